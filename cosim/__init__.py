@@ -1,0 +1,31 @@
+"""cosim: lockstep co-simulation of unmanned aircraft swarms.
+
+One JSBSim flight-dynamics model per aircraft, held by a pool of worker
+processes (``cosim.fdm_pool``) and advanced in lockstep by a synchronous
+scheduler (``cosim.sync``), driven from validated YAML scenarios
+(``cosim.scenario``) and logged to ``states.parquet``/``events.jsonl``
+(``cosim.logs``).
+"""
+
+from cosim.errors import (
+    ConfigError,
+    CosimError,
+    JSBSimError,
+    ModelNotFound,
+    PoolStateError,
+    WorkerDied,
+    WorkerError,
+)
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "ConfigError",
+    "CosimError",
+    "JSBSimError",
+    "ModelNotFound",
+    "PoolStateError",
+    "WorkerDied",
+    "WorkerError",
+    "__version__",
+]

@@ -1,0 +1,282 @@
+"""The ``cosim`` command: run, validate, models, bench.
+
+``main(argv) -> int``: exit 0 ok, 1 runtime failure, 2 usage or config
+error, 130 stopped by Ctrl-C (after a clean stop with everything flushed).
+Only this module configures logging handlers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import signal
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from types import FrameType
+from typing import TextIO
+
+from cosim import __version__
+from cosim.errors import ConfigError, CosimError
+
+log = logging.getLogger("cosim")
+
+EXIT_OK, EXIT_FAIL, EXIT_USAGE, EXIT_INTERRUPTED = 0, 1, 2, 130
+
+
+class _UsageError(Exception):
+    pass
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # type: ignore[override]
+        raise _UsageError(f"{self.prog}: error: {message}")
+
+
+def _positive_int_list(text: str) -> list[int]:
+    try:
+        vals = [int(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated whole numbers, got {text!r}")
+    if not vals or any(v < 1 for v in vals):
+        raise argparse.ArgumentTypeError(f"expected positive whole numbers, got {text!r}")
+    return vals
+
+
+def _positive_float(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}")
+    return v
+
+
+def _build_parser() -> _Parser:
+    p = _Parser(prog="cosim", description="Lockstep co-simulation of UAV swarms on JSBSim.")
+    p.add_argument("--version", action="version", version=f"cosim {__version__}")
+    p.add_argument("-v", "--verbose", action="count", default=0, help="more log output")
+    p.add_argument("-q", "--quiet", action="store_true", help="only warnings and errors")
+    sub = p.add_subparsers(dest="cmd", metavar="COMMAND", parser_class=_Parser)
+
+    r = sub.add_parser("run", help="run a scenario")
+    r.add_argument("scenario", help="scenario YAML file")
+    r.add_argument("--out", metavar="DIR",
+                   help="output folder (default: runs/<scenario>-<date>-<time>)")
+    r.add_argument("--overwrite", action="store_true",
+                   help="allow writing into a folder that already holds a run")
+    r.add_argument("--backend", choices=("inline", "process"), default="process",
+                   help="inline: one process (the reference); process: worker processes "
+                        "(default)")
+    r.add_argument("--workers", type=int, metavar="N",
+                   help="worker count for the process backend (default: one per core)")
+    r.add_argument("--realtime", nargs="?", const=1.0, type=_positive_float, metavar="FACTOR",
+                   help="pace to the wall clock (FACTOR x real time, default 1)")
+    r.add_argument("--duration-s", type=_positive_float, metavar="S",
+                   help="override the scenario's duration")
+    r.add_argument("--no-progress", action="store_true", help="no progress bar or lines")
+
+    v = sub.add_parser("validate", help="check scenario files and report every problem")
+    v.add_argument("scenarios", nargs="+", metavar="SCENARIO")
+
+    m = sub.add_parser("models", help="list usable aircraft models")
+    m.add_argument("--check", action="store_true", help="load each model to prove it works")
+    m.add_argument("--properties", metavar="MODEL",
+                   help="list the JSBSim properties of MODEL")
+
+    b = sub.add_parser("bench", help="measure pool throughput against the serial loop")
+    b.add_argument("--vehicles", type=_positive_int_list, default=[1, 16, 128, 512, 1024],
+                   metavar="N,N,...")
+    b.add_argument("--model", default="c172p")
+    b.add_argument("--backend", choices=("inline", "process"), default="process")
+    b.add_argument("--workers", type=int, metavar="N")
+    b.add_argument("--seconds", type=_positive_float, default=5.0, metavar="S",
+                   help="simulated seconds per size (default 5)")
+    b.add_argument("--physics-hz", type=_positive_float, default=120.0)
+    b.add_argument("--control-hz", type=_positive_float, default=30.0)
+    b.add_argument("--no-baselines", action="store_true",
+                   help="skip the serial and no-communication ceiling measurements")
+    b.add_argument("--json", metavar="FILE", help="write the results as JSON")
+    return p
+
+
+def _setup_logging(verbose: int, quiet: bool) -> None:
+    level = logging.WARNING if quiet else (logging.DEBUG if verbose >= 2 else logging.INFO)
+    h = logging.StreamHandler(sys.stderr)
+    h.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s",
+                                     "%H:%M:%S"))
+    root = logging.getLogger()
+    root.handlers[:] = [h]
+    root.setLevel(level)
+    if verbose < 3:
+        logging.getLogger("cosim.jsbsim").setLevel(logging.WARNING)
+
+
+class Progress:
+    """A bar on a terminal; a log line every ``every_s`` seconds otherwise."""
+
+    def __init__(self, stream: TextIO, hz: float, every_s: float = 10.0) -> None:
+        self.stream = stream
+        self.tty = stream.isatty()
+        self.hz = hz
+        self.every_s = every_s if not self.tty else 0.1
+        self.t0 = time.monotonic()
+        self.last = self.t0 if not self.tty else 0.0
+
+    def __call__(self, tick: int, total: int) -> None:
+        now = time.monotonic()
+        if now - self.last < self.every_s and tick < total:
+            return
+        self.last = now
+        wall = now - self.t0
+        sim = tick / self.hz
+        rtf = sim / wall if wall > 0 else 0.0
+        frac = tick / total if total else 1.0
+        if self.tty:
+            width = 30
+            bar = "#" * int(frac * width) + "-" * (width - int(frac * width))
+            self.stream.write(f"\r[{bar}] {frac:6.1%}  t={sim:8.1f} s  {rtf:6.2f}x real time ")
+            if tick >= total:
+                self.stream.write("\n")
+            self.stream.flush()
+        else:
+            log.info("progress: %.1f%% (sim %.1f s of %.1f s, %.2fx real time)", frac * 100,
+                     sim, total / self.hz, rtf)
+
+
+def _cmd_run(a: argparse.Namespace) -> int:
+    from cosim.scenario import load_scenario
+    from cosim.sync import Run
+
+    scn = load_scenario(a.scenario)
+    if a.duration_s:
+        scn = scn.with_duration(a.duration_s)
+    if a.workers is not None and a.workers < 1:
+        raise ConfigError(f"--workers must be >= 1, got {a.workers}")
+    out = Path(a.out) if a.out else Path("runs") / f"{scn.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+    if (out / "summary.json").exists() or (out / "events.jsonl").exists():
+        if not a.overwrite:
+            raise ConfigError(f"{out} already holds a run; choose another --out or pass "
+                              f"--overwrite")
+        import shutil
+
+        for name in ("states.parquet",):
+            shutil.rmtree(out / name, ignore_errors=True)
+        for name in ("events.jsonl", "summary.json", "scenario.resolved.yaml"):
+            (out / name).unlink(missing_ok=True)
+    progress = None if a.no_progress else Progress(sys.stderr, scn.rates.physics_hz)
+    run = Run(scn, out, backend=a.backend, workers=a.workers, realtime=a.realtime,
+              progress=progress)
+
+    interrupts = 0
+
+    def on_signal(signum: int, frame: FrameType | None) -> None:
+        nonlocal interrupts
+        interrupts += 1
+        if interrupts > 1:
+            raise KeyboardInterrupt
+        run.stop("interrupted" if signum == signal.SIGINT else "terminated")
+
+    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        res = run.run()
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+    sm = res.summary
+    print(f"{res.stop_reason}: {sm['vehicles']} vehicles, {sm['sim_time_s']:.2f} s simulated "
+          f"in {sm['wall_time_s']:.2f} s ({sm['real_time_factor'] or 0:.2f}x real time, "
+          f"{sm['workers']} worker(s), {sm['backend']})")
+    print(f"outputs in {out}/: states.parquet, events.jsonl, summary.json, "
+          f"scenario.resolved.yaml")
+    if res.error is not None:
+        print(f"cosim run: {res.error}", file=sys.stderr)
+    if res.stop_reason == "completed":
+        return EXIT_OK
+    if res.stop_reason in ("interrupted", "terminated"):
+        return EXIT_INTERRUPTED
+    return EXIT_FAIL
+
+
+def _cmd_validate(a: argparse.Namespace) -> int:
+    from cosim.scenario import load_scenario
+
+    bad = 0
+    for f in a.scenarios:
+        try:
+            scn = load_scenario(f)
+        except ConfigError as e:
+            bad += 1
+            print(e, file=sys.stderr)
+            continue
+        print(f"{f}: ok ({len(scn.vehicles)} vehicles, {scn.duration_s:g} s, "
+              f"{scn.rates.physics_hz:g}/{scn.rates.control_hz:g}/{scn.rates.log_hz:g} Hz)")
+    return EXIT_USAGE if bad else EXIT_OK
+
+
+def _cmd_models(a: argparse.Namespace) -> int:
+    from cosim.jsb import find_model, list_models, new_fdm
+
+    if a.properties:
+        fdm = new_fdm(find_model(a.properties), 1 / 120)
+        print(fdm.query_property_catalog(""))
+        return EXIT_OK
+    failed = 0
+    for m in list_models():
+        status = ""
+        if a.check:
+            try:
+                new_fdm(m, 1 / 120)
+                status = "ok      "
+            except CosimError:
+                status = "FAILED  "
+                failed += 1
+        print(f"{status}{m.name:18s} {m.source:7s} {m.description}")
+    return EXIT_FAIL if failed else EXIT_OK
+
+
+def _cmd_bench(a: argparse.Namespace) -> int:
+    from cosim.bench import run_bench
+
+    run_bench(vehicles=a.vehicles, model=a.model, backend=a.backend, workers=a.workers,
+              seconds=a.seconds, physics_hz=a.physics_hz, control_hz=a.control_hz,
+              baselines=not a.no_baselines, json_path=a.json)
+    return EXIT_OK
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = _build_parser()
+    try:
+        a = parser.parse_args(list(argv) if argv is not None else None)
+    except _UsageError as e:
+        print(e, file=sys.stderr)
+        return EXIT_USAGE
+    except SystemExit as e:  # --help, --version
+        return int(e.code or 0)
+    if a.cmd is None:
+        parser.print_help()
+        return EXIT_USAGE
+    _setup_logging(a.verbose, a.quiet)
+    handlers = {"run": _cmd_run, "validate": _cmd_validate, "models": _cmd_models,
+                "bench": _cmd_bench}
+    try:
+        return handlers[a.cmd](a)
+    except ConfigError as e:
+        print(e, file=sys.stderr)
+        return EXIT_USAGE
+    except CosimError as e:
+        print(f"cosim {a.cmd}: {e}", file=sys.stderr)
+        return EXIT_FAIL
+    except KeyboardInterrupt:
+        print("cosim: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except BrokenPipeError:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_FAIL
+
+
+if __name__ == "__main__":
+    sys.exit(main())

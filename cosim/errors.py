@@ -1,0 +1,90 @@
+"""The CosimError family.
+
+Every error cosim raises on purpose derives from ``CosimError``. All of them
+pickle (they pass ``args`` to ``super().__init__``) so a worker process can
+send one to the driver intact.
+"""
+
+from __future__ import annotations
+
+
+class CosimError(Exception):
+    """Base class of every error cosim raises on purpose."""
+
+
+class ConfigError(CosimError):
+    """A scenario (or command-line value) is invalid.
+
+    ``problems`` holds every problem found, each already formatted as
+    ``file:line: path: message``; ``str()`` lists them one per line.
+    """
+
+    def __init__(self, problems: list[str] | str) -> None:
+        if isinstance(problems, str):
+            problems = [problems]
+        super().__init__(problems)
+        self.problems = list(problems)
+
+    def __str__(self) -> str:
+        return "\n".join(self.problems)
+
+
+class ModelNotFound(ConfigError):
+    """An aircraft model name matches no model on the search path."""
+
+
+class JSBSimError(CosimError):
+    """A JSBSim call failed (returned False or raised) for a named vehicle."""
+
+
+class PoolStateError(CosimError):
+    """A pool method was called in a state that does not allow it."""
+
+
+class WorkerError(CosimError):
+    """A worker raised an exception; carries the vehicle, tick and remote traceback."""
+
+    def __init__(self, worker: int, vehicle: str | None, tick: int | None, remote_tb: str) -> None:
+        super().__init__(worker, vehicle, tick, remote_tb)
+        self.worker = worker
+        self.vehicle = vehicle
+        self.tick = tick
+        self.remote_traceback = remote_tb
+
+    def __str__(self) -> str:
+        where = f"worker {self.worker}"
+        if self.vehicle is not None:
+            where += f", vehicle {self.vehicle!r}"
+        if self.tick is not None:
+            where += f", tick {self.tick}"
+        last = self.remote_traceback.strip().splitlines()[-1:] or ["?"]
+        return f"{where}: {last[0]}\n--- remote traceback ---\n{self.remote_traceback.rstrip()}"
+
+
+class WorkerDied(CosimError):
+    """A worker process ended without being asked to (killed by the OS, crashed)."""
+
+    def __init__(self, worker: int, pid: int | None, exitcode: int | None,
+                 vehicles: list[str], tick: int | None) -> None:
+        super().__init__(worker, pid, exitcode, vehicles, tick)
+        self.worker = worker
+        self.pid = pid
+        self.exitcode = exitcode
+        self.vehicles = list(vehicles)
+        self.tick = tick
+
+    def __str__(self) -> str:
+        import signal
+
+        if self.exitcode is not None and self.exitcode < 0:
+            try:
+                how = f"killed by {signal.Signals(-self.exitcode).name}"
+            except ValueError:
+                how = f"killed by signal {-self.exitcode}"
+        else:
+            how = f"exited with code {self.exitcode}"
+        shown = ", ".join(self.vehicles[:10])
+        if len(self.vehicles) > 10:
+            shown += f", ... ({len(self.vehicles)} in all)"
+        at = f" at tick {self.tick}" if self.tick is not None else ""
+        return f"worker {self.worker} (pid {self.pid}) {how}{at}; its vehicles: {shown}"

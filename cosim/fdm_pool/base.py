@@ -1,0 +1,112 @@
+"""The pool contract shared by every backend.
+
+A pool owns ``n`` vehicles, a ``(n, k)`` float64 ``states`` array (columns
+``STATE_FIELDS``) and a ``(n, c)`` float64 ``setpoints`` array whose columns
+are the JSBSim properties named in ``channels``. The caller writes
+setpoints (NaN means "leave unchanged"), then ``send(nsub)`` starts one
+exchange of ``nsub`` physics substeps and ``wait(timeout_s)`` finishes it and
+returns ``states``. ``step(nsub)`` does both. After each exchange the pool
+resets ``setpoints`` to NaN. Pools are context managers; ``close()`` is
+idempotent.
+"""
+
+from __future__ import annotations
+
+import enum
+from abc import ABC, abstractmethod
+from collections.abc import Sequence
+from types import TracebackType
+
+import numpy as np
+
+from cosim.errors import PoolStateError
+from cosim.fdm_pool.spec import N_STATE, VehicleSpec
+
+
+class PoolState(enum.Enum):
+    READY = "ready"
+    WAITING = "waiting"  # send() called, wait() not yet
+    FAILED = "failed"
+    CLOSED = "closed"
+
+
+class Pool(ABC):
+    backend: str = "?"
+
+    def __init__(self, specs: Sequence[VehicleSpec], dt_s: float,
+                 channels: Sequence[str] = ()) -> None:
+        if not specs:
+            raise ValueError("a pool needs at least one vehicle")
+        self.specs = list(specs)
+        self.ids = [s.id for s in specs]
+        self.dt_s = float(dt_s)
+        self.channels = tuple(channels)
+        self.n = len(specs)
+        self.tick = 0  # physics ticks completed
+        self._state = PoolState.READY
+        self.states: np.ndarray = np.zeros((self.n, N_STATE))
+        self.setpoints: np.ndarray = np.full((self.n, len(self.channels)), np.nan)
+
+    @property
+    def workers(self) -> int:
+        return 1
+
+    def _require(self, *allowed: PoolState, action: str) -> None:
+        if self._state not in allowed:
+            raise PoolStateError(
+                f"cannot {action}: {self.backend} pool is {self._state.value}"
+                f" (allowed when {' or '.join(s.value for s in allowed)})")
+
+    def send(self, nsub: int) -> None:
+        """Start one exchange: apply setpoints and run ``nsub`` substeps."""
+        self._require(PoolState.READY, action="send()")
+        if nsub < 1:
+            raise ValueError(f"nsub must be >= 1, got {nsub}")
+        self._state = PoolState.WAITING
+        try:
+            self._send(int(nsub))
+        except BaseException:
+            self._state = PoolState.FAILED
+            raise
+
+    def wait(self, timeout_s: float | None = None) -> np.ndarray:
+        """Finish the exchange started by ``send`` and return ``states``."""
+        self._require(PoolState.WAITING, action="wait()")
+        try:
+            self._wait(timeout_s)
+        except BaseException:
+            self._state = PoolState.FAILED
+            raise
+        self.tick += self._nsub
+        self.setpoints.fill(np.nan)
+        self._state = PoolState.READY
+        return self.states
+
+    def step(self, nsub: int, timeout_s: float | None = None) -> np.ndarray:
+        self.send(nsub)
+        return self.wait(timeout_s)
+
+    def close(self) -> None:
+        if self._state is PoolState.CLOSED:
+            return
+        self._state = PoolState.CLOSED
+        self._close()
+
+    def __enter__(self) -> Pool:
+        return self
+
+    def __exit__(self, et: type[BaseException] | None, ev: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+    # backend hooks
+    _nsub: int = 0
+
+    @abstractmethod
+    def _send(self, nsub: int) -> None: ...
+
+    @abstractmethod
+    def _wait(self, timeout_s: float | None) -> None: ...
+
+    @abstractmethod
+    def _close(self) -> None: ...

@@ -1,0 +1,38 @@
+"""The reference backend: every vehicle in the calling process.
+
+Every other backend is tested against this one.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+from cosim.errors import CosimError, JSBSimError
+from cosim.fdm_pool.base import Pool
+from cosim.fdm_pool.shard import Shard
+from cosim.fdm_pool.spec import VehicleSpec
+
+
+class InlinePool(Pool):
+    backend = "inline"
+
+    def __init__(self, specs: Sequence[VehicleSpec], dt_s: float,
+                 channels: Sequence[str] = ()) -> None:
+        super().__init__(specs, dt_s, channels)
+        self._shard = Shard.build(self.specs, self.dt_s, self.channels)
+        self._shard.write_states(self.states)
+
+    def _send(self, nsub: int) -> None:
+        self._nsub = nsub
+
+    def _wait(self, timeout_s: float | None) -> None:
+        try:
+            self._shard.exchange(self.setpoints, self._nsub, self.states)
+        except CosimError:
+            raise
+        except Exception as e:
+            raise JSBSimError(f"vehicle {self._shard.current!r} at tick {self.tick}: "
+                              f"{type(e).__name__}: {e}") from e
+
+    def _close(self) -> None:
+        self._shard.vehicles.clear()

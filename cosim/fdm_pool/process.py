@@ -1,0 +1,266 @@
+"""The default backend: vehicles sharded over worker processes.
+
+Layout: ``workers`` shards of contiguous vehicles. With two or more shards
+the driver (calling) process steps shard 0 itself, so on a 2-core machine
+two processes share the two cores rather than three fighting over them;
+the other shards each live in a child process started with ``spawn`` that
+builds and trims its own FDMs from picklable ``VehicleSpec`` values.
+
+One exchange = one round trip through shared memory: the driver writes the
+setpoints, bumps each child's command sequence number, steps its own
+shard, then waits for every child's done number. Waiting spins with
+``os.sched_yield`` for a short while, then polls with short sleeps, and
+checks periodically that the peer is alive: a child killed by the OS
+becomes ``WorkerDied`` within a fraction of a second; a child whose parent
+died exits by itself. An exception inside a child comes back as
+``WorkerError`` carrying the vehicle, the tick and the remote traceback.
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing as mp
+import os
+import signal
+import time
+import traceback
+from collections.abc import Sequence
+from multiprocessing.connection import Connection
+from typing import Any
+
+import numpy as np
+
+from cosim.errors import CosimError, JSBSimError, WorkerDied, WorkerError
+from cosim.fdm_pool.base import Pool
+from cosim.fdm_pool.shard import Shard
+from cosim.fdm_pool.spec import N_STATE, VehicleSpec
+
+log = logging.getLogger(__name__)
+
+# control block: one 64-byte line of int64 per worker
+_SEQ, _DONE, _CMD, _NSUB, _STATUS = 0, 1, 2, 3, 4
+_CTRL_W = 8
+_CMD_STEP, _CMD_STOP = 1, 2
+_OK, _ERR = 0, 1
+_SPINS = 3000  # sched_yield spins before falling back to sleeping
+_LIVENESS_EVERY = 256
+
+
+def default_workers() -> int:
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def shard_bounds(n: int, workers: int) -> list[tuple[int, int]]:
+    """Contiguous [start, stop) ranges, sizes differing by at most one."""
+    base, extra = divmod(n, workers)
+    out, start = [], 0
+    for w in range(workers):
+        stop = start + base + (1 if w < extra else 0)
+        out.append((start, stop))
+        start = stop
+    return out
+
+
+class _Shared:
+    """Views of the shared arrays (rebuilt in each process from the raw arrays)."""
+
+    def __init__(self, raw: dict[str, Any], n: int, c: int, w: int) -> None:
+        self.states = np.frombuffer(raw["states"], dtype=np.float64).reshape(n, N_STATE)
+        self.setpoints = np.frombuffer(raw["setpoints"], dtype=np.float64)[: n * c].reshape(n, c)
+        self.ctrl = np.frombuffer(raw["ctrl"], dtype=np.int64).reshape(w, _CTRL_W)
+        self.busy_s = np.frombuffer(raw["busy"], dtype=np.float64).reshape(w, _CTRL_W)
+
+
+def _worker_main(w: int, specs: list[VehicleSpec], start: int, stop: int, dt_s: float,
+                 channels: tuple[str, ...], raw: dict[str, Any], n: int, n_workers: int,
+                 err: Connection, parent_pid: int) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the driver decides when to stop
+    sh = _Shared(raw, n, len(channels), n_workers)
+    ctrl = sh.ctrl[w]
+    shard = Shard()
+    try:
+        Shard.build(specs, dt_s, channels, into=shard)
+        shard.write_states(sh.states[start:stop])
+        ctrl[_DONE] = 0  # ready
+        last = 0
+        sp = sh.setpoints[start:stop] if channels else None
+        out = sh.states[start:stop]
+        busy = sh.busy_s[w]
+        while True:
+            spins = 0
+            while ctrl[_SEQ] == last:
+                spins += 1
+                if spins < _SPINS:
+                    os.sched_yield()
+                else:
+                    time.sleep(0.0002)
+                if spins % _LIVENESS_EVERY == 0 and os.getppid() != parent_pid:
+                    return  # the driver is gone: do not linger as an orphan
+            last = int(ctrl[_SEQ])
+            if ctrl[_CMD] == _CMD_STOP:
+                ctrl[_DONE] = last
+                return
+            nsub = int(ctrl[_NSUB])
+            t0 = time.perf_counter()
+            shard.exchange(sp, nsub, out)
+            busy[0] = time.perf_counter() - t0
+            ctrl[_DONE] = last
+    except BaseException:
+        try:
+            err.send((shard.current, traceback.format_exc()))
+        finally:
+            ctrl[_STATUS] = _ERR
+            ctrl[_DONE] = -2
+
+
+class ProcessPool(Pool):
+    backend = "process"
+
+    def __init__(self, specs: Sequence[VehicleSpec], dt_s: float, channels: Sequence[str] = (),
+                 workers: int | None = None, driver_steps: bool | None = None,
+                 start_timeout_s: float | None = None) -> None:
+        super().__init__(specs, dt_s, channels)
+        w = default_workers() if workers is None else int(workers)
+        if w < 1:
+            raise ValueError(f"workers must be >= 1, got {workers}")
+        w = min(w, self.n)
+        self._n_workers = w
+        self._driver_steps = (w >= 2) if driver_steps is None else bool(driver_steps)
+        self.bounds = shard_bounds(self.n, w)
+        c = len(self.channels)
+        ctx = mp.get_context("spawn")
+        self._raw = {
+            "states": ctx.RawArray("d", self.n * N_STATE),
+            "setpoints": ctx.RawArray("d", max(1, self.n * c)),
+            "ctrl": ctx.RawArray("q", w * _CTRL_W),
+            "busy": ctx.RawArray("d", w * _CTRL_W),
+        }
+        self._sh = _Shared(self._raw, self.n, c, w)
+        self.states = self._sh.states
+        self.setpoints = self._sh.setpoints
+        self.setpoints.fill(np.nan)
+        self._sh.ctrl[:, _DONE] = -1
+        self._seq = 0
+        self._procs: dict[int, Any] = {}
+        self._errs: dict[int, Connection] = {}
+        self._own: Shard | None = None
+        first_child = 1 if self._driver_steps else 0
+        try:
+            for i in range(first_child, w):
+                a, b = self.bounds[i]
+                r, s = ctx.Pipe(duplex=False)
+                p = ctx.Process(
+                    target=_worker_main, name=f"cosim-worker-{i}", daemon=True,
+                    args=(i, self.specs[a:b], a, b, self.dt_s, self.channels, self._raw,
+                          self.n, w, s, os.getpid()))
+                p.start()
+                s.close()
+                self._procs[i] = p
+                self._errs[i] = r
+            if self._driver_steps:
+                a, b = self.bounds[0]
+                self._own = Shard.build(self.specs[a:b], self.dt_s, self.channels)
+                self._own.write_states(self.states[a:b])
+            timeout = start_timeout_s if start_timeout_s is not None else 60.0 + 0.05 * self.n
+            self._await(0, timeout, what="build and trim its vehicles")
+        except BaseException:
+            self._close()
+            raise
+        log.debug("process pool: %d vehicles, %d workers (driver steps: %s), bounds %s",
+                  self.n, w, self._driver_steps, self.bounds)
+
+    @property
+    def workers(self) -> int:
+        return self._n_workers
+
+    @property
+    def pids(self) -> dict[int, int]:
+        """Worker index -> pid of its child process (the driver's shard has none)."""
+        return {i: p.pid for i, p in self._procs.items()}
+
+    def busy_s(self) -> list[float]:
+        """Seconds each child spent stepping during the last exchange."""
+        return [float(self._sh.busy_s[i, 0]) for i in self._procs]
+
+    def _vehicles_of(self, i: int) -> list[str]:
+        a, b = self.bounds[i]
+        return self.ids[a:b]
+
+    def _send(self, nsub: int) -> None:
+        self._nsub = nsub
+        self._seq += 1
+        ctrl = self._sh.ctrl
+        for i in self._procs:
+            ctrl[i, _NSUB] = nsub
+            ctrl[i, _CMD] = _CMD_STEP
+            ctrl[i, _SEQ] = self._seq  # written last: publishes the command
+
+    def _wait(self, timeout_s: float | None) -> None:
+        if self._own is not None:
+            a, b = self.bounds[0]
+            try:
+                self._own.exchange(self.setpoints[a:b] if self.channels else None,
+                                   self._nsub, self.states[a:b])
+            except CosimError:
+                raise
+            except Exception as e:
+                raise JSBSimError(f"vehicle {self._own.current!r} (worker 0, driver) at tick "
+                                  f"{self.tick}: {type(e).__name__}: {e}") from e
+        self._await(self._seq, timeout_s, what=f"finish tick {self.tick + self._nsub}")
+
+    def _await(self, seq: int, timeout_s: float | None, what: str) -> None:
+        ctrl = self._sh.ctrl
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        for i, proc in self._procs.items():
+            spins = 0
+            while ctrl[i, _DONE] != seq:
+                if ctrl[i, _STATUS] == _ERR:
+                    self._raise_remote(i)
+                spins += 1
+                if spins < _SPINS:
+                    os.sched_yield()
+                else:
+                    time.sleep(0.0001)
+                if spins % _LIVENESS_EVERY == 0:
+                    if proc.exitcode is not None and ctrl[i, _DONE] != seq:
+                        if ctrl[i, _STATUS] == _ERR:
+                            self._raise_remote(i)
+                        raise WorkerDied(i, proc.pid, proc.exitcode, self._vehicles_of(i),
+                                         self.tick)
+                    if deadline is not None and time.monotonic() > deadline:
+                        raise CosimError(
+                            f"worker {i} (pid {proc.pid}) did not {what} within {timeout_s} s; "
+                            f"its vehicles: {', '.join(self._vehicles_of(i)[:10])}")
+
+    def _raise_remote(self, i: int) -> None:
+        conn = self._errs[i]
+        if conn.poll(5.0):
+            vehicle, tb = conn.recv()
+        else:
+            vehicle, tb = None, "(the worker reported an error but sent no traceback)"
+        raise WorkerError(i, vehicle, self.tick, tb)
+
+    def _close(self) -> None:
+        ctrl = self._sh.ctrl
+        self._seq += 1
+        for i in self._procs:
+            ctrl[i, _CMD] = _CMD_STOP
+            ctrl[i, _SEQ] = self._seq
+        deadline = time.monotonic() + 2.0
+        for p in self._procs.values():
+            p.join(max(0.0, deadline - time.monotonic()))
+        for p in self._procs.values():
+            if p.is_alive():
+                p.terminate()
+                p.join(1.0)
+            if p.is_alive():
+                p.kill()
+                p.join(1.0)
+        for c in self._errs.values():
+            c.close()
+        self._procs.clear()
+        self._errs.clear()
+        self._own = None

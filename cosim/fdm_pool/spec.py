@@ -1,0 +1,70 @@
+"""Picklable descriptions of vehicles and the layout of the state array.
+
+JSBSim objects do not pickle, so workers receive ``VehicleSpec`` values and
+build their own FDMs. ``STATE_FIELDS`` fixes the columns of the
+``(n_vehicles, k)`` float64 state array every backend returns.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from enum import IntEnum
+
+from cosim.geo import FT_TO_M
+
+
+class VehicleStatus(IntEnum):
+    """Value of the ``status`` state column."""
+
+    ACTIVE = 0
+    GROUND_IMPACT = 1  # touched the ground while airborne: frozen
+    DIVERGED = 2  # a state became NaN/inf: frozen at its last finite state
+
+
+@dataclass(frozen=True)
+class StateField:
+    name: str
+    prop: str | None  # JSBSim property read each exchange (None: computed)
+    scale: float = 1.0
+
+
+#: columns of the state array, in order
+STATE_FIELDS: tuple[StateField, ...] = (
+    StateField("lat_deg", "position/lat-geod-deg"),
+    StateField("lon_deg", "position/long-gc-deg"),
+    StateField("alt_msl_m", "position/h-sl-ft", FT_TO_M),
+    StateField("alt_agl_m", "position/h-agl-ft", FT_TO_M),
+    StateField("roll_deg", "attitude/phi-deg"),
+    StateField("pitch_deg", "attitude/theta-deg"),
+    StateField("yaw_deg", "attitude/psi-deg"),
+    StateField("vn_mps", "velocities/v-north-fps", FT_TO_M),
+    StateField("ve_mps", "velocities/v-east-fps", FT_TO_M),
+    StateField("vd_mps", "velocities/v-down-fps", FT_TO_M),
+    StateField("airspeed_mps", "velocities/vt-fps", FT_TO_M),
+    StateField("alpha_deg", "aero/alpha-deg"),
+    StateField("gear_force_lbs", "forces/fbz-gear-lbs"),
+    StateField("status", None),
+)
+STATE_INDEX: dict[str, int] = {f.name: i for i, f in enumerate(STATE_FIELDS)}
+N_STATE = len(STATE_FIELDS)
+STATUS_COL = STATE_INDEX["status"]
+
+
+@dataclass(frozen=True)
+class VehicleSpec:
+    """Everything a worker needs to build and trim one vehicle."""
+
+    id: str
+    model: str  # model name
+    aircraft_dir: str  # folder holding <model>/<model>.xml
+    model_source: str  # "cosim", "jsbsim", "user"
+    lat_deg: float
+    lon_deg: float
+    alt_msl_m: float
+    heading_deg: float
+    airspeed_mps: float
+    terrain_alt_m: float = 0.0
+    trim: bool = True
+    random_seed: int = 0
+    #: properties written once after trim, before the first step
+    initial_props: tuple[tuple[str, float], ...] = field(default=())

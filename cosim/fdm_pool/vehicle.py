@@ -1,0 +1,124 @@
+"""One vehicle's FDM inside whichever process owns it: build, trim, step,
+read state, detect ground impact and divergence.
+
+Used by every backend, so all of them step FDMs the same way.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import jsbsim
+
+from cosim.errors import JSBSimError
+from cosim.fdm_pool.spec import (
+    N_STATE,
+    STATE_FIELDS,
+    STATUS_COL,
+    VehicleSpec,
+    VehicleStatus,
+)
+from cosim.geo import FT_TO_M
+from cosim.jsb import ModelInfo, has_property, new_fdm
+
+_MPS_TO_FPS = 1.0 / FT_TO_M
+
+
+class Vehicle:
+    """A built, trimmed FDM with cached property nodes."""
+
+    __slots__ = ("spec", "fdm", "_read", "_scales", "_channels", "_agl", "_gear",
+                 "status", "row", "airborne")
+
+    def __init__(self, spec: VehicleSpec, dt_s: float, channels: Sequence[str]) -> None:
+        self.spec = spec
+        model = ModelInfo(spec.model, spec.aircraft_dir, spec.model_source)
+        fdm = new_fdm(model, dt_s)
+        self.fdm = fdm
+        self._set_ic()
+        pm = fdm.get_property_manager()
+        self._read = []
+        self._scales = []
+        for f in STATE_FIELDS:
+            if f.prop is not None:
+                node = pm.get_node(f.prop)
+                if node is None:
+                    raise JSBSimError(f"vehicle {spec.id!r}: model {spec.model!r} lacks {f.prop}")
+                self._read.append(node)
+                self._scales.append(f.scale)
+        self._channels = []
+        for name in channels:
+            node = pm.get_node(name) if has_property(fdm, name) else None
+            self._channels.append(node)  # None: this model lacks the property
+        self._agl = pm.get_node("position/h-agl-ft")
+        self._gear = pm.get_node("forces/fbz-gear-lbs")
+        self.status = VehicleStatus.ACTIVE
+        self.row = [0.0] * N_STATE
+        self.read_state()
+        self.airborne = not self._touching()
+
+    def _set_ic(self) -> None:
+        s, fdm = self.spec, self.fdm
+        fdm["simulation/randomseed"] = float(s.random_seed)
+        # latitude/longitude before altitude and speed, or the speed drifts
+        fdm["ic/lat-geod-deg"] = s.lat_deg
+        fdm["ic/long-gc-deg"] = s.lon_deg
+        fdm["ic/terrain-elevation-ft"] = s.terrain_alt_m * _MPS_TO_FPS
+        fdm["ic/h-sl-ft"] = s.alt_msl_m * _MPS_TO_FPS
+        fdm["ic/psi-true-deg"] = s.heading_deg
+        fdm["ic/vt-fps"] = s.airspeed_mps * _MPS_TO_FPS
+        if not fdm.run_ic():
+            raise JSBSimError(f"vehicle {s.id!r}: JSBSim run_ic() failed")
+        fdm["propulsion/set-running"] = -1
+        if s.trim:
+            try:
+                fdm.do_trim(1)  # full trim
+            except (jsbsim.BaseError, RuntimeError) as e:
+                raise JSBSimError(
+                    f"vehicle {s.id!r} ({s.model}): JSBSim could not trim at "
+                    f"{s.airspeed_mps:.1f} m/s TAS, {s.alt_msl_m:.1f} m MSL, heading "
+                    f"{s.heading_deg:.1f} deg: {e}. Try another airspeed/altitude or "
+                    f"set trim: false") from None
+        for name, value in s.initial_props:
+            fdm[name] = value
+
+    def _touching(self) -> bool:
+        return self._gear.get_double_value() != 0.0 or self._agl.get_double_value() <= 0.0
+
+    def apply(self, values: Sequence[float]) -> None:
+        """Write the non-NaN setpoint channel values into the FDM."""
+        for node, v in zip(self._channels, values):
+            if v == v and node is not None:  # v == v: not NaN
+                node.set_double_value(v)
+
+    def step(self, n: int) -> int:
+        """Run ``n`` physics substeps; returns the substep at which the vehicle
+        froze (ground impact), or -1."""
+        if self.status != VehicleStatus.ACTIVE:
+            return -1
+        run = self.fdm.run
+        for i in range(n):
+            if not run():
+                raise JSBSimError(f"vehicle {self.spec.id!r}: JSBSim run() returned False")
+            if self.airborne:
+                if self._touching():
+                    self.status = VehicleStatus.GROUND_IMPACT
+                    return i
+            elif not self._touching():
+                self.airborne = True
+        return -1
+
+    def read_state(self) -> list[float]:
+        """Refresh ``row`` from the FDM unless frozen earlier. A NaN/inf state
+        freezes the vehicle as DIVERGED at its last finite state."""
+        if self.row[STATUS_COL] != VehicleStatus.ACTIVE:
+            return self.row  # frozen at an earlier exchange
+        new = [n.get_double_value() * k for n, k in zip(self._read, self._scales)]
+        if math.isfinite(sum(new)):
+            new.append(float(self.status))
+            self.row = new
+        else:
+            self.status = VehicleStatus.DIVERGED
+            self.row = self.row[:STATUS_COL] + [float(VehicleStatus.DIVERGED)]
+        return self.row

@@ -1,0 +1,115 @@
+"""Exact WGS-84 conversions: geodetic <-> ECEF <-> local NED/ENU.
+
+Everything a scenario places (vehicles, later targets and ground imagery)
+lives in one local tangent frame anchored at the scenario origin. This
+module owns that frame and nothing else; it never touches JSBSim.
+
+Heights are ellipsoidal (above the WGS-84 ellipsoid), which is what JSBSim
+calls "sea level": cosim has no geoid model, so ``alt_msl_m`` means height
+above the ellipsoid throughout. All functions accept scalars or numpy
+arrays and broadcast.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+WGS84_A_M = 6378137.0
+WGS84_F = 1.0 / 298.257223563
+WGS84_B_M = WGS84_A_M * (1.0 - WGS84_F)
+WGS84_E2 = WGS84_F * (2.0 - WGS84_F)
+WGS84_EP2 = WGS84_E2 / (1.0 - WGS84_E2)
+
+FT_TO_M = 0.3048
+KT_TO_MPS = 1852.0 / 3600.0
+
+Array = NDArray[np.float64]
+
+
+def geodetic_to_ecef(lat_deg: ArrayLike, lon_deg: ArrayLike, h_m: ArrayLike
+                     ) -> tuple[Array, Array, Array]:
+    """WGS-84 geodetic latitude, longitude (degrees) and height (m) to ECEF (m)."""
+    lat = np.radians(np.asarray(lat_deg, dtype=np.float64))
+    lon = np.radians(np.asarray(lon_deg, dtype=np.float64))
+    h = np.asarray(h_m, dtype=np.float64)
+    sin_lat = np.sin(lat)
+    n = WGS84_A_M / np.sqrt(1.0 - WGS84_E2 * sin_lat * sin_lat)
+    x = (n + h) * np.cos(lat) * np.cos(lon)
+    y = (n + h) * np.cos(lat) * np.sin(lon)
+    z = (n * (1.0 - WGS84_E2) + h) * sin_lat
+    return x, y, z
+
+
+def ecef_to_geodetic(x_m: ArrayLike, y_m: ArrayLike, z_m: ArrayLike
+                     ) -> tuple[Array, Array, Array]:
+    """ECEF (m) to WGS-84 geodetic latitude, longitude (degrees) and height (m).
+
+    Bowring's parametric start followed by Newton refinement of the latitude;
+    converges to well below a micrometre for any point above the Earth's
+    centre region (|height| < 1000 km is the tested range).
+    """
+    x = np.asarray(x_m, dtype=np.float64)
+    y = np.asarray(y_m, dtype=np.float64)
+    z = np.asarray(z_m, dtype=np.float64)
+    lon = np.arctan2(y, x)
+    p = np.hypot(x, y)
+    # Bowring (1976) initial estimate.
+    beta = np.arctan2(z * WGS84_A_M, p * WGS84_B_M)
+    lat = np.arctan2(z + WGS84_EP2 * WGS84_B_M * np.sin(beta) ** 3,
+                     p - WGS84_E2 * WGS84_A_M * np.cos(beta) ** 3)
+    for _ in range(3):
+        sin_lat = np.sin(lat)
+        n = WGS84_A_M / np.sqrt(1.0 - WGS84_E2 * sin_lat * sin_lat)
+        lat = np.arctan2(z + n * WGS84_E2 * sin_lat, p)
+    sin_lat = np.sin(lat)
+    cos_lat = np.cos(lat)
+    # Height: project onto the normal (stable at all latitudes).
+    h = p * cos_lat + z * sin_lat - WGS84_A_M * np.sqrt(1.0 - WGS84_E2 * sin_lat * sin_lat)
+    return np.degrees(lat), np.degrees(lon), h
+
+
+@dataclass(frozen=True)
+class LocalFrame:
+    """A local tangent frame (NED and ENU) anchored at a geodetic origin."""
+
+    lat_deg: float
+    lon_deg: float
+    alt_m: float = 0.0
+
+    def _rotation(self) -> Array:
+        """Rows are the N, E, D unit vectors expressed in ECEF."""
+        lat = np.radians(self.lat_deg)
+        lon = np.radians(self.lon_deg)
+        sl, cl = np.sin(lat), np.cos(lat)
+        so, co = np.sin(lon), np.cos(lon)
+        return np.array([
+            [-sl * co, -sl * so, cl],
+            [-so, co, 0.0],
+            [-cl * co, -cl * so, -sl],
+        ])
+
+    def _origin_ecef(self) -> Array:
+        return np.array(geodetic_to_ecef(self.lat_deg, self.lon_deg, self.alt_m))
+
+    def geodetic_to_ned(self, lat_deg: ArrayLike, lon_deg: ArrayLike, alt_m: ArrayLike
+                        ) -> tuple[Array, Array, Array]:
+        """Geodetic position(s) to north, east, down metres from the origin."""
+        x, y, z = geodetic_to_ecef(lat_deg, lon_deg, alt_m)
+        o = self._origin_ecef()
+        d = np.stack(np.broadcast_arrays(x - o[0], y - o[1], z - o[2]))
+        ned = np.tensordot(self._rotation(), d, axes=1)
+        return ned[0], ned[1], ned[2]
+
+    def ned_to_geodetic(self, north_m: ArrayLike, east_m: ArrayLike, down_m: ArrayLike
+                        ) -> tuple[Array, Array, Array]:
+        """North, east, down metres from the origin to geodetic lat, lon (deg), height (m)."""
+        ned = np.stack(np.broadcast_arrays(
+            np.asarray(north_m, dtype=np.float64),
+            np.asarray(east_m, dtype=np.float64),
+            np.asarray(down_m, dtype=np.float64)))
+        d = np.tensordot(self._rotation().T, ned, axes=1)
+        o = self._origin_ecef()
+        return ecef_to_geodetic(d[0] + o[0], d[1] + o[1], d[2] + o[2])

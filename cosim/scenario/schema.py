@@ -1,0 +1,545 @@
+"""Scenario files (YAML, ``schema_version: 1``) -> validated, frozen ``Scenario``.
+
+Every problem is collected and reported at once, each as
+``file:line: path: message``; unknown keys are errors; model names are
+looked up on the aircraft search path and JSBSim property names are checked
+to exist in the model (JSBSim silently creates misspelled properties).
+This module owns the schema; it never steps an FDM.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from fnmatch import fnmatchcase
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cosim.errors import ConfigError, CosimError
+from cosim.fdm_pool.spec import VehicleSpec
+from cosim.geo import KT_TO_MPS, LocalFrame
+from cosim.jsb import find_model, has_property, new_fdm
+from cosim.scenario.formation import FORMATIONS, formation_offsets
+from cosim.scenario.yaml_lines import YamlProblem, format_path, load_with_lines
+
+SCHEMA_VERSION = 1
+_ID = re.compile(r"^[A-Za-z0-9_.\-]+$")
+P = tuple[Any, ...]
+
+
+@dataclass(frozen=True)
+class Origin:
+    lat_deg: float
+    lon_deg: float
+    ground_alt_m: float = 0.0
+
+    @property
+    def frame(self) -> LocalFrame:
+        return LocalFrame(self.lat_deg, self.lon_deg, self.ground_alt_m)
+
+
+@dataclass(frozen=True)
+class Rates:
+    physics_hz: float = 120.0
+    control_hz: float = 30.0
+    log_hz: float = 10.0
+
+    @property
+    def dt_s(self) -> float:
+        return 1.0 / self.physics_hz
+
+    @property
+    def control_every(self) -> int:
+        """Physics ticks per control exchange."""
+        return round(self.physics_hz / self.control_hz)
+
+    @property
+    def log_every(self) -> int:
+        """Physics ticks per logged row."""
+        return round(self.physics_hz / self.log_hz)
+
+
+@dataclass(frozen=True)
+class ScheduleItem:
+    at_s: float
+    tick: int  # the control tick at which it applies (first at or after at_s)
+    vehicles: tuple[int, ...]  # indices into Scenario.vehicles
+    sets: tuple[tuple[str, float], ...]
+    index: int = 0  # position in the file's schedule list
+
+
+@dataclass(frozen=True)
+class Scenario:
+    name: str
+    path: str
+    origin: Origin
+    rates: Rates
+    duration_s: float
+    seed: int
+    vehicles: tuple[VehicleSpec, ...]
+    schedule: tuple[ScheduleItem, ...] = ()
+    description: str = ""
+    aircraft_path: tuple[str, ...] = ()
+    schema_version: int = SCHEMA_VERSION
+    extra: dict[str, Any] = field(default_factory=dict, compare=False)
+
+    @property
+    def total_ticks(self) -> int:
+        """Physics ticks in the run, rounded up to whole control exchanges."""
+        k = self.rates.control_every
+        return math.ceil(round(self.duration_s * self.rates.physics_hz, 6) / k) * k
+
+    @property
+    def channels(self) -> tuple[str, ...]:
+        """Every JSBSim property the schedule writes, in first-use order."""
+        seen: dict[str, None] = {}
+        for item in self.schedule:
+            for name, _ in item.sets:
+                seen.setdefault(name)
+        return tuple(seen)
+
+    def with_duration(self, duration_s: float) -> Scenario:
+        import dataclasses
+
+        return dataclasses.replace(self, duration_s=float(duration_s))
+
+    def resolved_dict(self) -> dict[str, Any]:
+        """A scenario document equivalent to this one with every vehicle listed
+        (loads back to the same vehicles, bit for bit)."""
+        vehicles = []
+        for v in self.vehicles:
+            d: dict[str, Any] = {
+                "id": v.id, "model": v.model,
+                "init": {"lat_deg": v.lat_deg, "lon_deg": v.lon_deg, "alt_msl_m": v.alt_msl_m,
+                         "heading_deg": v.heading_deg, "airspeed_mps": v.airspeed_mps},
+            }
+            if not v.trim:
+                d["trim"] = False
+            if v.initial_props:
+                d["set"] = dict(v.initial_props)
+            d["random_seed"] = v.random_seed
+            vehicles.append(d)
+        ids = [v.id for v in self.vehicles]
+        return {
+            "schema_version": self.schema_version,
+            "name": self.name,
+            "description": self.description,
+            "origin": {"lat_deg": self.origin.lat_deg, "lon_deg": self.origin.lon_deg,
+                       "ground_alt_m": self.origin.ground_alt_m},
+            "rates": {"physics_hz": self.rates.physics_hz, "control_hz": self.rates.control_hz,
+                      "log_hz": self.rates.log_hz},
+            "duration_s": self.duration_s,
+            "seed": self.seed,
+            "aircraft_path": list(self.aircraft_path),
+            "vehicles": vehicles,
+            "schedule": [{"at_s": s.at_s, "vehicles": [ids[i] for i in s.vehicles],
+                          "set": dict(s.sets)} for s in self.schedule],
+        }
+
+
+class _Ctx:
+    """Collects problems with file and line."""
+
+    def __init__(self, fname: str, lines: dict[P, int]) -> None:
+        self.fname = fname
+        self.lines = lines
+        self.problems: list[tuple[int, str]] = []
+
+    def line(self, path: P) -> int:
+        while path and path not in self.lines:
+            path = path[:-1]
+        return self.lines.get(path, 1)
+
+    def err(self, path: P, msg: str) -> None:
+        self.problems.append((self.line(path), f"{format_path(path)}: {msg}"))
+
+    def format(self) -> list[str]:
+        return [f"{self.fname}:{ln}: {m}" for ln, m in sorted(self.problems, key=lambda x: x[0])]
+
+
+_MISSING = object()
+
+
+def _describe(v: Any) -> str:
+    if isinstance(v, dict):
+        return "a mapping"
+    if isinstance(v, list):
+        return "a list"
+    if v is None:
+        return "nothing (null)"
+    return repr(v)
+
+
+class _Reader:
+    """Typed access to one mapping, reporting into a context."""
+
+    def __init__(self, ctx: _Ctx, d: Any, path: P, allowed: tuple[str, ...]) -> None:
+        self.ctx, self.path = ctx, path
+        if not isinstance(d, dict):
+            ctx.err(path, f"expected a mapping, got {_describe(d)}")
+            d = {}
+        self.d = d
+        for k in d:
+            if k not in allowed:
+                ctx.err(path + (k,), f"unknown key {k!r}; expected one of: {', '.join(allowed)}")
+
+    def has(self, key: str) -> bool:
+        return key in self.d
+
+    def num(self, key: str, default: Any = _MISSING, lo: float | None = None,
+            hi: float | None = None, lo_open: bool = False) -> Any:
+        p = self.path + (key,)
+        if key not in self.d:
+            if default is _MISSING:
+                self.ctx.err(self.path, f"missing required key {key!r}")
+                return None
+            return default
+        v = self.d[key]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            self.ctx.err(p, f"expected a number, got {_describe(v)}")
+            return None
+        if lo is not None and (v <= lo if lo_open else v < lo):
+            self.ctx.err(p, f"must be {'>' if lo_open else '>='} {lo:g}, got {v!r}")
+            return None
+        if hi is not None and v > hi:
+            self.ctx.err(p, f"must be <= {hi:g}, got {v!r}")
+            return None
+        return float(v)
+
+    def integer(self, key: str, default: Any = _MISSING, lo: int | None = None) -> Any:
+        p = self.path + (key,)
+        if key not in self.d:
+            if default is _MISSING:
+                self.ctx.err(self.path, f"missing required key {key!r}")
+                return None
+            return default
+        v = self.d[key]
+        if isinstance(v, bool) or not isinstance(v, int):
+            self.ctx.err(p, f"expected a whole number, got {_describe(v)}")
+            return None
+        if lo is not None and v < lo:
+            self.ctx.err(p, f"must be >= {lo}, got {v}")
+            return None
+        return v
+
+    def string(self, key: str, default: Any = _MISSING, pattern: re.Pattern[str] | None = None,
+               choices: tuple[str, ...] | None = None) -> Any:
+        p = self.path + (key,)
+        if key not in self.d:
+            if default is _MISSING:
+                self.ctx.err(self.path, f"missing required key {key!r}")
+                return None
+            return default
+        v = self.d[key]
+        if not isinstance(v, str):
+            self.ctx.err(p, f"expected a string, got {_describe(v)}")
+            return None
+        if choices is not None and v not in choices:
+            self.ctx.err(p, f"expected one of: {', '.join(choices)}; got {v!r}")
+            return None
+        if pattern is not None and not pattern.match(v):
+            self.ctx.err(p, f"{v!r} may only contain letters, digits, '_', '.', '-'")
+            return None
+        return v
+
+    def boolean(self, key: str, default: bool) -> bool:
+        v = self.d.get(key, default)
+        if not isinstance(v, bool):
+            self.ctx.err(self.path + (key,), f"expected true or false, got {_describe(v)}")
+            return default
+        return v
+
+    def one_of(self, *keys: str) -> str | None:
+        present = [k for k in keys if k in self.d]
+        if len(present) > 1:
+            self.ctx.err(self.path, f"give only one of {' / '.join(keys)}, not {' and '.join(present)}")
+            return None
+        return present[0] if present else None
+
+
+def _prop_values(ctx: _Ctx, d: Any, path: P) -> list[tuple[str, float]]:
+    """A ``{jsbsim/property: number}`` mapping."""
+    out: list[tuple[str, float]] = []
+    if not isinstance(d, dict) or not d:
+        ctx.err(path, f"expected a non-empty mapping of JSBSim property: value, got {_describe(d)}")
+        return out
+    for k, v in d.items():
+        if not isinstance(k, str) or not re.match(r"^[A-Za-z0-9_\-/\[\].]+$", k):
+            ctx.err(path + (k,), f"{k!r} is not a JSBSim property name")
+        elif isinstance(v, bool):
+            out.append((k, 1.0 if v else 0.0))
+        elif not isinstance(v, (int, float)) or not math.isfinite(v):
+            ctx.err(path + (k,), f"expected a number, got {_describe(v)}")
+        else:
+            out.append((k, float(v)))
+    return out
+
+
+def load_scenario(path: str | Path, check_properties: bool = True) -> Scenario:
+    """Read, validate and resolve a scenario file; ``ConfigError`` lists every problem."""
+    p = Path(path)
+    try:
+        text = p.read_text()
+    except OSError as e:
+        raise ConfigError(f"{p}: cannot read scenario: {e.strerror or e}") from None
+    return parse_scenario(text, str(p), check_properties=check_properties)
+
+
+def parse_scenario(text: str, fname: str = "<scenario>", check_properties: bool = True
+                   ) -> Scenario:
+    try:
+        data, lines, dups = load_with_lines(text)
+    except YamlProblem as e:
+        raise ConfigError([f"{fname}:{e.line}: {e.message}"]) from None
+    ctx = _Ctx(fname, lines)
+    ctx.problems.extend(dups)
+    top = _Reader(ctx, data, (), ("schema_version", "name", "description", "origin", "rates",
+                                  "duration_s", "seed", "aircraft_path", "vehicles", "schedule"))
+    version = top.integer("schema_version")
+    if version is not None and version != SCHEMA_VERSION:
+        ctx.err(("schema_version",), f"unsupported schema_version {version}; this cosim reads "
+                                     f"{SCHEMA_VERSION}")
+    name = top.string("name", Path(fname).stem)
+    description = top.string("description", "")
+    o = _Reader(ctx, top.d.get("origin"), ("origin",), ("lat_deg", "lon_deg", "ground_alt_m"))
+    origin = Origin(o.num("lat_deg", lo=-90, hi=90) or 0.0, o.num("lon_deg", lo=-180, hi=180) or 0.0,
+                    o.num("ground_alt_m", 0.0, lo=-500, hi=9000) or 0.0)
+    rates = _rates(ctx, top.d.get("rates", {}))
+    duration = top.num("duration_s", lo=0, lo_open=True)
+    seed = top.integer("seed", 0, lo=0)
+    apath: list[str] = []
+    raw_ap = top.d.get("aircraft_path", [])
+    if isinstance(raw_ap, str):
+        raw_ap = [raw_ap]
+    if not isinstance(raw_ap, list) or not all(isinstance(x, str) for x in raw_ap):
+        ctx.err(("aircraft_path",), "expected a folder or a list of folders")
+    else:
+        base = Path(fname).resolve().parent
+        apath = [str((base / x).resolve()) for x in raw_ap]
+
+    vehicles = _vehicles(ctx, top.d.get("vehicles", _MISSING), origin, tuple(apath), seed or 0)
+    if duration is None:
+        duration = 1.0
+    schedule = _schedule(ctx, top.d.get("schedule", []), vehicles, rates, duration)
+    if check_properties:
+        _check_properties(ctx, vehicles, schedule)
+    if ctx.problems:
+        raise ConfigError(ctx.format())
+    return Scenario(name=name, path=fname, origin=origin, rates=rates, duration_s=duration,
+                    seed=seed, vehicles=tuple(v for v, _ in vehicles), schedule=tuple(schedule),
+                    description=description, aircraft_path=tuple(apath),
+                    extra={"vehicle_paths": [pp for _, pp in vehicles]})
+
+
+def _rates(ctx: _Ctx, d: Any) -> Rates:
+    r = _Reader(ctx, d, ("rates",), ("physics_hz", "control_hz", "log_hz"))
+    ph = r.num("physics_hz", 120.0, lo=0, lo_open=True, hi=10000)
+    ch = r.num("control_hz", 30.0, lo=0, lo_open=True)
+    lh = r.num("log_hz", 10.0, lo=0, lo_open=True)
+    if None in (ph, ch, lh):
+        return Rates()
+
+    def divides(a: float, b: float) -> bool:
+        q = b / a
+        return abs(q - round(q)) < 1e-9 and round(q) >= 1
+
+    if not divides(ch, ph):
+        ctx.err(("rates", "control_hz"), f"control_hz {ch:g} must divide physics_hz {ph:g} "
+                                         f"(a whole number of physics ticks per exchange)")
+    elif not divides(lh, ch):
+        ctx.err(("rates", "log_hz"), f"log_hz {lh:g} must divide control_hz {ch:g} (states "
+                                     f"are exchanged at control_hz; physics_hz is {ph:g})")
+    return Rates(ph, ch, lh)
+
+
+def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: int
+              ) -> list[tuple[VehicleSpec, P]]:
+    path: P = ("vehicles",)
+    if d is _MISSING:
+        ctx.err((), "missing required key 'vehicles'")
+        return []
+    if not isinstance(d, list) or not d:
+        ctx.err(path, f"expected a non-empty list of vehicles, got {_describe(d)}")
+        return []
+    frame = origin.frame
+    out: list[tuple[VehicleSpec, P]] = []
+    seen: dict[str, P] = {}
+    for i, vd in enumerate(d):
+        vp = path + (i,)
+        r = _Reader(ctx, vd, vp, ("id", "model", "count", "formation", "init", "trim", "set",
+                                  "random_seed"))
+        vid = r.string("id", pattern=_ID)
+        model_name = r.string("model")
+        count = r.integer("count", 1, lo=1)
+        trim = r.boolean("trim", True)
+        props = _prop_values(ctx, r.d["set"], vp + ("set",)) if r.has("set") else []
+        fixed_seed = r.integer("random_seed", None, lo=0)
+        model = None
+        if model_name is not None:
+            try:
+                model = find_model(model_name, apath)
+            except CosimError as e:
+                ctx.err(vp + ("model",), str(e))
+        ini = _Reader(ctx, r.d.get("init"), vp + ("init",),
+                      ("lat_deg", "lon_deg", "north_m", "east_m", "alt_msl_m", "alt_agl_m",
+                       "heading_deg", "airspeed_kt", "airspeed_mps"))
+        if not r.has("init"):
+            continue
+        pos_geo = ini.has("lat_deg") or ini.has("lon_deg")
+        pos_ned = ini.has("north_m") or ini.has("east_m")
+        if pos_geo and pos_ned:
+            ctx.err(vp + ("init",), "give the position as lat_deg/lon_deg or as north_m/east_m, "
+                                    "not both")
+        if pos_geo:
+            lat, lon = ini.num("lat_deg", lo=-90, hi=90), ini.num("lon_deg", lo=-180, hi=180)
+            n0 = e0 = None
+        else:
+            n0, e0 = ini.num("north_m", 0.0), ini.num("east_m", 0.0)
+            lat = lon = None
+        alt_key = ini.one_of("alt_msl_m", "alt_agl_m")
+        alt = None
+        if alt_key is None:
+            ctx.err(vp + ("init",), "missing the altitude: give alt_msl_m or alt_agl_m")
+        else:
+            a = ini.num(alt_key, lo=-500, hi=100000)
+            if a is not None:
+                alt = a + (origin.ground_alt_m if alt_key == "alt_agl_m" else 0.0)
+        heading = ini.num("heading_deg", 0.0, lo=-360, hi=360)
+        spd_key = ini.one_of("airspeed_kt", "airspeed_mps")
+        speed = None
+        if spd_key is None:
+            ctx.err(vp + ("init",), "missing the airspeed: give airspeed_kt or airspeed_mps")
+        else:
+            s = ini.num(spd_key, lo=0, hi=2000)
+            if s is not None:
+                speed = s * (KT_TO_MPS if spd_key == "airspeed_kt" else 1.0)
+        offsets = (np.zeros(1), np.zeros(1))
+        alt_step = 0.0
+        if count is not None and count > 1 or r.has("formation"):
+            f = _Reader(ctx, r.d.get("formation"), vp + ("formation",),
+                        ("type", "spacing_m", "bearing_deg", "columns", "radius_m", "alt_step_m"))
+            kind = f.string("type", choices=FORMATIONS)
+            spacing = f.num("spacing_m", None if f.has("radius_m") else _MISSING, lo=0)
+            bearing = f.num("bearing_deg", None, lo=-360, hi=360)
+            columns = f.integer("columns", None, lo=1)
+            radius = f.num("radius_m", None, lo=0)
+            alt_step = f.num("alt_step_m", 0.0) or 0.0
+            if not r.has("formation"):
+                ctx.err(vp, f"count {count} needs a formation (type: line, grid or circle, "
+                            f"with spacing_m)")
+            elif kind is not None and (spacing is not None or radius is not None) and count:
+                offsets = formation_offsets(kind, count, spacing or 0.0, heading or 0.0,
+                                            bearing, columns, radius)
+        if None in (vid, model, alt, heading, speed, count) or (pos_geo and None in (lat, lon)) \
+                or (not pos_geo and None in (n0, e0)):
+            continue
+        assert model is not None and vid is not None and count is not None
+        dn, de = offsets
+        if pos_geo:
+            assert lat is not None and lon is not None
+            n_base, e_base, _ = frame.geodetic_to_ned(lat, lon, origin.ground_alt_m)
+        else:
+            n_base, e_base = n0, e0
+        lats, lons, _ = frame.ned_to_geodetic(n_base + dn, e_base + de, 0.0)
+        if count == 1 and pos_geo:
+            lats, lons = np.array([lat]), np.array([lon])
+        width = len(str(count - 1))
+        for j in range(count):
+            uid = vid if count == 1 else f"{vid}{j:0{width}d}"
+            if uid in seen:
+                ctx.err(vp + ("id",), f"duplicate vehicle id {uid!r} (also at "
+                                      f"{format_path(seen[uid])}, line {ctx.line(seen[uid])})")
+                continue
+            seen[uid] = vp
+            index = len(out)
+            vseed = fixed_seed if fixed_seed is not None and count == 1 else int(
+                np.random.SeedSequence([seed, index]).generate_state(1)[0] % (2**31 - 1))
+            out.append((VehicleSpec(
+                id=uid, model=model.name, aircraft_dir=model.aircraft_dir,
+                model_source=model.source, lat_deg=float(lats[j]), lon_deg=float(lons[j]),
+                alt_msl_m=float(alt + j * alt_step), heading_deg=float(heading) % 360.0,
+                airspeed_mps=float(speed), terrain_alt_m=origin.ground_alt_m, trim=trim,
+                random_seed=vseed, initial_props=tuple(props)), vp))
+    return out
+
+
+def _select(ctx: _Ctx, sel: Any, path: P, ids: list[str]) -> list[int]:
+    if sel == "all":
+        return list(range(len(ids)))
+    pats = [sel] if isinstance(sel, str) else sel
+    if not isinstance(pats, list) or not pats or not all(isinstance(x, str) for x in pats):
+        ctx.err(path, f"expected 'all', a vehicle id, a pattern such as 'uav*', or a list of "
+                      f"them; got {_describe(sel)}")
+        return []
+    chosen: set[int] = set()
+    for pat in pats:
+        hits = [i for i, v in enumerate(ids) if fnmatchcase(v, pat)]
+        if not hits:
+            shown = ", ".join(ids[:8]) + (", ..." if len(ids) > 8 else "")
+            ctx.err(path, f"{pat!r} matches no vehicle (vehicles: {shown})")
+        chosen.update(hits)
+    return sorted(chosen)
+
+
+def _schedule(ctx: _Ctx, d: Any, vehicles: list[tuple[VehicleSpec, P]], rates: Rates,
+              duration: float) -> list[ScheduleItem]:
+    if not isinstance(d, list):
+        ctx.err(("schedule",), f"expected a list of timed actions, got {_describe(d)}")
+        return []
+    ids = [v.id for v, _ in vehicles]
+    out = []
+    k = rates.control_every
+    for i, sd in enumerate(d):
+        sp: P = ("schedule", i)
+        r = _Reader(ctx, sd, sp, ("at_s", "vehicles", "set"))
+        at = r.num("at_s", lo=0)
+        if at is not None and at > duration:
+            ctx.err(sp + ("at_s",), f"at_s {at:g} is after the end of the run (duration_s "
+                                    f"{duration:g})")
+        sel = _select(ctx, r.d.get("vehicles", "all"), sp + ("vehicles",), ids)
+        if not r.has("set"):
+            ctx.err(sp, "missing 'set' (a mapping of JSBSim property: value)")
+            continue
+        sets = _prop_values(ctx, r.d["set"], sp + ("set",))
+        if at is None:
+            continue
+        tick = math.ceil(round(at * rates.physics_hz, 6) / k) * k
+        out.append(ScheduleItem(at, tick, tuple(sel), tuple(sets), i))
+    return sorted(out, key=lambda s: s.tick)  # stable: file order within a tick
+
+
+def _check_properties(ctx: _Ctx, vehicles: list[tuple[VehicleSpec, P]],
+                      schedule: list[ScheduleItem]) -> None:
+    """Every property written must exist in every model it is written to."""
+    fdms: dict[tuple[str, str], Any] = {}
+
+    def exists(spec: VehicleSpec, name: str) -> bool:
+        key = (spec.model, spec.aircraft_dir)
+        if key not in fdms:
+            from cosim.jsb import ModelInfo
+
+            fdms[key] = new_fdm(ModelInfo(spec.model, spec.aircraft_dir, spec.model_source), 0.01)
+        return has_property(fdms[key], name)
+
+    def check(where: P, specs: list[VehicleSpec], props: list[tuple[str, float]],
+              report: Callable[[P, str], None]) -> None:
+        for name, _ in props:
+            missing = sorted({s.model for s in specs if not exists(s, name)})
+            if missing:
+                report(where + (name,), f"JSBSim property {name!r} does not exist in model "
+                                        f"{', '.join(missing)} (check the spelling; "
+                                        f"`cosim models --properties MODEL` lists them)")
+
+    done: set[P] = set()
+    for spec, vp in vehicles:
+        if spec.initial_props and vp not in done:
+            done.add(vp)
+            check(vp + ("set",), [spec], list(spec.initial_props), ctx.err)
+    specs = [v for v, _ in vehicles]
+    for item in schedule:
+        check(("schedule", item.index, "set"), [specs[j] for j in item.vehicles],
+              list(item.sets), ctx.err)

@@ -1,0 +1,72 @@
+"""YAML loading that remembers where every value came from.
+
+``load_with_lines`` returns plain Python data (as ``yaml.safe_load`` would)
+plus a map from each value's path (a tuple of keys and indices) to its
+1-based line, so validation can report ``file:line: path: message``.
+Duplicate mapping keys are reported (``safe_load`` silently keeps the last).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import yaml
+
+Path_ = tuple[Any, ...]
+
+
+class YamlProblem(Exception):
+    def __init__(self, line: int, message: str) -> None:
+        super().__init__(line, message)
+        self.line = line
+        self.message = message
+
+
+def format_path(path: Path_) -> str:
+    out = ""
+    for part in path:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        else:
+            out += ("." if out else "") + str(part)
+    return out or "(top level)"
+
+
+def load_with_lines(text: str) -> tuple[Any, dict[Path_, int], list[tuple[int, str]]]:
+    """Parse ``text``; return (data, lines, duplicate-key problems).
+
+    Raises ``YamlProblem`` on a syntax error.
+    """
+    try:
+        node = yaml.compose(text, Loader=yaml.SafeLoader)
+    except yaml.MarkedYAMLError as e:
+        mark = e.problem_mark or e.context_mark
+        line = mark.line + 1 if mark is not None else 1
+        raise YamlProblem(line, f"YAML syntax error: {e.problem or e}") from None
+    except yaml.YAMLError as e:
+        raise YamlProblem(1, f"YAML error: {e}") from None
+    lines: dict[Path_, int] = {}
+    dups: list[tuple[int, str]] = []
+    if node is None:
+        return None, lines, dups
+    constructor = yaml.SafeLoader("")
+
+    def build(n: yaml.Node, path: Path_) -> Any:
+        lines[path] = n.start_mark.line + 1
+        if isinstance(n, yaml.MappingNode):
+            out: dict[Any, Any] = {}
+            for k_node, v_node in n.value:
+                key = constructor.construct_object(k_node, deep=True)
+                if isinstance(key, (list, dict)):
+                    key = str(key)
+                if key in out:
+                    dups.append((k_node.start_mark.line + 1,
+                                 f"{format_path(path + (key,))}: duplicate key {key!r}"))
+                out[key] = build(v_node, path + (key,))
+                lines[path + (key,)] = k_node.start_mark.line + 1
+            return out
+        if isinstance(n, yaml.SequenceNode):
+            return [build(v, path + (i,)) for i, v in enumerate(n.value)]
+        return constructor.construct_object(n, deep=True)
+
+    return build(node, ()), lines, dups

@@ -1,0 +1,210 @@
+"""The lockstep tick loop: one scenario from start to a clean stop.
+
+Time is an integer physics ``tick``; seconds are derived. Every exchange
+advances every vehicle by the same ``control_every`` ticks, so all vehicles
+are at the same simulation time whenever anything (schedule, logging,
+later controllers and renderers) looks at them. The loop stops cleanly on
+completion, on ``stop()`` (Ctrl-C/SIGTERM in the CLI) and on errors, and
+always closes the logs and writes ``summary.json`` first.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from cosim.errors import WorkerDied, WorkerError
+from cosim.fdm_pool import STATE_INDEX, VehicleStatus, make_pool
+from cosim.fdm_pool.base import Pool
+from cosim.logs import EventLog, StateLog, write_json_atomic
+from cosim.scenario import Scenario
+from cosim.sync.pacing import Pacer
+
+log = logging.getLogger(__name__)
+
+ProgressFn = Callable[[int, int], None]
+_STATUS = STATE_INDEX["status"]
+_EVENT_OF_STATUS = {VehicleStatus.GROUND_IMPACT: "ground_impact",
+                    VehicleStatus.DIVERGED: "divergence"}
+
+
+@dataclass
+class RunResult:
+    out_dir: Path
+    stop_reason: str
+    ticks: int
+    summary: dict[str, Any] = field(default_factory=dict)
+    error: BaseException | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.stop_reason == "completed"
+
+
+class Run:
+    """One run of a scenario into an output folder."""
+
+    def __init__(self, scenario: Scenario, out_dir: str | Path, backend: str = "process",
+                 workers: int | None = None, realtime: float | None = None,
+                 progress: ProgressFn | None = None) -> None:
+        self.scn = scenario
+        self.out = Path(out_dir)
+        self.backend = backend
+        self.workers = workers
+        self.pacer = Pacer(realtime) if realtime else None
+        self.progress = progress
+        self._stop = threading.Event()
+        self._stop_reason = "interrupted"
+        self.pool: Pool | None = None
+
+    def stop(self, reason: str = "interrupted") -> None:
+        """Ask the loop to stop after the current tick (safe from a signal handler)."""
+        self._stop_reason = reason
+        self._stop.set()
+
+    def run(self) -> RunResult:
+        scn, out = self.scn, self.out
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "scenario.resolved.yaml").write_text(
+            yaml.safe_dump(scn.resolved_dict(), sort_keys=False))
+        ids = [v.id for v in scn.vehicles]
+        hz = scn.rates.physics_hz
+        events = EventLog(out / "events.jsonl", hz)
+        states_log = StateLog(out / "states.parquet", ids, scn.origin.frame, hz)
+        k, every_log, total = scn.rates.control_every, scn.rates.log_every, scn.total_ticks
+        channels = scn.channels
+        chan_index = {c: i for i, c in enumerate(channels)}
+        tick = 0
+        reason = "error"
+        error: BaseException | None = None
+        wall0 = time.perf_counter()
+        startup_s = loop_s = 0.0
+        loop0: float | None = None
+        workers_used = 1
+        events.emit("run_start", 0, scenario=scn.name, vehicles=len(ids), backend=self.backend)
+        try:
+            log.info("building and trimming %d vehicles (%s backend)", len(ids), self.backend)
+            pool = make_pool(scn.vehicles, scn.rates.dt_s, channels, self.backend, self.workers)
+            self.pool = pool
+            workers_used = pool.workers
+            startup_s = time.perf_counter() - wall0
+            log.info("%d vehicles ready in %.2f s on %d worker(s)", len(ids), startup_s,
+                     workers_used)
+            with pool:
+                states = pool.states
+                status = states[:, _STATUS].copy()
+                self._status_events(events, 0, states, np.zeros_like(status), ids)
+                states_log.append(0, states)
+                pending = list(scn.schedule)
+                loop0 = time.perf_counter()
+                if self.pacer:
+                    self.pacer.start()
+                while tick < total:
+                    if self._stop.is_set():
+                        reason = self._stop_reason
+                        break
+                    while pending and pending[0].tick <= tick:
+                        item = pending.pop(0)
+                        rows = list(item.vehicles)
+                        for name, value in item.sets:
+                            pool.setpoints[rows, chan_index[name]] = value
+                        events.emit("schedule", tick, vehicle=None,
+                                    vehicles=len(rows), set=dict(item.sets))
+                    states = pool.step(k)
+                    tick += k
+                    new_status = states[:, _STATUS]
+                    if not np.array_equal(new_status, status):
+                        self._status_events(events, tick, states, status, ids)
+                        status = new_status.copy()
+                    if tick % every_log == 0:
+                        states_log.append(tick, states)
+                    if self.pacer:
+                        self.pacer.pace(tick / hz)
+                    if self.progress:
+                        self.progress(tick, total)
+                else:
+                    reason = "completed"
+                loop_s = time.perf_counter() - loop0
+        except WorkerDied as e:
+            reason, error = "worker_failure", e
+            events.emit("worker_failure", tick, vehicle=None, worker=e.worker, pid=e.pid,
+                        exitcode=e.exitcode, vehicles=e.vehicles, message=str(e))
+        except WorkerError as e:
+            reason, error = "error", e
+            events.emit("error", tick, vehicle=e.vehicle, worker=e.worker, message=str(e))
+        except Exception as e:
+            reason, error = "error", e
+            events.emit("error", tick, vehicle=None, message=f"{type(e).__name__}: {e}")
+        except KeyboardInterrupt as e:
+            reason, error = "interrupted", e
+        finally:
+            if loop0 is not None and loop_s == 0.0:
+                loop_s = time.perf_counter() - loop0
+            try:
+                states_log.close()
+            finally:
+                events.emit("stop", tick, reason=reason)
+                events.close()
+                summary = self._summary(reason, tick, startup_s, loop_s, workers_used,
+                                        events.counts, states_log.rows_written, error)
+                write_json_atomic(out / "summary.json", summary)
+        return RunResult(out, reason, tick, summary, error)
+
+    def _status_events(self, events: EventLog, tick: int, states: np.ndarray,
+                       old: np.ndarray, ids: list[str]) -> None:
+        for i in np.flatnonzero(states[:, _STATUS] != old).tolist():
+            st = VehicleStatus(int(states[i, _STATUS]))
+            if st in _EVENT_OF_STATUS:
+                row = states[i]
+                events.emit(_EVENT_OF_STATUS[st], tick, vehicle=ids[i],
+                            lat_deg=row[STATE_INDEX["lat_deg"]],
+                            lon_deg=row[STATE_INDEX["lon_deg"]],
+                            alt_msl_m=row[STATE_INDEX["alt_msl_m"]],
+                            vd_mps=row[STATE_INDEX["vd_mps"]],
+                            airspeed_mps=row[STATE_INDEX["airspeed_mps"]])
+                log.warning("tick %d: vehicle %s: %s (frozen)", tick, ids[i],
+                            _EVENT_OF_STATUS[st])
+
+    def _summary(self, reason: str, tick: int, startup_s: float, loop_s: float, workers: int,
+                 counts: dict[str, int], rows: int, error: BaseException | None
+                 ) -> dict[str, Any]:
+        scn = self.scn
+        sim_s = tick / scn.rates.physics_hz
+        s: dict[str, Any] = {
+            "scenario": scn.name,
+            "scenario_path": scn.path,
+            "vehicles": len(scn.vehicles),
+            "backend": self.backend,
+            "workers": workers,
+            "physics_hz": scn.rates.physics_hz,
+            "control_hz": scn.rates.control_hz,
+            "log_hz": scn.rates.log_hz,
+            "seed": scn.seed,
+            "ticks": tick,
+            "sim_time_s": sim_s,
+            "startup_s": round(startup_s, 4),
+            "wall_time_s": round(loop_s, 4),
+            "real_time_factor": round(sim_s / loop_s, 4) if loop_s > 0 else None,
+            "stop_reason": reason,
+            "events": counts,
+            "state_rows": rows,
+            "outputs": {"states": "states.parquet", "events": "events.jsonl",
+                        "scenario": "scenario.resolved.yaml"},
+        }
+        if self.pacer:
+            s["realtime"] = self.pacer.stats()
+        if error is not None:
+            s["error"] = f"{type(error).__name__}: {error}"
+        return s
+
+
+def run_scenario(scenario: Scenario, out_dir: str | Path, **kw: Any) -> RunResult:
+    return Run(scenario, out_dir, **kw).run()
