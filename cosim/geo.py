@@ -113,3 +113,18 @@ class LocalFrame:
         d = np.tensordot(self._rotation().T, ned, axes=1)
         o = self._origin_ecef()
         return ecef_to_geodetic(d[0] + o[0], d[1] + o[1], d[2] + o[2])
+
+    def place(self, north_m: ArrayLike, east_m: ArrayLike, height_m: ArrayLike
+              ) -> tuple[Array, Array]:
+        """Latitude and longitude (deg) of the point at ``height_m`` above the
+        ellipsoid whose local north/east coordinates are exactly ``north_m``,
+        ``east_m`` (solves for the matching ``down``; exact to well below 1 um)."""
+        n = np.asarray(north_m, dtype=np.float64)
+        e = np.asarray(east_m, dtype=np.float64)
+        h = np.asarray(height_m, dtype=np.float64)
+        d = -(h - self.alt_m) + 0.0 * n  # flat-earth first guess, broadcast
+        for _ in range(4):
+            lat, lon, hh = self.ned_to_geodetic(n, e, d)
+            d = d + (hh - h)  # moving down by x lowers the height by ~x (cos < 1e-3 off)
+        lat, lon, _ = self.ned_to_geodetic(n, e, d)
+        return lat, lon

@@ -51,6 +51,10 @@ class Pool(ABC):
     def workers(self) -> int:
         return 1
 
+    def busy_s(self) -> list[float]:
+        """Seconds each shard spent stepping in the last exchange (for benchmarks)."""
+        return []
+
     def _require(self, *allowed: PoolState, action: str) -> None:
         if self._state not in allowed:
             raise PoolStateError(

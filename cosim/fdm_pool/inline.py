@@ -5,6 +5,7 @@ Every other backend is tested against this one.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
 
 from cosim.errors import CosimError, JSBSimError
@@ -25,7 +26,13 @@ class InlinePool(Pool):
     def _send(self, nsub: int) -> None:
         self._nsub = nsub
 
+    def busy_s(self) -> list[float]:
+        return [self._busy]
+
+    _busy = 0.0
+
     def _wait(self, timeout_s: float | None) -> None:
+        t0 = time.perf_counter()
         try:
             self._shard.exchange(self.setpoints, self._nsub, self.states)
         except CosimError:
@@ -33,6 +40,7 @@ class InlinePool(Pool):
         except Exception as e:
             raise JSBSimError(f"vehicle {self._shard.current!r} at tick {self.tick}: "
                               f"{type(e).__name__}: {e}") from e
+        self._busy = time.perf_counter() - t0
 
     def _close(self) -> None:
         self._shard.vehicles.clear()

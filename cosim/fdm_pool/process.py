@@ -42,7 +42,7 @@ _SEQ, _DONE, _CMD, _NSUB, _STATUS = 0, 1, 2, 3, 4
 _CTRL_W = 8
 _CMD_STEP, _CMD_STOP = 1, 2
 _OK, _ERR = 0, 1
-_SPINS = 3000  # sched_yield spins before falling back to sleeping
+_SPINS = 0  # sched_yield spins before falling back to sleeping
 _LIVENESS_EVERY = 256
 
 
@@ -181,9 +181,11 @@ class ProcessPool(Pool):
         """Worker index -> pid of its child process (the driver's shard has none)."""
         return {i: p.pid for i, p in self._procs.items()}
 
+    _own_busy = 0.0
+
     def busy_s(self) -> list[float]:
-        """Seconds each child spent stepping during the last exchange."""
-        return [float(self._sh.busy_s[i, 0]) for i in self._procs]
+        own = [self._own_busy] if self._own is not None else []
+        return own + [float(self._sh.busy_s[i, 0]) for i in self._procs]
 
     def _vehicles_of(self, i: int) -> list[str]:
         a, b = self.bounds[i]
@@ -201,6 +203,7 @@ class ProcessPool(Pool):
     def _wait(self, timeout_s: float | None) -> None:
         if self._own is not None:
             a, b = self.bounds[0]
+            t0 = time.perf_counter()
             try:
                 self._own.exchange(self.setpoints[a:b] if self.channels else None,
                                    self._nsub, self.states[a:b])
@@ -209,6 +212,7 @@ class ProcessPool(Pool):
             except Exception as e:
                 raise JSBSimError(f"vehicle {self._own.current!r} (worker 0, driver) at tick "
                                   f"{self.tick}: {type(e).__name__}: {e}") from e
+            self._own_busy = time.perf_counter() - t0
         self._await(self._seq, timeout_s, what=f"finish tick {self.tick + self._nsub}")
 
     def _await(self, seq: int, timeout_s: float | None, what: str) -> None:

@@ -439,12 +439,14 @@ def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: i
             continue
         assert model is not None and vid is not None and count is not None
         dn, de = offsets
+        alts = alt + np.arange(count) * alt_step
         if pos_geo:
             assert lat is not None and lon is not None
-            n_base, e_base, _ = frame.geodetic_to_ned(lat, lon, origin.ground_alt_m)
+            n_base, e_base, _ = frame.geodetic_to_ned(lat, lon, alt)
         else:
             n_base, e_base = n0, e0
-        lats, lons, _ = frame.ned_to_geodetic(n_base + dn, e_base + de, 0.0)
+        # exact: each vehicle's local north/east are the formation's, at its own height
+        lats, lons = frame.place(n_base + dn, e_base + de, alts)
         if count == 1 and pos_geo:
             lats, lons = np.array([lat]), np.array([lon])
         width = len(str(count - 1))
@@ -461,7 +463,7 @@ def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: i
             out.append((VehicleSpec(
                 id=uid, model=model.name, aircraft_dir=model.aircraft_dir,
                 model_source=model.source, lat_deg=float(lats[j]), lon_deg=float(lons[j]),
-                alt_msl_m=float(alt + j * alt_step), heading_deg=float(heading) % 360.0,
+                alt_msl_m=float(alts[j]), heading_deg=float(heading) % 360.0,
                 airspeed_mps=float(speed), terrain_alt_m=origin.ground_alt_m, trim=trim,
                 random_seed=vseed, initial_props=tuple(props)), vp))
     return out

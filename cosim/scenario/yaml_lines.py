@@ -4,13 +4,19 @@
 plus a map from each value's path (a tuple of keys and indices) to its
 1-based line, so validation can report ``file:line: path: message``.
 Duplicate mapping keys are reported (``safe_load`` silently keeps the last).
+Unquoted numbers in exponent form without a sign (``1e3``, ``2.5e-3`` is
+fine already) are read as numbers, as YAML 1.2 and every user expect;
+PyYAML's YAML 1.1 rules would make them strings.
 """
 
 from __future__ import annotations
 
+import re
 from typing import Any
 
 import yaml
+
+_EXP_FLOAT = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+$")
 
 Path_ = tuple[Any, ...]
 
@@ -67,6 +73,10 @@ def load_with_lines(text: str) -> tuple[Any, dict[Path_, int], list[tuple[int, s
             return out
         if isinstance(n, yaml.SequenceNode):
             return [build(v, path + (i,)) for i, v in enumerate(n.value)]
-        return constructor.construct_object(n, deep=True)
+        value = constructor.construct_object(n, deep=True)
+        if (isinstance(value, str) and isinstance(n, yaml.ScalarNode) and n.style is None
+                and _EXP_FLOAT.match(value)):
+            return float(value)
+        return value
 
     return build(node, ()), lines, dups

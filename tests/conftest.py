@@ -1,0 +1,74 @@
+"""Shared fixtures: small vehicle sets and scenario files."""
+
+from __future__ import annotations
+
+import dataclasses
+import textwrap
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from cosim.bench import bench_specs
+from cosim.fdm_pool import VehicleSpec
+
+REPO = Path(__file__).resolve().parent.parent
+SCENARIOS = REPO / "scenarios"
+
+
+@pytest.fixture
+def specs() -> Callable[..., list[VehicleSpec]]:
+    """``specs(n, **changes)``: n c172p vehicles in a grid at 1000 m, 100 kt."""
+
+    def make(n: int, **changes: object) -> list[VehicleSpec]:
+        return [dataclasses.replace(s, **changes) for s in bench_specs(n)]  # type: ignore[arg-type]
+
+    return make
+
+
+@pytest.fixture
+def write_scenario(tmp_path: Path) -> Callable[[str, str], Path]:
+    """``write_scenario(text, name="s.yaml")``: write dedented YAML, return its path."""
+
+    def write(text: str, name: str = "s.yaml") -> Path:
+        p = tmp_path / name
+        p.write_text(textwrap.dedent(text).lstrip())
+        return p
+
+    return write
+
+
+#: a small scenario exercising formation, schedule, ground impact and divergence
+MIXED = """
+schema_version: 1
+name: mixed
+origin: {lat_deg: 47.0, lon_deg: 8.0, ground_alt_m: 400}
+rates: {physics_hz: 120, control_hz: 30, log_hz: 10}
+duration_s: 6
+seed: 7
+vehicles:
+  - id: a
+    count: 5
+    model: c172p
+    formation: {type: grid, spacing_m: 120}
+    init: {north_m: 100, east_m: -50, alt_agl_m: 700, heading_deg: 30, airspeed_kt: 95}
+  - id: diver
+    model: c172p
+    set: {fcs/throttle-cmd-norm: 0.0, fcs/elevator-cmd-norm: 0.6}
+    init: {north_m: -500, east_m: 0, alt_agl_m: 40, heading_deg: 0, airspeed_kt: 90}
+  - id: nan
+    model: c172x
+    init: {north_m: 0, east_m: 800, alt_agl_m: 900, heading_deg: 270, airspeed_kt: 90}
+schedule:
+  - at_s: 1.0
+    vehicles: [a1, a3]
+    set: {fcs/throttle-cmd-norm: 0.2, fcs/aileron-cmd-norm: 0.3}
+  - at_s: 2.0
+    vehicles: nan
+    set: {position/h-sl-ft: 1.0e308}
+"""
+
+
+@pytest.fixture
+def mixed_scenario(write_scenario: Callable[[str, str], Path]) -> Path:
+    return write_scenario(MIXED, "mixed.yaml")

@@ -1,0 +1,232 @@
+"""The pool contract: backends agree bit for bit, faults become named errors."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import numpy as np
+import pytest
+
+from cosim.errors import JSBSimError, PoolStateError, WorkerDied, WorkerError
+from cosim.fdm_pool import (
+    STATE_FIELDS,
+    STATE_INDEX,
+    InlinePool,
+    ProcessPool,
+    VehicleStatus,
+    make_pool,
+)
+from cosim.fdm_pool.process import shard_bounds
+from cosim.jsb import find_model, new_fdm
+
+CH = ("fcs/throttle-cmd-norm", "fcs/aileron-cmd-norm")
+
+
+def _drive(pool, steps: int = 60) -> list[np.ndarray]:
+    out = []
+    for i in range(steps):
+        if i == 10:
+            pool.setpoints[1, 0] = 0.3
+        if i == 20:
+            pool.setpoints[[0, 4], 1] = 0.25
+        if i == 40:
+            pool.setpoints[4, 1] = 0.0
+        out.append(pool.step(4).copy())
+    return out
+
+
+def _mismatches(a: np.ndarray, b: np.ndarray, ids: list[str]) -> list[str]:
+    bad = np.argwhere(~((a == b) | (np.isnan(a) & np.isnan(b))))
+    return [f"{ids[i]}.{STATE_FIELDS[j].name}: {a[i, j]!r} != {b[i, j]!r}" for i, j in bad[:10]]
+
+
+def test_shard_bounds_cover_everything_evenly() -> None:
+    for n in (1, 5, 7, 128):
+        for w in (1, 2, 3):
+            b = shard_bounds(n, min(n, w))
+            assert b[0][0] == 0 and b[-1][1] == n
+            assert all(x[1] == y[0] for x, y in zip(b, b[1:]))
+            sizes = [y - x for x, y in b]
+            assert max(sizes) - min(sizes) <= 1
+
+
+def test_process_backend_matches_inline_bit_for_bit_at_every_exchange(specs) -> None:
+    vs = specs(7)
+    with InlinePool(vs, 1 / 120, CH) as ref:
+        expected = [ref.states.copy()] + _drive(ref)
+    assert not np.array_equal(expected[0], expected[-1])  # something moved
+    for workers in (1, 2, 3):
+        with ProcessPool(vs, 1 / 120, CH, workers=workers) as pool:
+            assert pool.workers == workers
+            got = [pool.states.copy()] + _drive(pool)
+        for step, (e, g) in enumerate(zip(expected, got)):
+            bad = _mismatches(e, g, pool.ids)
+            assert not bad, f"workers={workers}, exchange {step}: {bad}"
+
+
+def test_setpoints_reach_jsbsim_and_reset_to_nan(specs) -> None:
+    with InlinePool(specs(2), 1 / 120, CH) as pool:
+        pool.setpoints[1, 0] = 0.123
+        pool.step(4)
+        assert np.isnan(pool.setpoints).all()
+        fdms = [v.fdm for v in pool._shard.vehicles]
+        assert fdms[1]["fcs/throttle-cmd-norm"] == pytest.approx(0.123)
+        assert fdms[0]["fcs/throttle-cmd-norm"] != pytest.approx(0.123)
+
+
+def test_state_columns_are_the_jsbsim_properties_in_si(specs) -> None:
+    with InlinePool(specs(1), 1 / 120) as pool:
+        pool.step(4)
+        fdm = pool._shard.vehicles[0].fdm
+        row = pool.states[0]
+        for f in STATE_FIELDS:
+            if f.prop:
+                assert row[STATE_INDEX[f.name]] == fdm[f.prop] * f.scale, f.name
+        assert row[STATE_INDEX["alt_msl_m"]] == pytest.approx(1000.0, abs=1.0)
+        assert row[STATE_INDEX["airspeed_mps"]] == pytest.approx(51.44, abs=0.3)
+
+
+def test_trimmed_start_is_steady(specs) -> None:
+    """Trimmed to the initial state: a few seconds later still level at the same speed."""
+    with InlinePool(specs(1, heading_deg=250.0), 1 / 120) as pool:
+        s0 = pool.states[0].copy()
+        for _ in range(90):
+            pool.step(4)
+        s = pool.states[0]
+    assert s0[STATE_INDEX["yaw_deg"]] == pytest.approx(250.0, abs=1e-6)
+    assert s[STATE_INDEX["alt_msl_m"]] == pytest.approx(1000.0, abs=3.0)
+    assert s[STATE_INDEX["airspeed_mps"]] == pytest.approx(s0[STATE_INDEX["airspeed_mps"]],
+                                                           abs=0.5)
+
+
+def test_misuse_is_a_named_error_and_close_is_idempotent(specs) -> None:
+    pool = InlinePool(specs(1), 1 / 120)
+    with pytest.raises(PoolStateError, match=r"cannot wait\(\).*ready"):
+        pool.wait()
+    pool.send(4)
+    with pytest.raises(PoolStateError, match=r"cannot send\(\).*waiting"):
+        pool.send(4)
+    pool.wait()
+    pool.close()
+    pool.close()
+    with pytest.raises(PoolStateError, match="closed"):
+        pool.step(4)
+    with pytest.raises(ValueError, match="unknown backend 'gpu'"):
+        make_pool(specs(1), 1 / 120, backend="gpu")
+
+
+def test_trim_failure_names_the_vehicle_inline_and_remote(specs) -> None:
+    vs = specs(3)
+    import dataclasses
+
+    vs[2] = dataclasses.replace(vs[2], airspeed_mps=3.0)  # far below a C172's stall
+    with pytest.raises(JSBSimError, match=r"vehicle 'b0002' \(c172p\): JSBSim could not trim"):
+        InlinePool(vs, 1 / 120)
+    with pytest.raises(WorkerError) as ei:
+        ProcessPool(vs, 1 / 120, workers=2)
+    err = ei.value
+    assert err.worker == 1 and err.vehicle == "b0002"
+    assert "Traceback" in err.remote_traceback and "could not trim" in err.remote_traceback
+    assert "vehicle 'b0002'" in str(err)
+
+
+def _children(pid: int) -> list[int]:
+    out = []
+    for d in os.listdir("/proc"):
+        if d.isdigit():
+            try:
+                with open(f"/proc/{d}/stat") as f:
+                    fields = f.read().rsplit(")", 1)[1].split()
+            except OSError:
+                continue
+            if int(fields[1]) == pid and fields[0] != "Z":
+                out.append(int(d))
+    return out
+
+
+def test_killed_worker_becomes_workerdied_within_5_s(specs) -> None:
+    pool = ProcessPool(specs(6), 1 / 120, workers=3)
+    try:
+        pool.step(4)
+        victim = pool.pids[2]
+        os.kill(victim, signal.SIGKILL)
+        t0 = time.monotonic()
+        with pytest.raises(WorkerDied) as ei:
+            for _ in range(10_000):
+                pool.step(4)
+        assert time.monotonic() - t0 < 5.0
+        e = ei.value
+        assert e.worker == 2 and e.pid == victim and e.exitcode == -signal.SIGKILL
+        assert e.vehicles == ["b0004", "b0005"]
+        assert "killed by SIGKILL" in str(e) and "b0004, b0005" in str(e)
+        with pytest.raises(PoolStateError, match="failed"):
+            pool.step(4)
+        procs = list(pool._procs.values())
+    finally:
+        pool.close()
+    assert procs and not any(p.is_alive() for p in procs)
+    assert not [c for c in _children(os.getpid()) if c in {p.pid for p in procs}]
+
+
+def test_workers_exit_when_the_driver_is_killed(tmp_path) -> None:
+    """No orphans: children notice their parent is gone and exit by themselves."""
+    script = tmp_path / "driver.py"
+    script.write_text(textwrap.dedent("""
+        import os, signal, sys
+        from cosim.bench import bench_specs
+        from cosim.fdm_pool import ProcessPool
+        if __name__ == "__main__":
+            pool = ProcessPool(bench_specs(4), 1 / 120, workers=3)
+            pool.step(4)
+            print(" ".join(str(p) for p in pool.pids.values()), flush=True)
+            os.kill(os.getpid(), signal.SIGKILL)
+    """))
+    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                          timeout=60)
+    pids = [int(p) for p in proc.stdout.split()]
+    assert len(pids) == 2
+    deadline = time.monotonic() + 5.0
+    alive = pids
+    while alive and time.monotonic() < deadline:
+        time.sleep(0.05)
+        alive = [p for p in pids if os.path.exists(f"/proc/{p}")]
+    assert not alive, f"orphaned workers still running: {alive}"
+
+
+def test_vehicle_statuses_freeze_on_impact_and_nan(specs) -> None:
+    vs = specs(3)
+    import dataclasses
+
+    vs[0] = dataclasses.replace(vs[0], alt_msl_m=40.0, initial_props=(
+        ("fcs/throttle-cmd-norm", 0.0), ("fcs/elevator-cmd-norm", 0.6)))
+    with InlinePool(vs, 1 / 120, ("position/h-sl-ft",)) as pool:
+        pool.setpoints[2, 0] = 1e308
+        pool.step(4)
+        st = STATE_INDEX["status"]
+        assert pool.states[2, st] == VehicleStatus.DIVERGED
+        assert np.isfinite(pool.states[2]).all()  # frozen at its last finite state
+        for _ in range(200):
+            pool.step(4)
+            if pool.states[0, st]:
+                break
+        assert pool.states[0, st] == VehicleStatus.GROUND_IMPACT
+        frozen = pool.states[0].copy()
+        moving = pool.states[1].copy()
+        for _ in range(5):
+            pool.step(4)
+        assert np.array_equal(pool.states[0], frozen)
+        assert not np.array_equal(pool.states[1], moving)
+        assert pool.states[1, st] == VehicleStatus.ACTIVE
+
+
+def test_jsbsim_console_is_silenced_in_workers(specs, capfd) -> None:
+    with ProcessPool(specs(2), 1 / 120, workers=2) as pool:
+        pool.step(4)
+    new_fdm(find_model("c172p"), 1 / 120)
+    out, err = capfd.readouterr()
+    assert "JSBSim" not in out and "JSBSim" not in err

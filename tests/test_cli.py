@@ -1,0 +1,102 @@
+"""The cosim command line: exit codes, messages, every bundled scenario runs."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from cosim.cli import main
+from cosim.logs import read_states
+
+REPO = Path(__file__).resolve().parent.parent
+SCENARIOS = sorted((REPO / "scenarios").rglob("*.yaml"))
+
+
+def test_quickstart_runs_and_says_where_outputs_are(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "q"
+    assert main(["run", str(REPO / "scenarios/quickstart.yaml"), "--out", str(out),
+                 "--no-progress"]) == 0
+    printed = capsys.readouterr().out
+    assert "completed: 5 vehicles" in printed and str(out) in printed
+    s = json.loads((out / "summary.json").read_text())
+    assert s["backend"] == "process" and s["stop_reason"] == "completed"
+    assert read_states(out).num_rows == 5 * (600 + 1)
+
+
+def test_refuses_to_overwrite_a_run_unless_asked(tmp_path: Path, capsys) -> None:
+    args = ["run", str(REPO / "scenarios/quickstart.yaml"), "--out", str(tmp_path / "o"),
+            "--duration-s", "0.5", "--backend", "inline", "--no-progress"]
+    assert main(args) == 0
+    assert main(args) == 2
+    assert "already holds a run" in capsys.readouterr().err
+    assert main(args + ["--overwrite"]) == 0
+    assert read_states(tmp_path / "o").num_rows == 5 * 6
+
+
+def test_bad_scenario_exit_2_lists_every_problem_with_lines(tmp_path: Path, capsys) -> None:
+    bad = tmp_path / "swarm8.yaml"
+    bad.write_text(
+        "schema_version: 1\n"
+        "origin: {lat_deg: 37, lon_deg: -122}\n"
+        "duration_s: 10\n"
+        "rates: {physics_hz: 100, control_hz: 30}\n"
+        "vehicles:\n"
+        "  - id: x\n"
+        "    model: c172q\n"
+        "    init: {alt_m: high, airspeed_kt: 90}\n")
+    assert main(["validate", str(bad)]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert f"{bad}:4: rates.control_hz: control_hz 30 must divide physics_hz 100" in err[0]
+    assert any(line.startswith(f"{bad}:7: vehicles[0].model: unknown aircraft model 'c172q'")
+               and "c172p" in line for line in err)
+    assert any(line.startswith(f"{bad}:8: vehicles[0].init.alt_m: unknown key 'alt_m'")
+               for line in err)
+    assert any("missing the altitude" in line for line in err)
+    assert main(["run", str(bad), "--out", str(tmp_path / "r")]) == 2
+    assert not (tmp_path / "r").exists()
+
+
+def test_usage_errors_exit_2(tmp_path: Path, capsys) -> None:
+    assert main(["run"]) == 2
+    assert main(["run", "x.yaml", "--backend", "gpu"]) == 2
+    assert main(["run", "x.yaml", "--realtime", "0"]) == 2
+    assert main(["bench", "--vehicles", "0,5"]) == 2
+    assert main(["run", str(tmp_path / "missing.yaml")]) == 2
+    assert "cannot read scenario" in capsys.readouterr().err
+    assert main([]) == 2
+
+
+def test_models_lists_bundled_aircraft(capsys) -> None:
+    assert main(["models"]) == 0
+    out = capsys.readouterr().out
+    assert any(line.split()[0] == "c172p" and "jsbsim" in line for line in out.splitlines())
+
+
+def test_models_properties(capsys) -> None:
+    assert main(["models", "--properties", "c172p"]) == 0
+    assert "fcs/throttle-cmd-norm" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("path", SCENARIOS, ids=[p.name for p in SCENARIOS])
+def test_every_bundled_scenario_validates_and_runs(path: Path, tmp_path: Path) -> None:
+    assert main(["validate", str(path)]) == 0
+    assert main(["run", str(path), "--out", str(tmp_path / "o"), "--duration-s", "1",
+                 "--no-progress"]) == 0
+    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert s["stop_reason"] == "completed" and s["sim_time_s"] == 1.0
+
+
+def test_bench_reports_ratios_measured_in_the_same_run(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "b.json"
+    assert main(["bench", "--vehicles", "4", "--seconds", "0.5", "--workers", "2",
+                 "--json", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    r = doc["results"][0]
+    for key in ("pool_steps_per_s", "pool_rtf", "serial_steps_per_s", "speedup_vs_serial",
+                "ceiling_steps_per_s", "fraction_of_ceiling", "overhead_us_per_exchange",
+                "startup_s"):
+        assert r[key] > 0, key
+    assert r["speedup_vs_serial"] == pytest.approx(r["serial_s"] / r["pool_s"])
+    assert r["vehicles"] == 4 and r["ticks"] == 60
