@@ -153,7 +153,7 @@ def run_bench(vehicles: list[int], model: str = "c172p", backend: str = "process
         r = bench_size(n, model, backend, workers, seconds, physics_hz, control_hz, baselines)
         results.append(r)
 
-        def f(key: str, fmt: str) -> str:
+        def f(key: str, fmt: str, r: dict[str, Any] = r) -> str:
             return format(r[key], fmt) if key in r else "-"
 
         print(f"{n:>6} {f('startup_s', '8.2f')} {f('pool_steps_per_s', '11.0f')} "

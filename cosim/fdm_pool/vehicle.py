@@ -51,8 +51,9 @@ class Vehicle:
         for name in channels:
             node = pm.get_node(name) if has_property(fdm, name) else None
             self._channels.append(node)  # None: this model lacks the property
-        self._agl = pm.get_node("position/h-agl-ft")
-        self._gear = pm.get_node("forces/fbz-gear-lbs")
+        agl, gear = pm.get_node("position/h-agl-ft"), pm.get_node("forces/fbz-gear-lbs")
+        assert agl is not None and gear is not None
+        self._agl, self._gear = agl, gear
         self.status = VehicleStatus.ACTIVE
         self.row = [0.0] * N_STATE
         self.read_state()

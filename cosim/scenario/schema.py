@@ -256,7 +256,8 @@ class _Reader:
     def one_of(self, *keys: str) -> str | None:
         present = [k for k in keys if k in self.d]
         if len(present) > 1:
-            self.ctx.err(self.path, f"give only one of {' / '.join(keys)}, not {' and '.join(present)}")
+            self.ctx.err(self.path,
+                         f"give only one of {' / '.join(keys)}, not {' and '.join(present)}")
             return None
         return present[0] if present else None
 
@@ -306,7 +307,8 @@ def parse_scenario(text: str, fname: str = "<scenario>", check_properties: bool 
     name = top.string("name", Path(fname).stem)
     description = top.string("description", "")
     o = _Reader(ctx, top.d.get("origin"), ("origin",), ("lat_deg", "lon_deg", "ground_alt_m"))
-    origin = Origin(o.num("lat_deg", lo=-90, hi=90) or 0.0, o.num("lon_deg", lo=-180, hi=180) or 0.0,
+    origin = Origin(o.num("lat_deg", lo=-90, hi=90) or 0.0,
+                    o.num("lon_deg", lo=-180, hi=180) or 0.0,
                     o.num("ground_alt_m", 0.0, lo=-500, hi=9000) or 0.0)
     rates = _rates(ctx, top.d.get("rates", {}))
     duration = top.num("duration_s", lo=0, lo_open=True)
@@ -438,13 +440,15 @@ def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: i
                 or (not pos_geo and None in (n0, e0)):
             continue
         assert model is not None and vid is not None and count is not None
+        assert alt is not None and heading is not None and speed is not None
         dn, de = offsets
         alts = alt + np.arange(count) * alt_step
         if pos_geo:
             assert lat is not None and lon is not None
             n_base, e_base, _ = frame.geodetic_to_ned(lat, lon, alt)
         else:
-            n_base, e_base = n0, e0
+            assert n0 is not None and e0 is not None
+            n_base, e_base = np.asarray(n0), np.asarray(e0)
         # exact: each vehicle's local north/east are the formation's, at its own height
         lats, lons = frame.place(n_base + dn, e_base + de, alts)
         if count == 1 and pos_geo:
