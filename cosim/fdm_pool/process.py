@@ -42,7 +42,7 @@ _SEQ, _DONE, _CMD, _NSUB, _STATUS = 0, 1, 2, 3, 4
 _CTRL_W = 8
 _CMD_STEP, _CMD_STOP = 1, 2
 _OK, _ERR = 0, 1
-_SPINS = 0  # sched_yield spins before falling back to sleeping
+_SPINS = 3000  # sched_yield spins (about 1-2 ms) before falling back to sleeping
 _LIVENESS_EVERY = 256
 
 

@@ -27,6 +27,7 @@ from cosim.scenario.formation import FORMATIONS, formation_offsets
 from cosim.scenario.yaml_lines import YamlProblem, format_path, load_with_lines
 
 SCHEMA_VERSION = 1
+ALT_MIN_M, ALT_MAX_M = -500.0, 100_000.0  # every vehicle's resolved height must lie here
 _ID = re.compile(r"^[A-Za-z0-9_.\-]+$")
 P = tuple[Any, ...]
 
@@ -380,6 +381,9 @@ def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: i
         trim = r.boolean("trim", True)
         props = _prop_values(ctx, r.d["set"], vp + ("set",)) if r.has("set") else []
         fixed_seed = r.integer("random_seed", None, lo=0)
+        if fixed_seed is not None and count is not None and count > 1:
+            ctx.err(vp + ("random_seed",), "random_seed is for a single vehicle; with count, "
+                                           "each vehicle's seed derives from the scenario seed")
         model = None
         if model_name is not None:
             try:
@@ -407,7 +411,7 @@ def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: i
         if alt_key is None:
             ctx.err(vp + ("init",), "missing the altitude: give alt_msl_m or alt_agl_m")
         else:
-            a = ini.num(alt_key, lo=-500, hi=100000)
+            a = ini.num(alt_key, lo=ALT_MIN_M, hi=ALT_MAX_M)
             if a is not None:
                 alt = a + (origin.ground_alt_m if alt_key == "alt_agl_m" else 0.0)
         heading = ini.num("heading_deg", 0.0, lo=-360, hi=360)
@@ -421,7 +425,11 @@ def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: i
                 speed = s * (KT_TO_MPS if spd_key == "airspeed_kt" else 1.0)
         offsets = (np.zeros(1), np.zeros(1))
         alt_step = 0.0
-        if count is not None and count > 1 or r.has("formation"):
+        no_formation = count is not None and count > 1 and not r.has("formation")
+        if no_formation:
+            ctx.err(vp, f"count {count} needs a formation (type: line, grid or circle, "
+                        f"with spacing_m)")
+        if r.has("formation"):
             f = _Reader(ctx, r.d.get("formation"), vp + ("formation",),
                         ("type", "spacing_m", "bearing_deg", "columns", "radius_m", "alt_step_m"))
             kind = f.string("type", choices=FORMATIONS)
@@ -430,19 +438,21 @@ def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: i
             columns = f.integer("columns", None, lo=1)
             radius = f.num("radius_m", None, lo=0)
             alt_step = f.num("alt_step_m", 0.0) or 0.0
-            if not r.has("formation"):
-                ctx.err(vp, f"count {count} needs a formation (type: line, grid or circle, "
-                            f"with spacing_m)")
-            elif kind is not None and (spacing is not None or radius is not None) and count:
+            if kind is not None and (spacing is not None or radius is not None) and count:
                 offsets = formation_offsets(kind, count, spacing or 0.0, heading or 0.0,
                                             bearing, columns, radius)
         if None in (vid, model, alt, heading, speed, count) or (pos_geo and None in (lat, lon)) \
-                or (not pos_geo and None in (n0, e0)):
+                or (not pos_geo and None in (n0, e0)) or no_formation:
             continue
         assert model is not None and vid is not None and count is not None
         assert alt is not None and heading is not None and speed is not None
         dn, de = offsets
         alts = alt + np.arange(count) * alt_step
+        if alts.min() < ALT_MIN_M or alts.max() > ALT_MAX_M:
+            ctx.err(vp + ("init", alt_key or "alt_msl_m"),
+                    f"gives altitudes {alts.min():g}..{alts.max():g} m above the ellipsoid "
+                    f"(with ground_alt_m and alt_step_m); allowed {ALT_MIN_M:g}..{ALT_MAX_M:g}")
+            continue
         if pos_geo:
             assert lat is not None and lon is not None
             n_base, e_base, _ = frame.geodetic_to_ned(lat, lon, alt)

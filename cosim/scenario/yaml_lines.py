@@ -57,23 +57,40 @@ def load_with_lines(text: str) -> tuple[Any, dict[Path_, int], list[tuple[int, s
         return None, lines, dups
     constructor = yaml.SafeLoader("")
 
+    def construct(n: yaml.Node) -> Any:
+        try:
+            return constructor.construct_object(n, deep=True)
+        except yaml.MarkedYAMLError as e:
+            mark = e.problem_mark or n.start_mark
+            raise YamlProblem(mark.line + 1, f"YAML error: {e.problem or e}") from None
+
     def build(n: yaml.Node, path: Path_) -> Any:
         lines[path] = n.start_mark.line + 1
         if isinstance(n, yaml.MappingNode):
+            own = sum(1 for k, _ in n.value if k.tag != "tag:yaml.org,2002:merge")
+            try:
+                constructor.flatten_mapping(n)  # YAML merge keys: `<<: *anchor`
+            except yaml.MarkedYAMLError as e:
+                mark = e.problem_mark or n.start_mark
+                raise YamlProblem(mark.line + 1, f"YAML error: {e.problem or e}") from None
             out: dict[Any, Any] = {}
-            for k_node, v_node in n.value:
-                key = constructor.construct_object(k_node, deep=True)
+            merged = len(n.value) - own  # merged pairs come first; own keys override them
+            own_seen: set[Any] = set()
+            for j, (k_node, v_node) in enumerate(n.value):
+                key = construct(k_node)
                 if isinstance(key, (list, dict)):
                     key = str(key)
-                if key in out:
-                    dups.append((k_node.start_mark.line + 1,
-                                 f"{format_path(path + (key,))}: duplicate key {key!r}"))
+                if j >= merged:
+                    if key in own_seen:
+                        dups.append((k_node.start_mark.line + 1,
+                                     f"{format_path(path + (key,))}: duplicate key {key!r}"))
+                    own_seen.add(key)
                 out[key] = build(v_node, path + (key,))
                 lines[path + (key,)] = k_node.start_mark.line + 1
             return out
         if isinstance(n, yaml.SequenceNode):
             return [build(v, path + (i,)) for i, v in enumerate(n.value)]
-        value = constructor.construct_object(n, deep=True)
+        value = construct(n)
         if (isinstance(value, str) and isinstance(n, yaml.ScalarNode) and n.style is None
                 and _EXP_FLOAT.match(value)):
             return float(value)
