@@ -9,6 +9,10 @@ For each fleet size N it measures, over the same number of physics ticks:
 - ``pool``: the chosen backend through the full exchange (setpoints, states,
   lockstep barrier), as ``cosim run`` uses it.
 
+The three are measured in interleaved rounds (pool, serial, ceiling, pool,
+...) because shared machines drift in speed over minutes; ratios are the
+median of the per-round ratios.
+
 and reports aircraft-steps per second, the real-time factor, the pool's
 start-up time (build + trim) and its per-exchange orchestration overhead
 (exchange wall time minus the busiest shard's stepping time). Ratios are
@@ -62,95 +66,131 @@ def _serial_loop(shard: Shard, ticks: int, k: int) -> float:
     return time.perf_counter() - t0
 
 
-def _ceiling_worker(specs: list[VehicleSpec], dt_s: float, ticks: int, k: int,
-                    ready: Any, go: Any, out: Any, i: int) -> None:
+def _ceiling_worker(specs: list[VehicleSpec], dt_s: float, ticks: int, k: int, repeat: int,
+                    start: Any, done: Any, out: Any, i: int) -> None:
     shard = Shard.build(specs, dt_s, ())
-    ready.release()
-    go.wait()
-    out[i] = _serial_loop(shard, ticks, k)
+    workers = start.parties - 1
+    done.wait()  # built: measurements may start
+    for r in range(repeat):
+        start.wait()
+        out[r * workers + i] = _serial_loop(shard, ticks, k)
+        done.wait()
 
 
-def _ceiling(specs: list[VehicleSpec], dt_s: float, ticks: int, k: int, workers: int) -> float:
-    """Wall time of W independent processes stepping their shards (max over them)."""
-    ctx = mp.get_context("spawn")
-    ready, go = ctx.Semaphore(0), ctx.Event()
-    out = ctx.RawArray("d", workers)
-    procs = []
-    for i, (a, b) in enumerate(shard_bounds(len(specs), workers)):
-        p = ctx.Process(target=_ceiling_worker, daemon=True,
-                        args=(specs[a:b], dt_s, ticks, k, ready, go, out, i))
-        p.start()
-        procs.append(p)
-    for _ in procs:
-        if not ready.acquire(timeout=600):
-            raise RuntimeError("ceiling worker failed to start")
-    go.set()
-    for p in procs:
-        p.join()
-        if p.exitcode != 0:
-            raise RuntimeError(f"ceiling worker exited with {p.exitcode}")
-    return max(out[:])
+class _Ceiling:
+    """W independent processes that step their shards with no communication,
+    one segment per ``segment()`` call (all start together; the slowest one
+    sets the wall time)."""
+
+    def __init__(self, specs: list[VehicleSpec], dt_s: float, ticks: int, k: int,
+                 workers: int, repeat: int) -> None:
+        ctx = mp.get_context("spawn")
+        self.start = ctx.Barrier(workers + 1, timeout=900)
+        self.done = ctx.Barrier(workers + 1, timeout=900)
+        self.out = ctx.RawArray("d", workers * repeat)
+        self.workers = workers
+        self.round = 0
+        self.procs = [ctx.Process(target=_ceiling_worker, daemon=True,
+                                  args=(specs[a:b], dt_s, ticks, k, repeat, self.start,
+                                        self.done, self.out, i))
+                      for i, (a, b) in enumerate(shard_bounds(len(specs), workers))]
+        for p in self.procs:
+            p.start()
+        self.done.wait()  # every shard built before anything is timed
+
+    def segment(self) -> float:
+        self.start.wait()
+        self.done.wait()
+        r, w = self.round, self.workers
+        self.round += 1
+        return max(self.out[r * w:(r + 1) * w])
+
+    def close(self) -> None:
+        for p in self.procs:
+            p.join(5)
+            if p.is_alive():
+                p.kill()
 
 
 def bench_size(n: int, model: str, backend: str, workers: int | None, seconds: float,
-               physics_hz: float, control_hz: float, baselines: bool = True) -> dict[str, Any]:
+               physics_hz: float, control_hz: float, baselines: bool = True,
+               repeat: int = 3) -> dict[str, Any]:
+    """``repeat`` rounds; each round runs one segment of ``seconds`` simulated
+    time on the pool, then on the serial loop, then on the ceiling processes,
+    so the three are measured side by side under the same machine load.
+    Rates are from each configuration's best segment; the ratios are the
+    median of the per-round ratios."""
     dt = 1.0 / physics_hz
     k = round(physics_hz / control_hz)
     ticks = max(k, math.ceil(seconds * physics_hz / k) * k)
     specs = bench_specs(n, model)
     steps = n * ticks
     res: dict[str, Any] = {"vehicles": n, "ticks": ticks, "sim_s": ticks * dt,
-                           "exchange_every": k}
+                           "exchange_every": k, "repeat": repeat}
 
     t0 = time.perf_counter()
     pool = make_pool(specs, dt, (), backend, workers)
     res["startup_s"] = time.perf_counter() - t0
     w = pool.workers
     res["workers"] = w
-    with pool:
-        pool.step(k)  # warm-up exchange
-        over = []
-        t0 = time.perf_counter()
-        for _ in range(ticks // k):
-            e0 = time.perf_counter()
-            pool.step(k)
-            over.append(time.perf_counter() - e0 - max(pool.busy_s() or [0.0]))
-        wall = time.perf_counter() - t0
+    shard = Shard.build(specs, dt, ()) if baselines else None
+    ceiling = _Ceiling(specs, dt, ticks, k, w, repeat) if baselines and w > 1 else None
+    walls: list[float] = []
+    serials: list[float] = []
+    ceils: list[float] = []
+    over: list[float] = []
+    try:
+        with pool:
+            pool.step(k)  # warm-up exchange
+            for _ in range(repeat):
+                t0 = time.perf_counter()
+                for _ in range(ticks // k):
+                    e0 = time.perf_counter()
+                    pool.step(k)
+                    over.append(time.perf_counter() - e0 - max(pool.busy_s() or [0.0]))
+                walls.append(time.perf_counter() - t0)
+                if shard is not None:
+                    serials.append(_serial_loop(shard, ticks, k))
+                if ceiling is not None:
+                    ceils.append(ceiling.segment())
+    finally:
+        if ceiling is not None:
+            ceiling.close()
+    wall = min(walls)
     res["pool_s"] = wall
+    res["pool_s_all"] = walls
     res["pool_steps_per_s"] = steps / wall
     res["pool_rtf"] = ticks * dt / wall
-    res["overhead_us_per_exchange"] = float(np.mean(over)) * 1e6
+    res["overhead_us_per_exchange"] = float(np.median(over)) * 1e6
     res["overhead_us_per_exchange_p99"] = float(np.percentile(over, 99)) * 1e6
-
-    if baselines:
-        shard = Shard.build(specs, dt, ())
-        serial = _serial_loop(shard, ticks, k)
-        del shard
-        res["serial_s"] = serial
-        res["serial_steps_per_s"] = steps / serial
-        res["speedup_vs_serial"] = serial / wall
-        if w > 1:
-            ceil = _ceiling(specs, dt, ticks, k, w)
-            res["ceiling_s"] = ceil
-            res["ceiling_steps_per_s"] = steps / ceil
-            res["fraction_of_ceiling"] = ceil / wall
+    if serials:
+        res["serial_s"] = min(serials)
+        res["serial_s_all"] = serials
+        res["serial_steps_per_s"] = steps / min(serials)
+        res["speedup_vs_serial"] = float(np.median([s / p for s, p in zip(serials, walls)]))
+    if ceils:
+        res["ceiling_s"] = min(ceils)
+        res["ceiling_s_all"] = ceils
+        res["ceiling_steps_per_s"] = steps / min(ceils)
+        res["fraction_of_ceiling"] = float(np.median([c / p for c, p in zip(ceils, walls)]))
     return res
 
 
 def run_bench(vehicles: list[int], model: str = "c172p", backend: str = "process",
               workers: int | None = None, seconds: float = 5.0, physics_hz: float = 120.0,
-              control_hz: float = 30.0, baselines: bool = True,
+              control_hz: float = 30.0, baselines: bool = True, repeat: int = 3,
               json_path: str | None = None) -> list[dict[str, Any]]:
     w = workers if workers is not None else (default_workers() if backend == "process" else 1)
     print(f"cosim bench: model {model}, backend {backend}, workers {w}, "
-          f"{physics_hz:g} Hz physics, {control_hz:g} Hz exchange, {seconds:g} s simulated per "
-          f"size", flush=True)
+          f"{physics_hz:g} Hz physics, {control_hz:g} Hz exchange, best of {repeat} x "
+          f"{seconds:g} s simulated per size", flush=True)
     hdr = (f"{'N':>6} {'start s':>8} {'pool st/s':>11} {'RTF':>8} {'ovh us':>8} "
            f"{'serial st/s':>12} {'x serial':>9} {'ceil st/s':>11} {'of ceil':>8}")
     print(hdr, flush=True)
     results = []
     for n in vehicles:
-        r = bench_size(n, model, backend, workers, seconds, physics_hz, control_hz, baselines)
+        r = bench_size(n, model, backend, workers, seconds, physics_hz, control_hz, baselines,
+                       repeat)
         results.append(r)
 
         def f(key: str, fmt: str, r: dict[str, Any] = r) -> str:
@@ -163,7 +203,7 @@ def run_bench(vehicles: list[int], model: str = "c172p", backend: str = "process
               flush=True)
     if json_path:
         doc = {"model": model, "backend": backend, "workers": w, "physics_hz": physics_hz,
-               "control_hz": control_hz, "seconds": seconds,
+               "control_hz": control_hz, "seconds": seconds, "repeat": repeat,
                "machine": {"python": sys.version.split()[0], "platform": platform.platform(),
                            "cores": default_workers()},
                "results": results}

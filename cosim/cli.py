@@ -95,7 +95,9 @@ def _build_parser() -> _Parser:
     b.add_argument("--backend", choices=("inline", "process"), default="process")
     b.add_argument("--workers", type=int, metavar="N")
     b.add_argument("--seconds", type=_positive_float, default=5.0, metavar="S",
-                   help="simulated seconds per size (default 5)")
+                   help="simulated seconds per measured segment (default 5)")
+    b.add_argument("--repeat", type=int, default=3, metavar="R",
+                   help="segments per configuration; the best is reported (default 3)")
     b.add_argument("--physics-hz", type=_positive_float, default=120.0)
     b.add_argument("--control-hz", type=_positive_float, default=30.0)
     b.add_argument("--no-baselines", action="store_true",
@@ -244,7 +246,7 @@ def _cmd_bench(a: argparse.Namespace) -> int:
 
     run_bench(vehicles=a.vehicles, model=a.model, backend=a.backend, workers=a.workers,
               seconds=a.seconds, physics_hz=a.physics_hz, control_hz=a.control_hz,
-              baselines=not a.no_baselines, json_path=a.json)
+              baselines=not a.no_baselines, repeat=max(1, a.repeat), json_path=a.json)
     return EXIT_OK
 
 

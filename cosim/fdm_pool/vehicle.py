@@ -1,35 +1,29 @@
 """One vehicle's FDM inside whichever process owns it: build, trim, step,
-read state, detect ground impact and divergence.
+read raw state, detect ground contact.
 
-Used by every backend, so all of them step FDMs the same way.
+Used by every backend, so all of them step FDMs the same way. Scaling to SI
+units and the NaN check are done per shard in numpy (``shard.py``).
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 import jsbsim
 
 from cosim.errors import JSBSimError
-from cosim.fdm_pool.spec import (
-    N_STATE,
-    STATE_FIELDS,
-    STATUS_COL,
-    VehicleSpec,
-    VehicleStatus,
-)
+from cosim.fdm_pool.spec import STATE_FIELDS, VehicleSpec, VehicleStatus
 from cosim.geo import FT_TO_M
 from cosim.jsb import ModelInfo, has_property, new_fdm
 
 _MPS_TO_FPS = 1.0 / FT_TO_M
+_get = jsbsim.FGPropertyNode.get_double_value
 
 
 class Vehicle:
     """A built, trimmed FDM with cached property nodes."""
 
-    __slots__ = ("spec", "fdm", "_read", "_scales", "_channels", "_agl", "_gear",
-                 "status", "row", "airborne")
+    __slots__ = ("spec", "fdm", "_read", "_channels", "_agl", "_gear", "status", "airborne")
 
     def __init__(self, spec: VehicleSpec, dt_s: float, channels: Sequence[str]) -> None:
         self.spec = spec
@@ -39,14 +33,12 @@ class Vehicle:
         self._set_ic()
         pm = fdm.get_property_manager()
         self._read = []
-        self._scales = []
         for f in STATE_FIELDS:
             if f.prop is not None:
                 node = pm.get_node(f.prop)
                 if node is None:
                     raise JSBSimError(f"vehicle {spec.id!r}: model {spec.model!r} lacks {f.prop}")
                 self._read.append(node)
-                self._scales.append(f.scale)
         self._channels = []
         for name in channels:
             node = pm.get_node(name) if has_property(fdm, name) else None
@@ -55,8 +47,6 @@ class Vehicle:
         assert agl is not None and gear is not None
         self._agl, self._gear = agl, gear
         self.status = VehicleStatus.ACTIVE
-        self.row = [0.0] * N_STATE
-        self.read_state()
         self.airborne = not self._touching()
 
     def _set_ic(self) -> None:
@@ -93,33 +83,26 @@ class Vehicle:
             if v == v and node is not None:  # v == v: not NaN
                 node.set_double_value(v)
 
-    def step(self, n: int) -> int:
-        """Run ``n`` physics substeps; returns the substep at which the vehicle
-        froze (ground impact), or -1."""
-        if self.status != VehicleStatus.ACTIVE:
-            return -1
+    def step(self, n: int, check_ground: bool) -> None:
+        """Run ``n`` physics substeps. With ``check_ground``, look for ground
+        contact after every substep and stop at the first one (status becomes
+        GROUND_IMPACT if the vehicle had been airborne)."""
         run = self.fdm.run
-        for i in range(n):
+        if not check_ground:
+            for _ in range(n):
+                if not run():
+                    raise JSBSimError(f"vehicle {self.spec.id!r}: JSBSim run() returned False")
+            return
+        for _ in range(n):
             if not run():
                 raise JSBSimError(f"vehicle {self.spec.id!r}: JSBSim run() returned False")
             if self.airborne:
                 if self._touching():
                     self.status = VehicleStatus.GROUND_IMPACT
-                    return i
+                    return
             elif not self._touching():
                 self.airborne = True
-        return -1
 
-    def read_state(self) -> list[float]:
-        """Refresh ``row`` from the FDM unless frozen earlier. A NaN/inf state
-        freezes the vehicle as DIVERGED at its last finite state."""
-        if self.row[STATUS_COL] != VehicleStatus.ACTIVE:
-            return self.row  # frozen at an earlier exchange
-        new = [n.get_double_value() * k for n, k in zip(self._read, self._scales)]
-        if math.isfinite(sum(new)):
-            new.append(float(self.status))
-            self.row = new
-        else:
-            self.status = VehicleStatus.DIVERGED
-            self.row = self.row[:STATUS_COL] + [float(VehicleStatus.DIVERGED)]
-        return self.row
+    def raw_state(self) -> list[float]:
+        """The state properties in JSBSim's units (``STATE_FIELDS`` order, no status)."""
+        return list(map(_get, self._read))
