@@ -15,6 +15,7 @@ from cosim.errors import (
     PoolStateError,
     WorkerDied,
     WorkerError,
+    WorkerTimeout,
 )
 
 __version__ = "0.1.0"
@@ -27,5 +28,6 @@ __all__ = [
     "PoolStateError",
     "WorkerDied",
     "WorkerError",
+    "WorkerTimeout",
     "__version__",
 ]

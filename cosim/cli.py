@@ -78,6 +78,8 @@ def _build_parser() -> _Parser:
                    help="pace to the wall clock (FACTOR x real time, default 1)")
     r.add_argument("--duration-s", type=_positive_float, metavar="S",
                    help="override the scenario's duration")
+    r.add_argument("--step-timeout-s", type=_positive_float, default=60.0, metavar="S",
+                   help="a worker silent this long in one exchange fails the run (default 60)")
     r.add_argument("--no-progress", action="store_true", help="no progress bar or lines")
 
     v = sub.add_parser("validate", help="check scenario files and report every problem")
@@ -172,7 +174,7 @@ def _cmd_run(a: argparse.Namespace) -> int:
             (out / name).unlink(missing_ok=True)
     progress = None if a.no_progress else Progress(sys.stderr, scn.rates.physics_hz)
     run = Run(scn, out, backend=a.backend, workers=a.workers, realtime=a.realtime,
-              progress=progress)
+              progress=progress, step_timeout_s=a.step_timeout_s)
 
     interrupts = 0
 

@@ -88,3 +88,25 @@ class WorkerDied(CosimError):
             shown += f", ... ({len(self.vehicles)} in all)"
         at = f" at tick {self.tick}" if self.tick is not None else ""
         return f"worker {self.worker} (pid {self.pid}) {how}{at}; its vehicles: {shown}"
+
+
+class WorkerTimeout(WorkerDied):
+    """A worker is alive but did not answer within the deadline (stuck, stopped)."""
+
+    def __init__(self, worker: int, pid: int | None, vehicles: list[str], tick: int | None,
+                 timeout_s: float, what: str) -> None:
+        CosimError.__init__(self, worker, pid, vehicles, tick, timeout_s, what)
+        self.worker = worker
+        self.pid = pid
+        self.exitcode = None
+        self.vehicles = list(vehicles)
+        self.tick = tick
+        self.timeout_s = timeout_s
+        self.what = what
+
+    def __str__(self) -> str:
+        shown = ", ".join(self.vehicles[:10])
+        if len(self.vehicles) > 10:
+            shown += f", ... ({len(self.vehicles)} in all)"
+        return (f"worker {self.worker} (pid {self.pid}) did not {self.what} within "
+                f"{self.timeout_s:g} s; its vehicles: {shown}")

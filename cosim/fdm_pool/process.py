@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from cosim.errors import CosimError, JSBSimError, WorkerDied, WorkerError
+from cosim.errors import CosimError, JSBSimError, WorkerDied, WorkerError, WorkerTimeout
 from cosim.fdm_pool.base import Pool
 from cosim.fdm_pool.shard import Shard
 from cosim.fdm_pool.spec import N_STATE, VehicleSpec
@@ -235,9 +235,9 @@ class ProcessPool(Pool):
                         raise WorkerDied(i, proc.pid, proc.exitcode, self._vehicles_of(i),
                                          self.tick)
                     if deadline is not None and time.monotonic() > deadline:
-                        raise CosimError(
-                            f"worker {i} (pid {proc.pid}) did not {what} within {timeout_s} s; "
-                            f"its vehicles: {', '.join(self._vehicles_of(i)[:10])}")
+                        assert timeout_s is not None
+                        raise WorkerTimeout(i, proc.pid, self._vehicles_of(i), self.tick,
+                                            timeout_s, what)
 
     def _raise_remote(self, i: int) -> None:
         conn = self._errs[i]

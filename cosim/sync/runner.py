@@ -54,13 +54,14 @@ class Run:
 
     def __init__(self, scenario: Scenario, out_dir: str | Path, backend: str = "process",
                  workers: int | None = None, realtime: float | None = None,
-                 progress: ProgressFn | None = None) -> None:
+                 progress: ProgressFn | None = None, step_timeout_s: float = 60.0) -> None:
         self.scn = scenario
         self.out = Path(out_dir)
         self.backend = backend
         self.workers = workers
         self.pacer = Pacer(realtime) if realtime else None
         self.progress = progress
+        self.step_timeout_s = step_timeout_s  # a worker silent this long is a failure
         self._stop = threading.Event()
         self._stop_reason = "interrupted"
         self.pool: Pool | None = None
@@ -118,7 +119,7 @@ class Run:
                             pool.setpoints[rows, chan_index[name]] = value
                         events.emit("schedule", tick, vehicle=None,
                                     vehicles=len(rows), set=dict(item.sets))
-                    states = pool.step(k)
+                    states = pool.step(k, self.step_timeout_s)
                     tick += k
                     new_status = states[:, _STATUS]
                     if not np.array_equal(new_status, status):

@@ -230,3 +230,24 @@ def test_jsbsim_console_is_silenced_in_workers(specs, capfd) -> None:
     new_fdm(find_model("c172p"), 1 / 120)
     out, err = capfd.readouterr()
     assert "JSBSim" not in out and "JSBSim" not in err
+
+
+def test_stopped_worker_becomes_workertimeout_not_a_hang(specs) -> None:
+    from cosim.errors import WorkerTimeout
+
+    pool = ProcessPool(specs(4), 1 / 120, workers=2)
+    try:
+        pool.step(4)
+        victim = pool.pids[1]
+        os.kill(victim, signal.SIGSTOP)
+        t0 = time.monotonic()
+        with pytest.raises(WorkerTimeout, match=r"worker 1 \(pid \d+\) did not finish tick 8 "
+                                                r"within 0.5 s; its vehicles: b0002, b0003"):
+            pool.step(4, timeout_s=0.5)
+        assert time.monotonic() - t0 < 3.0
+    finally:
+        t0 = time.monotonic()
+        pool.close()  # must get rid of the stopped process too
+        assert time.monotonic() - t0 < 6.0
+    assert not os.path.exists(f"/proc/{victim}") or \
+        open(f"/proc/{victim}/stat").read().rsplit(")", 1)[1].split()[0] == "Z"

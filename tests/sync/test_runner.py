@@ -227,3 +227,20 @@ def test_worker_killed_mid_run_exit_1_within_5_s_logs_intact(mixed_scenario: Pat
     while time.monotonic() < deadline and any(os.path.exists(f"/proc/{w}") for w in workers):
         time.sleep(0.05)
     assert not [w for w in workers if os.path.exists(f"/proc/{w}")], "orphan workers"
+
+
+def test_stopped_worker_ends_the_run_with_worker_failure(mixed_scenario: Path,
+                                                          tmp_path: Path) -> None:
+    scn = load_scenario(mixed_scenario)
+
+    def progress(tick: int, total: int) -> None:
+        if tick == 40:
+            os.kill(run.pool.pids[1], signal.SIGSTOP)  # type: ignore[union-attr]
+
+    run = Run(scn, tmp_path / "s", backend="process", workers=2, progress=progress,
+              step_timeout_s=0.5)
+    res = run.run()
+    assert res.stop_reason == "worker_failure" and res.ticks == 40
+    fail = [e for e in _events(res.out_dir) if e["event"] == "worker_failure"]
+    assert fail[0]["worker"] == 1 and "did not finish tick 44 within 0.5 s" in fail[0]["message"]
+    assert max(read_states(res.out_dir)["tick"].to_pylist()) == 36
