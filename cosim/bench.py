@@ -52,7 +52,7 @@ def bench_specs(n: int, model: str = "c172p", spacing_m: float = 300.0) -> list[
     return [VehicleSpec(id=f"b{i:04d}", model=m.name, aircraft_dir=m.aircraft_dir,
                         model_source=m.source, lat_deg=float(lat[i]), lon_deg=float(lon[i]),
                         alt_msl_m=1000.0, heading_deg=0.0, airspeed_mps=100 * KT_TO_MPS,
-                        random_seed=i) for i in range(n)]
+                        random_seed=i, profile=m.profile) for i in range(n)]
 
 
 def _serial_loop(shard: Shard, ticks: int, k: int) -> float:

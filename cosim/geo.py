@@ -128,3 +128,18 @@ class LocalFrame:
             d = d + (hh - h)  # moving down by x lowers the height by ~x (cos < 1e-3 off)
         lat, lon, _ = self.ned_to_geodetic(n, e, d)
         return lat, lon
+
+
+def bearing_deg(lat1_deg: ArrayLike, lon1_deg: ArrayLike, h1_m: ArrayLike,
+                lat2_deg: ArrayLike, lon2_deg: ArrayLike, h2_m: ArrayLike) -> Array:
+    """True bearing (deg, 0..360) from point 1 to point 2, measured in point 1's
+    own local tangent frame (exact; no flat-earth or origin-north shortcut)."""
+    x1, y1, z1 = geodetic_to_ecef(lat1_deg, lon1_deg, h1_m)
+    x2, y2, z2 = geodetic_to_ecef(lat2_deg, lon2_deg, h2_m)
+    dx, dy, dz = x2 - x1, y2 - y1, z2 - z1
+    lat = np.radians(np.asarray(lat1_deg, dtype=np.float64))
+    lon = np.radians(np.asarray(lon1_deg, dtype=np.float64))
+    sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
+    north = -sl * co * dx - sl * so * dy + cl * dz
+    east = -so * dx + co * dy
+    return np.degrees(np.arctan2(east, north)) % 360.0

@@ -8,15 +8,20 @@ catalog. It does not step, trim or schedule anything.
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import os
 import re
+import shutil
+import tempfile
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
+from typing import Any
 
 import jsbsim
+import yaml
 
 from cosim.errors import JSBSimError, ModelNotFound
 
@@ -25,6 +30,10 @@ log = logging.getLogger(__name__)
 #: the project's own aircraft (``aircraft/`` beside the package in a checkout)
 PROJECT_AIRCRAFT_DIR = Path(__file__).resolve().parent.parent / "aircraft"
 JSBSIM_ROOT = Path(jsbsim.get_default_root_dir())
+#: shared JSBSim systems (the cosim autopilot) and profiles of bundled models
+SYSTEMS_DIR = PROJECT_AIRCRAFT_DIR / "systems"
+PROFILES_DIR = PROJECT_AIRCRAFT_DIR / "profiles"
+AUTOPILOT_SYSTEM = "cosim_autopilot"
 
 _LEVELS = {
     0: logging.DEBUG,  # BULK
@@ -88,10 +97,28 @@ class ModelInfo:
     aircraft_dir: str  # the folder that holds <name>/<name>.xml
     source: str  # "cosim", "jsbsim" or "user"
     description: str = ""
+    #: cosim profile (``aircraft/<name>/cosim.yaml`` or ``aircraft/profiles/<name>.yaml``):
+    #: class, autopilot (native | attach), clmax, alpha_stall_deg, airspeed envelope,
+    #: JSBSim properties to set after loading
+    profile: dict[str, Any] = field(default_factory=dict, compare=False, hash=False)
 
     @property
     def xml_path(self) -> Path:
         return Path(self.aircraft_dir) / self.name / f"{self.name}.xml"
+
+    @property
+    def fixed_wing(self) -> bool:
+        return self.profile.get("class") == "fixed_wing"
+
+
+def _load_profile(name: str, aircraft_dir: Path) -> dict[str, Any]:
+    for p in (aircraft_dir / name / "cosim.yaml", PROFILES_DIR / f"{name}.yaml"):
+        if p.is_file():
+            data = yaml.safe_load(p.read_text()) or {}
+            if not isinstance(data, dict):
+                raise JSBSimError(f"{p}: a cosim profile must be a mapping")
+            return data
+    return {}
 
 
 def aircraft_search_path(extra: tuple[str, ...] = ()) -> list[tuple[Path, str]]:
@@ -127,7 +154,8 @@ def _catalog(extra: tuple[str, ...]) -> dict[str, ModelInfo]:
         for sub in sorted(folder.iterdir()):
             xml = sub / f"{sub.name}.xml"
             if sub.name not in found and xml.is_file():
-                found[sub.name] = ModelInfo(sub.name, str(folder), source, _description(xml))
+                found[sub.name] = ModelInfo(sub.name, str(folder), source, _description(xml),
+                                            _load_profile(sub.name, folder))
     return found
 
 
@@ -147,21 +175,83 @@ def find_model(name: str, extra: tuple[str, ...] = ()) -> ModelInfo:
     raise ModelNotFound(f"unknown aircraft model {name!r}{hint}; available: {', '.join(names)}")
 
 
+def _wrapper_root(model: ModelInfo) -> Path:
+    """An aircraft folder holding ``model`` with the cosim autopilot attached.
+
+    The model's own files are symlinked, its XML is copied with one
+    ``<system file="cosim_autopilot"/>`` line added, and the autopilot file is
+    placed in the wrapper's ``Systems/`` (which JSBSim searches first). Built
+    once per content hash under ``$COSIM_CACHE_DIR`` (default
+    ``~/.cache/cosim``), atomically, so concurrent workers agree.
+    """
+    src = Path(model.aircraft_dir) / model.name
+    xml = (src / f"{model.name}.xml").read_text()
+    ap = (SYSTEMS_DIR / f"{AUTOPILOT_SYSTEM}.xml").read_text()
+    key = hashlib.sha256((str(src) + "\0" + xml + "\0" + ap).encode()).hexdigest()[:16]
+    cache = Path(os.environ.get("COSIM_CACHE_DIR") or Path.home() / ".cache" / "cosim")
+    root = cache / "wrapped" / f"{model.name}-{key}"
+    if (root / model.name / f"{model.name}.xml").is_file():
+        return root
+    root.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{model.name}-", dir=root.parent))
+    try:
+        dst = tmp / model.name
+        dst.mkdir()
+        for entry in src.iterdir():
+            if entry.name in (f"{model.name}.xml", "Systems"):
+                continue
+            (dst / entry.name).symlink_to(entry.resolve())
+        systems = dst / "Systems"
+        systems.mkdir()
+        if (src / "Systems").is_dir():
+            for entry in (src / "Systems").iterdir():
+                (systems / entry.name).symlink_to(entry.resolve())
+        shutil.copyfile(SYSTEMS_DIR / f"{AUTOPILOT_SYSTEM}.xml",
+                        systems / f"{AUTOPILOT_SYSTEM}.xml")
+        end = xml.rfind("</fdm_config>")
+        if end < 0:
+            raise JSBSimError(f"{src}: no </fdm_config> in {model.name}.xml")
+        patched = (xml[:end] + f'  <system file="{AUTOPILOT_SYSTEM}"/>  <!-- added by cosim -->\n'
+                   + xml[end:])
+        (dst / f"{model.name}.xml").write_text(patched)
+        try:
+            os.rename(tmp, root)
+        except OSError:  # another process won the race: use its copy
+            if not (root / model.name / f"{model.name}.xml").is_file():
+                raise
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return root
+
+
 def new_fdm(model: ModelInfo, dt_s: float) -> jsbsim.FGFDMExec:
-    """Build a quiet FGFDMExec with ``model`` loaded and its time step set."""
+    """Build a quiet FGFDMExec with ``model`` loaded (with the cosim autopilot
+    when its profile asks for it), its profile applied and its time step set."""
     quiet_jsbsim()
     fdm = jsbsim.FGFDMExec(str(JSBSIM_ROOT))
     fdm.set_debug_level(0)
     fdm.disable_output()
-    if model.source == "jsbsim":
+    attach = model.profile.get("autopilot") == "attach"
+    if model.source == "jsbsim" and not attach:
         ok = fdm.load_model(model.name)
     else:
-        ok = fdm.load_model_with_paths(
-            model.name, model.aircraft_dir, str(JSBSIM_ROOT / "engine"),
-            str(JSBSIM_ROOT / "systems"))
+        aircraft = _wrapper_root(model) if attach else Path(model.aircraft_dir)
+        systems = JSBSIM_ROOT / "systems" if model.source == "jsbsim" else SYSTEMS_DIR
+        ok = fdm.load_model_with_paths(model.name, str(aircraft), str(JSBSIM_ROOT / "engine"),
+                                       str(systems))
     if not ok:
         raise JSBSimError(f"JSBSim could not load model {model.name!r} from {model.xml_path}")
     fdm.set_dt(dt_s)
+    prof = model.profile
+    if "clmax" in prof:
+        fdm["cosim/ap/clmax"] = float(prof["clmax"])
+    if "alpha_stall_deg" in prof:
+        fdm["cosim/ap/alpha-stall-deg"] = float(prof["alpha_stall_deg"])
+        fdm["cosim/ap/alpha-recover-deg"] = float(prof["alpha_stall_deg"]) - 2.0
+    for prop, value in (prof.get("properties") or {}).items():
+        if not has_property(fdm, prop):
+            raise JSBSimError(f"profile of {model.name!r} sets {prop!r}, which the model lacks")
+        fdm[prop] = float(value)
     return fdm
 
 

@@ -85,7 +85,12 @@ def test_quickstart_loads() -> None:
     assert item.tick == 1200
     assert item.vehicles == (2,)
     assert item.sets == (("fcs/throttle-cmd-norm", 0.0),)
-    assert scn.channels == ("fcs/throttle-cmd-norm",)
+    # c172p has a fixed-wing profile: the autopilot's setpoints come first, then
+    # the schedule's own properties (throttle is already one of them)
+    from cosim.guidance import AP_CHANNELS
+
+    assert scn.autopilot and scn.channels == AP_CHANNELS
+    assert "fcs/throttle-cmd-norm" in scn.channels
     assert all(v.alt_msl_m == 610.0 for v in scn.vehicles)
     assert all(v.airspeed_mps == pytest.approx(100 * 1852 / 3600, rel=1e-15)
                for v in scn.vehicles)

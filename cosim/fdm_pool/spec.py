@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from enum import IntEnum
+from typing import Any
 
 from cosim.geo import FT_TO_M
 
@@ -26,6 +27,8 @@ class StateField:
     name: str
     prop: str | None  # JSBSim property read each exchange (None: computed)
     scale: float = 1.0
+    #: models without this property (no cosim autopilot) read 0
+    optional: bool = False
 
 
 #: columns of the state array, in order
@@ -43,6 +46,11 @@ STATE_FIELDS: tuple[StateField, ...] = (
     StateField("airspeed_mps", "velocities/vt-fps", FT_TO_M),
     StateField("alpha_deg", "aero/alpha-deg"),
     StateField("gear_force_lbs", "forces/fbz-gear-lbs"),
+    StateField("throttle", "fcs/throttle-cmd-norm"),
+    StateField("ap_engaged", "cosim/ap/engage", optional=True),
+    StateField("bank_limit_deg", "cosim/ap/bank-limit-deg", optional=True),
+    StateField("stalled", "cosim/ap/stalled", optional=True),
+    StateField("stall_protection_active", "cosim/ap/stall-protection-active", optional=True),
     StateField("status", None),
 )
 STATE_INDEX: dict[str, int] = {f.name: i for i, f in enumerate(STATE_FIELDS)}
@@ -68,3 +76,5 @@ class VehicleSpec:
     random_seed: int = 0
     #: properties written once after trim, before the first step
     initial_props: tuple[tuple[str, float], ...] = field(default=())
+    #: the model's cosim profile (autopilot attachment, clmax, envelope, ...)
+    profile: dict[str, Any] = field(default_factory=dict)

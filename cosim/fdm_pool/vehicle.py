@@ -27,15 +27,20 @@ class Vehicle:
 
     def __init__(self, spec: VehicleSpec, dt_s: float, channels: Sequence[str]) -> None:
         self.spec = spec
-        model = ModelInfo(spec.model, spec.aircraft_dir, spec.model_source)
+        model = ModelInfo(spec.model, spec.aircraft_dir, spec.model_source, profile=spec.profile)
         fdm = new_fdm(model, dt_s)
         self.fdm = fdm
         self._set_ic()
         pm = fdm.get_property_manager()
         self._read = []
+        zero = None
         for f in STATE_FIELDS:
             if f.prop is not None:
-                node = pm.get_node(f.prop)
+                node = pm.get_node(f.prop) if has_property(fdm, f.prop) else None
+                if node is None and f.optional:
+                    if zero is None:  # reads as 0 for models without the property
+                        zero = pm.get_node("cosim/absent", True)
+                    node = zero
                 if node is None:
                     raise JSBSimError(f"vehicle {spec.id!r}: model {spec.model!r} lacks {f.prop}")
                 self._read.append(node)

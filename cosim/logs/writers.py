@@ -20,10 +20,13 @@ from cosim.geo import LocalFrame
 STATE_COLUMNS: tuple[str, ...] = (
     "tick", "time_s", "vehicle", "lat_deg", "lon_deg", "alt_msl_m", "alt_agl_m",
     "north_m", "east_m", "down_m", "roll_deg", "pitch_deg", "yaw_deg",
-    "vn_mps", "ve_mps", "vd_mps", "airspeed_mps", "alpha_deg", "status",
+    "vn_mps", "ve_mps", "vd_mps", "airspeed_mps", "alpha_deg", "throttle",
+    "bank_limit_deg", "ap_engaged", "stalled", "stall_protection_active", "command", "status",
 )
 _FROM_STATE = ("lat_deg", "lon_deg", "alt_msl_m", "alt_agl_m", "roll_deg", "pitch_deg",
-               "yaw_deg", "vn_mps", "ve_mps", "vd_mps", "airspeed_mps", "alpha_deg")
+               "yaw_deg", "vn_mps", "ve_mps", "vd_mps", "airspeed_mps", "alpha_deg", "throttle",
+               "bank_limit_deg", "ap_engaged", "stalled", "stall_protection_active")
+_FLAGS = ("ap_engaged", "stalled", "stall_protection_active", "status")
 
 
 def _schema() -> pa.Schema:
@@ -31,9 +34,9 @@ def _schema() -> pa.Schema:
     for c in STATE_COLUMNS:
         if c == "tick":
             fields.append(pa.field(c, pa.int64()))
-        elif c == "vehicle":
+        elif c in ("vehicle", "command"):
             fields.append(pa.field(c, pa.dictionary(pa.int32(), pa.string())))
-        elif c == "status":
+        elif c in _FLAGS:
             fields.append(pa.field(c, pa.int8()))
         else:
             fields.append(pa.field(c, pa.float64()))
@@ -60,16 +63,19 @@ class StateLog:
         self.schema = _schema()
         self._ticks: list[int] = []
         self._rows: list[np.ndarray] = []
+        self._labels: list[str] = []
         self._parts = 0
         self._last_flush = time.monotonic()
         self.rows_written = 0
         self._cols = [STATE_INDEX[c] for c in _FROM_STATE]
         self._closed = False
 
-    def append(self, tick: int, states: np.ndarray) -> None:
-        """Buffer one logged tick (copies ``states``)."""
+    def append(self, tick: int, states: np.ndarray, commands: list[str] | None = None) -> None:
+        """Buffer one logged tick (copies ``states``); ``commands``: each
+        vehicle's active command, for the ``command`` column."""
         self._ticks.append(tick)
         self._rows.append(states[:, self._cols + [STATE_INDEX["status"]]].copy())
+        self._labels.extend(commands if commands is not None else [""] * self.n)
         buffered = len(self._rows) * self.n
         if buffered >= self.flush_rows or time.monotonic() - self._last_flush >= self.flush_s:
             self.flush()
@@ -88,7 +94,10 @@ class StateLog:
         north, east, down = self.frame.geodetic_to_ned(cols["lat_deg"], cols["lon_deg"],
                                                         cols["alt_msl_m"])
         cols["north_m"], cols["east_m"], cols["down_m"] = north, east, down
+        for c in _FLAGS[:-1]:
+            cols[c] = cols[c].astype(np.int8)
         cols["status"] = block[:, -1].astype(np.int8)
+        cols["command"] = pa.array(self._labels, pa.string()).dictionary_encode()
         table = pa.table([cols[c] for c in STATE_COLUMNS], schema=self.schema)
         final = self.dir / f"part-{self._parts:06d}.parquet"
         tmp = final.with_suffix(".parquet.tmp")
@@ -96,7 +105,7 @@ class StateLog:
         os.replace(tmp, final)
         self._parts += 1
         self.rows_written += table.num_rows
-        self._ticks, self._rows = [], []
+        self._ticks, self._rows, self._labels = [], [], []
         self._last_flush = time.monotonic()
 
     def close(self) -> None:

@@ -22,6 +22,13 @@ import numpy as np
 from cosim.errors import ConfigError, CosimError
 from cosim.fdm_pool.spec import VehicleSpec
 from cosim.geo import KT_TO_MPS, LocalFrame
+from cosim.guidance import (
+    AP_CHANNELS,
+    DEFAULT_BANK_LIMIT_DEG,
+    Command,
+    min_turn_radius_m,
+    parse_command,
+)
 from cosim.jsb import find_model, has_property, new_fdm
 from cosim.scenario.formation import FORMATIONS, formation_offsets
 from cosim.scenario.yaml_lines import YamlProblem, format_path, load_with_lines
@@ -71,6 +78,7 @@ class ScheduleItem:
     vehicles: tuple[int, ...]  # indices into Scenario.vehicles
     sets: tuple[tuple[str, float], ...]
     index: int = 0  # position in the file's schedule list
+    command: Command | None = None  # the fixed-wing command vocabulary
 
 
 @dataclass(frozen=True)
@@ -95,9 +103,15 @@ class Scenario:
         return math.ceil(round(self.duration_s * self.rates.physics_hz, 6) / k) * k
 
     @property
+    def autopilot(self) -> bool:
+        """True if any vehicle carries the cosim autopilot (it can be commanded)."""
+        return any(v.profile.get("class") == "fixed_wing" for v in self.vehicles)
+
+    @property
     def channels(self) -> tuple[str, ...]:
-        """Every JSBSim property the schedule writes, in first-use order."""
-        seen: dict[str, None] = {}
+        """Setpoint channels: the autopilot's, then every JSBSim property the
+        schedule writes, in first-use order."""
+        seen: dict[str, None] = dict.fromkeys(AP_CHANNELS) if self.autopilot else {}
         for item in self.schedule:
             for name, _ in item.sets:
                 seen.setdefault(name)
@@ -137,9 +151,18 @@ class Scenario:
             "seed": self.seed,
             "aircraft_path": list(self.aircraft_path),
             "vehicles": vehicles,
-            "schedule": [{"at_s": s.at_s, "vehicles": [ids[i] for i in s.vehicles],
-                          "set": dict(s.sets)} for s in self.schedule],
+            "schedule": [self._item_dict(s, ids) for s in self.schedule],
         }
+
+
+    @staticmethod
+    def _item_dict(s: ScheduleItem, ids: list[str]) -> dict[str, Any]:
+        d: dict[str, Any] = {"at_s": s.at_s, "vehicles": [ids[i] for i in s.vehicles]}
+        if s.sets:
+            d["set"] = dict(s.sets)
+        if s.command is not None:
+            d["command"] = s.command.source
+        return d
 
 
 class _Ctx:
@@ -479,7 +502,7 @@ def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: i
                 model_source=model.source, lat_deg=float(lats[j]), lon_deg=float(lons[j]),
                 alt_msl_m=float(alts[j]), heading_deg=float(heading) % 360.0,
                 airspeed_mps=float(speed), terrain_alt_m=origin.ground_alt_m, trim=trim,
-                random_seed=vseed, initial_props=tuple(props)), vp))
+                random_seed=vseed, initial_props=tuple(props), profile=model.profile), vp))
     return out
 
 
@@ -511,21 +534,71 @@ def _schedule(ctx: _Ctx, d: Any, vehicles: list[tuple[VehicleSpec, P]], rates: R
     k = rates.control_every
     for i, sd in enumerate(d):
         sp: P = ("schedule", i)
-        r = _Reader(ctx, sd, sp, ("at_s", "vehicles", "set"))
+        r = _Reader(ctx, sd, sp, ("at_s", "vehicles", "set", "command"))
         at = r.num("at_s", lo=0)
         if at is not None and at > duration:
             ctx.err(sp + ("at_s",), f"at_s {at:g} is after the end of the run (duration_s "
                                     f"{duration:g})")
         sel = _select(ctx, r.d.get("vehicles", "all"), sp + ("vehicles",), ids)
-        if not r.has("set"):
-            ctx.err(sp, "missing 'set' (a mapping of JSBSim property: value)")
+        if not r.has("set") and not r.has("command"):
+            ctx.err(sp, "missing 'set' (JSBSim property: value) or 'command' (heading_deg, "
+                        "alt_msl_m, airspeed_kt, goto, waypoints, loiter, ...)")
             continue
-        sets = _prop_values(ctx, r.d["set"], sp + ("set",))
-        if at is None:
+        sets = _prop_values(ctx, r.d["set"], sp + ("set",)) if r.has("set") else []
+        cmd = parse_command(r.d["command"], sp + ("command",), ctx.err) if r.has(
+            "command") else None
+        if at is None or (r.has("command") and cmd is None):
             continue
         tick = math.ceil(round(at * rates.physics_hz, 6) / k) * k
-        out.append(ScheduleItem(at, tick, tuple(sel), tuple(sets), i))
-    return sorted(out, key=lambda s: s.tick)  # stable: file order within a tick
+        out.append(ScheduleItem(at, tick, tuple(sel), tuple(sets), i, cmd))
+    out.sort(key=lambda s: s.tick)  # stable: file order within a tick
+    _check_commands(ctx, out, [v for v, _ in vehicles])
+    return out
+
+
+def _check_commands(ctx: _Ctx, schedule: list[ScheduleItem], specs: list[VehicleSpec]) -> None:
+    """Commands only for vehicles with the autopilot; airspeeds inside each
+    model's envelope; loiter radii no tighter than the minimum turn radius at
+    the speed and bank limit in force at that point of the schedule."""
+    speed = [v.airspeed_mps for v in specs]
+    bank = [DEFAULT_BANK_LIMIT_DEG] * len(specs)
+    for item in schedule:
+        cmd = item.command
+        if cmd is None:
+            continue
+        path: P = ("schedule", item.index, "command")
+        no_ap = sorted({specs[j].model for j in item.vehicles
+                        if specs[j].profile.get("class") != "fixed_wing"})
+        if no_ap:
+            ctx.err(path, f"model {', '.join(no_ap)} has no cosim autopilot profile, so it "
+                          f"cannot take commands (fixed-wing profiles: aircraft/profiles/, "
+                          f"aircraft/<model>/cosim.yaml)")
+            continue
+        speeds = [cmd.airspeed_mps] + [p.airspeed_mps for p in cmd.points]
+        for j in item.vehicles:
+            prof = specs[j].profile
+            lo, hi = prof.get("airspeed_min_kt"), prof.get("airspeed_max_kt")
+            for spd in speeds:
+                if spd is None:
+                    continue
+                kt = spd / KT_TO_MPS
+                if (lo is not None and kt < lo - 1e-9) or (hi is not None and kt > hi + 1e-9):
+                    ctx.err(path, f"airspeed {kt:.1f} kt is outside the envelope of "
+                                  f"{specs[j].model} ({lo:g}..{hi:g} kt TAS)")
+                    break
+            if cmd.bank_limit_deg is not None:
+                bank[j] = cmd.bank_limit_deg
+            for spd in speeds:
+                if spd is not None:
+                    speed[j] = spd
+            if cmd.loiter_radius_m is not None:
+                r_min = min_turn_radius_m(speed[j], bank[j])
+                if cmd.loiter_radius_m < r_min:
+                    ctx.err(path, f"loiter radius {cmd.loiter_radius_m:g} m is below the "
+                                  f"minimum turn radius of {specs[j].id} ({r_min:.0f} m at "
+                                  f"{speed[j] / KT_TO_MPS:.0f} kt and a {bank[j]:g} deg bank "
+                                  f"limit)")
+                    break
 
 
 def _check_properties(ctx: _Ctx, vehicles: list[tuple[VehicleSpec, P]],
@@ -538,7 +611,8 @@ def _check_properties(ctx: _Ctx, vehicles: list[tuple[VehicleSpec, P]],
         if key not in fdms:
             from cosim.jsb import ModelInfo
 
-            fdms[key] = new_fdm(ModelInfo(spec.model, spec.aircraft_dir, spec.model_source), 0.01)
+            fdms[key] = new_fdm(ModelInfo(spec.model, spec.aircraft_dir, spec.model_source,
+                                          profile=spec.profile), 0.01)
         return has_property(fdms[key], name)
 
     def check(where: P, specs: list[VehicleSpec], props: list[tuple[str, float]],

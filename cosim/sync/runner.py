@@ -24,6 +24,7 @@ import yaml
 from cosim.errors import WorkerDied, WorkerError
 from cosim.fdm_pool import STATE_INDEX, VehicleStatus, make_pool
 from cosim.fdm_pool.base import Pool
+from cosim.guidance import FixedWingGuidance
 from cosim.logs import EventLog, StateLog, write_json_atomic
 from cosim.scenario import Scenario
 from cosim.sync.pacing import Pacer
@@ -34,6 +35,12 @@ ProgressFn = Callable[[int, int], None]
 _STATUS = STATE_INDEX["status"]
 _EVENT_OF_STATUS = {VehicleStatus.GROUND_IMPACT: "ground_impact",
                     VehicleStatus.DIVERGED: "divergence"}
+#: flag columns whose changes are events: column -> (event, on, off)
+_FLAG_EVENTS = {
+    "stalled": ("stall", "onset", "recovery"),
+    "stall_protection_active": ("stall_protection", "active", "inactive"),
+}
+_FLAG_COLS = [STATE_INDEX[c] for c in _FLAG_EVENTS]
 
 
 @dataclass
@@ -99,11 +106,18 @@ class Run:
             startup_s = time.perf_counter() - wall0
             log.info("%d vehicles ready in %.2f s on %d worker(s)", len(ids), startup_s,
                      workers_used)
+            start_ne = np.stack(scn.origin.frame.geodetic_to_ned(
+                [v.lat_deg for v in scn.vehicles], [v.lon_deg for v in scn.vehicles],
+                [v.alt_msl_m for v in scn.vehicles])[:2], axis=1)
+            guidance = FixedWingGuidance(len(ids), scn.origin.frame, start_ne, chan_index) \
+                if scn.autopilot else None
+            labels = guidance.labels if guidance is not None else None
             with pool:
                 states = pool.states
                 status = states[:, _STATUS].copy()
+                flags = states[:, _FLAG_COLS].copy()
                 self._status_events(events, 0, states, np.zeros_like(status), ids)
-                states_log.append(0, states)
+                states_log.append(0, states, labels)
                 pending = list(scn.schedule)
                 loop0 = time.perf_counter()
                 if self.pacer:
@@ -117,16 +131,26 @@ class Run:
                         rows = list(item.vehicles)
                         for name, value in item.sets:
                             pool.setpoints[rows, chan_index[name]] = value
-                        events.emit("schedule", tick, vehicle=None,
-                                    vehicles=len(rows), set=dict(item.sets))
+                        if item.command is not None and guidance is not None:
+                            guidance.command(rows, item.command, states, pool.setpoints)
+                        events.emit("schedule", tick, vehicle=None, vehicles=len(rows),
+                                    **({"set": dict(item.sets)} if item.sets else {}),
+                                    **({"command": item.command.source} if item.command else {}))
+                    if guidance is not None:
+                        for ge in guidance.update(states, pool.setpoints):
+                            events.emit(ge.kind, tick, vehicle=ids[ge.vehicle], **ge.fields)
                     states = pool.step(k, self.step_timeout_s)
                     tick += k
                     new_status = states[:, _STATUS]
                     if not np.array_equal(new_status, status):
                         self._status_events(events, tick, states, status, ids)
                         status = new_status.copy()
+                    new_flags = states[:, _FLAG_COLS]
+                    if not np.array_equal(new_flags, flags):
+                        self._flag_events(events, tick, new_flags, flags, ids)
+                        flags = new_flags.copy()
                     if tick % every_log == 0:
-                        states_log.append(tick, states)
+                        states_log.append(tick, states, labels)
                     if self.pacer:
                         self.pacer.pace(tick / hz)
                     if self.progress:
@@ -173,6 +197,12 @@ class Run:
                             airspeed_mps=row[STATE_INDEX["airspeed_mps"]])
                 log.warning("tick %d: vehicle %s: %s (frozen)", tick, ids[i],
                             _EVENT_OF_STATUS[st])
+
+    def _flag_events(self, events: EventLog, tick: int, new: np.ndarray, old: np.ndarray,
+                     ids: list[str]) -> None:
+        for i, j in np.argwhere(new != old).tolist():
+            kind, on, off = list(_FLAG_EVENTS.values())[j]
+            events.emit(kind, tick, vehicle=ids[i], phase=on if new[i, j] else off)
 
     def _summary(self, reason: str, tick: int, startup_s: float, loop_s: float, workers: int,
                  counts: dict[str, int], rows: int, error: BaseException | None

@@ -1,0 +1,263 @@
+"""The fixed-wing command vocabulary: parsing and validation.
+
+One vocabulary for every fixed-wing vehicle, used by the scenario schedule
+now and by MAVLink and the swarm controller later:
+
+- ``heading_deg``: fly this true heading (ends any goto/waypoints/loiter)
+- ``alt_msl_m`` / ``alt_agl_m``: hold this altitude
+- ``airspeed_kt`` / ``airspeed_mps``: hold this true airspeed (throttle)
+- ``throttle``: manual throttle 0..1 (ends the airspeed hold)
+- ``bank_limit_deg``: the autopilot's bank limit (default 45)
+- ``stall_protection``: true/false
+- ``goto``: a point (``lat_deg``/``lon_deg``, or ``north_m``/``east_m`` in the
+  scenario frame, or with ``frame: start`` metres relative to the vehicle's
+  own start position), optional ``alt_*``, ``airspeed_*``, ``loiter_radius_m``;
+  the vehicle flies there and loiters around it
+- ``waypoints``: a list of such points flown in order (each may carry its
+  own ``alt_*``/``airspeed_*``), then a loiter around the last
+- ``loiter``: ``center`` (a point; default: where the vehicle is),
+  ``radius_m``, ``direction`` (``cw``/``ccw``), optional ``alt_*``/``airspeed_*``
+
+Parsing returns a ``Command`` of plain values; problems are reported through
+a callback with the key path, so the scenario loader can attach file lines.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from cosim.geo import KT_TO_MPS
+
+G_MPS2 = 9.80665
+DEFAULT_BANK_LIMIT_DEG = 45.0
+P = tuple[Any, ...]
+Report = Callable[[P, str], None]
+
+COMMAND_KEYS = ("heading_deg", "alt_msl_m", "alt_agl_m", "airspeed_kt", "airspeed_mps",
+                "throttle", "bank_limit_deg", "stall_protection", "goto", "waypoints", "loiter")
+_POINT_KEYS = ("lat_deg", "lon_deg", "north_m", "east_m", "frame")
+_TARGET_EXTRA = ("alt_msl_m", "alt_agl_m", "airspeed_kt", "airspeed_mps")
+
+
+def min_turn_radius_m(airspeed_mps: float, bank_limit_deg: float) -> float:
+    """R = v^2 / (g tan(phi)) at the bank limit (DESIGN.md 3.1)."""
+    return airspeed_mps ** 2 / (G_MPS2 * math.tan(math.radians(bank_limit_deg)))
+
+
+@dataclass(frozen=True)
+class Point:
+    """A horizontal position: geodetic, scenario-frame metres, or metres from
+    the vehicle's start (``frame == "start"``)."""
+
+    frame: str  # "geodetic", "local" or "start"
+    a: float  # lat_deg or north_m
+    b: float  # lon_deg or east_m
+    alt_m: float | None = None  # altitude (MSL, or AGL if alt_agl)
+    alt_agl: bool = False
+    airspeed_mps: float | None = None
+
+
+@dataclass(frozen=True)
+class Command:
+    heading_deg: float | None = None
+    alt_m: float | None = None
+    alt_agl: bool = False
+    airspeed_mps: float | None = None
+    throttle: float | None = None
+    bank_limit_deg: float | None = None
+    stall_protection: bool | None = None
+    #: "goto", "waypoints", "loiter" or None
+    nav: str | None = None
+    points: tuple[Point, ...] = ()
+    loiter_radius_m: float | None = None
+    loiter_cw: bool = True
+    loiter_here: bool = False  # loiter around the current position
+    source: dict[str, Any] = field(default_factory=dict, compare=False)
+
+    def label(self) -> str:
+        """A short description for the state log's ``command`` column."""
+        parts = []
+        if self.nav:
+            parts.append(self.nav)
+        elif self.heading_deg is not None:
+            parts.append(f"heading {self.heading_deg:g}")
+        if self.alt_m is not None:
+            parts.append(f"alt {'agl' if self.alt_agl else 'msl'} {self.alt_m:g}")
+        if self.airspeed_mps is not None:
+            parts.append(f"speed {self.airspeed_mps / KT_TO_MPS:.0f}kt")
+        if self.throttle is not None:
+            parts.append(f"throttle {self.throttle:g}")
+        return ", ".join(parts) or "settings"
+
+
+def _num(d: dict[str, Any], key: str, path: P, report: Report, lo: float | None = None,
+         hi: float | None = None) -> float | None:
+    v = d.get(key)
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        report(path + (key,), f"expected a number, got {v!r}")
+        return None
+    if (lo is not None and v < lo) or (hi is not None and v > hi):
+        rng = f"{lo:g}..{hi:g}" if lo is not None and hi is not None else (
+            f">= {lo:g}" if lo is not None else f"<= {hi:g}")
+        report(path + (key,), f"must be {rng}, got {v!r}")
+        return None
+    return float(v)
+
+
+def _one_of(d: dict[str, Any], keys: tuple[str, str], path: P, report: Report) -> str | None:
+    present = [k for k in keys if k in d]
+    if len(present) > 1:
+        report(path, f"give only one of {keys[0]} / {keys[1]}")
+        return None
+    return present[0] if present else None
+
+
+def _alt_speed(d: dict[str, Any], path: P, report: Report
+               ) -> tuple[float | None, bool, float | None]:
+    alt = None
+    agl = False
+    k = _one_of(d, ("alt_msl_m", "alt_agl_m"), path, report)
+    if k:
+        alt = _num(d, k, path, report, lo=-500, hi=30000)
+        agl = k == "alt_agl_m"
+    spd = None
+    k = _one_of(d, ("airspeed_kt", "airspeed_mps"), path, report)
+    if k:
+        s = _num(d, k, path, report, lo=0, hi=2000)
+        spd = None if s is None else s * (KT_TO_MPS if k == "airspeed_kt" else 1.0)
+    return alt, agl, spd
+
+
+def _point(d: Any, path: P, report: Report, extra: tuple[str, ...] = _TARGET_EXTRA
+           ) -> Point | None:
+    if not isinstance(d, dict):
+        report(path, f"expected a point (lat_deg/lon_deg or north_m/east_m), got {d!r}")
+        return None
+    for k in d:
+        if k not in _POINT_KEYS + extra:
+            report(path + (k,), f"unknown key {k!r}; expected one of: "
+                                f"{', '.join(_POINT_KEYS + extra)}")
+    frame = d.get("frame", "local")
+    if frame not in ("local", "start"):
+        report(path + ("frame",), f"expected local or start, got {frame!r}")
+        return None
+    geo = "lat_deg" in d or "lon_deg" in d
+    ned = "north_m" in d or "east_m" in d
+    if geo and ned:
+        report(path, "give lat_deg/lon_deg or north_m/east_m, not both")
+        return None
+    if geo:
+        if frame == "start":
+            report(path + ("frame",), "frame: start takes north_m/east_m offsets, not lat/lon")
+            return None
+        a, b = _num(d, "lat_deg", path, report, -90, 90), _num(d, "lon_deg", path, report,
+                                                                 -180, 180)
+    elif ned:
+        a = _num(d, "north_m", path, report) if "north_m" in d else 0.0
+        b = _num(d, "east_m", path, report) if "east_m" in d else 0.0
+    else:
+        report(path, "missing the position: lat_deg/lon_deg or north_m/east_m")
+        return None
+    alt, agl, spd = _alt_speed(d, path, report) if extra else (None, False, None)
+    if a is None or b is None:
+        return None
+    return Point("geodetic" if geo else frame, a, b, alt, agl, spd)
+
+
+def parse_command(d: Any, path: P, report: Report) -> Command | None:
+    """Parse one ``command:`` mapping; problems go to ``report(path, message)``."""
+    if not isinstance(d, dict) or not d:
+        report(path, f"expected a mapping of commands ({', '.join(COMMAND_KEYS)}), got {d!r}")
+        return None
+    for k in d:
+        if k not in COMMAND_KEYS:
+            report(path + (k,), f"unknown command {k!r}; expected one of: "
+                                f"{', '.join(COMMAND_KEYS)}")
+    navs = [k for k in ("goto", "waypoints", "loiter") if k in d]
+    if len(navs) > 1:
+        report(path, f"give one of goto / waypoints / loiter, not {' and '.join(navs)}")
+        return None
+    if navs and "heading_deg" in d:
+        report(path, f"heading_deg and {navs[0]} conflict: a heading ends the {navs[0]}")
+        return None
+    heading = _num(d, "heading_deg", path, report, -360, 360) if "heading_deg" in d else None
+    alt, agl, spd = _alt_speed(d, path, report)
+    throttle = _num(d, "throttle", path, report, 0, 1) if "throttle" in d else None
+    if throttle is not None and spd is not None:
+        report(path, "throttle (manual) and an airspeed hold conflict: give one")
+    bank = _num(d, "bank_limit_deg", path, report, 5, 75) if "bank_limit_deg" in d else None
+    stall = d.get("stall_protection")
+    if stall is not None and not isinstance(stall, bool):
+        report(path + ("stall_protection",), f"expected true or false, got {stall!r}")
+        stall = None
+    nav = navs[0] if navs else None
+    points: list[Point] = []
+    radius = None
+    cw = True
+    here = False
+    if nav == "goto":
+        g = d["goto"]
+        p = _point(g, path + ("goto",), report, _TARGET_EXTRA + ("loiter_radius_m",))
+        if p is not None:
+            points.append(p)
+        if isinstance(g, dict) and "loiter_radius_m" in g:
+            radius = _num(g, "loiter_radius_m", path + ("goto",), report, lo=1)
+    elif nav == "waypoints":
+        w = d["waypoints"]
+        if isinstance(w, dict):
+            wp = w
+            w = wp.get("points")
+            for k in wp:
+                if k not in ("points", "loiter_radius_m"):
+                    report(path + ("waypoints", k), f"unknown key {k!r}; expected points, "
+                                                    f"loiter_radius_m")
+            if "loiter_radius_m" in wp:
+                radius = _num(wp, "loiter_radius_m", path + ("waypoints",), report, lo=1)
+        if not isinstance(w, list) or not w:
+            report(path + ("waypoints",), "expected a non-empty list of points")
+        else:
+            for i, item in enumerate(w):
+                p = _point(item, path + ("waypoints", i), report)
+                if p is not None:
+                    points.append(p)
+    elif nav == "loiter":
+        lo = d["loiter"]
+        if not isinstance(lo, dict):
+            report(path + ("loiter",), f"expected a mapping (center, radius_m, direction), "
+                                       f"got {lo!r}")
+        else:
+            for k in lo:
+                if k not in ("center", "radius_m", "direction") + _TARGET_EXTRA:
+                    report(path + ("loiter", k), f"unknown key {k!r}; expected one of: center, "
+                                                 f"radius_m, direction, alt_msl_m, alt_agl_m, "
+                                                 f"airspeed_kt, airspeed_mps")
+            if "center" in lo:
+                p = _point(lo["center"], path + ("loiter", "center"), report, ())
+                if p is not None:
+                    points.append(p)
+            else:
+                here = True
+            if "radius_m" in lo:
+                radius = _num(lo, "radius_m", path + ("loiter",), report, lo=1)
+            direction = lo.get("direction", "cw")
+            if direction not in ("cw", "ccw"):
+                report(path + ("loiter", "direction"), f"expected cw or ccw, got {direction!r}")
+            cw = direction != "ccw"
+            la, lagl, ls = _alt_speed(lo, path + ("loiter",), report)
+            if la is not None:
+                alt, agl = la, lagl
+            if ls is not None:
+                spd = ls
+    if nav == "goto" and points:
+        # the target's own altitude/speed are the command's
+        if points[0].alt_m is not None:
+            alt, agl = points[0].alt_m, points[0].alt_agl
+        if points[0].airspeed_mps is not None:
+            spd = points[0].airspeed_mps
+    return Command(heading_deg=None if heading is None else heading % 360.0, alt_m=alt,
+                   alt_agl=agl, airspeed_mps=spd, throttle=throttle, bank_limit_deg=bank,
+                   stall_protection=stall, nav=nav, points=tuple(points),
+                   loiter_radius_m=radius, loiter_cw=cw, loiter_here=here, source=d)

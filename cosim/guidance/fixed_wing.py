@@ -1,0 +1,261 @@
+"""Fixed-wing guidance: commands -> autopilot setpoints, path following.
+
+Runs in the driver at the exchange rate, vectorised over vehicles. It sees
+vehicles only through the state array and acts only by writing the cosim
+autopilot's setpoint properties (``AP_CHANNELS``) into the pool's setpoint
+array; the loops themselves run inside JSBSim.
+
+Lateral guidance follows legs and loiter circles with a carrot point
+``L1`` metres ahead along the path (pure pursuit of the L1 point), with
+``L1 = max(1.5 R_turn, 150 m)`` and ``R_turn = v^2 / (g tan(bank limit))``,
+so the commanded heading changes no faster than a bank-limited turn can
+follow. Headings are bearings in each vehicle's own local frame.
+A fixed-wing cannot stop: a goto ends in a loiter around the target, and
+waypoints end in a loiter around the last one.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from cosim.fdm_pool.spec import STATE_INDEX
+from cosim.geo import FT_TO_M, KT_TO_MPS, LocalFrame, bearing_deg
+from cosim.guidance.commands import (
+    DEFAULT_BANK_LIMIT_DEG,
+    G_MPS2,
+    Command,
+    Point,
+    min_turn_radius_m,
+)
+
+#: the autopilot setpoints guidance writes (see aircraft/systems/cosim_autopilot.xml)
+AP_CHANNELS: tuple[str, ...] = (
+    "cosim/ap/engage", "cosim/ap/heading-hold", "cosim/ap/heading-cmd-deg",
+    "cosim/ap/bank-limit-deg", "cosim/ap/alt-hold", "cosim/ap/alt-cmd-ft", "cosim/ap/alt-mode",
+    "cosim/ap/speed-hold", "cosim/ap/speed-cmd-kt", "cosim/ap/throttle-bias",
+    "cosim/ap/stall-protect", "fcs/throttle-cmd-norm",
+)
+_NONE, _LEG, _LOITER = 0, 1, 2
+_S = STATE_INDEX
+_M_TO_FT = 1.0 / FT_TO_M
+
+
+@dataclass
+class GuidanceEvent:
+    kind: str
+    vehicle: int
+    fields: dict[str, Any]
+
+
+class FixedWingGuidance:
+    def __init__(self, n: int, frame: LocalFrame, start_ne: np.ndarray,
+                 channel_index: dict[str, int]) -> None:
+        self.n = n
+        self.frame = frame
+        self.ground_alt_m = frame.alt_m
+        self.start_ne = np.asarray(start_ne, dtype=np.float64).reshape(n, 2)
+        self.ch = channel_index
+        self.engaged = np.zeros(n, dtype=bool)
+        self.nav = np.zeros(n, dtype=np.int8)
+        self.a = np.zeros((n, 2))  # leg start (north, east), scenario frame
+        self.b = np.zeros((n, 2))  # leg end / loiter centre
+        self.radius = np.zeros(n)  # loiter radius
+        self.cw = np.ones(n, dtype=bool)
+        self.end_radius = np.full(n, np.nan)  # loiter radius at the end of a goto/waypoints
+        self.bank_limit = np.full(n, DEFAULT_BANK_LIMIT_DEG)
+        self.speed_cmd = np.full(n, np.nan)  # commanded TAS (m/s), NaN: none
+        self.queue: dict[int, list[tuple[float, float, Point]]] = {}
+        self.wp_index = np.zeros(n, dtype=np.int32)
+        self.wp_total = np.zeros(n, dtype=np.int32)
+        self.kind = [""] * n  # "goto" / "waypoints" / "loiter"
+        self.labels = [""] * n
+
+    # -- commands --------------------------------------------------------
+    def _set(self, sp: np.ndarray, rows: Any, name: str, value: Any) -> None:
+        sp[rows, self.ch[name]] = value
+
+    def resolve(self, p: Point, i: int) -> tuple[float, float]:
+        """A point's (north, east) metres in the scenario frame for vehicle i."""
+        if p.frame == "geodetic":
+            n, e, _ = self.frame.geodetic_to_ned(p.a, p.b, self.ground_alt_m)
+            return float(n), float(e)
+        if p.frame == "start":
+            return float(self.start_ne[i, 0] + p.a), float(self.start_ne[i, 1] + p.b)
+        return p.a, p.b
+
+    def _alt_speed(self, sp: np.ndarray, i: int, alt: float | None, agl: bool,
+                   spd: float | None, states: np.ndarray) -> None:
+        if alt is not None:
+            self._set(sp, i, "cosim/ap/alt-hold", 1.0)
+            self._set(sp, i, "cosim/ap/alt-mode", 1.0 if agl else 0.0)
+            self._set(sp, i, "cosim/ap/alt-cmd-ft", alt * _M_TO_FT)
+        if spd is not None:
+            self._set(sp, i, "cosim/ap/speed-hold", 1.0)
+            self._set(sp, i, "cosim/ap/speed-cmd-kt", spd / KT_TO_MPS)
+            self._set(sp, i, "cosim/ap/throttle-bias", states[i, _S["throttle"]])
+            self.speed_cmd[i] = spd
+
+    def turn_radius(self, i: int | np.ndarray, v_mps: Any) -> Any:
+        return np.asarray(v_mps) ** 2 / (G_MPS2 * np.tan(np.radians(self.bank_limit[i])))
+
+    def command(self, rows: list[int], cmd: Command, states: np.ndarray, sp: np.ndarray
+                ) -> None:
+        """Apply ``cmd`` to vehicles ``rows`` (indices) given the current states."""
+        for i in rows:
+            s = states[i]
+            if not self.engaged[i]:  # engage, holding the current state on every axis
+                self.engaged[i] = True
+                self._set(sp, i, "cosim/ap/engage", 1.0)
+                self._set(sp, i, "cosim/ap/heading-hold", 1.0)
+                self._set(sp, i, "cosim/ap/heading-cmd-deg", s[_S["yaw_deg"]])
+                self._alt_speed(sp, i, s[_S["alt_msl_m"]], False,
+                                None if cmd.throttle is not None else s[_S["airspeed_mps"]],
+                                states)
+            if cmd.bank_limit_deg is not None:
+                self.bank_limit[i] = cmd.bank_limit_deg
+                self._set(sp, i, "cosim/ap/bank-limit-deg", cmd.bank_limit_deg)
+            if cmd.stall_protection is not None:
+                self._set(sp, i, "cosim/ap/stall-protect", 1.0 if cmd.stall_protection else 0.0)
+            if cmd.throttle is not None:
+                self._set(sp, i, "cosim/ap/speed-hold", 0.0)
+                self._set(sp, i, "fcs/throttle-cmd-norm", cmd.throttle)
+                self.speed_cmd[i] = np.nan
+            self._alt_speed(sp, i, cmd.alt_m, cmd.alt_agl, cmd.airspeed_mps, states)
+            if cmd.heading_deg is not None:
+                self._stop_nav(i)
+                self._set(sp, i, "cosim/ap/heading-cmd-deg", cmd.heading_deg)
+            if cmd.nav is not None:
+                self._start_nav(i, cmd, states, sp)
+            self.labels[i] = self._label(i, cmd)
+
+    def _label(self, i: int, cmd: Command) -> str:
+        if cmd.nav is None and cmd.heading_deg is None and self.nav[i] != _NONE:
+            return self.labels[i]  # settings only: the navigation goes on
+        return cmd.label()
+
+    def _stop_nav(self, i: int) -> None:
+        self.nav[i] = _NONE
+        self.queue.pop(i, None)
+        self.kind[i] = ""
+
+    def _speed_for_radius(self, i: int, states: np.ndarray) -> float:
+        v = self.speed_cmd[i]
+        return float(v) if v == v else float(states[i, _S["airspeed_mps"]])
+
+    def _default_radius(self, i: int, states: np.ndarray) -> float:
+        v = self._speed_for_radius(i, states)
+        return max(1.5 * min_turn_radius_m(v, float(self.bank_limit[i])), 150.0)
+
+    def _start_nav(self, i: int, cmd: Command, states: np.ndarray, sp: np.ndarray) -> None:
+        here = self.position_ne(states, np.array([i]))[0]
+        self.kind[i] = cmd.nav or ""
+        self.cw[i] = cmd.loiter_cw
+        if cmd.nav == "loiter":
+            centre = here if cmd.loiter_here or not cmd.points else np.array(
+                self.resolve(cmd.points[0], i))
+            self._begin_loiter(i, centre, cmd.loiter_radius_m or self._default_radius(i, states))
+            self.queue.pop(i, None)
+            return
+        pts = [(*self.resolve(p, i), p) for p in cmd.points]
+        self.end_radius[i] = cmd.loiter_radius_m if cmd.loiter_radius_m else np.nan
+        self.wp_total[i] = len(pts)
+        self.wp_index[i] = 0
+        self.queue[i] = pts
+        self._begin_leg(i, here, states, sp)
+
+    def _begin_leg(self, i: int, start: np.ndarray, states: np.ndarray, sp: np.ndarray) -> None:
+        n, e, p = self.queue[i][0]
+        self.nav[i] = _LEG
+        self.a[i] = start
+        self.b[i] = (n, e)
+        if self.kind[i] == "waypoints":
+            self._alt_speed(sp, i, p.alt_m, p.alt_agl, p.airspeed_mps, states)
+
+    def _begin_loiter(self, i: int, centre: np.ndarray, radius: float) -> None:
+        self.nav[i] = _LOITER
+        self.b[i] = centre
+        self.radius[i] = radius
+
+    # -- every exchange --------------------------------------------------
+    def position_ne(self, states: np.ndarray, idx: np.ndarray) -> np.ndarray:
+        n, e, _ = self.frame.geodetic_to_ned(states[idx, _S["lat_deg"]], states[idx, _S["lon_deg"]],
+                                             states[idx, _S["alt_msl_m"]])
+        return np.stack([np.atleast_1d(n), np.atleast_1d(e)], axis=1)
+
+    def update(self, states: np.ndarray, sp: np.ndarray) -> list[GuidanceEvent]:
+        """Advance navigation for every guided vehicle; write heading setpoints."""
+        idx = np.flatnonzero(self.nav != _NONE)
+        if idx.size == 0:
+            return []
+        events: list[GuidanceEvent] = []
+        pos = self.position_ne(states, idx)
+        v = np.maximum(states[idx, _S["airspeed_mps"]], 1.0)
+        l1 = np.maximum(1.5 * self.turn_radius(idx, v), 150.0)
+        # transitions first (they may change modes), then carrots
+        for k, i in enumerate(idx.tolist()):
+            if self.nav[i] == _LEG:
+                self._leg_transition(i, pos[k], float(l1[k]), float(v[k]), states, sp, events)
+        carrot = np.empty_like(pos)
+        leg = self.nav[idx] == _LEG
+        if leg.any():
+            j = idx[leg]
+            a, b, p = self.a[j], self.b[j], pos[leg]
+            d = b - a
+            length = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-6)
+            u = d / length[:, None]
+            r = p - a
+            along = r[:, 0] * u[:, 0] + r[:, 1] * u[:, 1]
+            cross = u[:, 0] * r[:, 1] - u[:, 1] * r[:, 0]
+            ahead = np.sqrt(np.maximum(l1[leg] ** 2 - cross ** 2, 0.0))
+            carrot[leg] = a + u * (along + ahead)[:, None]
+        loi = self.nav[idx] == _LOITER
+        if loi.any():
+            j = idx[loi]
+            c, rad, p = self.b[j], self.radius[j], pos[loi]
+            rel = p - c
+            theta = np.arctan2(rel[:, 1], rel[:, 0])
+            sign = np.where(self.cw[j], 1.0, -1.0)  # cw: bearing from centre increases
+            step = np.minimum(l1[loi] / rad, math.pi / 2)
+            ang = theta + sign * step
+            carrot[loi] = c + rad[:, None] * np.stack([np.cos(ang), np.sin(ang)], axis=1)
+        alt = states[idx, _S["alt_msl_m"]]
+        clat, clon, _ = self.frame.ned_to_geodetic(carrot[:, 0], carrot[:, 1],
+                                                   -(alt - self.ground_alt_m))
+        hdg = bearing_deg(states[idx, _S["lat_deg"]], states[idx, _S["lon_deg"]], alt,
+                          clat, clon, alt)
+        sp[idx, self.ch["cosim/ap/heading-cmd-deg"]] = hdg
+        return events
+
+    def _leg_transition(self, i: int, p: np.ndarray, l1: float, v: float, states: np.ndarray,
+                        sp: np.ndarray, events: list[GuidanceEvent]) -> None:
+        a, b = self.a[i], self.b[i]
+        dist = float(np.hypot(*(b - p)))
+        d = b - a
+        length = float(np.hypot(*d))
+        along = float(np.dot(p - a, d / length)) if length > 1e-6 else length
+        final = len(self.queue.get(i, ())) <= 1
+        if final:
+            radius = self.end_radius[i]
+            if radius != radius:  # NaN: default
+                radius = self._default_radius(i, states)
+            if dist <= max(radius, l1):
+                events.append(GuidanceEvent("goal_reached", i, {
+                    "command": self.kind[i], "north_m": float(b[0]), "east_m": float(b[1]),
+                    "distance_m": dist, "loiter_radius_m": float(radius)}))
+                self.queue.pop(i, None)
+                self._begin_loiter(i, b.copy(), float(radius))
+                self.labels[i] = f"loiter ({self.kind[i]} reached)"
+            return
+        accept = max(0.5 * min_turn_radius_m(v, float(self.bank_limit[i])), 50.0)
+        if dist <= accept or along >= length:
+            n_done = int(self.wp_index[i]) + 1
+            events.append(GuidanceEvent("waypoint_reached", i, {
+                "index": n_done - 1, "of": int(self.wp_total[i]), "distance_m": dist}))
+            self.queue[i].pop(0)
+            self.wp_index[i] = n_done
+            self.labels[i] = f"waypoints {n_done + 1}/{int(self.wp_total[i])}"
+            self._begin_leg(i, b.copy(), states, sp)
