@@ -90,6 +90,10 @@ def _build_parser() -> _Parser:
     m.add_argument("--properties", metavar="MODEL",
                    help="list the JSBSim properties of MODEL")
 
+    pl = sub.add_parser("plot", help="plot a run's ground track and altitude (PNG)")
+    pl.add_argument("run", metavar="RUN_DIR", help="a cosim run output folder")
+    pl.add_argument("--out", metavar="PNG", help="output file (default RUN_DIR/track.png)")
+
     b = sub.add_parser("bench", help="measure pool throughput against the serial loop")
     b.add_argument("--vehicles", type=_positive_int_list, default=[1, 16, 128, 512, 1024],
                    metavar="N,N,...")
@@ -243,6 +247,16 @@ def _cmd_models(a: argparse.Namespace) -> int:
     return EXIT_FAIL if failed else EXIT_OK
 
 
+def _cmd_plot(a: argparse.Namespace) -> int:
+    from cosim.logs.plot import plot_run
+
+    run = Path(a.run)
+    if not (run / "states.parquet").exists():
+        raise ConfigError(f"{run}: not a cosim run folder (no states.parquet)")
+    print(plot_run(run, a.out))
+    return EXIT_OK
+
+
 def _cmd_bench(a: argparse.Namespace) -> int:
     from cosim.bench import run_bench
 
@@ -266,7 +280,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_USAGE
     _setup_logging(a.verbose, a.quiet)
     handlers = {"run": _cmd_run, "validate": _cmd_validate, "models": _cmd_models,
-                "bench": _cmd_bench}
+                "plot": _cmd_plot, "bench": _cmd_bench}
     try:
         return handlers[a.cmd](a)
     except ConfigError as e:

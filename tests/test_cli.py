@@ -103,3 +103,19 @@ def test_bench_reports_ratios_measured_in_the_same_run(tmp_path: Path, capsys) -
     assert r["speedup_vs_serial"] == pytest.approx(sum(per_round) / 2)  # median of two
     assert r["pool_steps_per_s"] == pytest.approx(4 * 60 / min(r["pool_s_all"]))
     assert r["vehicles"] == 4 and r["ticks"] == 60
+
+
+def test_plot_writes_a_png_for_a_run(tmp_path: Path, capsys) -> None:
+    scn = tmp_path / "p.yaml"
+    scn.write_text((REPO / "scenarios/quickstart.yaml").read_text()
+                   .replace("duration_s: 60", "duration_s: 5\nplot: true"))
+    out = tmp_path / "run"
+    assert main(["run", str(scn), "--out", str(out), "--backend", "inline",
+                 "--no-progress"]) == 0
+    png = out / "track.png"
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
+    png.unlink()
+    assert main(["plot", str(out)]) == 0
+    assert png.exists()
+    assert main(["plot", str(tmp_path)]) == 2
+    assert "not a cosim run folder" in capsys.readouterr().err

@@ -93,6 +93,7 @@ class Scenario:
     schedule: tuple[ScheduleItem, ...] = ()
     description: str = ""
     aircraft_path: tuple[str, ...] = ()
+    plot: bool = False  # write track.png (ground track and altitude) after the run
     schema_version: int = SCHEMA_VERSION
     extra: dict[str, Any] = field(default_factory=dict, compare=False)
 
@@ -150,6 +151,7 @@ class Scenario:
             "duration_s": self.duration_s,
             "seed": self.seed,
             "aircraft_path": list(self.aircraft_path),
+            "plot": self.plot,
             "vehicles": vehicles,
             "schedule": [self._item_dict(s, ids) for s in self.schedule],
         }
@@ -323,7 +325,8 @@ def parse_scenario(text: str, fname: str = "<scenario>", check_properties: bool 
     ctx = _Ctx(fname, lines)
     ctx.problems.extend(dups)
     top = _Reader(ctx, data, (), ("schema_version", "name", "description", "origin", "rates",
-                                  "duration_s", "seed", "aircraft_path", "vehicles", "schedule"))
+                                  "duration_s", "seed", "aircraft_path", "plot", "vehicles",
+                                  "schedule"))
     version = top.integer("schema_version")
     if version is not None and version != SCHEMA_VERSION:
         ctx.err(("schema_version",), f"unsupported schema_version {version}; this cosim reads "
@@ -337,6 +340,7 @@ def parse_scenario(text: str, fname: str = "<scenario>", check_properties: bool 
     rates = _rates(ctx, top.d.get("rates", {}))
     duration = top.num("duration_s", lo=0, lo_open=True)
     seed = top.integer("seed", 0, lo=0)
+    plot = top.boolean("plot", False)
     apath: list[str] = []
     raw_ap = top.d.get("aircraft_path", [])
     if isinstance(raw_ap, str):
@@ -357,7 +361,7 @@ def parse_scenario(text: str, fname: str = "<scenario>", check_properties: bool 
         raise ConfigError(ctx.format())
     return Scenario(name=name, path=fname, origin=origin, rates=rates, duration_s=duration,
                     seed=seed, vehicles=tuple(v for v, _ in vehicles), schedule=tuple(schedule),
-                    description=description, aircraft_path=tuple(apath),
+                    description=description, aircraft_path=tuple(apath), plot=plot,
                     extra={"vehicle_paths": [pp for _, pp in vehicles]})
 
 

@@ -181,6 +181,13 @@ class Run:
                 summary = self._summary(reason, tick, startup_s, loop_s, workers_used,
                                         events.counts, states_log.rows_written, error)
                 write_json_atomic(out / "summary.json", summary)
+        if scn.plot and states_log.rows_written:
+            try:
+                from cosim.logs.plot import plot_run
+
+                log.info("plot: %s", plot_run(out))
+            except Exception as e:  # a plot must never lose a finished run
+                log.warning("could not write track.png: %s", e)
         return RunResult(out, reason, tick, summary, error)
 
     def _status_events(self, events: EventLog, tick: int, states: np.ndarray,
