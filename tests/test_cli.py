@@ -108,7 +108,7 @@ def test_bench_reports_ratios_measured_in_the_same_run(tmp_path: Path, capsys) -
 def test_plot_writes_a_png_for_a_run(tmp_path: Path, capsys) -> None:
     scn = tmp_path / "p.yaml"
     scn.write_text((REPO / "scenarios/quickstart.yaml").read_text()
-                   .replace("duration_s: 60", "duration_s: 5\nplot: true"))
+                   .replace("duration_s: 60", "duration_s: 12\nplot: true"))
     out = tmp_path / "run"
     assert main(["run", str(scn), "--out", str(out), "--backend", "inline",
                  "--no-progress"]) == 0
