@@ -150,15 +150,13 @@ def stall_onset(run_dir: str | Path, vehicle: str, model: str) -> dict[str, floa
 def report(run_dir: str | Path) -> dict[str, Any]:
     """Per vehicle: speed and height range, largest bank, steady 45-deg turn,
     stall onset (when the run has one)."""
-    from cosim.logs import read_states as _rs
+    import yaml
 
     run = Path(run_dir)
-    t = _rs(run)
+    t = read_states(run)
     out: dict[str, Any] = {}
     summary = json.loads((run / "summary.json").read_text())
     resolved = (run / "scenario.resolved.yaml").read_text()
-    import yaml
-
     models = {v["id"]: v["model"] for v in yaml.safe_load(resolved)["vehicles"]}
     for vid in dict.fromkeys(t["vehicle"].cast("string").to_pylist()):
         c = vehicle_columns(run, vid)
