@@ -28,11 +28,14 @@ import multiprocessing as mp
 import platform
 import sys
 import time
+from multiprocessing.connection import Connection
+from multiprocessing.connection import wait as mp_wait
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from cosim.errors import CosimError
 from cosim.fdm_pool import make_pool
 from cosim.fdm_pool.process import default_workers, shard_bounds
 from cosim.fdm_pool.shard import Shard
@@ -66,50 +69,115 @@ def _serial_loop(shard: Shard, ticks: int, k: int) -> float:
     return time.perf_counter() - t0
 
 
-def _ceiling_worker(specs: list[VehicleSpec], dt_s: float, ticks: int, k: int, repeat: int,
-                    start: Any, done: Any, out: Any, i: int) -> None:
+def _ceiling_worker(specs: list[VehicleSpec], dt_s: float, ticks: int, k: int,
+                    conn: Connection) -> None:
     shard = Shard.build(specs, dt_s, ())
-    workers = start.parties - 1
-    done.wait()  # built: measurements may start
-    for r in range(repeat):
-        start.wait()
-        out[r * workers + i] = _serial_loop(shard, ticks, k)
-        done.wait()
+    conn.send(0.0)  # built: measurements may start
+    while True:
+        try:
+            go = conn.recv()
+        except EOFError:  # the driver is gone
+            return
+        if go is None:
+            return
+        conn.send(_serial_loop(shard, ticks, k))
 
 
 class _Ceiling:
     """W independent processes that step their shards with no communication,
     one segment per ``segment()`` call (all start together; the slowest one
-    sets the wall time)."""
+    sets the wall time).
+
+    Each process has a pipe: the driver sends "go" to all, then waits for
+    every result or for a process to end (its sentinel), with a timeout. So a
+    dead ceiling process is a ``CosimError`` at once and a stuck one after
+    the timeout, never a hang. (Not a ``multiprocessing.Barrier``: notifying
+    a waiter that was killed blocks forever.)
+    """
 
     def __init__(self, specs: list[VehicleSpec], dt_s: float, ticks: int, k: int,
-                 workers: int, repeat: int) -> None:
+                 workers: int, build_timeout_s: float | None = None) -> None:
         ctx = mp.get_context("spawn")
-        self.start = ctx.Barrier(workers + 1, timeout=900)
-        self.done = ctx.Barrier(workers + 1, timeout=900)
-        self.out = ctx.RawArray("d", workers * repeat)
-        self.workers = workers
-        self.round = 0
-        self.procs = [ctx.Process(target=_ceiling_worker, daemon=True,
-                                  args=(specs[a:b], dt_s, ticks, k, repeat, self.start,
-                                        self.done, self.out, i))
-                      for i, (a, b) in enumerate(shard_bounds(len(specs), workers))]
-        for p in self.procs:
-            p.start()
-        self.done.wait()  # every shard built before anything is timed
+        self.procs: list[Any] = []
+        self.conns: list[Connection] = []
+        try:
+            for a, b in shard_bounds(len(specs), workers):
+                mine, theirs = ctx.Pipe()
+                p = ctx.Process(target=_ceiling_worker, daemon=True,
+                                args=(specs[a:b], dt_s, ticks, k, theirs))
+                p.start()
+                theirs.close()
+                self.procs.append(p)
+                self.conns.append(mine)
+            # every shard built before anything is timed
+            self._collect(build_timeout_s if build_timeout_s is not None
+                          else 60.0 + 0.05 * len(specs), "build its vehicles")
+        except BaseException:
+            self.close()
+            raise
 
-    def segment(self) -> float:
-        self.start.wait()
-        self.done.wait()
-        r, w = self.round, self.workers
-        self.round += 1
-        return max(self.out[r * w:(r + 1) * w])
+    def _collect(self, timeout_s: float, what: str) -> list[float]:
+        results = [0.0] * len(self.conns)
+        pending = set(range(len(self.conns)))
+        deadline = time.monotonic() + timeout_s
+        while pending:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise CosimError(f"bench: ceiling process(es) {sorted(pending)} did not {what} "
+                                 f"within {timeout_s:g} s")
+            waitables: list[Any] = [self.conns[i] for i in pending]
+            waitables += [self.procs[i].sentinel for i in pending]
+            mp_wait(waitables, timeout=left)
+            for i in sorted(pending):
+                p = self.procs[i]
+                if self.conns[i].poll():
+                    try:
+                        results[i] = self.conns[i].recv()
+                        pending.discard(i)
+                        continue
+                    except (EOFError, OSError):  # closed or reset: it is gone
+                        p.join(1.0)
+                if p.exitcode is not None or not p.is_alive():
+                    raise self._died(i, what)
+        return results
+
+    def _died(self, i: int, what: str) -> CosimError:
+        p = self.procs[i]
+        p.join(1.0)
+        return CosimError(f"bench: ceiling process {i} (pid {p.pid}) ended with code "
+                          f"{p.exitcode} (while waiting for it to {what})")
+
+    def segment(self, timeout_s: float = 300.0) -> float:
+        for i, c in enumerate(self.conns):
+            try:
+                c.send(True)
+            except OSError:  # a broken pipe: it is gone
+                raise self._died(i, "start a segment") from None
+        return max(self._collect(timeout_s, "finish a segment"))
 
     def close(self) -> None:
+        for c in self.conns:
+            try:
+                c.send(None)
+            except OSError:  # it is gone already
+                pass
         for p in self.procs:
             p.join(5)
             if p.is_alive():
                 p.kill()
+                p.join(1)
+        for c in self.conns:
+            c.close()
+
+
+def check_rates(physics_hz: float, control_hz: float) -> int:
+    """Physics ticks per exchange; ``ValueError`` quoting both rates unless
+    ``control_hz`` divides ``physics_hz``."""
+    q = physics_hz / control_hz
+    if not (abs(q - round(q)) < 1e-9 and round(q) >= 1):
+        raise ValueError(f"control_hz {control_hz:g} must divide physics_hz {physics_hz:g} "
+                         f"(a whole number of physics ticks per exchange)")
+    return round(q)
 
 
 def bench_size(n: int, model: str, backend: str, workers: int | None, seconds: float,
@@ -121,7 +189,7 @@ def bench_size(n: int, model: str, backend: str, workers: int | None, seconds: f
     Rates are from each configuration's best segment; the ratios are the
     median of the per-round ratios."""
     dt = 1.0 / physics_hz
-    k = round(physics_hz / control_hz)
+    k = check_rates(physics_hz, control_hz)
     ticks = max(k, math.ceil(seconds * physics_hz / k) * k)
     specs = bench_specs(n, model)
     steps = n * ticks
@@ -133,8 +201,12 @@ def bench_size(n: int, model: str, backend: str, workers: int | None, seconds: f
     res["startup_s"] = time.perf_counter() - t0
     w = pool.workers
     res["workers"] = w
-    shard = Shard.build(specs, dt, ()) if baselines else None
-    ceiling = _Ceiling(specs, dt, ticks, k, w, repeat) if baselines and w > 1 else None
+    try:
+        shard = Shard.build(specs, dt, ()) if baselines else None
+        ceiling = _Ceiling(specs, dt, ticks, k, w) if baselines and w > 1 else None
+    except BaseException:
+        pool.close()
+        raise
     walls: list[float] = []
     serials: list[float] = []
     ceils: list[float] = []
@@ -151,8 +223,8 @@ def bench_size(n: int, model: str, backend: str, workers: int | None, seconds: f
                 walls.append(time.perf_counter() - t0)
                 if shard is not None:
                     serials.append(_serial_loop(shard, ticks, k))
-                if ceiling is not None:
-                    ceils.append(ceiling.segment())
+                if ceiling is not None:  # no slower than 10x the pool, or it is stuck
+                    ceils.append(ceiling.segment(timeout_s=60.0 + 10 * walls[-1]))
     finally:
         if ceiling is not None:
             ceiling.close()
@@ -180,6 +252,9 @@ def run_bench(vehicles: list[int], model: str = "c172p", backend: str = "process
               workers: int | None = None, seconds: float = 5.0, physics_hz: float = 120.0,
               control_hz: float = 30.0, baselines: bool = True, repeat: int = 3,
               json_path: str | None = None) -> list[dict[str, Any]]:
+    check_rates(physics_hz, control_hz)
+    if workers is not None and workers < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
     w = workers if workers is not None else (default_workers() if backend == "process" else 1)
     print(f"cosim bench: model {model}, backend {backend}, workers {w}, "
           f"{physics_hz:g} Hz physics, {control_hz:g} Hz exchange, best of {repeat} x "

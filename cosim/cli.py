@@ -16,10 +16,13 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 from types import FrameType
-from typing import TextIO
+from typing import TYPE_CHECKING, TextIO
 
 from cosim import __version__
 from cosim.errors import ConfigError, CosimError
+
+if TYPE_CHECKING:
+    from cosim.scenario import Scenario
 
 log = logging.getLogger("cosim")
 
@@ -156,26 +159,33 @@ class Progress:
                      sim, total / self.hz, rtf)
 
 
+def _load_scenario(path: str) -> Scenario:
+    from cosim.scenario import load_scenario  # imported here: a fast --help
+
+    try:
+        return load_scenario(path)
+    except UnicodeDecodeError as e:
+        raise ConfigError(f"{path}: cannot read scenario: not UTF-8 text (byte "
+                          f"{e.object[e.start]:#04x} at offset {e.start})") from None
+
+
 def _cmd_run(a: argparse.Namespace) -> int:
-    from cosim.scenario import load_scenario
+    from cosim.logs import clear_outputs
     from cosim.sync import Run
 
-    scn = load_scenario(a.scenario)
-    if a.duration_s:
-        scn = scn.with_duration(a.duration_s)
     if a.workers is not None and a.workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {a.workers}")
+    scn = _load_scenario(a.scenario)
+    if a.duration_s:
+        scn = scn.with_duration(a.duration_s)
     out = Path(a.out) if a.out else Path("runs") / f"{scn.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"--out {out}: exists and is not a folder")
     if (out / "summary.json").exists() or (out / "events.jsonl").exists():
         if not a.overwrite:
             raise ConfigError(f"{out} already holds a run; choose another --out or pass "
                               f"--overwrite")
-        import shutil
-
-        for name in ("states.parquet",):
-            shutil.rmtree(out / name, ignore_errors=True)
-        for name in ("events.jsonl", "summary.json", "scenario.resolved.yaml"):
-            (out / name).unlink(missing_ok=True)
+        clear_outputs(out)  # Run does it too: a run never mixes with an old one's files
     progress = None if a.no_progress else Progress(sys.stderr, scn.rates.physics_hz)
     run = Run(scn, out, backend=a.backend, workers=a.workers, realtime=a.realtime,
               progress=progress, step_timeout_s=a.step_timeout_s)
@@ -185,9 +195,9 @@ def _cmd_run(a: argparse.Namespace) -> int:
     def on_signal(signum: int, frame: FrameType | None) -> None:
         nonlocal interrupts
         interrupts += 1
-        if interrupts > 1:
-            raise KeyboardInterrupt
         run.stop("interrupted" if signum == signal.SIGINT else "terminated")
+        if interrupts > 1 or run.building:
+            raise KeyboardInterrupt  # abort the build (or a second Ctrl-C: everything)
 
     old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     try:
@@ -211,15 +221,17 @@ def _cmd_run(a: argparse.Namespace) -> int:
 
 
 def _cmd_validate(a: argparse.Namespace) -> int:
-    from cosim.scenario import load_scenario
-
     bad = 0
     for f in a.scenarios:
         try:
-            scn = load_scenario(f)
+            scn = _load_scenario(f)
         except ConfigError as e:
             bad += 1
             print(e, file=sys.stderr)
+            continue
+        except (CosimError, OSError) as e:  # e.g. a model JSBSim cannot load
+            bad += 1
+            print(f"{f}: {e}", file=sys.stderr)
             continue
         print(f"{f}: ok ({len(scn.vehicles)} vehicles, {scn.duration_s:g} s, "
               f"{scn.rates.physics_hz:g}/{scn.rates.control_hz:g}/{scn.rates.log_hz:g} Hz)")
@@ -258,8 +270,22 @@ def _cmd_plot(a: argparse.Namespace) -> int:
 
 
 def _cmd_bench(a: argparse.Namespace) -> int:
-    from cosim.bench import run_bench
+    from cosim.bench import check_rates, run_bench
 
+    if a.workers is not None and a.workers < 1:
+        raise ConfigError(f"--workers must be >= 1, got {a.workers}")
+    try:
+        check_rates(a.physics_hz, a.control_hz)
+    except ValueError as e:
+        raise ConfigError(f"--physics-hz/--control-hz: {e}") from None
+    if a.json:
+        folder = Path(a.json).resolve().parent
+        if not folder.is_dir():
+            raise ConfigError(f"--json {a.json}: folder {folder} does not exist")
+        if not os.access(folder, os.W_OK):
+            raise ConfigError(f"--json {a.json}: folder {folder} is not writable")
+        if Path(a.json).is_dir():
+            raise ConfigError(f"--json {a.json}: is a folder")
     run_bench(vehicles=a.vehicles, model=a.model, backend=a.backend, workers=a.workers,
               seconds=a.seconds, physics_hz=a.physics_hz, control_hz=a.control_hz,
               baselines=not a.no_baselines, repeat=max(1, a.repeat), json_path=a.json)
@@ -295,6 +321,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return EXIT_FAIL
+    except OSError as e:  # a file that cannot be written, a full disk, ...
+        print(f"cosim {a.cmd}: {e}", file=sys.stderr)
+        return EXIT_FAIL
+    except ValueError as e:  # a bad value that got past the parser
+        print(f"cosim {a.cmd}: {e}", file=sys.stderr)
+        return EXIT_USAGE
 
 
 if __name__ == "__main__":

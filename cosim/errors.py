@@ -34,7 +34,37 @@ class ModelNotFound(ConfigError):
 
 
 class JSBSimError(CosimError):
-    """A JSBSim call failed (returned False or raised) for a named vehicle."""
+    """A JSBSim call failed (returned False or raised); ``vehicle`` names the
+    vehicle when there is one (its message names it too)."""
+
+    def __init__(self, message: str, vehicle: str | None = None) -> None:
+        super().__init__(message, vehicle)
+        self.message = message
+        self.vehicle = vehicle
+
+    def __str__(self) -> str:
+        return self.message
+
+
+class VehicleError(CosimError):
+    """Applying setpoints to or stepping one vehicle failed during an exchange
+    (a JSBSim call returned False or raised, or anything else went wrong).
+
+    Raised by the shard that owns the vehicle, whichever backend it runs in;
+    in a worker process it reaches the driver inside a ``WorkerError``.
+    ``tick`` is the physics tick the exchange started from.
+    """
+
+    def __init__(self, vehicle: str | None, tick: int | None, message: str) -> None:
+        super().__init__(vehicle, tick, message)
+        self.vehicle = vehicle
+        self.tick = tick
+        self.message = message
+
+    def __str__(self) -> str:
+        where = f"vehicle {self.vehicle!r}" if self.vehicle is not None else "a vehicle"
+        at = f" at tick {self.tick}" if self.tick is not None else ""
+        return f"{where}{at}: {self.message}"
 
 
 class PoolStateError(CosimError):
@@ -61,6 +91,14 @@ class WorkerError(CosimError):
         return f"{where}: {last[0]}\n--- remote traceback ---\n{self.remote_traceback.rstrip()}"
 
 
+def _vehicle_list(vehicles: list[str], shown: int = 10) -> str:
+    """``a, b, c`` or, for long lists, ``a, b, ... (N in all)``."""
+    text = ", ".join(vehicles[:shown])
+    if len(vehicles) > shown:
+        text += f", ... ({len(vehicles)} in all)"
+    return text
+
+
 class WorkerDied(CosimError):
     """A worker process ended without being asked to (killed by the OS, crashed)."""
 
@@ -83,11 +121,9 @@ class WorkerDied(CosimError):
                 how = f"killed by signal {-self.exitcode}"
         else:
             how = f"exited with code {self.exitcode}"
-        shown = ", ".join(self.vehicles[:10])
-        if len(self.vehicles) > 10:
-            shown += f", ... ({len(self.vehicles)} in all)"
         at = f" at tick {self.tick}" if self.tick is not None else ""
-        return f"worker {self.worker} (pid {self.pid}) {how}{at}; its vehicles: {shown}"
+        return (f"worker {self.worker} (pid {self.pid}) {how}{at}; its vehicles: "
+                f"{_vehicle_list(self.vehicles)}")
 
 
 class WorkerTimeout(WorkerDied):
@@ -105,8 +141,5 @@ class WorkerTimeout(WorkerDied):
         self.what = what
 
     def __str__(self) -> str:
-        shown = ", ".join(self.vehicles[:10])
-        if len(self.vehicles) > 10:
-            shown += f", ... ({len(self.vehicles)} in all)"
         return (f"worker {self.worker} (pid {self.pid}) did not {self.what} within "
-                f"{self.timeout_s:g} s; its vehicles: {shown}")
+                f"{self.timeout_s:g} s; its vehicles: {_vehicle_list(self.vehicles)}")

@@ -79,40 +79,45 @@ class LocalFrame:
     lon_deg: float
     alt_m: float = 0.0
 
-    def _rotation(self) -> Array:
-        """Rows are the N, E, D unit vectors expressed in ECEF."""
+    def _rotation(self) -> tuple[float, float, float, float]:
+        """sin and cos of the origin's latitude and longitude: the rows of the
+        rotation ECEF -> NED are (-sl*co, -sl*so, cl), (-so, co, 0) and
+        (-cl*co, -cl*so, -sl)."""
         lat = np.radians(self.lat_deg)
         lon = np.radians(self.lon_deg)
-        sl, cl = np.sin(lat), np.cos(lat)
-        so, co = np.sin(lon), np.cos(lon)
-        return np.array([
-            [-sl * co, -sl * so, cl],
-            [-so, co, 0.0],
-            [-cl * co, -cl * so, -sl],
-        ])
+        return float(np.sin(lat)), float(np.cos(lat)), float(np.sin(lon)), float(np.cos(lon))
 
     def _origin_ecef(self) -> Array:
         return np.array(geodetic_to_ecef(self.lat_deg, self.lon_deg, self.alt_m))
+
+    # The rotations are written out element by element (no matrix product):
+    # BLAS picks different summation orders for different array sizes, and
+    # each point's result must not depend on how many are converted at once.
 
     def geodetic_to_ned(self, lat_deg: ArrayLike, lon_deg: ArrayLike, alt_m: ArrayLike
                         ) -> tuple[Array, Array, Array]:
         """Geodetic position(s) to north, east, down metres from the origin."""
         x, y, z = geodetic_to_ecef(lat_deg, lon_deg, alt_m)
         o = self._origin_ecef()
-        d = np.stack(np.broadcast_arrays(x - o[0], y - o[1], z - o[2]))
-        ned = np.tensordot(self._rotation(), d, axes=1)
-        return ned[0], ned[1], ned[2]
+        dx, dy, dz = np.broadcast_arrays(x - o[0], y - o[1], z - o[2])
+        sl, cl, so, co = self._rotation()
+        north = (-sl * co) * dx + (-sl * so) * dy + cl * dz
+        east = -so * dx + co * dy
+        down = (-cl * co) * dx + (-cl * so) * dy - sl * dz
+        return north, east, down
 
     def ned_to_geodetic(self, north_m: ArrayLike, east_m: ArrayLike, down_m: ArrayLike
                         ) -> tuple[Array, Array, Array]:
         """North, east, down metres from the origin to geodetic lat, lon (deg), height (m)."""
-        ned = np.stack(np.broadcast_arrays(
-            np.asarray(north_m, dtype=np.float64),
-            np.asarray(east_m, dtype=np.float64),
-            np.asarray(down_m, dtype=np.float64)))
-        d = np.tensordot(self._rotation().T, ned, axes=1)
+        n, e, d = np.broadcast_arrays(np.asarray(north_m, dtype=np.float64),
+                                      np.asarray(east_m, dtype=np.float64),
+                                      np.asarray(down_m, dtype=np.float64))
+        sl, cl, so, co = self._rotation()
+        dx = (-sl * co) * n - so * e + (-cl * co) * d
+        dy = (-sl * so) * n + co * e + (-cl * so) * d
+        dz = cl * n - sl * d
         o = self._origin_ecef()
-        return ecef_to_geodetic(d[0] + o[0], d[1] + o[1], d[2] + o[2])
+        return ecef_to_geodetic(dx + o[0], dy + o[1], dz + o[2])
 
     def place(self, north_m: ArrayLike, east_m: ArrayLike, height_m: ArrayLike
               ) -> tuple[Array, Array]:

@@ -232,13 +232,17 @@ def new_fdm(model: ModelInfo, dt_s: float) -> jsbsim.FGFDMExec:
     fdm.set_debug_level(0)
     fdm.disable_output()
     attach = model.profile.get("autopilot") == "attach"
-    if model.source == "jsbsim" and not attach:
-        ok = fdm.load_model(model.name)
-    else:
-        aircraft = _wrapper_root(model) if attach else Path(model.aircraft_dir)
-        systems = JSBSIM_ROOT / "systems" if model.source == "jsbsim" else SYSTEMS_DIR
-        ok = fdm.load_model_with_paths(model.name, str(aircraft), str(JSBSIM_ROOT / "engine"),
-                                       str(systems))
+    try:
+        if model.source == "jsbsim" and not attach:
+            ok = fdm.load_model(model.name)
+        else:
+            aircraft = _wrapper_root(model) if attach else Path(model.aircraft_dir)
+            systems = JSBSIM_ROOT / "systems" if model.source == "jsbsim" else SYSTEMS_DIR
+            ok = fdm.load_model_with_paths(model.name, str(aircraft),
+                                           str(JSBSIM_ROOT / "engine"), str(systems))
+    except jsbsim.BaseError as e:  # e.g. an XML parse error
+        raise JSBSimError(f"JSBSim could not load model {model.name!r} from "
+                          f"{model.xml_path}: {' '.join(str(e).split())}") from None
     if not ok:
         raise JSBSimError(f"JSBSim could not load model {model.name!r} from {model.xml_path}")
     fdm.set_dt(dt_s)
@@ -251,6 +255,8 @@ def new_fdm(model: ModelInfo, dt_s: float) -> jsbsim.FGFDMExec:
     for prop, value in (prof.get("properties") or {}).items():
         if not has_property(fdm, prop):
             raise JSBSimError(f"profile of {model.name!r} sets {prop!r}, which the model lacks")
+        if not is_writable(fdm, prop):
+            raise JSBSimError(f"profile of {model.name!r} sets {prop!r}, which is read-only")
         fdm[prop] = float(value)
     return fdm
 
@@ -258,3 +264,10 @@ def new_fdm(model: ModelInfo, dt_s: float) -> jsbsim.FGFDMExec:
 def has_property(fdm: jsbsim.FGFDMExec, name: str) -> bool:
     """True if ``name`` exists in ``fdm`` (JSBSim silently creates misspelled ones on write)."""
     return bool(fdm.get_property_manager().hasNode(name))
+
+
+def is_writable(fdm: jsbsim.FGFDMExec, name: str) -> bool:
+    """True if the existing property ``name`` accepts writes (JSBSim silently
+    ignores writes to read-only ones)."""
+    node = fdm.get_property_manager().get_node(name)
+    return node is not None and bool(node.get_attribute(jsbsim.Attribute.WRITE))

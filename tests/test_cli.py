@@ -119,3 +119,156 @@ def test_plot_writes_a_png_for_a_run(tmp_path: Path, capsys) -> None:
     assert png.exists()
     assert main(["plot", str(tmp_path)]) == 2
     assert "not a cosim run folder" in capsys.readouterr().err
+
+
+# --- every failure is one line and an exit code, never a traceback --------------------
+
+def _quick_run(tmp_path: Path, out: Path | str, *extra: str) -> list[str]:
+    return ["run", str(REPO / "scenarios/quickstart.yaml"), "--out", str(out),
+            "--duration-s", "0.5", "--backend", "inline", "--no-progress", *extra]
+
+
+def test_out_that_is_a_file_is_a_usage_error(tmp_path: Path, capsys) -> None:
+    f = tmp_path / "f"
+    f.write_text("x")
+    assert main(_quick_run(tmp_path, f)) == 2
+    assert f"--out {f}: exists and is not a folder" in capsys.readouterr().err
+    assert main(_quick_run(tmp_path, f / "sub")) == 1  # an OSError: one line, exit 1
+    err = capsys.readouterr().err
+    assert err.startswith("cosim run: [Errno 20] Not a directory") and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1
+
+
+def test_a_failed_state_write_exits_1_with_one_line(tmp_path: Path, capsys,
+                                                    monkeypatch) -> None:
+    import errno
+
+    import cosim.logs.writers as w
+
+    def disk_full(*a, **k):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(w.pq, "write_table", disk_full)
+    out = tmp_path / "o"
+    assert main(["-q"] + _quick_run(tmp_path, out)) == 1
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    assert f"cosim run: [Errno 28] cannot write {out}/states.parquet/part-000000.parquet: " \
+           f"No space left on device" in err.splitlines()
+    assert json.loads((out / "summary.json").read_text())["stop_reason"] == "error"
+
+
+def test_a_scenario_that_is_not_utf8_is_a_config_error(tmp_path: Path, capsys) -> None:
+    bad = tmp_path / "latin1.yaml"
+    bad.write_bytes("name: caf\xe9\n".encode("latin-1"))
+    assert main(["validate", str(bad)]) == 2
+    assert f"{bad}: cannot read scenario: not UTF-8 text (byte 0xe9 at offset 9)" in \
+        capsys.readouterr().err
+    assert main(["run", str(bad), "--out", str(tmp_path / "o")]) == 2
+
+
+def test_validate_reports_every_file_even_after_a_jsbsim_error(tmp_path: Path,
+                                                               capsys) -> None:
+    (tmp_path / "acft" / "broken").mkdir(parents=True)
+    (tmp_path / "acft" / "broken" / "broken.xml").write_text(
+        '<?xml version="1.0"?>\n<fdm_config name="broken"><metrics>')
+    broken = tmp_path / "broken.yaml"
+    broken.write_text(
+        "schema_version: 1\naircraft_path: acft\nvehicles:\n"
+        "  - {id: a, model: broken, init: {alt_msl_m: 500, airspeed_kt: 90},"
+        " set: {fcs/throttle-cmd-norm: 1}}\n")
+    good = REPO / "scenarios/quickstart.yaml"
+    assert main(["-q", "validate", str(broken), str(good)]) == 2
+    out, err = capsys.readouterr()
+    assert f"{good}: ok" in out
+    assert f"{broken}: JSBSim could not load model 'broken'" in err and "Traceback" not in err
+
+
+def test_bench_usage_errors_exit_2_before_running_anything(tmp_path: Path, capsys,
+                                                           monkeypatch) -> None:
+    import cosim.bench
+
+    def must_not_run(*a, **k):
+        raise AssertionError("the bench ran")
+
+    monkeypatch.setattr(cosim.bench, "bench_size", must_not_run)
+    assert main(["bench", "--vehicles", "2", "--workers", "0"]) == 2
+    assert "--workers must be >= 1, got 0" in capsys.readouterr().err
+    assert main(["bench", "--vehicles", "2", "--json", "/nonexistent/dir/x.json"]) == 2
+    assert "--json /nonexistent/dir/x.json: folder /nonexistent/dir does not exist" in \
+        capsys.readouterr().err
+    assert main(["bench", "--vehicles", "2", "--json", str(tmp_path)]) == 2
+    assert "is a folder" in capsys.readouterr().err
+    assert main(["bench", "--vehicles", "2", "--physics-hz", "100", "--control-hz", "30"]) == 2
+    assert "control_hz 30 must divide physics_hz 100" in capsys.readouterr().err
+
+
+def test_a_bad_value_past_the_parser_is_exit_2(monkeypatch, capsys) -> None:
+    import cosim.bench
+
+    def bad(*a, **k):
+        raise ValueError("repeat must be small")
+
+    monkeypatch.setattr(cosim.bench, "run_bench", bad)
+    assert main(["bench", "--vehicles", "2"]) == 2
+    assert capsys.readouterr().err == "cosim bench: repeat must be small\n"
+
+
+def test_bench_closes_the_pool_when_the_baselines_fail(monkeypatch) -> None:
+    import cosim.bench as bench
+
+    closed = []
+    real = bench.make_pool
+
+    def spy(*a, **k):
+        pool = real(*a, **k)
+        orig = pool.close
+        pool.close = lambda: (closed.append(True), orig())[1]  # type: ignore[method-assign]
+        return pool
+
+    class Boom(Exception):
+        pass
+
+    def no_ceiling(*a, **k):
+        raise Boom
+
+    monkeypatch.setattr(bench, "make_pool", spy)
+    monkeypatch.setattr(bench, "_Ceiling", no_ceiling)
+    with pytest.raises(Boom):
+        bench.bench_size(2, "c172p", "process", 2, 0.1, 120.0, 30.0)
+    assert closed == [True]
+
+
+def test_a_dead_ceiling_process_is_an_error_not_a_hang() -> None:
+    import os
+    import re
+    import signal
+    import threading
+    import time
+
+    from cosim.bench import _Ceiling, bench_specs
+    from cosim.errors import CosimError
+
+    c = _Ceiling(bench_specs(2), 1 / 120, 8, 4, workers=2)
+    errors: list[BaseException] = []
+
+    def measure() -> None:  # in a thread: a regression must fail, not hang the suite
+        try:
+            c.segment()
+            c.segment()
+        except BaseException as e:
+            errors.append(e)
+
+    try:
+        os.kill(c.procs[1].pid, signal.SIGKILL)
+        t0 = time.monotonic()
+        th = threading.Thread(target=measure, daemon=True)
+        th.start()
+        th.join(5.0)
+        assert not th.is_alive(), "segment() hangs on a dead ceiling process"
+        assert time.monotonic() - t0 < 3.0
+    finally:
+        c.close()
+    assert len(errors) == 1 and isinstance(errors[0], CosimError), errors
+    assert re.search(r"ceiling process 1 \(pid \d+\) ended with code -9", str(errors[0]))
+    assert not any(p.is_alive() for p in c.procs)

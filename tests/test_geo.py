@@ -285,3 +285,27 @@ def test_broadcasting_shapes() -> None:
     assert np.shape(n3) == () and float(n3) == pytest.approx(n[3], abs=1e-9)
     assert float(e3) == pytest.approx(e[3], abs=1e-9)
     assert float(d3) == pytest.approx(d[3], abs=1e-9)
+
+
+def test_results_do_not_depend_on_the_batch_size() -> None:
+    """Bit for bit: a point's NED (and back) is the same converted alone, in a
+    batch of 50 or in any slice of it (states.parquet parts vary in size)."""
+    rng = np.random.default_rng(0)
+    lat = 47.0 + rng.normal(0.0, 0.05, 50)
+    lon = 8.0 + rng.normal(0.0, 0.05, 50)
+    alt = 400.0 + rng.uniform(0.0, 2000.0, 50)
+    f = LocalFrame(47.0, 8.0, 400.0)
+    batch = np.stack(f.geodetic_to_ned(lat, lon, alt))
+    alone = np.stack([np.array(f.geodetic_to_ned(lat[i], lon[i], alt[i])) for i in range(50)],
+                     axis=1)
+    assert np.array_equal(batch, alone)
+    for a, b in ((0, 7), (3, 20), (11, 50)):
+        assert np.array_equal(np.stack(f.geodetic_to_ned(lat[a:b], lon[a:b], alt[a:b])),
+                              batch[:, a:b])
+    back = np.stack(f.ned_to_geodetic(*batch))
+    back_alone = np.stack([np.array(f.ned_to_geodetic(*batch[:, i])) for i in range(50)], axis=1)
+    assert np.array_equal(back, back_alone)
+    placed = np.stack(f.place(batch[0], batch[1], alt))
+    placed_alone = np.stack([np.array(f.place(batch[0, i], batch[1, i], alt[i]))
+                             for i in range(50)], axis=1)
+    assert np.array_equal(placed, placed_alone)

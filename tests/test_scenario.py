@@ -134,7 +134,7 @@ def test_every_problem_reported_at_once() -> None:
         (line_of(MANY, "model: c172p", 2), "vehicles[1].model", "duplicate key 'model'"),
         (line_of(MANY, "id: b", 1), "vehicles[2].id", "duplicate vehicle id 'b'"),
         (line_of(MANY, "at_s: 30"), "schedule[0].at_s",
-         "at_s 30 is after the end of the run (duration_s 20)"),
+         "at_s 30 is at or after the end of the run (duration_s 20)"),
         (line_of(MANY, "zz*"), "schedule[0].vehicles", "'zz*' matches no vehicle"),
     ]
     for line, path, frag in expect:
@@ -238,18 +238,28 @@ def test_schedule_selecting_no_vehicle() -> None:
                "'b' matches no vehicle (vehicles: a)")
 
 
-def test_schedule_after_end() -> None:
+def test_schedule_at_or_after_end() -> None:
+    """An item at the very end (or rounded up onto it) would never run."""
     text = HEAD + ONE + dd("""
         schedule:
+          - at_s: 19.966
+            set: {fcs/throttle-cmd-norm: 0.5}
           - at_s: 20
             set: {fcs/throttle-cmd-norm: 0.5}
           - at_s: 20.5
             set: {fcs/throttle-cmd-norm: 0.5}
+          - at_s: 19.97
+            set: {fcs/throttle-cmd-norm: 0.5}
     """)
     probs = problems(text)
-    assert len(probs) == 1
-    assert has(probs, line_of(text, "at_s: 20.5"), "schedule[1].at_s",
-               "at_s 20.5 is after the end of the run (duration_s 20)")
+    assert len(probs) == 3, probs
+    assert has(probs, line_of(text, "at_s: 20.5"), "schedule[2].at_s",
+               "at_s 20.5 is at or after the end of the run (duration_s 20)")
+    assert has(probs, line_of(text, "at_s: 20"), "schedule[1].at_s",
+               "at_s 20 is at or after the end of the run (duration_s 20), so it would never "
+               "run; the last control exchange starts at 19.9667 s")
+    assert has(probs, line_of(text, "at_s: 19.97"), "schedule[3].at_s",  # rounds up to 20 s
+               "at_s 19.97 is at or after the end of the run")
 
 
 def test_schema_version_2() -> None:
@@ -397,6 +407,18 @@ def test_misspelled_property_in_vehicle_set() -> None:
                "'fcs/throtle-cmd-norm' does not exist in model c172p")
     scn = parse(HEAD + VSET.replace("{prop}", "fcs/throttle-cmd-norm"))
     assert scn.vehicles[0].initial_props == (("fcs/throttle-cmd-norm", 0.7),)
+
+
+def test_read_only_property_is_rejected() -> None:
+    """JSBSim silently ignores writes to read-only properties such as vt-fps."""
+    text = HEAD + VSET.replace("{prop}", "velocities/vt-fps").replace("0.7", "12")
+    probs = problems(text)
+    assert len(probs) == 1
+    assert has(probs, line_of(text, "vt-fps"), "vehicles[0].set.velocities/vt-fps",
+               "JSBSim property 'velocities/vt-fps' is read-only in model c172p")
+    text = HEAD + ONE + SCHED.replace("{prop}", "aero/alpha-deg")
+    assert has(problems(text), line_of(text, "alpha-deg"), "schedule[0].set.aero/alpha-deg",
+               "is read-only in model c172p")
 
 
 # --- count and formations --------------------------------------------------------

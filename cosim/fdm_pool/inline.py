@@ -8,7 +8,6 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 
-from cosim.errors import CosimError, JSBSimError
 from cosim.fdm_pool.base import Pool
 from cosim.fdm_pool.shard import Shard
 from cosim.fdm_pool.spec import VehicleSpec
@@ -33,13 +32,7 @@ class InlinePool(Pool):
 
     def _wait(self, timeout_s: float | None) -> None:
         t0 = time.perf_counter()
-        try:
-            self._shard.exchange(self.setpoints, self._nsub, self.states)
-        except CosimError:
-            raise
-        except Exception as e:
-            raise JSBSimError(f"vehicle {self._shard.current!r} at tick {self.tick}: "
-                              f"{type(e).__name__}: {e}") from e
+        self._shard.exchange(self.setpoints, self._nsub, self.states)  # VehicleError on failure
         self._busy = time.perf_counter() - t0
 
     def _close(self) -> None:

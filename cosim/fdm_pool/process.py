@@ -14,14 +14,24 @@ checks periodically that the peer is alive: a child killed by the OS
 becomes ``WorkerDied`` within a fraction of a second; a child whose parent
 died exits by itself. An exception inside a child comes back as
 ``WorkerError`` carrying the vehicle, the tick and the remote traceback.
+
+Children never act on SIGINT or SIGTERM: a signal sent to the whole process
+group (Ctrl-C in a terminal, ``timeout``, systemd) reaches the driver, which
+stops the run cleanly and then stops its children. Both signals are blocked
+while a child is started (the mask survives spawn's exec) and the child
+ignores them before unblocking them, so not even its start-up can be hit.
+Children log like the driver: its levels for ``cosim`` and ``cosim.jsbsim``
+and the format of its stream handler are passed to them.
 """
 
 from __future__ import annotations
 
+import atexit
 import logging
 import multiprocessing as mp
 import os
 import signal
+import sys
 import time
 import traceback
 from collections.abc import Sequence
@@ -30,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from cosim.errors import CosimError, JSBSimError, WorkerDied, WorkerError, WorkerTimeout
+from cosim.errors import WorkerDied, WorkerError, WorkerTimeout
 from cosim.fdm_pool.base import Pool
 from cosim.fdm_pool.shard import Shard
 from cosim.fdm_pool.spec import N_STATE, VehicleSpec
@@ -44,6 +54,7 @@ _CMD_STEP, _CMD_STOP = 1, 2
 _OK, _ERR = 0, 1
 _SPINS = 3000  # sched_yield spins (about 1-2 ms) before falling back to sleeping
 _LIVENESS_EVERY = 256
+_STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}  # the driver's to act on, never a child's
 
 
 def default_workers() -> int:
@@ -74,15 +85,46 @@ class _Shared:
         self.busy_s = np.frombuffer(raw["busy"], dtype=np.float64).reshape(w, _CTRL_W)
 
 
+def _log_config() -> dict[str, Any]:
+    """How the driver logs, for its children: the effective levels of the
+    ``cosim`` and ``cosim.jsbsim`` loggers and the format of the root
+    logger's first stream handler (None: the driver configured none)."""
+    fmt = datefmt = None
+    for h in logging.getLogger().handlers:
+        if isinstance(h, logging.StreamHandler) and h.formatter is not None:
+            fmt, datefmt = h.formatter._fmt, h.formatter.datefmt
+            break
+    levels = {name: logging.getLogger(name).getEffectiveLevel()
+              for name in ("cosim", "cosim.jsbsim")}
+    return {"levels": levels, "format": fmt, "datefmt": datefmt}
+
+
+def _setup_worker_logging(cfg: dict[str, Any]) -> None:
+    for name, level in cfg["levels"].items():
+        logging.getLogger(name).setLevel(level)
+    if cfg["format"] is not None:
+        h = logging.StreamHandler(sys.stderr)
+        h.setFormatter(logging.Formatter(cfg["format"], cfg["datefmt"]))
+        logging.getLogger().handlers[:] = [h]
+
+
 def _worker_main(w: int, specs: list[VehicleSpec], start: int, stop: int, dt_s: float,
                  channels: tuple[str, ...], raw: dict[str, Any], n: int, n_workers: int,
-                 err: Connection, parent_pid: int) -> None:
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the driver decides when to stop
+                 err: Connection, parent_pid: int, log_cfg: dict[str, Any]) -> None:
+    # the driver decides when to stop: ignore the stop signals, then unblock
+    # them (the driver blocked them around our start, see ProcessPool)
+    for sig in _STOP_SIGNALS:
+        signal.signal(sig, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
+    _setup_worker_logging(log_cfg)
     sh = _Shared(raw, n, len(channels), n_workers)
     ctrl = sh.ctrl[w]
     shard = Shard()
     try:
+        t0 = time.perf_counter()
         Shard.build(specs, dt_s, channels, into=shard)
+        log.debug("worker %d (pid %d): %d vehicles built and trimmed in %.2f s", w,
+                  os.getpid(), len(specs), time.perf_counter() - t0)
         shard.write_states(sh.states[start:stop])
         ctrl[_DONE] = 0  # ready
         last = 0
@@ -109,10 +151,12 @@ def _worker_main(w: int, specs: list[VehicleSpec], start: int, stop: int, dt_s: 
             busy[0] = time.perf_counter() - t0
             ctrl[_DONE] = last
     except BaseException:
+        # status first: the driver then reads the pipe, so a traceback longer
+        # than the pipe's buffer cannot block this send
+        ctrl[_STATUS] = _ERR
         try:
             err.send((shard.current, traceback.format_exc()))
         finally:
-            ctrl[_STATUS] = _ERR
             ctrl[_DONE] = -2
 
 
@@ -148,6 +192,12 @@ class ProcessPool(Pool):
         self._errs: dict[int, Connection] = {}
         self._own: Shard | None = None
         first_child = 1 if self._driver_steps else 0
+        log_cfg = _log_config()
+        # children ignore SIGTERM, so multiprocessing's own exit handler (terminate,
+        # then join every daemonic child) would wait forever for a pool left open
+        # or half closed: close it first (atexit runs the last registered first;
+        # multiprocessing registered its handler when the shared arrays were made)
+        atexit.register(self.close)
         try:
             for i in range(first_child, w):
                 a, b = self.bounds[i]
@@ -155,11 +205,17 @@ class ProcessPool(Pool):
                 p = ctx.Process(
                     target=_worker_main, name=f"cosim-worker-{i}", daemon=True,
                     args=(i, self.specs[a:b], a, b, self.dt_s, self.channels, self._raw,
-                          self.n, w, s, os.getpid()))
-                p.start()
+                          self.n, w, s, os.getpid(), log_cfg))
+                # blocked until the child ignores them; in the driver, a stop
+                # signal arriving meanwhile is handled right after
+                old_mask = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
+                try:
+                    p.start()
+                    self._procs[i] = p
+                    self._errs[i] = r
+                finally:
+                    signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
                 s.close()
-                self._procs[i] = p
-                self._errs[i] = r
             if self._driver_steps:
                 a, b = self.bounds[0]
                 self._own = Shard.build(self.specs[a:b], self.dt_s, self.channels)
@@ -204,14 +260,8 @@ class ProcessPool(Pool):
         if self._own is not None:
             a, b = self.bounds[0]
             t0 = time.perf_counter()
-            try:
-                self._own.exchange(self.setpoints[a:b] if self.channels else None,
-                                   self._nsub, self.states[a:b])
-            except CosimError:
-                raise
-            except Exception as e:
-                raise JSBSimError(f"vehicle {self._own.current!r} (worker 0, driver) at tick "
-                                  f"{self.tick}: {type(e).__name__}: {e}") from e
+            self._own.exchange(self.setpoints[a:b] if self.channels else None,  # VehicleError
+                               self._nsub, self.states[a:b])
             self._own_busy = time.perf_counter() - t0
         self._await(self._seq, timeout_s, what=f"finish tick {self.tick + self._nsub}")
 
@@ -254,13 +304,12 @@ class ProcessPool(Pool):
             ctrl[i, _CMD] = _CMD_STOP
             ctrl[i, _SEQ] = self._seq
         deadline = time.monotonic() + 2.0
-        for p in self._procs.values():
+        for i, p in self._procs.items():
+            if ctrl[i, _DONE] == -1:  # still building: it would not see the stop yet
+                p.kill()
             p.join(max(0.0, deadline - time.monotonic()))
         for p in self._procs.values():
-            if p.is_alive():
-                p.terminate()
-                p.join(1.0)
-            if p.is_alive():
+            if p.is_alive():  # stuck or stopped (children ignore SIGTERM)
                 p.kill()
                 p.join(1.0)
         for c in self._errs.values():
@@ -268,3 +317,4 @@ class ProcessPool(Pool):
         self._procs.clear()
         self._errs.clear()
         self._own = None
+        atexit.unregister(self.close)  # last: a close cut short is finished at exit

@@ -10,8 +10,11 @@ Unit scaling and the finiteness check run once per shard in numpy. Frozen
 vehicles (ground impact, divergence) are no longer stepped and their rows
 keep the state at which they froze. The per-substep ground-contact check is
 skipped for a vehicle that cannot reach the ground within the exchange
-(height above ground greater than ``(|vd| + 50 m/s) * exchange + 2 m``),
-which leaves the results unchanged and saves most of its cost.
+(height of its CG above ground greater than ``(|vd| + 50 m/s) * exchange +
+2 m + contact radius``, the contact radius being the largest distance from
+the CG to any of the model's gear or structural contact points, so that any
+attitude is covered), which leaves the results unchanged and saves most of
+its cost.
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from cosim.errors import CosimError, JSBSimError, VehicleError
 from cosim.fdm_pool.spec import (
     N_STATE,
     STATE_FIELDS,
@@ -43,7 +47,9 @@ class Shard:
         self.dt_s = 0.0
         self._active: list[int] = []  # indices still stepped
         self._check: list[bool] = []  # per active vehicle: check ground every substep
+        self._radius_m = np.zeros(0)  # per vehicle: contact radius (m)
         self._nsub = 1
+        self.tick = 0  # physics ticks completed (the same in every shard of a pool)
 
     @classmethod
     def build(cls, specs: Sequence[VehicleSpec], dt_s: float, channels: Sequence[str],
@@ -56,6 +62,7 @@ class Shard:
             shard.current = spec.id
             shard.vehicles.append(Vehicle(spec, dt_s, channels))
         shard.current = None
+        shard._radius_m = np.array([v.contact_radius_m for v in shard.vehicles])
         shard._active = list(range(len(shard.vehicles)))
         shard._check = [True] * len(shard._active)
         return shard
@@ -80,14 +87,33 @@ class Shard:
         out[idx, STATUS_COL] = status
         if (status != VehicleStatus.ACTIVE).any():
             keep = status == VehicleStatus.ACTIVE
-            self._active = idx[keep].tolist()
+            idx = idx[keep]
+            self._active = idx.tolist()
             block = block[keep]
-        reach = (np.abs(block[:, _VD]) + _MARGIN_MPS) * (self._nsub * self.dt_s) + _MARGIN_M
+        reach = ((np.abs(block[:, _VD]) + _MARGIN_MPS) * (self._nsub * self.dt_s) + _MARGIN_M
+                 + self._radius_m[idx])
         self._check = (block[:, _AGL] <= reach).tolist()
 
     def exchange(self, setpoints: np.ndarray | None, nsub: int, out: np.ndarray) -> None:
         """Apply setpoints (NaN = leave as is), run ``nsub`` substeps per
-        vehicle, write the new states into ``out``."""
+        vehicle, write the new states into ``out``.
+
+        Any failure (a JSBSim call returning False or raising, or anything
+        else) becomes one ``VehicleError`` naming the vehicle and the tick the
+        exchange started from; ``current`` keeps naming the vehicle.
+        """
+        tick = self.tick
+        try:
+            self._exchange(setpoints, nsub, out)
+        except JSBSimError as e:
+            raise VehicleError(self.current, tick, str(e)) from e
+        except CosimError:
+            raise
+        except Exception as e:
+            raise VehicleError(self.current, tick, f"{type(e).__name__}: {e}") from e
+        self.tick += nsub
+
+    def _exchange(self, setpoints: np.ndarray | None, nsub: int, out: np.ndarray) -> None:
         vs = self.vehicles
         if setpoints is not None and self.n_channels:
             written = np.flatnonzero(~np.isnan(setpoints).all(axis=1))

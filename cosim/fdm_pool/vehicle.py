@@ -7,9 +7,12 @@ units and the NaN check are done per shard in numpy (``shard.py``).
 
 from __future__ import annotations
 
+import math
+import warnings
 from collections.abc import Sequence
 
 import jsbsim
+import numpy as np
 
 from cosim.errors import JSBSimError
 from cosim.fdm_pool.spec import STATE_FIELDS, VehicleSpec, VehicleStatus
@@ -17,13 +20,35 @@ from cosim.geo import FT_TO_M
 from cosim.jsb import ModelInfo, has_property, new_fdm
 
 _MPS_TO_FPS = 1.0 / FT_TO_M
+_IN_TO_M = FT_TO_M / 12.0
 _get = jsbsim.FGPropertyNode.get_double_value
+
+
+def contact_radius_m(fdm: jsbsim.FGFDMExec) -> float:
+    """The largest distance (m) from the CG to any ground-contact point of the
+    model (landing gear and structural contacts such as wingtips and tail).
+
+    Whatever the attitude, no contact point is lower than this below the CG,
+    so a vehicle whose CG is higher than this above the ground is not
+    touching it. Read after ``run_ic()`` (the CG is computed there).
+    """
+    gr = fdm.get_ground_reactions()
+    cg = (fdm["inertia/cg-x-in"], fdm["inertia/cg-y-in"], fdm["inertia/cg-z-in"])
+    r_in = 0.0
+    # every contact unit (gear/unit[i]/... properties exist only for BOGEY units)
+    for i in range(gr.get_num_gear_units()):
+        with warnings.catch_warnings():  # JSBSim returns a numpy.matrix
+            warnings.simplefilter("ignore", PendingDeprecationWarning)
+            loc = np.asarray(gr.get_gear_unit(i).get_location(), dtype=np.float64).reshape(3)
+        r_in = max(r_in, math.dist(loc.tolist(), cg))  # structural frame, inches
+    return r_in * _IN_TO_M
 
 
 class Vehicle:
     """A built, trimmed FDM with cached property nodes."""
 
-    __slots__ = ("spec", "fdm", "_read", "_channels", "_agl", "_gear", "status", "airborne")
+    __slots__ = ("spec", "fdm", "_read", "_channels", "_agl", "_gear", "status", "airborne",
+                 "contact_radius_m")
 
     def __init__(self, spec: VehicleSpec, dt_s: float, channels: Sequence[str]) -> None:
         self.spec = spec
@@ -31,6 +56,8 @@ class Vehicle:
         fdm = new_fdm(model, dt_s)
         self.fdm = fdm
         self._set_ic()
+        #: ground contact is possible only with the CG this close to the ground
+        self.contact_radius_m = contact_radius_m(fdm)
         pm = fdm.get_property_manager()
         self._read = []
         zero = None
@@ -42,7 +69,8 @@ class Vehicle:
                         zero = pm.get_node("cosim/absent", True)
                     node = zero
                 if node is None:
-                    raise JSBSimError(f"vehicle {spec.id!r}: model {spec.model!r} lacks {f.prop}")
+                    raise JSBSimError(f"vehicle {spec.id!r}: model {spec.model!r} lacks {f.prop}",
+                                      spec.id)
                 self._read.append(node)
         self._channels = []
         for name in channels:
@@ -65,7 +93,7 @@ class Vehicle:
         fdm["ic/psi-true-deg"] = s.heading_deg
         fdm["ic/vt-fps"] = s.airspeed_mps * _MPS_TO_FPS
         if not fdm.run_ic():
-            raise JSBSimError(f"vehicle {s.id!r}: JSBSim run_ic() failed")
+            raise JSBSimError(f"vehicle {s.id!r}: JSBSim run_ic() failed", s.id)
         fdm["propulsion/set-running"] = -1
         if s.trim:
             try:
@@ -75,7 +103,7 @@ class Vehicle:
                     f"vehicle {s.id!r} ({s.model}): JSBSim could not trim at "
                     f"{s.airspeed_mps:.1f} m/s TAS, {s.alt_msl_m:.1f} m MSL, heading "
                     f"{s.heading_deg:.1f} deg: {e}. Try another airspeed/altitude or "
-                    f"set trim: false") from None
+                    f"set trim: false", s.id) from None
         for name, value in s.initial_props:
             fdm[name] = value
 
@@ -96,17 +124,22 @@ class Vehicle:
         if not check_ground:
             for _ in range(n):
                 if not run():
-                    raise JSBSimError(f"vehicle {self.spec.id!r}: JSBSim run() returned False")
+                    self._run_failed()
             return
         for _ in range(n):
             if not run():
-                raise JSBSimError(f"vehicle {self.spec.id!r}: JSBSim run() returned False")
+                self._run_failed()
             if self.airborne:
                 if self._touching():
                     self.status = VehicleStatus.GROUND_IMPACT
                     return
             elif not self._touching():
                 self.airborne = True
+
+    def _run_failed(self) -> None:
+        # the shard adds the vehicle and the tick (VehicleError)
+        raise JSBSimError("JSBSim run() returned False (the simulation was told to terminate: "
+                          "simulation/terminate is set)", self.spec.id)
 
     def raw_state(self) -> list[float]:
         """The state properties in JSBSim's units (``STATE_FIELDS`` order, no status)."""

@@ -5,12 +5,14 @@ from __future__ import annotations
 import json
 import math
 import os
+import shutil
 import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from cosim.fdm_pool.spec import STATE_INDEX
@@ -44,10 +46,17 @@ def _schema() -> pa.Schema:
 
 
 class StateLog:
-    """Buffers logged rows and writes them as complete parquet parts.
+    """Writes logged ticks as complete parquet parts, journalling each tick first.
 
-    A part is written when ``flush_rows`` rows are buffered or ``flush_s``
-    seconds of wall time have passed since the last part, and on ``close``.
+    Every logged tick becomes one record batch, appended (unbuffered) to an
+    Arrow IPC stream ``_journal-NNNNNN.arrows`` beside the parts: a driver
+    killed between parts loses at most the tick being written. A part
+    ``part-NNNNNN.parquet`` is written (to a hidden temporary file, renamed
+    into place) when ``flush_rows`` rows are buffered or ``flush_s`` seconds
+    of wall time have passed since the last part, and on ``close``; its
+    journal is deleted once it is in place. The leading ``_`` keeps journals
+    out of the dataset that pyarrow and pandas read from the folder;
+    ``read_states`` reads them too.
     """
 
     def __init__(self, folder: Path, ids: list[str], frame: LocalFrame, physics_hz: float,
@@ -61,34 +70,24 @@ class StateLog:
         self.flush_rows = flush_rows
         self.flush_s = flush_s
         self.schema = _schema()
-        self._ticks: list[int] = []
-        self._rows: list[np.ndarray] = []
-        self._labels: list[str] = []
+        self._batches: list[pa.RecordBatch] = []
+        self._vehicle = pa.DictionaryArray.from_arrays(
+            pa.array(np.arange(self.n, dtype=np.int32)), self.ids)
+        self._journal: Any = None  # pa.ipc.RecordBatchStreamWriter
+        self._journal_file: Any = None
         self._parts = 0
         self._last_flush = time.monotonic()
-        self.rows_written = 0
+        self.rows_written = 0  # rows in parts
+        self.rows_logged = 0  # rows appended (in parts or journalled)
+        self.last_tick: int | None = None
         self._cols = [STATE_INDEX[c] for c in _FROM_STATE]
         self._closed = False
 
-    def append(self, tick: int, states: np.ndarray, commands: list[str] | None = None) -> None:
-        """Buffer one logged tick (copies ``states``); ``commands``: each
-        vehicle's active command, for the ``command`` column."""
-        self._ticks.append(tick)
-        self._rows.append(states[:, self._cols + [STATE_INDEX["status"]]].copy())
-        self._labels.extend(commands if commands is not None else [""] * self.n)
-        buffered = len(self._rows) * self.n
-        if buffered >= self.flush_rows or time.monotonic() - self._last_flush >= self.flush_s:
-            self.flush()
-
-    def flush(self) -> None:
-        if not self._rows:
-            return
-        block = np.concatenate(self._rows)  # (ticks*n, k)
-        ticks = np.repeat(np.asarray(self._ticks, dtype=np.int64), self.n)
-        vehicle = pa.DictionaryArray.from_arrays(
-            pa.array(np.tile(np.arange(self.n, dtype=np.int32), len(self._ticks))), self.ids)
-        cols: dict[str, Any] = {"tick": ticks, "time_s": ticks / self.physics_hz,
-                                "vehicle": vehicle}
+    def _batch(self, tick: int, states: np.ndarray, commands: list[str] | None) -> pa.RecordBatch:
+        block = states[:, self._cols]  # a copy (fancy indexing)
+        cols: dict[str, Any] = {"tick": np.full(self.n, tick, dtype=np.int64)}
+        cols["time_s"] = cols["tick"] / self.physics_hz
+        cols["vehicle"] = self._vehicle
         for j, name in enumerate(_FROM_STATE):
             cols[name] = block[:, j]
         north, east, down = self.frame.geodetic_to_ned(cols["lat_deg"], cols["lon_deg"],
@@ -96,35 +95,134 @@ class StateLog:
         cols["north_m"], cols["east_m"], cols["down_m"] = north, east, down
         for c in _FLAGS[:-1]:
             cols[c] = cols[c].astype(np.int8)
-        cols["status"] = block[:, -1].astype(np.int8)
-        cols["command"] = pa.array(self._labels, pa.string()).dictionary_encode()
-        table = pa.table([cols[c] for c in STATE_COLUMNS], schema=self.schema)
+        cols["status"] = states[:, STATE_INDEX["status"]].astype(np.int8)
+        labels = commands if commands is not None else [""] * self.n
+        cols["command"] = pa.array(labels, pa.string()).dictionary_encode()
+        return pa.RecordBatch.from_arrays([cols[c] for c in STATE_COLUMNS], schema=self.schema)
+
+    def append(self, tick: int, states: np.ndarray, commands: list[str] | None = None) -> None:
+        """Log one tick (journalled at once); ``commands``: each vehicle's
+        active command, for the ``command`` column."""
+        batch = self._batch(tick, states, commands)
+        if self._journal is None:
+            self._journal_file = open(self._journal_path(self._parts), "wb",  # noqa: SIM115
+                                      buffering=0)
+            self._journal = pa.ipc.new_stream(self._journal_file, self.schema)
+        self._journal.write_batch(batch)
+        self._batches.append(batch)
+        self.rows_logged += self.n
+        self.last_tick = tick
+        buffered = len(self._batches) * self.n
+        if buffered >= self.flush_rows or time.monotonic() - self._last_flush >= self.flush_s:
+            self.flush()
+
+    def _journal_path(self, part: int) -> Path:
+        return self.dir / f"_journal-{part:06d}.arrows"
+
+    def _close_journal(self) -> None:
+        try:
+            if self._journal is not None:
+                self._journal.close()
+        finally:
+            self._journal = None
+            if self._journal_file is not None:
+                self._journal_file.close()
+                self._journal_file = None
+
+    def flush(self) -> None:
+        """Write the buffered ticks as the next part, then delete their journal.
+        On failure (``OSError`` naming the file) nothing is lost: the ticks stay
+        buffered and journalled, and the next flush tries again."""
+        if not self._batches:
+            return
+        table = pa.Table.from_batches(self._batches, self.schema)
+        table = table.unify_dictionaries().combine_chunks()
         final = self.dir / f"part-{self._parts:06d}.parquet"
-        tmp = final.with_suffix(".parquet.tmp")
-        pq.write_table(table, tmp, compression="zstd")
-        os.replace(tmp, final)
+        tmp = self.dir / f".{final.name}.tmp"
+        try:
+            pq.write_table(table, tmp, compression="zstd")
+            os.replace(tmp, final)
+        except OSError as e:
+            tmp.unlink(missing_ok=True)
+            raise OSError(e.errno, f"cannot write {final}: {e.strerror or e}") from e
+        self._close_journal()
+        self._journal_path(self._parts).unlink(missing_ok=True)
         self._parts += 1
         self.rows_written += table.num_rows
-        self._ticks, self._rows, self._labels = [], [], []
+        self._batches = []
         self._last_flush = time.monotonic()
 
     def close(self) -> None:
-        if not self._closed:
-            self._closed = True
+        """Write the last part. If that fails the journal stays on disk (and
+        ``read_states`` reads it); the error is raised."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
             self.flush()
+        finally:
+            self._close_journal()
+
+
+def _read_journal(path: Path) -> list[pa.RecordBatch]:
+    """Every complete record batch of a journal (a truncated last one is ignored)."""
+    batches: list[pa.RecordBatch] = []
+    try:
+        with pa.OSFile(str(path)) as f:
+            reader = pa.ipc.open_stream(f)
+            while True:
+                batches.append(reader.read_next_batch())
+    except StopIteration:
+        pass
+    except (ValueError, OSError):  # pa.ArrowInvalid: cut short by a crash
+        pass
+    return batches
 
 
 def read_states(folder: str | Path) -> pa.Table:
-    """Read a run's ``states.parquet`` (a file or a parts folder) as one table."""
+    """Read a run's ``states.parquet`` (a file or a parts folder) as one table,
+    in tick order: every part, then the ticks journalled but not yet in a part
+    (a run that crashed or could not write its last part)."""
     p = Path(folder)
     if p.is_dir() and (p / "states.parquet").exists():
         p = p / "states.parquet"
-    if p.is_dir():
-        parts = sorted(p.glob("part-*.parquet"))
-        if not parts:
-            return _schema().empty_table()
-        return pa.concat_tables([pq.read_table(x) for x in parts])
-    return pq.read_table(p)
+    if not p.is_dir():
+        return pq.read_table(p)
+    schema = _schema()
+    parts = sorted(p.glob("part-*.parquet"))
+    tables = [pq.read_table(x, schema=schema) for x in parts]
+    done = {x.name[len("part-"):-len(".parquet")] for x in parts}
+    for j in sorted(p.glob("_journal-*.arrows")):
+        if j.name[len("_journal-"):-len(".arrows")] in done:
+            continue  # its part is in place (the crash came before the journal went)
+        batches = _read_journal(j)
+        if batches:
+            tables.append(pa.Table.from_batches(batches, schema))
+    if not tables:
+        return schema.empty_table()
+    table = pa.concat_tables(tables)
+    ticks = table["tick"].to_numpy()
+    if ticks.size and (np.diff(ticks) < 0).any():
+        table = table.take(pc.sort_indices(table, sort_keys=[("tick", "ascending")]))
+    return table
+
+
+#: what a run writes into its output folder (``clear_outputs`` removes them)
+RUN_OUTPUTS = ("states.parquet", "events.jsonl", "summary.json", "scenario.resolved.yaml",
+               "track.png", "faulthandler.log")
+
+
+def clear_outputs(folder: str | Path) -> None:
+    """Remove a previous run's outputs from ``folder`` so that a new run starts
+    from empty ones (its other files are left alone)."""
+    out = Path(folder)
+    for name in RUN_OUTPUTS:
+        p = out / name
+        if p.is_dir() and not p.is_symlink():
+            shutil.rmtree(p)
+        else:
+            p.unlink(missing_ok=True)
+        Path(str(p) + ".tmp").unlink(missing_ok=True)
 
 
 def _jsonable(v: Any) -> Any:

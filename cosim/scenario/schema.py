@@ -29,7 +29,7 @@ from cosim.guidance import (
     min_turn_radius_m,
     parse_command,
 )
-from cosim.jsb import find_model, has_property, new_fdm
+from cosim.jsb import find_model, has_property, is_writable, new_fdm
 from cosim.scenario.formation import FORMATIONS, formation_offsets
 from cosim.scenario.yaml_lines import YamlProblem, format_path, load_with_lines
 
@@ -528,6 +528,12 @@ def _select(ctx: _Ctx, sel: Any, path: P, ids: list[str]) -> list[int]:
     return sorted(chosen)
 
 
+def _schedule_tick(at_s: float, rates: Rates) -> int:
+    """The control tick at which an item at ``at_s`` applies (first at or after it)."""
+    k = rates.control_every
+    return math.ceil(round(at_s * rates.physics_hz, 6) / k) * k
+
+
 def _schedule(ctx: _Ctx, d: Any, vehicles: list[tuple[VehicleSpec, P]], rates: Rates,
               duration: float) -> list[ScheduleItem]:
     if not isinstance(d, list):
@@ -536,13 +542,15 @@ def _schedule(ctx: _Ctx, d: Any, vehicles: list[tuple[VehicleSpec, P]], rates: R
     ids = [v.id for v, _ in vehicles]
     out = []
     k = rates.control_every
+    total = _schedule_tick(duration, rates)  # Scenario.total_ticks
     for i, sd in enumerate(d):
         sp: P = ("schedule", i)
         r = _Reader(ctx, sd, sp, ("at_s", "vehicles", "set", "command"))
         at = r.num("at_s", lo=0)
-        if at is not None and at > duration:
-            ctx.err(sp + ("at_s",), f"at_s {at:g} is after the end of the run (duration_s "
-                                    f"{duration:g})")
+        if at is not None and _schedule_tick(at, rates) >= total:
+            ctx.err(sp + ("at_s",), f"at_s {at:g} is at or after the end of the run (duration_s "
+                                    f"{duration:g}), so it would never run; the last control "
+                                    f"exchange starts at {(total - k) / rates.physics_hz:g} s")
         sel = _select(ctx, r.d.get("vehicles", "all"), sp + ("vehicles",), ids)
         if not r.has("set") and not r.has("command"):
             ctx.err(sp, "missing 'set' (JSBSim property: value) or 'command' (heading_deg, "
@@ -553,8 +561,7 @@ def _schedule(ctx: _Ctx, d: Any, vehicles: list[tuple[VehicleSpec, P]], rates: R
             "command") else None
         if at is None or (r.has("command") and cmd is None):
             continue
-        tick = math.ceil(round(at * rates.physics_hz, 6) / k) * k
-        out.append(ScheduleItem(at, tick, tuple(sel), tuple(sets), i, cmd))
+        out.append(ScheduleItem(at, _schedule_tick(at, rates), tuple(sel), tuple(sets), i, cmd))
     out.sort(key=lambda s: s.tick)  # stable: file order within a tick
     _check_commands(ctx, out, [v for v, _ in vehicles])
     return out
@@ -607,17 +614,25 @@ def _check_commands(ctx: _Ctx, schedule: list[ScheduleItem], specs: list[Vehicle
 
 def _check_properties(ctx: _Ctx, vehicles: list[tuple[VehicleSpec, P]],
                       schedule: list[ScheduleItem]) -> None:
-    """Every property written must exist in every model it is written to."""
+    """Every property written must exist, and be writable, in every model it is
+    written to (JSBSim silently creates misspelled properties and silently
+    ignores writes to read-only ones)."""
     fdms: dict[tuple[str, str], Any] = {}
 
-    def exists(spec: VehicleSpec, name: str) -> bool:
+    def fdm_of(spec: VehicleSpec) -> Any:
         key = (spec.model, spec.aircraft_dir)
         if key not in fdms:
             from cosim.jsb import ModelInfo
 
             fdms[key] = new_fdm(ModelInfo(spec.model, spec.aircraft_dir, spec.model_source,
                                           profile=spec.profile), 0.01)
-        return has_property(fdms[key], name)
+        return fdms[key]
+
+    def exists(spec: VehicleSpec, name: str) -> bool:
+        return has_property(fdm_of(spec), name)
+
+    def writable(spec: VehicleSpec, name: str) -> bool:
+        return is_writable(fdm_of(spec), name)
 
     def check(where: P, specs: list[VehicleSpec], props: list[tuple[str, float]],
               report: Callable[[P, str], None]) -> None:
@@ -627,6 +642,13 @@ def _check_properties(ctx: _Ctx, vehicles: list[tuple[VehicleSpec, P]],
                 report(where + (name,), f"JSBSim property {name!r} does not exist in model "
                                         f"{', '.join(missing)} (check the spelling; "
                                         f"`cosim models --properties MODEL` lists them)")
+                continue
+            read_only = sorted({s.model for s in specs if not writable(s, name)})
+            if read_only:
+                report(where + (name,), f"JSBSim property {name!r} is read-only in model "
+                                        f"{', '.join(read_only)}: JSBSim would ignore the "
+                                        f"value (`cosim models --properties MODEL` marks "
+                                        f"writable ones RW)")
 
     done: set[P] = set()
     for spec, vp in vehicles:

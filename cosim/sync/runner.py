@@ -5,12 +5,18 @@ advances every vehicle by the same ``control_every`` ticks, so all vehicles
 are at the same simulation time whenever anything (schedule, logging,
 later controllers and renderers) looks at them. The loop stops cleanly on
 completion, on ``stop()`` (Ctrl-C/SIGTERM in the CLI) and on errors, and
-always closes the logs and writes ``summary.json`` first.
+always closes the logs and writes ``summary.json`` first. A run starts from
+empty outputs (a previous run's files in its folder are removed), logs the
+tick it ends on, and reports schedule items that a shortened duration
+leaves out as ``schedule_skipped`` events.
 """
 
 from __future__ import annotations
 
+import faulthandler
 import logging
+import os
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -21,11 +27,11 @@ from typing import Any
 import numpy as np
 import yaml
 
-from cosim.errors import WorkerDied, WorkerError
+from cosim.errors import VehicleError, WorkerDied, WorkerError
 from cosim.fdm_pool import STATE_INDEX, VehicleStatus, make_pool
 from cosim.fdm_pool.base import Pool
 from cosim.guidance import FixedWingGuidance
-from cosim.logs import EventLog, StateLog, write_json_atomic
+from cosim.logs import EventLog, StateLog, clear_outputs, write_json_atomic
 from cosim.scenario import Scenario
 from cosim.sync.pacing import Pacer
 
@@ -71,6 +77,7 @@ class Run:
         self.step_timeout_s = step_timeout_s  # a worker silent this long is a failure
         self._stop = threading.Event()
         self._stop_reason = "interrupted"
+        self._building = False
         self.pool: Pool | None = None
 
     def stop(self, reason: str = "interrupted") -> None:
@@ -78,9 +85,19 @@ class Run:
         self._stop_reason = reason
         self._stop.set()
 
+    @property
+    def building(self) -> bool:
+        """True while the vehicles are being built and trimmed. A stop request
+        then only takes effect once the build is over; a caller that wants it
+        at once (the CLI's signal handler) raises ``KeyboardInterrupt`` in the
+        main thread instead: the pool cleans up, and the run ends with the
+        reason given to ``stop`` and writes its summary as usual."""
+        return self._building
+
     def run(self) -> RunResult:
         scn, out = self.scn, self.out
         out.mkdir(parents=True, exist_ok=True)
+        clear_outputs(out)  # a new run never mixes with an old one's files
         (out / "scenario.resolved.yaml").write_text(
             yaml.safe_dump(scn.resolved_dict(), sort_keys=False))
         ids = [v.id for v in scn.vehicles]
@@ -90,6 +107,11 @@ class Run:
         k, every_log, total = scn.rates.control_every, scn.rates.log_every, scn.total_ticks
         channels = scn.channels
         chan_index = {c: i for i, c in enumerate(channels)}
+        # items a shortened duration (with_duration, --duration-s) leaves out
+        skipped = [item for item in scn.schedule if item.tick >= total]
+        for item in skipped:
+            log.warning("schedule[%d] at %g s is at or after the end of the run (%g s): "
+                        "skipped", item.index, item.at_s, total / hz)
         tick = 0
         reason = "error"
         error: BaseException | None = None
@@ -98,9 +120,18 @@ class Run:
         loop0: float | None = None
         workers_used = 1
         events.emit("run_start", 0, scenario=scn.name, vehicles=len(ids), backend=self.backend)
+        # a hard crash of this process (segfault, abort) leaves its Python traceback here
+        fault_path = out / "faulthandler.log"
+        fault_file = open(fault_path, "w")  # noqa: SIM115 - closed in the finally below
+        fault_was_enabled = faulthandler.is_enabled()
+        faulthandler.enable(fault_file, all_threads=True)
         try:
             log.info("building and trimming %d vehicles (%s backend)", len(ids), self.backend)
+            self._building = True
+            if self._stop.is_set():
+                raise KeyboardInterrupt
             pool = make_pool(scn.vehicles, scn.rates.dt_s, channels, self.backend, self.workers)
+            self._building = False
             self.pool = pool
             workers_used = pool.workers
             startup_s = time.perf_counter() - wall0
@@ -118,7 +149,7 @@ class Run:
                 flags = states[:, _FLAG_COLS].copy()
                 self._status_events(events, 0, states, np.zeros_like(status), ids)
                 states_log.append(0, states, labels)
-                pending = list(scn.schedule)
+                pending = [item for item in scn.schedule if item.tick < total]
                 loop0 = time.perf_counter()
                 if self.pacer:
                     self.pacer.start()
@@ -157,6 +188,8 @@ class Run:
                         self.progress(tick, total)
                 else:
                     reason = "completed"
+                if states_log.last_tick != tick:  # the tick the run ends on, once
+                    states_log.append(tick, states, labels)
                 loop_s = time.perf_counter() - loop0
         except WorkerDied as e:
             reason, error = "worker_failure", e
@@ -165,23 +198,43 @@ class Run:
         except WorkerError as e:
             reason, error = "error", e
             events.emit("error", tick, vehicle=e.vehicle, worker=e.worker, message=str(e))
+        except VehicleError as e:
+            reason, error = "error", e
+            events.emit("error", tick, vehicle=e.vehicle, message=str(e))
         except Exception as e:
             reason, error = "error", e
-            events.emit("error", tick, vehicle=None, message=f"{type(e).__name__}: {e}")
-        except KeyboardInterrupt as e:
-            reason, error = "interrupted", e
+            events.emit("error", tick, vehicle=getattr(e, "vehicle", None),
+                        message=f"{type(e).__name__}: {e}")
+        except KeyboardInterrupt:  # a stop, not an error
+            reason = self._stop_reason if self._stop.is_set() else "interrupted"
+            if self.pool is None and self._building:
+                log.warning("stopped while building the vehicles (%s)", reason)
         finally:
+            self._building = False
             if loop0 is not None and loop_s == 0.0:
                 loop_s = time.perf_counter() - loop0
             try:
-                states_log.close()
-            finally:
+                try:
+                    states_log.close()
+                except Exception as e:  # the ticks stay journalled; read_states reads them
+                    log.error("could not write states.parquet: %s", e)
+                    if reason != "worker_failure":
+                        reason = "error"
+                    error = error if error is not None else e
+                    events.emit("error", tick, vehicle=None,
+                                message=f"writing states.parquet failed: {type(e).__name__}: {e}")
+                for item in skipped:
+                    events.emit("schedule_skipped", tick, vehicle=None, index=item.index,
+                                at_s=item.at_s, vehicles=len(item.vehicles),
+                                reason=f"at or after the end of the run ({total / hz:g} s)")
                 events.emit("stop", tick, reason=reason)
                 events.close()
                 summary = self._summary(reason, tick, startup_s, loop_s, workers_used,
-                                        events.counts, states_log.rows_written, error)
+                                        events.counts, states_log.rows_logged, error)
                 write_json_atomic(out / "summary.json", summary)
-        if scn.plot and states_log.rows_written:
+            finally:
+                self._end_fault_log(fault_file, fault_was_enabled)
+        if scn.plot and states_log.rows_logged:
             try:
                 from cosim.logs.plot import plot_run
 
@@ -189,6 +242,20 @@ class Run:
             except Exception as e:  # a plot must never lose a finished run
                 log.warning("could not write track.png: %s", e)
         return RunResult(out, reason, tick, summary, error)
+
+    @staticmethod
+    def _end_fault_log(f: Any, was_enabled: bool) -> None:
+        """Stop writing faulthandler.log (removed if empty); restore faulthandler
+        as it was (as pytest and ``python -X faulthandler`` have it: to stderr)."""
+        faulthandler.disable()
+        if was_enabled:
+            faulthandler.enable(sys.__stderr__ or sys.stderr, all_threads=True)
+        f.close()
+        try:
+            if os.path.getsize(f.name) == 0:
+                os.unlink(f.name)
+        except OSError:
+            pass
 
     def _status_events(self, events: EventLog, tick: int, states: np.ndarray,
                        old: np.ndarray, ids: list[str]) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -173,8 +174,10 @@ def test_killed_worker_becomes_workerdied_within_5_s(specs) -> None:
     assert not [c for c in _children(os.getpid()) if c in {p.pid for p in procs}]
 
 
-def test_workers_exit_when_the_driver_is_killed(tmp_path) -> None:
-    """No orphans: children notice their parent is gone and exit by themselves."""
+def _run_driver(tmp_path, ending: str, timeout: float) -> tuple[subprocess.CompletedProcess,
+                                                                  list[int]]:
+    """Run a script that opens a 3-worker pool, prints its children's pids and
+    then does ``ending``; returns the finished process and those pids."""
     script = tmp_path / "driver.py"
     script.write_text(textwrap.dedent("""
         import os, signal, sys
@@ -184,11 +187,15 @@ def test_workers_exit_when_the_driver_is_killed(tmp_path) -> None:
             pool = ProcessPool(bench_specs(4), 1 / 120, workers=3)
             pool.step(4)
             print(" ".join(str(p) for p in pool.pids.values()), flush=True)
-            os.kill(os.getpid(), signal.SIGKILL)
-    """))
+    """) + "    " + ending + "\n")
     proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
-                          timeout=60)
-    pids = [int(p) for p in proc.stdout.split()]
+                          timeout=timeout)
+    return proc, [int(p) for p in proc.stdout.split()]
+
+
+def test_workers_exit_when_the_driver_is_killed(tmp_path) -> None:
+    """No orphans: children notice their parent is gone and exit by themselves."""
+    _, pids = _run_driver(tmp_path, "os.kill(os.getpid(), signal.SIGKILL)", 60)
     assert len(pids) == 2
     deadline = time.monotonic() + 5.0
     alive = pids
@@ -251,3 +258,126 @@ def test_stopped_worker_becomes_workertimeout_not_a_hang(specs) -> None:
         assert time.monotonic() - t0 < 6.0
     assert not os.path.exists(f"/proc/{victim}") or \
         open(f"/proc/{victim}/stat").read().rsplit(")", 1)[1].split()[0] == "Z"
+
+
+@pytest.mark.parametrize("model, drop_m", [("MD11", 25.0), ("B747", 20.0)])
+def test_ground_impact_of_models_whose_gear_hangs_far_below_the_cg(specs, model: str,
+                                                                    drop_m: float) -> None:
+    """Airliner gear and wingtips lie metres from the CG: the ground check must
+    not be skipped while they can touch (the margin includes the contact radius)."""
+    import dataclasses
+
+    m = find_model(model)
+    vs = [dataclasses.replace(specs(1)[0], id=model, model=m.name, aircraft_dir=m.aircraft_dir,
+                              model_source=m.source, alt_msl_m=drop_m, airspeed_mps=0.0,
+                              trim=False)]
+    st = STATE_INDEX["status"]
+    with InlinePool(vs, 1 / 120) as pool:
+        assert pool._shard.vehicles[0].contact_radius_m > 20.0  # nose gear to CG
+        for _ in range(120):  # 4 s: the free fall takes about 2
+            pool.step(4)
+            if pool.states[0, st]:
+                break
+        assert pool.states[0, st] == VehicleStatus.GROUND_IMPACT
+
+
+def test_contact_radius_is_the_farthest_contact_point_from_the_cg(specs) -> None:
+    with InlinePool(specs(1), 1 / 120) as pool:
+        v = pool._shard.vehicles[0]
+    # c172p: the wingtip contacts, 214.8 in out and about 22 in above the CG
+    assert v.contact_radius_m == pytest.approx(5.5, abs=0.1)
+
+
+def test_a_failing_exchange_is_one_vehicleerror_naming_vehicle_and_tick(specs) -> None:
+    """Inline and in the driver's own shard alike; it pickles intact."""
+    import pickle
+
+    from cosim.errors import VehicleError
+
+    for make in (lambda v: InlinePool(v, 1 / 120, ("simulation/terminate",)),
+                 lambda v: ProcessPool(v, 1 / 120, ("simulation/terminate",), workers=2)):
+        with make(specs(4)) as pool:
+            pool.step(4)
+            pool.setpoints[1, 0] = 1.0
+            with pytest.raises(VehicleError) as ei:
+                pool.step(4)
+        e = ei.value
+        assert (e.vehicle, e.tick) == ("b0001", 4)
+        assert str(e) == ("vehicle 'b0001' at tick 4: JSBSim run() returned False (the "
+                          "simulation was told to terminate: simulation/terminate is set)")
+        back = pickle.loads(pickle.dumps(e))
+        assert (back.vehicle, back.tick, str(back)) == (e.vehicle, e.tick, str(e))
+
+
+def test_an_error_in_a_child_mid_run_is_a_workererror_naming_the_vehicle(specs) -> None:
+    with ProcessPool(specs(4), 1 / 120, ("simulation/terminate",), workers=2) as pool:
+        pool.step(4)
+        pool.setpoints[3, 0] = 1.0
+        with pytest.raises(WorkerError) as ei:
+            pool.step(4)
+    e = ei.value
+    assert (e.worker, e.vehicle, e.tick) == (1, "b0003", 4)
+    assert "VehicleError: vehicle 'b0003' at tick 4: JSBSim run() returned False" in \
+        e.remote_traceback
+    assert str(e).startswith("worker 1, vehicle 'b0003', tick 4: cosim.errors.VehicleError")
+
+
+def test_a_traceback_longer_than_the_pipe_buffer_comes_back_promptly(specs) -> None:
+    """The child flags the error before sending: the driver reads the pipe
+    while the child writes, so a long traceback cannot block it."""
+    import dataclasses
+
+    vs = specs(2)
+    vs[1] = dataclasses.replace(vs[1], id="x" * 200_000, airspeed_mps=3.0)  # cannot trim
+    t0 = time.monotonic()
+    with pytest.raises(WorkerError) as ei:
+        ProcessPool(vs, 1 / 120, workers=2, start_timeout_s=10.0)
+    assert time.monotonic() - t0 < 5.0
+    assert len(ei.value.remote_traceback) > 150_000 and "could not trim" in \
+        ei.value.remote_traceback
+
+
+@pytest.mark.parametrize("verbosity, expect", [("-vvv", True), ("-q", False)])
+def test_workers_log_like_the_driver(tmp_path, verbosity: str, expect: bool) -> None:
+    """A child's records (its JSBSim output too) follow the driver's levels and format."""
+    script = tmp_path / "driver.py"
+    script.write_text(textwrap.dedent(f"""
+        from cosim.bench import bench_specs
+        from cosim.cli import _setup_logging
+        from cosim.fdm_pool import ProcessPool
+        if __name__ == "__main__":
+            _setup_logging(verbose={verbosity.count("v")}, quiet={verbosity == "-q"})
+            # every vehicle in the child: whatever is logged about them comes from it
+            with ProcessPool(bench_specs(1), 1 / 120, workers=1, driver_steps=False) as pool:
+                pool.step(4)
+    """))
+    p = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                       timeout=60)
+    assert p.returncode == 0, p.stderr
+    fmt = re.compile(r"^\d\d:\d\d:\d\d DEBUG cosim\.")
+    worker = [ln for ln in p.stderr.splitlines() if "worker 0 (pid" in ln]
+    banner = [ln for ln in p.stderr.splitlines() if "JSBSim Flight Dynamics Model" in ln]
+    if expect:
+        assert len(worker) == 1 and fmt.match(worker[0]), p.stderr
+        assert len(banner) == 1 and fmt.match(banner[0]) and "cosim.jsbsim" in banner[0]
+    else:
+        assert p.stderr == "" and p.stdout == ""
+
+
+def test_worker_errors_list_at_most_ten_vehicles() -> None:
+    from cosim.errors import WorkerTimeout
+
+    ids = [f"v{i:02d}" for i in range(12)]
+    died = str(WorkerDied(1, 99, -9, ids, 40))
+    late = str(WorkerTimeout(1, 99, ids, 40, 0.5, "finish tick 44"))
+    shown = "v00, v01, v02, v03, v04, v05, v06, v07, v08, v09, ... (12 in all)"
+    assert died.endswith(f"its vehicles: {shown}") and late.endswith(f"its vehicles: {shown}")
+    assert str(WorkerDied(1, 99, -9, ids[:2], 40)).endswith("its vehicles: v00, v01")
+
+
+def test_a_pool_left_open_does_not_hang_the_interpreter_exit(tmp_path) -> None:
+    """Children ignore SIGTERM, so multiprocessing's exit handler (terminate,
+    then join) alone would wait for them forever: the pool closes itself first."""
+    proc, pids = _run_driver(tmp_path, "pass  # exit with the pool still open", 30)
+    assert proc.returncode == 0, proc.stderr
+    assert len(pids) == 2 and not [p for p in pids if os.path.exists(f"/proc/{p}")]
