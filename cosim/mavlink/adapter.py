@@ -1,0 +1,329 @@
+"""The one module that imports pymavlink.
+
+Everything else in ``cosim.mavlink`` sees MAVLink through this module only:
+
+- ``Packer``: encodes messages for ONE vehicle (its own system id,
+  component 1 and its own sequence numbers), MAVLink 2 framing,
+  ``ardupilotmega`` dialect (a superset of ``common``).
+- ``Decoder``: turns one received UDP datagram into typed ``Message``
+  values. It never raises: garbage, bad CRCs, truncated or malformed
+  packets and unknown message ids are dropped and counted.
+- ``Message``: a decoded message as plain Python values (no pymavlink
+  types leak out), also constructible directly so in-process callers can use
+  the same handling path as the network.
+- The protocol constants the rest of the package uses, as typed ints.
+
+pymavlink ships no type information, so its objects stay inside this module.
+The dialect module is imported directly (not through ``mavutil``), so the
+``MAVLINK20``/``MAVLINK_DIALECT`` environment variables that ``mavutil``
+reads do not change what cosim sends.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+from typing import Any, Final
+
+from pymavlink.dialects.v20 import ardupilotmega as _d
+
+#: MAVLink protocol version spoken (framing); v1 packets are still decoded
+WIRE_PROTOCOL_VERSION: Final[str] = str(_d.WIRE_PROTOCOL_VERSION)
+
+# -- constants ---------------------------------------------------------------
+MAV_COMP_ID_AUTOPILOT1: Final[int] = int(_d.MAV_COMP_ID_AUTOPILOT1)
+MAV_COMP_ID_ALL: Final[int] = int(_d.MAV_COMP_ID_ALL)
+MAV_TYPE_FIXED_WING: Final[int] = int(_d.MAV_TYPE_FIXED_WING)
+MAV_TYPE_GCS: Final[int] = int(_d.MAV_TYPE_GCS)
+MAV_AUTOPILOT_ARDUPILOTMEGA: Final[int] = int(_d.MAV_AUTOPILOT_ARDUPILOTMEGA)
+
+MAV_MODE_FLAG_CUSTOM_MODE_ENABLED: Final[int] = int(_d.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED)
+MAV_MODE_FLAG_GUIDED_ENABLED: Final[int] = int(_d.MAV_MODE_FLAG_GUIDED_ENABLED)
+MAV_MODE_FLAG_STABILIZE_ENABLED: Final[int] = int(_d.MAV_MODE_FLAG_STABILIZE_ENABLED)
+MAV_MODE_FLAG_MANUAL_INPUT_ENABLED: Final[int] = int(_d.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED)
+MAV_MODE_FLAG_SAFETY_ARMED: Final[int] = int(_d.MAV_MODE_FLAG_SAFETY_ARMED)
+
+MAV_STATE_STANDBY: Final[int] = int(_d.MAV_STATE_STANDBY)
+MAV_STATE_ACTIVE: Final[int] = int(_d.MAV_STATE_ACTIVE)
+MAV_STATE_EMERGENCY: Final[int] = int(_d.MAV_STATE_EMERGENCY)
+
+MAV_RESULT_ACCEPTED: Final[int] = int(_d.MAV_RESULT_ACCEPTED)
+MAV_RESULT_TEMPORARILY_REJECTED: Final[int] = int(_d.MAV_RESULT_TEMPORARILY_REJECTED)
+MAV_RESULT_DENIED: Final[int] = int(_d.MAV_RESULT_DENIED)
+MAV_RESULT_UNSUPPORTED: Final[int] = int(_d.MAV_RESULT_UNSUPPORTED)
+MAV_RESULT_FAILED: Final[int] = int(_d.MAV_RESULT_FAILED)
+
+MAV_CMD_NAV_LOITER_UNLIM: Final[int] = int(_d.MAV_CMD_NAV_LOITER_UNLIM)
+MAV_CMD_NAV_RETURN_TO_LAUNCH: Final[int] = int(_d.MAV_CMD_NAV_RETURN_TO_LAUNCH)
+MAV_CMD_NAV_TAKEOFF: Final[int] = int(_d.MAV_CMD_NAV_TAKEOFF)
+MAV_CMD_DO_SET_MODE: Final[int] = int(_d.MAV_CMD_DO_SET_MODE)
+MAV_CMD_DO_CHANGE_SPEED: Final[int] = int(_d.MAV_CMD_DO_CHANGE_SPEED)
+MAV_CMD_DO_REPOSITION: Final[int] = int(_d.MAV_CMD_DO_REPOSITION)
+MAV_CMD_COMPONENT_ARM_DISARM: Final[int] = int(_d.MAV_CMD_COMPONENT_ARM_DISARM)
+MAV_CMD_GET_HOME_POSITION: Final[int] = int(_d.MAV_CMD_GET_HOME_POSITION)
+MAV_CMD_GET_MESSAGE_INTERVAL: Final[int] = int(_d.MAV_CMD_GET_MESSAGE_INTERVAL)
+MAV_CMD_SET_MESSAGE_INTERVAL: Final[int] = int(_d.MAV_CMD_SET_MESSAGE_INTERVAL)
+MAV_CMD_REQUEST_MESSAGE: Final[int] = int(_d.MAV_CMD_REQUEST_MESSAGE)
+MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: Final[int] = int(
+    _d.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES)
+
+MAV_DO_REPOSITION_FLAGS_CHANGE_MODE: Final[int] = int(_d.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE)
+
+MAV_FRAME_GLOBAL: Final[int] = int(_d.MAV_FRAME_GLOBAL)
+MAV_FRAME_GLOBAL_INT: Final[int] = int(_d.MAV_FRAME_GLOBAL_INT)
+MAV_FRAME_GLOBAL_RELATIVE_ALT: Final[int] = int(_d.MAV_FRAME_GLOBAL_RELATIVE_ALT)
+MAV_FRAME_GLOBAL_RELATIVE_ALT_INT: Final[int] = int(_d.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT)
+MAV_FRAME_GLOBAL_TERRAIN_ALT: Final[int] = int(_d.MAV_FRAME_GLOBAL_TERRAIN_ALT)
+MAV_FRAME_GLOBAL_TERRAIN_ALT_INT: Final[int] = int(_d.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT)
+MAV_FRAME_LOCAL_NED: Final[int] = int(_d.MAV_FRAME_LOCAL_NED)
+MAV_FRAME_LOCAL_OFFSET_NED: Final[int] = int(_d.MAV_FRAME_LOCAL_OFFSET_NED)
+MAV_FRAME_BODY_OFFSET_NED: Final[int] = int(_d.MAV_FRAME_BODY_OFFSET_NED)
+
+POSITION_TARGET_TYPEMASK_X_IGNORE: Final[int] = int(_d.POSITION_TARGET_TYPEMASK_X_IGNORE)
+POSITION_TARGET_TYPEMASK_Y_IGNORE: Final[int] = int(_d.POSITION_TARGET_TYPEMASK_Y_IGNORE)
+POSITION_TARGET_TYPEMASK_Z_IGNORE: Final[int] = int(_d.POSITION_TARGET_TYPEMASK_Z_IGNORE)
+
+MAV_PARAM_TYPE_INT8: Final[int] = int(_d.MAV_PARAM_TYPE_INT8)
+MAV_PARAM_TYPE_INT16: Final[int] = int(_d.MAV_PARAM_TYPE_INT16)
+MAV_PARAM_TYPE_INT32: Final[int] = int(_d.MAV_PARAM_TYPE_INT32)
+MAV_PARAM_TYPE_REAL32: Final[int] = int(_d.MAV_PARAM_TYPE_REAL32)
+
+MAV_SEVERITY_WARNING: Final[int] = int(_d.MAV_SEVERITY_WARNING)
+MAV_SEVERITY_INFO: Final[int] = int(_d.MAV_SEVERITY_INFO)
+
+GPS_FIX_TYPE_3D_FIX: Final[int] = int(_d.GPS_FIX_TYPE_3D_FIX)
+MAV_VTOL_STATE_UNDEFINED: Final[int] = int(_d.MAV_VTOL_STATE_UNDEFINED)
+MAV_LANDED_STATE_ON_GROUND: Final[int] = int(_d.MAV_LANDED_STATE_ON_GROUND)
+MAV_LANDED_STATE_IN_AIR: Final[int] = int(_d.MAV_LANDED_STATE_IN_AIR)
+
+#: SYS_STATUS sensor/subsystem bits cosim reports (present, enabled, health)
+SENSOR_GYRO: Final[int] = int(_d.MAV_SYS_STATUS_SENSOR_3D_GYRO)
+SENSOR_ACCEL: Final[int] = int(_d.MAV_SYS_STATUS_SENSOR_3D_ACCEL)
+SENSOR_MAG: Final[int] = int(_d.MAV_SYS_STATUS_SENSOR_3D_MAG)
+SENSOR_ABS_PRESSURE: Final[int] = int(_d.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE)
+SENSOR_DIFF_PRESSURE: Final[int] = int(_d.MAV_SYS_STATUS_SENSOR_DIFFERENTIAL_PRESSURE)
+SENSOR_GPS: Final[int] = int(_d.MAV_SYS_STATUS_SENSOR_GPS)
+SENSOR_RATE_CONTROL: Final[int] = int(_d.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL)
+SENSOR_ATTITUDE_CONTROL: Final[int] = int(_d.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION)
+SENSOR_YAW_CONTROL: Final[int] = int(_d.MAV_SYS_STATUS_SENSOR_YAW_POSITION)
+SENSOR_Z_CONTROL: Final[int] = int(_d.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL)
+SENSOR_XY_CONTROL: Final[int] = int(_d.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL)
+SENSOR_MOTOR_OUTPUTS: Final[int] = int(_d.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS)
+SENSOR_GEOFENCE: Final[int] = int(_d.MAV_SYS_STATUS_GEOFENCE)
+SENSOR_AHRS: Final[int] = int(_d.MAV_SYS_STATUS_AHRS)
+SENSOR_PREARM_CHECK: Final[int] = int(_d.MAV_SYS_STATUS_PREARM_CHECK)
+
+CAP_MAVLINK2: Final[int] = int(_d.MAV_PROTOCOL_CAPABILITY_MAVLINK2)
+CAP_COMMAND_INT: Final[int] = int(_d.MAV_PROTOCOL_CAPABILITY_COMMAND_INT)
+CAP_PARAM_ENCODE_C_CAST: Final[int] = int(_d.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_C_CAST)
+CAP_SET_POSITION_TARGET_GLOBAL_INT: Final[int] = int(
+    _d.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT)
+CAP_SET_POSITION_TARGET_LOCAL_NED: Final[int] = int(
+    _d.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED)
+
+FIRMWARE_VERSION_TYPE_OFFICIAL: Final[int] = int(_d.FIRMWARE_VERSION_TYPE_OFFICIAL)
+
+# -- message ids -------------------------------------------------------------
+_CLASS_BY_NAME: dict[str, Any] = {cls.msgname: cls for cls in _d.mavlink_map.values()}
+_NAME_BY_ID: dict[int, str] = {int(i): cls.msgname for i, cls in _d.mavlink_map.items()}
+_CHAR_FIELDS: dict[str, frozenset[str]] = {
+    name: frozenset(f for f, t in zip(cls.fieldnames, cls.fieldtypes) if t == "char")
+    for name, cls in _CLASS_BY_NAME.items()}
+
+
+def msg_id(name: str) -> int:
+    """The numeric id of a message name (``"HEARTBEAT"`` -> 0); KeyError if unknown."""
+    return int(_CLASS_BY_NAME[name].id)
+
+
+def msg_name(msgid: int) -> str | None:
+    """The name of a message id, or None if the dialect does not define it."""
+    return _NAME_BY_ID.get(msgid)
+
+
+def command_name(cmd: int) -> str:
+    """The name of a MAV_CMD value (``"MAV_CMD_NAV_TAKEOFF"``), or ``"MAV_CMD <n>"``."""
+    entry = _d.enums.get("MAV_CMD", {}).get(cmd)
+    return str(entry.name) if entry is not None else f"MAV_CMD {cmd}"
+
+
+def field_names(name: str) -> tuple[str, ...]:
+    """The field names of a message, in declaration order."""
+    return tuple(_CLASS_BY_NAME[name].fieldnames)
+
+
+# -- messages ----------------------------------------------------------------
+@dataclass(frozen=True)
+class Message:
+    """One decoded (or in-process) MAVLink message as plain values.
+
+    ``fields`` holds every field by its MAVLink name (char arrays as ``str``,
+    arrays as lists of numbers); ``raw`` is the packet exactly as received
+    (empty for in-process messages), written to tlogs.
+    """
+
+    name: str
+    src_system: int
+    src_component: int
+    fields: Mapping[str, Any]
+    raw: bytes = b""
+    signed: bool = False
+
+    @property
+    def target_system(self) -> int | None:
+        v = self.fields.get("target_system")
+        return None if v is None else int(v)
+
+    @property
+    def target_component(self) -> int | None:
+        v = self.fields.get("target_component")
+        return None if v is None else int(v)
+
+
+def make_message(name: str, src_system: int = 255, src_component: int = 190,
+                 **fields: Any) -> Message:
+    """A ``Message`` built in-process, exactly as it would arrive from the
+    network: omitted fields take the dialect's zero values and every value is
+    rounded to its wire type (float32 params, integer ranges) by encoding and
+    decoding it. ``raw`` stays empty (it was never on a link). Unknown fields
+    or values that do not fit raise ``ValueError``."""
+    cls = _message_class(name)
+    names = list(cls.fieldnames)
+    extra = set(fields) - set(names)
+    if extra:
+        raise ValueError(f"{name} has no field(s) {sorted(extra)}; fields: {', '.join(names)}")
+    full: dict[str, Any] = {}
+    for fname, ftype, alen in zip(names, cls.fieldtypes, _array_lengths(cls)):
+        if fname in fields:
+            full[fname] = fields[fname]
+        elif ftype == "char":
+            full[fname] = ""
+        elif alen:
+            full[fname] = [0] * alen
+        else:
+            full[fname] = 0
+    decoded = Decoder().decode(Packer(src_system, src_component).pack(name, **full))
+    if len(decoded) != 1:
+        raise ValueError(f"{name} with {fields!r} does not survive encoding")
+    return replace(decoded[0], raw=b"")
+
+
+def _array_lengths(cls: Any) -> list[int]:
+    """Array length per field in ``fieldnames`` order (0: scalar)."""
+    by_wire = dict(zip(cls.ordered_fieldnames, cls.array_lengths))
+    return [int(by_wire[f]) for f in cls.fieldnames]
+
+
+def _message_class(name: str) -> Any:
+    try:
+        return _CLASS_BY_NAME[name]
+    except KeyError:
+        raise ValueError(f"unknown MAVLink message {name!r} (dialect ardupilotmega)") from None
+
+
+class Packer:
+    """Encodes messages from one vehicle: its own system id, component and
+    sequence numbers (one pymavlink ``MAVLink`` instance per vehicle)."""
+
+    def __init__(self, system_id: int, component_id: int = MAV_COMP_ID_AUTOPILOT1) -> None:
+        if not 1 <= system_id <= 255:
+            raise ValueError(f"MAVLink system id must be 1..255, got {system_id}")
+        self._mav = _d.MAVLink(None, srcSystem=system_id, srcComponent=component_id)
+        self.system_id = system_id
+        self.component_id = component_id
+        self.packets = 0
+
+    @property
+    def seq(self) -> int:
+        """The sequence number the next packet will carry."""
+        return int(self._mav.seq)
+
+    def pack(self, name: str, **fields: Any) -> bytes:
+        """Encode one message; ``str`` values of char fields are ASCII-encoded.
+
+        A wrong field name or a value that does not fit its field raises
+        ``ValueError`` naming the message (a bug in the caller, not bad input).
+        """
+        _message_class(name)
+        chars = _CHAR_FIELDS[name]
+        for k in chars & fields.keys():
+            v = fields[k]
+            if isinstance(v, str):
+                fields[k] = v.encode("ascii", errors="replace")
+        try:
+            msg = getattr(self._mav, name.lower() + "_encode")(**fields)
+            buf = bytes(msg.pack(self._mav))
+        except Exception as e:  # TypeError (fields), struct.error (ranges)
+            raise ValueError(f"cannot encode {name} from system {self.system_id} with "
+                             f"{fields!r}: {e}") from e
+        self._mav.seq = (self._mav.seq + 1) % 256
+        self.packets += 1
+        return buf
+
+
+#: Decoder counters (keys always present)
+DECODE_COUNTERS: tuple[str, ...] = ("datagrams", "messages", "garbage", "bad_crc", "truncated",
+                                    "malformed", "unknown_message", "decoder_errors")
+
+
+class Decoder:
+    """Decodes received datagrams into ``Message`` values; never raises.
+
+    Each datagram is parsed on its own (a truncated packet at the end of one
+    datagram cannot swallow the start of the next). Problems are counted in
+    ``counts``: ``garbage`` (runs of bytes that do not start a packet),
+    ``bad_crc``, ``truncated`` (a datagram ending inside a packet),
+    ``malformed`` (bad length or flags), ``unknown_message`` (an id this
+    dialect does not define: its CRC cannot be checked), ``decoder_errors``
+    (pymavlink raised anyway).
+    """
+
+    def __init__(self) -> None:
+        self._mav = _d.MAVLink(None, srcSystem=0, srcComponent=0)
+        self._mav.robust_parsing = True
+        self.counts: Counter[str] = Counter({k: 0 for k in DECODE_COUNTERS})
+
+    def _reset(self) -> None:
+        m = self._mav
+        m.buf = bytearray()
+        m.buf_index = 0
+        m.expected_length = _d.HEADER_LEN_V1 + 2
+        m.have_prefix_error = False
+
+    def decode(self, datagram: bytes) -> list[Message]:
+        """All valid messages in one datagram, in order."""
+        self.counts["datagrams"] += 1
+        self._reset()
+        try:
+            parsed = self._mav.parse_buffer(datagram) or []
+        except Exception:  # robust parsing should not raise; count it if it does
+            self.counts["decoder_errors"] += 1
+            parsed = []
+        out: list[Message] = []
+        for pm in parsed:
+            kind = pm.get_type()
+            if kind == "BAD_DATA":
+                reason = str(getattr(pm, "reason", ""))
+                if reason.startswith("Bad prefix"):
+                    self.counts["garbage"] += 1
+                elif "CRC" in reason:
+                    self.counts["bad_crc"] += 1
+                else:
+                    self.counts["malformed"] += 1
+                continue
+            if kind.startswith("UNKNOWN_"):
+                self.counts["unknown_message"] += 1
+                continue
+            try:
+                fields = {n: getattr(pm, n) for n in pm.get_fieldnames()}
+                out.append(Message(kind, int(pm.get_srcSystem()), int(pm.get_srcComponent()),
+                                   fields, bytes(pm.get_msgbuf()), bool(pm.get_signed())))
+            except Exception:
+                self.counts["decoder_errors"] += 1
+        if self._mav.buf_len() > 0:
+            self.counts["truncated"] += 1
+        self._reset()
+        self.counts["messages"] += len(out)
+        return out
+

@@ -1,0 +1,291 @@
+"""The MAVLink endpoint: every simulated vehicle as a MAVLink vehicle on one
+UDP socket, driven once per exchange by the lockstep loop.
+
+Usage (the runner, once per exchange, before stepping the pool)::
+
+    specs = mav_specs(scenario.vehicles, autopilot=scenario.autopilot)
+    with MavlinkEndpoint(specs, physics_hz, MavlinkConfig(url), tlog_dir=out) as mav:
+        while ...:
+            for vc in mav.exchange(tick, states):
+                guidance.command([vc.row], vc.command, states, pool.setpoints)
+            guidance.update(states, pool.setpoints)
+            states = pool.step(k)
+            tick += k
+        summary["mavlink"] = mav.counters()
+
+``exchange(tick, states)`` reads every datagram waiting (bounded), answers
+them (ACKs, parameters, requested messages), sends the telemetry due at
+``tick`` from ``states`` (the state array at ``tick``), writes both
+directions to the tlogs, and returns the guidance commands the messages
+produced, in arrival order. It never blocks and never raises because of
+what arrives from the network; problems are counted (``counters()``).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections import Counter
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+
+from cosim.errors import ConfigError
+from cosim.fdm_pool.spec import N_STATE
+from cosim.guidance.commands import Command
+from cosim.mavlink import adapter as mav
+from cosim.mavlink.errors import EndpointClosed
+from cosim.mavlink.handlers import Handler, Outcome
+from cosim.mavlink.link import DEFAULT_URL, UdpLink
+from cosim.mavlink.tlog import TlogWriter
+from cosim.mavlink.vehicle import (
+    ATTITUDE_COLUMNS,
+    MavVehicle,
+    MavVehicleSpec,
+    SimClock,
+    body_rates,
+    check_rates,
+    safe_name,
+)
+
+log = logging.getLogger(__name__)
+
+#: vehicles one endpoint carries (system ids are 8 bits and ground stations
+#: use 255 and up); more need a second endpoint on its own URL, serving its
+#: own ground station: ``mav_specs(vehicles[240:], first_sysid=1, first_row=240)``
+MAX_VEHICLES_PER_LINK = 240
+
+#: counters always present in ``counters()``
+ENDPOINT_COUNTERS = (
+    "packets_out", "echoes", "unknown_target_system", "other_component", "gcs_heartbeats",
+    "ignored_messages", "unsupported_commands", "commands_refused", "commands_out",
+    "handler_errors", "param_unknown", "param_rejected", "ftp_naks",
+    "position_targets_ignored", "position_targets_invalid", "position_targets_unsupported",
+    "injected")
+
+
+@dataclass(frozen=True)
+class MavlinkConfig:
+    """The MAVLink options of a run.
+
+    ``rates_hz`` overrides ``DEFAULT_RATES_HZ`` per message (0 = off);
+    ``max_datagrams_per_exchange`` bounds the work one exchange does for the
+    network, ``max_peers`` the addresses answered.
+    """
+
+    url: str = DEFAULT_URL
+    rates_hz: Mapping[str, float] = field(default_factory=dict)
+    max_peers: int = 16
+    max_datagrams_per_exchange: int = 1000
+
+
+class VehicleCommand(NamedTuple):
+    """A command for guidance: apply ``command`` to state row ``row``."""
+
+    row: int
+    command: Command
+    #: what it came from, e.g. ``"COMMAND_INT MAV_CMD_DO_REPOSITION from 255/190"``
+    origin: str
+
+
+def _origin(m: mav.Message) -> str:
+    what = m.name
+    if m.name in ("COMMAND_LONG", "COMMAND_INT"):
+        what += f" {mav.command_name(int(m.fields['command']))}"
+    src = "in-process" if not m.raw else f"from {m.src_system}/{m.src_component}"
+    return f"{what} {src}"
+
+
+class MavlinkEndpoint:
+    """Vehicles on one MAVLink link (see the module docstring).
+
+    ``vehicles``: one ``MavVehicleSpec`` each (``mav_specs`` builds them
+    from scenario vehicles); ``physics_hz``: ticks per simulated second;
+    ``tlog_dir``: folder for one ``<vehicle>.tlog`` each (None: no tlogs);
+    ``clock_anchor_unix_us``: the wall-clock instant of tick 0 in
+    SYSTEM_TIME and tlogs (default: the start of the current second, so
+    real-time runs show the wall clock; pass a fixed value for
+    reproducible tlogs).
+    """
+
+    def __init__(self, vehicles: Sequence[MavVehicleSpec], physics_hz: float,
+                 config: MavlinkConfig | None = None, tlog_dir: str | Path | None = None,
+                 clock_anchor_unix_us: int | None = None) -> None:
+        config = config or MavlinkConfig()
+        problems = check_rates(config.rates_hz)
+        if not physics_hz > 0:
+            problems.append(f"physics_hz must be > 0, got {physics_hz!r}")
+        if len(vehicles) > MAX_VEHICLES_PER_LINK:
+            problems.append(f"{len(vehicles)} vehicles on one MAVLink link; at most "
+                            f"{MAX_VEHICLES_PER_LINK} (use a second link for the rest)")
+        for what, values in (("system id", [v.sysid for v in vehicles]),
+                             ("row", [v.row for v in vehicles])):
+            dup = sorted({x for x in values if values.count(x) > 1})
+            if dup:
+                problems.append(f"duplicate vehicle {what}(s): {dup}")
+        if problems:
+            raise ConfigError([f"mavlink: {p}" for p in problems])
+        anchor = clock_anchor_unix_us if clock_anchor_unix_us is not None \
+            else int(time.time()) * 1_000_000
+        self.clock = SimClock(float(physics_hz), int(anchor))
+        self.config = config
+        self.vehicles = [MavVehicle(s, self.clock, config.rates_hz) for s in vehicles]
+        self._by_sysid = {v.sysid: v for v in self.vehicles}
+        self.counts: Counter[str] = Counter({k: 0 for k in ENDPOINT_COUNTERS})
+        self.decoder = mav.Decoder()
+        self.handler = Handler(self.counts, self.clock.physics_hz)
+        self._injected: list[mav.Message] = []
+        self._last_tick: int | None = None
+        self._rows = np.array([v.row for v in self.vehicles], dtype=np.intp)
+        self._prev_att: np.ndarray | None = None
+        self._rates = np.zeros((len(self.vehicles), 3))
+        self.tlogs: dict[int, TlogWriter] = {}
+        self.link = UdpLink(config.url, config.max_peers, config.max_datagrams_per_exchange)
+        try:
+            if tlog_dir is not None:
+                used: set[str] = set()
+                for v in self.vehicles:
+                    stem = safe_name(v.spec.name)
+                    if stem in used:
+                        stem = f"{stem}-sys{v.sysid}"
+                    used.add(stem)
+                    self.tlogs[v.sysid] = TlogWriter(Path(tlog_dir) / f"{stem}.tlog")
+        except BaseException:
+            self.close()
+            raise
+
+    # -- lifecycle -------------------------------------------------------------
+    @property
+    def closed(self) -> bool:
+        return self.link.closed
+
+    @property
+    def local_address(self) -> tuple[str, int]:
+        """Where the socket is bound (ground stations using udpout send here)."""
+        return self.link.local_address
+
+    def __enter__(self) -> MavlinkEndpoint:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Flush and close the tlogs and the socket (safe to call twice)."""
+        for t in self.tlogs.values():
+            t.close()
+        self.link.close()
+
+    # -- per exchange ----------------------------------------------------------
+    def inject(self, message: mav.Message) -> None:
+        """Queue a message to be handled at the next exchange exactly as if it had
+        arrived from the network (for in-process clients: one command path)."""
+        if self.closed:
+            raise EndpointClosed("mavlink endpoint: inject() after close()")
+        self._injected.append(message)
+
+    def exchange(self, tick: int, states: np.ndarray) -> list[VehicleCommand]:
+        """Handle what arrived, send what is due at ``tick``; the commands produced."""
+        if self.closed:
+            raise EndpointClosed(f"mavlink endpoint: exchange(tick={tick}) after close()")
+        if self._last_tick is not None and tick < self._last_tick:
+            raise ValueError(f"mavlink exchange: tick {tick} is before the previous "
+                             f"exchange's tick {self._last_tick}")
+        rows = int(self._rows.max(initial=-1)) + 1
+        if states.ndim != 2 or states.shape[0] < rows or states.shape[1] < N_STATE:
+            raise ValueError(f"mavlink exchange: states must be (n >= {rows}, {N_STATE}), "
+                             f"got {states.shape}")
+        prev_tick, self._last_tick = self._last_tick, tick
+        mine = states[self._rows]
+        att = mine[:, ATTITUDE_COLUMNS]
+        if self._prev_att is not None and prev_tick is not None and tick > prev_tick:
+            dt_s = (tick - prev_tick) / self.clock.physics_hz
+            self._rates = body_rates(self._prev_att, att, dt_s)
+        self._prev_att = att
+        # Python floats: much faster than numpy scalars to read field by field
+        for v, row, pqr in zip(self.vehicles, mine.tolist(), self._rates.tolist()):
+            v.observe(row, pqr)
+        commands: list[VehicleCommand] = []
+        injected, self._injected = self._injected, []
+        for m in injected:
+            self.counts["injected"] += 1
+            self._dispatch(m, tick, commands)
+        for data, addr in self.link.poll():
+            msgs = self.decoder.decode(data)
+            if msgs:
+                self.link.remember(addr)
+            for m in msgs:
+                self._dispatch(m, tick, commands)
+        for v in self.vehicles:
+            for name in v.due(tick):
+                self._send(v, name, v.fields(name, tick), tick)
+        for t in self.tlogs.values():
+            t.flush()
+        self.counts["commands_out"] += len(commands)
+        return commands
+
+    def counters(self) -> dict[str, int]:
+        """Every counter (decoding, link, handling), for summary.json."""
+        out: dict[str, int] = {}
+        out.update(self.decoder.counts)
+        out.update(self.link.counts)
+        out.update(self.counts)
+        out["peers"] = len(self.link.peers)
+        out["tlog_records"] = sum(t.records for t in self.tlogs.values())
+        return dict(sorted(out.items()))
+
+    # -- internals -------------------------------------------------------------
+    def _send(self, v: MavVehicle, name: str, fields: dict[str, object], tick: int) -> None:
+        pkt = v.packer.pack(name, **fields)
+        self.link.send(pkt)
+        self.counts["packets_out"] += 1
+        t = self.tlogs.get(v.sysid)
+        if t is not None:
+            t.write(self.clock.unix_us(tick), pkt)
+
+    def _dispatch(self, m: mav.Message, tick: int, commands: list[VehicleCommand]) -> None:
+        if m.src_system in self._by_sysid and m.src_component == mav.MAV_COMP_ID_AUTOPILOT1 \
+                and m.raw:
+            self.counts["echoes"] += 1  # our own packets looped back by the network setup
+            return
+        tgt = m.target_system
+        if tgt is None:  # not addressed to a vehicle (a ground station's HEARTBEAT, ...)
+            self.counts["gcs_heartbeats" if m.name == "HEARTBEAT" else "ignored_messages"] += 1
+            if m.raw:
+                for t in self.tlogs.values():
+                    t.write(self.clock.unix_us(tick), m.raw)
+            return
+        if tgt == 0:
+            targets = self.vehicles
+        elif tgt in self._by_sysid:
+            targets = [self._by_sysid[tgt]]
+        else:
+            self.counts["unknown_target_system"] += 1
+            return
+        comp = m.target_component
+        if comp not in (None, mav.MAV_COMP_ID_ALL, mav.MAV_COMP_ID_AUTOPILOT1):
+            self.counts["other_component"] += 1  # a camera, gimbal, ...: not ours
+            return
+        for v in targets:
+            tlog = self.tlogs.get(v.sysid)
+            if tlog is not None and m.raw:
+                tlog.write(self.clock.unix_us(tick), m.raw)
+            try:
+                out = self.handler.handle(v, m, tick)
+            except Exception:
+                # a bug, not bad input: log it loudly, keep flying, still answer
+                log.exception("mavlink: handling %s for system %d failed", m.name, v.sysid)
+                self.counts["handler_errors"] += 1
+                out = Outcome()
+                if m.name in ("COMMAND_LONG", "COMMAND_INT"):
+                    out.replies.append(("COMMAND_ACK", {
+                        "command": int(m.fields["command"]), "result": mav.MAV_RESULT_FAILED,
+                        "target_system": m.src_system, "target_component": m.src_component}))
+            for name, fields in out.replies:
+                self._send(v, name, fields, tick)
+            if out.commands:
+                origin = _origin(m)
+                commands.extend(VehicleCommand(v.row, c, origin) for c in out.commands)

@@ -1,0 +1,663 @@
+"""Incoming MAVLink messages -> replies, vehicle state changes and commands
+in the fixed-wing vocabulary (``cosim.guidance.commands``).
+
+Every command is translated into the same mapping a scenario schedule
+would hold (``{"goto": {...}}``, ``{"airspeed_mps": ...}``) and parsed by
+``parse_command``, so MAVLink, the schedule and the swarm controller share
+one vocabulary and one validation. ``handle`` never touches sockets: it
+returns an ``Outcome`` (replies to send, commands for guidance).
+
+Each COMMAND_LONG / COMMAND_INT gets exactly one COMMAND_ACK (a SET_MODE
+message too, acknowledged as MAV_CMD_DO_SET_MODE like ArduPilot does).
+Results:
+
+- ACCEPTED: done (the command, if any, is in ``Outcome.commands``)
+- DENIED: the parameters are invalid (out of range, unknown frame or message)
+- FAILED: valid, but not possible now (mode needs a mission, disarm in flight,
+  pre-arm check, no autopilot); a STATUSTEXT says why
+- UNSUPPORTED: a command cosim does not implement
+
+Positions: COMMAND_LONG carries degrees in param5/6 and an altitude relative
+to home in param7 (ArduPilot's convention); COMMAND_INT carries degE7 in
+x/y and the altitude frame in ``frame`` (global = MSL, relative = above
+home, terrain = above ground). A position of (0, 0) or INT32_MAX means
+"where the vehicle is". The local NED frame (SET_POSITION_TARGET_LOCAL_NED,
+MAV_FRAME_LOCAL_NED) is relative to the vehicle's start, DESIGN.md 3.3.
+
+Disarmed vehicles keep their engine off: arming restores the cruise
+airspeed, disarming sets throttle 0, and no other command carries a speed
+while disarmed.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import struct
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+from cosim.fdm_pool.spec import STATE_INDEX
+from cosim.geo import LocalFrame
+from cosim.guidance.commands import Command, parse_command
+from cosim.mavlink import adapter as mav
+from cosim.mavlink.params import PARAM_DEFS, PARAM_INDEX
+from cosim.mavlink.vehicle import (
+    DEFAULT_RATES_HZ,
+    FORCE_MAGIC,
+    STREAMABLE,
+    MavVehicle,
+    PlaneMode,
+    mode_name,
+    period_ticks,
+)
+
+log = logging.getLogger(__name__)
+
+Reply = tuple[str, dict[str, Any]]
+_S = STATE_INDEX
+_INT32_MAX = 2 ** 31 - 1
+
+#: modes a vehicle with an autopilot can be switched to
+SETTABLE_MODES = (PlaneMode.GUIDED, PlaneMode.LOITER, PlaneMode.RTL, PlaneMode.TAKEOFF)
+
+# MAVLink FTP (https://mavlink.io/en/services/ftp.html)
+_FTP_ACK, _FTP_NAK = 128, 129
+_FTP_ERR_FAIL, _FTP_ERR_INVALID_SESSION, _FTP_ERR_FILE_NOT_FOUND = 1, 4, 10
+_FTP_PATH_OPS = {3, 4, 6, 8, 9, 10, 11, 12, 13, 14}  # list/open/create/remove/.../crc
+_FTP_SESSION_OPS = {1, 5, 7, 15}  # terminate, read, write, burst read
+_FTP_HEADER = struct.Struct("<HBBBBBBI")
+
+
+@dataclass
+class Outcome:
+    """What handling one message produced, in order."""
+
+    replies: list[Reply] = field(default_factory=list)
+    commands: list[Command] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class CommandRequest:
+    """COMMAND_LONG and COMMAND_INT in one shape."""
+
+    command: int
+    p: tuple[float, float, float, float]  # param1..param4
+    x: float  # param5 (deg) or x (degE7 for global frames)
+    y: float
+    z: float  # param7 or z
+    frame: int  # COMMAND_LONG: MAV_FRAME_GLOBAL_RELATIVE_ALT
+    is_int: bool
+
+    @classmethod
+    def of(cls, m: mav.Message) -> CommandRequest:
+        f = m.fields
+        ps = (float(f["param1"]), float(f["param2"]), float(f["param3"]), float(f["param4"]))
+        if m.name == "COMMAND_INT":
+            return cls(int(f["command"]), ps, float(f["x"]), float(f["y"]), float(f["z"]),
+                       int(f["frame"]), True)
+        return cls(int(f["command"]), ps, float(f["param5"]), float(f["param6"]),
+                   float(f["param7"]), mav.MAV_FRAME_GLOBAL_RELATIVE_ALT, False)
+
+    def location(self) -> tuple[float, float] | None:
+        """(lat_deg, lon_deg), or None for "where the vehicle is"."""
+        x, y = self.x, self.y
+        if not (math.isfinite(x) and math.isfinite(y)):
+            return None
+        if self.is_int:
+            if _INT32_MAX in (int(x), int(y)) or (x == 0 and y == 0):
+                return None
+            return x / 1e7, y / 1e7
+        if x == 0 and y == 0:
+            return None
+        return x, y
+
+
+def _int(x: float) -> int | None:
+    return int(round(x)) if math.isfinite(x) else None
+
+
+def _ack(m: mav.Message, command: int, result: int) -> Reply:
+    return ("COMMAND_ACK", {"command": command, "result": result, "progress": 0,
+                            "result_param2": 0, "target_system": m.src_system,
+                            "target_component": m.src_component})
+
+
+def _text(text: str, severity: int = mav.MAV_SEVERITY_WARNING) -> Reply:
+    return ("STATUSTEXT", {"severity": severity, "text": text[:50]})
+
+
+def _vocab(d: dict[str, Any]) -> Command | str:
+    """A vocabulary mapping -> Command, or the problems as one string."""
+    problems: list[str] = []
+    cmd = parse_command(d, ("mavlink",), lambda p, msg: problems.append(
+        f"{'.'.join(map(str, p[1:])) or 'command'}: {msg}"))
+    if problems or cmd is None:
+        return "; ".join(problems) or "invalid command"
+    return cmd
+
+
+class Handler:
+    """Handles the messages addressed to one vehicle (one per endpoint)."""
+
+    def __init__(self, counts: Counter[str], physics_hz: float) -> None:
+        self.counts = counts
+        self.physics_hz = physics_hz
+        self._by_name: dict[str, Callable[[MavVehicle, mav.Message, int], Outcome]] = {
+            "COMMAND_LONG": self._command,
+            "COMMAND_INT": self._command,
+            "SET_MODE": self._set_mode_msg,
+            "PARAM_REQUEST_LIST": self._param_list,
+            "PARAM_REQUEST_READ": self._param_read,
+            "PARAM_SET": self._param_set,
+            "FILE_TRANSFER_PROTOCOL": self._ftp,
+            "SET_POSITION_TARGET_GLOBAL_INT": self._target_global,
+            "SET_POSITION_TARGET_LOCAL_NED": self._target_local,
+        }
+
+    def handle(self, v: MavVehicle, m: mav.Message, tick: int) -> Outcome:
+        """Handle one message for vehicle ``v`` at ``tick`` (its row observed)."""
+        fn = self._by_name.get(m.name)
+        if fn is None:
+            self.counts["ignored_messages"] += 1
+            return Outcome()
+        return fn(v, m, tick)
+
+    # -- helpers -----------------------------------------------------------
+    def _row(self, v: MavVehicle) -> Any:
+        if v.row_values is None:
+            raise RuntimeError(f"vehicle {v.spec.name!r}: no state observed yet")
+        return v.row_values
+
+    def _alt(self, v: MavVehicle, frame: int, z: float) -> tuple[str, float] | None:
+        """An altitude in a global frame -> (vocabulary key, metres); None: bad frame."""
+        if frame in (mav.MAV_FRAME_GLOBAL, mav.MAV_FRAME_GLOBAL_INT):
+            return "alt_msl_m", z
+        if frame in (mav.MAV_FRAME_GLOBAL_RELATIVE_ALT, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT):
+            return "alt_msl_m", v.home[2] + z
+        if frame in (mav.MAV_FRAME_GLOBAL_TERRAIN_ALT, mav.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT):
+            return "alt_agl_m", z
+        return None
+
+    def _radius(self, v: MavVehicle, name: str = "WP_LOITER_RAD") -> tuple[float | None, bool]:
+        """(radius_m or None for guidance's default, counter-clockwise)."""
+        r = v.params[name]
+        if name == "RTL_RADIUS" and r == 0:
+            r = v.params["WP_LOITER_RAD"]
+        return (abs(r) if r else None), r < 0
+
+    def _speed_ok(self, v: MavVehicle, spd: float) -> str | None:
+        lo, hi = v.params["AIRSPEED_MIN"], v.params["AIRSPEED_MAX"]
+        if not lo <= spd <= hi:
+            return f"speed {spd:g} m/s outside AIRSPEED_MIN..MAX {lo:g}..{hi:g}"
+        return None
+
+    def _loiter_here(self, v: MavVehicle) -> dict[str, Any]:
+        radius, ccw = self._radius(v)
+        lo: dict[str, Any] = {}
+        if radius:
+            lo["radius_m"] = radius
+        if ccw:
+            lo["direction"] = "ccw"
+        return lo
+
+    # -- modes ---------------------------------------------------------------
+    def enter_mode(self, v: MavVehicle, mode: int, tick: int, out: Outcome) -> int:
+        """Switch ``v`` to an ArduPlane mode; the result code (texts go to ``out``)."""
+        if not v.spec.has_autopilot:
+            if mode == v.mode:
+                return mav.MAV_RESULT_ACCEPTED
+            out.replies.append(_text(f"{mode_name(mode)}: this vehicle has no autopilot"))
+            return mav.MAV_RESULT_FAILED
+        if mode == v.mode:
+            return mav.MAV_RESULT_ACCEPTED
+        row = self._row(v)
+        d: dict[str, Any]
+        cw_override: bool | None = None
+        if mode in (PlaneMode.GUIDED, PlaneMode.LOITER):
+            d = {"loiter": self._loiter_here(v)}
+        elif mode == PlaneMode.RTL:
+            alt_cm = v.params["ALT_HOLD_RTL"]
+            alt = float(row[_S["alt_msl_m"]]) if alt_cm < 0 else v.home[2] + alt_cm / 100.0
+            goto: dict[str, Any] = {"lat_deg": v.home[0], "lon_deg": v.home[1], "alt_msl_m": alt}
+            radius, ccw = self._radius(v, "RTL_RADIUS")
+            if radius:
+                goto["loiter_radius_m"] = radius
+            cw_override = not ccw
+            if v.armed:
+                goto["airspeed_mps"] = v.params["AIRSPEED_CRUISE"]
+            d = {"goto": goto}
+        elif mode == PlaneMode.TAKEOFF:
+            return self._takeoff(v, v.home[2] + v.params["TKOFF_ALT"], tick, out)
+        elif mode == PlaneMode.AUTO:
+            out.replies.append(_text("AUTO needs a mission: not implemented yet"))
+            return mav.MAV_RESULT_FAILED
+        elif mode == PlaneMode.MANUAL:
+            out.replies.append(_text("MANUAL: no pilot in the simulation"))
+            return mav.MAV_RESULT_FAILED
+        else:
+            out.replies.append(_text(f"{mode_name(mode)} is not supported by cosim"))
+            return mav.MAV_RESULT_FAILED
+        cmd = _vocab(d)
+        if isinstance(cmd, str):
+            out.replies.append(_text(f"{mode_name(mode)}: {cmd}"))
+            return mav.MAV_RESULT_FAILED
+        if cw_override is not None:
+            cmd = replace(cmd, loiter_cw=cw_override)
+        v.mode = int(mode)
+        out.commands.append(cmd)
+        return mav.MAV_RESULT_ACCEPTED
+
+    def _takeoff(self, v: MavVehicle, alt_msl_m: float, tick: int, out: Outcome) -> int:
+        if not v.spec.has_autopilot:
+            out.replies.append(_text("TAKEOFF: this vehicle has no autopilot"))
+            return mav.MAV_RESULT_FAILED
+        if not v.armed:
+            out.replies.append(_text("TAKEOFF: arm first"))
+            return mav.MAV_RESULT_FAILED
+        lo = self._loiter_here(v)
+        if float(self._row(v)[_S["alt_msl_m"]]) < alt_msl_m:  # takeoff climbs, never descends
+            lo["alt_msl_m"] = alt_msl_m
+        cmd = _vocab({"loiter": lo})
+        if isinstance(cmd, str):
+            out.replies.append(_text(f"TAKEOFF: {cmd}"))
+            return mav.MAV_RESULT_DENIED
+        v.mode = int(PlaneMode.TAKEOFF)
+        out.commands.append(cmd)
+        return mav.MAV_RESULT_ACCEPTED
+
+    def _set_mode_msg(self, v: MavVehicle, m: mav.Message, tick: int) -> Outcome:
+        out = Outcome()
+        res = self._set_mode(v, int(m.fields["base_mode"]), float(m.fields["custom_mode"]),
+                             tick, out)
+        out.replies.append(_ack(m, mav.MAV_CMD_DO_SET_MODE, res))
+        return out
+
+    def _set_mode(self, v: MavVehicle, base_mode: int | None, custom: float, tick: int,
+                  out: Outcome) -> int:
+        mode = _int(custom)
+        if base_mode is None or not base_mode & mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED \
+                or mode is None:
+            out.replies.append(_text("set mode: use ArduPlane custom modes"))
+            return mav.MAV_RESULT_DENIED
+        return self.enter_mode(v, mode, tick, out)
+
+    # -- commands ------------------------------------------------------------
+    def _command(self, v: MavVehicle, m: mav.Message, tick: int) -> Outcome:
+        out = Outcome()
+        req = CommandRequest.of(m)
+        fn = self._commands.get(req.command)
+        if fn is None:
+            self.counts["unsupported_commands"] += 1
+            res = mav.MAV_RESULT_UNSUPPORTED
+        else:
+            res = fn(self, v, req, tick, out)
+        if res != mav.MAV_RESULT_ACCEPTED:
+            self.counts["commands_refused"] += 1
+        out.replies.insert(self._ack_position(out, req), _ack(m, req.command, res))
+        return out
+
+    @staticmethod
+    def _ack_position(out: Outcome, req: CommandRequest) -> int:
+        """The ACK goes after any STATUSTEXT but before requested messages."""
+        return sum(1 for name, _ in out.replies if name == "STATUSTEXT")
+
+    def _arm_disarm(self, v: MavVehicle, req: CommandRequest, tick: int, out: Outcome) -> int:
+        want, force = _int(req.p[0]), _int(req.p[1]) == FORCE_MAGIC
+        if want == 1:
+            if v.armed:
+                return mav.MAV_RESULT_ACCEPTED
+            if v.params["ARMING_CHECK"] != 0 and not force and not v.prearm_ok():
+                out.replies.append(_text("PreArm: vehicle crashed or diverged"))
+                return mav.MAV_RESULT_FAILED
+            v.armed = True
+            if v.spec.has_autopilot and v.mode in SETTABLE_MODES:
+                cmd = _vocab({"airspeed_mps": v.params["AIRSPEED_CRUISE"]})
+                if isinstance(cmd, Command):
+                    out.commands.append(cmd)
+            return mav.MAV_RESULT_ACCEPTED
+        if want == 0:
+            if not v.armed:
+                return mav.MAV_RESULT_ACCEPTED
+            if v.in_air() and not force:
+                out.replies.append(_text("Disarm refused in flight (param2=21196 forces)"))
+                return mav.MAV_RESULT_FAILED
+            v.armed = False
+            if v.spec.has_autopilot:
+                cmd = _vocab({"throttle": 0.0})
+                if isinstance(cmd, Command):
+                    out.commands.append(cmd)
+            return mav.MAV_RESULT_ACCEPTED
+        return mav.MAV_RESULT_DENIED
+
+    def _do_set_mode(self, v: MavVehicle, req: CommandRequest, tick: int, out: Outcome) -> int:
+        return self._set_mode(v, _int(req.p[0]), req.p[1], tick, out)
+
+    def _rtl(self, v: MavVehicle, req: CommandRequest, tick: int, out: Outcome) -> int:
+        return self.enter_mode(v, PlaneMode.RTL, tick, out)
+
+    def _nav_takeoff(self, v: MavVehicle, req: CommandRequest, tick: int, out: Outcome) -> int:
+        if math.isfinite(req.z) and req.z > 0:
+            a = self._alt(v, req.frame, req.z)
+            if a is None or a[0] != "alt_msl_m":
+                out.replies.append(_text("TAKEOFF: altitude frame not supported"))
+                return mav.MAV_RESULT_DENIED
+            alt = a[1]
+        else:
+            alt = v.home[2] + v.params["TKOFF_ALT"]
+        return self._takeoff(v, alt, tick, out)
+
+    def _change_speed(self, v: MavVehicle, req: CommandRequest, tick: int, out: Outcome) -> int:
+        kind, spd, thr = _int(req.p[0]), req.p[1], req.p[2]
+        if not v.spec.has_autopilot:
+            out.replies.append(_text("change speed: this vehicle has no autopilot"))
+            return mav.MAV_RESULT_FAILED
+        if kind not in (0, 1):  # airspeed; ground speed flown as airspeed (no wind)
+            return mav.MAV_RESULT_DENIED
+        if not v.armed:
+            out.replies.append(_text("change speed: disarmed"))
+            return mav.MAV_RESULT_FAILED
+        d: dict[str, Any]
+        if math.isfinite(spd) and spd > 0:
+            problem = self._speed_ok(v, spd)
+            if problem:
+                out.replies.append(_text(problem))
+                return mav.MAV_RESULT_DENIED
+            d = {"airspeed_mps": spd}
+        elif math.isfinite(thr) and 0 <= thr <= 100:
+            d = {"throttle": thr / 100.0}
+        else:
+            return mav.MAV_RESULT_DENIED
+        cmd = _vocab(d)
+        if isinstance(cmd, str):
+            return mav.MAV_RESULT_DENIED
+        out.commands.append(cmd)
+        return mav.MAV_RESULT_ACCEPTED
+
+    def _position(self, v: MavVehicle, req: CommandRequest, out: Outcome
+                  ) -> tuple[dict[str, Any], str | None] | None:
+        """The horizontal point and altitude of a positional command (None: DENIED)."""
+        loc = req.location()
+        if loc is None:
+            row = self._row(v)
+            loc = (float(row[_S["lat_deg"]]), float(row[_S["lon_deg"]]))
+        lat, lon = loc
+        if not (-90 <= lat <= 90 and -180 <= lon <= 180):
+            out.replies.append(_text(f"bad position {lat:g}, {lon:g}"))
+            return None
+        d: dict[str, Any] = {"lat_deg": lat, "lon_deg": lon}
+        alt_key = None
+        if math.isfinite(req.z):
+            a = self._alt(v, req.frame, req.z)
+            if a is None:
+                out.replies.append(_text(f"frame {req.frame} not supported"))
+                return None
+            alt_key = a[0]
+            d[a[0]] = a[1]
+        return d, alt_key
+
+    def _reposition(self, v: MavVehicle, req: CommandRequest, tick: int, out: Outcome) -> int:
+        if not v.spec.has_autopilot:
+            out.replies.append(_text("reposition: this vehicle has no autopilot"))
+            return mav.MAV_RESULT_FAILED
+        pos = self._position(v, req, out)
+        if pos is None:
+            return mav.MAV_RESULT_DENIED
+        goto, _ = pos
+        spd, flags, radius, direction = req.p
+        if math.isfinite(spd) and spd > 0 and v.armed:
+            problem = self._speed_ok(v, spd)
+            if problem:
+                out.replies.append(_text(problem))
+                return mav.MAV_RESULT_DENIED
+            goto["airspeed_mps"] = spd
+        default_r, default_ccw = self._radius(v)
+        if math.isfinite(radius) and radius != 0:
+            goto["loiter_radius_m"] = abs(radius)
+            ccw = math.isfinite(direction) and direction != 0
+        else:
+            if default_r:
+                goto["loiter_radius_m"] = default_r
+            ccw = (math.isfinite(direction) and direction != 0) or default_ccw
+        change = (_int(flags) or 0) & mav.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE
+        if v.mode != PlaneMode.GUIDED and not change:
+            out.replies.append(_text("reposition: switch to GUIDED first"))
+            return mav.MAV_RESULT_FAILED
+        cmd = _vocab({"goto": goto})
+        if isinstance(cmd, str):
+            out.replies.append(_text(f"reposition: {cmd}"))
+            return mav.MAV_RESULT_DENIED
+        v.mode = int(PlaneMode.GUIDED)
+        out.commands.append(replace(cmd, loiter_cw=not ccw))
+        return mav.MAV_RESULT_ACCEPTED
+
+    def _loiter_unlim(self, v: MavVehicle, req: CommandRequest, tick: int, out: Outcome) -> int:
+        if not v.spec.has_autopilot:
+            out.replies.append(_text("loiter: this vehicle has no autopilot"))
+            return mav.MAV_RESULT_FAILED
+        radius = req.p[2]
+        lo = self._loiter_here(v)
+        if math.isfinite(radius) and radius != 0:  # ArduPilot: negative = counter-clockwise
+            lo["radius_m"] = abs(radius)
+            lo["direction"] = "ccw" if radius < 0 else "cw"
+        z = req.z if math.isfinite(req.z) and req.z != 0 else math.nan
+        pos = self._position(v, replace(req, z=z), out)
+        if pos is None:
+            return mav.MAV_RESULT_DENIED
+        point, alt_key = pos
+        if req.location() is not None:
+            lo["center"] = {"lat_deg": point["lat_deg"], "lon_deg": point["lon_deg"]}
+        if alt_key is not None:
+            lo[alt_key] = point[alt_key]
+        cmd = _vocab({"loiter": lo})
+        if isinstance(cmd, str):
+            out.replies.append(_text(f"loiter: {cmd}"))
+            return mav.MAV_RESULT_DENIED
+        v.mode = int(PlaneMode.LOITER)
+        out.commands.append(cmd)
+        return mav.MAV_RESULT_ACCEPTED
+
+    def _send_message(self, v: MavVehicle, name: str | None, tick: int, out: Outcome) -> int:
+        if name not in STREAMABLE:
+            return mav.MAV_RESULT_DENIED
+        out.replies.append((name, v.fields(name, tick)))
+        return mav.MAV_RESULT_ACCEPTED
+
+    def _request_message(self, v: MavVehicle, req: CommandRequest, tick: int, out: Outcome
+                         ) -> int:
+        mid = _int(req.p[0])
+        return self._send_message(v, None if mid is None else mav.msg_name(mid), tick, out)
+
+    def _request_capabilities(self, v: MavVehicle, req: CommandRequest, tick: int,
+                              out: Outcome) -> int:
+        if _int(req.p[0]) != 1:
+            return mav.MAV_RESULT_ACCEPTED  # nothing requested
+        return self._send_message(v, "AUTOPILOT_VERSION", tick, out)
+
+    def _get_home(self, v: MavVehicle, req: CommandRequest, tick: int, out: Outcome) -> int:
+        return self._send_message(v, "HOME_POSITION", tick, out)
+
+    def _set_interval(self, v: MavVehicle, req: CommandRequest, tick: int, out: Outcome) -> int:
+        mid, interval = _int(req.p[0]), req.p[1]
+        name = None if mid is None else mav.msg_name(mid)
+        if name not in STREAMABLE or not math.isfinite(interval) or interval < -1:
+            return mav.MAV_RESULT_DENIED
+        hz = self.physics_hz
+        if interval == -1:
+            period = None
+        elif interval == 0:
+            period = period_ticks(DEFAULT_RATES_HZ.get(name, 0.0), hz)
+        else:
+            period = max(1, round(interval * 1e-6 * hz))
+        v.set_period(name, period, tick)
+        return mav.MAV_RESULT_ACCEPTED
+
+    def _get_interval(self, v: MavVehicle, req: CommandRequest, tick: int, out: Outcome) -> int:
+        mid = _int(req.p[0])
+        name = None if mid is None else mav.msg_name(mid)
+        if mid is None or not 0 <= mid <= 0xFFFFFF:
+            return mav.MAV_RESULT_DENIED
+        if name not in STREAMABLE:
+            us = 0  # not available
+        else:
+            p = v.period[name]
+            us = -1 if p is None else round(p * 1e6 / self.physics_hz)
+        out.replies.append(("MESSAGE_INTERVAL", {"message_id": mid, "interval_us": us}))
+        return mav.MAV_RESULT_ACCEPTED
+
+    _commands: dict[int, Callable[[Handler, MavVehicle, CommandRequest, int, Outcome], int]] = {
+        mav.MAV_CMD_COMPONENT_ARM_DISARM: _arm_disarm,
+        mav.MAV_CMD_DO_SET_MODE: _do_set_mode,
+        mav.MAV_CMD_NAV_RETURN_TO_LAUNCH: _rtl,
+        mav.MAV_CMD_NAV_TAKEOFF: _nav_takeoff,
+        mav.MAV_CMD_DO_CHANGE_SPEED: _change_speed,
+        mav.MAV_CMD_DO_REPOSITION: _reposition,
+        mav.MAV_CMD_NAV_LOITER_UNLIM: _loiter_unlim,
+        mav.MAV_CMD_REQUEST_MESSAGE: _request_message,
+        mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: _request_capabilities,
+        mav.MAV_CMD_GET_HOME_POSITION: _get_home,
+        mav.MAV_CMD_SET_MESSAGE_INTERVAL: _set_interval,
+        mav.MAV_CMD_GET_MESSAGE_INTERVAL: _get_interval,
+    }
+
+    # -- position targets (no ACK, as in ArduPilot) ------------------------------
+    def _target_ok(self, v: MavVehicle) -> bool:
+        if not v.spec.has_autopilot or v.mode != PlaneMode.GUIDED:
+            self.counts["position_targets_ignored"] += 1  # ArduPlane: GUIDED only
+            return False
+        return True
+
+    def _target_cmd(self, d: dict[str, Any]) -> Outcome:
+        cmd = _vocab(d)
+        if isinstance(cmd, str):
+            self.counts["position_targets_invalid"] += 1
+            log.debug("position target rejected: %s", cmd)
+            return Outcome()
+        return Outcome(commands=[cmd])
+
+    @staticmethod
+    def _mask(type_mask: int) -> tuple[bool, bool] | None:
+        """(horizontal position given, altitude given); None: unusable mask."""
+        xy = type_mask & (mav.POSITION_TARGET_TYPEMASK_X_IGNORE
+                          | mav.POSITION_TARGET_TYPEMASK_Y_IGNORE)
+        if xy not in (0, mav.POSITION_TARGET_TYPEMASK_X_IGNORE
+                      | mav.POSITION_TARGET_TYPEMASK_Y_IGNORE):
+            return None
+        has_xy = xy == 0
+        has_z = not type_mask & mav.POSITION_TARGET_TYPEMASK_Z_IGNORE
+        return (has_xy, has_z) if (has_xy or has_z) else None
+
+    def _target_global(self, v: MavVehicle, m: mav.Message, tick: int) -> Outcome:
+        if not self._target_ok(v):
+            return Outcome()
+        f = m.fields
+        mask = self._mask(int(f["type_mask"]))
+        alt = self._alt(v, int(f["coordinate_frame"]), float(f["alt"]))
+        if mask is None or alt is None:
+            self.counts["position_targets_unsupported"] += 1
+            return Outcome()
+        has_xy, has_z = mask
+        d: dict[str, Any] = {alt[0]: alt[1]} if has_z else {}
+        if has_xy:
+            d.update(lat_deg=int(f["lat_int"]) / 1e7, lon_deg=int(f["lon_int"]) / 1e7)
+            return self._target_cmd({"goto": d})
+        return self._target_cmd(d)
+
+    def _target_local(self, v: MavVehicle, m: mav.Message, tick: int) -> Outcome:
+        if not self._target_ok(v):
+            return Outcome()
+        f = m.fields
+        mask = self._mask(int(f["type_mask"]))
+        frame = int(f["coordinate_frame"])
+        x, y, z = float(f["x"]), float(f["y"]), float(f["z"])
+        if mask is None or frame not in (mav.MAV_FRAME_LOCAL_NED, mav.MAV_FRAME_LOCAL_OFFSET_NED,
+                                         mav.MAV_FRAME_BODY_OFFSET_NED) \
+                or not all(map(math.isfinite, (x, y, z))):
+            self.counts["position_targets_unsupported"] += 1
+            return Outcome()
+        has_xy, has_z = mask
+        row = self._row(v)
+        if frame == mav.MAV_FRAME_LOCAL_NED:  # relative to the vehicle's start
+            alt = v.spec.start_alt_msl_m - z
+            if not has_xy:
+                return self._target_cmd({"alt_msl_m": alt})
+            goto: dict[str, Any] = {"frame": "start", "north_m": x, "east_m": y}
+        else:  # offsets from where the vehicle is now
+            lat0, lon0 = float(row[_S["lat_deg"]]), float(row[_S["lon_deg"]])
+            alt0 = float(row[_S["alt_msl_m"]])
+            alt = alt0 - z
+            if not has_xy:
+                return self._target_cmd({"alt_msl_m": alt})
+            north, east = x, y
+            if frame == mav.MAV_FRAME_BODY_OFFSET_NED:  # x forward, y right
+                psi = math.radians(float(row[_S["yaw_deg"]]))
+                north = x * math.cos(psi) - y * math.sin(psi)
+                east = x * math.sin(psi) + y * math.cos(psi)
+            lat, lon = LocalFrame(lat0, lon0, alt0).place(north, east, alt0)
+            goto = {"lat_deg": float(lat), "lon_deg": float(lon)}
+        if has_z:
+            goto["alt_msl_m"] = alt
+        return self._target_cmd({"goto": goto})
+
+    # -- parameters ------------------------------------------------------------
+    def _param_value(self, v: MavVehicle, index: int) -> Reply:
+        p = PARAM_DEFS[index]
+        return ("PARAM_VALUE", {"param_id": p.name, "param_value": v.params.values[index],
+                                "param_type": p.mav_type, "param_count": len(PARAM_DEFS),
+                                "param_index": index})
+
+    def _param_list(self, v: MavVehicle, m: mav.Message, tick: int) -> Outcome:
+        return Outcome(replies=[self._param_value(v, i) for i in range(len(PARAM_DEFS))])
+
+    def _param_read(self, v: MavVehicle, m: mav.Message, tick: int) -> Outcome:
+        idx = int(m.fields["param_index"])
+        if idx < 0:
+            idx = PARAM_INDEX.get(str(m.fields["param_id"]).strip("\0 "), -1)
+        if not 0 <= idx < len(PARAM_DEFS):
+            self.counts["param_unknown"] += 1
+            return Outcome()
+        return Outcome(replies=[self._param_value(v, idx)])
+
+    def _param_set(self, v: MavVehicle, m: mav.Message, tick: int) -> Outcome:
+        name = str(m.fields["param_id"]).strip("\0 ")
+        idx = PARAM_INDEX.get(name)
+        if idx is None:
+            self.counts["param_unknown"] += 1
+            return Outcome()
+        value = float(m.fields["param_value"])
+        out = Outcome()
+        problem = v.params.set(name, value)
+        if problem:
+            self.counts["param_rejected"] += 1
+            out.replies.append(_text(f"{name}: {problem}"))
+        else:
+            d: dict[str, Any] | None = None
+            if name == "ROLL_LIMIT_DEG":
+                d = {"bank_limit_deg": v.params[name]}
+            elif name == "STALL_PREVENTION":
+                d = {"stall_protection": bool(v.params[name])}
+            if d is not None and v.spec.has_autopilot:
+                cmd = _vocab(d)
+                if isinstance(cmd, Command):
+                    out.commands.append(cmd)
+        out.replies.append(self._param_value(v, idx))  # the value now in force
+        return out
+
+    # -- FTP: always NAK, so ground stations fall back at once --------------------
+    def _ftp(self, v: MavVehicle, m: mav.Message, tick: int) -> Outcome:
+        payload = bytes(int(b) & 0xFF for b in m.fields["payload"])
+        if len(payload) < _FTP_HEADER.size:
+            return Outcome()
+        seq, session, opcode = _FTP_HEADER.unpack_from(payload)[:3]
+        if opcode in (_FTP_ACK, _FTP_NAK):  # a response, not a request: never answer
+            return Outcome()
+        err = (_FTP_ERR_FILE_NOT_FOUND if opcode in _FTP_PATH_OPS else
+               _FTP_ERR_INVALID_SESSION if opcode in _FTP_SESSION_OPS else _FTP_ERR_FAIL)
+        head = _FTP_HEADER.pack((seq + 1) % 65536, session, _FTP_NAK, 1, opcode, 0, 0, 0)
+        body = list(head + bytes([err]))
+        self.counts["ftp_naks"] += 1
+        return Outcome(replies=[("FILE_TRANSFER_PROTOCOL", {
+            "target_network": 0, "target_system": m.src_system,
+            "target_component": m.src_component, "payload": body + [0] * (251 - len(body))})])

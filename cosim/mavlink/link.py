@@ -1,0 +1,177 @@
+"""One non-blocking UDP socket carrying every vehicle's MAVLink traffic.
+
+URLs follow pymavlink:
+
+- ``udpout:HOST:PORT`` (default ``udpout:127.0.0.1:14550``, where ground
+  stations listen): send to HOST:PORT from an ephemeral local port, and also
+  answer whoever talks to us.
+- ``udpin:HOST:PORT`` (``udp:`` is an alias): listen on HOST:PORT and answer
+  whoever talks to us.
+
+The socket binds to loopback unless the user names another address: for
+``udpin`` the named HOST is the bind address; for ``udpout`` to a remote
+host, the local address the OS routes to that host (never all interfaces).
+
+There is no thread: ``poll()`` is called once per exchange and returns the
+datagrams waiting, at most ``max_datagrams`` of them, so a flood cannot stall
+the simulation (the rest wait in the kernel buffer or are dropped by it).
+Peers are remembered (up to ``max_peers``) once they send a valid MAVLink
+packet; every outgoing packet goes to every peer.
+"""
+
+from __future__ import annotations
+
+import errno
+import ipaddress
+import logging
+import socket
+from collections import Counter
+from dataclasses import dataclass
+
+from cosim.errors import ConfigError
+from cosim.mavlink.errors import LinkError
+
+log = logging.getLogger(__name__)
+
+DEFAULT_URL = "udpout:127.0.0.1:14550"
+Address = tuple[str, int]
+_MODES = {"udpout": "udpout", "udpin": "udpin", "udp": "udpin"}
+
+
+@dataclass(frozen=True)
+class LinkUrl:
+    mode: str  # "udpout" or "udpin"
+    host: str
+    port: int
+
+    @classmethod
+    def parse(cls, url: str) -> LinkUrl:
+        """Parse ``udpout:HOST:PORT`` / ``udpin:HOST:PORT``; ConfigError otherwise."""
+        usage = (f"mavlink URL {url!r}: expected udpout:HOST:PORT (send to a ground station) "
+                 f"or udpin:HOST:PORT (listen), e.g. {DEFAULT_URL}")
+        parts = url.strip().split(":")
+        if len(parts) != 3 or parts[0].lower() not in _MODES or not parts[1]:
+            raise ConfigError(usage)
+        try:
+            port = int(parts[2])
+        except ValueError:
+            raise ConfigError(f"{usage}; port {parts[2]!r} is not a number") from None
+        mode = _MODES[parts[0].lower()]
+        if not 0 <= port <= 65535 or (mode == "udpout" and port == 0):
+            raise ConfigError(f"{usage}; port {port} out of range")
+        return cls(mode, parts[1], port)
+
+    def __str__(self) -> str:
+        return f"{self.mode}:{self.host}:{self.port}"
+
+
+def _resolve(host: str) -> str:
+    try:
+        return str(socket.getaddrinfo(host, None, socket.AF_INET, socket.SOCK_DGRAM)[0][4][0])
+    except socket.gaierror as e:
+        raise ConfigError(f"mavlink: cannot resolve host {host!r}: {e}") from None
+
+
+def _route_source(ip: str) -> str:
+    """The local address the OS would send from to reach ``ip``."""
+    if ipaddress.ip_address(ip).is_loopback:
+        return "127.0.0.1"
+    probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        probe.connect((ip, 9))  # UDP connect sends nothing; it only picks a route
+        return str(probe.getsockname()[0])
+    except OSError as e:
+        raise LinkError(f"mavlink: no route to {ip}: {e}") from None
+    finally:
+        probe.close()
+
+
+class UdpLink:
+    """The shared MAVLink socket (see the module docstring)."""
+
+    def __init__(self, url: str | LinkUrl = DEFAULT_URL, max_peers: int = 16,
+                 max_datagrams: int = 1000) -> None:
+        self.url = url if isinstance(url, LinkUrl) else LinkUrl.parse(url)
+        if max_peers < 1 or max_datagrams < 1:
+            raise ValueError(f"max_peers and max_datagrams must be >= 1, got {max_peers}, "
+                             f"{max_datagrams}")
+        self.max_peers = max_peers
+        self.max_datagrams = max_datagrams
+        self.counts: Counter[str] = Counter({k: 0 for k in (
+            "datagrams_in", "datagrams_out", "bytes_in", "bytes_out", "send_errors",
+            "recv_errors", "poll_capped", "peers_refused")})
+        ip = _resolve(self.url.host)
+        self.peers: list[Address] = []
+        if self.url.mode == "udpout":
+            bind: Address = (_route_source(ip), 0)
+            self.peers.append((ip, self.url.port))
+        else:
+            bind = (ip, self.url.port)
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            sock.setblocking(False)
+            sock.bind(bind)
+        except OSError as e:
+            sock.close()
+            hint = " (another program or simulation uses it; pick another port)" \
+                if e.errno == errno.EADDRINUSE else ""
+            raise LinkError(f"mavlink {self.url}: cannot bind {bind[0]}:{bind[1]}: "
+                            f"{e.strerror or e}{hint}") from None
+        self._sock: socket.socket | None = sock
+        self.local_address: Address = sock.getsockname()
+        log.info("mavlink %s on %s:%d", self.url, *self.local_address)
+
+    @property
+    def closed(self) -> bool:
+        return self._sock is None
+
+    def _socket(self) -> socket.socket:
+        if self._sock is None:
+            raise LinkError(f"mavlink {self.url}: the link is closed")
+        return self._sock
+
+    def poll(self) -> list[tuple[bytes, Address]]:
+        """The datagrams waiting now (at most ``max_datagrams``); never blocks."""
+        sock = self._socket()
+        out: list[tuple[bytes, Address]] = []
+        for _ in range(self.max_datagrams):
+            try:
+                data, addr = sock.recvfrom(65535)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError:  # e.g. ICMP errors surfacing on some platforms
+                self.counts["recv_errors"] += 1
+                continue
+            out.append((data, (str(addr[0]), int(addr[1]))))
+            self.counts["bytes_in"] += len(data)
+        else:
+            self.counts["poll_capped"] += 1
+        self.counts["datagrams_in"] += len(out)
+        return out
+
+    def remember(self, addr: Address) -> None:
+        """Answer ``addr`` from now on (it sent a valid MAVLink packet)."""
+        if addr in self.peers:
+            return
+        if len(self.peers) >= self.max_peers:
+            self.counts["peers_refused"] += 1
+            return
+        self.peers.append(addr)
+        log.info("mavlink: new peer %s:%d", *addr)
+
+    def send(self, packet: bytes) -> None:
+        """Send one packet to every peer (errors are counted, never raised)."""
+        sock = self._socket()
+        for addr in self.peers:
+            try:
+                sock.sendto(packet, addr)
+                self.counts["datagrams_out"] += 1
+                self.counts["bytes_out"] += len(packet)
+            except OSError:  # buffer full, unreachable: UDP is lossy anyway
+                self.counts["send_errors"] += 1
+
+    def close(self) -> None:
+        """Close the socket (safe to call twice)."""
+        if self._sock is not None:
+            self._sock.close()
+            self._sock = None

@@ -1,0 +1,64 @@
+"""Telemetry logs (``.tlog``) in the standard format ground stations write.
+
+Each record is an 8-byte big-endian timestamp in microseconds since the
+unix epoch followed by one raw MAVLink packet; pymavlink's
+``mavutil.mavlink_connection("x.tlog")``, ``mavlogdump.py``, MAVExplorer
+and Mission Planner read them. Timestamps are simulation time anchored to
+a past wall-clock instant (``SimClock.unix_us``), so a run's tlogs do not
+depend on how fast it ran.
+
+Records are buffered during an exchange and written with one unbuffered
+``write`` at ``flush()`` (once per exchange): a crash loses at most the
+exchange in progress.
+"""
+
+from __future__ import annotations
+
+import io
+import struct
+from pathlib import Path
+
+_STAMP = struct.Struct(">Q")
+
+
+class TlogWriter:
+    """One vehicle's tlog (both directions)."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._f: io.FileIO | None = open(self.path, "wb", buffering=0)
+        self._buf = bytearray()
+        self.records = 0
+        self._last_us = 0
+
+    def write(self, unix_us: int, packet: bytes) -> None:
+        """Queue one record; timestamps never go backwards within a file."""
+        if self._f is None:
+            raise ValueError(f"tlog {self.path} is closed")
+        t = max(int(unix_us), self._last_us)
+        self._last_us = t
+        self._buf += _STAMP.pack(t)
+        self._buf += packet
+        self.records += 1
+
+    def flush(self) -> None:
+        if self._buf and self._f is not None:
+            view = memoryview(self._buf)
+            while view:
+                n = self._f.write(view)
+                if not n:
+                    raise OSError(f"tlog {self.path}: short write")
+                view = view[n:]
+            self._buf = bytearray()
+
+    @property
+    def closed(self) -> bool:
+        return self._f is None
+
+    def close(self) -> None:
+        """Flush and close (safe to call twice)."""
+        if self._f is not None:
+            self.flush()
+            self._f.close()
+            self._f = None

@@ -1,0 +1,410 @@
+"""One simulated vehicle as an ArduPlane MAVLink vehicle: identity, mode and
+arming state, parameters, telemetry built from its state row, and the
+per-message schedule.
+
+Telemetry is stamped from SIMULATION time only (``SimClock``): boot is tick
+0, ``time_boot_ms`` counts simulated milliseconds, and unix times are a
+wall-clock anchor plus simulated time. Nothing here reads the wall clock.
+
+Streams are scheduled on integer ticks: each message has a period of
+``max(1, round(physics_hz / rate_hz))`` ticks and a next-due tick; at an
+exchange a message is sent once if it is due, and its next-due tick moves on
+by whole periods, so the long-run rate is exactly ``physics_hz / period``
+whatever the exchange interval (never more than once per exchange).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from enum import IntEnum
+from typing import Any
+
+import numpy as np
+
+from cosim.fdm_pool.spec import STATE_INDEX, VehicleSpec, VehicleStatus
+from cosim.geo import KT_TO_MPS
+from cosim.mavlink import adapter as mav
+from cosim.mavlink.params import ParamTable
+
+_S = STATE_INDEX
+
+
+class PlaneMode(IntEnum):
+    """ArduPlane custom mode numbers (HEARTBEAT.custom_mode)."""
+
+    MANUAL = 0
+    CIRCLE = 1
+    STABILIZE = 2
+    TRAINING = 3
+    ACRO = 4
+    FBWA = 5
+    FBWB = 6
+    CRUISE = 7
+    AUTOTUNE = 8
+    AUTO = 10
+    RTL = 11
+    LOITER = 12
+    TAKEOFF = 13
+    AVOID_ADSB = 14
+    GUIDED = 15
+    THERMAL = 24
+
+
+def mode_name(number: int) -> str:
+    try:
+        return PlaneMode(number).name
+    except ValueError:
+        return f"mode {number}"
+
+
+#: modes in which ArduPlane reports MAV_MODE_FLAG_MANUAL_INPUT_ENABLED only
+_MANUAL_MODES = {PlaneMode.MANUAL, PlaneMode.TRAINING, PlaneMode.ACRO}
+#: modes ArduPlane reports as GUIDED_ENABLED | STABILIZE_ENABLED
+_GUIDED_MODES = {PlaneMode.AUTO, PlaneMode.RTL, PlaneMode.LOITER, PlaneMode.AVOID_ADSB,
+                 PlaneMode.GUIDED, PlaneMode.CIRCLE, PlaneMode.TAKEOFF, PlaneMode.THERMAL}
+
+#: what ArduPlane 4.5.0 (official) would report; ground stations gate features on it
+FLIGHT_SW_VERSION = (4 << 24) | (5 << 16) | (0 << 8) | mav.FIRMWARE_VERSION_TYPE_OFFICIAL
+CAPABILITIES = (mav.CAP_MAVLINK2 | mav.CAP_COMMAND_INT | mav.CAP_PARAM_ENCODE_C_CAST
+                | mav.CAP_SET_POSITION_TARGET_GLOBAL_INT | mav.CAP_SET_POSITION_TARGET_LOCAL_NED)
+
+_SENSORS = (mav.SENSOR_GYRO | mav.SENSOR_ACCEL | mav.SENSOR_MAG | mav.SENSOR_ABS_PRESSURE
+            | mav.SENSOR_DIFF_PRESSURE | mav.SENSOR_GPS | mav.SENSOR_AHRS)
+_CONTROL = (mav.SENSOR_RATE_CONTROL | mav.SENSOR_ATTITUDE_CONTROL | mav.SENSOR_YAW_CONTROL
+            | mav.SENSOR_Z_CONTROL | mav.SENSOR_XY_CONTROL)
+_PRESENT = (_SENSORS | _CONTROL | mav.SENSOR_MOTOR_OUTPUTS | mav.SENSOR_GEOFENCE
+            | mav.SENSOR_PREARM_CHECK)
+
+#: messages a vehicle can produce on request or as a stream
+STREAMABLE: tuple[str, ...] = (
+    "HEARTBEAT", "GLOBAL_POSITION_INT", "ATTITUDE", "VFR_HUD", "SYS_STATUS", "GPS_RAW_INT",
+    "SYSTEM_TIME", "HOME_POSITION", "EXTENDED_SYS_STATE", "AUTOPILOT_VERSION")
+#: default stream rates (Hz); streamable messages not listed are sent on request only
+DEFAULT_RATES_HZ: Mapping[str, float] = {
+    "HEARTBEAT": 1.0, "GLOBAL_POSITION_INT": 5.0, "ATTITUDE": 5.0, "VFR_HUD": 2.0,
+    "SYS_STATUS": 1.0, "GPS_RAW_INT": 1.0, "SYSTEM_TIME": 1.0}
+
+#: ArduPilot's magic param2 of COMPONENT_ARM_DISARM that forces (dis)arming
+FORCE_MAGIC = 21196
+#: system ids a vehicle may take (0 is broadcast; 251..255 are left to ground stations)
+SYSID_RANGE = (1, 250)
+
+
+def check_rates(rates_hz: Mapping[str, float]) -> list[str]:
+    """Problems with a stream-rate mapping (message name -> Hz, 0 = off)."""
+    problems = []
+    for name, hz in rates_hz.items():
+        if name not in STREAMABLE:
+            problems.append(f"{name!r} is not a message cosim streams; streamable: "
+                            f"{', '.join(STREAMABLE)}")
+        elif isinstance(hz, bool) or not isinstance(hz, (int, float)) or not math.isfinite(hz) \
+                or hz < 0:
+            problems.append(f"{name}: rate must be a number >= 0 (Hz, 0 = off), got {hz!r}")
+    return problems
+
+
+def period_ticks(rate_hz: float, physics_hz: float) -> int | None:
+    """Stream period in ticks for a rate (None: off)."""
+    if rate_hz <= 0:
+        return None
+    return max(1, round(physics_hz / rate_hz))
+
+
+@dataclass(frozen=True)
+class SimClock:
+    """Simulation time for MAVLink: boot at tick 0, unix time = anchor + sim time."""
+
+    physics_hz: float
+    anchor_unix_us: int
+
+    def sim_us(self, tick: int) -> int:
+        return int(tick * 1_000_000 // self.physics_hz)
+
+    def boot_ms(self, tick: int) -> int:
+        return (self.sim_us(tick) // 1000) % 2 ** 32
+
+    def unix_us(self, tick: int) -> int:
+        return self.anchor_unix_us + self.sim_us(tick)
+
+
+@dataclass(frozen=True)
+class MavVehicleSpec:
+    """How one simulated vehicle appears on MAVLink.
+
+    ``row`` is its row in the state array (and the index commands are
+    returned with); ``home_alt_msl_m`` the ground under its start (ArduPilot's
+    home is where it armed on the ground). ``mode`` None: GUIDED with an
+    autopilot (outside guidance drives it), MANUAL without one.
+    """
+
+    row: int
+    sysid: int
+    name: str
+    start_lat_deg: float
+    start_lon_deg: float
+    start_alt_msl_m: float
+    home_alt_msl_m: float
+    has_autopilot: bool = True
+    armed: bool = True
+    mode: int | None = None
+    params: Mapping[str, float] = field(default_factory=dict)
+
+
+def mav_specs(vehicles: Sequence[VehicleSpec], autopilot: bool = True, first_sysid: int = 1,
+              first_row: int = 0) -> list[MavVehicleSpec]:
+    """MAVLink identities for scenario vehicles: system ids ``first_sysid``
+    upwards, airspeed limits from each model's profile, cruise speed from
+    its initial airspeed."""
+    out = []
+    for k, v in enumerate(vehicles):
+        params: dict[str, float] = {}
+        lo_kt, hi_kt = v.profile.get("airspeed_min_kt"), v.profile.get("airspeed_max_kt")
+        lo = math.ceil(lo_kt * KT_TO_MPS) if isinstance(lo_kt, (int, float)) else None
+        hi = math.floor(hi_kt * KT_TO_MPS) if isinstance(hi_kt, (int, float)) else None
+        if lo is not None:
+            params["AIRSPEED_MIN"] = lo
+        if hi is not None:
+            params["AIRSPEED_MAX"] = hi
+        cruise = v.airspeed_mps
+        if lo is not None:
+            cruise = max(cruise, lo)
+        if hi is not None:
+            cruise = min(cruise, hi)
+        params["AIRSPEED_CRUISE"] = round(cruise, 2)
+        out.append(MavVehicleSpec(row=first_row + k, sysid=first_sysid + k, name=v.id,
+                                  start_lat_deg=v.lat_deg, start_lon_deg=v.lon_deg,
+                                  start_alt_msl_m=v.alt_msl_m, home_alt_msl_m=v.terrain_alt_m,
+                                  has_autopilot=autopilot, params=params))
+    return out
+
+
+def _i(x: float, lo: int, hi: int, nan: int = 0) -> int:
+    """Round into an integer field's range (NaN -> ``nan``)."""
+    if x != x:
+        return nan
+    return int(min(max(round(x), lo), hi))
+
+
+ATTITUDE_COLUMNS = [_S["roll_deg"], _S["pitch_deg"], _S["yaw_deg"]]
+
+
+def body_rates(prev_deg: np.ndarray, cur_deg: np.ndarray, dt_s: float) -> np.ndarray:
+    """Body rates p, q, r (rad/s) from two samples of (roll, pitch, yaw) in
+    degrees ``dt_s`` apart, per row (vectorised; non-finite results are 0)."""
+    prev = np.radians(prev_deg)
+    cur = np.radians(cur_deg)
+    d = cur - prev
+    d[:, 0] = np.remainder(d[:, 0] + np.pi, 2 * np.pi) - np.pi
+    d[:, 2] = np.remainder(d[:, 2] + np.pi, 2 * np.pi) - np.pi
+    dphi, dtheta, dpsi = (d / dt_s).T
+    phi, theta = cur[:, 0], cur[:, 1]
+    sphi, cphi, ctheta = np.sin(phi), np.cos(phi), np.cos(theta)
+    pqr = np.stack([dphi - dpsi * np.sin(theta),
+                    dtheta * cphi + dpsi * sphi * ctheta,
+                    -dtheta * sphi + dpsi * cphi * ctheta], axis=1)
+    return np.where(np.isfinite(pqr), pqr, 0.0)
+
+
+def _cdeg(deg: float) -> int:
+    """An angle in centidegrees 0..35999 (65535: unknown)."""
+    if not math.isfinite(deg):
+        return 65535
+    return round((deg % 360.0) * 100.0) % 36000
+
+
+def safe_name(name: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("._") or "vehicle"
+
+
+class MavVehicle:
+    """Mutable MAVLink-side state of one vehicle."""
+
+    def __init__(self, spec: MavVehicleSpec, clock: SimClock,
+                 rates_hz: Mapping[str, float]) -> None:
+        lo, hi = SYSID_RANGE
+        if not lo <= spec.sysid <= hi:
+            raise ValueError(f"vehicle {spec.name!r}: system id must be {lo}..{hi}, "
+                             f"got {spec.sysid}")
+        self.spec = spec
+        self.row = spec.row
+        self.sysid = spec.sysid
+        self.clock = clock
+        self.packer = mav.Packer(spec.sysid)
+        self.params = ParamTable(spec.params)
+        self.params.force("SYSID_THISMAV", spec.sysid)
+        self.armed = spec.armed
+        default = PlaneMode.GUIDED if spec.has_autopilot else PlaneMode.MANUAL
+        self.mode = int(default if spec.mode is None else spec.mode)
+        self.home = (spec.start_lat_deg, spec.start_lon_deg, spec.home_alt_msl_m)
+        self.period: dict[str, int | None] = {
+            n: period_ticks(rates_hz.get(n, DEFAULT_RATES_HZ.get(n, 0.0)), clock.physics_hz)
+            for n in STREAMABLE}
+        self.next_due: dict[str, int | None] = {n: None for n in STREAMABLE}
+        self.body_rates = (0.0, 0.0, 0.0)  # p, q, r (rad/s)
+        self.status = int(VehicleStatus.ACTIVE)
+        self.row_values: Sequence[float] | None = None  # the latest state row
+
+    # -- state -------------------------------------------------------------
+    def observe(self, row: Sequence[float], body_rates: Sequence[float]) -> None:
+        """Take this exchange's state row (as Python floats) and body rates
+        (p, q, r in rad/s, from ``body_rates``); before any telemetry."""
+        self.row_values = row
+        self.body_rates = (float(body_rates[0]), float(body_rates[1]), float(body_rates[2]))
+        status = row[_S["status"]]
+        self.status = int(status) if status == status else int(VehicleStatus.DIVERGED)
+        bank = row[_S["bank_limit_deg"]]
+        if self.spec.has_autopilot and 5.0 <= bank <= 75.0:  # the autopilot's actual limit
+            self.params.force("ROLL_LIMIT_DEG", bank)
+
+    def in_air(self) -> bool:
+        row = self.row_values
+        return (row is not None and self.status == VehicleStatus.ACTIVE
+                and row[_S["alt_agl_m"]] > 1.0)
+
+    def prearm_ok(self) -> bool:
+        return self.status == VehicleStatus.ACTIVE
+
+    def base_mode(self) -> int:
+        """HEARTBEAT.base_mode as ArduPlane computes it (stick mixing off: no RC)."""
+        m = self.mode
+        if m in _MANUAL_MODES:
+            bm = mav.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
+        elif m in _GUIDED_MODES:
+            bm = mav.MAV_MODE_FLAG_GUIDED_ENABLED | mav.MAV_MODE_FLAG_STABILIZE_ENABLED
+        else:
+            bm = mav.MAV_MODE_FLAG_STABILIZE_ENABLED
+        if self.armed:
+            bm |= mav.MAV_MODE_FLAG_SAFETY_ARMED
+        return bm | mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+
+    def system_status(self) -> int:
+        if self.status != VehicleStatus.ACTIVE:
+            return mav.MAV_STATE_EMERGENCY
+        return mav.MAV_STATE_ACTIVE if self.armed else mav.MAV_STATE_STANDBY
+
+    # -- schedule ----------------------------------------------------------
+    def due(self, tick: int) -> list[str]:
+        """Streams due at ``tick``; advances their next-due ticks."""
+        out = []
+        for name, p in self.period.items():
+            if p is None:
+                continue
+            nd = self.next_due[name]
+            if nd is None:
+                nd = tick
+            if tick >= nd:
+                out.append(name)
+                nd += p * ((tick - nd) // p + 1)
+            self.next_due[name] = nd
+        return out
+
+    def set_period(self, name: str, period: int | None, tick: int) -> None:
+        self.period[name] = period
+        self.next_due[name] = tick  # starts at the next telemetry pass
+
+    # -- telemetry ---------------------------------------------------------
+    def fields(self, name: str, tick: int) -> dict[str, Any]:
+        """The fields of a streamable message at ``tick`` (needs ``observe`` first,
+        except for HEARTBEAT, SYSTEM_TIME and AUTOPILOT_VERSION)."""
+        fields: dict[str, Any] = getattr(self, "_f_" + name.lower())(tick)
+        return fields
+
+    def _row(self) -> Sequence[float]:
+        if self.row_values is None:
+            raise RuntimeError(f"vehicle {self.spec.name!r}: no state observed yet")
+        return self.row_values
+
+    def _f_heartbeat(self, tick: int) -> dict[str, Any]:
+        return {"type": mav.MAV_TYPE_FIXED_WING, "autopilot": mav.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                "base_mode": self.base_mode(), "custom_mode": self.mode,
+                "system_status": self.system_status(), "mavlink_version": 3}
+
+    def _f_global_position_int(self, tick: int) -> dict[str, Any]:
+        r = self._row()
+        alt = float(r[_S["alt_msl_m"]])
+        return {"time_boot_ms": self.clock.boot_ms(tick),
+                "lat": _i(r[_S["lat_deg"]] * 1e7, -900_000_000, 900_000_000),
+                "lon": _i(r[_S["lon_deg"]] * 1e7, -1_800_000_000, 1_800_000_000),
+                "alt": _i(alt * 1000.0, -2 ** 31, 2 ** 31 - 1),
+                "relative_alt": _i((alt - self.home[2]) * 1000.0, -2 ** 31, 2 ** 31 - 1),
+                "vx": _i(r[_S["vn_mps"]] * 100.0, -32768, 32767),
+                "vy": _i(r[_S["ve_mps"]] * 100.0, -32768, 32767),
+                "vz": _i(r[_S["vd_mps"]] * 100.0, -32768, 32767),
+                "hdg": _cdeg(float(r[_S["yaw_deg"]]))}
+
+    def _f_attitude(self, tick: int) -> dict[str, Any]:
+        r = self._row()
+        p, q, rr = self.body_rates
+        return {"time_boot_ms": self.clock.boot_ms(tick),
+                "roll": math.radians(r[_S["roll_deg"]]),
+                "pitch": math.radians(r[_S["pitch_deg"]]),
+                "yaw": math.remainder(math.radians(r[_S["yaw_deg"]]), math.tau),
+                "rollspeed": p, "pitchspeed": q, "yawspeed": rr}
+
+    def _f_vfr_hud(self, tick: int) -> dict[str, Any]:
+        r = self._row()
+        yaw = float(r[_S["yaw_deg"]])
+        return {"airspeed": float(r[_S["airspeed_mps"]]),
+                "groundspeed": math.hypot(r[_S["vn_mps"]], r[_S["ve_mps"]]),
+                "heading": int(yaw % 360.0) % 360 if math.isfinite(yaw) else 0,
+                "throttle": _i(float(r[_S["throttle"]]) * 100.0, 0, 100),
+                "alt": float(r[_S["alt_msl_m"]]), "climb": -float(r[_S["vd_mps"]])}
+
+    def _f_sys_status(self, tick: int) -> dict[str, Any]:
+        enabled = _PRESENT
+        if self.mode in _MANUAL_MODES or not self.spec.has_autopilot:
+            enabled &= ~_CONTROL
+        if not self.armed:
+            enabled &= ~mav.SENSOR_MOTOR_OUTPUTS
+        health = _PRESENT if self.prearm_ok() else _PRESENT & ~(mav.SENSOR_PREARM_CHECK
+                                                                  | mav.SENSOR_AHRS)
+        return {"onboard_control_sensors_present": _PRESENT,
+                "onboard_control_sensors_enabled": enabled,
+                "onboard_control_sensors_health": health,
+                "load": 0, "voltage_battery": 65535, "current_battery": -1,
+                "battery_remaining": -1, "drop_rate_comm": 0, "errors_comm": 0,
+                "errors_count1": 0, "errors_count2": 0, "errors_count3": 0, "errors_count4": 0}
+
+    def _f_gps_raw_int(self, tick: int) -> dict[str, Any]:
+        r = self._row()
+        vn, ve = float(r[_S["vn_mps"]]), float(r[_S["ve_mps"]])
+        gs = math.hypot(vn, ve)
+        cog = _cdeg(math.degrees(math.atan2(ve, vn))) if gs > 0.1 else 65535
+        alt_mm = _i(float(r[_S["alt_msl_m"]]) * 1000.0, -2 ** 31, 2 ** 31 - 1)
+        return {"time_usec": self.clock.sim_us(tick), "fix_type": mav.GPS_FIX_TYPE_3D_FIX,
+                "lat": _i(r[_S["lat_deg"]] * 1e7, -900_000_000, 900_000_000),
+                "lon": _i(r[_S["lon_deg"]] * 1e7, -1_800_000_000, 1_800_000_000),
+                "alt": alt_mm, "eph": 100, "epv": 100, "vel": _i(gs * 100.0, 0, 65534),
+                "cog": cog, "satellites_visible": 12,
+                # cosim has no geoid: heights are ellipsoidal throughout (cosim.geo)
+                "alt_ellipsoid": alt_mm, "h_acc": 500, "v_acc": 800, "vel_acc": 100,
+                "hdg_acc": 0, "yaw": 0}
+
+    def _f_system_time(self, tick: int) -> dict[str, Any]:
+        return {"time_unix_usec": self.clock.unix_us(tick),
+                "time_boot_ms": self.clock.boot_ms(tick)}
+
+    def _f_home_position(self, tick: int) -> dict[str, Any]:
+        lat, lon, alt = self.home
+        return {"latitude": _i(lat * 1e7, -900_000_000, 900_000_000),
+                "longitude": _i(lon * 1e7, -1_800_000_000, 1_800_000_000),
+                "altitude": _i(alt * 1000.0, -2 ** 31, 2 ** 31 - 1),
+                # local frame = the vehicle's start (DESIGN.md 3.3): home is below it
+                "x": 0.0, "y": 0.0, "z": float(self.spec.start_alt_msl_m - alt),
+                "q": [1.0, 0.0, 0.0, 0.0], "approach_x": 0.0, "approach_y": 0.0,
+                "approach_z": 0.0, "time_usec": self.clock.sim_us(tick)}
+
+    def _f_extended_sys_state(self, tick: int) -> dict[str, Any]:
+        return {"vtol_state": mav.MAV_VTOL_STATE_UNDEFINED,
+                "landed_state": mav.MAV_LANDED_STATE_IN_AIR if self.in_air()
+                else mav.MAV_LANDED_STATE_ON_GROUND}
+
+    def _f_autopilot_version(self, tick: int) -> dict[str, Any]:
+        return {"capabilities": CAPABILITIES, "flight_sw_version": FLIGHT_SW_VERSION,
+                "middleware_sw_version": 0, "os_sw_version": 0, "board_version": 0,
+                "flight_custom_version": list(b"cosim\0\0\0"),
+                "middleware_custom_version": [0] * 8, "os_custom_version": [0] * 8,
+                "vendor_id": 0, "product_id": 0, "uid": self.sysid}

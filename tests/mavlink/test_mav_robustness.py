@@ -1,0 +1,180 @@
+"""Bad input is counted and ignored; the endpoint's contract (URLs, binding,
+peers, lifecycle, validation) holds."""
+
+from __future__ import annotations
+
+import socket
+
+import numpy as np
+import pytest
+from mavtest import PHYSICS_HZ, mavutil, of_type, state_rows, vehicle_specs
+
+from cosim.errors import ConfigError
+from cosim.fdm_pool.spec import VehicleSpec
+from cosim.mavlink import (
+    EndpointClosed,
+    LinkError,
+    LinkUrl,
+    MavlinkConfig,
+    MavlinkEndpoint,
+    mav_specs,
+)
+from cosim.mavlink.adapter import Decoder, Packer
+
+ML = mavutil.mavlink
+
+
+def _command(target: int = 1) -> bytes:
+    return Packer(255, 190).pack("COMMAND_LONG", target_system=target, target_component=1,
+                                 command=ML.MAV_CMD_NAV_LOITER_UNLIM, confirmation=0,
+                                 param1=0, param2=0, param3=0, param4=0, param5=0, param6=0,
+                                 param7=0)
+
+
+def test_garbage_bad_crc_and_truncated_datagrams_are_counted_and_ignored(rig) -> None:
+    r = rig(2)
+    good = _command()
+    bad_crc = bytearray(good)
+    bad_crc[-1] ^= 0x5A
+    unknown_id = bytearray(Packer(255, 190).pack("HEARTBEAT", type=6, autopilot=8, base_mode=0,
+                                                 custom_mode=0, system_status=0))
+    unknown_id[7:10] = (54321).to_bytes(3, "little")  # a message id no dialect defines
+    datagrams = [b"hello, vehicles", bytes(range(256)), good[:9], good[:-1], bytes(bad_crc),
+                 bytes(unknown_id), b"\xfd", b"\xfe\xff" * 40]
+    before = r.ep.counters()
+    for d in datagrams:
+        r.gcs.send_raw(d)
+    cmds, replies = r.request(lambda: r.gcs.send_raw(b"junk" + good + b"\x00\x01"))
+    for _ in range(10):  # make sure every datagram was read
+        cmds += r.step()
+    after = r.ep.counters()
+    grew = {k: after[k] - before[k] for k in after if after[k] != before[k]}
+    assert grew["garbage"] >= 3 and grew["bad_crc"] >= 1 and grew["truncated"] >= 3
+    assert grew["unknown_message"] == 1
+    assert after["handler_errors"] == 0 and after["decoder_errors"] == 0
+    # the one good command inside the last datagram still got its single ACK
+    assert len(cmds) == 1
+    acks = of_type(replies + r.gcs.drain(wait_s=0.3), "COMMAND_ACK")
+    assert [a.result for a in acks] == [ML.MAV_RESULT_ACCEPTED]
+
+
+def test_decoder_never_raises_and_resyncs_after_random_bytes() -> None:
+    d = Decoder()
+    rng = np.random.default_rng(1)
+    valid = _command()
+    for _ in range(3000):
+        data = rng.integers(0, 256, size=int(rng.integers(0, 300)), dtype=np.uint8).tobytes()
+        d.decode(data)  # anything at all: never raises
+        # noise without start-of-packet markers, then a real packet: always recovered
+        noise = data.replace(b"\xfd", b"").replace(b"\xfe", b"")
+        assert [m.name for m in d.decode(noise + valid)] == ["COMMAND_LONG"]
+    assert d.counts["datagrams"] == 6000 and d.counts["decoder_errors"] == 0
+    assert d.counts["garbage"] > 2000
+
+
+def test_a_command_flood_is_bounded_per_exchange(rig) -> None:
+    r = rig(1, config=MavlinkConfig(url="udpin:127.0.0.1:0", max_datagrams_per_exchange=50))
+    for _ in range(120):
+        r.gcs.send_raw(_command())
+    first = len(r.step())
+    assert first == 50 and r.ep.counters()["poll_capped"] >= 1
+    rest = sum(len(r.step()) for _ in range(10))
+    assert first + rest == 120  # nothing lost on loopback, just spread over exchanges
+
+
+def test_our_own_packets_looped_back_are_dropped(rig) -> None:
+    r = rig(2)
+    echo = Packer(2).pack("COMMAND_LONG", target_system=1, target_component=1,
+                          command=ML.MAV_CMD_NAV_LOITER_UNLIM, confirmation=0, param1=0,
+                          param2=0, param3=0, param4=0, param5=0, param6=0, param7=0)
+    cmds, replies = r.request(lambda: r.gcs.send_raw(echo))
+    assert not cmds and not of_type(replies, "COMMAND_ACK")
+    assert r.ep.counters()["echoes"] == 1
+
+
+def test_peers_are_remembered_and_capped(rig) -> None:
+    r = rig(1, config=MavlinkConfig(url="udpin:127.0.0.1:0", max_peers=2))
+    port = r.ep.local_address[1]
+    socks = [socket.socket(socket.AF_INET, socket.SOCK_DGRAM) for _ in range(3)]
+    try:
+        for s in socks:
+            s.sendto(b"not mavlink", ("127.0.0.1", port))  # garbage does not make a peer
+        r.step()
+        assert len(r.ep.link.peers) == 1
+        for s in socks:
+            s.sendto(_command(), ("127.0.0.1", port))
+        for _ in range(5):
+            r.step()
+        assert len(r.ep.link.peers) == 2 and r.ep.counters()["peers_refused"] >= 1
+    finally:
+        for s in socks:
+            s.close()
+
+
+@pytest.mark.parametrize("url, parsed", [
+    ("udpout:127.0.0.1:14550", ("udpout", "127.0.0.1", 14550)),
+    ("udpin:0.0.0.0:14551", ("udpin", "0.0.0.0", 14551)),
+    ("udp:localhost:14552", ("udpin", "localhost", 14552)),
+])
+def test_url_forms(url: str, parsed: tuple[str, str, int]) -> None:
+    u = LinkUrl.parse(url)
+    assert (u.mode, u.host, u.port) == parsed
+
+
+@pytest.mark.parametrize("url", ["tcp:127.0.0.1:5760", "udpout:127.0.0.1", "udpin::14550",
+                                 "udpout:127.0.0.1:port", "udpout:127.0.0.1:0", "udpin:h:70000"])
+def test_bad_urls_are_config_errors(url: str) -> None:
+    with pytest.raises(ConfigError, match="expected udpout:HOST:PORT"):
+        LinkUrl.parse(url)
+
+
+def test_udpin_binds_to_loopback_and_a_busy_port_is_a_clear_error() -> None:
+    with MavlinkEndpoint(vehicle_specs(1), PHYSICS_HZ,
+                         MavlinkConfig(url="udpin:127.0.0.1:0")) as ep:
+        host, port = ep.local_address
+        assert host == "127.0.0.1" and port > 0 and not ep.link.peers
+        with pytest.raises(LinkError, match=f"cannot bind 127.0.0.1:{port}.*pick another port"):
+            MavlinkEndpoint(vehicle_specs(1), PHYSICS_HZ,
+                            MavlinkConfig(url=f"udpin:127.0.0.1:{port}"))
+
+
+def test_lifecycle_and_argument_errors(tmp_path) -> None:
+    ep = MavlinkEndpoint(vehicle_specs(2), PHYSICS_HZ, MavlinkConfig(url="udpin:127.0.0.1:0"),
+                         tlog_dir=tmp_path)
+    states = state_rows(2)
+    ep.exchange(8, states)
+    ep.exchange(8, states)  # the same tick again is fine
+    with pytest.raises(ValueError, match="tick 4 is before the previous exchange's tick 8"):
+        ep.exchange(4, states)
+    with pytest.raises(ValueError, match=r"states must be \(n >= 2, "):
+        ep.exchange(12, states[:1])
+    ep.close()
+    ep.close()  # twice is fine
+    with pytest.raises(EndpointClosed, match="after close"):
+        ep.exchange(12, states)
+
+
+def test_bad_configuration_is_reported_all_at_once() -> None:
+    specs = vehicle_specs(2)
+    dup = [specs[0], specs[0]]
+    with pytest.raises(ConfigError) as e:
+        MavlinkEndpoint(dup, PHYSICS_HZ, MavlinkConfig(
+            url="udpin:127.0.0.1:0", rates_hz={"ATTITUDE": -1, "MISSION_ITEM": 1}))
+    text = str(e.value)
+    assert "duplicate vehicle system id(s): [1]" in text
+    assert "ATTITUDE: rate must be a number >= 0" in text
+    assert "'MISSION_ITEM' is not a message cosim streams" in text
+    with pytest.raises(ConfigError, match="at most 240"):
+        MavlinkEndpoint(vehicle_specs(241), PHYSICS_HZ)
+
+
+def test_mav_specs_from_scenario_vehicles() -> None:
+    v = VehicleSpec(id="a b", model="c172p", aircraft_dir="", model_source="jsbsim",
+                    lat_deg=47.1, lon_deg=8.2, alt_msl_m=900, heading_deg=0,
+                    airspeed_mps=51.4, terrain_alt_m=420,
+                    profile={"airspeed_min_kt": 55, "airspeed_max_kt": 140})
+    s, = mav_specs([v], first_sysid=7, first_row=3)
+    assert (s.sysid, s.row, s.name) == (7, 3, "a b")
+    assert (s.start_lat_deg, s.start_lon_deg, s.start_alt_msl_m, s.home_alt_msl_m) == (
+        47.1, 8.2, 900, 420)
+    assert s.params == {"AIRSPEED_MIN": 29, "AIRSPEED_MAX": 72, "AIRSPEED_CRUISE": 51.4}
