@@ -81,6 +81,10 @@ def _build_parser() -> _Parser:
                    help="pace to the wall clock (FACTOR x real time, default 1)")
     r.add_argument("--duration-s", type=_positive_float, metavar="S",
                    help="override the scenario's duration")
+    r.add_argument("--mavlink", metavar="URL", nargs="?", const="udpout:127.0.0.1:14550",
+                   help="present every vehicle on MAVLink (udpout:HOST:PORT sends there and "
+                        "answers whoever talks; udpin:HOST:PORT listens; default "
+                        "udpout:127.0.0.1:14550, where ground stations listen)")
     r.add_argument("--step-timeout-s", type=_positive_float, default=60.0, metavar="S",
                    help="a worker silent this long in one exchange fails the run (default 60)")
     r.add_argument("--no-progress", action="store_true", help="no progress bar or lines")
@@ -187,8 +191,13 @@ def _cmd_run(a: argparse.Namespace) -> int:
                               f"--overwrite")
         clear_outputs(out)  # Run does it too: a run never mixes with an old one's files
     progress = None if a.no_progress else Progress(sys.stderr, scn.rates.physics_hz)
+    mav_cfg = None
+    if a.mavlink:
+        from cosim.mavlink import MavlinkConfig
+
+        mav_cfg = MavlinkConfig(url=a.mavlink)
     run = Run(scn, out, backend=a.backend, workers=a.workers, realtime=a.realtime,
-              progress=progress, step_timeout_s=a.step_timeout_s)
+              progress=progress, step_timeout_s=a.step_timeout_s, mavlink=mav_cfg)
 
     interrupts = 0
 

@@ -67,7 +67,8 @@ class Run:
 
     def __init__(self, scenario: Scenario, out_dir: str | Path, backend: str = "process",
                  workers: int | None = None, realtime: float | None = None,
-                 progress: ProgressFn | None = None, step_timeout_s: float = 60.0) -> None:
+                 progress: ProgressFn | None = None, step_timeout_s: float = 60.0,
+                 mavlink: Any = None) -> None:
         self.scn = scenario
         self.out = Path(out_dir)
         self.backend = backend
@@ -75,6 +76,9 @@ class Run:
         self.pacer = Pacer(realtime) if realtime else None
         self.progress = progress
         self.step_timeout_s = step_timeout_s  # a worker silent this long is a failure
+        #: a cosim.mavlink.MavlinkConfig: every vehicle on one MAVLink link
+        self.mavlink_config = mavlink
+        self.mavlink: Any = None
         self._stop = threading.Event()
         self._stop_reason = "interrupted"
         self._building = False
@@ -143,6 +147,14 @@ class Run:
             guidance = FixedWingGuidance(len(ids), scn.origin.frame, start_ne, chan_index) \
                 if scn.autopilot else None
             labels = guidance.labels if guidance is not None else None
+            if self.mavlink_config is not None:
+                from cosim.mavlink import MavlinkEndpoint, mav_specs
+
+                self.mavlink = MavlinkEndpoint(
+                    mav_specs(scn.vehicles, autopilot=scn.autopilot), hz, self.mavlink_config,
+                    tlog_dir=out)
+                log.info("MAVLink: %d vehicles on %s (local %s:%d)", len(ids),
+                         self.mavlink_config.url, *self.mavlink.local_address)
             with pool:
                 states = pool.states
                 status = states[:, _STATUS].copy()
@@ -167,6 +179,12 @@ class Run:
                         events.emit("schedule", tick, vehicle=None, vehicles=len(rows),
                                     **({"set": dict(item.sets)} if item.sets else {}),
                                     **({"command": item.command.source} if item.command else {}))
+                    if self.mavlink is not None:  # the same command path as the schedule
+                        for vc in self.mavlink.exchange(tick, states):
+                            if guidance is not None:
+                                guidance.command([vc.row], vc.command, states, pool.setpoints)
+                            events.emit("mavlink_command", tick, vehicle=ids[vc.row],
+                                        origin=vc.origin, command=vc.command.source)
                     if guidance is not None:
                         for ge in guidance.update(states, pool.setpoints):
                             events.emit(ge.kind, tick, vehicle=ids[ge.vehicle], **ge.fields)
@@ -211,6 +229,8 @@ class Run:
                 log.warning("stopped while building the vehicles (%s)", reason)
         finally:
             self._building = False
+            if self.mavlink is not None:
+                self.mavlink.close()
             if loop0 is not None and loop_s == 0.0:
                 loop_s = time.perf_counter() - loop0
             try:
@@ -231,6 +251,9 @@ class Run:
                 events.close()
                 summary = self._summary(reason, tick, startup_s, loop_s, workers_used,
                                         events.counts, states_log.rows_logged, error)
+                if self.mavlink is not None:
+                    summary["mavlink"] = {"url": self.mavlink_config.url,
+                                          "counters": self.mavlink.counters()}
                 write_json_atomic(out / "summary.json", summary)
             finally:
                 self._end_fault_log(fault_file, fault_was_enabled)

@@ -1,0 +1,95 @@
+"""`cosim run --mavlink`: a pymavlink ground station against a running
+simulation (loopback, ephemeral port)."""
+
+from __future__ import annotations
+
+import json
+import math
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+mavutil = pytest.importorskip("pymavlink.mavutil")
+
+from tests.mavlink.mavtest import GroundStation  # noqa: E402
+
+ML = mavutil.mavlink
+SCENARIO = """
+schema_version: 1
+name: mav3
+origin: {lat_deg: 37.0, lon_deg: -116.0, ground_alt_m: 1000}
+duration_s: 600
+vehicles:
+  - {id: uav, count: 3, model: uav700, formation: {type: line, spacing_m: 1000},
+     init: {north_m: 0, east_m: 0, alt_agl_m: 300, heading_deg: 0, airspeed_kt: 100}}
+"""
+
+
+def _dist_m(lat1: float, lon1: float, lat2: float, lon2: float) -> float:
+    dn = math.radians(lat2 - lat1) * 6371000.0
+    de = math.radians(lon2 - lon1) * 6371000.0 * math.cos(math.radians(lat1))
+    return math.hypot(dn, de)
+
+
+def test_ground_station_sees_vehicles_and_flies_one_with_do_reposition(tmp_path: Path) -> None:
+    scn = tmp_path / "mav3.yaml"
+    scn.write_text(SCENARIO)
+    gcs = GroundStation("udpin:127.0.0.1:0")
+    out = tmp_path / "out"
+    sim = subprocess.Popen(
+        [sys.executable, "-m", "cosim", "-q", "run", str(scn), "--out", str(out),
+         "--realtime", "10", "--no-progress", "--mavlink", f"udpout:127.0.0.1:{gcs.port}"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        seen: dict[int, object] = {}
+        start: dict[int, tuple[float, float]] = {}
+        deadline = time.monotonic() + 60
+        while (len(seen) < 3 or len(start) < 3) and time.monotonic() < deadline:
+            for m in gcs.drain(0.5):
+                src = m.get_srcSystem()
+                if m.get_type() == "HEARTBEAT":
+                    seen[src] = m
+                elif m.get_type() == "GLOBAL_POSITION_INT" and src not in start:
+                    start[src] = (m.lat * 1e-7, m.lon * 1e-7)
+        assert sorted(seen) == [1, 2, 3], f"heartbeats from {sorted(seen)}"
+        for hb in seen.values():
+            assert hb.type == ML.MAV_TYPE_FIXED_WING
+            assert hb.autopilot == ML.MAV_AUTOPILOT_ARDUPILOTMEGA
+
+        gcs.hello()
+        gcs.conn.mav.set_mode_send(3, ML.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 15)  # GUIDED
+        lat0, lon0 = start[3]
+        target = (lat0 + 2000.0 / 111_000.0, lon0)  # about 2 km north
+        gcs.conn.mav.command_int_send(
+            3, 1, ML.MAV_FRAME_GLOBAL_INT, ML.MAV_CMD_DO_REPOSITION, 0, 0, -1,
+            ML.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE, 0, 0, round(target[0] * 1e7),
+            round(target[1] * 1e7), 1300.0)
+        acks, closest = [], 1e9
+        deadline = time.monotonic() + 60
+        while closest > 700 and time.monotonic() < deadline:
+            for m in gcs.drain(0.5):
+                if m.get_type() == "COMMAND_ACK" and m.get_srcSystem() == 3:
+                    acks.append(m)
+                if m.get_type() == "GLOBAL_POSITION_INT" and m.get_srcSystem() == 3:
+                    closest = min(closest, _dist_m(m.lat * 1e-7, m.lon * 1e-7, *target))
+        assert [a.command for a in acks if a.command == ML.MAV_CMD_DO_REPOSITION] == [
+            ML.MAV_CMD_DO_REPOSITION]
+        assert all(a.result == ML.MAV_RESULT_ACCEPTED for a in acks)
+        assert closest <= 700, f"vehicle 3 got no closer than {closest:.0f} m"
+    finally:
+        sim.send_signal(signal.SIGINT)
+        _, err = sim.communicate(timeout=30)
+        gcs.close()
+    assert sim.returncode == 130, err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["mavlink"]["counters"]["packets_out"] > 0
+    events = [json.loads(x) for x in (out / "events.jsonl").read_text().splitlines()]
+    cmds = [e for e in events if e["event"] == "mavlink_command"]
+    assert cmds and cmds[0]["vehicle"] == "uav2" and "DO_REPOSITION" in cmds[-1]["origin"]
+    tlogs = sorted(p.name for p in out.glob("*.tlog"))
+    assert tlogs == ["uav0.tlog", "uav1.tlog", "uav2.tlog"]
+    assert mavutil.mavlink_connection(str(out / "uav2.tlog")).recv_match(type="HEARTBEAT")
