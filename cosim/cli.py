@@ -192,10 +192,13 @@ def _cmd_run(a: argparse.Namespace) -> int:
         clear_outputs(out)  # Run does it too: a run never mixes with an old one's files
     progress = None if a.no_progress else Progress(sys.stderr, scn.rates.physics_hz)
     mav_cfg = None
-    if a.mavlink:
+    if a.mavlink:  # overrides the scenario's URL, keeps its stream rates
         from cosim.mavlink import MavlinkConfig
+        from cosim.mavlink.link import LinkUrl
 
-        mav_cfg = MavlinkConfig(url=a.mavlink)
+        LinkUrl.parse(a.mavlink)  # a bad URL is a usage error before anything is built
+        rates = dict(scn.mavlink["rates_hz"]) if scn.mavlink else {}
+        mav_cfg = MavlinkConfig(url=a.mavlink, rates_hz=rates)
     run = Run(scn, out, backend=a.backend, workers=a.workers, realtime=a.realtime,
               progress=progress, step_timeout_s=a.step_timeout_s, mavlink=mav_cfg)
 

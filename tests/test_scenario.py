@@ -782,3 +782,19 @@ def test_random_seed_with_count_is_an_error() -> None:
     with pytest.raises(ConfigError, match=r"vehicles\[0\]\.random_seed: random_seed is for a "
                                           r"single vehicle"):
         parse(text)
+
+
+def test_mavlink_section_is_validated_with_lines() -> None:
+    text = HEAD + ONE + dd("""
+        mavlink:
+          url: udpout:127.0.0.1
+          rates_hz: {GLOBAL_POSITION_INT: 10, NOT_A_MESSAGE: 1}
+    """)
+    probs = problems(text)
+    assert any("mavlink.url: mavlink URL 'udpout:127.0.0.1': expected udpout:HOST:PORT" in p
+               for p in probs), probs
+    assert any("mavlink.rates_hz: 'NOT_A_MESSAGE' is not a message cosim streams" in p
+               for p in probs), probs
+    ok = parse(HEAD + ONE + "mavlink: true\n")
+    assert ok.mavlink == {"url": "udpout:127.0.0.1:14550", "rates_hz": {}}
+    assert parse(HEAD + ONE).mavlink is None

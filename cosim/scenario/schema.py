@@ -94,6 +94,8 @@ class Scenario:
     description: str = ""
     aircraft_path: tuple[str, ...] = ()
     plot: bool = False  # write track.png (ground track and altitude) after the run
+    #: MAVLink link of the run: {"url": ..., "rates_hz": {...}}; None: no MAVLink
+    mavlink: dict[str, Any] | None = None
     schema_version: int = SCHEMA_VERSION
     extra: dict[str, Any] = field(default_factory=dict, compare=False)
 
@@ -152,6 +154,7 @@ class Scenario:
             "seed": self.seed,
             "aircraft_path": list(self.aircraft_path),
             "plot": self.plot,
+            **({"mavlink": self.mavlink} if self.mavlink is not None else {}),
             "vehicles": vehicles,
             "schedule": [self._item_dict(s, ids) for s in self.schedule],
         }
@@ -325,8 +328,8 @@ def parse_scenario(text: str, fname: str = "<scenario>", check_properties: bool 
     ctx = _Ctx(fname, lines)
     ctx.problems.extend(dups)
     top = _Reader(ctx, data, (), ("schema_version", "name", "description", "origin", "rates",
-                                  "duration_s", "seed", "aircraft_path", "plot", "vehicles",
-                                  "schedule"))
+                                  "duration_s", "seed", "aircraft_path", "plot", "mavlink",
+                                  "vehicles", "schedule"))
     version = top.integer("schema_version")
     if version is not None and version != SCHEMA_VERSION:
         ctx.err(("schema_version",), f"unsupported schema_version {version}; this cosim reads "
@@ -341,6 +344,7 @@ def parse_scenario(text: str, fname: str = "<scenario>", check_properties: bool 
     duration = top.num("duration_s", lo=0, lo_open=True)
     seed = top.integer("seed", 0, lo=0)
     plot = top.boolean("plot", False)
+    mavlink = _mavlink(ctx, top.d["mavlink"]) if top.has("mavlink") else None
     apath: list[str] = []
     raw_ap = top.d.get("aircraft_path", [])
     if isinstance(raw_ap, str):
@@ -362,7 +366,35 @@ def parse_scenario(text: str, fname: str = "<scenario>", check_properties: bool 
     return Scenario(name=name, path=fname, origin=origin, rates=rates, duration_s=duration,
                     seed=seed, vehicles=tuple(v for v, _ in vehicles), schedule=tuple(schedule),
                     description=description, aircraft_path=tuple(apath), plot=plot,
+                    mavlink=mavlink,
                     extra={"vehicle_paths": [pp for _, pp in vehicles]})
+
+
+def _mavlink(ctx: _Ctx, d: Any) -> dict[str, Any] | None:
+    """``mavlink: true`` or ``mavlink: {url: udpout:HOST:PORT, rates_hz: {MSG: Hz}}``."""
+    from cosim.mavlink import DEFAULT_URL
+    from cosim.mavlink.link import LinkUrl
+    from cosim.mavlink.vehicle import check_rates
+
+    if d is False:
+        return None
+    if d is True:
+        d = {}
+    r = _Reader(ctx, d, ("mavlink",), ("url", "rates_hz"))
+    url = r.string("url", DEFAULT_URL)
+    if url is not None:
+        try:
+            LinkUrl.parse(url)
+        except ConfigError as e:
+            ctx.err(("mavlink", "url"), str(e))
+    rates = r.d.get("rates_hz", {})
+    if not isinstance(rates, dict) or not all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) for v in rates.values()):
+        ctx.err(("mavlink", "rates_hz"), "expected a mapping of message name: Hz")
+        rates = {}
+    for problem in check_rates(rates):
+        ctx.err(("mavlink", "rates_hz"), problem)
+    return {"url": url or DEFAULT_URL, "rates_hz": {str(k): float(v) for k, v in rates.items()}}
 
 
 def _rates(ctx: _Ctx, d: Any) -> Rates:

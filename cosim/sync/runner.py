@@ -77,6 +77,11 @@ class Run:
         self.progress = progress
         self.step_timeout_s = step_timeout_s  # a worker silent this long is a failure
         #: a cosim.mavlink.MavlinkConfig: every vehicle on one MAVLink link
+        if mavlink is None and scenario.mavlink is not None:
+            from cosim.mavlink import MavlinkConfig
+
+            mavlink = MavlinkConfig(url=scenario.mavlink["url"],
+                                    rates_hz=dict(scenario.mavlink["rates_hz"]))
         self.mavlink_config = mavlink
         self.mavlink: Any = None
         self._stop = threading.Event()
