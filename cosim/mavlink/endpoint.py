@@ -17,7 +17,9 @@ Usage (the runner, once per exchange, before stepping the pool)::
 them (ACKs, parameters, requested messages), sends the telemetry due at
 ``tick`` from ``states`` (the state array at ``tick``), writes both
 directions to the tlogs, and returns the guidance commands the messages
-produced, in arrival order. It never blocks and never raises because of
+produced, in arrival order (a mission flown in AUTO is one ``waypoints``
+command; its progress is followed from ``states``, no guidance events
+needed). It never blocks and never raises because of
 what arrives from the network; problems are counted (``counters()``).
 """
 
@@ -64,7 +66,8 @@ ENDPOINT_COUNTERS = (
     "ignored_messages", "unsupported_commands", "commands_refused", "commands_out",
     "handler_errors", "param_unknown", "param_rejected", "ftp_naks",
     "position_targets_ignored", "position_targets_invalid", "position_targets_unsupported",
-    "injected")
+    "injected", "mission_uploads", "mission_upload_errors", "mission_upload_timeouts",
+    "mission_rerequests", "mission_unexpected", "mission_downloads", "mission_items_reached")
 
 
 @dataclass(frozen=True)
@@ -220,6 +223,10 @@ class MavlinkEndpoint:
             for m in msgs:
                 self._dispatch(m, tick, commands)
         for v in self.vehicles:
+            ms = v.mission
+            if ms.upload is not None or ms.route or ms.reported_current != ms.current:
+                for name, fields in self.handler.mission_update(v, tick):
+                    self._send(v, name, fields, tick)
             for name in v.due(tick):
                 self._send(v, name, v.fields(name, tick), tick)
         for t in self.tlogs.values():

@@ -24,6 +24,18 @@ home, terrain = above ground). A position of (0, 0) or INT32_MAX means
 "where the vehicle is". The local NED frame (SET_POSITION_TARGET_LOCAL_NED,
 MAV_FRAME_LOCAL_NED) is relative to the vehicle's start, DESIGN.md 3.3.
 
+Missions (ArduPlane's protocol, state in ``cosim.mavlink.mission``): upload
+(MISSION_COUNT -> MISSION_REQUEST_INT, or MISSION_REQUEST once the client
+answers with float MISSION_ITEMs -> ... -> MISSION_ACK; retried every
+simulated second, cancelled after 8 s without progress), download, clear,
+MISSION_SET_CURRENT / DO_SET_MISSION_CURRENT. Item 0 is home. AUTO flies
+the items from the current one as ONE ``waypoints`` command (see
+``Handler._mission_route`` for how each item maps); progress is tracked
+from the state rows (``mission_update``, once per exchange), which sends
+MISSION_ITEM_REACHED and MISSION_CURRENT on a change (and 1 Hz as a
+stream). MISSION_ITEM(_INT) with current=2 is a guided goto (GUIDED only),
+current=3 an altitude change, both answered with a MISSION_ACK.
+
 Disarmed vehicles keep their engine off: arming restores the cruise
 airspeed, disarming sets throttle 0, and no other command carries a speed
 while disarmed.
@@ -43,6 +55,14 @@ from cosim.fdm_pool.spec import STATE_INDEX
 from cosim.geo import LocalFrame
 from cosim.guidance.commands import Command, parse_command
 from cosim.mavlink import adapter as mav
+from cosim.mavlink.mission import (
+    MAX_ITEMS,
+    UPLOAD_RETRY_S,
+    UPLOAD_TIMEOUT_S,
+    MissionItem,
+    RoutePoint,
+    Upload,
+)
 from cosim.mavlink.params import PARAM_DEFS, PARAM_INDEX
 from cosim.mavlink.vehicle import (
     DEFAULT_RATES_HZ,
@@ -155,7 +175,18 @@ class Handler:
             "FILE_TRANSFER_PROTOCOL": self._ftp,
             "SET_POSITION_TARGET_GLOBAL_INT": self._target_global,
             "SET_POSITION_TARGET_LOCAL_NED": self._target_local,
+            "MISSION_COUNT": self._mission_count,
+            "MISSION_ITEM_INT": self._mission_item,
+            "MISSION_ITEM": self._mission_item,
+            "MISSION_REQUEST_LIST": self._mission_request_list,
+            "MISSION_REQUEST_INT": self._mission_request,
+            "MISSION_REQUEST": self._mission_request,
+            "MISSION_ACK": self._mission_ack_in,
+            "MISSION_CLEAR_ALL": self._mission_clear,
+            "MISSION_SET_CURRENT": self._mission_set_current_msg,
         }
+        self.retry_ticks = max(1, round(UPLOAD_RETRY_S * physics_hz))
+        self.timeout_ticks = max(1, round(UPLOAD_TIMEOUT_S * physics_hz))
 
     def handle(self, v: MavVehicle, m: mav.Message, tick: int) -> Outcome:
         """Handle one message for vehicle ``v`` at ``tick`` (its row observed)."""
@@ -232,8 +263,7 @@ class Handler:
         elif mode == PlaneMode.TAKEOFF:
             return self._takeoff(v, v.home[2] + v.params["TKOFF_ALT"], tick, out)
         elif mode == PlaneMode.AUTO:
-            out.replies.append(_text("AUTO needs a mission: not implemented yet"))
-            return mav.MAV_RESULT_FAILED
+            return self._auto(v, v.mission.current, out)
         elif mode == PlaneMode.MANUAL:
             out.replies.append(_text("MANUAL: no pilot in the simulation"))
             return mav.MAV_RESULT_FAILED
@@ -313,7 +343,7 @@ class Handler:
                 out.replies.append(_text("PreArm: vehicle crashed or diverged"))
                 return mav.MAV_RESULT_FAILED
             v.armed = True
-            if v.spec.has_autopilot and v.mode in SETTABLE_MODES:
+            if v.spec.has_autopilot and v.mode in SETTABLE_MODES + (PlaneMode.AUTO,):
                 cmd = _vocab({"airspeed_mps": v.params["AIRSPEED_CRUISE"]})
                 if isinstance(cmd, Command):
                     out.commands.append(cmd)
@@ -507,6 +537,13 @@ class Handler:
         out.replies.append(("MESSAGE_INTERVAL", {"message_id": mid, "interval_us": us}))
         return mav.MAV_RESULT_ACCEPTED
 
+    def _do_set_mission_current(self, v: MavVehicle, req: CommandRequest, tick: int,
+                                out: Outcome) -> int:
+        seq = _int(req.p[0])
+        if seq is None or seq == -1:  # -1: leave the current item as it is
+            return mav.MAV_RESULT_ACCEPTED
+        return self.set_mission_current(v, seq, out)
+
     _commands: dict[int, Callable[[Handler, MavVehicle, CommandRequest, int, Outcome], int]] = {
         mav.MAV_CMD_COMPONENT_ARM_DISARM: _arm_disarm,
         mav.MAV_CMD_DO_SET_MODE: _do_set_mode,
@@ -520,6 +557,7 @@ class Handler:
         mav.MAV_CMD_GET_HOME_POSITION: _get_home,
         mav.MAV_CMD_SET_MESSAGE_INTERVAL: _set_interval,
         mav.MAV_CMD_GET_MESSAGE_INTERVAL: _get_interval,
+        mav.MAV_CMD_DO_SET_MISSION_CURRENT: _do_set_mission_current,
     }
 
     # -- position targets (no ACK, as in ArduPilot) ------------------------------
@@ -661,3 +699,332 @@ class Handler:
         return Outcome(replies=[("FILE_TRANSFER_PROTOCOL", {
             "target_network": 0, "target_system": m.src_system,
             "target_component": m.src_component, "payload": body + [0] * (251 - len(body))})])
+
+    # -- missions (ArduPlane's mission protocol; cosim.mavlink.mission) ------------
+    @staticmethod
+    def _mission_ack(m: mav.Message, result: int, to: tuple[int, int] | None = None,
+                     mission_type: int = mav.MAV_MISSION_TYPE_MISSION) -> Reply:
+        ts, tc = to if to is not None else (m.src_system, m.src_component)
+        return ("MISSION_ACK", {"target_system": ts, "target_component": tc, "type": result,
+                                "mission_type": mission_type})
+
+    @staticmethod
+    def _mission_item_request(up: Upload) -> Reply:
+        return ("MISSION_REQUEST_INT" if up.use_int else "MISSION_REQUEST", {
+            "target_system": up.partner[0], "target_component": up.partner[1],
+            "seq": up.next_seq, "mission_type": mav.MAV_MISSION_TYPE_MISSION})
+
+    def _mission_count(self, v: MavVehicle, m: mav.Message, tick: int) -> Outcome:
+        out = Outcome()
+        mtype, count = int(m.fields["mission_type"]), int(m.fields["count"])
+        partner = (m.src_system, m.src_component)
+        ms = v.mission
+        if mtype != mav.MAV_MISSION_TYPE_MISSION:  # no fence or rally points in cosim
+            out.replies.append(self._mission_ack(m, mav.MAV_MISSION_UNSUPPORTED,
+                                                 mission_type=mtype))
+            return out
+        if ms.upload is not None and ms.upload.partner != partner:
+            out.replies.append(self._mission_ack(m, mav.MAV_MISSION_DENIED))
+            return out
+        if count - 1 > MAX_ITEMS:
+            ms.upload = None
+            out.replies.append(self._mission_ack(m, mav.MAV_MISSION_NO_SPACE))
+            return out
+        if count <= 1:  # nothing (or home only): an empty mission
+            ms.upload = None
+            self._mission_replaced(v, [], out)
+            out.replies.append(self._mission_ack(m, mav.MAV_MISSION_ACCEPTED))
+            return out
+        ms.upload = Upload(partner, count, last_request_tick=tick, last_progress_tick=tick)
+        out.replies.append(self._mission_item_request(ms.upload))
+        return out
+
+    def _mission_item(self, v: MavVehicle, m: mav.Message, tick: int) -> Outcome:
+        current = int(m.fields["current"])
+        if current == 2:
+            return self._guided_item(v, m)
+        if current == 3:
+            return self._guided_alt(v, m)
+        out = Outcome()
+        mtype = int(m.fields["mission_type"])
+        up = v.mission.upload
+        if up is None or up.partner != (m.src_system, m.src_component) \
+                or mtype != mav.MAV_MISSION_TYPE_MISSION:
+            self.counts["mission_unexpected"] += 1
+            out.replies.append(self._mission_ack(m, mav.MAV_MISSION_ERROR, mission_type=mtype))
+            return out
+        item = MissionItem.of(m)
+        if item.seq != up.next_seq:
+            if item.seq == up.next_seq - 1:  # a repeat of the last one: ask again
+                out.replies.append(self._mission_item_request(up))
+            else:  # ArduPilot: say so, keep the upload open (it retries or times out)
+                out.replies.append(self._mission_ack(m, mav.MAV_MISSION_INVALID_SEQUENCE))
+            return out
+        up.use_int = m.name == "MISSION_ITEM_INT"
+        if item.seq > 0:  # item 0 is home: its contents are ignored
+            result = item.check()
+            if result != mav.MAV_MISSION_ACCEPTED:
+                v.mission.upload = None  # the mission on board is unchanged
+                self.counts["mission_upload_errors"] += 1
+                out.replies.append(_text(f"Mission item {item.seq}: "
+                                         f"{mav.command_name(item.command)} refused"))
+                out.replies.append(self._mission_ack(m, result))
+                return out
+            up.received.append(item)
+        up.next_seq += 1
+        up.last_progress_tick = up.last_request_tick = tick
+        if up.next_seq < up.count:
+            out.replies.append(self._mission_item_request(up))
+            return out
+        v.mission.upload = None
+        self.counts["mission_uploads"] += 1
+        self._mission_replaced(v, up.received, out)
+        out.replies.append(self._mission_ack(m, mav.MAV_MISSION_ACCEPTED))
+        return out
+
+    def _mission_replaced(self, v: MavVehicle, items: list[MissionItem], out: Outcome) -> None:
+        """Store a new mission; a vehicle in AUTO restarts it from item 1 (or, with
+        nothing left to fly, loiters where it is, in LOITER)."""
+        v.mission.replace(items)
+        if v.mode != PlaneMode.AUTO:
+            return
+        if self._auto(v, 1, out) != mav.MAV_RESULT_ACCEPTED:
+            self.enter_mode(v, PlaneMode.LOITER, 0, out)
+
+    def _mission_request_list(self, v: MavVehicle, m: mav.Message, tick: int) -> Outcome:
+        mtype = int(m.fields["mission_type"])
+        count = v.mission.count if mtype == mav.MAV_MISSION_TYPE_MISSION else 0
+        return Outcome(replies=[("MISSION_COUNT", {
+            "target_system": m.src_system, "target_component": m.src_component,
+            "count": count, "mission_type": mtype})])
+
+    def _mission_request(self, v: MavVehicle, m: mav.Message, tick: int) -> Outcome:
+        mtype = int(m.fields["mission_type"])
+        item = v.mission.item(int(m.fields["seq"]), v.home) \
+            if mtype == mav.MAV_MISSION_TYPE_MISSION else None
+        if item is None:
+            return Outcome(replies=[self._mission_ack(m, mav.MAV_MISSION_INVALID_SEQUENCE,
+                                                      mission_type=mtype)])
+        name = "MISSION_ITEM_INT" if m.name == "MISSION_REQUEST_INT" else "MISSION_ITEM"
+        return Outcome(replies=[(name, item.fields(
+            name == "MISSION_ITEM_INT", (m.src_system, m.src_component),
+            item.seq == v.mission.current and item.seq > 0))])
+
+    def _mission_ack_in(self, v: MavVehicle, m: mav.Message, tick: int) -> Outcome:
+        up = v.mission.upload
+        if up is not None and up.partner == (m.src_system, m.src_component) \
+                and int(m.fields["type"]) != mav.MAV_MISSION_ACCEPTED:
+            v.mission.upload = None  # the client cancelled its upload
+            self.counts["mission_upload_errors"] += 1
+        elif int(m.fields["type"]) == mav.MAV_MISSION_ACCEPTED:
+            self.counts["mission_downloads"] += 1
+        return Outcome()
+
+    def _mission_clear(self, v: MavVehicle, m: mav.Message, tick: int) -> Outcome:
+        out = Outcome()
+        mtype = int(m.fields["mission_type"])
+        if mtype not in (mav.MAV_MISSION_TYPE_MISSION, mav.MAV_MISSION_TYPE_ALL):
+            out.replies.append(self._mission_ack(m, mav.MAV_MISSION_UNSUPPORTED,
+                                                 mission_type=mtype))
+            return out
+        v.mission.upload = None
+        self._mission_replaced(v, [], out)
+        out.replies.append(self._mission_ack(m, mav.MAV_MISSION_ACCEPTED, mission_type=mtype))
+        return out
+
+    def _mission_set_current_msg(self, v: MavVehicle, m: mav.Message, tick: int) -> Outcome:
+        out = Outcome()
+        if self.set_mission_current(v, int(m.fields["seq"]), out) != mav.MAV_RESULT_ACCEPTED:
+            self.counts["commands_refused"] += 1
+        return out
+
+    def set_mission_current(self, v: MavVehicle, seq: int, out: Outcome) -> int:
+        """Make ``seq`` the current item; in AUTO the vehicle flies on from it.
+        MISSION_CURRENT follows at the end of the exchange."""
+        ms = v.mission
+        if not 1 <= seq < ms.count:
+            out.replies.append(_text(f"Mission item {seq} does not exist"))
+            return mav.MAV_RESULT_DENIED
+        if v.mode == PlaneMode.AUTO:
+            return self._auto(v, seq, out)
+        ms.stop()
+        ms.current = seq
+        return mav.MAV_RESULT_ACCEPTED
+
+    def _auto(self, v: MavVehicle, start: int, out: Outcome) -> int:
+        """Switch to AUTO (or stay in it) flying the mission from item ``start``
+        (0: from item 1) as one ``waypoints`` command."""
+        ms = v.mission
+        if not ms.items:
+            out.replies.append(_text("AUTO: no mission loaded"))
+            return mav.MAV_RESULT_FAILED
+        built = self._mission_route(v, max(start, 1))
+        if isinstance(built, str):
+            out.replies.append(_text(f"AUTO: {built}"))
+            return mav.MAV_RESULT_FAILED
+        cmd, route = built
+        row = self._row(v)
+        ms.fly(route, (float(row[_S["lat_deg"]]), float(row[_S["lon_deg"]])))
+        v.mode = int(PlaneMode.AUTO)
+        out.commands.append(cmd)
+        return mav.MAV_RESULT_ACCEPTED
+
+    def _mission_route(self, v: MavVehicle, start: int
+                       ) -> tuple[Command, list[RoutePoint]] | str:
+        """The ``waypoints`` command flying items ``start``.. and the route it flies.
+
+        NAV_WAYPOINT: a point; NAV_LOITER_UNLIM: the last point, loitered around
+        (its radius and direction); NAV_RETURN_TO_LAUNCH: home at the RTL
+        altitude, loitered around (RTL_RADIUS); items after those two are never
+        reached, as in ArduPlane. DO_CHANGE_SPEED sets the airspeed of the
+        following points (before one: AIRSPEED_CRUISE; none while disarmed).
+        NAV_TAKEOFF: skipped by a vehicle in the air (cosim's vehicles start
+        flying); on the ground, a point 1 km ahead on its heading at the
+        takeoff altitude. The loiter at the end of a mission without one is
+        around its last point (``waypoints`` always ends in a loiter).
+        """
+        row = self._row(v)
+        here = (float(row[_S["lat_deg"]]), float(row[_S["lon_deg"]]))
+        prev = here
+        speed = v.params["AIRSPEED_CRUISE"] if v.armed else None
+        radius, ccw = self._radius(v)
+        points: list[dict[str, Any]] = []
+        route: list[RoutePoint] = []
+        for it in v.mission.items[start - 1:]:
+            c = it.command
+            if c == mav.MAV_CMD_DO_CHANGE_SPEED:
+                if it.param2 > 0 and v.armed:
+                    problem = self._speed_ok(v, it.param2)
+                    if problem:
+                        return f"item {it.seq}: {problem}"
+                    speed = it.param2
+                continue
+            end = False
+            p: dict[str, Any]
+            if c == mav.MAV_CMD_NAV_RETURN_TO_LAUNCH:
+                alt_cm = v.params["ALT_HOLD_RTL"]
+                alt = float(row[_S["alt_msl_m"]]) if alt_cm < 0 else v.home[2] + alt_cm / 100.0
+                p = {"lat_deg": v.home[0], "lon_deg": v.home[1], "alt_msl_m": alt}
+                radius, ccw = self._radius(v, "RTL_RADIUS")
+                end = True
+            else:
+                a = self._alt(v, it.frame, it.z)
+                if a is None:
+                    return f"item {it.seq}: frame {it.frame} not supported"
+                if c == mav.MAV_CMD_NAV_TAKEOFF:
+                    if v.in_air():
+                        continue
+                    psi = math.radians(float(row[_S["yaw_deg"]]))
+                    lat, lon = LocalFrame(here[0], here[1], v.home[2]).place(
+                        1000.0 * math.cos(psi), 1000.0 * math.sin(psi), v.home[2])
+                    p = {"lat_deg": float(lat), "lon_deg": float(lon)}
+                elif it.x == 0 and it.y == 0:  # ArduPilot: "here" (the previous point)
+                    p = {"lat_deg": prev[0], "lon_deg": prev[1]}
+                else:
+                    p = {"lat_deg": it.lat_deg, "lon_deg": it.lon_deg}
+                p[a[0]] = a[1]
+                if c == mav.MAV_CMD_NAV_LOITER_UNLIM:
+                    if it.param3 != 0:  # negative: counter-clockwise
+                        radius, ccw = abs(it.param3), it.param3 < 0
+                    end = True
+            if speed is not None:
+                p["airspeed_mps"] = speed
+            points.append(p)
+            prev = (p["lat_deg"], p["lon_deg"])
+            route.append(RoutePoint(it.seq, p["lat_deg"], p["lon_deg"]))
+            if end:
+                break
+        if not points:
+            return "no navigation items left in the mission"
+        wp: dict[str, Any] = {"points": points}
+        if radius:
+            wp["loiter_radius_m"] = radius
+        cmd = _vocab({"waypoints": wp})
+        if isinstance(cmd, str):
+            return cmd
+        last = route[-1]
+        route[-1] = RoutePoint(last.seq, last.lat_deg, last.lon_deg, True, radius)
+        return replace(cmd, loiter_cw=not ccw), route
+
+    def mission_update(self, v: MavVehicle, tick: int) -> list[Reply]:
+        """Once per exchange after the messages: upload retries and timeout, progress
+        along the mission in AUTO (MISSION_ITEM_REACHED) and MISSION_CURRENT on a
+        change of the current item."""
+        ms = v.mission
+        out: list[Reply] = []
+        up = ms.upload
+        if up is not None and tick - up.last_request_tick >= self.retry_ticks:
+            if tick - up.last_progress_tick >= self.timeout_ticks:
+                ms.upload = None
+                self.counts["mission_upload_timeouts"] += 1
+                out.append(("MISSION_ACK", {
+                    "target_system": up.partner[0], "target_component": up.partner[1],
+                    "type": mav.MAV_MISSION_OPERATION_CANCELLED,
+                    "mission_type": mav.MAV_MISSION_TYPE_MISSION}))
+            else:
+                up.last_request_tick = tick
+                self.counts["mission_rerequests"] += 1
+                out.append(self._mission_item_request(up))
+        if v.mode == PlaneMode.AUTO and v.row_values is not None:
+            ms.track(v.row_values, _S)
+        elif ms.route:
+            ms.stop()  # left AUTO: the current item stays, to resume from
+        for seq in ms.reached:
+            self.counts["mission_items_reached"] += 1
+            out.append(("MISSION_ITEM_REACHED", {"seq": seq}))
+        ms.reached.clear()
+        if ms.reported_current != ms.current and v.period.get("MISSION_CURRENT") is not None:
+            out.append(("MISSION_CURRENT", v.fields("MISSION_CURRENT", tick)))
+        return out
+
+    def _guided_item(self, v: MavVehicle, m: mav.Message) -> Outcome:
+        """MISSION_ITEM(_INT) with current=2: "fly to here" in GUIDED (MAVProxy's
+        and older stations' guided goto), answered with a MISSION_ACK."""
+        out = Outcome()
+        item = MissionItem.of(m)
+        if not v.spec.has_autopilot or v.mode != PlaneMode.GUIDED:
+            out.replies.append(_text("guided goto: switch to GUIDED first"))
+            out.replies.append(self._mission_ack(m, mav.MAV_MISSION_ERROR))
+            self.counts["commands_refused"] += 1
+            return out
+        result = item.check() if item.command == mav.MAV_CMD_NAV_WAYPOINT \
+            else mav.MAV_MISSION_UNSUPPORTED
+        alt = self._alt(v, item.frame, item.z)
+        if result != mav.MAV_MISSION_ACCEPTED or alt is None:
+            out.replies.append(self._mission_ack(m, result if result != mav.MAV_MISSION_ACCEPTED
+                                                 else mav.MAV_MISSION_UNSUPPORTED_FRAME))
+            self.counts["commands_refused"] += 1
+            return out
+        goto: dict[str, Any] = {"lat_deg": item.lat_deg, "lon_deg": item.lon_deg, alt[0]: alt[1]}
+        radius, ccw = self._radius(v)
+        if radius:
+            goto["loiter_radius_m"] = radius
+        cmd = _vocab({"goto": goto})
+        if isinstance(cmd, str):
+            out.replies.append(_text(f"guided goto: {cmd}"))
+            out.replies.append(self._mission_ack(m, mav.MAV_MISSION_ERROR))
+            self.counts["commands_refused"] += 1
+            return out
+        out.commands.append(replace(cmd, loiter_cw=not ccw))
+        out.replies.append(self._mission_ack(m, mav.MAV_MISSION_ACCEPTED))
+        return out
+
+    def _guided_alt(self, v: MavVehicle, m: mav.Message) -> Outcome:
+        """MISSION_ITEM(_INT) with current=3: change the altitude (ArduPlane, GUIDED
+        and the other autopilot modes)."""
+        out = Outcome()
+        item = MissionItem.of(m)
+        alt = self._alt(v, item.frame, item.z)
+        if not v.spec.has_autopilot or v.mode not in SETTABLE_MODES + (PlaneMode.AUTO,) \
+                or alt is None:
+            out.replies.append(self._mission_ack(m, mav.MAV_MISSION_ERROR))
+            self.counts["commands_refused"] += 1
+            return out
+        cmd = _vocab({alt[0]: alt[1]})
+        if isinstance(cmd, str):
+            out.replies.append(_text(f"change altitude: {cmd}"))
+            out.replies.append(self._mission_ack(m, mav.MAV_MISSION_ERROR))
+            return out
+        out.commands.append(cmd)
+        out.replies.append(self._mission_ack(m, mav.MAV_MISSION_ACCEPTED))
+        return out

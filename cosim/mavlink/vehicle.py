@@ -27,6 +27,7 @@ import numpy as np
 from cosim.fdm_pool.spec import STATE_INDEX, VehicleSpec, VehicleStatus
 from cosim.geo import KT_TO_MPS
 from cosim.mavlink import adapter as mav
+from cosim.mavlink.mission import Mission
 from cosim.mavlink.params import ParamTable
 
 _S = STATE_INDEX
@@ -81,11 +82,12 @@ _PRESENT = (_SENSORS | _CONTROL | mav.SENSOR_MOTOR_OUTPUTS | mav.SENSOR_GEOFENCE
 #: messages a vehicle can produce on request or as a stream
 STREAMABLE: tuple[str, ...] = (
     "HEARTBEAT", "GLOBAL_POSITION_INT", "ATTITUDE", "VFR_HUD", "SYS_STATUS", "GPS_RAW_INT",
-    "SYSTEM_TIME", "HOME_POSITION", "EXTENDED_SYS_STATE", "AUTOPILOT_VERSION")
+    "SYSTEM_TIME", "HOME_POSITION", "EXTENDED_SYS_STATE", "AUTOPILOT_VERSION",
+    "MISSION_CURRENT")
 #: default stream rates (Hz); streamable messages not listed are sent on request only
 DEFAULT_RATES_HZ: Mapping[str, float] = {
     "HEARTBEAT": 1.0, "GLOBAL_POSITION_INT": 5.0, "ATTITUDE": 5.0, "VFR_HUD": 2.0,
-    "SYS_STATUS": 1.0, "GPS_RAW_INT": 1.0, "SYSTEM_TIME": 1.0}
+    "SYS_STATUS": 1.0, "GPS_RAW_INT": 1.0, "SYSTEM_TIME": 1.0, "MISSION_CURRENT": 1.0}
 
 #: ArduPilot's magic param2 of COMPONENT_ARM_DISARM that forces (dis)arming
 FORCE_MAGIC = 21196
@@ -246,6 +248,7 @@ class MavVehicle:
         self.body_rates = (0.0, 0.0, 0.0)  # p, q, r (rad/s)
         self.status = int(VehicleStatus.ACTIVE)
         self.row_values: Sequence[float] | None = None  # the latest state row
+        self.mission = Mission()
 
     # -- state -------------------------------------------------------------
     def observe(self, row: Sequence[float], body_rates: Sequence[float]) -> None:
@@ -401,6 +404,10 @@ class MavVehicle:
         return {"vtol_state": mav.MAV_VTOL_STATE_UNDEFINED,
                 "landed_state": mav.MAV_LANDED_STATE_IN_AIR if self.in_air()
                 else mav.MAV_LANDED_STATE_ON_GROUND}
+
+    def _f_mission_current(self, tick: int) -> dict[str, Any]:
+        self.mission.reported_current = self.mission.current
+        return self.mission.state(self.mode == PlaneMode.AUTO)
 
     def _f_autopilot_version(self, tick: int) -> dict[str, Any]:
         return {"capabilities": CAPABILITIES, "flight_sw_version": FLIGHT_SW_VERSION,
