@@ -35,7 +35,8 @@ def _dist_m(lat1: float, lon1: float, lat2: float, lon2: float) -> float:
     return math.hypot(dn, de)
 
 
-def test_ground_station_sees_vehicles_and_flies_one_with_do_reposition(tmp_path: Path) -> None:
+def test_ground_station_repositions_one_vehicle_and_flies_a_mission_on_another(
+        tmp_path: Path) -> None:
     scn = tmp_path / "mav3.yaml"
     scn.write_text(SCENARIO)
     gcs = GroundStation("udpin:127.0.0.1:0")
@@ -80,6 +81,43 @@ def test_ground_station_sees_vehicles_and_flies_one_with_do_reposition(tmp_path:
             ML.MAV_CMD_DO_REPOSITION]
         assert all(a.result == ML.MAV_RESULT_ACCEPTED for a in acks)
         assert closest <= 700, f"vehicle 3 got no closer than {closest:.0f} m"
+
+        # a 4-waypoint square uploaded to vehicle 2 and flown in AUTO
+        lat2, lon2 = start[2]
+        dlat, dlon = 1500.0 / 111_000.0, 1500.0 / (111_000.0 * math.cos(math.radians(lat2)))
+        square = [(lat2 + dlat, lon2), (lat2 + dlat, lon2 + dlon), (lat2, lon2 + dlon),
+                  (lat2, lon2)]
+        items = [(lat2, lon2)] + square  # item 0: home (ignored by the vehicle)
+        gcs.conn.mav.mission_count_send(2, 1, len(items), ML.MAV_MISSION_TYPE_MISSION)
+        ack = None
+        deadline = time.monotonic() + 20
+        while ack is None and time.monotonic() < deadline:
+            for m in gcs.drain(0.5):
+                if m.get_srcSystem() != 2:
+                    continue
+                if m.get_type() in ("MISSION_REQUEST_INT", "MISSION_REQUEST"):
+                    lat, lon = items[m.seq]
+                    gcs.conn.mav.mission_item_int_send(
+                        2, 1, m.seq, ML.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                        ML.MAV_CMD_NAV_WAYPOINT, 0, 1, 0, 0, 0, 0, round(lat * 1e7),
+                        round(lon * 1e7), 300.0, ML.MAV_MISSION_TYPE_MISSION)
+                elif m.get_type() == "MISSION_ACK":
+                    ack = m
+        assert ack is not None and ack.type == ML.MAV_MISSION_ACCEPTED
+        gcs.conn.mav.set_mode_send(2, ML.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 10)  # AUTO
+        reached: list[int] = []
+        auto_seen = False
+        deadline = time.monotonic() + 60
+        while len(reached) < 3 and time.monotonic() < deadline:
+            for m in gcs.drain(0.5):
+                if m.get_srcSystem() != 2:
+                    continue
+                if m.get_type() == "HEARTBEAT" and m.custom_mode == 10:
+                    auto_seen = True
+                if m.get_type() == "MISSION_ITEM_REACHED" and m.seq not in reached:
+                    reached.append(m.seq)
+        assert auto_seen, "vehicle 2 never reported AUTO in its heartbeat"
+        assert reached[:3] == [1, 2, 3], reached
     finally:
         sim.send_signal(signal.SIGINT)
         _, err = sim.communicate(timeout=30)
@@ -89,7 +127,9 @@ def test_ground_station_sees_vehicles_and_flies_one_with_do_reposition(tmp_path:
     assert summary["mavlink"]["counters"]["packets_out"] > 0
     events = [json.loads(x) for x in (out / "events.jsonl").read_text().splitlines()]
     cmds = [e for e in events if e["event"] == "mavlink_command"]
-    assert cmds and cmds[0]["vehicle"] == "uav2" and "DO_REPOSITION" in cmds[-1]["origin"]
+    assert [c["vehicle"] for c in cmds][:1] == ["uav2"]
+    assert any("DO_REPOSITION" in c["origin"] for c in cmds)
+    assert any(c["vehicle"] == "uav1" and "waypoints" in c["command"] for c in cmds)
     tlogs = sorted(p.name for p in out.glob("*.tlog"))
     assert tlogs == ["uav0.tlog", "uav1.tlog", "uav2.tlog"]
     assert mavutil.mavlink_connection(str(out / "uav2.tlog")).recv_match(type="HEARTBEAT")
