@@ -85,6 +85,14 @@ def _build_parser() -> _Parser:
                    help="present every vehicle on MAVLink (udpout:HOST:PORT sends there and "
                         "answers whoever talks; udpin:HOST:PORT listens; default "
                         "udpout:127.0.0.1:14550, where ground stations listen)")
+    sg = r.add_mutually_exclusive_group()
+    sg.add_argument("--mavlink-signing-key-file", metavar="PATH",
+                    help="sign MAVLink 2 traffic with the passphrase in PATH (as MAVProxy's "
+                         "'signing key'); unsigned or wrongly signed commands are dropped")
+    sg.add_argument("--mavlink-signing-key-env", metavar="NAME",
+                    help="the same, with the passphrase in environment variable NAME")
+    r.add_argument("--mavlink-signing-link-id", type=int, default=0, metavar="N",
+                   help="link id in outgoing signatures (0..255, default 0)")
     r.add_argument("--step-timeout-s", type=_positive_float, default=60.0, metavar="S",
                    help="a worker silent this long in one exchange fails the run (default 60)")
     r.add_argument("--no-progress", action="store_true", help="no progress bar or lines")
@@ -199,6 +207,22 @@ def _cmd_run(a: argparse.Namespace) -> int:
         LinkUrl.parse(a.mavlink)  # a bad URL is a usage error before anything is built
         rates = dict(scn.mavlink["rates_hz"]) if scn.mavlink else {}
         mav_cfg = MavlinkConfig(url=a.mavlink, rates_hz=rates)
+    signing = a.mavlink_signing_key_file or a.mavlink_signing_key_env
+    if signing:
+        import dataclasses
+
+        from cosim.mavlink import MavlinkConfig, load_signing_key
+
+        if mav_cfg is None and scn.mavlink is None:
+            raise ConfigError("--mavlink-signing-key-* needs MAVLink: pass --mavlink or give "
+                              "the scenario a mavlink: section")
+        if mav_cfg is None:
+            assert scn.mavlink is not None
+            mav_cfg = MavlinkConfig(url=scn.mavlink["url"], rates_hz=dict(scn.mavlink["rates_hz"]))
+        mav_cfg = dataclasses.replace(mav_cfg, signing_key_file=a.mavlink_signing_key_file,
+                                      signing_key_env=a.mavlink_signing_key_env,
+                                      signing_link_id=a.mavlink_signing_link_id)
+        load_signing_key(mav_cfg)  # a missing or bad key is a usage error before the build
     run = Run(scn, out, backend=a.backend, workers=a.workers, realtime=a.realtime,
               progress=progress, step_timeout_s=a.step_timeout_s, mavlink=mav_cfg)
 

@@ -18,6 +18,7 @@ from cosim.mavlink.endpoint import (
     MavlinkConfig,
     MavlinkEndpoint,
     VehicleCommand,
+    load_signing_key,
 )
 from cosim.mavlink.errors import EndpointClosed, LinkError, MavlinkError
 from cosim.mavlink.link import DEFAULT_URL, LinkUrl
@@ -31,4 +32,5 @@ from cosim.mavlink.vehicle import (
 
 __all__ = ["DEFAULT_RATES_HZ", "DEFAULT_URL", "MAX_VEHICLES_PER_LINK", "EndpointClosed",
            "LinkError", "LinkUrl", "MavVehicleSpec", "MavlinkConfig", "MavlinkEndpoint",
-           "MavlinkError", "PlaneMode", "SimClock", "VehicleCommand", "mav_specs"]
+           "MavlinkError", "PlaneMode", "SimClock", "VehicleCommand", "load_signing_key",
+           "mav_specs"]

@@ -11,6 +11,9 @@ Everything else in ``cosim.mavlink`` sees MAVLink through this module only:
 - ``Message``: a decoded message as plain Python values (no pymavlink
   types leak out), also constructible directly so in-process callers can use
   the same handling path as the network.
+- MAVLink 2 signing: ``signing_key`` (MAVProxy's passphrase -> key),
+  ``Packer.enable_signing`` (sign every outgoing packet) and
+  ``SignatureChecker`` (verify received packets, reject replays).
 - The protocol constants the rest of the package uses, as typed ints.
 
 pymavlink ships no type information, so its objects stay inside this module.
@@ -21,6 +24,8 @@ reads do not change what cosim sends.
 
 from __future__ import annotations
 
+import hashlib
+import hmac
 from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
@@ -257,6 +262,35 @@ class Packer:
         """The sequence number the next packet will carry."""
         return int(self._mav.seq)
 
+    @property
+    def signing(self) -> bool:
+        """Whether packets are signed (``enable_signing`` was called)."""
+        return bool(self._mav.signing.sign_outgoing)
+
+    def enable_signing(self, key: bytes, link_id: int = 0) -> None:
+        """Sign every packet from now on (MAVLink 2 signing) with the 32-byte
+        ``key`` and ``link_id``; timestamps come from ``advance_signing_time``."""
+        if len(key) != SIGNING_KEY_LEN:
+            raise ValueError(f"MAVLink signing key must be {SIGNING_KEY_LEN} bytes, "
+                             f"got {len(key)}")
+        if not 0 <= link_id <= 255:
+            raise ValueError(f"MAVLink signing link id must be 0..255, got {link_id}")
+        s = self._mav.signing
+        s.secret_key = bytes(key)
+        s.link_id = link_id
+        s.sign_outgoing = True
+
+    @property
+    def signing_timestamp(self) -> int:
+        """The signature timestamp the next packet will carry (10 us units since 2015)."""
+        return int(self._mav.signing.timestamp)
+
+    def advance_signing_time(self, timestamp: int) -> None:
+        """Move the signature timestamp up to ``timestamp`` (never back: every
+        signed packet carries a timestamp greater than the previous one)."""
+        s = self._mav.signing
+        s.timestamp = max(int(s.timestamp), int(timestamp))
+
     def pack(self, name: str, **fields: Any) -> bytes:
         """Encode one message; ``str`` values of char fields are ASCII-encoded.
 
@@ -278,6 +312,77 @@ class Packer:
         self._mav.seq = (self._mav.seq + 1) % 256
         self.packets += 1
         return buf
+
+
+# -- signing -----------------------------------------------------------------
+SIGNING_KEY_LEN: Final[int] = 32
+#: the MAVLink 2 signing epoch, 2015-01-01T00:00:00Z, in unix microseconds
+SIGNING_EPOCH_UNIX_US: Final[int] = 1_420_070_400 * 1_000_000
+_IFLAG_SIGNED: Final[int] = int(_d.MAVLINK_IFLAG_SIGNED)
+_SIGNATURE_LEN: Final[int] = int(_d.MAVLINK_SIGNATURE_BLOCK_LEN)
+_V2_MARKER: Final[int] = int(_d.PROTOCOL_MARKER_V2)
+
+
+def signing_key(passphrase: str) -> bytes:
+    """The 32-byte MAVLink 2 signing key of a passphrase, as MAVProxy's
+    ``signing key PASSPHRASE`` (and ``signing setup``) derive it: SHA-256 of
+    the ASCII passphrase. ``ValueError`` if it is not ASCII."""
+    return hashlib.sha256(passphrase.encode("ascii")).digest()
+
+
+def signing_timestamp(unix_us: int) -> int:
+    """A MAVLink 2 signature timestamp (10 us units since 2015-01-01) for a
+    unix time in microseconds (0 before 2015)."""
+    return max(0, (int(unix_us) - SIGNING_EPOCH_UNIX_US) // 10)
+
+
+#: ``SignatureChecker.check`` verdicts
+SIG_OK: Final[str] = "ok"
+SIG_MAVLINK1: Final[str] = "mavlink1"
+SIG_UNSIGNED: Final[str] = "unsigned"
+SIG_BAD: Final[str] = "bad_signature"
+SIG_REPLAY: Final[str] = "replay"
+
+
+class SignatureChecker:
+    """Verifies the MAVLink 2 signature of received packets against one key.
+
+    ``check(raw)`` (``raw``: one packet exactly as received, ``Message.raw``)
+    returns ``SIG_OK``, ``SIG_MAVLINK1`` (a MAVLink 1 packet: it cannot carry
+    a signature), ``SIG_UNSIGNED``, ``SIG_BAD`` (wrong key or tampered) or
+    ``SIG_REPLAY`` (a correct signature whose timestamp is not newer than
+    the last accepted one of the same stream: link id, system, component).
+    The signature is checked before the timestamp, and only an accepted
+    packet advances its stream's timestamp, so forged packets cannot block a
+    stream. The first packet of a new stream is accepted at any timestamp
+    (the simulation clock need not follow the wall clock, so there is no
+    "recent enough" test to make against it).
+    """
+
+    def __init__(self, key: bytes) -> None:
+        if len(key) != SIGNING_KEY_LEN:
+            raise ValueError(f"MAVLink signing key must be {SIGNING_KEY_LEN} bytes, "
+                             f"got {len(key)}")
+        self._key = bytes(key)
+        self.last_timestamp: dict[tuple[int, int, int], int] = {}
+
+    def check(self, raw: bytes) -> str:
+        if not raw or raw[0] != _V2_MARKER:
+            return SIG_MAVLINK1
+        if len(raw) < 10 + 2 + _SIGNATURE_LEN or not raw[2] & _IFLAG_SIGNED:
+            return SIG_UNSIGNED
+        body, sig = raw[:-6], raw[-6:]
+        expect = hashlib.sha256(self._key + body).digest()[:6]
+        if not hmac.compare_digest(expect, sig):
+            return SIG_BAD
+        link_id = raw[-_SIGNATURE_LEN]
+        timestamp = int.from_bytes(raw[-12:-6], "little")
+        stream = (int(link_id), int(raw[5]), int(raw[6]))
+        last = self.last_timestamp.get(stream)
+        if last is not None and timestamp <= last:
+            return SIG_REPLAY
+        self.last_timestamp[stream] = timestamp
+        return SIG_OK
 
 
 #: Decoder counters (keys always present)

@@ -21,15 +21,38 @@ produced, in arrival order (a mission flown in AUTO is one ``waypoints``
 command; its progress is followed from ``states``, no guidance events
 needed). It never blocks and never raises because of
 what arrives from the network; problems are counted (``counters()``).
+
+MAVLink 2 signing (``MavlinkConfig.signing_key_file`` / ``signing_key_env``):
+
+- every packet the vehicles send is signed with the key and
+  ``signing_link_id``; the signature timestamp follows the simulation clock
+  (``unix_us(tick)``, in 10 us units since 2015-01-01) and never goes back
+  (each vehicle's packets carry strictly increasing timestamps);
+- a received packet is handled only if it carries a valid signature made
+  with the same key, and its timestamp is newer than the last accepted one
+  of its stream (link id, system, component); otherwise it is dropped before
+  anything looks at it and counted: ``unsigned_dropped``,
+  ``bad_signature_dropped`` (wrong key, tampered), ``replay_dropped``.
+  MAVLink 1 packets cannot be signed, so they are dropped too (counted in
+  ``unsigned_dropped`` and, separately, ``mavlink1_dropped``);
+- only a sender of an accepted packet becomes a peer (gets telemetry);
+- SETUP_SIGNING is never obeyed, even correctly signed
+  (``setup_signing_ignored``): the key comes from the operator only;
+- ``inject()``-ed messages are in-process, not checked.
+
+Ground stations reject a new signed stream whose timestamp is more than a
+minute behind their clock: with signing on, keep the default clock anchor
+(now), not one in the past.
 """
 
 from __future__ import annotations
 
 import logging
+import os
 import time
 from collections import Counter
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import NamedTuple
 
@@ -67,7 +90,9 @@ ENDPOINT_COUNTERS = (
     "handler_errors", "param_unknown", "param_rejected", "ftp_naks",
     "position_targets_ignored", "position_targets_invalid", "position_targets_unsupported",
     "injected", "mission_uploads", "mission_upload_errors", "mission_upload_timeouts",
-    "mission_rerequests", "mission_unexpected", "mission_downloads", "mission_items_reached")
+    "mission_rerequests", "mission_unexpected", "mission_downloads", "mission_items_reached",
+    "unsigned_dropped", "mavlink1_dropped", "bad_signature_dropped", "replay_dropped",
+    "setup_signing_ignored")
 
 
 @dataclass(frozen=True)
@@ -77,12 +102,76 @@ class MavlinkConfig:
     ``rates_hz`` overrides ``DEFAULT_RATES_HZ`` per message (0 = off);
     ``max_datagrams_per_exchange`` bounds the work one exchange does for the
     network, ``max_peers`` the addresses answered.
+
+    MAVLink 2 signing is on when a key source is named, either
+    ``signing_key_file`` (a file holding the passphrase) or
+    ``signing_key_env`` (the name of an environment variable holding it),
+    never both. The passphrase is what MAVProxy's ``signing key PASSPHRASE``
+    takes (one word, ASCII; surrounding whitespace such as the file's final
+    newline is ignored); the key is its SHA-256, as MAVProxy derives it. The
+    config holds where the key is, never the key, so scenario text cannot
+    carry it. ``signing_link_id`` (0..255) is the link id in outgoing
+    signatures. See ``MavlinkEndpoint`` for what signing changes.
     """
 
     url: str = DEFAULT_URL
     rates_hz: Mapping[str, float] = field(default_factory=dict)
     max_peers: int = 16
     max_datagrams_per_exchange: int = 1000
+    signing_key_file: str | Path | None = None
+    signing_key_env: str | None = None
+    signing_link_id: int = 0
+
+    @property
+    def signing(self) -> bool:
+        """Whether MAVLink 2 signing is on (a key source is named)."""
+        return self.signing_key_file is not None or self.signing_key_env is not None
+
+
+def load_signing_key(config: MavlinkConfig) -> bytes | None:
+    """The 32-byte signing key from the config's key source (None: signing
+    off); ConfigError naming where it looked if it is missing or unusable."""
+    problems: list[str] = []
+    if not 0 <= config.signing_link_id <= 255:
+        problems.append(f"mavlink signing: link id must be 0..255, got "
+                        f"{config.signing_link_id!r}")
+    if config.signing_key_file is not None and config.signing_key_env is not None:
+        problems.append("mavlink signing: give the key in a file or an environment variable, "
+                        f"not both (file {str(config.signing_key_file)!r}, "
+                        f"variable {config.signing_key_env!r})")
+    if problems or not config.signing:
+        if problems:
+            raise ConfigError(problems)
+        return None
+    if config.signing_key_file is not None:
+        where = f"key file {str(config.signing_key_file)!r}"
+        try:
+            passphrase = Path(config.signing_key_file).read_text(encoding="ascii").strip()
+        except UnicodeDecodeError:
+            raise ConfigError(f"mavlink signing: {where} is not ASCII text (MAVProxy's "
+                              "'signing key' takes an ASCII passphrase)") from None
+        except OSError as e:
+            raise ConfigError(f"mavlink signing: cannot read {where}: "
+                              f"{e.strerror or e}") from None
+    else:
+        name = str(config.signing_key_env)
+        where = f"environment variable {name!r}"
+        if not name:
+            raise ConfigError("mavlink signing: the key's environment variable name is empty")
+        value = os.environ.get(name)
+        if value is None:
+            raise ConfigError(f"mavlink signing: {where} is not set")
+        passphrase = value.strip()
+    if not passphrase:
+        raise ConfigError(f"mavlink signing: {where} holds an empty passphrase")
+    if any(c.isspace() for c in passphrase):
+        raise ConfigError(f"mavlink signing: the passphrase in {where} contains whitespace; "
+                          "it must be one word, as MAVProxy's 'signing key' takes it")
+    try:
+        return mav.signing_key(passphrase)
+    except UnicodeEncodeError:
+        raise ConfigError(f"mavlink signing: the passphrase in {where} is not ASCII "
+                          "(MAVProxy's 'signing key' takes an ASCII passphrase)") from None
 
 
 class VehicleCommand(NamedTuple):
@@ -131,11 +220,21 @@ class MavlinkEndpoint:
                 problems.append(f"duplicate vehicle {what}(s): {dup}")
         if problems:
             raise ConfigError([f"mavlink: {p}" for p in problems])
+        key = load_signing_key(config)
         anchor = clock_anchor_unix_us if clock_anchor_unix_us is not None \
             else int(time.time()) * 1_000_000
         self.clock = SimClock(float(physics_hz), int(anchor))
         self.config = config
         self.vehicles = [MavVehicle(s, self.clock, config.rates_hz) for s in vehicles]
+        #: verifies incoming signatures (None: signing off)
+        self.signature_checker = mav.SignatureChecker(key) if key is not None else None
+        if key is not None:
+            for v in self.vehicles:
+                v.packer.enable_signing(key, config.signing_link_id)
+            if anchor < time.time() * 1_000_000 - 60_000_000:
+                log.warning("mavlink signing: the simulation clock starts in the past; ground "
+                            "stations reject a new signed stream more than a minute behind "
+                            "their own clock")
         self._by_sysid = {v.sysid: v for v in self.vehicles}
         self.counts: Counter[str] = Counter({k: 0 for k in ENDPOINT_COUNTERS})
         self.decoder = mav.Decoder()
@@ -218,6 +317,8 @@ class MavlinkEndpoint:
             self._dispatch(m, tick, commands)
         for data, addr in self.link.poll():
             msgs = self.decoder.decode(data)
+            if self.signature_checker is not None:
+                msgs = [a for a in (self._authenticate(m) for m in msgs) if a is not None]
             if msgs:
                 self.link.remember(addr)
             for m in msgs:
@@ -245,7 +346,31 @@ class MavlinkEndpoint:
         return dict(sorted(out.items()))
 
     # -- internals -------------------------------------------------------------
+    def _authenticate(self, m: mav.Message) -> mav.Message | None:
+        """A received message if its signature is good (marked signed), else
+        None, counted; SETUP_SIGNING is never obeyed (signing on)."""
+        assert self.signature_checker is not None
+        verdict = self.signature_checker.check(m.raw)
+        if verdict != mav.SIG_OK:
+            if verdict == mav.SIG_MAVLINK1:
+                self.counts["mavlink1_dropped"] += 1
+                self.counts["unsigned_dropped"] += 1
+            elif verdict == mav.SIG_UNSIGNED:
+                self.counts["unsigned_dropped"] += 1
+            elif verdict == mav.SIG_BAD:
+                self.counts["bad_signature_dropped"] += 1
+            else:
+                self.counts["replay_dropped"] += 1
+            return None
+        if m.name == "SETUP_SIGNING":
+            # the key comes from the operator's file or variable, never the network
+            self.counts["setup_signing_ignored"] += 1
+            return None
+        return replace(m, signed=True)
+
     def _send(self, v: MavVehicle, name: str, fields: dict[str, object], tick: int) -> None:
+        if self.signature_checker is not None:
+            v.packer.advance_signing_time(mav.signing_timestamp(self.clock.unix_us(tick)))
         pkt = v.packer.pack(name, **fields)
         self.link.send(pkt)
         self.counts["packets_out"] += 1

@@ -61,10 +61,12 @@ def vehicle_specs(n: int, **kw: Any) -> list[MavVehicleSpec]:
 class GroundStation:
     """A pymavlink client (system 255, component 190) talking to an endpoint."""
 
-    def __init__(self, url: str) -> None:
+    def __init__(self, url: str, key: bytes | None = None) -> None:
         self.conn = mavutil.mavlink_connection(url, source_system=255, source_component=190,
                                                dialect="ardupilotmega")
         self.mav = self.conn.mav
+        if key is not None:  # as MAVProxy's "signing key" does
+            self.conn.setup_signing(key, sign_outgoing=True)
 
     @property
     def port(self) -> int:
@@ -100,14 +102,15 @@ class Rig:
     ground station that has said hello; ``step()`` runs one exchange."""
 
     def __init__(self, tmp_path: Path, n: int, config: MavlinkConfig | None = None,
+                 anchor_us: int = ANCHOR_US, gcs_key: bytes | None = None,
                  **spec_kw: Any) -> None:
         self.n = n
         self.states = state_rows(n)
         self.tick = 0
         self.ep = MavlinkEndpoint(vehicle_specs(n, **spec_kw), PHYSICS_HZ,
                                   config or MavlinkConfig(url="udpin:127.0.0.1:0"),
-                                  tlog_dir=tmp_path / "tlogs", clock_anchor_unix_us=ANCHOR_US)
-        self.gcs = GroundStation(f"udpout:127.0.0.1:{self.ep.local_address[1]}")
+                                  tlog_dir=tmp_path / "tlogs", clock_anchor_unix_us=anchor_us)
+        self.gcs = GroundStation(f"udpout:127.0.0.1:{self.ep.local_address[1]}", gcs_key)
         self.gcs.hello()
         self.step()
         self.gcs.drain(wait_s=1.0)

@@ -133,3 +133,68 @@ def test_ground_station_repositions_one_vehicle_and_flies_a_mission_on_another(
     tlogs = sorted(p.name for p in out.glob("*.tlog"))
     assert tlogs == ["uav0.tlog", "uav1.tlog", "uav2.tlog"]
     assert mavutil.mavlink_connection(str(out / "uav2.tlog")).recv_match(type="HEARTBEAT")
+
+
+def test_signed_run_answers_only_a_ground_station_with_the_key(tmp_path: Path,
+                                                               monkeypatch) -> None:
+    import hashlib
+
+    scn = tmp_path / "mav3.yaml"
+    scn.write_text(SCENARIO.replace("duration_s: 600", "duration_s: 120"))
+    keyfile = tmp_path / "key"
+    keyfile.write_text("correct-horse\n")
+    out = tmp_path / "out"
+    good = GroundStation("udpin:127.0.0.1:0")
+    good.conn.setup_signing(hashlib.sha256(b"correct-horse").digest(), sign_outgoing=True)
+    sim = subprocess.Popen(
+        [sys.executable, "-m", "cosim", "-q", "run", str(scn), "--out", str(out),
+         "--realtime", "5", "--no-progress", "--mavlink", f"udpout:127.0.0.1:{good.port}",
+         "--mavlink-signing-key-file", str(keyfile)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    bad = GroundStation("udpout:127.0.0.1:1")  # re-aimed below, once the port is known
+    try:
+        addr = None
+        deadline = time.monotonic() + 60
+        while addr is None and time.monotonic() < deadline:
+            for m in good.drain(0.5):
+                if m.get_type() == "HEARTBEAT":
+                    assert m.get_signed()  # telemetry is signed
+                    addr = next(iter(good.conn.clients), None)  # the simulation's socket
+        assert addr is not None, "no signed heartbeat"
+        bad.close()
+        bad = GroundStation(f"udpout:{addr[0]}:{addr[1]}")  # no key
+        bad.conn.mav.command_long_send(1, 1, ML.MAV_CMD_REQUEST_MESSAGE, 0, 148, 0, 0, 0, 0,
+                                       0, 0)
+        good.conn.mav.command_long_send(1, 1, ML.MAV_CMD_REQUEST_MESSAGE, 0, 148, 0, 0, 0, 0,
+                                        0, 0)
+        good_acks, bad_msgs = [], []
+        deadline = time.monotonic() + 10
+        while not good_acks and time.monotonic() < deadline:
+            good_acks += [m for m in good.drain(0.5) if m.get_type() == "COMMAND_ACK"]
+        bad_msgs = bad.drain(1.0)
+        assert good_acks and good_acks[0].result == ML.MAV_RESULT_ACCEPTED
+        assert not [m for m in bad_msgs if m.get_type() == "COMMAND_ACK"]
+    finally:
+        sim.send_signal(signal.SIGINT)
+        _, err = sim.communicate(timeout=30)
+        good.close()
+        bad.close()
+    assert sim.returncode == 130, err
+    counters = json.loads((out / "summary.json").read_text())["mavlink"]["counters"]
+    assert counters["unsigned_dropped"] >= 1
+
+
+def test_signing_key_problems_are_usage_errors(tmp_path: Path, capsys) -> None:
+    from cosim.cli import main
+
+    scn = tmp_path / "mav3.yaml"
+    scn.write_text(SCENARIO)
+    args = ["run", str(scn), "--out", str(tmp_path / "o"), "--no-progress"]
+    assert main(args + ["--mavlink-signing-key-file", str(tmp_path / "nokey")]) == 2
+    assert "needs MAVLink" in capsys.readouterr().err
+    assert main(args + ["--mavlink", "--mavlink-signing-key-file",
+                        str(tmp_path / "nokey")]) == 2
+    assert "nokey" in capsys.readouterr().err
+    assert main(args + ["--mavlink", "--mavlink-signing-key-env", "COSIM_TEST_NO_SUCH_VAR"]) == 2
+    assert "COSIM_TEST_NO_SUCH_VAR" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
