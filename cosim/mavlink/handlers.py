@@ -270,12 +270,21 @@ class Handler:
         else:
             out.replies.append(_text(f"{mode_name(mode)} is not supported by cosim"))
             return mav.MAV_RESULT_FAILED
+        return self._switch_to(v, mode, d, out, mode_name(mode), mav.MAV_RESULT_FAILED,
+                               cw_override)
+
+    @staticmethod
+    def _switch_to(v: MavVehicle, mode: int, d: dict[str, Any], out: Outcome, what: str,
+                   refused: int = mav.MAV_RESULT_DENIED, cw: bool | None = None) -> int:
+        """Turn vocabulary mapping ``d`` into a command for ``v`` in ``mode``; a
+        mapping the vocabulary rejects is answered with a STATUSTEXT and
+        ``refused``, leaving the mode as it was."""
         cmd = _vocab(d)
         if isinstance(cmd, str):
-            out.replies.append(_text(f"{mode_name(mode)}: {cmd}"))
-            return mav.MAV_RESULT_FAILED
-        if cw_override is not None:
-            cmd = replace(cmd, loiter_cw=cw_override)
+            out.replies.append(_text(f"{what}: {cmd}"))
+            return refused
+        if cw is not None:
+            cmd = replace(cmd, loiter_cw=cw)
         v.mode = int(mode)
         out.commands.append(cmd)
         return mav.MAV_RESULT_ACCEPTED
@@ -290,13 +299,7 @@ class Handler:
         lo = self._loiter_here(v)
         if float(self._row(v)[_S["alt_msl_m"]]) < alt_msl_m:  # takeoff climbs, never descends
             lo["alt_msl_m"] = alt_msl_m
-        cmd = _vocab({"loiter": lo})
-        if isinstance(cmd, str):
-            out.replies.append(_text(f"TAKEOFF: {cmd}"))
-            return mav.MAV_RESULT_DENIED
-        v.mode = int(PlaneMode.TAKEOFF)
-        out.commands.append(cmd)
-        return mav.MAV_RESULT_ACCEPTED
+        return self._switch_to(v, PlaneMode.TAKEOFF, {"loiter": lo}, out, "TAKEOFF")
 
     def _set_mode_msg(self, v: MavVehicle, m: mav.Message, tick: int) -> Outcome:
         out = Outcome()
@@ -455,13 +458,8 @@ class Handler:
         if v.mode != PlaneMode.GUIDED and not change:
             out.replies.append(_text("reposition: switch to GUIDED first"))
             return mav.MAV_RESULT_FAILED
-        cmd = _vocab({"goto": goto})
-        if isinstance(cmd, str):
-            out.replies.append(_text(f"reposition: {cmd}"))
-            return mav.MAV_RESULT_DENIED
-        v.mode = int(PlaneMode.GUIDED)
-        out.commands.append(replace(cmd, loiter_cw=not ccw))
-        return mav.MAV_RESULT_ACCEPTED
+        return self._switch_to(v, PlaneMode.GUIDED, {"goto": goto}, out, "reposition",
+                               cw=not ccw)
 
     def _loiter_unlim(self, v: MavVehicle, req: CommandRequest, tick: int, out: Outcome) -> int:
         if not v.spec.has_autopilot:
@@ -481,13 +479,7 @@ class Handler:
             lo["center"] = {"lat_deg": point["lat_deg"], "lon_deg": point["lon_deg"]}
         if alt_key is not None:
             lo[alt_key] = point[alt_key]
-        cmd = _vocab({"loiter": lo})
-        if isinstance(cmd, str):
-            out.replies.append(_text(f"loiter: {cmd}"))
-            return mav.MAV_RESULT_DENIED
-        v.mode = int(PlaneMode.LOITER)
-        out.commands.append(cmd)
-        return mav.MAV_RESULT_ACCEPTED
+        return self._switch_to(v, PlaneMode.LOITER, {"loiter": lo}, out, "loiter")
 
     def _send_message(self, v: MavVehicle, name: str | None, tick: int, out: Outcome) -> int:
         if name not in STREAMABLE:
