@@ -35,16 +35,30 @@ def _dist_m(lat1: float, lon1: float, lat2: float, lon2: float) -> float:
     return math.hypot(dn, de)
 
 
-def test_ground_station_repositions_one_vehicle_and_flies_a_mission_on_another(
-        tmp_path: Path) -> None:
+def _start_sim(tmp_path: Path, duration_s: int, realtime: str, gcs_port: int,
+               *extra: str) -> tuple[subprocess.Popen, Path]:
+    """``cosim run`` of the 3-vehicle scenario with MAVLink sent to ``gcs_port``."""
     scn = tmp_path / "mav3.yaml"
-    scn.write_text(SCENARIO)
-    gcs = GroundStation("udpin:127.0.0.1:0")
+    scn.write_text(SCENARIO.replace("duration_s: 600", f"duration_s: {duration_s}"))
     out = tmp_path / "out"
     sim = subprocess.Popen(
         [sys.executable, "-m", "cosim", "-q", "run", str(scn), "--out", str(out),
-         "--realtime", "10", "--no-progress", "--mavlink", f"udpout:127.0.0.1:{gcs.port}"],
+         "--realtime", realtime, "--no-progress", "--mavlink",
+         f"udpout:127.0.0.1:{gcs_port}", *extra],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return sim, out
+
+
+def _stop_sim(sim: subprocess.Popen) -> str:
+    """Ctrl-C, wait; returns stderr."""
+    sim.send_signal(signal.SIGINT)
+    return sim.communicate(timeout=30)[1]
+
+
+def test_ground_station_repositions_one_vehicle_and_flies_a_mission_on_another(
+        tmp_path: Path) -> None:
+    gcs = GroundStation("udpin:127.0.0.1:0")
+    sim, out = _start_sim(tmp_path, 600, "10", gcs.port)
     try:
         seen: dict[int, object] = {}
         start: dict[int, tuple[float, float]] = {}
@@ -119,8 +133,7 @@ def test_ground_station_repositions_one_vehicle_and_flies_a_mission_on_another(
         assert auto_seen, "vehicle 2 never reported AUTO in its heartbeat"
         assert reached[:3] == [1, 2, 3], reached
     finally:
-        sim.send_signal(signal.SIGINT)
-        _, err = sim.communicate(timeout=30)
+        err = _stop_sim(sim)
         gcs.close()
     assert sim.returncode == 130, err
     summary = json.loads((out / "summary.json").read_text())
@@ -139,18 +152,12 @@ def test_signed_run_answers_only_a_ground_station_with_the_key(tmp_path: Path,
                                                                monkeypatch) -> None:
     import hashlib
 
-    scn = tmp_path / "mav3.yaml"
-    scn.write_text(SCENARIO.replace("duration_s: 600", "duration_s: 120"))
     keyfile = tmp_path / "key"
     keyfile.write_text("correct-horse\n")
-    out = tmp_path / "out"
     good = GroundStation("udpin:127.0.0.1:0")
     good.conn.setup_signing(hashlib.sha256(b"correct-horse").digest(), sign_outgoing=True)
-    sim = subprocess.Popen(
-        [sys.executable, "-m", "cosim", "-q", "run", str(scn), "--out", str(out),
-         "--realtime", "5", "--no-progress", "--mavlink", f"udpout:127.0.0.1:{good.port}",
-         "--mavlink-signing-key-file", str(keyfile)],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    sim, out = _start_sim(tmp_path, 120, "5", good.port,
+                          "--mavlink-signing-key-file", str(keyfile))
     bad = GroundStation("udpout:127.0.0.1:1")  # re-aimed below, once the port is known
     try:
         addr = None
@@ -175,8 +182,7 @@ def test_signed_run_answers_only_a_ground_station_with_the_key(tmp_path: Path,
         assert good_acks and good_acks[0].result == ML.MAV_RESULT_ACCEPTED
         assert not [m for m in bad_msgs if m.get_type() == "COMMAND_ACK"]
     finally:
-        sim.send_signal(signal.SIGINT)
-        _, err = sim.communicate(timeout=30)
+        err = _stop_sim(sim)
         good.close()
         bad.close()
     assert sim.returncode == 130, err
@@ -207,14 +213,8 @@ def test_fuzzing_a_live_run_leaves_the_vehicles_flying_and_answering(tmp_path: P
     import socket
 
     rng = random.Random(20261121)
-    scn = tmp_path / "mav3.yaml"
-    scn.write_text(SCENARIO.replace("duration_s: 600", "duration_s: 300"))
     gcs = GroundStation("udpin:127.0.0.1:0")
-    out = tmp_path / "out"
-    sim = subprocess.Popen(
-        [sys.executable, "-m", "cosim", "-q", "run", str(scn), "--out", str(out),
-         "--realtime", "2", "--no-progress", "--mavlink", f"udpout:127.0.0.1:{gcs.port}"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    sim, out = _start_sim(tmp_path, 300, "2", gcs.port)
     fuzz = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
         addr = None
@@ -271,8 +271,7 @@ def test_fuzzing_a_live_run_leaves_the_vehicles_flying_and_answering(tmp_path: P
         assert len(set(positions)) > 1  # vehicle 1 still moves
     finally:
         fuzz.close()
-        sim.send_signal(signal.SIGINT)
-        _, err = sim.communicate(timeout=30)
+        err = _stop_sim(sim)
         gcs.close()
     assert sim.returncode == 130, err
     summary = json.loads((out / "summary.json").read_text())
