@@ -338,6 +338,7 @@ class MavlinkEndpoint:
     def counters(self) -> dict[str, int]:
         """Every counter (decoding, link, handling), for summary.json."""
         out: dict[str, int] = {}
+        self.link.update_kernel_drops()
         out.update(self.decoder.counts)
         out.update(self.link.counts)
         out.update(self.counts)

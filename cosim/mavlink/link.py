@@ -17,6 +17,12 @@ datagrams waiting, at most ``max_datagrams`` of them, so a flood cannot stall
 the simulation (the rest wait in the kernel buffer or are dropped by it).
 Peers are remembered (up to ``max_peers``) once they send a valid MAVLink
 packet; every outgoing packet goes to every peer.
+
+The receive buffer is enlarged (``RCVBUF_BYTES``, as far as the OS allows)
+so a burst between two exchanges is not lost; what the kernel drops anyway
+when it is full (a flood) is counted as ``kernel_dropped`` (Linux, from
+``/proc/net/udp``): a ground station's command lost that way is retried by
+the station, as over any lossy link.
 """
 
 from __future__ import annotations
@@ -24,6 +30,7 @@ from __future__ import annotations
 import errno
 import ipaddress
 import logging
+import os
 import socket
 from collections import Counter
 from dataclasses import dataclass
@@ -36,6 +43,8 @@ log = logging.getLogger(__name__)
 DEFAULT_URL = "udpout:127.0.0.1:14550"
 Address = tuple[str, int]
 _MODES = {"udpout": "udpout", "udpin": "udpin", "udp": "udpin"}
+#: receive buffer asked for (Linux caps it at net.core.rmem_max)
+RCVBUF_BYTES = 4 << 20
 
 
 @dataclass(frozen=True)
@@ -99,7 +108,7 @@ class UdpLink:
         self.max_datagrams = max_datagrams
         self.counts: Counter[str] = Counter({k: 0 for k in (
             "datagrams_in", "datagrams_out", "bytes_in", "bytes_out", "send_errors",
-            "recv_errors", "poll_capped", "peers_refused")})
+            "recv_errors", "poll_capped", "peers_refused", "kernel_dropped")})
         ip = _resolve(self.url.host)
         self.peers: list[Address] = []
         if self.url.mode == "udpout":
@@ -110,6 +119,10 @@ class UdpLink:
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             sock.setblocking(False)
+            try:
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RCVBUF_BYTES)
+            except OSError:  # keep the default buffer
+                pass
             sock.bind(bind)
         except OSError as e:
             sock.close()
@@ -170,8 +183,25 @@ class UdpLink:
             except OSError:  # buffer full, unreachable: UDP is lossy anyway
                 self.counts["send_errors"] += 1
 
+    def update_kernel_drops(self) -> None:
+        """Refresh ``counts["kernel_dropped"]``: datagrams the OS dropped because
+        the receive buffer was full (Linux; elsewhere it stays 0)."""
+        if self._sock is None:
+            return
+        try:
+            inode = str(os.fstat(self._sock.fileno()).st_ino)
+            with open("/proc/net/udp") as f:
+                for line in f:
+                    cols = line.split()
+                    if len(cols) > 12 and cols[9] == inode:
+                        self.counts["kernel_dropped"] = int(cols[-1])
+                        return
+        except (OSError, ValueError):
+            pass
+
     def close(self) -> None:
         """Close the socket (safe to call twice)."""
         if self._sock is not None:
+            self.update_kernel_drops()
             self._sock.close()
             self._sock = None
