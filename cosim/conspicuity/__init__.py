@@ -1,0 +1,30 @@
+"""conspicuity: measurements for the conspicuity experiments (DESIGN.md 3.5).
+
+Owns the analysis of the renderer's per-frame ground truth (how long each
+target is visible, pass by pass), the critical-gap relation between a
+conspicuity angle measured at a viewing distance and the angle at a flight
+altitude, and the conversion between on-screen distance and visual angle for
+a display profile. It reads run folders; it never renders, steps an FDM or
+writes into a run's own files (``cosim visibility`` adds ``visibility.csv``).
+"""
+
+from cosim.conspicuity.angles import (
+    DisplayProfile,
+    angle_at_altitude_deg,
+    angle_at_viewing_distance_deg,
+    angle_for_gap_deg,
+    critical_gap_m,
+)
+from cosim.conspicuity.visibility import (
+    Pass,
+    TargetVisibility,
+    passes,
+    read_ground_truth,
+    run_visibility,
+    visibility,
+    write_visibility_csv,
+)
+
+__all__ = ["DisplayProfile", "Pass", "TargetVisibility", "angle_at_altitude_deg",
+           "angle_at_viewing_distance_deg", "angle_for_gap_deg", "critical_gap_m", "passes",
+           "read_ground_truth", "run_visibility", "visibility", "write_visibility_csv"]

@@ -1,0 +1,269 @@
+"""How long each target is visible: passes from the per-frame ground truth.
+
+A **pass** is a maximal run of consecutive frames (frame numbers without a
+gap) in which the target is ``in_view`` (any part of it in the image).
+
+Convention for the duration: ``visible_s = frames_in_view * frame_period_s``.
+Each frame stands for one frame period of video, so this is exactly how long
+the target is on screen when the clip is played back, and for a pass that
+lasts ``T`` seconds of simulated time it is within one frame period of ``T``
+(n samples at period p fall in an interval of length T when
+``(n - 1) p <= T < (n + 1) p``). For a straight level pass of a nadir camera
+at height ``h`` and ground speed ``v`` over a target ``L`` long along the
+track, ``T = (2 h tan(vfov / 2) + L) / v``.
+``first_visible_s`` / ``last_visible_s`` are the times of the first and last
+in-view frames, so ``last - first = visible_s - period``.
+
+The frame in a pass where the target is closest to the image centre (least
+``eccentricity_deg``) is the **overhead** frame: for a nadir camera, the
+moment the vehicle is above the target (experiment 1's trial start).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from cosim.errors import CosimError
+
+#: ground-truth columns this module needs
+REQUIRED_COLUMNS = ("frame", "time_s", "vehicle", "camera", "target", "in_view")
+
+
+class GroundTruthError(CosimError):
+    """A ground-truth file is missing, unreadable or malformed."""
+
+
+@dataclass(frozen=True)
+class GtRow:
+    frame: int
+    time_s: float
+    in_view: bool
+    eccentricity_deg: float = math.nan
+    angular_size_deg: float = math.nan
+    range_m: float = math.nan
+
+
+@dataclass(frozen=True)
+class Pass:
+    index: int  # 1-based, in time order
+    first_frame: int
+    last_frame: int
+    first_visible_s: float
+    last_visible_s: float
+    frames: int
+    visible_s: float
+    overhead_frame: int
+    overhead_s: float
+    min_eccentricity_deg: float
+    max_angular_size_deg: float
+    min_range_m: float
+
+
+@dataclass(frozen=True)
+class TargetVisibility:
+    vehicle: str
+    camera: str
+    target: str
+    frame_period_s: float
+    frames: int  # frames in the ground truth for this target
+    passes: tuple[Pass, ...] = field(default=())
+
+    @property
+    def visible_s(self) -> float:
+        """Total over every pass."""
+        return sum(p.visible_s for p in self.passes)
+
+    @property
+    def first_visible_s(self) -> float | None:
+        return self.passes[0].first_visible_s if self.passes else None
+
+    @property
+    def last_visible_s(self) -> float | None:
+        return self.passes[-1].last_visible_s if self.passes else None
+
+
+def _num(text: str | None) -> float:
+    if text is None or text == "":
+        return math.nan
+    return float(text)
+
+
+def read_ground_truth(path: str | Path) -> dict[tuple[str, str, str], list[GtRow]]:
+    """Rows of one ground-truth CSV grouped by (vehicle, camera, target), in frame order."""
+    p = Path(path)
+    try:
+        f = p.open(newline="")
+    except OSError as e:
+        raise GroundTruthError(f"{p}: cannot read ground truth: {e.strerror or e}") from None
+    out: dict[tuple[str, str, str], list[GtRow]] = {}
+    with f:
+        reader = csv.DictReader(f)
+        missing = [c for c in REQUIRED_COLUMNS if c not in (reader.fieldnames or [])]
+        if missing:
+            raise GroundTruthError(f"{p}: not a ground-truth file: missing column(s) "
+                                   f"{', '.join(missing)}")
+        for n, r in enumerate(reader, start=2):
+            try:
+                row = GtRow(frame=int(r["frame"]), time_s=float(r["time_s"]),
+                            in_view=int(r["in_view"]) != 0,
+                            eccentricity_deg=_num(r.get("eccentricity_deg")),
+                            angular_size_deg=_num(r.get("angular_size_deg")),
+                            range_m=_num(r.get("range_m")))
+            except (TypeError, ValueError) as e:
+                raise GroundTruthError(f"{p}:{n}: bad value: {e}") from None
+            out.setdefault((r["vehicle"], r["camera"], r["target"]), []).append(row)
+    for rows in out.values():
+        rows.sort(key=lambda x: x.frame)
+    return out
+
+
+def _nanmin(xs: Iterable[float]) -> float:
+    vals = [x for x in xs if not math.isnan(x)]
+    return min(vals) if vals else math.nan
+
+
+def passes(rows: Sequence[GtRow], frame_period_s: float) -> list[Pass]:
+    """The passes in one target's rows (sorted by frame)."""
+    runs: list[list[GtRow]] = []
+    for r in rows:
+        if not r.in_view:
+            continue
+        if runs and runs[-1][-1].frame == r.frame - 1:
+            runs[-1].append(r)
+        else:
+            runs.append([r])
+    out = []
+    for i, run in enumerate(runs, start=1):
+        ecc = [(x.eccentricity_deg, x.frame) for x in run if not math.isnan(x.eccentricity_deg)]
+        over = min(ecc)[1] if ecc else run[len(run) // 2].frame
+        over_row = next(x for x in run if x.frame == over)
+        sizes = [x.angular_size_deg for x in run if not math.isnan(x.angular_size_deg)]
+        out.append(Pass(index=i, first_frame=run[0].frame, last_frame=run[-1].frame,
+                        first_visible_s=run[0].time_s, last_visible_s=run[-1].time_s,
+                        frames=len(run), visible_s=len(run) * frame_period_s,
+                        overhead_frame=over, overhead_s=over_row.time_s,
+                        min_eccentricity_deg=_nanmin(x.eccentricity_deg for x in run),
+                        max_angular_size_deg=max(sizes) if sizes else math.nan,
+                        min_range_m=_nanmin(x.range_m for x in run)))
+    return out
+
+
+def _period_from_times(rows: Sequence[GtRow]) -> float:
+    """The frame period from the rows' times: the first-to-last span over the
+    frame count between them (precise even with times rounded in the file)."""
+    if len(rows) < 2 or rows[-1].frame == rows[0].frame:
+        raise GroundTruthError("cannot tell the frame period from fewer than two frames; "
+                               "give the camera's rate_hz")
+    return (rows[-1].time_s - rows[0].time_s) / (rows[-1].frame - rows[0].frame)
+
+
+def visibility(path: str | Path, rate_hz: float | None = None) -> list[TargetVisibility]:
+    """Per target visibility from one ground-truth CSV; ``rate_hz`` is the
+    camera's frame rate (default: read from the frame times)."""
+    out = []
+    for (vehicle, camera, target), rows in read_ground_truth(path).items():
+        period = 1.0 / rate_hz if rate_hz else _period_from_times(rows)
+        out.append(TargetVisibility(vehicle=vehicle, camera=camera, target=target,
+                                    frame_period_s=period, frames=len(rows),
+                                    passes=tuple(passes(rows, period))))
+    return out
+
+
+def camera_entries(run_dir: str | Path) -> list[dict[str, Any]]:
+    """The run's cameras: summary.json's ``cameras`` list (paths made absolute),
+    or, without one, every ``cameras/*.gt.csv`` in the folder."""
+    run = Path(run_dir)
+    summary_path = run / "summary.json"
+    entries: list[dict[str, Any]] = []
+    if summary_path.exists():
+        try:
+            summary = json.loads(summary_path.read_text())
+        except (OSError, ValueError) as e:
+            raise GroundTruthError(f"{summary_path}: cannot read: {e}") from None
+        for c in summary.get("cameras") or []:
+            entry = dict(c)
+            for key in ("video", "ground_truth"):
+                if entry.get(key):
+                    entry[key] = str(run / entry[key])
+            entries.append(entry)
+    if not entries:
+        for gt in sorted((run / "cameras").glob("*.gt.csv")):
+            entries.append({"ground_truth": str(gt)})
+    return entries
+
+
+def run_visibility(run_dir: str | Path) -> list[TargetVisibility]:
+    """Every target seen by every camera of one run."""
+    out: list[TargetVisibility] = []
+    for e in camera_entries(run_dir):
+        out.extend(visibility(e["ground_truth"], e.get("rate_hz")))
+    return out
+
+
+def physics_hz_of(run_dir: str | Path) -> float | None:
+    try:
+        hz = json.loads((Path(run_dir) / "summary.json").read_text()).get("physics_hz")
+    except (OSError, ValueError):
+        return None
+    return float(hz) if hz else None
+
+
+PASS_COLUMNS = ("vehicle", "camera", "target", "pass", "first_visible_s", "last_visible_s",
+                "visible_s", "frames", "overhead_s", "overhead_tick", "overhead_frame",
+                "min_eccentricity_deg", "max_angular_size_deg", "min_range_m")
+
+
+def _fmt(x: float | int | None) -> str:
+    if x is None or (isinstance(x, float) and math.isnan(x)):
+        return ""
+    if isinstance(x, float):
+        return f"{x:.6g}" if abs(x) >= 1e5 else f"{round(x, 6):g}"
+    return str(x)
+
+
+def pass_rows(results: Iterable[TargetVisibility], physics_hz: float | None
+              ) -> list[dict[str, str]]:
+    """One row per pass (a target never in view gets one row with pass 0)."""
+    rows = []
+    for tv in results:
+        base = {"vehicle": tv.vehicle, "camera": tv.camera, "target": tv.target}
+        if not tv.passes:
+            rows.append({**base, "pass": "0", "visible_s": "0", "frames": "0"})
+        for p in tv.passes:
+            tick = round(p.overhead_s * physics_hz) if physics_hz else None
+            rows.append({**base, "pass": str(p.index),
+                         "first_visible_s": _fmt(p.first_visible_s),
+                         "last_visible_s": _fmt(p.last_visible_s),
+                         "visible_s": _fmt(p.visible_s), "frames": str(p.frames),
+                         "overhead_s": _fmt(p.overhead_s), "overhead_tick": _fmt(tick),
+                         "overhead_frame": str(p.overhead_frame),
+                         "min_eccentricity_deg": _fmt(p.min_eccentricity_deg),
+                         "max_angular_size_deg": _fmt(p.max_angular_size_deg),
+                         "min_range_m": _fmt(p.min_range_m)})
+    return rows
+
+
+def write_csv(path: str | Path, columns: Sequence[str], rows: Iterable[dict[str, Any]]) -> Path:
+    """Write ``rows`` (missing keys left empty) atomically."""
+    p = Path(path)
+    tmp = p.with_name(p.name + ".tmp")
+    with tmp.open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(columns), restval="", extrasaction="ignore")
+        w.writeheader()
+        for r in rows:
+            w.writerow(r)
+    tmp.replace(p)
+    return p
+
+
+def write_visibility_csv(run_dir: str | Path, out: str | Path | None = None) -> Path:
+    """``RUN_DIR/visibility.csv``: one row per pass per target per camera."""
+    run = Path(run_dir)
+    rows = pass_rows(run_visibility(run), physics_hz_of(run))
+    return write_csv(out or run / "visibility.csv", PASS_COLUMNS, rows)
