@@ -93,6 +93,9 @@ def _build_parser() -> _Parser:
                     help="the same, with the passphrase in environment variable NAME")
     r.add_argument("--mavlink-signing-link-id", type=int, default=0, metavar="N",
                    help="link id in outgoing signatures (0..255, default 0)")
+    r.add_argument("--external-controller", action="store_true",
+                   help="the scenario's swarm controller runs in another process (cosim swarm "
+                        "SCENARIO --connect URL), kept in lockstep over --mavlink")
     r.add_argument("--step-timeout-s", type=_positive_float, default=60.0, metavar="S",
                    help="a worker silent this long in one exchange fails the run (default 60)")
     r.add_argument("--no-progress", action="store_true", help="no progress bar or lines")
@@ -223,8 +226,22 @@ def _cmd_run(a: argparse.Namespace) -> int:
                                       signing_key_env=a.mavlink_signing_key_env,
                                       signing_link_id=a.mavlink_signing_link_id)
         load_signing_key(mav_cfg)  # a missing or bad key is a usage error before the build
+    if a.external_controller:
+        import dataclasses
+
+        from cosim.mavlink import CONTROLLER_SYSID
+        from cosim.sync.participants import needs_mavlink
+
+        if not needs_mavlink(scn):
+            raise ConfigError(f"--external-controller: {a.scenario} has no controller section "
+                              "(swarm:) for an outside controller to run")
+        if mav_cfg is None:
+            raise ConfigError("--external-controller needs a network link: pass --mavlink URL "
+                              "(e.g. udpin:127.0.0.1:14560, where the controller connects)")
+        mav_cfg = dataclasses.replace(mav_cfg, lockstep_sysid=CONTROLLER_SYSID)
     run = Run(scn, out, backend=a.backend, workers=a.workers, realtime=a.realtime,
-              progress=progress, step_timeout_s=a.step_timeout_s, mavlink=mav_cfg)
+              progress=progress, step_timeout_s=a.step_timeout_s, mavlink=mav_cfg,
+              external_controller=a.external_controller)
 
     interrupts = 0
 

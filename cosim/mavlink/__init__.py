@@ -14,13 +14,14 @@ Entry point: ``MavlinkEndpoint`` (see ``cosim.mavlink.endpoint``).
 """
 
 from cosim.mavlink.endpoint import (
+    CONTROLLER_SYSID,
     MAX_VEHICLES_PER_LINK,
     MavlinkConfig,
     MavlinkEndpoint,
     VehicleCommand,
     load_signing_key,
 )
-from cosim.mavlink.errors import EndpointClosed, LinkError, MavlinkError
+from cosim.mavlink.errors import EndpointClosed, LinkError, LockstepTimeout, MavlinkError
 from cosim.mavlink.link import DEFAULT_URL, LinkUrl
 from cosim.mavlink.vehicle import (
     DEFAULT_RATES_HZ,
@@ -30,7 +31,7 @@ from cosim.mavlink.vehicle import (
     mav_specs,
 )
 
-__all__ = ["DEFAULT_RATES_HZ", "DEFAULT_URL", "MAX_VEHICLES_PER_LINK", "EndpointClosed",
-           "LinkError", "LinkUrl", "MavVehicleSpec", "MavlinkConfig", "MavlinkEndpoint",
-           "MavlinkError", "PlaneMode", "SimClock", "VehicleCommand", "load_signing_key",
-           "mav_specs"]
+__all__ = ["CONTROLLER_SYSID", "DEFAULT_RATES_HZ", "DEFAULT_URL", "MAX_VEHICLES_PER_LINK",
+           "EndpointClosed", "LinkError", "LinkUrl", "LockstepTimeout", "MavVehicleSpec",
+           "MavlinkConfig", "MavlinkEndpoint", "MavlinkError", "PlaneMode", "SimClock",
+           "VehicleCommand", "load_signing_key", "mav_specs"]

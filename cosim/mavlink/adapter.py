@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import hashlib
 import hmac
+import struct
 from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
@@ -147,6 +148,8 @@ CAP_SET_POSITION_TARGET_LOCAL_NED: Final[int] = int(
 
 FIRMWARE_VERSION_TYPE_OFFICIAL: Final[int] = int(_d.FIRMWARE_VERSION_TYPE_OFFICIAL)
 
+_F32 = struct.Struct("<f")
+
 # -- message ids -------------------------------------------------------------
 _CLASS_BY_NAME: dict[str, Any] = {cls.msgname: cls for cls in _d.mavlink_map.values()}
 _NAME_BY_ID: dict[int, str] = {int(i): cls.msgname for i, cls in _d.mavlink_map.items()}
@@ -169,6 +172,26 @@ def command_name(cmd: int) -> str:
     """The name of a MAV_CMD value (``"MAV_CMD_NAV_TAKEOFF"``), or ``"MAV_CMD <n>"``."""
     entry = _d.enums.get("MAV_CMD", {}).get(cmd)
     return str(entry.name) if entry is not None else f"MAV_CMD {cmd}"
+
+
+_FLOAT32_FIELDS: dict[str, tuple[str, ...]] = {}  # filled on first use per message
+
+
+def wire_values(name: str, fields: dict[str, Any]) -> dict[str, Any]:
+    """``fields`` with every scalar ``float`` field rounded to float32, as a
+    receiver decodes them from the wire (in-place; returns ``fields``). Integer
+    fields are already exact; arrays and chars are left alone."""
+    names = _FLOAT32_FIELDS.get(name)
+    if names is None:
+        cls = _message_class(name)
+        names = _FLOAT32_FIELDS[name] = tuple(
+            f for f, t, n in zip(cls.fieldnames, cls.fieldtypes, _array_lengths(cls))
+            if t == "float" and not n)
+    for f in names:
+        v = fields.get(f)
+        if v is not None:
+            fields[f] = _F32.unpack(_F32.pack(v))[0]
+    return fields
 
 
 def field_names(name: str) -> tuple[str, ...]:

@@ -43,6 +43,28 @@ MAVLink 2 signing (``MavlinkConfig.signing_key_file`` / ``signing_key_env``):
 Ground stations reject a new signed stream whose timestamp is more than a
 minute behind their clock: with signing on, keep the default clock anchor
 (now), not one in the past.
+
+In-process clients (the swarm controller) use the same messages without a
+socket: ``subscribe(callback)`` delivers every packet a vehicle sends as a
+``Message`` (float fields rounded to float32 as a receiver decodes them, so
+an in-process client sees exactly what a network client sees), and
+``inject(message)`` queues a message handled at the next exchange exactly as
+if it came from the network.
+
+Lockstep with an outside controller (``MavlinkConfig.lockstep_sysid``), so
+that a controller in another process gives the same results as in-process:
+
+- after the telemetry of every exchange at tick T, vehicle 1 sends
+  TIMESYNC ``tc1=0, ts1=T's simulation time in ns`` (an ordinary time-sync
+  request);
+- the controller reads the telemetry, sends its commands, then answers the
+  request as the TIMESYNC protocol says (``tc1`` its clock, non-zero;
+  ``ts1`` echoed);
+- the next exchange first waits (at most ``lockstep_timeout_s``, else
+  ``LockstepTimeout``) for that answer from the controller's system id, then
+  handles everything received: the commands take effect at the same tick as
+  an in-process controller's ``inject``-ed ones. The first exchange waits
+  for any message from the controller (it says hello with a HEARTBEAT).
 """
 
 from __future__ import annotations
@@ -51,7 +73,7 @@ import logging
 import os
 import time
 from collections import Counter
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import NamedTuple
@@ -62,9 +84,9 @@ from cosim.errors import ConfigError
 from cosim.fdm_pool.spec import N_STATE
 from cosim.guidance.commands import Command
 from cosim.mavlink import adapter as mav
-from cosim.mavlink.errors import EndpointClosed
+from cosim.mavlink.errors import EndpointClosed, LockstepTimeout
 from cosim.mavlink.handlers import Handler, Outcome
-from cosim.mavlink.link import DEFAULT_URL, UdpLink
+from cosim.mavlink.link import DEFAULT_URL, NullLink, UdpLink
 from cosim.mavlink.tlog import TlogWriter
 from cosim.mavlink.vehicle import (
     ATTITUDE_COLUMNS,
@@ -82,6 +104,10 @@ log = logging.getLogger(__name__)
 #: use 255 and up); more need a second endpoint on its own URL, serving its
 #: own ground station: ``mav_specs(vehicles[240:], first_sysid=1, first_row=240)``
 MAX_VEHICLES_PER_LINK = 240
+
+#: the system id of cosim's own controllers (the swarm controller) on MAVLink,
+#: in-process or outside (``cosim run --external-controller``)
+CONTROLLER_SYSID = 245
 
 #: counters always present in ``counters()``
 ENDPOINT_COUNTERS = (
@@ -112,15 +138,24 @@ class MavlinkConfig:
     config holds where the key is, never the key, so scenario text cannot
     carry it. ``signing_link_id`` (0..255) is the link id in outgoing
     signatures. See ``MavlinkEndpoint`` for what signing changes.
+
+    ``url=None``: no socket; vehicles talk only to in-process clients
+    (``MavlinkEndpoint.inject`` and ``subscribe``). ``lockstep_sysid``: an
+    outside controller with this system id is kept in lockstep with the
+    simulation (see ``MavlinkEndpoint``), silent for at most
+    ``lockstep_timeout_s``.
     """
 
-    url: str = DEFAULT_URL
+    url: str | None = DEFAULT_URL  # None: in-process only (no socket)
     rates_hz: Mapping[str, float] = field(default_factory=dict)
     max_peers: int = 16
     max_datagrams_per_exchange: int = 1000
     signing_key_file: str | Path | None = None
     signing_key_env: str | None = None
     signing_link_id: int = 0
+    #: lockstep with an outside controller of this system id (see ``MavlinkEndpoint``)
+    lockstep_sysid: int | None = None
+    lockstep_timeout_s: float = 30.0
 
     @property
     def signing(self) -> bool:
@@ -245,7 +280,11 @@ class MavlinkEndpoint:
         self._prev_att: np.ndarray | None = None
         self._rates = np.zeros((len(self.vehicles), 3))
         self.tlogs: dict[int, TlogWriter] = {}
-        self.link = UdpLink(config.url, config.max_peers, config.max_datagrams_per_exchange)
+        self.link: UdpLink | NullLink = NullLink() if config.url is None else UdpLink(
+            config.url, config.max_peers, config.max_datagrams_per_exchange)
+        self._subscribers: list[Callable[[mav.Message], None]] = []
+        self._lockstep_pending: int | None = None  # the tick whose answer is awaited
+        self._lockstep_seen = False  # the controller has spoken
         try:
             if tlog_dir is not None:
                 used: set[str] = set()
@@ -289,6 +328,12 @@ class MavlinkEndpoint:
             raise EndpointClosed("mavlink endpoint: inject() after close()")
         self._injected.append(message)
 
+    def subscribe(self, callback: Callable[[mav.Message], None]) -> None:
+        """Call ``callback(message)`` for every packet any vehicle sends from now
+        on (telemetry and answers), in sending order, as an in-process client
+        would receive it (see the module docstring)."""
+        self._subscribers.append(callback)
+
     def exchange(self, tick: int, states: np.ndarray) -> list[VehicleCommand]:
         """Handle what arrived, send what is due at ``tick``; the commands produced."""
         if self.closed:
@@ -315,10 +360,7 @@ class MavlinkEndpoint:
         for m in injected:
             self.counts["injected"] += 1
             self._dispatch(m, tick, commands)
-        for data, addr in self.link.poll():
-            msgs = self.decoder.decode(data)
-            if self.signature_checker is not None:
-                msgs = [a for a in (self._authenticate(m) for m in msgs) if a is not None]
+        for msgs, addr in self._receive(tick):
             if msgs:
                 self.link.remember(addr)
             for m in msgs:
@@ -330,6 +372,10 @@ class MavlinkEndpoint:
                     self._send(v, name, fields, tick)
             for name in v.due(tick):
                 self._send(v, name, v.fields(name, tick), tick)
+        if self.config.lockstep_sysid is not None:
+            self._send(self.vehicles[0], "TIMESYNC",
+                       {"tc1": 0, "ts1": self.clock.sim_us(tick) * 1000}, tick)
+            self._lockstep_pending = tick
         for t in self.tlogs.values():
             t.flush()
         self.counts["commands_out"] += len(commands)
@@ -347,6 +393,51 @@ class MavlinkEndpoint:
         return dict(sorted(out.items()))
 
     # -- internals -------------------------------------------------------------
+    def _decode(self, data: bytes) -> list[mav.Message]:
+        msgs = self.decoder.decode(data)
+        if self.signature_checker is not None:
+            msgs = [a for a in (self._authenticate(m) for m in msgs) if a is not None]
+        return msgs
+
+    def _receive(self, tick: int) -> list[tuple[list[mav.Message], tuple[str, int]]]:
+        """The datagrams waiting, decoded; in lockstep, first wait for the
+        controller (see the module docstring)."""
+        got = [(self._decode(data), addr) for data, addr in self.link.poll()]
+        sysid = self.config.lockstep_sysid
+        if sysid is None:
+            return got
+        pending = self._lockstep_pending
+        ts1 = None if pending is None else self.clock.sim_us(pending) * 1000
+
+        def answered(batch: list[tuple[list[mav.Message], tuple[str, int]]]) -> bool:
+            for msgs, _ in batch:
+                for m in msgs:
+                    if m.src_system != sysid:
+                        continue
+                    self._lockstep_seen = True
+                    if ts1 is None or (m.name == "TIMESYNC" and m.fields["tc1"] != 0
+                                       and m.fields["ts1"] == ts1):
+                        return True
+            return False
+
+        done = answered(got)
+        deadline = time.monotonic() + self.config.lockstep_timeout_s
+        while not done:
+            left = deadline - time.monotonic()
+            if left <= 0 or isinstance(self.link, NullLink):
+                what = ("any message" if ts1 is None else
+                        f"the TIMESYNC answer for tick {pending}")
+                raise LockstepTimeout(
+                    f"mavlink lockstep: no {what} from the controller (system {sysid}) "
+                    f"within {self.config.lockstep_timeout_s:g} s at tick {tick}; is it "
+                    f"running and talking to {self.link.url}?")
+            if self.link.wait_readable(min(left, 0.5)):
+                batch = [(self._decode(data), addr) for data, addr in self.link.poll()]
+                got.extend(batch)
+                done = answered(batch)
+        self._lockstep_pending = None
+        return got
+
     def _authenticate(self, m: mav.Message) -> mav.Message | None:
         """A received message if its signature is good (marked signed), else
         None, counted; SETUP_SIGNING is never obeyed (signing on)."""
@@ -374,6 +465,11 @@ class MavlinkEndpoint:
             v.packer.advance_signing_time(mav.signing_timestamp(self.clock.unix_us(tick)))
         pkt = v.packer.pack(name, **fields)
         self.link.send(pkt)
+        if self._subscribers:
+            m = mav.Message(name, v.sysid, mav.MAV_COMP_ID_AUTOPILOT1,
+                            mav.wire_values(name, dict(fields)))
+            for cb in self._subscribers:
+                cb(m)
         self.counts["packets_out"] += 1
         t = self.tlogs.get(v.sysid)
         if t is not None:

@@ -15,3 +15,7 @@ class LinkError(MavlinkError):
 
 class EndpointClosed(MavlinkError):
     """The endpoint was used after ``close()``."""
+
+
+class LockstepTimeout(MavlinkError):
+    """The outside controller kept in lockstep did not answer in time."""

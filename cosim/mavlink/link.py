@@ -162,6 +162,13 @@ class UdpLink:
         self.counts["datagrams_in"] += len(out)
         return out
 
+    def wait_readable(self, timeout_s: float) -> bool:
+        """Block until a datagram is waiting (True) or ``timeout_s`` passes (False)."""
+        import select
+
+        r, _, _ = select.select([self._socket()], [], [], max(0.0, timeout_s))
+        return bool(r)
+
     def remember(self, addr: Address) -> None:
         """Answer ``addr`` from now on (it sent a valid MAVLink packet)."""
         if addr in self.peers:
@@ -205,3 +212,38 @@ class UdpLink:
             self.update_kernel_drops()
             self._sock.close()
             self._sock = None
+
+
+class NullLink:
+    """No socket: in-process MAVLink only (``MavlinkConfig(url=None)``); what
+    vehicles send reaches only the endpoint's subscribers and the tlogs."""
+
+    url = None
+    local_address: Address = ("", 0)
+
+    def __init__(self) -> None:
+        self.peers: list[Address] = []
+        self.counts: Counter[str] = Counter()
+        self._closed = False
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def poll(self) -> list[tuple[bytes, Address]]:
+        return []
+
+    def wait_readable(self, timeout_s: float) -> bool:
+        return False
+
+    def remember(self, addr: Address) -> None:
+        pass
+
+    def send(self, packet: bytes) -> None:
+        pass
+
+    def update_kernel_drops(self) -> None:
+        pass
+
+    def close(self) -> None:
+        self._closed = True

@@ -10,9 +10,10 @@ from cosim.scenario.schema import (
     Rates,
     Scenario,
     ScheduleItem,
+    SectionInfo,
     load_scenario,
     parse_scenario,
 )
 
-__all__ = ["SCHEMA_VERSION", "Origin", "Rates", "Scenario", "ScheduleItem", "load_scenario",
-           "parse_scenario"]
+__all__ = ["SCHEMA_VERSION", "Origin", "Rates", "Scenario", "ScheduleItem", "SectionInfo",
+           "load_scenario", "parse_scenario"]

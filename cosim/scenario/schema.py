@@ -96,6 +96,10 @@ class Scenario:
     plot: bool = False  # write track.png (ground track and altitude) after the run
     #: MAVLink link of the run: {"url": ..., "rates_hz": {...}}; None: no MAVLink
     mavlink: dict[str, Any] | None = None
+    #: parsed top-level sections owned by other parts (``SECTIONS``): key -> object
+    sections: dict[str, Any] = field(default_factory=dict, compare=False)
+    #: the sections as written (YAML data), for ``resolved_dict``
+    section_sources: dict[str, Any] = field(default_factory=dict, compare=False)
     schema_version: int = SCHEMA_VERSION
     extra: dict[str, Any] = field(default_factory=dict, compare=False)
 
@@ -157,6 +161,7 @@ class Scenario:
             **({"mavlink": self.mavlink} if self.mavlink is not None else {}),
             "vehicles": vehicles,
             "schedule": [self._item_dict(s, ids) for s in self.schedule],
+            **self.section_sources,
         }
 
 
@@ -329,7 +334,7 @@ def parse_scenario(text: str, fname: str = "<scenario>", check_properties: bool 
     ctx.problems.extend(dups)
     top = _Reader(ctx, data, (), ("schema_version", "name", "description", "origin", "rates",
                                   "duration_s", "seed", "aircraft_path", "plot", "mavlink",
-                                  "vehicles", "schedule"))
+                                  "vehicles", "schedule", *SECTIONS))
     version = top.integer("schema_version")
     if version is not None and version != SCHEMA_VERSION:
         ctx.err(("schema_version",), f"unsupported schema_version {version}; this cosim reads "
@@ -361,13 +366,73 @@ def parse_scenario(text: str, fname: str = "<scenario>", check_properties: bool 
     schedule = _schedule(ctx, top.d.get("schedule", []), vehicles, rates, duration)
     if check_properties:
         _check_properties(ctx, vehicles, schedule)
+    info = SectionInfo(ctx, origin, rates, duration, [v for v, _ in vehicles], Path(fname))
+    sections: dict[str, Any] = {}
+    for key in SECTIONS:
+        if key in top.d:
+            sections[key] = _section_parser(key)(info, top.d[key], (key,))
     if ctx.problems:
         raise ConfigError(ctx.format())
     return Scenario(name=name, path=fname, origin=origin, rates=rates, duration_s=duration,
                     seed=seed, vehicles=tuple(v for v, _ in vehicles), schedule=tuple(schedule),
                     description=description, aircraft_path=tuple(apath), plot=plot,
-                    mavlink=mavlink,
+                    mavlink=mavlink, sections=sections,
+                    section_sources={k: top.d[k] for k in sections},
                     extra={"vehicle_paths": [pp for _, pp in vehicles]})
+
+
+#: top-level sections parsed by the part that owns them: key -> "module:function".
+#: The function is ``parse(info: SectionInfo, node, path) -> object`` (the
+#: object lands in ``Scenario.sections[key]``); it reports problems with
+#: ``info.err`` / ``info.reader`` and never raises for bad input.
+SECTIONS: dict[str, str] = {
+    "swarm": "cosim.swarm.config:parse_swarm",
+    "ground": "cosim.renderer.config:parse_ground",
+    "targets": "cosim.renderer.config:parse_targets",
+    "cameras": "cosim.renderer.config:parse_cameras",
+    "sweep": "cosim.renderer.sweep:parse_sweep",
+}
+
+
+def _section_parser(key: str) -> Callable[[SectionInfo, Any, P], Any]:
+    import importlib
+
+    module, func = SECTIONS[key].split(":")
+    parser: Callable[[SectionInfo, Any, P], Any] = getattr(importlib.import_module(module), func)
+    return parser
+
+
+@dataclass
+class SectionInfo:
+    """What a section parser sees: the scenario parsed so far, and the problem list."""
+
+    ctx: _Ctx
+    origin: Origin
+    rates: Rates
+    duration_s: float
+    vehicles: list[VehicleSpec]
+    path: Path  # the scenario file (relative file names in sections resolve against it)
+
+    @property
+    def ids(self) -> list[str]:
+        return [v.id for v in self.vehicles]
+
+    def err(self, path: P, msg: str) -> None:
+        """Report a problem at ``path`` (the file line is found from it)."""
+        self.ctx.err(path, msg)
+
+    def reader(self, d: Any, path: P, allowed: tuple[str, ...]) -> _Reader:
+        """Typed access to the mapping ``d`` at ``path`` (num, integer, string,
+        boolean, one_of); unknown keys are reported."""
+        return _Reader(self.ctx, d, path, allowed)
+
+    def select(self, sel: Any, path: P) -> list[int]:
+        """Vehicle rows chosen by ``'all'``, an id, a pattern or a list of them."""
+        return _select(self.ctx, sel, path, self.ids)
+
+    @property
+    def problems(self) -> int:
+        return len(self.ctx.problems)
 
 
 def _mavlink(ctx: _Ctx, d: Any) -> dict[str, Any] | None:

@@ -34,6 +34,7 @@ from cosim.guidance import FixedWingGuidance
 from cosim.logs import EventLog, StateLog, clear_outputs, write_json_atomic
 from cosim.scenario import Scenario
 from cosim.sync.pacing import Pacer
+from cosim.sync.participants import Participant, RunContext, build_participants, needs_mavlink
 
 log = logging.getLogger(__name__)
 
@@ -68,7 +69,7 @@ class Run:
     def __init__(self, scenario: Scenario, out_dir: str | Path, backend: str = "process",
                  workers: int | None = None, realtime: float | None = None,
                  progress: ProgressFn | None = None, step_timeout_s: float = 60.0,
-                 mavlink: Any = None) -> None:
+                 mavlink: Any = None, external_controller: bool = False) -> None:
         self.scn = scenario
         self.out = Path(out_dir)
         self.backend = backend
@@ -82,12 +83,20 @@ class Run:
 
             mavlink = MavlinkConfig(url=scenario.mavlink["url"],
                                     rates_hz=dict(scenario.mavlink["rates_hz"]))
+        if mavlink is None and needs_mavlink(scenario):
+            from cosim.mavlink import MavlinkConfig
+
+            mavlink = MavlinkConfig(url=None)  # in-process only: no socket
         self.mavlink_config = mavlink
+        #: the scenario's controller runs in another process (``cosim swarm
+        #: --connect``), kept in lockstep over ``mavlink`` (lockstep_sysid set)
+        self.external_controller = external_controller
         self.mavlink: Any = None
         self._stop = threading.Event()
         self._stop_reason = "interrupted"
         self._building = False
         self.pool: Pool | None = None
+        self.participants: list[Participant] = []
 
     def stop(self, reason: str = "interrupted") -> None:
         """Ask the loop to stop after the current tick (safe from a signal handler)."""
@@ -146,9 +155,10 @@ class Run:
             startup_s = time.perf_counter() - wall0
             log.info("%d vehicles ready in %.2f s on %d worker(s)", len(ids), startup_s,
                      workers_used)
-            start_ne = np.stack(scn.origin.frame.geodetic_to_ned(
+            start_ned = np.stack(scn.origin.frame.geodetic_to_ned(
                 [v.lat_deg for v in scn.vehicles], [v.lon_deg for v in scn.vehicles],
-                [v.alt_msl_m for v in scn.vehicles])[:2], axis=1)
+                [v.alt_msl_m for v in scn.vehicles]), axis=1)
+            start_ne = start_ned[:, :2].copy()
             guidance = FixedWingGuidance(len(ids), scn.origin.frame, start_ne, chan_index) \
                 if scn.autopilot else None
             labels = guidance.labels if guidance is not None else None
@@ -158,9 +168,16 @@ class Run:
                 self.mavlink = MavlinkEndpoint(
                     mav_specs(scn.vehicles, autopilot=scn.autopilot), hz, self.mavlink_config,
                     tlog_dir=out)
-                log.info("MAVLink: %d vehicles on %s (local %s:%d)", len(ids),
-                         self.mavlink_config.url, *self.mavlink.local_address)
+                if self.mavlink_config.url is not None:
+                    log.info("MAVLink: %d vehicles on %s (local %s:%d)", len(ids),
+                             self.mavlink_config.url, *self.mavlink.local_address)
             with pool:
+                self.participants = build_participants(
+                    scn, skip=("swarm",) if self.external_controller else ())
+                ctx = RunContext(scn, out, ids, scn.origin.frame, start_ned, hz, k, events,
+                                 self.mavlink, workers_used)
+                for part in self.participants:
+                    part.start(ctx)
                 states = pool.states
                 status = states[:, _STATUS].copy()
                 flags = states[:, _FLAG_COLS].copy()
@@ -190,6 +207,8 @@ class Run:
                                 guidance.command([vc.row], vc.command, states, pool.setpoints)
                             events.emit("mavlink_command", tick, vehicle=ids[vc.row],
                                         origin=vc.origin, command=vc.command.source)
+                    for part in self.participants:
+                        part.on_exchange(tick, states)
                     if guidance is not None:
                         for ge in guidance.update(states, pool.setpoints):
                             events.emit(ge.kind, tick, vehicle=ids[ge.vehicle], **ge.fields)
@@ -259,9 +278,22 @@ class Run:
                 if self.mavlink is not None:
                     summary["mavlink"] = {"url": self.mavlink_config.url,
                                           "counters": self.mavlink.counters()}
+                for part in self.participants:
+                    try:
+                        section = part.finish(tick, reason)
+                    except Exception as e:  # one part's failure must not lose the summary
+                        log.exception("%s: finishing failed", part.name)
+                        section = {"error": f"{type(e).__name__}: {e}"}
+                    if section is not None:
+                        summary[part.name] = section
                 write_json_atomic(out / "summary.json", summary)
             finally:
                 self._end_fault_log(fault_file, fault_was_enabled)
+        for part in self.participants:
+            try:
+                part.after_run(out)
+            except Exception as e:  # a plot must never lose a finished run
+                log.warning("%s: %s", part.name, e)
         if scn.plot and states_log.rows_logged:
             try:
                 from cosim.logs.plot import plot_run

@@ -1,0 +1,85 @@
+"""Participants: parts that run inside the lockstep loop beside the pool
+(the swarm controller, the cameras), each owned by its own package.
+
+A scenario section listed in ``PARTICIPANTS`` makes the runner build that
+part's participant with ``make_participant(scenario)``. Per run:
+
+- ``start(ctx)`` once, after the vehicles are built, before the first tick;
+- ``on_exchange(tick, states)`` at every exchange, after the schedule and
+  the MAVLink endpoint (telemetry due at ``tick`` has been sent) and before
+  guidance and the pool step; ``states`` is the state array at ``tick`` and
+  must not be modified. A controller commands vehicles by injecting MAVLink
+  messages (``ctx.mavlink.inject``): the endpoint handles them at the next
+  exchange, exactly like a ground station's;
+- ``finish(tick, reason)`` once, whatever the end (also after an error);
+  returns the participant's section of ``summary.json`` (or None).
+- ``after_run(out_dir)`` after ``summary.json`` is written (plots); errors
+  there are logged, never lose the run.
+
+Participants must not touch the pool, the logs' files or each other; results
+must not depend on the backend or the worker count.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Protocol
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from cosim.geo import LocalFrame
+    from cosim.logs import EventLog
+    from cosim.scenario import Scenario
+
+#: scenario section -> "module:factory" building its participant
+PARTICIPANTS: dict[str, str] = {
+    "swarm": "cosim.swarm:make_participant",
+    "cameras": "cosim.renderer:make_participant",
+}
+
+
+@dataclass
+class RunContext:
+    """What a participant may use during a run."""
+
+    scenario: Scenario
+    out_dir: Path
+    ids: list[str]
+    frame: LocalFrame  # the scenario's local WGS-84 NED frame
+    start_ned_m: np.ndarray  # (n, 3) each vehicle's start in ``frame``
+    physics_hz: float
+    control_every: int  # ticks per exchange
+    events: EventLog  # ``events.emit(kind, tick, vehicle=..., **fields)``
+    mavlink: Any  # the run's cosim.mavlink.MavlinkEndpoint (None: no MAVLink)
+    workers: int  # the pool's worker count (for parts with their own pools)
+
+
+class Participant(Protocol):
+    name: str
+
+    def start(self, ctx: RunContext) -> None: ...
+
+    def on_exchange(self, tick: int, states: np.ndarray) -> None: ...
+
+    def finish(self, tick: int, reason: str) -> dict[str, Any] | None: ...
+
+    def after_run(self, out_dir: Path) -> None: ...
+
+
+def needs_mavlink(scenario: Scenario) -> bool:
+    """True if a participant of the scenario talks MAVLink (the swarm controller)."""
+    return "swarm" in scenario.sections
+
+
+def build_participants(scenario: Scenario, skip: tuple[str, ...] = ()) -> list[Participant]:
+    """The participants the scenario's sections ask for, in ``PARTICIPANTS``
+    order, except those in ``skip`` (run elsewhere, e.g. an outside controller)."""
+    out: list[Participant] = []
+    for key, target in PARTICIPANTS.items():
+        if key in scenario.sections and key not in skip:
+            module, func = target.split(":")
+            out.append(getattr(importlib.import_module(module), func)(scenario))
+    return out
