@@ -1,4 +1,4 @@
-"""The ``cosim`` command: run, validate, models, bench.
+"""The ``cosim`` command: run, validate, models, plot, bench, sweep, visibility.
 
 ``main(argv) -> int``: exit 0 ok, 1 runtime failure, 2 usage or config
 error, 130 stopped by Ctrl-C (after a clean stop with everything flushed).
@@ -16,7 +16,7 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 from types import FrameType
-from typing import TYPE_CHECKING, TextIO
+from typing import TYPE_CHECKING, Any, TextIO
 
 from cosim import __version__
 from cosim.errors import ConfigError, CosimError
@@ -111,6 +111,23 @@ def _build_parser() -> _Parser:
     pl = sub.add_parser("plot", help="plot a run's ground track and altitude (PNG)")
     pl.add_argument("run", metavar="RUN_DIR", help="a cosim run output folder")
     pl.add_argument("--out", metavar="PNG", help="output file (default RUN_DIR/track.png)")
+
+    sw = sub.add_parser("sweep", help="run a scenario once per combination of its sweep: "
+                                      "values, in parallel")
+    sw.add_argument("scenario", help="scenario YAML file with a sweep: section")
+    sw.add_argument("--out", metavar="DIR", required=True,
+                    help="output folder: one subfolder per run, visibility.csv, manifest.csv")
+    sw.add_argument("--jobs", type=int, metavar="N",
+                    help="runs at a time (default: one per core); each run is one process")
+    sw.add_argument("--overwrite", action="store_true",
+                    help="allow writing into a folder that already holds a sweep")
+    sw.add_argument("--duration-s", type=_positive_float, metavar="S",
+                    help="override every run's duration")
+
+    vi = sub.add_parser("visibility", help="how long each target is in view, pass by pass "
+                                           "(a run or a sweep folder)")
+    vi.add_argument("run", metavar="RUN_DIR", help="a run folder (writes RUN_DIR/visibility.csv)"
+                                                  " or a sweep folder (rewrites its tables)")
 
     b = sub.add_parser("bench", help="measure pool throughput against the serial loop")
     b.add_argument("--vehicles", type=_positive_int_list, default=[1, 16, 128, 512, 1024],
@@ -322,6 +339,60 @@ def _cmd_plot(a: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _cmd_sweep(a: argparse.Namespace) -> int:
+    from cosim.sweep.runner import run_sweep
+
+    if a.jobs is not None and a.jobs < 1:
+        raise ConfigError(f"--jobs must be >= 1, got {a.jobs}")
+
+    def on_done(o: Any, done: int, total: int, elapsed_s: float) -> None:
+        left_s = elapsed_s / done * (total - done)
+        how = "completed" if o.status == "completed" else f"{o.status.upper()}: {o.error}"
+        log.info("[%d/%d] %s: %s in %.1f s (elapsed %.0f s, about %.0f s left)", done, total,
+                 o.name, how, o.wall_s, elapsed_s, left_s)
+
+    res = run_sweep(a.scenario, a.out, jobs=a.jobs, overwrite=a.overwrite,
+                    duration_s=a.duration_s, on_done=on_done)
+    ok = len(res.runs) - len(res.failed)
+    print(f"{ok} of {len(res.runs)} runs completed in {res.wall_s:.1f} s; outputs in {a.out}/: "
+          f"visibility.csv, manifest.csv, sweep.json, logs/, one folder per run")
+    for o in res.failed:
+        print(f"cosim sweep: run {o.name} {o.status}: {o.error} (log: "
+              f"{Path(a.out) / 'logs' / (o.name + '.log')})", file=sys.stderr)
+    return EXIT_FAIL if res.failed else EXIT_OK
+
+
+def _cmd_visibility(a: argparse.Namespace) -> int:
+    from cosim.conspicuity.visibility import PASS_COLUMNS, physics_hz_of, write_csv
+    from cosim.sweep.runner import rewrite_tables
+
+    run = Path(a.run)
+    if (run / "sweep.json").exists():
+        res = rewrite_tables(run)
+        print(f"{run}/visibility.csv and manifest.csv rewritten from {len(res.runs)} runs")
+        return EXIT_OK
+    if not (run / "summary.json").exists() and not (run / "cameras").is_dir():
+        raise ConfigError(f"{run}: not a cosim run or sweep folder (no summary.json, "
+                          f"sweep.json or cameras/)")
+    from cosim.conspicuity import run_visibility
+    from cosim.conspicuity.visibility import pass_rows
+
+    rows = pass_rows(run_visibility(run), physics_hz_of(run))
+    if not rows:
+        print(f"{run}: no cameras with ground truth in this run")
+        return EXIT_OK
+    for r in rows:
+        where = f"{r['vehicle']}/{r['camera']} {r['target']}"
+        if r["pass"] == "0":
+            print(f"{where}: never in view")
+            continue
+        print(f"{where} pass {r['pass']}: visible {r['visible_s']} s "
+              f"(t = {r['first_visible_s']} .. {r['last_visible_s']} s, {r['frames']} frames), "
+              f"nearest the centre at t = {r['overhead_s']} s (tick {r['overhead_tick'] or '?'})")
+    print(write_csv(run / "visibility.csv", PASS_COLUMNS, rows))
+    return EXIT_OK
+
+
 def _cmd_bench(a: argparse.Namespace) -> int:
     from cosim.bench import check_rates, run_bench
 
@@ -359,7 +430,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_USAGE
     _setup_logging(a.verbose, a.quiet)
     handlers = {"run": _cmd_run, "validate": _cmd_validate, "models": _cmd_models,
-                "plot": _cmd_plot, "bench": _cmd_bench}
+                "plot": _cmd_plot, "bench": _cmd_bench, "sweep": _cmd_sweep,
+                "visibility": _cmd_visibility}
     try:
         return handlers[a.cmd](a)
     except ConfigError as e:

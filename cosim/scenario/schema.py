@@ -314,24 +314,31 @@ def _prop_values(ctx: _Ctx, d: Any, path: P) -> list[tuple[str, float]]:
     return out
 
 
-def load_scenario(path: str | Path, check_properties: bool = True) -> Scenario:
-    """Read, validate and resolve a scenario file; ``ConfigError`` lists every problem."""
+def load_scenario(path: str | Path, check_properties: bool = True,
+                  sweep_point: dict[str, Any] | None = None) -> Scenario:
+    """Read, validate and resolve a scenario file; ``ConfigError`` lists every problem.
+    ``sweep_point``: the values of the ``sweep:`` names (default: the first of each)."""
     p = Path(path)
     try:
         text = p.read_text()
     except OSError as e:
         raise ConfigError(f"{p}: cannot read scenario: {e.strerror or e}") from None
-    return parse_scenario(text, str(p), check_properties=check_properties)
+    return parse_scenario(text, str(p), check_properties=check_properties,
+                          sweep_point=sweep_point)
 
 
-def parse_scenario(text: str, fname: str = "<scenario>", check_properties: bool = True
-                   ) -> Scenario:
+def parse_scenario(text: str, fname: str = "<scenario>", check_properties: bool = True,
+                   sweep_point: dict[str, Any] | None = None) -> Scenario:
+    from cosim.sweep.spec import protect_placeholders, substitute  # ${...}: sweep values
+
+    text, placeholders = protect_placeholders(text)
     try:
         data, lines, dups = load_with_lines(text)
     except YamlProblem as e:
         raise ConfigError([f"{fname}:{e.line}: {e.message}"]) from None
     ctx = _Ctx(fname, lines)
     ctx.problems.extend(dups)
+    data = substitute(data, ctx.err, sweep_point, fname, placeholders)
     top = _Reader(ctx, data, (), ("schema_version", "name", "description", "origin", "rates",
                                   "duration_s", "seed", "aircraft_path", "plot", "mavlink",
                                   "vehicles", "schedule", *SECTIONS))
@@ -390,7 +397,7 @@ SECTIONS: dict[str, str] = {
     "ground": "cosim.renderer.config:parse_ground",
     "targets": "cosim.renderer.config:parse_targets",
     "cameras": "cosim.renderer.config:parse_cameras",
-    "sweep": "cosim.renderer.sweep:parse_sweep",
+    "sweep": "cosim.sweep.spec:parse_sweep",
 }
 
 
