@@ -309,7 +309,7 @@ def write_tables(result: SweepResult, spec: SweepSpec) -> None:
             continue
         try:
             vis.extend(visibility_rows(spec, o, out / o.name))
-            man.extend(manifest_rows(spec, o, out / o.name))
+            man.extend(manifest_rows(spec, o, out))
         except GroundTruthError as e:
             o.status, o.error = "failed", f"reading its ground truth: {e}"
     swept = list(spec.swept)
