@@ -176,7 +176,8 @@ def visibility(path: str | Path, rate_hz: float | None = None) -> list[TargetVis
 
 
 def camera_entries(run_dir: str | Path) -> list[dict[str, Any]]:
-    """The run's cameras: summary.json's ``cameras`` list (paths made absolute),
+    """The run's cameras: summary.json's ``cameras`` list, or its ``streams``
+    list when ``cameras`` is a mapping (paths made absolute),
     or, without one, every ``cameras/*.gt.csv`` in the folder."""
     run = Path(run_dir)
     summary_path = run / "summary.json"
@@ -186,7 +187,10 @@ def camera_entries(run_dir: str | Path) -> list[dict[str, Any]]:
             summary = json.loads(summary_path.read_text())
         except (OSError, ValueError) as e:
             raise GroundTruthError(f"{summary_path}: cannot read: {e}") from None
-        for c in summary.get("cameras") or []:
+        cams = summary.get("cameras") or []
+        if isinstance(cams, dict):  # {"streams": [...], "codec": ...}
+            cams = cams.get("streams") or []
+        for c in cams:
             entry = dict(c)
             for key in ("video", "ground_truth"):
                 if entry.get(key):
