@@ -129,6 +129,18 @@ def _build_parser() -> _Parser:
     vi.add_argument("run", metavar="RUN_DIR", help="a run folder (writes RUN_DIR/visibility.csv)"
                                                   " or a sweep folder (rewrites its tables)")
 
+    sw = sub.add_parser("swarm", help="run a scenario's swarm controller in this process, "
+                                      "connected to `cosim run --external-controller`")
+    sw.add_argument("scenario", help="scenario YAML file (the one the simulation runs)")
+    sw.add_argument("--connect", metavar="URL", required=True,
+                    help="udpout:HOST:PORT where the simulation's --mavlink udpin:HOST:PORT "
+                         "listens")
+    sw.add_argument("--out", metavar="DIR",
+                    help="write swarm.json, swarm_events.jsonl, swarm_commands.csv and "
+                         "swarm.png here")
+    sw.add_argument("--connect-timeout-s", type=_positive_float, default=60.0, metavar="S",
+                    help="give up if the simulation does not answer within S (default 60)")
+
     b = sub.add_parser("bench", help="measure pool throughput against the serial loop")
     b.add_argument("--vehicles", type=_positive_int_list, default=[1, 16, 128, 512, 1024],
                    metavar="N,N,...")
@@ -393,6 +405,22 @@ def _cmd_visibility(a: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _cmd_swarm(a: argparse.Namespace) -> int:
+    from cosim.swarm.external import UdpController
+
+    scn = _load_scenario(a.scenario)
+    ctl = UdpController(scn, a.connect, a.out, connect_timeout_s=a.connect_timeout_s)
+    s = ctl.run()
+    for name, g in s["groups"].items():
+        for ph in g["phases"]:
+            print(f"{name} phase {ph['phase']} {ph['behaviour']}: {ph.get('reason')} after "
+                  f"{ph.get('time_s', 0.0):.1f} s")
+    if a.out:
+        print(f"outputs in {a.out}/: swarm.json, swarm_events.jsonl, swarm_commands.csv, "
+              f"swarm.png")
+    return EXIT_OK
+
+
 def _cmd_bench(a: argparse.Namespace) -> int:
     from cosim.bench import check_rates, run_bench
 
@@ -431,6 +459,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     _setup_logging(a.verbose, a.quiet)
     handlers = {"run": _cmd_run, "validate": _cmd_validate, "models": _cmd_models,
                 "plot": _cmd_plot, "bench": _cmd_bench, "sweep": _cmd_sweep,
+                "swarm": _cmd_swarm,
                 "visibility": _cmd_visibility}
     try:
         return handlers[a.cmd](a)

@@ -1,0 +1,118 @@
+"""The swarm controller inside ``cosim run``: telemetry by ``subscribe``,
+commands by ``inject`` (no socket), metrics from the ground truth.
+
+At every exchange (``on_exchange(tick)``, right after the endpoint sent the
+telemetry due at ``tick``): the monitor takes the true positions, then at a
+controller step the controller acts on the telemetry received so far; its
+injected commands are handled at the next exchange. Phase and separation
+events go to ``events.jsonl``; ``summary.json["swarm"]`` gets the phases with
+their metrics; ``after_run`` writes ``swarm.png`` and ``swarm_commands.csv``
+(every command: tick, vehicle, speed sent, stall speed, roll).
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cosim.fdm_pool.spec import STATE_INDEX
+from cosim.scenario import Scenario
+from cosim.swarm.config import SwarmSpec
+from cosim.swarm.controller import SwarmController, to_message
+from cosim.swarm.metrics import SwarmMonitor
+from cosim.sync.participants import RunContext
+
+log = logging.getLogger(__name__)
+_S = STATE_INDEX
+
+
+def merged_summary(ctl: SwarmController, mon: SwarmMonitor) -> dict[str, Any]:
+    """The controller's phases (telemetry) joined with the monitor's metrics."""
+    out = ctl.summary()
+    ms = mon.summary()
+    for name, g in out["groups"].items():
+        metrics = ms["phases"].get(name, [])
+        for rec, met in zip(g["phases"], metrics):
+            rec.update({k: v for k, v in met.items() if k not in rec})
+        for rec in g["phases"]:
+            rec["converged"] = rec.get("reason") == "converged"
+    out.update({k: v for k, v in ms.items() if k != "phases"})
+    return out
+
+
+def write_commands_csv(path: Path, ctl: SwarmController, physics_hz: float) -> None:
+    with open(path, "w") as f:
+        f.write("tick,t_s,vehicle,speed_mps,stall_mps,roll_rad\n")
+        for tick, i, spd, stall, roll in ctl.sent:
+            f.write(f"{tick},{tick / physics_hz:.4f},{ctl.ids[i]},{spd!r},{stall!r},{roll!r}\n")
+
+
+class SwarmParticipant:
+    name = "swarm"
+
+    def __init__(self, scenario: Scenario) -> None:
+        self.scenario = scenario
+        spec = scenario.sections["swarm"]
+        assert isinstance(spec, SwarmSpec)
+        self.spec = spec
+        self.ctx: RunContext | None = None
+        self.ctl: SwarmController | None = None
+        self.mon: SwarmMonitor | None = None
+
+    def start(self, ctx: RunContext) -> None:
+        if ctx.mavlink is None:
+            raise RuntimeError("swarm: the run has no MAVLink endpoint (the runner makes one "
+                               "for a swarm: section)")
+        self.ctx = ctx
+        scn = self.scenario
+        self.ctl = SwarmController(self.spec, scn.vehicles, ctx.frame, ctx.physics_hz)
+        self.mon = SwarmMonitor(self.spec, self.ctl.ids, [g.idx for g in self.ctl.groups],
+                                ctx.physics_hz)
+        self.rows = self.ctl.rows
+        ctx.mavlink.subscribe(self.ctl.on_message)
+
+    def on_exchange(self, tick: int, states: np.ndarray) -> None:
+        ctx, ctl, mon = self.ctx, self.ctl, self.mon
+        assert ctx is not None and ctl is not None and mon is not None
+        s = states[self.rows]
+        n, e, d = ctx.frame.geodetic_to_ned(s[:, _S["lat_deg"]], s[:, _S["lon_deg"]],
+                                            s[:, _S["alt_msl_m"]])
+        mon.update(tick, np.stack([n, e, d], axis=1))
+        if ctl.due(tick):
+            for o in ctl.step(tick):
+                ctx.mavlink.inject(to_message(o))
+        self._flush_events()
+
+    def _flush_events(self, emit: bool = True) -> None:
+        ctx, ctl, mon = self.ctx, self.ctl, self.mon
+        assert ctx is not None and ctl is not None and mon is not None
+        for kind, tick, fields in ctl.drain_events():
+            mon.phase_event(tick, fields)
+            if emit:
+                ctx.events.emit(kind, tick, vehicle=None, **fields)
+        for kind, tick, fields in mon.drain_events():
+            if emit:
+                ctx.events.emit(kind, tick, vehicle=None, **fields)
+
+    def finish(self, tick: int, reason: str) -> dict[str, Any] | None:
+        if self.ctl is None or self.mon is None:
+            return None
+        self.ctl.end_run(tick)
+        self._flush_events(emit=False)  # events.jsonl is closed by now
+        return merged_summary(self.ctl, self.mon)
+
+    def after_run(self, out_dir: Path) -> None:
+        ctl, mon = self.ctl, self.mon
+        if ctl is None or mon is None:
+            return
+        write_commands_csv(out_dir / "swarm_commands.csv", ctl, mon.hz)
+        if mon.track_ticks:
+            from cosim.swarm.plot import plot_swarm
+
+            p = plot_swarm(out_dir / "swarm.png", self.spec, [g.idx for g in ctl.groups],
+                           mon.track_ticks, mon.track_pos, mon.track_phase, mon.hz,
+                           self.scenario.name)
+            log.info("swarm plot: %s", p)
