@@ -1,0 +1,117 @@
+"""The camera model: pinhole intrinsics, mounts and the pose at a frame tick.
+
+Frames (all right-handed):
+
+- ``L``: the local NED tangent frame at the point on the ground (height
+  ``ground_alt_m``) directly below the vehicle. The ground near the vehicle
+  is the plane ``down = 0`` of ``L``; JSBSim's roll/pitch/yaw are relative
+  to this same north, so no convergence correction is needed.
+- body: x nose, y right wing, z down; ``R_nb = Rz(yaw) Ry(pitch) Rx(roll)``.
+- camera (OpenCV): x image right, y image down, z along the optical axis.
+
+Mounts are rigid: a ``nadir`` camera looks along body z with the image top
+toward the nose (so ``vfov`` is the along-track field of view); on a banked
+aircraft it therefore looks sideways. ``forward`` looks along the nose; a
+gimbal ``{pitch_deg: p}`` is the forward camera pitched by ``p`` about the
+body y axis (-90 is nadir). ``stabilised: true`` removes the body's roll and
+pitch (a stabilised gimbal keeps only the heading).
+
+Pixel coordinates put pixel centres at integers: the image spans
+``[-0.5, W - 0.5] x [-0.5, H - 0.5]`` and the principal point is its centre.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from cosim.geo import LocalFrame
+from cosim.renderer.config import CameraSpec
+
+NEAR_M = 0.05  # points closer than this along the optical axis are clipped
+
+# camera axes (columns) in body axes for the forward mount
+_R_BC_FORWARD = np.array([[0.0, 0.0, 1.0],
+                          [1.0, 0.0, 0.0],
+                          [0.0, 1.0, 0.0]])
+
+
+def rot_x(a_rad: float) -> np.ndarray:
+    c, s = math.cos(a_rad), math.sin(a_rad)
+    return np.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def rot_y(a_rad: float) -> np.ndarray:
+    c, s = math.cos(a_rad), math.sin(a_rad)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def rot_z(a_rad: float) -> np.ndarray:
+    c, s = math.cos(a_rad), math.sin(a_rad)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def intrinsics(cam: CameraSpec) -> np.ndarray:
+    """The 3x3 pinhole matrix K (square pixels, principal point at the image centre)."""
+    f = cam.fx_px
+    return np.array([[f, 0.0, (cam.width_px - 1) / 2.0],
+                     [0.0, f, (cam.height_px - 1) / 2.0],
+                     [0.0, 0.0, 1.0]])
+
+
+def mount_rotation(cam: CameraSpec) -> np.ndarray:
+    """R_bc: camera axes -> body axes."""
+    return rot_y(math.radians(cam.pitch_deg)) @ _R_BC_FORWARD
+
+
+@dataclass(frozen=True)
+class Pose:
+    """A camera at one frame: ``R_cl`` maps L vectors to camera vectors; ``c_l``
+    is the camera position in L; ``local`` is L itself."""
+
+    R_cl: np.ndarray
+    c_l: np.ndarray
+    local: LocalFrame
+    height_m: float  # above the ground plane
+
+
+def camera_pose(cam: CameraSpec, lat_deg: float, lon_deg: float, alt_msl_m: float,
+                roll_deg: float, pitch_deg: float, yaw_deg: float, ground_alt_m: float
+                ) -> Pose:
+    local = LocalFrame(float(lat_deg), float(lon_deg), float(ground_alt_m))
+    if cam.stabilised:
+        r_nb = rot_z(math.radians(yaw_deg))
+    else:
+        r_nb = (rot_z(math.radians(yaw_deg)) @ rot_y(math.radians(pitch_deg))
+                @ rot_x(math.radians(roll_deg)))
+    r_lc = r_nb @ mount_rotation(cam)
+    h = float(alt_msl_m) - float(ground_alt_m)
+    return Pose(R_cl=r_lc.T.copy(), c_l=np.array([0.0, 0.0, -h]), local=local, height_m=h)
+
+
+def to_camera(pose: Pose, pts_l: np.ndarray) -> np.ndarray:
+    """(n, 3) points in L -> (n, 3) in camera axes."""
+    d = pts_l - pose.c_l
+    out: np.ndarray = d @ pose.R_cl.T
+    return out
+
+
+def project(K: np.ndarray, pts_c: np.ndarray) -> np.ndarray:
+    """(n, 3) camera-axis points (z > 0) -> (n, 2) pixel coordinates."""
+    z = pts_c[:, 2]
+    u = K[0, 0] * pts_c[:, 0] / z + K[0, 2]
+    v = K[1, 1] * pts_c[:, 1] / z + K[1, 2]
+    return np.stack([u, v], axis=1)
+
+
+def ground_homography(K: np.ndarray, pose: Pose) -> np.ndarray:
+    """3x3 H: image pixel (u, v, 1) -> ground point (north, east, 1) of L, up to
+    scale; the third component of ``H @ p`` is the ray's downward component
+    (<= 0: the ray does not reach the ground)."""
+    h = pose.height_m
+    c = pose.c_l
+    g = np.array([[h, 0.0, c[0]], [0.0, h, c[1]], [0.0, 0.0, 1.0]])
+    out: np.ndarray = g @ pose.R_cl.T @ np.linalg.inv(K)
+    return out

@@ -1,0 +1,267 @@
+"""The scenario's ``ground:``, ``targets:`` and ``cameras:`` sections -> frozen specs.
+
+Each parser takes ``(info: SectionInfo, node, path)``, reports every problem
+through ``info`` (file:line: path: message, all at once) and never raises
+for bad input. The camera rate is checked against the loop here: a frame is
+only ever rendered at an exchange tick, so its period must be a whole number
+of exchanges.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+from typing import Any
+
+from cosim.scenario.schema import SectionInfo
+
+P = tuple[Any, ...]
+_NAME = re.compile(r"^[A-Za-z0-9_.\-]+$")
+
+MOUNTS = ("nadir", "forward")
+CODECS = ("mp4v", "mjpg")
+TARGET_KINDS = ("truck", "fire_truck", "car", "person", "fire")
+
+#: kind -> (length_m, width_m, height_m, (r, g, b)) defaults
+TARGET_DEFAULTS: dict[str, tuple[float, float, float, tuple[int, int, int]]] = {
+    "truck": (10.0, 2.5, 3.5, (200, 200, 195)),  # white box truck
+    "fire_truck": (10.0, 2.5, 3.2, (220, 20, 25)),  # signal red with a yellow-green band
+    "car": (4.5, 1.8, 1.5, (40, 70, 160)),
+    "person": (0.5, 0.4, 1.75, (200, 120, 40)),
+    "fire": (8.0, 8.0, 3.0, (255, 120, 0)),  # burning patch; the smoke rises above it
+}
+
+
+@dataclass(frozen=True)
+class GroundSpec:
+    """The ground texture. ``kind`` procedural: generated from the scenario seed;
+    ``image``: a north-up picture whose top-left corner is at ``origin_ne_m``
+    (local frame metres) with ``m_per_px``; outside it the procedural ground."""
+
+    kind: str = "procedural"
+    image: str | None = None
+    origin_ne_m: tuple[float, float] | None = None  # top-left corner (north, east)
+    origin_latlon_deg: tuple[float, float] | None = None  # or its lat/lon
+    m_per_px: float = 1.0
+    base_m_per_px: float = 0.05  # finest procedural level (no blur at 30 m)
+    tile_px: int = 256
+    max_range_m: float = 5000.0  # ground farther than this is drawn as haze/sky
+
+
+@dataclass(frozen=True)
+class TargetSpec:
+    id: str
+    kind: str
+    north_m: float | None
+    east_m: float | None
+    lat_deg: float | None
+    lon_deg: float | None
+    heading_deg: float
+    length_m: float
+    width_m: float
+    height_m: float
+    color_rgb: tuple[int, int, int]
+
+
+@dataclass(frozen=True)
+class CameraSpec:
+    name: str
+    vehicles: tuple[int, ...]  # rows of Scenario.vehicles carrying this camera
+    mount: str  # nadir | forward | gimbal
+    pitch_deg: float  # gimbal pitch (nadir -90, forward 0)
+    stabilised: bool  # roll and pitch of the body removed (a stabilised gimbal)
+    hfov_deg: float
+    vfov_deg: float
+    width_px: int
+    height_px: int
+    rate_hz: float
+    frame_every: int  # physics ticks per frame
+
+    @property
+    def fx_px(self) -> float:
+        return self.width_px / 2.0 / math.tan(math.radians(self.hfov_deg) / 2.0)
+
+
+@dataclass(frozen=True)
+class CamerasSpec:
+    views: tuple[CameraSpec, ...]
+    codec: str = "mp4v"
+    render_workers: int | None = None  # None: one per CPU, at most one per camera; 0: inline
+    operator_view: bool = False
+    operator_width_px: int = 960
+    digest: bool = False  # record a sha256 of every camera's raw frames in summary.json
+    max_in_flight: int = 64  # frames queued per render worker before the loop waits
+
+
+def _rgb(info: SectionInfo, v: Any, path: P) -> tuple[int, int, int] | None:
+    if isinstance(v, str) and re.match(r"^#[0-9a-fA-F]{6}$", v):
+        return int(v[1:3], 16), int(v[3:5], 16), int(v[5:7], 16)
+    if (isinstance(v, list) and len(v) == 3
+            and all(isinstance(c, int) and not isinstance(c, bool) and 0 <= c <= 255 for c in v)):
+        return int(v[0]), int(v[1]), int(v[2])
+    info.err(path, f"expected a colour as '#rrggbb' or [r, g, b] (0-255), got {v!r}")
+    return None
+
+
+def parse_ground(info: SectionInfo, node: Any, path: P) -> GroundSpec:
+    r = info.reader(node, path, ("texture", "image", "origin", "m_per_px", "base_m_per_px",
+                                 "tile_px", "max_range_m"))
+    kind = r.string("texture", "image" if r.has("image") else "procedural",
+                    choices=("procedural", "image"))
+    base = r.num("base_m_per_px", 0.05, lo=0.005, hi=10.0)
+    tile = r.integer("tile_px", 256, lo=32)
+    max_range = r.num("max_range_m", 5000.0, lo=100.0)
+    image: str | None = None
+    o_ne: tuple[float, float] | None = None
+    o_ll: tuple[float, float] | None = None
+    mpp = 1.0
+    if kind == "image":
+        raw = r.string("image")
+        if raw is not None:
+            p = (info.path.resolve().parent / raw).resolve()
+            if p.suffix.lower() in (".tif", ".tiff"):
+                info.err(path + ("image",), "GeoTIFF is not supported yet; convert it to PNG "
+                                            "and give origin and m_per_px")
+            elif not p.is_file():
+                info.err(path + ("image",), f"no such image file: {p}")
+            image = str(p)
+        mpp = r.num("m_per_px", lo=0.0, lo_open=True) or 1.0
+        o = info.reader(r.d.get("origin"), path + ("origin",),
+                        ("north_m", "east_m", "lat_deg", "lon_deg"))
+        if o.has("lat_deg") or o.has("lon_deg"):
+            la, lo = o.num("lat_deg", lo=-90, hi=90), o.num("lon_deg", lo=-180, hi=180)
+            if la is not None and lo is not None:
+                o_ll = (la, lo)
+        else:
+            n, e = o.num("north_m"), o.num("east_m")
+            if n is not None and e is not None:
+                o_ne = (n, e)
+    elif r.has("image"):
+        info.err(path + ("image",), "an image needs 'texture: image'")
+    return GroundSpec(kind=kind or "procedural", image=image, origin_ne_m=o_ne,
+                      origin_latlon_deg=o_ll, m_per_px=mpp, base_m_per_px=base or 0.05,
+                      tile_px=tile or 256, max_range_m=max_range or 5000.0)
+
+
+def parse_targets(info: SectionInfo, node: Any, path: P) -> tuple[TargetSpec, ...]:
+    if not isinstance(node, list):
+        info.err(path, "expected a list of targets")
+        return ()
+    out: list[TargetSpec] = []
+    seen: set[str] = set()
+    for i, d in enumerate(node):
+        p = path + (i,)
+        r = info.reader(d, p, ("id", "kind", "north_m", "east_m", "lat_deg", "lon_deg",
+                               "heading_deg", "length_m", "width_m", "height_m", "color"))
+        kind = r.string("kind", choices=TARGET_KINDS)
+        tid = r.string("id", f"{kind or 'target'}{i}", pattern=_NAME)
+        if tid is not None and tid in seen:
+            info.err(p + ("id",), f"duplicate target id {tid!r}")
+        seen.add(tid or "")
+        n = e = la = lo = None
+        if r.has("lat_deg") or r.has("lon_deg"):
+            if r.has("north_m") or r.has("east_m"):
+                info.err(p, "give north_m/east_m or lat_deg/lon_deg, not both")
+            la, lo = r.num("lat_deg", lo=-90, hi=90), r.num("lon_deg", lo=-180, hi=180)
+        else:
+            n, e = r.num("north_m"), r.num("east_m")
+        dl, dw, dh, dc = TARGET_DEFAULTS.get(kind or "truck", TARGET_DEFAULTS["truck"])
+        color = _rgb(info, r.d["color"], p + ("color",)) if r.has("color") else dc
+        out.append(TargetSpec(
+            id=tid or f"target{i}", kind=kind or "truck", north_m=n, east_m=e, lat_deg=la,
+            lon_deg=lo, heading_deg=r.num("heading_deg", 0.0) or 0.0,
+            length_m=r.num("length_m", dl, lo=0.0, lo_open=True) or dl,
+            width_m=r.num("width_m", dw, lo=0.0, lo_open=True) or dw,
+            height_m=r.num("height_m", dh, lo=0.0, lo_open=True) or dh,
+            color_rgb=color or dc))
+    return tuple(out)
+
+
+def _frame_every(info: SectionInfo, rate_hz: float, p: P) -> int:
+    """Physics ticks per frame; reports a rate whose period is not a whole
+    number of exchanges (frames are rendered from the states of an exchange)."""
+    hz, k = info.rates.physics_hz, info.rates.control_every
+    ok = ", ".join(f"{hz / (k * m):g}" for m in range(1, 7))
+    every = hz / rate_hz
+    if abs(every - round(every)) > 1e-9:
+        info.err(p, f"rate_hz {rate_hz:g} must divide physics_hz {hz:g}, and a frame must "
+                    f"fall on an exchange (every {k} ticks); rates that fit: {ok}, ...")
+        return 0
+    n = round(every)
+    if n % k:
+        info.err(p, f"rate_hz {rate_hz:g}: a frame every {n} ticks is not a whole number of "
+                    f"exchanges (control_hz {info.rates.control_hz:g} = every {k} ticks); "
+                    f"use control_hz / m ({ok}, ...) or change rates.control_hz")
+        return 0
+    return n
+
+
+def _camera(info: SectionInfo, d: Any, p: P, i: int) -> CameraSpec | None:
+    r = info.reader(d, p, ("name", "vehicles", "mount", "stabilised", "hfov_deg", "vfov_deg",
+                           "width_px", "height_px", "rate_hz"))
+    name = r.string("name", f"cam{i}", pattern=_NAME)
+    rows = info.select(r.d.get("vehicles", "all"), p + ("vehicles",))
+    mount_raw = r.d.get("mount", "nadir")
+    mount, pitch = "nadir", -90.0
+    if isinstance(mount_raw, dict):
+        m = info.reader(mount_raw, p + ("mount",), ("pitch_deg",))
+        pitch = m.num("pitch_deg", lo=-90, hi=30) or 0.0
+        mount = "gimbal"
+    elif mount_raw in MOUNTS:
+        mount = str(mount_raw)
+        pitch = -90.0 if mount == "nadir" else 0.0
+    else:
+        info.err(p + ("mount",), f"expected nadir, forward or {{pitch_deg: N}}, got {mount_raw!r}")
+    w = r.integer("width_px", 640, lo=16)
+    h = r.integer("height_px", 480, lo=16)
+    which = r.one_of("hfov_deg", "vfov_deg")
+    fov = r.num(which or "hfov_deg", 60.0, lo=1.0, hi=170.0)
+    hfov = vfov = 60.0
+    if w is not None and h is not None and fov is not None:
+        t = math.tan(math.radians(fov) / 2)
+        if which == "vfov_deg":
+            vfov, hfov = fov, math.degrees(2 * math.atan(t * w / h))
+        else:
+            hfov, vfov = fov, math.degrees(2 * math.atan(t * h / w))
+        if max(hfov, vfov) >= 175.0:
+            info.err(p + (which or "hfov_deg",), f"the other field of view would be "
+                                                 f"{max(hfov, vfov):.0f} deg; keep both under 175")
+    rate = r.num("rate_hz", 10.0, lo=0.0, lo_open=True)
+    every = _frame_every(info, rate, p + ("rate_hz",)) if rate is not None else 0
+    stab = r.boolean("stabilised", False)
+    if None in (name, w, h, rate) or not every:
+        return None
+    return CameraSpec(name=name, vehicles=tuple(rows), mount=mount, pitch_deg=pitch,
+                      stabilised=stab, hfov_deg=hfov, vfov_deg=vfov, width_px=w, height_px=h,
+                      rate_hz=rate, frame_every=every)
+
+
+def parse_cameras(info: SectionInfo, node: Any, path: P) -> CamerasSpec:
+    """``cameras: [camera, ...]`` or ``cameras: {views: [...], codec, render_workers,
+    operator_view, digest}``."""
+    if isinstance(node, list):
+        node = {"views": node}
+    r = info.reader(node, path, ("views", "codec", "render_workers", "operator_view",
+                                 "operator_width_px", "digest", "max_in_flight"))
+    codec = r.string("codec", "mp4v", choices=CODECS)
+    workers = r.integer("render_workers", None, lo=0)
+    views_raw = r.d.get("views")
+    views: list[CameraSpec] = []
+    if not isinstance(views_raw, list) or not views_raw:
+        info.err(path + ("views",), "expected a non-empty list of cameras")
+    else:
+        names: set[str] = set()
+        for i, d in enumerate(views_raw):
+            cam = _camera(info, d, path + ("views", i), i)
+            if cam is None:
+                continue
+            if cam.name in names:
+                info.err(path + ("views", i, "name"), f"duplicate camera name {cam.name!r}")
+            names.add(cam.name)
+            views.append(cam)
+    return CamerasSpec(views=tuple(views), codec=codec or "mp4v", render_workers=workers,
+                       operator_view=r.boolean("operator_view", False),
+                       operator_width_px=r.integer("operator_width_px", 960, lo=160) or 960,
+                       digest=r.boolean("digest", False),
+                       max_in_flight=r.integer("max_in_flight", 64, lo=1) or 64)

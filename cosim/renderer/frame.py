@@ -1,0 +1,412 @@
+"""One camera frame: ground, targets, sky, and the per-target ground truth.
+
+``World`` holds everything a frame depends on besides the pose and the
+tick (ground texture, targets, seed); a render worker builds it once from a
+picklable ``WorldSpec``. ``render_frame`` is a pure function of
+(world, camera, pose, tick): the same inputs give the same pixels in any
+process.
+
+Ground truth (one row per target): ``in_view`` any part of the target's box
+projects into the image; ``fully_in_view`` all of it does; ``bbox`` the
+projected box's bounding rectangle (not clipped to the image); ``center``
+the projected box centre; ``eccentricity_px`` its distance from the image
+centre and ``eccentricity_deg`` its angle off the optical axis;
+``angular_size_deg`` the largest angle between two corners of the box seen
+from the camera; ``pixels_on_target`` the target's visible (unoccluded)
+pixels; ``range_m`` camera to box centre; ``contrast`` the Weber luminance
+contrast ``(Y_t - Y_b) / Y_b`` of the target's visible pixels against a ring
+of background pixels around its bounding rectangle (the rectangle grown by
+half its size, at least 4 px, minus the rectangle and any target's pixels),
+with Y the relative luminance of linearised sRGB (Rec. 709 weights). Values
+that do not exist (a target behind the camera, no visible pixels) are empty.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import numpy as np
+
+from cosim.geo import LocalFrame
+from cosim.renderer.camera import NEAR_M, Pose, ground_homography, intrinsics, project, to_camera
+from cosim.renderer.config import CameraSpec, GroundSpec, TargetSpec
+from cosim.renderer.ground import GroundTexture
+from cosim.renderer.targets import (
+    FACE_IDX,
+    FACE_NORMALS,
+    TargetSet,
+    bounding_part,
+    box_corners,
+    faces_of,
+    heading_rotation,
+    lambert,
+    parts_of,
+    smoke_puffs,
+    to_local,
+)
+
+GT_COLUMNS = ("frame", "time_s", "vehicle", "camera", "target", "in_view", "fully_in_view",
+              "bbox_x0_px", "bbox_y0_px", "bbox_x1_px", "bbox_y1_px", "center_x_px",
+              "center_y_px", "eccentricity_px", "eccentricity_deg", "angular_size_deg",
+              "pixels_on_target", "range_m", "contrast")
+SKY_TOP_BGR = np.array([225, 170, 120], dtype=np.float32)
+SKY_HORIZON_BGR = np.array([235, 220, 205], dtype=np.float32)
+MAX_PATCH_PX = 3000
+_SMOKE_BGR = np.array([150.0, 150.0, 155.0])
+SHIFT = 4  # sub-pixel bits for polygon filling
+_UNIT_CORNERS = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
+_LIN = ((np.arange(256) / 255.0) ** 2.2).astype(np.float32)  # sRGB -> linear (approx.)
+
+
+@dataclass(frozen=True)
+class WorldSpec:
+    """Picklable: what every render process builds its ``World`` from."""
+
+    origin_lat_deg: float
+    origin_lon_deg: float
+    ground_alt_m: float
+    seed: int
+    physics_hz: float
+    ground: GroundSpec
+    targets: tuple[TargetSpec, ...]
+
+
+class World:
+    def __init__(self, spec: WorldSpec) -> None:
+        self.spec = spec
+        self.frame = LocalFrame(spec.origin_lat_deg, spec.origin_lon_deg, spec.ground_alt_m)
+        self.ground = GroundTexture(spec.ground, self.frame, spec.seed)
+        self.targets = TargetSet(spec.targets, self.frame, spec.ground_alt_m)
+        self.sky: dict[tuple[int, int], np.ndarray] = {}
+
+
+def _l_to_scenario_ne(world: World, pose: Pose) -> np.ndarray:
+    """3x3 affine: L ground (north, east, 1) -> scenario frame (north, east, 1)
+    (exact at three points 100 m apart; curvature terms are below a millimetre
+    over a camera footprint)."""
+    pts = np.array([[0.0, 0.0], [100.0, 0.0], [0.0, 100.0]])
+    la, lo = pose.local.place(pts[:, 0], pts[:, 1], world.spec.ground_alt_m)
+    n, e, _ = world.frame.geodetic_to_ned(la, lo, np.full(3, world.spec.ground_alt_m))
+    src = pts.astype(np.float64)
+    dst = np.stack([n, e], axis=1)
+    a = np.linalg.solve(np.c_[src, np.ones(3)], dst).T  # 2x3
+    return np.vstack([a, [0.0, 0.0, 1.0]])
+
+
+def _sky(h: int, w: int, v_horizon: np.ndarray) -> np.ndarray:
+    """A vertical sky gradient (BGR uint8) for an image of h x w."""
+    t = np.clip(np.arange(h, dtype=np.float32) / max(h - 1, 1), 0, 1)[:, None]
+    rows = SKY_TOP_BGR + (SKY_HORIZON_BGR - SKY_TOP_BGR) * t
+    return np.broadcast_to(rows[:, None, :], (h, w, 3)).astype(np.uint8)
+
+
+def _draw_ground(world: World, cam: CameraSpec, pose: Pose, K: np.ndarray,
+                 img: np.ndarray) -> None:
+    h_img, w_img = cam.height_px, cam.width_px
+    H = ground_homography(K, pose)
+    A = _l_to_scenario_ne(world, pose)
+    max_r = world.spec.ground.max_range_m
+    # visibility: a ray reaches the ground (w > 0) within max range
+    ys, xs = np.linspace(-0.5, h_img - 0.5, 9), np.linspace(-0.5, w_img - 0.5, 9)
+    gx, gy = np.meshgrid(xs, ys)
+    p = np.stack([gx.ravel(), gy.ravel(), np.ones(gx.size)])
+    q = H @ p
+    wq = q[2]
+    horiz = np.hypot(q[0], q[1])
+    near_ok = (wq > 1e-9) & (horiz <= max_r * np.maximum(wq, 1e-12) + 1e-9)
+    # ground sample distance at the grid points (m per pixel, geometric mean)
+    if not near_ok.any():
+        return  # all sky
+    all_ground = bool(near_ok.all())
+    mask = None
+    if not all_ground:  # per-pixel sky mask (w and range are linear/quadratic in u, v)
+        uu, vv = np.meshgrid(np.arange(w_img, dtype=np.float32),
+                             np.arange(h_img, dtype=np.float32))
+        qn = H[0, 0] * uu + H[0, 1] * vv + H[0, 2]
+        qe = H[1, 0] * uu + H[1, 1] * vv + H[1, 2]
+        qw = H[2, 0] * uu + H[2, 1] * vv + H[2, 2]
+        mask = (qw > 0) & (qn * qn + qe * qe <= (max_r * qw) ** 2)
+    gsd = _gsd(H, p)
+    gsd_rows = np.where(near_ok, gsd, np.inf).reshape(9, 9).min(axis=1)
+    # bands of rows, each from the level its finest visible ground needs
+    strips = 8
+    bounds = np.linspace(0, h_img, strips + 1).round().astype(int)
+    levels = []
+    for s in range(strips):
+        g = min(gsd_rows[s], gsd_rows[s + 1])
+        levels.append(world.ground.level_for(g) if math.isfinite(g) else -1)
+    s = 0
+    while s < strips:
+        e = s
+        while e + 1 < strips and levels[e + 1] == levels[s]:
+            e += 1
+        if levels[s] >= 0:
+            _draw_band(world, H, A, max_r, int(bounds[s]), int(bounds[e + 1]), w_img,
+                       levels[s], img, mask)
+        s = e + 1
+
+
+def _gsd(H: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Ground metres per pixel (square root of a pixel's ground area) at image
+    points ``p`` (3 x n homogeneous); inf where the ray misses the ground."""
+    def ground(q: np.ndarray) -> np.ndarray:
+        r = H @ q
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return r[:2] / r[2]
+    with np.errstate(invalid="ignore"):
+        g0 = ground(p)
+        gx = ground(p + np.array([[1.0], [0.0], [0.0]])) - g0
+        gy = ground(p + np.array([[0.0], [1.0], [0.0]])) - g0
+        area = np.abs(gx[0] * gy[1] - gx[1] * gy[0])
+    out: np.ndarray = np.where(np.isfinite(area), np.sqrt(area), np.inf)
+    return out
+
+
+def _band_extent(H_up: np.ndarray, y0: int, y1: int, w_img: int,
+                 max_r: float) -> np.ndarray:
+    """Scenario (north, east) points bounding the ground seen in rows [y0, y1)."""
+    xs = np.linspace(-0.5, w_img - 0.5, 9)
+    ys = np.linspace(y0 - 0.5, y1 - 0.5, 5)
+    gx, gy = np.meshgrid(xs, ys)
+    p = np.stack([gx.ravel(), gy.ravel(), np.ones(gx.size)])
+    q = H_up @ p  # L ground homogeneous
+    w = q[2]
+    horiz = np.hypot(q[0], q[1])
+    far = (w <= 1e-9) | (horiz > max_r * np.maximum(w, 1e-12))
+    ne = np.empty((2, p.shape[1]))
+    ok = ~far
+    ne[:, ok] = q[:2, ok] / w[ok]
+    if far.any():  # clamp to the range limit along the ray's horizontal direction
+        dirn = q[:2, far] / np.maximum(horiz[far], 1e-12)
+        ne[:, far] = dirn * max_r
+    return ne
+
+
+def _draw_band(world: World, H: np.ndarray, A: np.ndarray, max_r: float, y0: int, y1: int,
+               w_img: int, level: int, img: np.ndarray, mask: np.ndarray | None) -> None:
+    """Rows [y0, y1) of the ground from ``level`` (H: image -> L ground,
+    A: L ground -> scenario north/east)."""
+    ground = world.ground
+    HA = A @ H
+    ne_l = _band_extent(H, y0, y1, w_img, max_r)
+    ne = A[:2, :2] @ ne_l + A[:2, 2:3]
+    while True:
+        P = ground.ne_to_px(level)
+        cols = P[0, 1] * ne[1] + P[0, 2]
+        rows = P[1, 0] * ne[0] + P[1, 2]
+        c0, c1 = math.floor(cols.min()) - 2, math.ceil(cols.max()) + 3
+        r0, r1 = math.floor(rows.min()) - 2, math.ceil(rows.max()) + 3
+        if max(c1 - c0, r1 - r0) <= MAX_PATCH_PX:
+            break
+        level += 1
+    patch = ground.patch(level, r0, r1, c0, c1)
+    shift = np.array([[1.0, 0.0, -c0], [0.0, 1.0, -r0], [0.0, 0.0, 1.0]])
+    band = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, float(y0)], [0.0, 0.0, 1.0]])
+    M = shift @ P @ HA @ band  # band pixel -> patch pixel
+    out = cv2.warpPerspective(patch, M, (w_img, y1 - y0),
+                              flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                              borderMode=cv2.BORDER_REPLICATE)
+    if ground.image is not None:
+        lay = ground.image
+        g = float(np.median(np.abs(np.linalg.det(M[:2, :2])) ** -0.5)) * ground.mpp(level)
+        k = lay.level_for(g)
+        src = lay.levels[k]
+        Mi = lay.ne_to_px(k) @ HA @ band
+        over = cv2.warpPerspective(src, Mi, (w_img, y1 - y0),
+                                   flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                   borderMode=cv2.BORDER_CONSTANT)
+        inside = cv2.warpPerspective(np.full(src.shape[:2], 255, np.uint8), Mi,
+                                     (w_img, y1 - y0),
+                                     flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP,
+                                     borderMode=cv2.BORDER_CONSTANT)
+        np.copyto(out, over, where=(inside > 0)[..., None])
+    if mask is not None:
+        np.copyto(img[y0:y1], out, where=mask[y0:y1, :, None])
+    else:
+        img[y0:y1] = out
+
+
+def _clip_near(poly_c: np.ndarray) -> np.ndarray:
+    """Clip a polygon (n x 3, camera axes) to z >= NEAR_M (Sutherland-Hodgman)."""
+    out = []
+    n = len(poly_c)
+    for i in range(n):
+        a, b = poly_c[i], poly_c[(i + 1) % n]
+        ina, inb = a[2] >= NEAR_M, b[2] >= NEAR_M
+        if ina:
+            out.append(a)
+        if ina != inb:
+            t = (NEAR_M - a[2]) / (b[2] - a[2])
+            out.append(a + t * (b - a))
+    return np.array(out) if out else np.zeros((0, 3))
+
+
+def _fixed(uv: np.ndarray) -> np.ndarray:
+    return np.round(uv * (1 << SHIFT)).astype(np.int32)
+
+
+def _culled(K: np.ndarray, w_img: int, h_img: int, pts_c: np.ndarray) -> bool:
+    """True if every point lies outside one of the view frustum's planes."""
+    x, y, z = pts_c[:, 0], pts_c[:, 1], pts_c[:, 2]
+    f, cx, cy = K[0, 0], K[0, 2], K[1, 2]
+    planes = (z - NEAR_M, f * x + (cx + 0.5) * z, (w_img - 0.5 - cx) * z - f * x,
+              f * y + (cy + 0.5) * z, (h_img - 0.5 - cy) * z - f * y)
+    return any(bool((p < 0).all()) for p in planes)
+
+
+def _sky_image(world: World, h: int, w: int) -> np.ndarray:
+    key = (h, w)
+    if key not in world.sky:
+        world.sky[key] = _sky(h, w, np.zeros(0))
+    return world.sky[key].copy()
+
+
+def _target_faces(pose: Pose, t: TargetSpec, origin_l: np.ndarray, time_s: float, seed: int,
+                  tid: int) -> list[tuple[float, np.ndarray, tuple[int, int, int], int]]:
+    """The front faces of a target's boxes: (depth, camera-axis polygon, BGR, id)."""
+    parts = parts_of(t, time_s, seed)
+    lo = np.array([p.lo for p in parts])[:, None, :]
+    hi = np.array([p.hi for p in parts])[:, None, :]
+    rot = heading_rotation(t)
+    corners_l = origin_l + (lo + _UNIT_CORNERS * (hi - lo)) @ rot.T  # (P, 8, 3)
+    normals = FACE_NORMALS @ rot.T  # (6, 3)
+    faces_l = corners_l[:, FACE_IDX]  # (P, 6, 4, 3)
+    cent = faces_l.mean(axis=2)
+    front = np.einsum("pfk,fk->pf", cent - pose.c_l, normals) < 0
+    faces_c = (faces_l - pose.c_l) @ pose.R_cl.T
+    shade = [lambert(n) for n in normals]
+    out = []
+    for pi, fi in zip(*np.nonzero(front)):
+        v_c = faces_c[pi, fi]
+        if v_c[:, 2].min() < NEAR_M:
+            v_c = _clip_near(v_c)
+            if len(v_c) < 3:
+                continue
+        c, k = parts[pi].color_rgb, shade[fi]
+        bgr = (min(255, int(c[2] * k)), min(255, int(c[1] * k)), min(255, int(c[0] * k)))
+        out.append((float(np.linalg.norm(v_c.mean(axis=0))), v_c, bgr, tid))
+    return out
+
+
+def _draw_smoke(K: np.ndarray, pose: Pose, t: TargetSpec, origin_l: np.ndarray, time_s: float,
+                seed: int, img: np.ndarray) -> None:
+    h_img, w_img = img.shape[:2]
+    for centre_t, radius, alpha in smoke_puffs(t, time_s, seed):
+        c_c = to_camera(pose, to_local(t, origin_l, centre_t[None, :]))[0]
+        if c_c[2] < NEAR_M + radius:
+            continue
+        uv = project(K, c_c[None, :])[0]
+        r_px = K[0, 0] * radius / c_c[2]
+        x0, y0 = int(max(0, uv[0] - r_px - 1)), int(max(0, uv[1] - r_px - 1))
+        x1, y1 = int(min(w_img, uv[0] + r_px + 2)), int(min(h_img, uv[1] + r_px + 2))
+        if x1 <= x0 or y1 <= y0:
+            continue
+        roi = img[y0:y1, x0:x1]
+        disc = np.zeros(roi.shape[:2], dtype=np.uint8)
+        cv2.circle(disc, (int(round((uv[0] - x0) * 16)), int(round((uv[1] - y0) * 16))),
+                   int(round(r_px * 16)), 1, -1, cv2.LINE_8, SHIFT)
+        m = disc.astype(bool)
+        roi[m] = (roi[m] * (1.0 - alpha) + _SMOKE_BGR * alpha).astype(np.uint8)
+
+
+def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int
+                 ) -> tuple[np.ndarray, list[dict[str, Any]]]:
+    """The BGR frame and one ground-truth dict per target (without frame/vehicle/camera)."""
+    K = intrinsics(cam)
+    w_img, h_img = cam.width_px, cam.height_px
+    img = _sky_image(world, h_img, w_img)
+    _draw_ground(world, cam, pose, K, img)
+    ids = np.zeros((h_img, w_img), dtype=np.uint16)
+    time_s = tick / world.spec.physics_hz
+    seed = world.spec.seed
+    targets = world.targets
+    origins = targets.origins_in(pose.local)
+    faces: list[tuple[float, np.ndarray, tuple[int, int, int], int]] = []
+    gt_boxes, visible = [], []
+    for k, t in enumerate(targets.specs):
+        lo, hi = bounding_part(t)
+        box_c = to_camera(pose, to_local(t, origins[k], box_corners(lo, hi)))
+        gt_boxes.append(box_c)
+        smoke_top = np.array([[0.0, 0.0, -(t.height_m + 20.0)]]) if t.kind == "fire" else None
+        probe = box_c if smoke_top is None else np.vstack(
+            [box_c, to_camera(pose, to_local(t, origins[k], smoke_top))])
+        vis = not _culled(K, w_img, h_img, probe)
+        visible.append(vis)
+        if vis:
+            faces.extend(_target_faces(pose, t, origins[k], time_s, seed + k, k + 1))
+    faces.sort(key=lambda f: -f[0])  # painter's order: far to near
+    for _, v_c, bgr, tid in faces:
+        pts = _fixed(project(K, v_c))
+        cv2.fillConvexPoly(img, pts, bgr, cv2.LINE_8, SHIFT)
+        cv2.fillConvexPoly(ids, pts, tid, cv2.LINE_8, SHIFT)
+    for k, t in enumerate(targets.specs):
+        if visible[k] and t.kind == "fire":
+            _draw_smoke(K, pose, t, origins[k], time_s, seed + k, img)
+    rows = [_ground_truth(K, cam, pose, box_c, img, ids, k + 1, visible[k])
+            for k, box_c in enumerate(gt_boxes)]
+    return img, rows
+
+
+def _luminance(bgr: np.ndarray) -> np.ndarray:
+    lin = _LIN[bgr]
+    out: np.ndarray = 0.0722 * lin[..., 0] + 0.7152 * lin[..., 1] + 0.2126 * lin[..., 2]
+    return out
+
+
+def _ground_truth(K: np.ndarray, cam: CameraSpec, pose: Pose, box_c: np.ndarray,
+                  img: np.ndarray, ids: np.ndarray, tid: int, visible: bool) -> dict[str, Any]:
+    w_img, h_img = cam.width_px, cam.height_px
+    centre = box_c.mean(axis=0)
+    rng_m = float(np.linalg.norm(centre))
+    ecc_deg = math.degrees(math.atan2(math.hypot(centre[0], centre[1]), centre[2]))
+    dirs = box_c / np.linalg.norm(box_c, axis=1, keepdims=True)
+    ang = math.degrees(math.acos(float(np.clip((dirs @ dirs.T).min(), -1.0, 1.0))))
+    row: dict[str, Any] = {"in_view": 0, "fully_in_view": 0, "bbox_x0_px": None,
+                           "bbox_y0_px": None, "bbox_x1_px": None, "bbox_y1_px": None,
+                           "center_x_px": None, "center_y_px": None, "eccentricity_px": None,
+                           "eccentricity_deg": ecc_deg, "angular_size_deg": ang,
+                           "pixels_on_target": 0, "range_m": rng_m, "contrast": None}
+    if (box_c[:, 2] >= NEAR_M).all():
+        uv = project(K, box_c)
+    else:
+        pts = [project(K, fc) for v, _ in faces_of(box_c) if len(fc := _clip_near(v)) >= 3]
+        if not pts:
+            return row
+        uv = np.concatenate(pts)
+    x0, y0 = uv.min(axis=0)
+    x1, y1 = uv.max(axis=0)
+    row.update(bbox_x0_px=float(x0), bbox_y0_px=float(y0), bbox_x1_px=float(x1),
+               bbox_y1_px=float(y1))
+    if centre[2] >= NEAR_M:
+        c_uv = project(K, centre[None, :])[0]
+        row.update(center_x_px=float(c_uv[0]), center_y_px=float(c_uv[1]),
+                   eccentricity_px=math.hypot(c_uv[0] - K[0, 2], c_uv[1] - K[1, 2]))
+    lim = np.array([[-0.5, -0.5], [w_img - 0.5, -0.5], [w_img - 0.5, h_img - 0.5],
+                    [-0.5, h_img - 0.5]], dtype=np.float32)
+    if visible and x1 >= -0.5 and y1 >= -0.5 and x0 <= w_img - 0.5 and y0 <= h_img - 0.5:
+        hull = cv2.convexHull(uv.astype(np.float32))
+        area, _ = cv2.intersectConvexConvex(hull, lim)
+        inside_bbox = x0 >= -0.5 and y0 >= -0.5 and x1 <= w_img - 0.5 and y1 <= h_img - 0.5
+        row["in_view"] = int(area > 0 or inside_bbox)
+        row["fully_in_view"] = int(inside_bbox and bool((box_c[:, 2] >= NEAR_M).all()))
+    if not row["in_view"]:
+        return row
+    bx0, by0 = max(0, math.floor(x0)), max(0, math.floor(y0))
+    bx1, by1 = min(w_img, math.ceil(x1) + 1), min(h_img, math.ceil(y1) + 1)
+    sub = ids[by0:by1, bx0:bx1] == tid
+    n_px = int(sub.sum())
+    row["pixels_on_target"] = n_px
+    if n_px:
+        m = max(4, int(0.5 * max(bx1 - bx0, by1 - by0)))
+        rx0, ry0 = max(0, bx0 - m), max(0, by0 - m)
+        rx1, ry1 = min(w_img, bx1 + m), min(h_img, by1 + m)
+        ring = ids[ry0:ry1, rx0:rx1] == 0
+        ring[by0 - ry0:by1 - ry0, bx0 - rx0:bx1 - rx0] = False
+        if ring.any():
+            y_t = float(_luminance(img[by0:by1, bx0:bx1][sub]).mean())
+            y_b = float(_luminance(img[ry0:ry1, rx0:rx1][ring]).mean())
+            row["contrast"] = (y_t - y_b) / y_b if y_b > 0 else None
+    return row

@@ -1,0 +1,284 @@
+"""The ground texture: geo-referenced in the scenario's local frame, as a
+pyramid of levels made of tiles generated on demand (LRU cache).
+
+Texture coordinates are the scenario frame's ``(north_m, east_m)``: a ground
+point is the ellipsoid point ``LocalFrame.place(north, east, ground_alt)``,
+the same convention targets use. Level ``l`` has ``base_m_per_px * 2**l``
+metres per pixel; its pixel ``(row, col)`` is centred at
+``east = (col + 0.5) * mpp``, ``north = -(row + 0.5) * mpp``. A frame picks
+the level from its ground sample distance (no blur low, no aliasing high).
+
+The procedural texture is a pure function of the seed and the position:
+fields in a gently warped grid (crop colours, crop rows), hedgerows and woods
+of individual tree crowns, roads, and a tileable fine-detail texture down to
+the base level (5 cm/px by default). Every feature is band-limited to the
+level it is drawn at (crop rows and noise octaves finer than two pixels are
+left out, roads and tree crowns are drawn with their pixel coverage), and
+tiles are cheap (a few ms), so they are regenerated rather than stored on
+disk. A user image (PNG/JPG, north up, ``m_per_px``, top-left corner
+``origin``) gets its own pyramid; outside it the procedural ground shows.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections import OrderedDict
+
+import cv2
+import numpy as np
+
+from cosim.geo import LocalFrame
+from cosim.renderer.config import GroundSpec
+
+log = logging.getLogger(__name__)
+
+MACRO_STEP_M = 0.5  # macro features (fields, roads, trees) sampled at least this fine
+DETAIL_PX = 512  # the tileable detail texture's size at the base level
+MAX_TILES = 384  # LRU size per process (256 px tiles: ~75 MB)
+
+# field palette, RGB: crops, pasture, wheat, ploughed soil, dry grass, dark crop
+_FIELDS = np.array([[96, 128, 58], [118, 140, 72], [176, 160, 96], [122, 98, 72],
+                    [150, 146, 98], [74, 104, 50]], dtype=np.float32)
+_TREE = np.array([46, 70, 38], dtype=np.float32)
+_ROAD = np.array([118, 116, 112], dtype=np.float32)
+
+
+def _hash(i: np.ndarray, j: np.ndarray, seed: int) -> np.ndarray:
+    """Uniform [0, 1) from integer lattice coordinates (vectorised, stateless;
+    uint32 arithmetic wraps by design)."""
+    with np.errstate(over="ignore"):
+        h = (i.astype(np.int64).astype(np.uint32) * np.uint32(374761393)
+             + j.astype(np.int64).astype(np.uint32) * np.uint32(668265263)
+             + np.uint32((seed * 2246822519 + 0x9E3779B9) & 0xFFFFFFFF))
+        h = (h ^ (h >> np.uint32(13))) * np.uint32(1274126177)
+        h = h ^ (h >> np.uint32(16))
+    out: np.ndarray = (h >> np.uint32(8)).astype(np.float32) * np.float32(1.0 / 0x1000000)
+    return out
+
+
+def _derive(h: np.ndarray, k: float) -> np.ndarray:
+    """Another uniform [0, 1) value from one hash (cheaper than hashing again)."""
+    x = h.astype(np.float64) * k
+    out: np.ndarray = (x - np.floor(x)).astype(np.float32)
+    return out
+
+
+def _vnoise(x: np.ndarray, y: np.ndarray, seed: int, period: int = 0) -> np.ndarray:
+    """Smooth value noise in [0, 1) on the unit lattice (periodic if ``period``)."""
+    xi, yi = np.floor(x), np.floor(y)
+    fx, fy = (x - xi).astype(np.float32), (y - yi).astype(np.float32)
+    fx, fy = fx * fx * (3 - 2 * fx), fy * fy * (3 - 2 * fy)
+    xi, yi = xi.astype(np.int64), yi.astype(np.int64)
+    x1, y1 = xi + 1, yi + 1
+    if period:
+        xi, yi, x1, y1 = xi % period, yi % period, x1 % period, y1 % period
+    a, b = _hash(xi, yi, seed), _hash(x1, yi, seed)
+    c, d = _hash(xi, y1, seed), _hash(x1, y1, seed)
+    top = a + (b - a) * fx
+    return top + ((c + (d - c) * fx) - top) * fy
+
+
+def _fbm(n: np.ndarray, e: np.ndarray, wavelength_m: float, octaves: int, step_m: float,
+         seed: int) -> np.ndarray:
+    """Fractal noise around 0 (about +-0.5), octaves finer than two samples left out."""
+    out = np.zeros(np.broadcast_shapes(n.shape, e.shape), dtype=np.float32)
+    amp, wl = 1.0, wavelength_m
+    for k in range(octaves):
+        if wl < 2 * step_m:
+            break
+        out += amp * (_vnoise(n / wl, e / wl, seed + 17 * k) - 0.5)
+        amp *= 0.5
+        wl *= 0.5
+    return out
+
+
+def _coverage(signed_dist_m: np.ndarray, step_m: float) -> np.ndarray:
+    """Pixel coverage of a shape from the signed distance to its edge (inside > 0)."""
+    out: np.ndarray = np.clip(signed_dist_m / max(step_m, 1e-6) + 0.5, 0.0, 1.0)
+    return out.astype(np.float32)
+
+
+def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int) -> np.ndarray:
+    """The procedural ground's colour (float32 RGB 0..255, shape (..., 3)) at
+    scenario-frame points, drawn for a sample spacing of ``step_m``."""
+    n = n.astype(np.float64)
+    e = e.astype(np.float64)
+    wn = n + 30.0 * (_vnoise(n / 230.0, e / 230.0, seed + 1) - 0.5)
+    we = e + 30.0 * (_vnoise(n / 230.0, e / 230.0, seed + 2) - 0.5)
+    fn, fe = 160.0, 220.0  # field size
+    ci, cj = np.floor(wn / fn), np.floor(we / fe)
+    hf = _hash(ci, cj, seed + 3)
+    kind = np.minimum((hf * len(_FIELDS)).astype(np.int64), len(_FIELDS) - 1)
+    rgb = _FIELDS[kind] * (0.88 + 0.24 * _derive(hf, 613.37))[..., None]
+    # crop rows: 2.5-4 m apart, along or across the field, only where resolvable
+    period = 2.5 + 1.5 * _derive(hf, 2713.91)
+    along = _derive(hf, 97.13) < 0.5
+    coord = np.where(along, wn, we)
+    fade = np.clip((period / step_m - 4.0) / 4.0, 0.0, 1.0).astype(np.float32)
+    rows = kind != 1  # pasture has none
+    rgb *= (1.0 + (0.10 * fade * rows) * np.sin(2 * np.pi * coord / period)
+            .astype(np.float32))[..., None]
+    # brightness variation within fields (soil moisture, growth)
+    rgb *= (1.0 + 0.35 * _fbm(n, e, 60.0, 4, step_m, seed + 7))[..., None]
+    # roads along some warped grid lines
+    dn = wn - fn * np.round(wn / fn)
+    de = we - fe * np.round(we / fe)
+    road_n = _hash(np.round(wn / fn), np.zeros_like(ci), seed + 8) < 0.3
+    road_e = _hash(np.zeros_like(cj), np.round(we / fe), seed + 9) < 0.3
+    road = np.maximum(_coverage(3.0 - np.abs(dn), step_m) * road_n,
+                      _coverage(3.0 - np.abs(de), step_m) * road_e)
+    # trees: woods where low-frequency noise is high, hedgerows on field edges
+    woods = _vnoise(n / 500.0, e / 500.0, seed + 10) > 0.76
+    edge = np.minimum(np.abs(dn), np.abs(de))
+    hedge = (edge > 4.0) & (edge < 9.0) & (_derive(hf, 31.77) < 0.5)
+    cell = 7.0
+    ti, tj = np.floor(n / cell), np.floor(e / cell)
+    ht = _hash(ti, tj, seed + 12)
+    tn = (ti + 0.25 + 0.5 * ht) * cell
+    te = (tj + 0.25 + 0.5 * _derive(ht, 577.31)) * cell
+    radius = 1.6 + 1.2 * _derive(ht, 1291.7)
+    present = (woods & (_derive(ht, 43.9) < 0.9)) | (hedge & (_derive(ht, 71.3) < 0.7))
+    tree = _coverage(radius - np.hypot(n - tn, e - te), step_m) * present
+    tree_rgb = _TREE * (0.75 + 0.5 * _derive(ht, 3343.1))[..., None]
+    rgb = rgb + (_ROAD - rgb) * road[..., None]
+    rgb = rgb + (tree_rgb - rgb) * tree[..., None]
+    out: np.ndarray = np.clip(rgb, 0, 255).astype(np.float32)
+    return out
+
+
+def _detail_pyramid(seed: int) -> list[np.ndarray]:
+    """A tileable fine-detail multiplier (around 1) at the base level and its
+    2x2-averaged levels down to 1 px."""
+    y, x = np.mgrid[0:DETAIL_PX, 0:DETAIL_PX].astype(np.float64)
+    d = np.zeros((DETAIL_PX, DETAIL_PX), dtype=np.float32)
+    amp = 0.5
+    for k, cells in enumerate((8, 32, 64, 128, 256)):
+        d += amp * (_vnoise(x * cells / DETAIL_PX, y * cells / DETAIL_PX, seed + 31 + k,
+                            period=cells) - 0.5)
+        amp *= 0.8
+    levels = [1.0 + 0.6 * d]
+    while levels[-1].shape[0] > 1:
+        a = levels[-1]
+        levels.append(0.25 * (a[0::2, 0::2] + a[1::2, 0::2] + a[0::2, 1::2] + a[1::2, 1::2]))
+    return [lv.astype(np.float32) for lv in levels]
+
+
+class _ImageLayer:
+    """A user's north-up image with its pyramid (BGR uint8)."""
+
+    def __init__(self, spec: GroundSpec, frame: LocalFrame) -> None:
+        assert spec.image is not None
+        img = cv2.imread(spec.image, cv2.IMREAD_COLOR)
+        if img is None:
+            from cosim.errors import ConfigError
+
+            raise ConfigError(f"ground.image: cannot read {spec.image} as an image")
+        if spec.origin_latlon_deg is not None:
+            la, lo = spec.origin_latlon_deg
+            n, e, _ = frame.geodetic_to_ned(la, lo, frame.alt_m)
+            self.n0, self.e0 = float(n), float(e)
+        else:
+            self.n0, self.e0 = spec.origin_ne_m or (0.0, 0.0)
+        self.mpp = spec.m_per_px
+        self.levels = [img]
+        while min(self.levels[-1].shape[:2]) >= 8:
+            self.levels.append(cv2.resize(self.levels[-1], None, fx=0.5, fy=0.5,
+                                          interpolation=cv2.INTER_AREA))
+        h, w = img.shape[:2]
+        self.bounds_ne = (self.n0 - h * self.mpp, self.n0, self.e0, self.e0 + w * self.mpp)
+
+    def level_for(self, gsd_m: float) -> int:
+        k = math.floor(math.log2(max(gsd_m, 1e-9) / self.mpp) + 0.3)
+        return min(max(k, 0), len(self.levels) - 1)
+
+    def ne_to_px(self, level: int) -> np.ndarray:
+        """3x3: scenario (north, east, 1) -> pixel (col, row, 1) of ``level``."""
+        m = self.mpp * 2 ** level
+        return np.array([[0.0, 1.0 / m, -self.e0 / m - 0.5],
+                         [-1.0 / m, 0.0, self.n0 / m - 0.5],
+                         [0.0, 0.0, 1.0]])
+
+
+class GroundTexture:
+    """Tiles of the ground by level, generated on demand and kept in an LRU cache."""
+
+    def __init__(self, spec: GroundSpec, frame: LocalFrame, seed: int) -> None:
+        self.spec = spec
+        self.seed = int(seed)
+        self.base_mpp = spec.base_m_per_px
+        self.tile_px = spec.tile_px
+        self.detail = _detail_pyramid(self.seed)
+        self._tiles: OrderedDict[tuple[int, int, int], np.ndarray] = OrderedDict()
+        self.image = _ImageLayer(spec, frame) if spec.kind == "image" else None
+        self.tiles_made = 0
+
+    def mpp(self, level: int) -> float:
+        return float(self.base_mpp * 2 ** level)
+
+    def level_for(self, gsd_m: float) -> int:
+        """The finest level not much finer than the ground sample distance."""
+        return max(0, math.floor(math.log2(max(gsd_m, 1e-9) / self.base_mpp) + 0.3))
+
+    def ne_to_px(self, level: int) -> np.ndarray:
+        """3x3: scenario (north, east, 1) -> global pixel (col, row, 1) of ``level``."""
+        m = self.mpp(level)
+        return np.array([[0.0, 1.0 / m, -0.5], [-1.0 / m, 0.0, -0.5], [0.0, 0.0, 1.0]])
+
+    def tile(self, level: int, ti: int, tj: int) -> np.ndarray:
+        key = (level, ti, tj)
+        t = self._tiles.get(key)
+        if t is not None:
+            self._tiles.move_to_end(key)
+            return t
+        t = self._make_tile(level, ti, tj)
+        self._tiles[key] = t
+        self.tiles_made += 1
+        if len(self._tiles) > MAX_TILES:
+            self._tiles.popitem(last=False)
+        return t
+
+    def _make_tile(self, level: int, ti: int, tj: int) -> np.ndarray:
+        T, m = self.tile_px, self.mpp(level)
+        rows = np.arange(ti * T, ti * T + T, dtype=np.float64)
+        cols = np.arange(tj * T, tj * T + T, dtype=np.float64)
+        step = max(m, MACRO_STEP_M)
+        if step <= m * 1.0001:
+            n = -(rows[:, None] + 0.5) * m
+            e = (cols[None, :] + 0.5) * m
+            rgb = macro_rgb(n, e, m, self.seed)
+        else:  # sample the macro colour on a coarser global lattice, interpolate
+            n0, n1 = -(rows[-1] + 0.5) * m, -(rows[0] + 0.5) * m
+            e0, e1 = (cols[0] + 0.5) * m, (cols[-1] + 0.5) * m
+            ka0, ka1 = math.floor(n0 / step), math.ceil(n1 / step)
+            kb0, kb1 = math.floor(e0 / step), math.ceil(e1 / step)
+            gn = np.arange(ka1, ka0 - 1, -1, dtype=np.float64) * step  # north descending
+            ge = np.arange(kb0, kb1 + 1, dtype=np.float64) * step
+            coarse = macro_rgb(gn[:, None], ge[None, :], step, self.seed)
+            map_x = ((cols + 0.5) * m / step - kb0).astype(np.float32)
+            map_y = (ka1 - (-(rows + 0.5) * m) / step).astype(np.float32)
+            mx, my = np.broadcast_to(map_x[None, :], (T, T)), np.broadcast_to(map_y[:, None],
+                                                                             (T, T))
+            rgb = cv2.remap(coarse, np.ascontiguousarray(mx), np.ascontiguousarray(my),
+                            cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        if level < len(self.detail) - 1:
+            d = self.detail[level]
+            s = d.shape[0]
+            ri = (np.arange(ti * T, ti * T + T) % s)
+            ci = (np.arange(tj * T, tj * T + T) % s)
+            rgb = rgb * d[np.ix_(ri, ci)][..., None]
+        bgr = np.clip(rgb[..., ::-1], 0, 255).astype(np.uint8)
+        return np.ascontiguousarray(bgr)
+
+    def patch(self, level: int, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
+        """Global pixels rows [r0, r1) x cols [c0, c1) of ``level`` (BGR uint8)."""
+        T = self.tile_px
+        out = np.empty((r1 - r0, c1 - c0, 3), dtype=np.uint8)
+        for ti in range(r0 // T, (r1 - 1) // T + 1):
+            for tj in range(c0 // T, (c1 - 1) // T + 1):
+                t = self.tile(level, ti, tj)
+                ra, rb = max(r0, ti * T), min(r1, ti * T + T)
+                ca, cb = max(c0, tj * T), min(c1, tj * T + T)
+                out[ra - r0:rb - r0, ca - c0:cb - c0] = t[ra - ti * T:rb - ti * T,
+                                                          ca - tj * T:cb - tj * T]
+        return out

@@ -1,0 +1,333 @@
+"""The cameras participant: renders every camera's frames in lockstep, in its
+own pool of processes, and writes the videos and ground-truth files.
+
+A *stream* is one camera on one vehicle. Stream ``s`` belongs to render
+worker ``s % n``, which renders its frames in tick order, encodes them into
+``cameras/<vehicle>_<camera>.<ext>`` and appends their ground truth to
+``cameras/<vehicle>_<camera>.gt.csv`` (flushed every frame). The loop only
+sends the pose at the frame tick (six numbers), so rendering overlaps the
+physics; at most ``max_in_flight`` frames per worker are queued before the
+loop waits. ``render_workers: 0`` renders inline (the reference). Frames are a
+pure function of the scenario, seed, pose and tick, hence identical for any
+worker count. ``finish`` drains every queued frame and closes the files; a
+worker also closes its files if the loop's process disappears.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import logging
+import multiprocessing as mp
+import os
+import queue
+import traceback
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from cosim.errors import CosimError
+from cosim.fdm_pool.spec import STATE_INDEX
+from cosim.renderer.camera import camera_pose
+from cosim.renderer.config import CameraSpec, CamerasSpec, GroundSpec
+from cosim.renderer.frame import GT_COLUMNS, World, WorldSpec, render_frame
+from cosim.sync.participants import RunContext
+
+log = logging.getLogger(__name__)
+
+_POSE_COLS = [STATE_INDEX[c] for c in ("lat_deg", "lon_deg", "alt_msl_m", "roll_deg",
+                                       "pitch_deg", "yaw_deg")]
+_CODEC = {"mp4v": ("mp4v", "mp4"), "mjpg": ("MJPG", "avi")}
+_RESULT_TIMEOUT_S = 60.0
+
+
+class RenderError(CosimError):
+    """Rendering or writing a camera's frame failed (names the stream, the tick
+    and the render worker's traceback)."""
+
+    def __init__(self, vehicle: str, camera: str, tick: int | None, remote_tb: str) -> None:
+        super().__init__(vehicle, camera, tick, remote_tb)
+        self.vehicle, self.camera, self.tick, self.remote_traceback = (vehicle, camera, tick,
+                                                                        remote_tb)
+
+    def __str__(self) -> str:
+        last = self.remote_traceback.strip().splitlines()[-1:] or ["?"]
+        at = f" at tick {self.tick}" if self.tick is not None else ""
+        return (f"camera {self.camera!r} of vehicle {self.vehicle!r}{at}: {last[0]}\n"
+                f"--- render traceback ---\n{self.remote_traceback.rstrip()}")
+
+
+@dataclass(frozen=True)
+class Stream:
+    index: int
+    vehicle: str
+    row: int  # the vehicle's row in the state array
+    camera: CameraSpec
+    video: str  # relative to the run folder
+    ground_truth: str
+    thumb_px: tuple[int, int] | None  # (w, h) of the operator view's thumbnail, if any
+
+
+class StreamWriter:
+    """One stream's video and ground-truth files."""
+
+    def __init__(self, out_dir: Path, stream: Stream, codec: str, digest: bool) -> None:
+        self.s = stream
+        cam = stream.camera
+        fourcc, _ = _CODEC[codec]
+        self.video = cv2.VideoWriter(str(out_dir / stream.video),
+                                     cv2.VideoWriter.fourcc(*fourcc), cam.rate_hz,
+                                     (cam.width_px, cam.height_px))
+        if not self.video.isOpened():
+            raise CosimError(f"cannot open a {codec} video writer for {stream.video}")
+        self.gt_file = open(out_dir / stream.ground_truth, "w", newline="")  # noqa: SIM115
+        self.gt = csv.writer(self.gt_file)
+        self.gt.writerow(GT_COLUMNS)
+        self.gt_file.flush()
+        self.frames = 0
+        self.hash = hashlib.sha256() if digest else None
+
+    def write(self, frame_no: int, time_s: float, img: np.ndarray,
+              rows: list[dict[str, Any]], target_ids: list[str]) -> None:
+        self.video.write(img)
+        if self.hash is not None:
+            self.hash.update(img.tobytes())
+        for tid, r in zip(target_ids, rows):
+            self.gt.writerow([frame_no, f"{time_s:.6f}", self.s.vehicle, self.s.camera.name, tid]
+                             + [_fmt(r[c]) for c in GT_COLUMNS[5:]])
+        self.gt_file.flush()
+        self.frames += 1
+
+    def close(self) -> dict[str, Any]:
+        self.video.release()
+        self.gt_file.close()
+        return {"frames": self.frames,
+                **({"frames_sha256": self.hash.hexdigest()} if self.hash is not None else {})}
+
+
+def _fmt(v: Any) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, float):
+        return f"{v:.4f}"
+    return str(v)
+
+
+class RenderWorker:
+    """Renders and writes the streams given to it (in a worker process or inline)."""
+
+    def __init__(self, world_spec: WorldSpec, streams: list[Stream], out_dir: Path, codec: str,
+                 digest: bool) -> None:
+        self.world = World(world_spec)
+        self.streams = {s.index: s for s in streams}
+        self.writers = {s.index: StreamWriter(out_dir, s, codec, digest) for s in streams}
+        self.target_ids = [t.id for t in world_spec.targets]
+
+    def render(self, stream: int, frame_no: int, tick: int, pose6: tuple[float, ...]
+               ) -> np.ndarray | None:
+        s = self.streams[stream]
+        la, lo, alt, roll, pitch, yaw = pose6
+        pose = camera_pose(s.camera, la, lo, alt, roll, pitch, yaw, self.world.spec.ground_alt_m)
+        img, rows = render_frame(self.world, s.camera, pose, tick)
+        self.writers[stream].write(frame_no, tick / self.world.spec.physics_hz, img, rows,
+                                   self.target_ids)
+        if s.thumb_px is None:
+            return None
+        thumb: np.ndarray = cv2.resize(img, s.thumb_px, interpolation=cv2.INTER_AREA)
+        return thumb
+
+    def close(self) -> dict[int, dict[str, Any]]:
+        return {i: w.close() for i, w in self.writers.items()}
+
+
+def _worker_main(world_spec: WorldSpec, streams: list[Stream], out_dir: str, codec: str,
+                 digest: bool, jobs: Any, results: Any) -> None:
+    cv2.setNumThreads(1)
+    parent = os.getppid()
+    try:
+        w = RenderWorker(world_spec, streams, Path(out_dir), codec, digest)
+    except BaseException:
+        results.put(("error", streams[0].index if streams else -1, None, traceback.format_exc()))
+        return
+    try:
+        while True:
+            try:
+                job = jobs.get(timeout=1.0)
+            except queue.Empty:
+                if os.getppid() != parent:  # the loop's process is gone: keep what we have
+                    break
+                continue
+            if job is None:
+                break
+            stream, frame_no, tick, pose6 = job
+            try:
+                thumb = w.render(stream, frame_no, tick, pose6)
+            except BaseException:
+                results.put(("error", stream, tick, traceback.format_exc()))
+                break
+            results.put(("frame", stream, frame_no, thumb))
+    finally:
+        results.put(("done", w.close()))
+
+
+class CameraParticipant:
+    name = "cameras"
+
+    def __init__(self, scenario: Any) -> None:
+        self.scn = scenario
+        self.spec: CamerasSpec = scenario.sections["cameras"]
+        self.streams: list[Stream] = []
+        self.inline: RenderWorker | None = None
+        self.procs: list[Any] = []
+        self.jobs: list[Any] = []
+        self.results: Any = None
+        self.in_flight: list[int] = []
+        self.closed: dict[int, dict[str, Any]] = {}
+        self.operator: Any = None
+        self.finished = False
+
+    # --- lifecycle -------------------------------------------------------------------
+    def start(self, ctx: RunContext) -> None:
+        from cosim.renderer.operator import OperatorView
+
+        self.ctx = ctx
+        out = ctx.out_dir / "cameras"
+        out.mkdir(parents=True, exist_ok=True)
+        _, ext = _CODEC[self.spec.codec]
+        streams = [(cam, row) for cam in self.spec.views for row in cam.vehicles]
+        tiles = OperatorView.tile_size(self.spec, len(streams)) if self.spec.operator_view \
+            else None
+        for i, (cam, row) in enumerate(streams):
+            base = f"cameras/{ctx.ids[row]}_{cam.name}"
+            show = tiles is not None and i < OperatorView.MAX_TILES
+            self.streams.append(Stream(i, ctx.ids[row], row, cam, f"{base}.{ext}",
+                                       f"{base}.gt.csv", tiles if show else None))
+        scn = ctx.scenario
+        ws = WorldSpec(scn.origin.lat_deg, scn.origin.lon_deg, scn.origin.ground_alt_m,
+                       int(scn.seed), float(ctx.physics_hz),
+                       scn.sections.get("ground") or GroundSpec(),
+                       tuple(scn.sections.get("targets") or ()))
+        n = self.spec.render_workers
+        if n is None:
+            n = min(len(self.streams), os.cpu_count() or 1)
+        n = min(n, len(self.streams))
+        if self.spec.operator_view:
+            self.operator = OperatorView(self.spec, self.streams, ws, ctx, ext)
+        if n == 0:
+            self.inline = RenderWorker(ws, self.streams, ctx.out_dir, self.spec.codec,
+                                       self.spec.digest)
+            return
+        mpc = mp.get_context("spawn")
+        self.results = mpc.Queue()
+        for k in range(n):
+            q = mpc.Queue()
+            mine = [s for s in self.streams if s.index % n == k]
+            p = mpc.Process(target=_worker_main, name=f"cosim-render-{k}", daemon=True,
+                            args=(ws, mine, str(ctx.out_dir), self.spec.codec,
+                                  self.spec.digest, q, self.results))
+            p.start()
+            self.procs.append(p)
+            self.jobs.append(q)
+            self.in_flight.append(0)
+        log.info("cameras: %d stream(s) on %d render worker(s)", len(self.streams), n)
+
+    def on_exchange(self, tick: int, states: np.ndarray) -> None:
+        for s in self.streams:
+            every = s.camera.frame_every
+            if tick % every:
+                continue
+            pose6 = tuple(float(x) for x in states[s.row, _POSE_COLS])
+            frame_no = tick // every
+            if self.inline is not None:
+                thumb = self.inline.render(s.index, frame_no, tick, pose6)
+                if self.operator is not None:
+                    self.operator.thumb(s.index, frame_no, thumb)
+            else:
+                k = s.index % len(self.procs)
+                self.jobs[k].put((s.index, frame_no, tick, pose6))
+                self.in_flight[k] += 1
+                while self.in_flight[k] >= self.spec.max_in_flight:
+                    self._collect(block=True)
+        if self.operator is not None:
+            self.operator.at_exchange(tick, states)
+        if self.procs:
+            self._collect(block=False)
+
+    def _collect(self, block: bool) -> None:
+        while True:
+            try:
+                msg = self.results.get(timeout=1.0) if block else self.results.get_nowait()
+            except queue.Empty:
+                if not block:
+                    return
+                dead = [p for p in self.procs if not p.is_alive() and p.exitcode != 0]
+                if dead:
+                    raise RenderError("?", "?", None, f"render worker {dead[0].name} died "
+                                                      f"(exit code {dead[0].exitcode})"
+                                      ) from None
+                continue
+            kind = msg[0]
+            if kind == "frame":
+                _, stream, frame_no, thumb = msg
+                self.in_flight[stream % len(self.procs)] -= 1
+                if self.operator is not None and thumb is not None:
+                    self.operator.thumb(stream, frame_no, thumb)
+            elif kind == "done":
+                self.closed.update(msg[1])
+            elif kind == "error":
+                _, stream, tick, tb = msg
+                s = self.streams[stream] if 0 <= stream < len(self.streams) else None
+                raise RenderError(s.vehicle if s else "?", s.camera.name if s else "?", tick, tb)
+            if block:
+                return
+
+    def finish(self, tick: int, reason: str) -> dict[str, Any] | None:
+        if self.finished:
+            return None
+        self.finished = True
+        error: BaseException | None = None
+        if self.inline is not None:
+            self.closed = self.inline.close()
+        elif self.procs:
+            for q in self.jobs:
+                q.put(None)
+            done = 0
+            while done < len(self.procs):
+                try:
+                    msg = self.results.get(timeout=_RESULT_TIMEOUT_S)
+                except queue.Empty:
+                    error = RenderError("?", "?", tick, "render workers did not finish")
+                    break
+                if msg[0] == "done":
+                    done += 1
+                    self.closed.update(msg[1])
+                elif msg[0] == "frame" and self.operator is not None and msg[3] is not None:
+                    self.operator.thumb(msg[1], msg[2], msg[3])
+                elif msg[0] == "error" and error is None:
+                    s = self.streams[msg[1]]
+                    error = RenderError(s.vehicle, s.camera.name, msg[2], msg[3])
+            for p in self.procs:
+                p.join(timeout=10)
+                if p.is_alive():
+                    p.kill()
+        out: dict[str, Any] = {"streams": [], "codec": self.spec.codec}
+        for s in self.streams:
+            c = s.camera
+            out["streams"].append({
+                "vehicle": s.vehicle, "camera": c.name, "video": s.video,
+                "ground_truth": s.ground_truth, "rate_hz": c.rate_hz, "width_px": c.width_px,
+                "height_px": c.height_px, "hfov_deg": c.hfov_deg, "vfov_deg": c.vfov_deg,
+                "mount": c.mount, "pitch_deg": c.pitch_deg,
+                **self.closed.get(s.index, {"frames": None})})
+        if self.operator is not None:
+            out["operator"] = self.operator.close()
+        if error is not None:
+            out["error"] = str(error).splitlines()[0]
+            log.error("%s", error)
+        return out
+
+    def after_run(self, out_dir: Path) -> None:
+        return None

@@ -1,0 +1,177 @@
+"""Targets: 3-D boxes on the ground, drawn with flat shading from a fixed sun
+in painter's order, and each target's ground truth.
+
+A target is a set of boxes in its own frame (x along its heading, y right,
+z down, origin on the ground under its centre). Its ground-truth box is the
+box around all of them; a fire's is its burning patch up to the flame height
+(the smoke is drawn but is not part of the target). Placement is exact: the
+target's ground point is fixed geodetically once and converted into each
+frame's local plane ``L`` (see ``camera``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from cosim.geo import LocalFrame
+from cosim.renderer.config import TargetSpec
+
+SUN_ELEVATION_DEG, SUN_AZIMUTH_DEG = 50.0, 135.0  # from the south-east
+_el, _az = math.radians(SUN_ELEVATION_DEG), math.radians(SUN_AZIMUTH_DEG)
+SUN_TO_L = np.array([math.cos(_el) * math.cos(_az), math.cos(_el) * math.sin(_az),
+                     -math.sin(_el)])  # unit vector toward the sun (NED)
+AMBIENT = 0.45
+
+# unit box corners (x, y, z in 0..1) and faces (outward, counter-clockwise seen from outside)
+_CORNERS = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=float)
+_FACES = ((0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3))
+FACE_IDX = np.array(_FACES)
+FACE_NORMALS = np.array([[-1.0, 0, 0], [1, 0, 0], [0, -1, 0], [0, 1, 0], [0, 0, -1], [0, 0, 1]])
+
+
+@dataclass(frozen=True)
+class Part:
+    lo: tuple[float, float, float]  # (x, y, z) min corner in the target frame (z down)
+    hi: tuple[float, float, float]
+    color_rgb: tuple[int, int, int]
+
+
+def _shade(c: tuple[int, int, int], k: float) -> tuple[int, int, int]:
+    return (int(min(255, c[0] * k)), int(min(255, c[1] * k)), int(min(255, c[2] * k)))
+
+
+def parts_of(t: TargetSpec, time_s: float = 0.0, seed: int = 0) -> list[Part]:
+    """The boxes of target ``t`` (a fire's flames depend on time and seed)."""
+    L, W, H, c = t.length_m, t.width_m, t.height_m, t.color_rgb
+    hl, hw = L / 2, W / 2
+    if t.kind == "truck":
+        cab = 0.2 * L
+        return [Part((hl - cab, -hw, -0.8 * H), (hl, hw, 0.0), _shade(c, 0.8)),
+                Part((-hl, -hw, -H), (hl - cab - 0.2, hw, -0.25 * H), c),
+                Part((-hl, -0.45 * W, -0.25 * H), (hl - cab, 0.45 * W, 0.0), (40, 40, 40))]
+    if t.kind == "fire_truck":  # red body, lime-yellow roof band, white ladder
+        return [Part((-hl, -hw, -0.9 * H), (hl, hw, 0.0), c),
+                Part((-0.4 * L, -0.32 * W, -H), (0.3 * L, 0.32 * W, -0.9 * H), (200, 230, 20)),
+                Part((-0.45 * L, -0.1 * W, -1.06 * H), (0.35 * L, 0.1 * W, -H),
+                     (235, 235, 235))]
+    if t.kind == "car":
+        return [Part((-hl, -hw, -0.55 * H), (hl, hw, 0.0), c),
+                Part((-0.25 * L, -0.42 * W, -H), (0.2 * L, 0.42 * W, -0.55 * H),
+                     _shade(c, 0.7))]
+    if t.kind == "person":
+        return [Part((-hl, -hw, -0.87 * H), (hl, hw, 0.0), c),
+                Part((-0.22 * L, -0.3 * W, -H), (0.22 * L, 0.3 * W, -0.87 * H),
+                     (190, 150, 120))]
+    # fire: a charred patch and flickering flames (deterministic from seed and time)
+    out = [Part((-hl, -hw, -0.05), (hl, hw, 0.0), (35, 30, 28))]
+    rng = np.random.default_rng([seed, 4242])
+    n = 6
+    xs, ys = rng.uniform(-0.35, 0.35, n) * L, rng.uniform(-0.35, 0.35, n) * W
+    ph, fr = rng.uniform(0, 2 * np.pi, n), rng.uniform(2.0, 5.0, n)
+    for i in range(n):
+        h = H * (0.45 + 0.55 * abs(math.sin(fr[i] * time_s + ph[i])))
+        s = 0.12 * min(L, W) * (1.0 + 0.3 * math.sin(1.7 * fr[i] * time_s + ph[i]))
+        col = (255, 200, 40) if i % 2 else c
+        out.append(Part((xs[i] - s, ys[i] - s, -h), (xs[i] + s, ys[i] + s, -0.05), col))
+    return out
+
+
+def smoke_puffs(t: TargetSpec, time_s: float, seed: int) -> list[tuple[np.ndarray, float, float]]:
+    """A fire's smoke puffs at ``time_s``: (centre in the target frame, radius_m, alpha)."""
+    if t.kind != "fire":
+        return []
+    rng = np.random.default_rng([seed, 777])
+    wind = rng.uniform(-1, 1, 2) * 1.5  # drift, m/s
+    period, life = 0.6, 8.0
+    out = []
+    k_last = math.floor(time_s / period)
+    for k in range(k_last - int(life / period), k_last + 1):
+        age = time_s - k * period
+        if age < 0 or age > life:
+            continue
+        j = np.random.default_rng([seed, 778, k & 0xFFFFFFFF]).uniform(-0.3, 0.3, 2)
+        centre = np.array([j[0] * t.length_m + wind[0] * age, j[1] * t.width_m + wind[1] * age,
+                           -(t.height_m + 2.0 * age)])
+        out.append((centre, 0.3 * max(t.length_m, t.width_m) + 0.6 * age,
+                    0.55 * (1.0 - age / life)))
+    return out
+
+
+def box_corners(lo: tuple[float, float, float], hi: tuple[float, float, float]) -> np.ndarray:
+    lo_a, hi_a = np.array(lo), np.array(hi)
+    out: np.ndarray = lo_a + _CORNERS * (hi_a - lo_a)
+    return out
+
+
+def bounding_part(t: TargetSpec) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """The target's ground-truth box (lo, hi) in its own frame."""
+    hl, hw = t.length_m / 2, t.width_m / 2
+    top = -t.height_m * (1.06 if t.kind == "fire_truck" else 1.0)
+    return (-hl, -hw, top), (hl, hw, 0.0)
+
+
+class TargetSet:
+    """All targets, their ground points fixed geodetically at start."""
+
+    def __init__(self, targets: tuple[TargetSpec, ...], frame: LocalFrame, ground_alt_m: float
+                 ) -> None:
+        self.specs = targets
+        lat, lon = [], []
+        for t in targets:
+            if t.lat_deg is not None and t.lon_deg is not None:
+                la, lo = t.lat_deg, t.lon_deg
+            else:
+                la_a, lo_a = frame.place(t.north_m or 0.0, t.east_m or 0.0, ground_alt_m)
+                la, lo = float(la_a), float(lo_a)
+            lat.append(la)
+            lon.append(lo)
+        self.lat_deg = np.array(lat)
+        self.lon_deg = np.array(lon)
+        self.ground_alt_m = ground_alt_m
+        ne = frame.geodetic_to_ned(self.lat_deg, self.lon_deg, np.full(len(lat), ground_alt_m))
+        self.north_m, self.east_m = ne[0], ne[1]  # in the scenario frame (for maps)
+
+    def origins_in(self, local: LocalFrame) -> np.ndarray:
+        """(n, 3) each target's ground point in the frame ``local``."""
+        if not self.specs:
+            return np.zeros((0, 3))
+        n, e, d = local.geodetic_to_ned(self.lat_deg, self.lon_deg,
+                                        np.full(len(self.specs), self.ground_alt_m))
+        return np.stack([n, e, d], axis=1)
+
+
+def heading_rotation(t: TargetSpec) -> np.ndarray:
+    a = math.radians(t.heading_deg)
+    c, s = math.cos(a), math.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def to_local(t: TargetSpec, origin_l: np.ndarray, pts_t: np.ndarray) -> np.ndarray:
+    """Target-frame points -> L (rotation by the heading; the target's own north
+    differs from L's by far less than a millimetre over a target's size)."""
+    out: np.ndarray = origin_l + pts_t @ heading_rotation(t).T
+    return out
+
+
+def faces_of(corners_l: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The six faces of a box given by its 8 corners in L: (4x3 vertices, normal)."""
+    out = []
+    centre = corners_l.mean(axis=0)
+    for f in _FACES:
+        v = corners_l[list(f)]
+        nrm = np.cross(v[1] - v[0], v[3] - v[0])
+        norm = np.linalg.norm(nrm)
+        if norm == 0:
+            continue
+        nrm = nrm / norm
+        if np.dot(nrm, v.mean(axis=0) - centre) < 0:
+            nrm = -nrm
+        out.append((v, nrm))
+    return out
+
+
+def lambert(normal_l: np.ndarray) -> float:
+    return AMBIENT + (1.0 - AMBIENT) * max(0.0, float(np.dot(normal_l, SUN_TO_L)))

@@ -1,0 +1,221 @@
+"""Renderer: projection against an independent pinhole model, a level pass's
+time in view, determinism across render workers, video read-back, config errors."""
+
+from __future__ import annotations
+
+import csv
+import math
+import textwrap
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import pytest
+
+from cosim.errors import ConfigError
+from cosim.fdm_pool.spec import N_STATE, STATE_INDEX
+from cosim.geo import LocalFrame
+from cosim.renderer.camera import camera_pose
+from cosim.renderer.config import TARGET_DEFAULTS, CameraSpec, GroundSpec, TargetSpec
+from cosim.renderer.frame import World, WorldSpec, render_frame
+from cosim.renderer.participant import CameraParticipant
+from cosim.scenario import parse_scenario
+from cosim.sync.participants import RunContext
+
+LAT0, LON0, GROUND_M = 37.0, -122.0, 10.0
+
+
+def _cam(mount: str, pitch: float, w: int = 320, h: int = 240, hfov: float = 60.0
+         ) -> CameraSpec:
+    vfov = math.degrees(2 * math.atan(math.tan(math.radians(hfov) / 2) * h / w))
+    return CameraSpec("c", (0,), mount, pitch, False, hfov, vfov, w, h, 10.0, 12)
+
+
+def _analytic_uv(cam: CameraSpec, pts_ned: np.ndarray, cam_ned: np.ndarray, roll: float,
+                 pitch: float, yaw: float) -> np.ndarray:
+    """Pixel of NED points: the textbook 3-2-1 direction cosine matrix, camera
+    axes written out for the mount, u = cx + f x/z."""
+    ph, th, ps = (math.radians(a) for a in (roll, pitch, yaw))
+    cph, sph, cth, sth, cps, sps = (math.cos(ph), math.sin(ph), math.cos(th), math.sin(th),
+                                    math.cos(ps), math.sin(ps))
+    # rows: body x, y, z axes expressed in NED
+    bx = np.array([cth * cps, cth * sps, -sth])
+    by = np.array([sph * sth * cps - cph * sps, sph * sth * sps + cph * cps, sph * cth])
+    bz = np.array([cph * sth * cps + sph * sps, cph * sth * sps - sph * cps, cph * cth])
+    g = math.radians(cam.pitch_deg)  # gimbal: optical axis = nose pitched by g
+    axis = math.cos(g) * bx - math.sin(g) * bz
+    down_img = math.sin(g) * bx + math.cos(g) * bz  # image "down" direction
+    right = by
+    f = cam.width_px / 2 / math.tan(math.radians(cam.hfov_deg) / 2)
+    d = pts_ned - cam_ned
+    x, y, z = d @ right, d @ down_img, d @ axis
+    return np.stack([(cam.width_px - 1) / 2 + f * x / z, (cam.height_px - 1) / 2 + f * y / z],
+                    axis=1)
+
+
+def _target(kind: str, n: float, e: float, heading: float = 0.0, tid: str = "t") -> TargetSpec:
+    L, W, H, c = TARGET_DEFAULTS[kind]
+    return TargetSpec(tid, kind, n, e, None, None, heading, L, W, H, c)
+
+
+@pytest.mark.parametrize("mount,pitch,att,offset_ne", [
+    ("nadir", -90.0, (4.0, -3.0, 30.0), (12.0, -7.0)),
+    ("forward", 0.0, (3.0, -20.0, 10.0), (120.0, 30.0)),
+    ("gimbal", -45.0, (-6.0, 2.0, -40.0), (70.0, -40.0)),
+])
+def test_projected_corners_match_an_analytic_pinhole(mount: str, pitch: float,
+                                                      att: tuple[float, float, float],
+                                                      offset_ne: tuple[float, float]) -> None:
+    t = _target("truck", *offset_ne, heading=25.0)
+    world = World(WorldSpec(LAT0, LON0, GROUND_M, 1, 120.0, GroundSpec(), (t,)))
+    cam = _cam(mount, pitch)
+    alt_agl = 100.0
+    pose = camera_pose(cam, LAT0, LON0, GROUND_M + alt_agl, *att, ground_alt_m=GROUND_M)
+    _, rows = render_frame(world, cam, pose, 0)
+    # the target's corners in the frame anchored under the camera (= scenario frame here)
+    frame = LocalFrame(LAT0, LON0, GROUND_M)
+    la, lo = frame.place(*offset_ne, GROUND_M)
+    base = np.array(frame.geodetic_to_ned(la, lo, GROUND_M), dtype=float)
+    a = math.radians(t.heading_deg)
+    fwd, rgt = np.array([math.cos(a), math.sin(a), 0]), np.array([-math.sin(a), math.cos(a), 0])
+    corners = np.array([base + sx * t.length_m / 2 * fwd + sy * t.width_m / 2 * rgt
+                        - np.array([0, 0, hz]) for sx in (-1, 1) for sy in (-1, 1)
+                        for hz in (0.0, t.height_m)])
+    uv = _analytic_uv(cam, corners, np.array([0.0, 0.0, -alt_agl]), *att)
+    r = rows[0]
+    assert r["in_view"] == 1 and r["fully_in_view"] == 1
+    got = [r["bbox_x0_px"], r["bbox_y0_px"], r["bbox_x1_px"], r["bbox_y1_px"]]
+    want = [uv[:, 0].min(), uv[:, 1].min(), uv[:, 0].max(), uv[:, 1].max()]
+    assert np.allclose(got, want, atol=0.5), (got, want)
+    assert r["pixels_on_target"] > 0
+
+
+# --- runs through the participant, with synthetic straight and level poses -------------
+
+SCENARIO = """\
+schema_version: 1
+origin: {{lat_deg: {lat}, lon_deg: {lon}, ground_alt_m: {g}}}
+rates: {{physics_hz: 120, control_hz: 30}}
+duration_s: {dur}
+seed: 3
+vehicles:
+  - id: u1
+    model: uav700
+    init: {{north_m: 0, east_m: 0, alt_agl_m: 100, heading_deg: 0, airspeed_kt: 100}}
+targets:
+  - {{id: truck1, kind: truck, north_m: 0, east_m: 0}}
+  - {{id: fire1, kind: fire, north_m: 40, east_m: 30}}
+cameras:
+  render_workers: {workers}
+  digest: true
+  codec: {codec}
+  operator_view: {op}
+  views:
+    - {{name: belly, vehicles: u1, mount: nadir, vfov_deg: 40, width_px: {w}, height_px: {h},
+       rate_hz: {rate}}}
+"""
+
+
+def _fly(tmp_path: Path, name: str, *, workers: int = 0, rate: float = 30.0, dur: float = 4.0,
+         w: int = 160, h: int = 120, alt_agl_m: float = 100.0, v_mps: float = 51.4,
+         codec: str = "mp4v", op: bool = False) -> tuple[dict[str, Any], Path]:
+    """Fly u1 north at v_mps and alt_agl_m, passing over the truck at mid-run."""
+    text = SCENARIO.format(lat=LAT0, lon=LON0, g=GROUND_M, dur=dur, workers=workers, w=w, h=h,
+                           rate=rate, codec=codec, op=str(op).lower())
+    scn = parse_scenario(text, str(tmp_path / f"{name}.yaml"), check_properties=False)
+    out = tmp_path / name
+    out.mkdir()
+    frame = LocalFrame(LAT0, LON0, GROUND_M)
+    part = CameraParticipant(scn)
+    ctx = RunContext(scn, out, ["u1"], frame, np.zeros((1, 3)), 120.0, 4, None, None, 1)
+    part.start(ctx)
+    states = np.zeros((1, N_STATE))
+    for tick in range(0, scn.total_ticks, 4):
+        north = -v_mps * dur / 2 + v_mps * tick / 120.0
+        la, lo = frame.place(north, 0.0, GROUND_M + alt_agl_m)
+        states[0, STATE_INDEX["lat_deg"]], states[0, STATE_INDEX["lon_deg"]] = la, lo
+        states[0, STATE_INDEX["alt_msl_m"]] = GROUND_M + alt_agl_m
+        part.on_exchange(tick, states)
+    summary = part.finish(scn.total_ticks, "completed")
+    assert summary is not None
+    return summary, out
+
+
+def _rows(out: Path, target: str) -> list[dict[str, str]]:
+    with open(out / "cameras/u1_belly.gt.csv") as f:
+        return [r for r in csv.DictReader(f) if r["target"] == target]
+
+
+def test_level_pass_time_in_view_matches_the_field_of_view(tmp_path: Path) -> None:
+    h, v, rate = 100.0, 51.4, 30.0
+    summary, out = _fly(tmp_path, "pass", rate=rate, alt_agl_m=h, v_mps=v, dur=6.0)
+    rows = _rows(out, "truck1")
+    assert len(rows) == summary["streams"][0]["frames"] == 180
+    seen = sum(int(r["in_view"]) for r in rows) / rate
+    want = (2 * h * math.tan(math.radians(40.0) / 2) + 10.0) / v  # truck 10 m long
+    assert abs(seen - want) <= 1 / rate, (seen, want)
+    full = [r for r in rows if r["fully_in_view"] == "1"]
+    assert full and all(float(r["contrast"]) != 0 for r in full)
+    mid = min(rows, key=lambda r: float(r["eccentricity_px"] or 1e9))
+    assert float(mid["range_m"]) == pytest.approx(h - 3.5 / 2, abs=0.5)
+
+
+def test_frames_identical_whatever_the_render_worker_count(tmp_path: Path) -> None:
+    digests = []
+    for n in (0, 1, 2):
+        summary, out = _fly(tmp_path, f"w{n}", workers=n, rate=10.0, dur=1.5, op=n == 2)
+        digests.append(summary["streams"][0]["frames_sha256"])
+    assert digests[0] == digests[1] == digests[2]
+    cap = cv2.VideoCapture(str(out / "cameras/u1_belly.mp4"))
+    n_read = 0
+    while True:
+        ok, img = cap.read()
+        if not ok:
+            break
+        assert img.shape == (120, 160, 3)
+        n_read += 1
+    assert n_read == 15 == summary["streams"][0]["frames"]
+    assert summary["operator"]["frames"] == 15
+
+
+def test_mjpg_video_reads_back(tmp_path: Path) -> None:
+    summary, out = _fly(tmp_path, "mj", codec="mjpg", rate=10.0, dur=1.0)
+    cap = cv2.VideoCapture(str(out / summary["streams"][0]["video"]))
+    assert summary["streams"][0]["video"].endswith(".avi")
+    assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 10
+    assert (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))) \
+        == (160, 120)
+
+
+def test_config_errors_carry_file_and_line(tmp_path: Path) -> None:
+    text = textwrap.dedent("""\
+        schema_version: 1
+        origin: {lat_deg: 37, lon_deg: -122}
+        rates: {physics_hz: 120, control_hz: 30}
+        duration_s: 2
+        vehicles:
+          - {id: u1, model: uav700, init: {north_m: 0, east_m: 0, alt_agl_m: 100,
+             heading_deg: 0, airspeed_kt: 100}}
+        targets:
+          - {kind: tank, north_m: 0, east_m: 0}
+          - {kind: truck, north_m: 0, east_m: 0, color: purple}
+        cameras:
+          views:
+            - {name: a, mount: sideways, rate_hz: 10}
+            - {name: b, rate_hz: 7}
+            - {name: c, rate_hz: 60}
+            - {name: d, vehicles: nobody}
+        """)
+    f = str(tmp_path / "bad.yaml")
+    with pytest.raises(ConfigError) as ei:
+        parse_scenario(text, f, check_properties=False)
+    msgs = ei.value.problems
+    assert any(m.startswith(f"{f}:9: targets[0].kind: expected one of") for m in msgs)
+    assert any(m.startswith(f"{f}:10: targets[1].color: expected a colour") for m in msgs)
+    assert any(m.startswith(f"{f}:13: cameras.views[0].mount: expected nadir") for m in msgs)
+    assert any(m.startswith(f"{f}:14: cameras.views[1].rate_hz: rate_hz 7 must divide "
+                            "physics_hz 120") for m in msgs)
+    assert any(m.startswith(f"{f}:15: cameras.views[2].rate_hz: rate_hz 60: a frame every 2 "
+                            "ticks is not a whole number of exchanges") for m in msgs)
+    assert any(m.startswith(f"{f}:16: cameras.views[3].vehicles") for m in msgs)
