@@ -218,7 +218,7 @@ class GroundTexture:
 
     def level_for(self, gsd_m: float) -> int:
         """The finest level not much finer than the ground sample distance."""
-        return max(0, math.floor(math.log2(max(gsd_m, 1e-9) / self.base_mpp) + 0.3))
+        return max(0, math.floor(math.log2(max(gsd_m, 1e-9) / self.base_mpp) + 0.5))
 
     def ne_to_px(self, level: int) -> np.ndarray:
         """3x3: scenario (north, east, 1) -> global pixel (col, row, 1) of ``level``."""
