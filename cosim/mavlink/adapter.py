@@ -194,6 +194,25 @@ def wire_values(name: str, fields: dict[str, Any]) -> dict[str, Any]:
     return fields
 
 
+_NP_TYPES = {"uint8_t": "u1", "int8_t": "i1", "uint16_t": "<u2", "int16_t": "<i2",
+             "uint32_t": "<u4", "int32_t": "<i4", "uint64_t": "<u8", "int64_t": "<i8",
+             "float": "<f4", "double": "<f8", "char": "S1"}
+
+
+def wire_layout(name: str) -> tuple[int, int, list[tuple[str, str, int]]]:
+    """(message id, CRC extra, fields in wire order as (name, numpy type, array
+    length or 0)) of a message: what a batch encoder needs to lay out payloads."""
+    cls = _message_class(name)
+    types = dict(zip(cls.fieldnames, cls.fieldtypes))
+    fields = []
+    for f, n in zip(cls.ordered_fieldnames, cls.array_lengths):
+        t = _NP_TYPES[types[f]]
+        if t == "S1" and n:
+            t, n = f"S{n}", 0
+        fields.append((str(f), t, int(n)))
+    return int(cls.id), int(cls.crc_extra), fields
+
+
 def field_names(name: str) -> tuple[str, ...]:
     """The field names of a message, in declaration order."""
     return tuple(_CLASS_BY_NAME[name].fieldnames)
@@ -284,6 +303,11 @@ class Packer:
     def seq(self) -> int:
         """The sequence number the next packet will carry."""
         return int(self._mav.seq)
+
+    @seq.setter
+    def seq(self, value: int) -> None:
+        """Set by a batch encoder that sent packets for this vehicle."""
+        self._mav.seq = int(value) % 256
 
     @property
     def signing(self) -> bool:

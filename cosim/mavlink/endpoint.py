@@ -81,18 +81,23 @@ from typing import NamedTuple
 import numpy as np
 
 from cosim.errors import ConfigError
-from cosim.fdm_pool.spec import N_STATE
+from cosim.fdm_pool.spec import N_STATE, STATE_INDEX
 from cosim.guidance.commands import Command
 from cosim.mavlink import adapter as mav
+from cosim.mavlink.batch import BatchEncoder
 from cosim.mavlink.errors import EndpointClosed, LockstepTimeout
 from cosim.mavlink.handlers import Handler, Outcome
 from cosim.mavlink.link import DEFAULT_URL, NullLink, UdpLink
 from cosim.mavlink.tlog import TlogWriter
+from cosim.mavlink.tlog import stamp as tlog_stamp
 from cosim.mavlink.vehicle import (
     ATTITUDE_COLUMNS,
+    STATE_COLUMNS,
+    STREAMABLE,
     MavVehicle,
     MavVehicleSpec,
     SimClock,
+    StateFrame,
     body_rates,
     check_rates,
     safe_name,
@@ -108,6 +113,10 @@ MAX_VEHICLES_PER_LINK = 240
 #: the system id of cosim's own controllers (the swarm controller) on MAVLink,
 #: in-process or outside (``cosim run --external-controller``)
 CONTROLLER_SYSID = 245
+
+#: tlogs are written to disk at most this often (wall clock) and at close:
+#: a hard crash loses at most this much of them
+TLOG_FLUSH_S = 0.5
 
 #: counters always present in ``counters()``
 ENDPOINT_COUNTERS = (
@@ -260,7 +269,9 @@ class MavlinkEndpoint:
             else int(time.time()) * 1_000_000
         self.clock = SimClock(float(physics_hz), int(anchor))
         self.config = config
-        self.vehicles = [MavVehicle(s, self.clock, config.rates_hz) for s in vehicles]
+        self.frame = StateFrame()  # this exchange's rows, read by vehicles on demand
+        self.vehicles = [MavVehicle(s, self.clock, config.rates_hz, self.frame, i)
+                         for i, s in enumerate(vehicles)]
         #: verifies incoming signatures (None: signing off)
         self.signature_checker = mav.SignatureChecker(key) if key is not None else None
         if key is not None:
@@ -278,7 +289,22 @@ class MavlinkEndpoint:
         self._last_tick: int | None = None
         self._rows = np.array([v.row for v in self.vehicles], dtype=np.intp)
         self._prev_att: np.ndarray | None = None
-        self._rates = np.zeros((len(self.vehicles), 3))
+        self._bank = np.full(len(self.vehicles), np.nan)  # ROLL_LIMIT_DEG as last synced
+        self._autopilot = np.array([v.spec.has_autopilot for v in self.vehicles], dtype=bool)
+        self._sysids = np.array([v.sysid for v in self.vehicles], dtype=np.int64)
+        self._home_alt = np.array([v.home[2] for v in self.vehicles], dtype=float)
+        # stream schedule over all vehicles: period and next-due tick per
+        # (message, vehicle); -1 = off / not yet sent (see vehicle.py's due())
+        n = len(self.vehicles)
+        self._period = np.full((len(STREAMABLE), n), -1, dtype=np.int64)
+        self._next_due = np.full((len(STREAMABLE), n), -1, dtype=np.int64)
+        for j, v in enumerate(self.vehicles):
+            v.on_period_change = self._period_changed
+            for k, name in enumerate(STREAMABLE):
+                p = v.period[name]
+                self._period[k, j] = -1 if p is None else p
+        self._encoders = {name: BatchEncoder(name) for name in STREAMABLE}
+        self._tlog_flushed = time.monotonic()
         self.tlogs: dict[int, TlogWriter] = {}
         self.link: UdpLink | NullLink = NullLink() if config.url is None else UdpLink(
             config.url, config.max_peers, config.max_datagrams_per_exchange)
@@ -348,13 +374,18 @@ class MavlinkEndpoint:
         prev_tick, self._last_tick = self._last_tick, tick
         mine = states[self._rows]
         att = mine[:, ATTITUDE_COLUMNS]
-        if self._prev_att is not None and prev_tick is not None and tick > prev_tick:
+        prev_att, self._prev_att = self._prev_att, att
+        if prev_att is not None and prev_tick is not None and tick > prev_tick:
             dt_s = (tick - prev_tick) / self.clock.physics_hz
-            self._rates = body_rates(self._prev_att, att, dt_s)
-        self._prev_att = att
-        # Python floats: much faster than numpy scalars to read field by field
-        for v, row, pqr in zip(self.vehicles, mine.tolist(), self._rates.tolist()):
-            v.observe(row, pqr)
+            self.frame.update(mine, lambda: body_rates(prev_att, att, dt_s))
+        else:  # the first exchange, or the same tick again: the rates stand
+            self.frame.update(mine, self._last_rates)
+        bank = mine[:, STATE_INDEX["bank_limit_deg"]]
+        changed = self._autopilot & (bank != self._bank) & (bank >= 5.0) & (bank <= 75.0)
+        if changed.any():  # ROLL_LIMIT_DEG follows the autopilot's actual limit
+            for j in np.flatnonzero(changed).tolist():
+                self.vehicles[j].sync_roll_limit()
+            self._bank = np.where(changed, bank, self._bank)
         commands: list[VehicleCommand] = []
         injected, self._injected = self._injected, []
         for m in injected:
@@ -370,14 +401,16 @@ class MavlinkEndpoint:
             if ms.upload is not None or ms.route or ms.reported_current != ms.current:
                 for name, fields in self.handler.mission_update(v, tick):
                     self._send(v, name, fields, tick)
-            for name in v.due(tick):
-                self._send(v, name, v.fields(name, tick), tick)
+        self._telemetry(tick)
         if self.config.lockstep_sysid is not None:
             self._send(self.vehicles[0], "TIMESYNC",
                        {"tc1": 0, "ts1": self.clock.sim_us(tick) * 1000}, tick)
             self._lockstep_pending = tick
-        for t in self.tlogs.values():
-            t.flush()
+        now = time.monotonic()
+        if now - self._tlog_flushed >= TLOG_FLUSH_S:
+            self._tlog_flushed = now
+            for t in self.tlogs.values():
+                t.flush()
         self.counts["commands_out"] += len(commands)
         return commands
 
@@ -393,6 +426,90 @@ class MavlinkEndpoint:
         return dict(sorted(out.items()))
 
     # -- internals -------------------------------------------------------------
+    @property
+    def _last_rates(self) -> np.ndarray:
+        """Body rates at the latest exchange (zeros before the second)."""
+        r = self.frame.rates
+        return np.zeros((len(self.vehicles), 3)) if r is None else r
+
+    def _period_changed(self, v: MavVehicle, name: str) -> None:
+        k, j = STREAMABLE.index(name), v.index
+        p = v.period[name]
+        self._period[k, j] = -1 if p is None else p
+        nd = v.next_due[name]
+        self._next_due[k, j] = -1 if nd is None else nd
+
+    def _telemetry(self, tick: int) -> None:
+        """Send every stream due at ``tick``, one message type for all due
+        vehicles at once; the next-due ticks move on by whole periods (the
+        rule of ``MavVehicle.due``)."""
+        on = self._period > 0
+        nd = np.where(on & (self._next_due < 0), tick, self._next_due)
+        due = on & (nd <= tick)
+        if not due.any():
+            self._next_due = nd
+            return
+        p = np.where(on, self._period, 1)
+        self._next_due = np.where(due, nd + p * ((tick - nd) // p + 1), nd)
+        signing = self.signature_checker is not None
+        seq = None if signing else np.array([v.packer.seq for v in self.vehicles], dtype=np.int64)
+        sent = np.zeros(len(self.vehicles), dtype=np.int64)
+        blobs: list[bytes] = []
+        lengths: list[np.ndarray] = []
+        unix_us = self.clock.unix_us(tick)
+        for k in np.flatnonzero(due.any(axis=1)).tolist():
+            name = STREAMABLE[k]
+            idx = np.flatnonzero(due[k])
+            vs = [self.vehicles[j] for j in idx.tolist()]
+            if signing:  # each packet signed by pymavlink
+                for v in vs:
+                    self._send(v, name, v.fields(name, tick), tick)
+                continue
+            assert seq is not None
+            build = STATE_COLUMNS.get(name)
+            if build is not None:
+                rows = self.frame.rows
+                assert rows is not None
+                cols = build(rows[idx], self._last_rates[idx], self._home_alt[idx], self.clock,
+                             tick)
+            else:
+                dicts = [v.fields(name, tick) for v in vs]
+                cols = {f: [d[f] for d in dicts] for f in dicts[0]}
+            enc = self._encoders[name]
+            rec = enc.payloads(len(idx), cols)
+            blob, lens = enc.encode(rec, self._sysids[idx], seq[idx] % 256)
+            seq[idx] += 1
+            sent[idx] += 1
+            blobs.append(blob)
+            lengths.append(lens)
+            if self.tlogs or self._subscribers:
+                self._record_batch(name, vs, blob, lens, rec, unix_us)
+        self.counts["packets_out"] += int(sent.sum())
+        if seq is not None:
+            for j in np.flatnonzero(sent).tolist():
+                self.vehicles[j].packer.seq = int(seq[j])
+                self.vehicles[j].packer.packets += int(sent[j])
+        if blobs:
+            self.link.send_packets(b"".join(blobs), np.concatenate(lengths).tolist())
+
+    def _record_batch(self, name: str, vs: list[MavVehicle], blob: bytes, lens: np.ndarray,
+                      rec: np.ndarray, unix_us: int) -> None:
+        """A batch's packets into the tlogs, and to subscribers as messages."""
+        off = 0
+        names = self._encoders[name].field_names
+        values = rec.tolist() if self._subscribers else None
+        st = tlog_stamp(unix_us)
+        for i, (v, n) in enumerate(zip(vs, lens.tolist())):
+            t = self.tlogs.get(v.sysid)
+            if t is not None:
+                t.write_stamped(unix_us, st, blob[off:off + n])
+            off += n
+            if values is not None:
+                m = mav.Message(name, v.sysid, mav.MAV_COMP_ID_AUTOPILOT1,
+                                dict(zip(names, values[i])))
+                for cb in self._subscribers:
+                    cb(m)
+
     def _decode(self, data: bytes) -> list[mav.Message]:
         msgs = self.decoder.decode(data)
         if self.signature_checker is not None:

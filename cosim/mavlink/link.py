@@ -45,6 +45,9 @@ Address = tuple[str, int]
 _MODES = {"udpout": "udpout", "udpin": "udpin", "udp": "udpin"}
 #: receive buffer asked for (Linux caps it at net.core.rmem_max)
 RCVBUF_BYTES = 4 << 20
+#: telemetry packets are packed into datagrams up to this size (below the
+#: common 1500-byte Ethernet MTU, so nothing is fragmented on a real network)
+MAX_DATAGRAM_BYTES = 1400
 
 
 @dataclass(frozen=True)
@@ -206,6 +209,19 @@ class UdpLink:
         except (OSError, ValueError):
             pass
 
+    def send_packets(self, blob: bytes, lengths: list[int]) -> None:
+        """Send consecutive packets (``blob``, each ``lengths[i]`` long), several
+        per datagram up to ``MAX_DATAGRAM_BYTES`` (ground stations parse every
+        packet of a datagram), never splitting a packet."""
+        start = end = 0
+        for n in lengths:
+            if end - start + n > MAX_DATAGRAM_BYTES and end > start:
+                self.send(blob[start:end])
+                start = end
+            end += n
+        if end > start:
+            self.send(blob[start:end])
+
     def close(self) -> None:
         """Close the socket (safe to call twice)."""
         if self._sock is not None:
@@ -240,6 +256,9 @@ class NullLink:
         pass
 
     def send(self, packet: bytes) -> None:
+        pass
+
+    def send_packets(self, blob: bytes, lengths: list[int]) -> None:
         pass
 
     def update_kernel_drops(self) -> None:

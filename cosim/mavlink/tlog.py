@@ -7,9 +7,9 @@ and Mission Planner read them. Timestamps are simulation time anchored to
 a past wall-clock instant (``SimClock.unix_us``), so a run's tlogs do not
 depend on how fast it ran.
 
-Records are buffered during an exchange and written with one unbuffered
-``write`` at ``flush()`` (once per exchange): a crash loses at most the
-exchange in progress.
+Records are buffered and written with one unbuffered ``write`` at
+``flush()`` (the endpoint flushes at least every ``TLOG_FLUSH_S`` of wall
+time and at close): a hard crash loses at most that much.
 """
 
 from __future__ import annotations
@@ -19,6 +19,11 @@ import struct
 from pathlib import Path
 
 _STAMP = struct.Struct(">Q")
+
+
+def stamp(unix_us: int) -> bytes:
+    """A record's packed timestamp (for ``TlogWriter.write_stamped``)."""
+    return _STAMP.pack(int(unix_us))
 
 
 class TlogWriter:
@@ -39,6 +44,17 @@ class TlogWriter:
         t = max(int(unix_us), self._last_us)
         self._last_us = t
         self._buf += _STAMP.pack(t)
+        self._buf += packet
+        self.records += 1
+
+    def write_stamped(self, unix_us: int, stamp: bytes, packet: bytes) -> None:
+        """``write`` with the timestamp already packed (``stamp``, for
+        ``unix_us``): the same record, cheaper for batches."""
+        if unix_us < self._last_us or self._f is None:
+            self.write(unix_us, packet)
+            return
+        self._last_us = unix_us
+        self._buf += stamp
         self._buf += packet
         self.records += 1
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import IntEnum
 from typing import Any
@@ -210,22 +210,45 @@ def body_rates(prev_deg: np.ndarray, cur_deg: np.ndarray, dt_s: float) -> np.nda
     return np.where(np.isfinite(pqr), pqr, 0.0)
 
 
-def _cdeg(deg: float) -> int:
-    """An angle in centidegrees 0..35999 (65535: unknown)."""
-    if not math.isfinite(deg):
-        return 65535
-    return round((deg % 360.0) * 100.0) % 36000
-
-
 def safe_name(name: str) -> str:
     return re.sub(r"[^A-Za-z0-9_.-]+", "_", name).strip("._") or "vehicle"
 
 
+class StateFrame:
+    """The state rows of an exchange, shared by the vehicles of an endpoint:
+    each vehicle reads its own row only when something needs it (no
+    per-vehicle work per exchange). ``rows``: (n, N_STATE) float64 in vehicle
+    order; ``rates``: (n, 3) body rates p, q, r in rad/s."""
+
+    def __init__(self) -> None:
+        self.rows: np.ndarray | None = None
+        self._rates: np.ndarray | Callable[[], np.ndarray] | None = None
+        self.version = 0
+
+    def update(self, rows: np.ndarray,
+               rates: np.ndarray | Callable[[], np.ndarray]) -> None:
+        """New rows; ``rates`` may be a function computing them on first use."""
+        self.rows, self._rates = rows, rates
+        self.version += 1
+
+    @property
+    def rates(self) -> np.ndarray | None:
+        r = self._rates
+        if callable(r):
+            r = self._rates = r()
+        return r
+
+
 class MavVehicle:
-    """Mutable MAVLink-side state of one vehicle."""
+    """Mutable MAVLink-side state of one vehicle.
+
+    ``frame``/``index``: where its state row comes from (an endpoint's shared
+    ``StateFrame``); without them it has its own, fed by ``observe``.
+    """
 
     def __init__(self, spec: MavVehicleSpec, clock: SimClock,
-                 rates_hz: Mapping[str, float]) -> None:
+                 rates_hz: Mapping[str, float], frame: StateFrame | None = None,
+                 index: int = 0) -> None:
         lo, hi = SYSID_RANGE
         if not lo <= spec.sysid <= hi:
             raise ValueError(f"vehicle {spec.name!r}: system id must be {lo}..{hi}, "
@@ -245,22 +268,56 @@ class MavVehicle:
             n: period_ticks(rates_hz.get(n, DEFAULT_RATES_HZ.get(n, 0.0)), clock.physics_hz)
             for n in STREAMABLE}
         self.next_due: dict[str, int | None] = {n: None for n in STREAMABLE}
-        self.body_rates = (0.0, 0.0, 0.0)  # p, q, r (rad/s)
-        self.status = int(VehicleStatus.ACTIVE)
-        self.row_values: Sequence[float] | None = None  # the latest state row
+        self.frame = frame if frame is not None else StateFrame()
+        self.index = index
+        self._seen = -1  # the frame version the cached row is from
+        self._row: list[float] | None = None
+        #: called with (vehicle, message name) when a stream's period changes
+        self.on_period_change: Callable[[MavVehicle, str], None] | None = None
         self.mission = Mission()
 
     # -- state -------------------------------------------------------------
     def observe(self, row: Sequence[float], body_rates: Sequence[float]) -> None:
-        """Take this exchange's state row (as Python floats) and body rates
-        (p, q, r in rad/s, from ``body_rates``); before any telemetry."""
-        self.row_values = row
-        self.body_rates = (float(body_rates[0]), float(body_rates[1]), float(body_rates[2]))
-        status = row[_S["status"]]
-        self.status = int(status) if status == status else int(VehicleStatus.DIVERGED)
-        bank = row[_S["bank_limit_deg"]]
-        if self.spec.has_autopilot and 5.0 <= bank <= 75.0:  # the autopilot's actual limit
-            self.params.force("ROLL_LIMIT_DEG", bank)
+        """Take a state row and body rates (p, q, r in rad/s) for a vehicle
+        with its own frame (an endpoint's vehicles share the endpoint's)."""
+        self.frame.update(np.asarray([row], dtype=float),
+                          np.asarray([body_rates], dtype=float))
+        self.index = 0
+        self.sync_roll_limit()
+
+    @property
+    def row_values(self) -> list[float] | None:
+        """The latest state row as Python floats (None before any)."""
+        f = self.frame
+        if f.version != self._seen:
+            self._seen = f.version
+            self._row = None if f.rows is None else f.rows[self.index].tolist()
+        return self._row
+
+    @property
+    def body_rates(self) -> tuple[float, float, float]:
+        """p, q, r (rad/s) at the latest state."""
+        r = self.frame.rates
+        if r is None:
+            return (0.0, 0.0, 0.0)
+        p, q, rr = r[self.index].tolist()
+        return (p, q, rr)
+
+    @property
+    def status(self) -> int:
+        row = self.row_values
+        if row is None:
+            return int(VehicleStatus.ACTIVE)
+        st = row[_S["status"]]
+        return int(st) if st == st else int(VehicleStatus.DIVERGED)
+
+    def sync_roll_limit(self) -> None:
+        """ROLL_LIMIT_DEG follows the autopilot's actual bank limit."""
+        row = self.row_values
+        if row is not None and self.spec.has_autopilot:
+            bank = row[_S["bank_limit_deg"]]
+            if 5.0 <= bank <= 75.0:
+                self.params.force("ROLL_LIMIT_DEG", bank)
 
     def in_air(self) -> bool:
         row = self.row_values
@@ -307,54 +364,34 @@ class MavVehicle:
     def set_period(self, name: str, period: int | None, tick: int) -> None:
         self.period[name] = period
         self.next_due[name] = tick  # starts at the next telemetry pass
+        if self.on_period_change is not None:
+            self.on_period_change(self, name)
 
     # -- telemetry ---------------------------------------------------------
     def fields(self, name: str, tick: int) -> dict[str, Any]:
-        """The fields of a streamable message at ``tick`` (needs ``observe`` first,
+        """The fields of a streamable message at ``tick`` (needs a state row,
         except for HEARTBEAT, SYSTEM_TIME and AUTOPILOT_VERSION)."""
+        build = STATE_COLUMNS.get(name)
+        if build is not None:
+            if name != "SYSTEM_TIME":
+                self._row_or_raise()
+            cols = build(self.frame.rows[self.index:self.index + 1]
+                         if self.frame.rows is not None else np.zeros((1, 0)),
+                         self.frame.rates[self.index:self.index + 1]
+                         if self.frame.rates is not None else np.zeros((1, 3)),
+                         np.array([self.home[2]]), self.clock, tick)
+            return {k: _scalar(v) for k, v in cols.items()}
         fields: dict[str, Any] = getattr(self, "_f_" + name.lower())(tick)
         return fields
 
-    def _row(self) -> Sequence[float]:
+    def _row_or_raise(self) -> None:
         if self.row_values is None:
             raise RuntimeError(f"vehicle {self.spec.name!r}: no state observed yet")
-        return self.row_values
 
     def _f_heartbeat(self, tick: int) -> dict[str, Any]:
         return {"type": mav.MAV_TYPE_FIXED_WING, "autopilot": mav.MAV_AUTOPILOT_ARDUPILOTMEGA,
                 "base_mode": self.base_mode(), "custom_mode": self.mode,
                 "system_status": self.system_status(), "mavlink_version": 3}
-
-    def _f_global_position_int(self, tick: int) -> dict[str, Any]:
-        r = self._row()
-        alt = float(r[_S["alt_msl_m"]])
-        return {"time_boot_ms": self.clock.boot_ms(tick),
-                "lat": _i(r[_S["lat_deg"]] * 1e7, -900_000_000, 900_000_000),
-                "lon": _i(r[_S["lon_deg"]] * 1e7, -1_800_000_000, 1_800_000_000),
-                "alt": _i(alt * 1000.0, -2 ** 31, 2 ** 31 - 1),
-                "relative_alt": _i((alt - self.home[2]) * 1000.0, -2 ** 31, 2 ** 31 - 1),
-                "vx": _i(r[_S["vn_mps"]] * 100.0, -32768, 32767),
-                "vy": _i(r[_S["ve_mps"]] * 100.0, -32768, 32767),
-                "vz": _i(r[_S["vd_mps"]] * 100.0, -32768, 32767),
-                "hdg": _cdeg(float(r[_S["yaw_deg"]]))}
-
-    def _f_attitude(self, tick: int) -> dict[str, Any]:
-        r = self._row()
-        p, q, rr = self.body_rates
-        return {"time_boot_ms": self.clock.boot_ms(tick),
-                "roll": math.radians(r[_S["roll_deg"]]),
-                "pitch": math.radians(r[_S["pitch_deg"]]),
-                "yaw": math.remainder(math.radians(r[_S["yaw_deg"]]), math.tau),
-                "rollspeed": p, "pitchspeed": q, "yawspeed": rr}
-
-    def _f_vfr_hud(self, tick: int) -> dict[str, Any]:
-        r = self._row()
-        yaw = float(r[_S["yaw_deg"]])
-        return {"airspeed": float(r[_S["airspeed_mps"]]),
-                "groundspeed": math.hypot(r[_S["vn_mps"]], r[_S["ve_mps"]]),
-                "heading": int(yaw % 360.0) % 360 if math.isfinite(yaw) else 0,
-                "throttle": _i(float(r[_S["throttle"]]) * 100.0, 0, 100),
-                "alt": float(r[_S["alt_msl_m"]]), "climb": -float(r[_S["vd_mps"]])}
 
     def _f_sys_status(self, tick: int) -> dict[str, Any]:
         enabled = _PRESENT
@@ -370,25 +407,6 @@ class MavVehicle:
                 "load": 0, "voltage_battery": 65535, "current_battery": -1,
                 "battery_remaining": -1, "drop_rate_comm": 0, "errors_comm": 0,
                 "errors_count1": 0, "errors_count2": 0, "errors_count3": 0, "errors_count4": 0}
-
-    def _f_gps_raw_int(self, tick: int) -> dict[str, Any]:
-        r = self._row()
-        vn, ve = float(r[_S["vn_mps"]]), float(r[_S["ve_mps"]])
-        gs = math.hypot(vn, ve)
-        cog = _cdeg(math.degrees(math.atan2(ve, vn))) if gs > 0.1 else 65535
-        alt_mm = _i(float(r[_S["alt_msl_m"]]) * 1000.0, -2 ** 31, 2 ** 31 - 1)
-        return {"time_usec": self.clock.sim_us(tick), "fix_type": mav.GPS_FIX_TYPE_3D_FIX,
-                "lat": _i(r[_S["lat_deg"]] * 1e7, -900_000_000, 900_000_000),
-                "lon": _i(r[_S["lon_deg"]] * 1e7, -1_800_000_000, 1_800_000_000),
-                "alt": alt_mm, "eph": 100, "epv": 100, "vel": _i(gs * 100.0, 0, 65534),
-                "cog": cog, "satellites_visible": 12,
-                # cosim has no geoid: heights are ellipsoidal throughout (cosim.geo)
-                "alt_ellipsoid": alt_mm, "h_acc": 500, "v_acc": 800, "vel_acc": 100,
-                "hdg_acc": 0, "yaw": 0}
-
-    def _f_system_time(self, tick: int) -> dict[str, Any]:
-        return {"time_unix_usec": self.clock.unix_us(tick),
-                "time_boot_ms": self.clock.boot_ms(tick)}
 
     def _f_home_position(self, tick: int) -> dict[str, Any]:
         lat, lon, alt = self.home
@@ -415,3 +433,98 @@ class MavVehicle:
                 "flight_custom_version": list(b"cosim\0\0\0"),
                 "middleware_custom_version": [0] * 8, "os_custom_version": [0] * 8,
                 "vendor_id": 0, "product_id": 0, "uid": self.sysid}
+
+
+# -- telemetry from state rows, vectorised over vehicles ------------------------
+def _iv(x: np.ndarray, lo: int, hi: int, nan: int = 0) -> np.ndarray:
+    """Round half to even into an integer field's range (NaN -> ``nan``)."""
+    with np.errstate(invalid="ignore"):
+        out = np.clip(np.rint(x), lo, hi)
+    return np.where(np.isnan(x), nan, out).astype(np.int64)
+
+
+def _cdeg_v(deg: np.ndarray) -> np.ndarray:
+    """Angles in centidegrees 0..35999 (65535: unknown)."""
+    ok = np.isfinite(deg)
+    with np.errstate(invalid="ignore"):
+        c = np.rint(np.mod(np.where(ok, deg, 0.0), 360.0) * 100.0) % 36000
+    return np.where(ok, c, 65535).astype(np.int64)
+
+
+_I32 = (-2 ** 31, 2 ** 31 - 1)
+ColumnBuilder = Callable[[np.ndarray, np.ndarray, np.ndarray, SimClock, int],
+                         dict[str, Any]]
+
+
+def _c_global_position_int(r: np.ndarray, pqr: np.ndarray, home_alt: np.ndarray,
+                           clock: SimClock, tick: int) -> dict[str, Any]:
+    alt = r[:, _S["alt_msl_m"]]
+    return {"time_boot_ms": clock.boot_ms(tick),
+            "lat": _iv(r[:, _S["lat_deg"]] * 1e7, -900_000_000, 900_000_000),
+            "lon": _iv(r[:, _S["lon_deg"]] * 1e7, -1_800_000_000, 1_800_000_000),
+            "alt": _iv(alt * 1000.0, *_I32),
+            "relative_alt": _iv((alt - home_alt) * 1000.0, *_I32),
+            "vx": _iv(r[:, _S["vn_mps"]] * 100.0, -32768, 32767),
+            "vy": _iv(r[:, _S["ve_mps"]] * 100.0, -32768, 32767),
+            "vz": _iv(r[:, _S["vd_mps"]] * 100.0, -32768, 32767),
+            "hdg": _cdeg_v(r[:, _S["yaw_deg"]])}
+
+
+def _c_attitude(r: np.ndarray, pqr: np.ndarray, home_alt: np.ndarray, clock: SimClock,
+                tick: int) -> dict[str, Any]:
+    yaw = np.radians(r[:, _S["yaw_deg"]])
+    return {"time_boot_ms": clock.boot_ms(tick),
+            "roll": np.radians(r[:, _S["roll_deg"]]),
+            "pitch": np.radians(r[:, _S["pitch_deg"]]),
+            # -pi..pi as IEEE remainder (exact), like ArduPilot reports it
+            "yaw": np.array([math.remainder(y, math.tau) for y in yaw.tolist()]),
+            "rollspeed": pqr[:, 0], "pitchspeed": pqr[:, 1], "yawspeed": pqr[:, 2]}
+
+
+def _c_vfr_hud(r: np.ndarray, pqr: np.ndarray, home_alt: np.ndarray, clock: SimClock,
+               tick: int) -> dict[str, Any]:
+    yaw = r[:, _S["yaw_deg"]]
+    ok = np.isfinite(yaw)
+    heading = np.where(ok, np.floor(np.mod(np.where(ok, yaw, 0.0), 360.0)) % 360, 0)
+    return {"airspeed": r[:, _S["airspeed_mps"]],
+            "groundspeed": np.hypot(r[:, _S["vn_mps"]], r[:, _S["ve_mps"]]),
+            "heading": heading.astype(np.int64),
+            "throttle": _iv(r[:, _S["throttle"]] * 100.0, 0, 100),
+            "alt": r[:, _S["alt_msl_m"]], "climb": -r[:, _S["vd_mps"]]}
+
+
+def _c_gps_raw_int(r: np.ndarray, pqr: np.ndarray, home_alt: np.ndarray, clock: SimClock,
+                   tick: int) -> dict[str, Any]:
+    vn, ve = r[:, _S["vn_mps"]], r[:, _S["ve_mps"]]
+    gs = np.hypot(vn, ve)
+    with np.errstate(invalid="ignore"):
+        moving = gs > 0.1
+    cog = np.where(moving, _cdeg_v(np.degrees(np.arctan2(ve, vn))), 65535)
+    alt_mm = _iv(r[:, _S["alt_msl_m"]] * 1000.0, *_I32)
+    return {"time_usec": clock.sim_us(tick), "fix_type": mav.GPS_FIX_TYPE_3D_FIX,
+            "lat": _iv(r[:, _S["lat_deg"]] * 1e7, -900_000_000, 900_000_000),
+            "lon": _iv(r[:, _S["lon_deg"]] * 1e7, -1_800_000_000, 1_800_000_000),
+            "alt": alt_mm, "eph": 100, "epv": 100, "vel": _iv(gs * 100.0, 0, 65534),
+            "cog": cog, "satellites_visible": 12,
+            # cosim has no geoid: heights are ellipsoidal throughout (cosim.geo)
+            "alt_ellipsoid": alt_mm, "h_acc": 500, "v_acc": 800, "vel_acc": 100,
+            "hdg_acc": 0, "yaw": 0}
+
+
+def _c_system_time(r: np.ndarray, pqr: np.ndarray, home_alt: np.ndarray, clock: SimClock,
+                   tick: int) -> dict[str, Any]:
+    return {"time_unix_usec": clock.unix_us(tick), "time_boot_ms": clock.boot_ms(tick)}
+
+
+#: messages built from state rows for many vehicles at once: name -> builder of
+#: columns (arrays over the rows given, or one value for all)
+STATE_COLUMNS: dict[str, ColumnBuilder] = {
+    "GLOBAL_POSITION_INT": _c_global_position_int, "ATTITUDE": _c_attitude,
+    "VFR_HUD": _c_vfr_hud, "GPS_RAW_INT": _c_gps_raw_int, "SYSTEM_TIME": _c_system_time}
+
+
+def _scalar(v: Any) -> Any:
+    """One row's value of a column as a plain Python number."""
+    if isinstance(v, np.ndarray):
+        v = v[0]
+    return v.item() if isinstance(v, np.generic) else v

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import time
 from collections import Counter
 from pathlib import Path
 
 import pytest
 from mavtest import ANCHOR_US, PHYSICS_HZ, mavutil
+
+from cosim.mavlink.endpoint import TLOG_FLUSH_S
 
 ML = mavutil.mavlink
 
@@ -32,7 +35,9 @@ def test_tlogs_hold_both_directions_with_sim_time_stamps(rig, tmp_path: Path) ->
     ack_tick = r.tick
     for _ in range(30):
         r.step(4)
-    # flushed every exchange: readable while the run goes on, before close()
+    # written to disk at least every TLOG_FLUSH_S: readable while the run goes on
+    time.sleep(TLOG_FLUSH_S)
+    r.step(0)
     paths = sorted((tmp_path / "tlogs").glob("*.tlog"))
     assert [p.name for p in paths] == ["uav1.tlog", "uav2.tlog"]
     live = _read(paths[1])
