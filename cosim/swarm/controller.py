@@ -153,8 +153,9 @@ class SwarmController:
             self.groups.append(GroupState(g, idx))
         #: (kind, tick, fields) produced since the last ``drain_events``
         self.events: list[tuple[str, int, dict[str, Any]]] = []
-        #: every command sent: tick, vehicle index, speed (float32 as sent), stall speed, roll
-        self.sent: list[tuple[int, int, float, float, float]] = []
+        #: every command sent: tick, vehicle index, speed (float32 as sent), stall speed,
+        #: roll (rad) and altitude (m MSL) of the telemetry it used
+        self.sent: list[tuple[int, int, float, float, float, float]] = []
         self.acks: Counter[str] = Counter()
         self.stall_above_max = 0
 
@@ -334,7 +335,7 @@ class SwarmController:
                 "param4": 0.0, "x": int(round(float(lat[k]) * 1e7)),
                 "y": int(round(float(lon[k]) * 1e7)), "z": float(np.float32(alt[k]))}))
             self.sent.append((tick, i, float(speed32[k]), float(stall[k]),
-                              float(self.roll_rad[i])))
+                              float(self.roll_rad[i]), float(self.alt_msl_m[i])))
         return out
 
     # -- summary -----------------------------------------------------------

@@ -7,7 +7,7 @@ controller step the controller acts on the telemetry received so far; its
 injected commands are handled at the next exchange. Phase and separation
 events go to ``events.jsonl``; ``summary.json["swarm"]`` gets the phases with
 their metrics; ``after_run`` writes ``swarm.png`` and ``swarm_commands.csv``
-(every command: tick, vehicle, speed sent, stall speed, roll).
+(every command: tick, vehicle, speed sent, stall speed, roll, altitude).
 """
 
 from __future__ import annotations
@@ -45,9 +45,10 @@ def merged_summary(ctl: SwarmController, mon: SwarmMonitor) -> dict[str, Any]:
 
 def write_commands_csv(path: Path, ctl: SwarmController, physics_hz: float) -> None:
     with open(path, "w") as f:
-        f.write("tick,t_s,vehicle,speed_mps,stall_mps,roll_rad\n")
-        for tick, i, spd, stall, roll in ctl.sent:
-            f.write(f"{tick},{tick / physics_hz:.4f},{ctl.ids[i]},{spd!r},{stall!r},{roll!r}\n")
+        f.write("tick,t_s,vehicle,speed_mps,stall_mps,roll_rad,alt_msl_m\n")
+        for tick, i, spd, stall, roll, alt in ctl.sent:
+            f.write(f"{tick},{tick / physics_hz:.4f},{ctl.ids[i]},{spd!r},{stall!r},{roll!r},"
+                    f"{alt!r}\n")
 
 
 class SwarmParticipant:
