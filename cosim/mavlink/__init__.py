@@ -23,6 +23,7 @@ from cosim.mavlink.endpoint import (
 )
 from cosim.mavlink.errors import EndpointClosed, LinkError, LockstepTimeout, MavlinkError
 from cosim.mavlink.link import DEFAULT_URL, LinkUrl
+from cosim.mavlink.links import MavlinkLinks, link_specs
 from cosim.mavlink.vehicle import (
     DEFAULT_RATES_HZ,
     MavVehicleSpec,
@@ -33,5 +34,5 @@ from cosim.mavlink.vehicle import (
 
 __all__ = ["CONTROLLER_SYSID", "DEFAULT_RATES_HZ", "DEFAULT_URL", "MAX_VEHICLES_PER_LINK",
            "EndpointClosed", "LinkError", "LinkUrl", "LockstepTimeout", "MavVehicleSpec",
-           "MavlinkConfig", "MavlinkEndpoint", "MavlinkError", "PlaneMode", "SimClock",
-           "VehicleCommand", "load_signing_key", "mav_specs"]
+           "MavlinkConfig", "MavlinkEndpoint", "MavlinkError", "MavlinkLinks", "PlaneMode",
+           "SimClock", "VehicleCommand", "link_specs", "load_signing_key", "mav_specs"]

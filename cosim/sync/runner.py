@@ -163,14 +163,16 @@ class Run:
                 if scn.autopilot else None
             labels = guidance.labels if guidance is not None else None
             if self.mavlink_config is not None:
-                from cosim.mavlink import MavlinkEndpoint, mav_specs
+                from cosim.mavlink import MavlinkLinks
 
-                self.mavlink = MavlinkEndpoint(
-                    mav_specs(scn.vehicles, autopilot=scn.autopilot), hz, self.mavlink_config,
-                    tlog_dir=out)
-                if self.mavlink_config.url is not None:
-                    log.info("MAVLink: %d vehicles on %s (local %s:%d)", len(ids),
-                             self.mavlink_config.url, *self.mavlink.local_address)
+                self.mavlink = MavlinkLinks(scn.vehicles, hz, self.mavlink_config,
+                                            tlog_dir=out, autopilot=scn.autopilot)
+                for url, specs, (host, port) in zip(self.mavlink.urls, self.mavlink.specs,
+                                                     self.mavlink.local_addresses):
+                    if url is not None:
+                        log.info("MAVLink: vehicles %s..%s (system ids 1..%d) on %s "
+                                 "(local %s:%d)", ids[specs[0].row], ids[specs[-1].row],
+                                 len(specs), url, host, port)
             with pool:
                 self.participants = build_participants(
                     scn, skip=("swarm",) if self.external_controller else ())

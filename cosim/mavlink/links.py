@@ -1,0 +1,147 @@
+"""More vehicles than one MAVLink link can carry: one endpoint per 240.
+
+System ids are 8 bits and ground stations keep 251..255 for themselves, so
+one link (``MavlinkEndpoint``) carries at most ``MAX_VEHICLES_PER_LINK``
+(240) vehicles. A run with more gets one link per 240 vehicles, in vehicle
+order, each with system ids 1..240 on its own port:
+
+- ``udpout:HOST:PORT``: link k sends to ``PORT + k`` (point one ground
+  station, or one MAVProxy ``--master``, at each port);
+- ``udpin:HOST:PORT``: link k listens on ``PORT + k`` (``PORT`` 0: each
+  link an ephemeral port, see ``local_addresses``);
+- in-process only (``url`` None): no ports; in-process clients tell the
+  links apart by the ``link`` index ``subscribe`` callbacks receive and
+  ``inject`` takes.
+
+``MavlinkLinks`` drives them together with the endpoint's interface.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections import Counter
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cosim.errors import ConfigError
+from cosim.fdm_pool.spec import VehicleSpec
+from cosim.mavlink import adapter as mav
+from cosim.mavlink.endpoint import (
+    MAX_VEHICLES_PER_LINK,
+    MavlinkConfig,
+    MavlinkEndpoint,
+    VehicleCommand,
+)
+from cosim.mavlink.link import LinkUrl
+from cosim.mavlink.vehicle import MavVehicleSpec, mav_specs
+
+
+def link_specs(vehicles: Sequence[VehicleSpec], autopilot: bool = True
+               ) -> list[list[MavVehicleSpec]]:
+    """The MAVLink identities of a run's vehicles, one list per link: rows in
+    vehicle order, system ids 1..240 on each link."""
+    out = []
+    for a in range(0, len(vehicles), MAX_VEHICLES_PER_LINK):
+        out.append(mav_specs(vehicles[a:a + MAX_VEHICLES_PER_LINK], autopilot=autopilot,
+                             first_sysid=1, first_row=a))
+    return out
+
+
+def link_urls(url: str | None, n: int) -> list[str | None]:
+    """The URL of each of ``n`` links (see the module docstring)."""
+    if url is None:
+        return [None] * n
+    u = LinkUrl.parse(url)
+    if n > 1 and u.port and u.port + n - 1 > 65535:
+        raise ConfigError(f"mavlink {url}: {n} links need ports {u.port}..{u.port + n - 1}")
+    return [str(dataclasses.replace(u, port=u.port + k if u.port else 0)) for k in range(n)]
+
+
+class MavlinkLinks:
+    """Every vehicle of a run on as many links as it takes (see the module
+    docstring); the interface of ``MavlinkEndpoint``, with the link index
+    where it matters."""
+
+    def __init__(self, vehicles: Sequence[VehicleSpec], physics_hz: float,
+                 config: MavlinkConfig, tlog_dir: str | Path | None = None,
+                 autopilot: bool = True, clock_anchor_unix_us: int | None = None) -> None:
+        self.specs = link_specs(vehicles, autopilot)
+        n = len(self.specs)
+        if n > 1 and config.lockstep_sysid is not None:
+            raise ConfigError(f"mavlink: an outside controller in lockstep drives one link "
+                              f"(at most {MAX_VEHICLES_PER_LINK} vehicles); this run has "
+                              f"{len(vehicles)}: run the controller in-process")
+        self.config = config
+        self.urls = link_urls(config.url, n)
+        self.endpoints: list[MavlinkEndpoint] = []
+        try:
+            for specs, url in zip(self.specs, self.urls):
+                self.endpoints.append(MavlinkEndpoint(
+                    specs, physics_hz, dataclasses.replace(config, url=url), tlog_dir=tlog_dir,
+                    clock_anchor_unix_us=clock_anchor_unix_us))
+                if clock_anchor_unix_us is None:  # every link on the same clock
+                    clock_anchor_unix_us = self.endpoints[0].clock.anchor_unix_us
+        except BaseException:
+            self.close()
+            raise
+
+    @property
+    def links(self) -> int:
+        return len(self.endpoints)
+
+    @property
+    def closed(self) -> bool:
+        return all(e.closed for e in self.endpoints)
+
+    @property
+    def local_address(self) -> tuple[str, int]:
+        """The first link's socket address."""
+        return self.endpoints[0].local_address
+
+    @property
+    def local_addresses(self) -> list[tuple[str, int]]:
+        return [e.local_address for e in self.endpoints]
+
+    def __enter__(self) -> MavlinkLinks:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        for e in self.endpoints:
+            e.close()
+
+    def inject(self, message: mav.Message, link: int = 0) -> None:
+        """Queue an in-process message for the vehicles of ``link``."""
+        self.endpoints[link].inject(message)
+
+    def subscribe(self, callback: Callable[[mav.Message, int], None]) -> None:
+        """``callback(message, link)`` for every packet any vehicle sends."""
+        for k, e in enumerate(self.endpoints):
+            e.subscribe(_tagged(callback, k))
+
+    def exchange(self, tick: int, states: np.ndarray) -> list[VehicleCommand]:
+        out: list[VehicleCommand] = []
+        for e in self.endpoints:
+            out += e.exchange(tick, states)
+        return out
+
+    def counters(self) -> dict[str, Any]:
+        """Every counter summed over the links (``links``: how many)."""
+        total: Counter[str] = Counter()
+        for e in self.endpoints:
+            total.update(e.counters())
+        out: dict[str, Any] = dict(sorted(total.items()))
+        out["links"] = len(self.endpoints)
+        return out
+
+
+def _tagged(callback: Callable[[mav.Message, int], None], link: int
+            ) -> Callable[[mav.Message], None]:
+    def deliver(m: mav.Message) -> None:
+        callback(m, link)
+    return deliver
