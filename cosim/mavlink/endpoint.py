@@ -282,6 +282,7 @@ class MavlinkEndpoint:
                             "stations reject a new signed stream more than a minute behind "
                             "their own clock")
         self._by_sysid = {v.sysid: v for v in self.vehicles}
+        self._by_row = {v.row: v for v in self.vehicles}
         self.counts: Counter[str] = Counter({k: 0 for k in ENDPOINT_COUNTERS})
         self.decoder = mav.Decoder()
         self.handler = Handler(self.counts, self.clock.physics_hz)
@@ -353,6 +354,13 @@ class MavlinkEndpoint:
         if self.closed:
             raise EndpointClosed("mavlink endpoint: inject() after close()")
         self._injected.append(message)
+
+    def local_command(self, row: int, command: Command) -> Command:
+        """A command from inside cosim (the schedule) for the vehicle at state
+        row ``row``: its MAVLink state follows (``Handler.local_command``), so
+        the next heartbeat shows the mode; returns the command for guidance."""
+        v = self._by_row.get(row)
+        return command if v is None else self.handler.local_command(v, command)
 
     def subscribe(self, callback: Callable[[mav.Message], None]) -> None:
         """Call ``callback(message)`` for every packet any vehicle sends from now

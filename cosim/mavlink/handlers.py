@@ -235,6 +235,17 @@ class Handler:
         return lo
 
     # -- modes ---------------------------------------------------------------
+    def local_command(self, v: MavVehicle, cmd: Command) -> Command:
+        """A command from inside cosim (a schedule item) for ``v``, applied to the
+        vehicle's MAVLink state as a ground station's command would be: one
+        that steers the vehicle (a nav command or a heading) puts it in GUIDED
+        and so ends a mission flown in AUTO, as DO_REPOSITION does; settings
+        (speed, altitude, limits) leave the mode alone. Returns the command
+        for guidance, unchanged: one command path."""
+        if v.spec.has_autopilot and (cmd.nav is not None or cmd.heading_deg is not None):
+            v.mode = int(PlaneMode.GUIDED)
+        return cmd
+
     def enter_mode(self, v: MavVehicle, mode: int, tick: int, out: Outcome) -> int:
         """Switch ``v`` to an ArduPlane mode; the result code (texts go to ``out``)."""
         if not v.spec.has_autopilot:

@@ -28,6 +28,7 @@ import numpy as np
 
 from cosim.errors import ConfigError
 from cosim.fdm_pool.spec import VehicleSpec
+from cosim.guidance.commands import Command
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.endpoint import (
     MAX_VEHICLES_PER_LINK,
@@ -118,6 +119,10 @@ class MavlinkLinks:
     def inject(self, message: mav.Message, link: int = 0) -> None:
         """Queue an in-process message for the vehicles of ``link``."""
         self.endpoints[link].inject(message)
+
+    def local_command(self, row: int, command: Command) -> Command:
+        """See ``MavlinkEndpoint.local_command``."""
+        return self.endpoints[row // MAX_VEHICLES_PER_LINK].local_command(row, command)
 
     def subscribe(self, callback: Callable[[mav.Message, int], None]) -> None:
         """``callback(message, link)`` for every packet any vehicle sends."""

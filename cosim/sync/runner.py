@@ -199,6 +199,9 @@ class Run:
                         for name, value in item.sets:
                             pool.setpoints[rows, chan_index[name]] = value
                         if item.command is not None and guidance is not None:
+                            if self.mavlink is not None:  # the vehicles' MAVLink state follows
+                                for r in rows:
+                                    self.mavlink.local_command(r, item.command)
                             guidance.command(rows, item.command, states, pool.setpoints)
                         events.emit("schedule", tick, vehicle=None, vehicles=len(rows),
                                     **({"set": dict(item.sets)} if item.sets else {}),

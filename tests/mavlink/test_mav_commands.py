@@ -450,3 +450,27 @@ def test_states_are_read_from_each_vehicles_own_row(rig) -> None:
     r.step(120)
     gp, = of_type(r.gcs.drain(wait_s=1.0), "GLOBAL_POSITION_INT", 1)
     assert gp.lat == round(r.states[0, S["lat_deg"]] * 1e7)
+
+
+def test_schedule_commands_take_the_vehicle_state_path(rig) -> None:
+    """A schedule item's command goes through the same vehicle state as a
+    station's: steering puts the vehicle in GUIDED (the heartbeat shows it),
+    a setting leaves the mode alone, and the command reaches guidance as is."""
+    from cosim.guidance.commands import parse_command
+
+    r = rig(2)
+    long(r, 2, ML.MAV_CMD_DO_SET_MODE, ML.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, PlaneMode.LOITER)
+    assert heartbeat(r, 2).custom_mode == PlaneMode.LOITER
+
+    def cmd(d: dict):
+        c = parse_command(d, ("command",), lambda p, m: pytest.fail(m))
+        assert c is not None
+        return c
+
+    speed = cmd({"airspeed_kt": 90})
+    assert r.ep.local_command(1, speed) is speed
+    assert heartbeat(r, 2).custom_mode == PlaneMode.LOITER  # a setting: mode unchanged
+    goto = cmd({"goto": {"north_m": 1000, "east_m": 0, "frame": "start"}})
+    assert r.ep.local_command(1, goto) is goto
+    assert heartbeat(r, 2).custom_mode == PlaneMode.GUIDED
+    assert heartbeat(r, 1).custom_mode == PlaneMode.GUIDED
