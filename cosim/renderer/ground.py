@@ -24,6 +24,7 @@ from __future__ import annotations
 import logging
 import math
 from collections import OrderedDict
+from collections.abc import Callable
 
 import cv2
 import numpy as np
@@ -35,7 +36,8 @@ log = logging.getLogger(__name__)
 
 MACRO_STEP_M = 0.5  # macro features (fields, roads, trees) sampled at least this fine
 DETAIL_PX = 512  # the tileable detail texture's size at the base level
-MAX_TILES = 384  # LRU size per process (256 px tiles: ~75 MB)
+MAX_TILES = 384  # LRU size per process (256 px BGRA tiles: ~100 MB)
+MACRO_OVERSAMPLE = 2.0  # macro features sampled at most every this many pixels, then upsampled
 
 # field palette, RGB: crops, pasture, wheat, ploughed soil, dry grass, dark crop
 _FIELDS = np.array([[96, 128, 58], [118, 140, 72], [176, 160, 96], [122, 98, 72],
@@ -99,13 +101,42 @@ def _coverage(signed_dist_m: np.ndarray, step_m: float) -> np.ndarray:
     return out.astype(np.float32)
 
 
+def _smooth(n: np.ndarray, e: np.ndarray, spacing_m: float,
+            field: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> np.ndarray:
+    """``field`` (a smooth function of north, east) at the grid ``n`` (R x 1) x
+    ``e`` (1 x C), evaluated on the global lattice of ``spacing_m`` that covers
+    the grid and interpolated bilinearly (exact at lattice points; a pure
+    function of position, so neighbouring tiles agree)."""
+    nv, ev = n[:, 0], e[0, :]
+    if len(nv) * len(ev) <= 64 or (len(nv) > 1 and abs(nv[1] - nv[0]) >= spacing_m):
+        return field(n, e)
+    kn0, kn1 = math.floor(nv.min() / spacing_m), math.floor(nv.max() / spacing_m) + 1
+    ke0, ke1 = math.floor(ev.min() / spacing_m), math.floor(ev.max() / spacing_m) + 1
+    gn = np.arange(kn0, kn1 + 1, dtype=np.float64) * spacing_m
+    ge = np.arange(ke0, ke1 + 1, dtype=np.float64) * spacing_m
+    coarse = field(gn[:, None], ge[None, :])
+    fn = nv / spacing_m - kn0
+    i = np.minimum(np.floor(fn).astype(np.int64), len(gn) - 2)
+    wn = (fn - i).astype(np.float32)[:, None]
+    rows = coarse[i] + (coarse[i + 1] - coarse[i]) * wn
+    fe = ev / spacing_m - ke0
+    j = np.minimum(np.floor(fe).astype(np.int64), len(ge) - 2)
+    we = (fe - j).astype(np.float32)[None, :]
+    out: np.ndarray = rows[:, j] + (rows[:, j + 1] - rows[:, j]) * we
+    return out
+
+
 def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int) -> np.ndarray:
-    """The procedural ground's colour (float32 RGB 0..255, shape (..., 3)) at
-    scenario-frame points, drawn for a sample spacing of ``step_m``."""
+    """The procedural ground's colour (float32 RGB 0..255, shape (R, C, 3)) at
+    the scenario-frame grid ``n`` (R x 1) x ``e`` (1 x C), drawn for a sample
+    spacing of ``step_m``. Low-frequency fields (field-grid warp, woods, the
+    brightness noise) are evaluated on coarser lattices and interpolated."""
     n = n.astype(np.float64)
     e = e.astype(np.float64)
-    wn = n + 30.0 * (_vnoise(n / 230.0, e / 230.0, seed + 1) - 0.5)
-    we = e + 30.0 * (_vnoise(n / 230.0, e / 230.0, seed + 2) - 0.5)
+    wn = n + _smooth(n, e, 8.0, lambda a, b: 30.0 * (_vnoise(a / 230.0, b / 230.0, seed + 1)
+                                                    - 0.5))
+    we = e + _smooth(n, e, 8.0, lambda a, b: 30.0 * (_vnoise(a / 230.0, b / 230.0, seed + 2)
+                                                    - 0.5))
     fn, fe = 160.0, 220.0  # field size
     ci, cj = np.floor(wn / fn), np.floor(we / fe)
     hf = _hash(ci, cj, seed + 3)
@@ -120,7 +151,8 @@ def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int) -> np.ndar
     rgb *= (1.0 + (0.10 * fade * rows) * np.sin(2 * np.pi * coord / period)
             .astype(np.float32))[..., None]
     # brightness variation within fields (soil moisture, growth)
-    rgb *= (1.0 + 0.35 * _fbm(n, e, 60.0, 4, step_m, seed + 7))[..., None]
+    rgb *= (1.0 + 0.35 * _smooth(n, e, 2.0, lambda a, b: _fbm(a, b, 60.0, 4, step_m, seed + 7))
+            )[..., None]
     # roads along some warped grid lines
     dn = wn - fn * np.round(wn / fn)
     de = we - fe * np.round(we / fe)
@@ -129,7 +161,7 @@ def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int) -> np.ndar
     road = np.maximum(_coverage(3.0 - np.abs(dn), step_m) * road_n,
                       _coverage(3.0 - np.abs(de), step_m) * road_e)
     # trees: woods where low-frequency noise is high, hedgerows on field edges
-    woods = _vnoise(n / 500.0, e / 500.0, seed + 10) > 0.76
+    woods = _smooth(n, e, 8.0, lambda a, b: _vnoise(a / 500.0, b / 500.0, seed + 10)) > 0.76
     edge = np.minimum(np.abs(dn), np.abs(de))
     hedge = (edge > 4.0) & (edge < 9.0) & (_derive(hf, 31.77) < 0.5)
     cell = 7.0
@@ -212,6 +244,7 @@ class GroundTexture:
         self._tiles: OrderedDict[tuple[int, int, int], np.ndarray] = OrderedDict()
         self.image = _ImageLayer(spec, frame) if spec.kind == "image" else None
         self.tiles_made = 0
+        self._patch = np.empty((0, 0, 4), dtype=np.uint8)
 
     def mpp(self, level: int) -> float:
         return float(self.base_mpp * 2 ** level)
@@ -242,7 +275,7 @@ class GroundTexture:
         T, m = self.tile_px, self.mpp(level)
         rows = np.arange(ti * T, ti * T + T, dtype=np.float64)
         cols = np.arange(tj * T, tj * T + T, dtype=np.float64)
-        step = max(m, MACRO_STEP_M)
+        step = max(m * MACRO_OVERSAMPLE, MACRO_STEP_M)
         if step <= m * 1.0001:
             n = -(rows[:, None] + 0.5) * m
             e = (cols[None, :] + 0.5) * m
@@ -267,13 +300,22 @@ class GroundTexture:
             ri = (np.arange(ti * T, ti * T + T) % s)
             ci = (np.arange(tj * T, tj * T + T) % s)
             rgb = rgb * d[np.ix_(ri, ci)][..., None]
-        bgr = np.clip(rgb[..., ::-1], 0, 255).astype(np.uint8)
-        return np.ascontiguousarray(bgr)
+        # BGRA (alpha 255): OpenCV's bilinear warp is ~2.5x faster on four channels
+        bgra = np.empty((T, T, 4), dtype=np.uint8)
+        bgra[..., 3] = 255
+        np.clip(rgb, 0, 255, out=rgb)
+        bgra[..., :3] = rgb[..., ::-1]
+        return bgra
 
     def patch(self, level: int, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
-        """Global pixels rows [r0, r1) x cols [c0, c1) of ``level`` (BGR uint8)."""
+        """Global pixels rows [r0, r1) x cols [c0, c1) of ``level`` (BGRA uint8,
+        alpha 255); a view of a buffer reused by the next call."""
         T = self.tile_px
-        out = np.empty((r1 - r0, c1 - c0, 3), dtype=np.uint8)
+        h, w = r1 - r0, c1 - c0
+        if self._patch.shape[0] < h or self._patch.shape[1] < w:
+            self._patch = np.empty((max(h, self._patch.shape[0]), max(w, self._patch.shape[1]),
+                                    4), dtype=np.uint8)
+        out = self._patch[:h, :w]
         for ti in range(r0 // T, (r1 - 1) // T + 1):
             for tj in range(c0 // T, (c1 - 1) // T + 1):
                 t = self.tile(level, ti, tj)

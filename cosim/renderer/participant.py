@@ -125,13 +125,15 @@ class RenderWorker:
         self.streams = {s.index: s for s in streams}
         self.writers = {s.index: StreamWriter(out_dir, s, codec, digest) for s in streams}
         self.target_ids = [t.id for t in world_spec.targets]
+        self.frames = {s.index: np.empty((s.camera.height_px, s.camera.width_px, 3), np.uint8)
+                       for s in streams}  # one reused frame buffer per stream
 
     def render(self, stream: int, frame_no: int, tick: int, pose6: tuple[float, ...]
                ) -> np.ndarray | None:
         s = self.streams[stream]
         la, lo, alt, roll, pitch, yaw = pose6
         pose = camera_pose(s.camera, la, lo, alt, roll, pitch, yaw, self.world.spec.ground_alt_m)
-        img, rows = render_frame(self.world, s.camera, pose, tick)
+        img, rows = render_frame(self.world, s.camera, pose, tick, self.frames[stream])
         self.writers[stream].write(frame_no, tick / self.world.spec.physics_hz, img, rows,
                                    self.target_ids)
         if s.thumb_px is None:
