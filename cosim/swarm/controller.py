@@ -356,6 +356,9 @@ class SwarmController:
 
 
 def to_message(o: Outbound) -> mav.Message:
-    """An in-process message, exactly as the network would deliver it."""
-    return mav.make_message(o.name, src_system=CONTROLLER_SYSID,
-                            src_component=CONTROLLER_COMPID, **o.fields)
+    """An in-process message, exactly as the network would deliver it: every
+    field is given (``Outbound`` carries them all), integers fit their wire
+    types, and ``wire_values`` rounds the floats to float32 (``make_message``
+    gives the same, at ~20x the cost of packing and parsing each one)."""
+    return mav.Message(o.name, CONTROLLER_SYSID, CONTROLLER_COMPID,
+                       mav.wire_values(o.name, dict(o.fields)))

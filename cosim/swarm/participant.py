@@ -69,7 +69,12 @@ class SwarmParticipant:
                                "for a swarm: section)")
         self.ctx = ctx
         scn = self.scenario
-        self.ctl = SwarmController(self.spec, scn.vehicles, ctx.frame, ctx.physics_hz)
+        # more than 240 vehicles: several links (cosim.mavlink.MavlinkLinks, whose
+        # subscribe callbacks get (message, link) and inject takes the link)
+        links = getattr(ctx.mavlink, "specs", None)
+        self.multi_link = links is not None
+        self.ctl = SwarmController(self.spec, scn.vehicles, ctx.frame, ctx.physics_hz,
+                                   links=links)
         self.mon = SwarmMonitor(self.spec, self.ctl.ids, [g.idx for g in self.ctl.groups],
                                 ctx.physics_hz)
         self.rows = self.ctl.rows
@@ -84,7 +89,10 @@ class SwarmParticipant:
         mon.update(tick, np.stack([n, e, d], axis=1))
         if ctl.due(tick):
             for o in ctl.step(tick):
-                ctx.mavlink.inject(to_message(o))
+                if self.multi_link:
+                    ctx.mavlink.inject(to_message(o), o.link)
+                else:
+                    ctx.mavlink.inject(to_message(o))
         self._flush_events()
 
     def _flush_events(self, emit: bool = True) -> None:

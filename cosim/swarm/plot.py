@@ -30,14 +30,16 @@ def plot_swarm(path: str | Path, spec: SwarmSpec, group_index: Sequence[np.ndarr
     ph = np.asarray(phases, dtype=np.int64).reshape(len(pos), -1)  # (T, groups)
     fig, ax = plt.subplots(figsize=(6.4, 5.6), dpi=90)
     legend: dict[str, Line2D] = {}
+    # one colour per (group, phase), across groups
+    offset = np.cumsum([0] + [len(g.phases) for g in spec.groups])
     for gi, (g, idx) in enumerate(zip(spec.groups, group_index)):
         if len(pos) < 2:
             break
         for k in idx.tolist():
             e, n = pos[:, k, 1] / 1000.0, pos[:, k, 0] / 1000.0
             seg = np.stack([np.stack([e[:-1], n[:-1]], 1), np.stack([e[1:], n[1:]], 1)], 1)
-            colours = [_PHASE_COLOURS[p % len(_PHASE_COLOURS)] if p >= 0 else "0.7"
-                       for p in ph[1:, gi]]
+            colours = [_PHASE_COLOURS[(offset[gi] + p) % len(_PHASE_COLOURS)] if p >= 0
+                       else "0.7" for p in ph[1:, gi]]
             ax.add_collection(LineCollection(list(seg), colors=colours, linewidths=0.8))
             ax.plot(e[0], n[0], "o", ms=2.5, color="0.3")
         c = pos[:, idx, :2].mean(axis=1) / 1000.0
@@ -46,7 +48,9 @@ def plot_swarm(path: str | Path, spec: SwarmSpec, group_index: Sequence[np.ndarr
         for p_i, phase in enumerate(g.phases):
             label = f"{g.name} {p_i}: {phase.behaviour}" if len(spec.groups) > 1 \
                 else f"{p_i}: {phase.behaviour}"
-            legend[label] = Line2D([], [], color=_PHASE_COLOURS[p_i % len(_PHASE_COLOURS)])
+            legend[label] = Line2D([], [], color=_PHASE_COLOURS[
+                (offset[gi] + p_i) % len(_PHASE_COLOURS)])
+    legend["after the last phase"] = Line2D([], [], color="0.7")
     legend["centroid"] = Line2D([], [], color="k", ls="--")
     ax.autoscale()
     ax.set_aspect("equal", adjustable="datalim")

@@ -12,7 +12,7 @@ from cosim.errors import ConfigError
 from cosim.mavlink import adapter as mav
 from cosim.scenario import parse_scenario
 from cosim.swarm.config import SwarmSpec
-from cosim.swarm.controller import SwarmController
+from cosim.swarm.controller import SwarmController, to_message
 
 HEAD = """\
 schema_version: 1
@@ -136,6 +136,10 @@ def test_speed_never_below_the_stall_speed_in_the_current_bank() -> None:
         # what a receiver decodes (float32) is never below the stall speed
         wire = np.array([mav.make_message("COMMAND_INT", **o.fields).fields["param1"]
                          for o in out])
+        # the in-process message is exactly what the wire would deliver
+        for o in out:
+            assert to_message(o).fields == mav.make_message(
+                "COMMAND_INT", src_system=245, src_component=190, **o.fields).fields
         assert (wire >= stall).all() and (sent >= 26.0).all()
         if expect_stall_wins:
             assert wire == pytest.approx(stall, abs=1e-5)
