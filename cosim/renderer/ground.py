@@ -299,12 +299,10 @@ class GroundTexture:
             s = d.shape[0]
             ri = (np.arange(ti * T, ti * T + T) % s)
             ci = (np.arange(tj * T, tj * T + T) % s)
-            rgb = rgb * d[np.ix_(ri, ci)][..., None]
+            rgb *= d[np.ix_(ri, ci)][..., None]
         # BGRA (alpha 255): OpenCV's bilinear warp is ~2.5x faster on four channels
-        bgra = np.empty((T, T, 4), dtype=np.uint8)
-        bgra[..., 3] = 255
         np.clip(rgb, 0, 255, out=rgb)
-        bgra[..., :3] = rgb[..., ::-1]
+        bgra: np.ndarray = cv2.cvtColor(rgb.astype(np.uint8), cv2.COLOR_RGB2BGRA)
         return bgra
 
     def patch(self, level: int, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
