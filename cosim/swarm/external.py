@@ -15,7 +15,8 @@ Metrics: this process has only telemetry, so the monitor runs on the
 positions received (GLOBAL_POSITION_INT, 1e-7 deg / 1 mm), once per
 exchange. It writes to ``--out DIR``: ``swarm.json`` (what the in-process
 run puts in ``summary.json["swarm"]``), ``swarm_events.jsonl`` (phase and
-separation events), ``swarm_commands.csv`` and ``swarm.png``. The run
+separation events), ``swarm_commands.csv``, ``swarm_separation.csv`` and
+``swarm.png``. The run
 folder of the simulation has no swarm section or events in this mode.
 """
 
@@ -167,6 +168,7 @@ class UdpController:
                 for e in self.events:
                     f.write(json.dumps(e) + "\n")
             write_commands_csv(self.out / "swarm_commands.csv", self.ctl, self.hz)
+            self.mon.write_separation_csv(self.out / "swarm_separation.csv")
             if self.mon.track_ticks:
                 from cosim.swarm.plot import plot_swarm
 

@@ -6,7 +6,8 @@ gives the ground truth (the state array), ``cosim swarm --connect`` the
 telemetry it received (it has nothing else). It keeps
 
 - the minimum separation, 3-D and horizontal, with the closest pair and
-  when; a ``swarm_separation`` event when the 3-D closest pair drops below
+  when, at every exchange (``swarm_separation.csv``) and over the run
+  (the summary); a ``swarm_separation`` event when the 3-D closest pair drops below
   ``separation_warn_m`` (and one when it is clear again);
 - per phase (from the controller's ``swarm_phase`` events): minimum
   separation inside the group, distance travelled per vehicle, spread
@@ -17,6 +18,7 @@ telemetry it received (it has nothing else). It keeps
 from __future__ import annotations
 
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -29,7 +31,7 @@ class SwarmMonitor:
                  physics_hz: float) -> None:
         self.spec = spec
         self.ids = list(ids)
-        self.group_index = [np.asarray(g) for g in group_index]
+        self.group_index = [np.sort(np.asarray(g)) for g in group_index]
         self.hz = float(physics_hz)
         n = len(self.ids)
         self.prev: np.ndarray | None = None
@@ -45,19 +47,15 @@ class SwarmMonitor:
         self.track_pos: list[np.ndarray] = []
         self.track_phase: list[list[int]] = []  # per sample, per group: phase (-1: none)
         self.events: list[tuple[str, int, dict[str, Any]]] = []
-        self._pair_cache: tuple[np.ndarray, np.ndarray, list[np.ndarray]] | None = None
+        self._mask: np.ndarray | None = None
+        #: every exchange: tick, closest 3-D distance, its pair (indices), closest horizontal
+        self.separation_log: list[tuple[int, float, int, int, float]] = []
 
-    def _pairs(self, n: int) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
-        """Every pair (i < j) once, and per group the pairs inside it."""
-        if self._pair_cache is None or len(self._pair_cache[0]) != n * (n - 1) // 2:
-            ii, jj = np.triu_indices(n, k=1)
-            label = np.full(n, -1)
-            for g, idx in enumerate(self.group_index):
-                label[idx] = g
-            inside = [np.flatnonzero((label[ii] == g) & (label[jj] == g))
-                      for g in range(len(self.group_index))]
-            self._pair_cache = (ii, jj, inside)
-        return self._pair_cache
+    def _upper(self, n: int) -> np.ndarray:
+        """0 above the diagonal, inf on and below it (each pair once, no self-pairs)."""
+        if self._mask is None or len(self._mask) != n:
+            self._mask = np.where(np.triu(np.ones((n, n), dtype=bool), k=1), 0.0, np.inf)
+        return self._mask
 
     def update(self, tick: int, pos_ned_m: np.ndarray) -> None:
         pos = np.asarray(pos_ned_m, dtype=np.float64)
@@ -72,18 +70,27 @@ class SwarmMonitor:
         self.prev = pos
         if len(pos) < 2:
             return
-        # one pass over the pairs gives both distances (256 vehicles: 32,640 pairs)
-        ii, jj, inside = self._pairs(len(pos))
-        diff = pos[ii] - pos[jj]
-        h2 = diff[:, 0] ** 2 + diff[:, 1] ** 2
-        d2 = h2 + diff[:, 2] ** 2
-        k3, kh = int(np.argmin(d2)), int(np.argmin(h2))
-        d3, i, j = float(np.sqrt(d2[k3])), int(ii[k3]), int(jj[k3])
+        # one (n, n) pass per axis gives both distances (broadcasting by column is
+        # several times faster than gathering the pairs' rows)
+        n = len(pos)
+        x, y, z = (np.ascontiguousarray(pos[:, c]) for c in range(3))
+        dx = x[:, None] - x[None, :]
+        h2 = dx * dx
+        dx = y[:, None] - y[None, :]
+        h2 += dx * dx
+        h2 += self._upper(n)
+        dx = z[:, None] - z[None, :]
+        d2 = dx * dx
+        d2 += h2
+        i, j = divmod(int(np.argmin(d2)), n)
+        d3 = float(np.sqrt(d2[i, j]))
         if d3 < self.min3[0]:
             self.min3 = (d3, i, j, tick)
-        dh = float(np.sqrt(h2[kh]))
+        hi, hj = divmod(int(np.argmin(h2)), n)
+        dh = float(np.sqrt(h2[hi, hj]))
+        self.separation_log.append((tick, d3, i, j, dh))
         if dh < self.minh[0]:
-            self.minh = (dh, int(ii[kh]), int(jj[kh]), tick)
+            self.minh = (dh, hi, hj, tick)
         warn = self.spec.separation_warn_m
         if d3 < warn and not self.below:
             self.below = True
@@ -95,13 +102,20 @@ class SwarmMonitor:
             self.below = False
             self.events.append(("swarm_separation", tick, {
                 "state": "clear", "distance_m": d3, "threshold_m": warn}))
-        for o, sel in zip(self.open, inside):
-            if o is not None and len(sel):
-                k = int(sel[np.argmin(d2[sel])])
-                g3 = float(np.sqrt(d2[k]))
-                if g3 < o["min3"][0]:
-                    o["min3"] = (g3, int(ii[k]), int(jj[k]), tick)
-                o["minh"] = min(o["minh"], float(np.sqrt(h2[sel].min())))
+        for o, gi in zip(self.open, self.group_index):
+            if o is None or len(gi) < 2:
+                continue
+            # rows in ascending order: the group's block keeps the upper-triangle mask
+            if len(gi) == n:  # the whole swarm: the run's closest pairs
+                g3, pa, pb, gh = d3, i, j, dh
+            else:
+                g2 = d2[np.ix_(gi, gi)]
+                a, b = divmod(int(np.argmin(g2)), len(gi))
+                g3, pa, pb = float(np.sqrt(g2[a, b])), int(gi[a]), int(gi[b])
+                gh = float(np.sqrt(h2[np.ix_(gi, gi)].min()))
+            if g3 < o["min3"][0]:
+                o["min3"] = (g3, pa, pb, tick)
+            o["minh"] = min(o["minh"], gh)
         if tick % self.spec.every_ticks == 0:
             self.track_ticks.append(tick)
             self.track_pos.append(pos.copy())
@@ -155,6 +169,15 @@ class SwarmMonitor:
                                      for k, v in zip(self.ids, self.travelled_m)},
             "phases": {g.name: self.closed[gi] for gi, g in enumerate(self.spec.groups)},
         }
+
+    def write_separation_csv(self, path: Path) -> None:
+        """The closest pair at every exchange: ``swarm_separation.csv``."""
+        with open(path, "w") as f:
+            f.write("tick,t_s,min_separation_3d_m,vehicle_a,vehicle_b,"
+                    "min_separation_horizontal_m\n")
+            for tick, d3, i, j, dh in self.separation_log:
+                f.write(f"{tick},{tick / self.hz:.4f},{d3:.3f},{self.ids[i]},{self.ids[j]},"
+                        f"{dh:.3f}\n")
 
     def drain_events(self) -> list[tuple[str, int, dict[str, Any]]]:
         ev, self.events = self.events, []

@@ -6,8 +6,9 @@ telemetry due at ``tick``): the monitor takes the true positions, then at a
 controller step the controller acts on the telemetry received so far; its
 injected commands are handled at the next exchange. Phase and separation
 events go to ``events.jsonl``; ``summary.json["swarm"]`` gets the phases with
-their metrics; ``after_run`` writes ``swarm.png`` and ``swarm_commands.csv``
-(every command: tick, vehicle, speed sent, stall speed, roll, altitude).
+their metrics; ``after_run`` writes ``swarm.png``, ``swarm_commands.csv``
+(every command: tick, vehicle, speed sent, stall speed, roll, altitude) and
+``swarm_separation.csv`` (the closest pair at every exchange).
 """
 
 from __future__ import annotations
@@ -118,6 +119,7 @@ class SwarmParticipant:
         if ctl is None or mon is None:
             return
         write_commands_csv(out_dir / "swarm_commands.csv", ctl, mon.hz)
+        mon.write_separation_csv(out_dir / "swarm_separation.csv")
         if mon.track_ticks:
             from cosim.swarm.plot import plot_swarm
 

@@ -145,3 +145,34 @@ def test_speed_never_below_the_stall_speed_in_the_current_bank() -> None:
             assert wire == pytest.approx(stall, abs=1e-5)
         else:
             assert (wire == 26.0).all()
+
+
+def test_monitor_separations_match_brute_force() -> None:
+    from cosim.swarm.config import SwarmGroup
+    from cosim.swarm.metrics import SwarmMonitor
+
+    rng = np.random.default_rng(5)
+    n = 9
+    groups = (SwarmGroup("a", (0, 2, 4, 6, 8), (), None), SwarmGroup("b", (1, 3, 5, 7), (), None))
+    spec = SwarmSpec(groups, 1.0, 120, 50.0)
+    mon = SwarmMonitor(spec, [f"v{i}" for i in range(n)], [np.array(g.rows) for g in groups],
+                       120.0)
+    for g in ("a", "b"):
+        mon.phase_event(0, {"group": g, "state": "start", "phase": 0, "behaviour": "rendezvous"})
+    best3, besth, best_b = np.inf, np.inf, np.inf
+    for k in range(20):
+        pos = rng.uniform(-300, 300, (n, 3))
+        mon.update(4 * k, pos)
+        for i in range(n):
+            for j in range(i + 1, n):
+                d = pos[i] - pos[j]
+                best3 = min(best3, float(np.sqrt(d @ d)))
+                besth = min(besth, float(np.hypot(d[0], d[1])))
+                if i % 2 and j % 2:
+                    best_b = min(best_b, float(np.sqrt(d @ d)))
+    mon.phase_event(80, {"group": "b", "state": "end", "reason": "timeout"})
+    s = mon.summary()
+    assert s["min_separation_3d"]["distance_m"] == pytest.approx(best3)
+    assert s["min_separation_horizontal"]["distance_m"] == pytest.approx(besth)
+    assert s["phases"]["b"][0]["min_separation_3d_m"] == pytest.approx(best_b)
+    assert len(mon.separation_log) == 20

@@ -134,6 +134,14 @@ def test_commands_never_below_the_stall_speed(
 def test_swarm_plot_and_phase_events(rendezvous: tuple[Scenario, dict[str, Any], Path]) -> None:
     _, summary, out = rendezvous
     assert (out / "swarm.png").stat().st_size > 10_000
+    # the closest pair at every exchange (120 s at 30 Hz: ticks 0, 4, ..., 14396)
+    sep = list(csv.DictReader(open(out / "swarm_separation.csv")))
+    assert len(sep) == 120 * 30
+    d3 = [float(r["min_separation_3d_m"]) for r in sep]
+    assert min(d3) == pytest.approx(summary["swarm"]["min_separation_3d"]["distance_m"],
+                                    abs=1e-3)
+    assert all(float(r["min_separation_horizontal_m"]) <= float(r["min_separation_3d_m"])
+               for r in sep)
     ev = [json.loads(x) for x in (out / "events.jsonl").read_text().splitlines()]
     ph = [e for e in ev if e["event"] == "swarm_phase"]
     assert [(e["state"], e.get("reason")) for e in ph] == [("start", None),
