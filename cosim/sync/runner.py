@@ -263,6 +263,20 @@ class Run:
             if loop0 is not None and loop_s == 0.0:
                 loop_s = time.perf_counter() - loop0
             try:
+                # participants finish their work (a render queue drains) inside
+                # the run's wall time, and may still emit events
+                t_fin = time.perf_counter()
+                sections: dict[str, Any] = {}
+                for part in self.participants:
+                    try:
+                        section = part.finish(tick, reason)
+                    except Exception as e:  # one part's failure must not lose the summary
+                        log.exception("%s: finishing failed", part.name)
+                        section = {"error": f"{type(e).__name__}: {e}"}
+                    if section is not None:
+                        sections[part.name] = section
+                if loop0 is not None:
+                    loop_s += time.perf_counter() - t_fin
                 try:
                     states_log.close()
                 except Exception as e:  # the ticks stay journalled; read_states reads them
@@ -283,14 +297,7 @@ class Run:
                 if self.mavlink is not None:
                     summary["mavlink"] = {"url": self.mavlink_config.url,
                                           "counters": self.mavlink.counters()}
-                for part in self.participants:
-                    try:
-                        section = part.finish(tick, reason)
-                    except Exception as e:  # one part's failure must not lose the summary
-                        log.exception("%s: finishing failed", part.name)
-                        section = {"error": f"{type(e).__name__}: {e}"}
-                    if section is not None:
-                        summary[part.name] = section
+                summary.update(sections)
                 write_json_atomic(out / "summary.json", summary)
             finally:
                 self._end_fault_log(fault_file, fault_was_enabled)
