@@ -155,7 +155,9 @@ class UdpController:
     def finish(self) -> dict[str, Any]:
         from cosim.swarm.participant import merged_summary, write_commands_csv
 
-        tick = max(self.last_tick, 0)
+        # the run ends one exchange after the last one seen (its final step), as
+        # the in-process participant's finish(tick) has it
+        tick = self.last_tick + self.scn.rates.control_every if self.last_tick >= 0 else 0
         self.ctl.end_run(tick)
         self._collect()
         summary = merged_summary(self.ctl, self.mon)

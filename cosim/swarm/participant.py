@@ -96,22 +96,20 @@ class SwarmParticipant:
                     ctx.mavlink.inject(to_message(o))
         self._flush_events()
 
-    def _flush_events(self, emit: bool = True) -> None:
+    def _flush_events(self) -> None:
         ctx, ctl, mon = self.ctx, self.ctl, self.mon
         assert ctx is not None and ctl is not None and mon is not None
         for kind, tick, fields in ctl.drain_events():
             mon.phase_event(tick, fields)
-            if emit:
-                ctx.events.emit(kind, tick, vehicle=None, **fields)
+            ctx.events.emit(kind, tick, vehicle=None, **fields)
         for kind, tick, fields in mon.drain_events():
-            if emit:
-                ctx.events.emit(kind, tick, vehicle=None, **fields)
+            ctx.events.emit(kind, tick, vehicle=None, **fields)
 
     def finish(self, tick: int, reason: str) -> dict[str, Any] | None:
         if self.ctl is None or self.mon is None:
             return None
         self.ctl.end_run(tick)
-        self._flush_events(emit=False)  # events.jsonl is closed by now
+        self._flush_events()  # the phases still running end with reason run_end
         return merged_summary(self.ctl, self.mon)
 
     def after_run(self, out_dir: Path) -> None:

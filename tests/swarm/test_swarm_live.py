@@ -193,6 +193,7 @@ def test_flocking_moves_the_centroid_along_q_with_bounded_spread(tmp_path: Path)
     scn, summary = _run(p, tmp_path / "out")
     (ph,) = _phases(summary)
     assert ph["reason"] == "duration" and ph["time_s"] == 50
+    assert summary["events"]["swarm_phase"] == 2
     times, pos = _tracks(tmp_path / "out", [v.id for v in scn.vehicles])
     c = pos.mean(axis=1)
     # after the first 20 s (the turn onto q), the centroid moves along q
@@ -278,3 +279,11 @@ def test_external_controller_gives_the_same_tracks_as_in_process(tmp_path: Path)
     assert (tmp_path / "ctl" / "swarm_commands.csv").read_text() == \
         (tmp_path / "inproc" / "swarm_commands.csv").read_text()
     assert (tmp_path / "ctl" / "swarm.png").exists()
+    # the same phase events, the unfinished phase closed by the end of the run
+    ext_ev = [json.loads(x) for x in (tmp_path / "ctl" / "swarm_events.jsonl").read_text()
+              .splitlines() if '"swarm_phase"' in x]
+    in_ev = [json.loads(x) for x in (tmp_path / "inproc" / "events.jsonl").read_text()
+             .splitlines() if '"swarm_phase"' in x]
+    assert [(e["tick"], e["state"], e.get("reason")) for e in ext_ev] == \
+        [(e["tick"], e["state"], e.get("reason")) for e in in_ev] == \
+        [(0, "start", None), (1800, "end", "run_end")]
