@@ -176,3 +176,33 @@ def test_monitor_separations_match_brute_force() -> None:
     assert s["min_separation_horizontal"]["distance_m"] == pytest.approx(besth)
     assert s["phases"]["b"][0]["min_separation_3d_m"] == pytest.approx(best_b)
     assert len(mon.separation_log) == 20
+
+
+def test_phase_sequence_timeout_then_converged_then_done() -> None:
+    scn = parse_scenario(HEAD + """\
+swarm:
+  groups:
+    - name: g
+      vehicles: "uav*"
+      phases:
+        - {behaviour: rendezvous, radius_m: 10, timeout_s: 2}
+        - {behaviour: anti_rendezvous, radius_m: 1}
+""", "s.yaml")
+    ctl = SwarmController(scn.sections["swarm"], scn.vehicles, scn.origin.frame, 120.0)
+    assert ctl.step(0) == []  # no telemetry yet: wait, do not start
+    assert ctl.drain_events() == []
+    for i, v in enumerate(scn.vehicles[:4]):  # a 1.5 km line that never moves
+        ctl.on_message(mav.make_message(
+            "GLOBAL_POSITION_INT", src_system=i + 1, src_component=1,
+            lat=round(v.lat_deg * 1e7), lon=round(v.lon_deg * 1e7),
+            alt=round(v.alt_msl_m * 1000)))
+        ctl.on_message(mav.make_message("ATTITUDE", src_system=i + 1, src_component=1))
+    assert len(ctl.step(120)) == 4
+    assert len(ctl.step(240)) == 4
+    # 2 s after the start the rendezvous times out; the anti-rendezvous (every
+    # vehicle >= 1 m from the centroid) ends at once; nothing more to command
+    assert ctl.step(360) == []
+    ev = [(t, f["phase"], f["state"], f.get("reason")) for _, t, f in ctl.drain_events()]
+    assert ev == [(120, 0, "start", None), (360, 0, "end", "timeout"),
+                  (360, 1, "start", None), (360, 1, "end", "converged")]
+    assert ctl.finished and ctl.step(480) == []

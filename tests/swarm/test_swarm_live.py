@@ -287,3 +287,16 @@ def test_external_controller_gives_the_same_tracks_as_in_process(tmp_path: Path)
     assert [(e["tick"], e["state"], e.get("reason")) for e in ext_ev] == \
         [(e["tick"], e["state"], e.get("reason")) for e in in_ev] == \
         [(0, "start", None), (1800, "end", "run_end")]
+
+
+def test_cosim_swarm_usage_and_no_simulation(tmp_path: Path, capsys: pytest.CaptureFixture[str]
+                                             ) -> None:
+    p = _scenario(tmp_path, "lone", 5, EIGHT_ON_4KM, """\
+  groups: [{vehicles: all, phases: [{behaviour: rendezvous, radius_m: 300}]}]
+""")
+    assert main(["swarm", str(p), "--connect", "udpin:127.0.0.1:5"]) == 2
+    assert "expected udpout:HOST:PORT" in capsys.readouterr().err
+    port = _free_udp_port()  # nobody listens there
+    assert main(["swarm", str(p), "--connect", f"udpout:127.0.0.1:{port}",
+                 "--connect-timeout-s", "0.6"]) == 1
+    assert "no answer from the simulation" in capsys.readouterr().err
