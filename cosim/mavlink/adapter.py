@@ -150,6 +150,10 @@ FIRMWARE_VERSION_TYPE_OFFICIAL: Final[int] = int(_d.FIRMWARE_VERSION_TYPE_OFFICI
 
 _F32 = struct.Struct("<f")
 
+#: CRC-16/MCRF4XX of bytes from an initial value, in C when pymavlink has
+#: fastcrc (its dependency), else None (callers fall back to their own)
+crc16_mcrf4xx: Any = getattr(_d, "mcrf4xx", None)
+
 # -- message ids -------------------------------------------------------------
 _CLASS_BY_NAME: dict[str, Any] = {cls.msgname: cls for cls in _d.mavlink_map.values()}
 _NAME_BY_ID: dict[int, str] = {int(i): cls.msgname for i, cls in _d.mavlink_map.items()}

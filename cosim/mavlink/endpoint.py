@@ -88,6 +88,7 @@ from cosim.mavlink.batch import BatchEncoder
 from cosim.mavlink.errors import EndpointClosed, LockstepTimeout
 from cosim.mavlink.handlers import Handler, Outcome
 from cosim.mavlink.link import DEFAULT_URL, NullLink, UdpLink
+from cosim.mavlink.tlog import STAMP_LEN as TLOG_STAMP_LEN
 from cosim.mavlink.tlog import TlogWriter
 from cosim.mavlink.tlog import stamp as tlog_stamp
 from cosim.mavlink.vehicle import (
@@ -305,6 +306,9 @@ class MavlinkEndpoint:
                 p = v.period[name]
                 self._period[k, j] = -1 if p is None else p
         self._encoders = {name: BatchEncoder(name) for name in STREAMABLE}
+        self._first_due = -1  # the earliest next-due tick of any stream
+        #: each vehicle's next sequence number (the batches and its packer share it)
+        self._seq = np.zeros(n, dtype=np.int64)
         self._tlog_flushed = time.monotonic()
         self.tlogs: dict[int, TlogWriter] = {}
         self.link: UdpLink | NullLink = NullLink() if config.url is None else UdpLink(
@@ -369,15 +373,25 @@ class MavlinkEndpoint:
         self._subscribers.append(callback)
 
     def exchange(self, tick: int, states: np.ndarray) -> list[VehicleCommand]:
-        """Handle what arrived, send what is due at ``tick``; the commands produced."""
+        """Handle what arrived, send what is due at ``tick``; the commands produced.
+        (``receive`` then ``send_telemetry``.)"""
+        commands = self.receive(tick, states)
+        self.send_telemetry(tick)
+        return commands
+
+    def receive(self, tick: int, states: np.ndarray) -> list[VehicleCommand]:
+        """The first half of ``exchange``: take the state rows at ``tick`` (a
+        copy), handle every message waiting; the commands produced. The
+        runner calls ``send_telemetry(tick)`` next, after starting the pool's
+        step, so that telemetry overlaps the workers' physics."""
         if self.closed:
             raise EndpointClosed(f"mavlink endpoint: exchange(tick={tick}) after close()")
         if self._last_tick is not None and tick < self._last_tick:
-            raise ValueError(f"mavlink exchange: tick {tick} is before the previous "
+            raise ValueError(f"mavlink receive: tick {tick} is before the previous "
                              f"exchange's tick {self._last_tick}")
         rows = int(self._rows.max(initial=-1)) + 1
         if states.ndim != 2 or states.shape[0] < rows or states.shape[1] < N_STATE:
-            raise ValueError(f"mavlink exchange: states must be (n >= {rows}, {N_STATE}), "
+            raise ValueError(f"mavlink receive: states must be (n >= {rows}, {N_STATE}), "
                              f"got {states.shape}")
         prev_tick, self._last_tick = self._last_tick, tick
         mine = states[self._rows]
@@ -404,6 +418,15 @@ class MavlinkEndpoint:
                 self.link.remember(addr)
             for m in msgs:
                 self._dispatch(m, tick, commands)
+        self.counts["commands_out"] += len(commands)
+        return commands
+
+    def send_telemetry(self, tick: int) -> None:
+        """The second half of ``exchange``: mission progress and every stream
+        due at ``tick``, from the rows ``receive(tick, ...)`` took."""
+        if self._last_tick != tick:
+            raise ValueError(f"mavlink send_telemetry: tick {tick} is not the tick of the last "
+                             f"receive ({self._last_tick})")
         for v in self.vehicles:
             ms = v.mission
             if ms.upload is not None or ms.route or ms.reported_current != ms.current:
@@ -419,8 +442,6 @@ class MavlinkEndpoint:
             self._tlog_flushed = now
             for t in self.tlogs.values():
                 t.flush()
-        self.counts["commands_out"] += len(commands)
-        return commands
 
     def counters(self) -> dict[str, int]:
         """Every counter (decoding, link, handling), for summary.json."""
@@ -446,24 +467,28 @@ class MavlinkEndpoint:
         self._period[k, j] = -1 if p is None else p
         nd = v.next_due[name]
         self._next_due[k, j] = -1 if nd is None else nd
+        self._first_due = -1  # recomputed at the next exchange
 
     def _telemetry(self, tick: int) -> None:
         """Send every stream due at ``tick``, one message type for all due
         vehicles at once; the next-due ticks move on by whole periods (the
         rule of ``MavVehicle.due``)."""
+        if tick < self._first_due:  # nothing due before then (most exchanges)
+            return
         on = self._period > 0
         nd = np.where(on & (self._next_due < 0), tick, self._next_due)
         due = on & (nd <= tick)
-        if not due.any():
-            self._next_due = nd
-            return
         p = np.where(on, self._period, 1)
         self._next_due = np.where(due, nd + p * ((tick - nd) // p + 1), nd)
+        self._first_due = int(self._next_due[on].min()) if on.any() else 2 ** 62
+        if not due.any():
+            return
         signing = self.signature_checker is not None
-        seq = None if signing else np.array([v.packer.seq for v in self.vehicles], dtype=np.int64)
+        seq = None if signing else self._seq
         sent = np.zeros(len(self.vehicles), dtype=np.int64)
         blobs: list[bytes] = []
         lengths: list[np.ndarray] = []
+        who: list[np.ndarray] = []
         unix_us = self.clock.unix_us(tick)
         for k in np.flatnonzero(due.any(axis=1)).tolist():
             name = STREAMABLE[k]
@@ -485,38 +510,55 @@ class MavlinkEndpoint:
                 cols = {f: [d[f] for d in dicts] for f in dicts[0]}
             enc = self._encoders[name]
             rec = enc.payloads(len(idx), cols)
-            blob, lens = enc.encode(rec, self._sysids[idx], seq[idx] % 256)
-            seq[idx] += 1
+            blob, lens = enc.encode(rec, self._sysids[idx], seq[idx])
+            seq[idx] = (seq[idx] + 1) % 256
             sent[idx] += 1
             blobs.append(blob)
             lengths.append(lens)
-            if self.tlogs or self._subscribers:
-                self._record_batch(name, vs, blob, lens, rec, unix_us)
+            who.append(idx)
+            if self._subscribers:
+                self._deliver_batch(name, vs, rec)
         self.counts["packets_out"] += int(sent.sum())
-        if seq is not None:
-            for j in np.flatnonzero(sent).tolist():
-                self.vehicles[j].packer.seq = int(seq[j])
-                self.vehicles[j].packer.packets += int(sent[j])
         if blobs:
-            self.link.send_packets(b"".join(blobs), np.concatenate(lengths).tolist())
+            blob = b"".join(blobs)
+            lens = np.concatenate(lengths)
+            self.link.send_packets(blob, lens.tolist())
+            if self.tlogs:
+                self._tlog_batch(blob, lens, np.concatenate(who), unix_us)
 
-    def _record_batch(self, name: str, vs: list[MavVehicle], blob: bytes, lens: np.ndarray,
-                      rec: np.ndarray, unix_us: int) -> None:
-        """A batch's packets into the tlogs, and to subscribers as messages."""
-        off = 0
+    def _deliver_batch(self, name: str, vs: list[MavVehicle], rec: np.ndarray) -> None:
+        """A batch's packets to the subscribers, as messages."""
         names = self._encoders[name].field_names
-        values = rec.tolist() if self._subscribers else None
-        st = tlog_stamp(unix_us)
-        for i, (v, n) in enumerate(zip(vs, lens.tolist())):
-            t = self.tlogs.get(v.sysid)
+        for v, values in zip(vs, rec.tolist()):
+            m = mav.Message(name, v.sysid, mav.MAV_COMP_ID_AUTOPILOT1, dict(zip(names, values)))
+            for cb in self._subscribers:
+                cb(m)
+
+    def _tlog_batch(self, blob: bytes, lens: np.ndarray, who: np.ndarray, unix_us: int) -> None:
+        """An exchange's batched packets (vehicle index ``who`` each) into the
+        tlogs: the records (stamp + packet) are laid out per vehicle in one
+        numpy pass, then each tlog takes its run of records at once."""
+        order = np.argsort(who, kind="stable")  # per vehicle, in sending order
+        src_start = np.cumsum(lens) - lens
+        n_sorted = lens[order]
+        rec_len = n_sorted + TLOG_STAMP_LEN
+        dst_start = np.cumsum(rec_len) - rec_len
+        out = np.empty(int(rec_len.sum()), dtype=np.uint8)
+        out[(dst_start[:, None] + np.arange(TLOG_STAMP_LEN)).ravel()] = np.tile(
+            np.frombuffer(tlog_stamp(unix_us), dtype=np.uint8), len(order))
+        total = int(n_sorted.sum())
+        within = np.arange(total) - np.repeat(np.cumsum(n_sorted) - n_sorted, n_sorted)
+        out[np.repeat(dst_start + TLOG_STAMP_LEN, n_sorted) + within] = np.frombuffer(
+            blob, dtype=np.uint8)[np.repeat(src_start[order], n_sorted) + within]
+        data = out.tobytes()
+        w = who[order]
+        firsts = np.flatnonzero(np.r_[True, w[1:] != w[:-1]])
+        ends = np.r_[firsts[1:], len(w)]
+        byte_at = np.r_[dst_start, len(out)]
+        for j, a, b in zip(w[firsts].tolist(), firsts.tolist(), ends.tolist()):
+            t = self.tlogs.get(self.vehicles[j].sysid)
             if t is not None:
-                t.write_stamped(unix_us, st, blob[off:off + n])
-            off += n
-            if values is not None:
-                m = mav.Message(name, v.sysid, mav.MAV_COMP_ID_AUTOPILOT1,
-                                dict(zip(names, values[i])))
-                for cb in self._subscribers:
-                    cb(m)
+                t.write_records(unix_us, data[byte_at[a]:byte_at[b]], b - a)
 
     def _decode(self, data: bytes) -> list[mav.Message]:
         msgs = self.decoder.decode(data)
@@ -588,7 +630,9 @@ class MavlinkEndpoint:
     def _send(self, v: MavVehicle, name: str, fields: dict[str, object], tick: int) -> None:
         if self.signature_checker is not None:
             v.packer.advance_signing_time(mav.signing_timestamp(self.clock.unix_us(tick)))
+        v.packer.seq = int(self._seq[v.index])  # one sequence per vehicle, batches included
         pkt = v.packer.pack(name, **fields)
+        self._seq[v.index] = v.packer.seq
         self.link.send(pkt)
         if self._subscribers:
             m = mav.Message(name, v.sysid, mav.MAV_COMP_ID_AUTOPILOT1,

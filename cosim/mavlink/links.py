@@ -130,10 +130,19 @@ class MavlinkLinks:
             e.subscribe(_tagged(callback, k))
 
     def exchange(self, tick: int, states: np.ndarray) -> list[VehicleCommand]:
+        commands = self.receive(tick, states)
+        self.send_telemetry(tick)
+        return commands
+
+    def receive(self, tick: int, states: np.ndarray) -> list[VehicleCommand]:
         out: list[VehicleCommand] = []
         for e in self.endpoints:
-            out += e.exchange(tick, states)
+            out += e.receive(tick, states)
         return out
+
+    def send_telemetry(self, tick: int) -> None:
+        for e in self.endpoints:
+            e.send_telemetry(tick)
 
     def counters(self) -> dict[str, Any]:
         """Every counter summed over the links (``links``: how many)."""

@@ -19,6 +19,7 @@ import struct
 from pathlib import Path
 
 _STAMP = struct.Struct(">Q")
+STAMP_LEN = _STAMP.size
 
 
 def stamp(unix_us: int) -> bytes:
@@ -47,16 +48,16 @@ class TlogWriter:
         self._buf += packet
         self.records += 1
 
-    def write_stamped(self, unix_us: int, stamp: bytes, packet: bytes) -> None:
-        """``write`` with the timestamp already packed (``stamp``, for
-        ``unix_us``): the same record, cheaper for batches."""
-        if unix_us < self._last_us or self._f is None:
-            self.write(unix_us, packet)
-            return
+    def write_records(self, unix_us: int, records: bytes, count: int) -> None:
+        """Queue ``count`` whole records (stamp + packet each) all stamped
+        ``unix_us`` (not before the last record's time)."""
+        if self._f is None:
+            raise ValueError(f"tlog {self.path} is closed")
+        if unix_us < self._last_us:
+            raise ValueError(f"tlog {self.path}: records at {unix_us} us after {self._last_us}")
         self._last_us = unix_us
-        self._buf += stamp
-        self._buf += packet
-        self.records += 1
+        self._buf += records
+        self.records += count
 
     def flush(self) -> None:
         if self._buf and self._f is not None:

@@ -207,17 +207,23 @@ class Run:
                                     **({"set": dict(item.sets)} if item.sets else {}),
                                     **({"command": item.command.source} if item.command else {}))
                     if self.mavlink is not None:  # the same command path as the schedule
-                        for vc in self.mavlink.exchange(tick, states):
+                        for vc in self.mavlink.receive(tick, states):
                             if guidance is not None:
                                 guidance.command([vc.row], vc.command, states, pool.setpoints)
                             events.emit("mavlink_command", tick, vehicle=ids[vc.row],
                                         origin=vc.origin, command=vc.command.source)
-                    for part in self.participants:
-                        part.on_exchange(tick, states)
                     if guidance is not None:
                         for ge in guidance.update(states, pool.setpoints):
                             events.emit(ge.kind, tick, vehicle=ids[ge.vehicle], **ge.fields)
-                    states = pool.step(k, self.step_timeout_s)
+                    # telemetry and participants work on the states at ``tick`` while
+                    # the workers step (they see a copy: the step overwrites ``states``)
+                    at_tick = states.copy() if self.participants else states
+                    pool.send(k)
+                    if self.mavlink is not None:
+                        self.mavlink.send_telemetry(tick)
+                    for part in self.participants:
+                        part.on_exchange(tick, at_tick)
+                    states = pool.wait(self.step_timeout_s)
                     tick += k
                     new_status = states[:, _STATUS]
                     if not np.array_equal(new_status, status):

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from cosim.mavlink import adapter as mav
+from cosim.mavlink import batch
 from cosim.mavlink.batch import BatchEncoder
 from cosim.mavlink.link import MAX_DATAGRAM_BYTES, UdpLink
 from cosim.mavlink.vehicle import STREAMABLE
@@ -40,8 +41,14 @@ def _random_fields(name: str, n: int, rng: np.random.Generator) -> list[dict]:
     return rows
 
 
+@pytest.mark.parametrize("c_crc", [True, False], ids=["fastcrc", "numpy-crc"])
 @pytest.mark.parametrize("name", STREAMABLE)
-def test_batch_packets_equal_pymavlink_byte_for_byte(name: str) -> None:
+def test_batch_packets_equal_pymavlink_byte_for_byte(name: str, c_crc: bool,
+                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    if not c_crc:
+        monkeypatch.setattr(batch, "_CRC", None)
+    elif batch._CRC is None:
+        pytest.skip("fastcrc (a pymavlink dependency) is not installed")
     rng = np.random.default_rng(sum(map(ord, name)))
     n = 40
     rows = _random_fields(name, n, rng)
