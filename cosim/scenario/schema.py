@@ -373,7 +373,8 @@ def parse_scenario(text: str, fname: str = "<scenario>", check_properties: bool 
     schedule = _schedule(ctx, top.d.get("schedule", []), vehicles, rates, duration)
     if check_properties:
         _check_properties(ctx, vehicles, schedule)
-    info = SectionInfo(ctx, origin, rates, duration, [v for v, _ in vehicles], Path(fname))
+    info = SectionInfo(ctx, origin, rates, duration, [v for v, _ in vehicles], Path(fname),
+                       mavlink)
     sections: dict[str, Any] = {}
     for key in SECTIONS:
         if key in top.d:
@@ -419,6 +420,8 @@ class SectionInfo:
     duration_s: float
     vehicles: list[VehicleSpec]
     path: Path  # the scenario file (relative file names in sections resolve against it)
+    #: the scenario's ``mavlink:`` section as resolved ({"url", "rates_hz"}), or None
+    mavlink: dict[str, Any] | None = None
 
     @property
     def ids(self) -> list[str]:

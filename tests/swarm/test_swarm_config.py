@@ -100,6 +100,14 @@ def test_rate_must_be_whole_exchanges() -> None:
                               "[{behaviour: rendezvous, radius_m: 300}]\n", "s.yaml")
 
 
+def test_telemetry_the_controller_reads_cannot_be_switched_off() -> None:
+    with pytest.raises(ConfigError, match=r"s.yaml:13: mavlink.rates_hz.ATTITUDE: the swarm "
+                                          r"controller reads ATTITUDE"):
+        parse_scenario(HEAD + "mavlink: {rates_hz: {ATTITUDE: 0}}\nswarm:\n  groups:\n"
+                              "    - phases: [{behaviour: rendezvous, radius_m: 300}]\n",
+                       "s.yaml")
+
+
 def _controller(roll_deg: float) -> SwarmController:
     scn = parse_scenario(HEAD + """\
 swarm:
