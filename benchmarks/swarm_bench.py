@@ -5,10 +5,12 @@ Runs ``cosim run``'s loop (``cosim.sync.Run``) on a generated flocking
 scenario as fast as possible and reports the real-time factor and where the
 driver's time goes, by timing the parts of the loop in place:
 
-- ``pool.step``: the physics (process backend: sending setpoints, waiting
-  for the workers, reading the states; inline: JSBSim itself);
-- ``mavlink exchange``: every endpoint's ``exchange`` (telemetry packing,
-  tlogs, handling the swarm's injected commands);
+- ``pool.send`` + ``pool.wait``: the physics (process backend: starting the
+  workers, stepping the driver's own shard, waiting for the others; inline:
+  JSBSim itself);
+- ``mavlink exchange``: every endpoint's ``receive`` and ``send_telemetry``
+  (handling the swarm's injected commands, telemetry packing, tlogs; the
+  telemetry runs while the workers step);
 - ``swarm controller``: ``SwarmController.step`` (laws, WGS-84 conversions,
   building commands) and ``to_message`` (encoding each command as the wire
   would);
@@ -99,8 +101,10 @@ def main(argv: list[str] | None = None) -> int:
     from cosim.sync import Run
 
     for cls in (InlinePool, ProcessPool):
-        _wrap(cls, "step", "physics (pool.step)")
-    _wrap(MavlinkEndpoint, "exchange", "mavlink exchange")
+        _wrap(cls, "send", "physics (pool.send + wait)")
+        _wrap(cls, "wait", "physics (pool.send + wait)")
+    _wrap(MavlinkEndpoint, "receive", "mavlink exchange")
+    _wrap(MavlinkEndpoint, "send_telemetry", "mavlink exchange")
     _wrap(SwarmController, "step", "swarm controller (laws + commands)")
     to_message: Callable[..., Any] = swarm_participant.to_message
     _wrap(swarm_participant, "to_message", "swarm commands -> messages")
