@@ -9,6 +9,7 @@ of exchanges.
 
 from __future__ import annotations
 
+import importlib.util
 import math
 import re
 from dataclasses import dataclass
@@ -20,7 +21,7 @@ P = tuple[Any, ...]
 _NAME = re.compile(r"^[A-Za-z0-9_.\-]+$")
 
 MOUNTS = ("nadir", "forward")
-CODECS = ("mp4v", "mjpg")
+CODECS = ("mp4v", "h264", "mjpg")
 TARGET_KINDS = ("truck", "fire_truck", "car", "person", "fire")
 
 #: kind -> (length_m, width_m, height_m, (r, g, b)) defaults
@@ -245,6 +246,9 @@ def parse_cameras(info: SectionInfo, node: Any, path: P) -> CamerasSpec:
     r = info.reader(node, path, ("views", "codec", "render_workers", "operator_view",
                                  "operator_width_px", "digest", "max_in_flight"))
     codec = r.string("codec", "mp4v", choices=CODECS)
+    if codec == "h264" and importlib.util.find_spec("av") is None:
+        info.err(path + ("codec",), "h264 needs PyAV (pip install av); OpenCV's wheels have "
+                                    "no H.264 encoder (mp4v and mjpg work without it)")
     workers = r.integer("render_workers", None, lo=0)
     views_raw = r.d.get("views")
     views: list[CameraSpec] = []

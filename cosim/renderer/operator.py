@@ -17,6 +17,7 @@ import numpy as np
 from cosim.fdm_pool.spec import STATE_INDEX
 from cosim.renderer.config import CamerasSpec
 from cosim.renderer.targets import TargetSet
+from cosim.renderer.video import open_video
 
 if TYPE_CHECKING:
     from cosim.renderer.frame import WorldSpec
@@ -46,10 +47,9 @@ class OperatorView:
         self.every = max(s.camera.frame_every for s in self.shown)
         self.rate_hz = ctx.physics_hz / self.every
         self.path = f"cameras/operator.{ext}"
-        fourcc = "mp4v" if ext == "mp4" else "MJPG"
         self.size = (self.cols * self.tw, self.rows * self.th)
-        self.video = cv2.VideoWriter(str(ctx.out_dir / self.path),
-                                     cv2.VideoWriter.fourcc(*fourcc), self.rate_hz, self.size)
+        self.video = open_video(str(ctx.out_dir / self.path), spec.codec, self.rate_hz,
+                                *self.size)
         self.frame = ctx.frame
         self.targets = TargetSet(world.targets, ctx.frame, world.ground_alt_m)
         self.thumbs: dict[tuple[int, int], np.ndarray] = {}

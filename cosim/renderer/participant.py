@@ -34,13 +34,13 @@ from cosim.fdm_pool.spec import STATE_INDEX
 from cosim.renderer.camera import camera_pose
 from cosim.renderer.config import CameraSpec, CamerasSpec, GroundSpec
 from cosim.renderer.frame import GT_COLUMNS, World, WorldSpec, render_frame
+from cosim.renderer.video import EXTENSIONS, open_video
 from cosim.sync.participants import RunContext
 
 log = logging.getLogger(__name__)
 
 _POSE_COLS = [STATE_INDEX[c] for c in ("lat_deg", "lon_deg", "alt_msl_m", "roll_deg",
                                        "pitch_deg", "yaw_deg")]
-_CODEC = {"mp4v": ("mp4v", "mp4"), "mjpg": ("MJPG", "avi")}
 _RESULT_TIMEOUT_S = 60.0
 
 
@@ -77,12 +77,8 @@ class StreamWriter:
     def __init__(self, out_dir: Path, stream: Stream, codec: str, digest: bool) -> None:
         self.s = stream
         cam = stream.camera
-        fourcc, _ = _CODEC[codec]
-        self.video = cv2.VideoWriter(str(out_dir / stream.video),
-                                     cv2.VideoWriter.fourcc(*fourcc), cam.rate_hz,
-                                     (cam.width_px, cam.height_px))
-        if not self.video.isOpened():
-            raise CosimError(f"cannot open a {codec} video writer for {stream.video}")
+        self.video = open_video(str(out_dir / stream.video), codec, cam.rate_hz, cam.width_px,
+                                cam.height_px)
         self.gt_file = open(out_dir / stream.ground_truth, "w", newline="")  # noqa: SIM115
         self.gt = csv.writer(self.gt_file)
         self.gt.writerow(GT_COLUMNS)
@@ -198,7 +194,7 @@ class CameraParticipant:
         self.ctx = ctx
         out = ctx.out_dir / "cameras"
         out.mkdir(parents=True, exist_ok=True)
-        _, ext = _CODEC[self.spec.codec]
+        ext = EXTENSIONS[self.spec.codec]
         streams = [(cam, row) for cam in self.spec.views for row in cam.vehicles]
         tiles = OperatorView.tile_size(self.spec, len(streams)) if self.spec.operator_view \
             else None

@@ -16,10 +16,12 @@ import pytest
 from cosim.errors import ConfigError
 from cosim.fdm_pool.spec import N_STATE, STATE_INDEX
 from cosim.geo import LocalFrame
+from cosim.renderer import video
 from cosim.renderer.camera import camera_pose
 from cosim.renderer.config import TARGET_DEFAULTS, CameraSpec, GroundSpec, TargetSpec
 from cosim.renderer.frame import World, WorldSpec, render_frame
 from cosim.renderer.participant import CameraParticipant
+from cosim.renderer.video import have_pyav
 from cosim.scenario import parse_scenario
 from cosim.sync.participants import RunContext
 
@@ -186,6 +188,49 @@ def test_mjpg_video_reads_back(tmp_path: Path) -> None:
     assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 10
     assert (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))) \
         == (160, 120)
+
+
+def _decoded(path: Path) -> list[np.ndarray]:
+    cap = cv2.VideoCapture(str(path))
+    frames = []
+    while True:
+        ok, img = cap.read()
+        if not ok:
+            return frames
+        frames.append(img)
+
+
+@pytest.mark.skipif(not have_pyav(), reason="PyAV not installed")
+def test_pyav_and_opencv_mp4v_and_h264_read_back_alike(tmp_path: Path,
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """mp4v through PyAV and through the OpenCV fallback, and h264: the right frame
+    count and size, and the same picture (the YUV planes' range and order are right)."""
+    s_av, out_av = _fly(tmp_path, "av", rate=10.0, dur=1.0)
+    s_264, out_264 = _fly(tmp_path, "x264", rate=10.0, dur=1.0, codec="h264")
+    monkeypatch.setattr(video, "have_pyav", lambda: False)
+    s_cv, out_cv = _fly(tmp_path, "cv", rate=10.0, dur=1.0)
+    assert s_264["streams"][0]["video"].endswith(".mp4")
+    assert s_av["streams"][0]["frames_sha256"] == s_cv["streams"][0]["frames_sha256"]
+    ref = _decoded(out_cv / s_cv["streams"][0]["video"])
+    for out, s in ((out_av, s_av), (out_264, s_264)):
+        got = _decoded(out / s["streams"][0]["video"])
+        assert len(got) == len(ref) == 10
+        assert all(g.shape == (120, 160, 3) for g in got)
+        assert min(cv2.PSNR(g, r) for g, r in zip(got, ref)) > 28.0
+
+
+def test_h264_without_pyav_is_a_config_error(tmp_path: Path,
+                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: None if name == "av" else real(name, *a))
+    text = SCENARIO.format(lat=LAT0, lon=LON0, g=GROUND_M, dur=1, workers=0, w=160, h=120,
+                           rate=10, codec="h264", op="false")
+    f = str(tmp_path / "h264.yaml")
+    with pytest.raises(ConfigError, match=r"h264.yaml:\d+: cameras.codec: h264 needs PyAV"):
+        parse_scenario(text, f, check_properties=False)
 
 
 def test_config_errors_carry_file_and_line(tmp_path: Path) -> None:
