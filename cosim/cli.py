@@ -267,6 +267,11 @@ def _cmd_run(a: argparse.Namespace) -> int:
         if mav_cfg is None:
             raise ConfigError("--external-controller needs a network link: pass --mavlink URL "
                               "(e.g. udpin:127.0.0.1:14560, where the controller connects)")
+        if mav_cfg.signing:
+            raise ConfigError("--external-controller with MAVLink signing: cosim swarm "
+                              "--connect does not sign its messages yet, so the lockstep "
+                              "would wait for answers it drops; run without signing on a "
+                              "loopback link")
         mav_cfg = dataclasses.replace(mav_cfg, lockstep_sysid=CONTROLLER_SYSID)
     run = Run(scn, out, backend=a.backend, workers=a.workers, realtime=a.realtime,
               progress=progress, step_timeout_s=a.step_timeout_s, mavlink=mav_cfg,

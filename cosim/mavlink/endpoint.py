@@ -1,19 +1,23 @@
 """The MAVLink endpoint: every simulated vehicle as a MAVLink vehicle on one
 UDP socket, driven once per exchange by the lockstep loop.
 
-Usage (the runner, once per exchange, before stepping the pool)::
+Usage (the runner, once per exchange; ``MavlinkLinks`` has the same
+interface for runs of more than 240 vehicles)::
 
     specs = mav_specs(scenario.vehicles, autopilot=scenario.autopilot)
     with MavlinkEndpoint(specs, physics_hz, MavlinkConfig(url), tlog_dir=out) as mav:
         while ...:
-            for vc in mav.exchange(tick, states):
+            for vc in mav.receive(tick, states):
                 guidance.command([vc.row], vc.command, states, pool.setpoints)
             guidance.update(states, pool.setpoints)
-            states = pool.step(k)
+            pool.send(k)
+            mav.send_telemetry(tick)  # while the workers step
+            states = pool.wait()
             tick += k
         summary["mavlink"] = mav.counters()
 
-``exchange(tick, states)`` reads every datagram waiting (bounded), answers
+``exchange(tick, states)`` (``receive`` then ``send_telemetry``) reads
+every datagram waiting (bounded), answers
 them (ACKs, parameters, requested messages), sends the telemetry due at
 ``tick`` from ``states`` (the state array at ``tick``), writes both
 directions to the tlogs, and returns the guidance commands the messages

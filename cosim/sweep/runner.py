@@ -43,7 +43,6 @@ VISIBILITY_COLUMNS = ("speed_kt", "alt_agl_m", "target", "visible_s", "first_vis
                       "camera", "run")
 MANIFEST_COLUMNS = ("run", "vehicle", "camera", "video", "ground_truth", "frames", "rate_hz",
                     "width_px", "height_px", "hfov_deg", "vfov_deg")
-RESULT_FILE = "sweep_result.json"  # written by each run's process, into the logs folder
 
 
 @dataclass
@@ -88,6 +87,9 @@ def _run_one(scenario: str, point: dict[str, Scalar], run_dir: str, log_path: st
     as JSON next to it. Never raises (the parent reads the outcome file)."""
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ[var] = "1"  # one core per run: the sweep fills the cores with runs
+    import cv2  # OpenCV's own thread pool ignores OMP_NUM_THREADS
+
+    cv2.setNumThreads(1)
     handler = logging.FileHandler(log_path, mode="w")
     handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
     root = logging.getLogger()

@@ -133,6 +133,8 @@ def evaluate(expr: str, env: Mapping[str, Scalar], used: set[str] | None = None)
         # record the names it mentions, so a typo is not also reported as "unused"
         used.update(re.findall(r"[A-Za-z_][A-Za-z0-9_]*", expr))
         raise _ExprError("not a valid expression") from None
+    # every name the expression mentions counts as used, also in a branch not taken
+    used.update(n.id for n in ast.walk(tree) if isinstance(n, ast.Name))
     try:
         value = _eval(tree, env, used)
     except _ExprError:

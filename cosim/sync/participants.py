@@ -5,12 +5,14 @@ A scenario section listed in ``PARTICIPANTS`` makes the runner build that
 part's participant with ``make_participant(scenario)``. Per run:
 
 - ``start(ctx)`` once, after the vehicles are built, before the first tick;
-- ``on_exchange(tick, states)`` at every exchange, after the schedule and
-  the MAVLink endpoint (telemetry due at ``tick`` has been sent) and before
-  guidance and the pool step; ``states`` is the state array at ``tick`` and
-  must not be modified. A controller commands vehicles by injecting MAVLink
-  messages (``ctx.mavlink.inject``): the endpoint handles them at the next
-  exchange, exactly like a ground station's;
+- ``on_exchange(tick, states)`` at every exchange, after the schedule,
+  MAVLink commands and guidance, once the pool's step from ``tick`` has
+  started (``pool.send``) and the telemetry due at ``tick`` has been sent:
+  it runs while the workers step; ``states`` is a copy of the state array
+  at ``tick`` (do not keep it past the call). A controller commands vehicles
+  by injecting MAVLink messages (``ctx.mavlink.inject(message, link)``): the
+  endpoint handles them at the next exchange, exactly like a ground
+  station's;
 - ``finish(tick, reason)`` once, whatever the end (also after an error);
   returns the participant's section of ``summary.json`` (or None).
 - ``after_run(out_dir)`` after ``summary.json`` is written (plots); errors
@@ -53,7 +55,7 @@ class RunContext:
     physics_hz: float
     control_every: int  # ticks per exchange
     events: EventLog  # ``events.emit(kind, tick, vehicle=..., **fields)``
-    mavlink: Any  # the run's cosim.mavlink.MavlinkEndpoint (None: no MAVLink)
+    mavlink: Any  # the run's cosim.mavlink.MavlinkLinks (None: no MAVLink)
     workers: int  # the pool's worker count (for parts with their own pools)
 
 

@@ -149,31 +149,31 @@ class Run:
             if self._stop.is_set():
                 raise KeyboardInterrupt
             pool = make_pool(scn.vehicles, scn.rates.dt_s, channels, self.backend, self.workers)
-            self._building = False
-            self.pool = pool
-            workers_used = pool.workers
-            startup_s = time.perf_counter() - wall0
-            log.info("%d vehicles ready in %.2f s on %d worker(s)", len(ids), startup_s,
-                     workers_used)
-            start_ned = np.stack(scn.origin.frame.geodetic_to_ned(
-                [v.lat_deg for v in scn.vehicles], [v.lon_deg for v in scn.vehicles],
-                [v.alt_msl_m for v in scn.vehicles]), axis=1)
-            start_ne = start_ned[:, :2].copy()
-            guidance = FixedWingGuidance(len(ids), scn.origin.frame, start_ne, chan_index) \
-                if scn.autopilot else None
-            labels = guidance.labels if guidance is not None else None
-            if self.mavlink_config is not None:
-                from cosim.mavlink import MavlinkLinks
+            with pool:  # closed however the rest of the set-up ends
+                self._building = False
+                self.pool = pool
+                workers_used = pool.workers
+                startup_s = time.perf_counter() - wall0
+                log.info("%d vehicles ready in %.2f s on %d worker(s)", len(ids), startup_s,
+                         workers_used)
+                start_ned = np.stack(scn.origin.frame.geodetic_to_ned(
+                    [v.lat_deg for v in scn.vehicles], [v.lon_deg for v in scn.vehicles],
+                    [v.alt_msl_m for v in scn.vehicles]), axis=1)
+                start_ne = start_ned[:, :2].copy()
+                guidance = FixedWingGuidance(len(ids), scn.origin.frame, start_ne, chan_index) \
+                    if scn.autopilot else None
+                labels = guidance.labels if guidance is not None else None
+                if self.mavlink_config is not None:
+                    from cosim.mavlink import MavlinkLinks
 
-                self.mavlink = MavlinkLinks(scn.vehicles, hz, self.mavlink_config,
-                                            tlog_dir=out, autopilot=scn.autopilot)
-                for url, specs, (host, port) in zip(self.mavlink.urls, self.mavlink.specs,
-                                                     self.mavlink.local_addresses):
-                    if url is not None:
-                        log.info("MAVLink: vehicles %s..%s (system ids 1..%d) on %s "
-                                 "(local %s:%d)", ids[specs[0].row], ids[specs[-1].row],
-                                 len(specs), url, host, port)
-            with pool:
+                    self.mavlink = MavlinkLinks(scn.vehicles, hz, self.mavlink_config,
+                                                tlog_dir=out, autopilot=scn.autopilot)
+                    for url, specs, (host, port) in zip(self.mavlink.urls, self.mavlink.specs,
+                                                         self.mavlink.local_addresses):
+                        if url is not None:
+                            log.info("MAVLink: vehicles %s..%s (system ids 1..%d) on %s "
+                                     "(local %s:%d)", ids[specs[0].row], ids[specs[-1].row],
+                                     len(specs), url, host, port)
                 self.participants = build_participants(
                     scn, skip=("swarm",) if self.external_controller else ())
                 ctx = RunContext(scn, out, ids, scn.origin.frame, start_ned, hz, k, events,

@@ -262,8 +262,10 @@ def test_fuzzing_a_live_run_leaves_the_vehicles_flying_and_answering(tmp_path: P
         acks, positions = [], []
         deadline = time.monotonic() + 20
         next_try = 0.0
+        attempts = 0
         while (not acks or len(positions) < 10) and time.monotonic() < deadline:
             if not acks and time.monotonic() >= next_try:
+                attempts += 1
                 gcs.hello()
                 gcs.conn.mav.command_long_send(2, 1, ML.MAV_CMD_REQUEST_MESSAGE, 0, 148, 0, 0,
                                                0, 0, 0, 0)
@@ -284,5 +286,6 @@ def test_fuzzing_a_live_run_leaves_the_vehicles_flying_and_answering(tmp_path: P
     assert summary["stop_reason"] == "interrupted"
     c = summary["mavlink"]["counters"]
     assert c["garbage"] + c["bad_crc"] + c["truncated"] + c["malformed"] > 0, c
-    assert "kernel_dropped" in c
+    if attempts > 1:  # a command went unanswered: only because the kernel dropped datagrams
+        assert c["kernel_dropped"] > 0, c
     assert acks and acks[0].result == ML.MAV_RESULT_ACCEPTED, (acks, c)

@@ -150,3 +150,12 @@ def test_expression_results_must_be_finite(write_scenario: Write) -> None:
     with pytest.raises(ConfigError, match=r"s.yaml:4: duration_s: cannot substitute "
                                           r"\$\{1 / \(speed_kt - 50\)\}: ZeroDivisionError"):
         load_scenario(p, check_properties=False)
+
+
+def test_a_name_only_in_the_branch_not_taken_still_counts_as_used(write_scenario: Write
+                                                                   ) -> None:
+    text = BASE.replace("duration_s: ${round(1200 / speed_kt, 1)}",
+                        "duration_s: ${30 if mode == 'short' else long_s}").replace(
+        "  vfov_deg: 40\n", "  vfov_deg: 40\n  mode: short\n  long_s: [60, 90]\n")
+    scn = load_scenario(write_scenario(text), check_properties=False)
+    assert scn.duration_s == 30
