@@ -410,7 +410,11 @@ class MavlinkEndpoint:
         changed = self._autopilot & (bank != self._bank) & (bank >= 5.0) & (bank <= 75.0)
         if changed.any():  # ROLL_LIMIT_DEG follows the autopilot's actual limit
             for j in np.flatnonzero(changed).tolist():
-                self.vehicles[j].sync_roll_limit()
+                v = self.vehicles[j]
+                before = v.params["ROLL_LIMIT_DEG"]
+                v.sync_roll_limit()
+                if v.params["ROLL_LIMIT_DEG"] != before:  # announced, as ArduPilot does
+                    self._send(v, *self.handler.param_value(v, "ROLL_LIMIT_DEG"), tick)
             self._bank = np.where(changed, bank, self._bank)
         commands: list[VehicleCommand] = []
         injected, self._injected = self._injected, []

@@ -643,6 +643,10 @@ class Handler:
         return self._target_cmd({"goto": goto})
 
     # -- parameters ------------------------------------------------------------
+    def param_value(self, v: MavVehicle, name: str) -> Reply:
+        """The PARAM_VALUE of one parameter (to announce a change)."""
+        return self._param_value(v, PARAM_INDEX[name])
+
     def _param_value(self, v: MavVehicle, index: int) -> Reply:
         p = PARAM_DEFS[index]
         return ("PARAM_VALUE", {"param_id": p.name, "param_value": v.params.values[index],

@@ -35,6 +35,7 @@ there).
 from __future__ import annotations
 
 import logging
+import math
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -126,6 +127,7 @@ class SwarmController:
         self.min_mps = np.empty(n)
         self.max_mps = np.empty(n)
         numbers = []
+        bank_deg: list[float] = []
         for i, r in enumerate(self.rows.tolist()):
             li, ms = by_row[r]
             self._key[(li, ms.sysid)] = i
@@ -133,6 +135,7 @@ class SwarmController:
             params = {**defaults, **dict(ms.params)}
             self.min_mps[i] = params["AIRSPEED_MIN"]
             self.max_mps[i] = params["AIRSPEED_MAX"]
+            bank_deg.append(params["ROLL_LIMIT_DEG"])
             numbers.append(stall_numbers(vehicles[r]))
         self.mass_kg = np.array([s.mass_kg for s in numbers])
         self.wing_area_m2 = np.array([s.wing_area_m2 for s in numbers])
@@ -142,8 +145,9 @@ class SwarmController:
         self.alt_msl_m = np.full(n, np.nan)
         self.roll_rad = np.full(n, np.nan)
         self.layer_alt_msl_m = np.array([vehicles[r].alt_msl_m for r in self.rows.tolist()])
-        #: the bank every loiter is flown at (the vehicles' ROLL_LIMIT_DEG)
-        self.bank_limit_rad = np.radians(np.full(n, defaults["ROLL_LIMIT_DEG"]))
+        #: the bank every loiter is flown at: each vehicle's ROLL_LIMIT_DEG, followed
+        #: through the PARAM_VALUE a vehicle announces when it changes
+        self.bank_limit_rad = np.radians(np.array(bank_deg, dtype=float))
         self.groups: list[GroupState] = []
         for g in spec.groups:
             idx = np.array([self.index_of_row[r] for r in g.rows], dtype=np.intp)
@@ -172,6 +176,9 @@ class SwarmController:
             self.alt_msl_m[i] = f["alt"] * 1e-3
         elif m.name == "ATTITUDE":
             self.roll_rad[i] = f["roll"]
+        elif m.name == "PARAM_VALUE" and f.get("param_id") == "ROLL_LIMIT_DEG":
+            # the bank its loiters are flown at changed (a schedule, a ground station)
+            self.bank_limit_rad[i] = math.radians(float(f["param_value"]))
         elif m.name == "COMMAND_ACK" and f.get("target_system") == CONTROLLER_SYSID:
             res = int(f["result"])
             if res == mav.MAV_RESULT_ACCEPTED:

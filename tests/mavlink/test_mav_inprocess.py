@@ -114,3 +114,22 @@ def test_lockstep_controller_commands_land_on_the_next_exchange(tmp_path: Path) 
         ctl.sock.close()
         ep.close()
 
+
+
+def test_a_new_bank_limit_is_announced_as_param_value(tmp_path: Path) -> None:
+    ep = _endpoint(tmp_path, 2, url=None)
+    got: list[mav.Message] = []
+    ep.subscribe(got.append)
+    states = state_rows(2)
+    ep.exchange(0, states)
+    assert not [m for m in got if m.name == "PARAM_VALUE"]  # 45 deg: the default
+    states[1, S["bank_limit_deg"]] = 60.0  # the schedule set bank_limit_deg on vehicle 2
+    got.clear()
+    ep.exchange(4, states)
+    pv = [m for m in got if m.name == "PARAM_VALUE"]
+    assert [(m.src_system, m.fields["param_id"], m.fields["param_value"]) for m in pv] == [
+        (2, "ROLL_LIMIT_DEG", 60.0)]
+    got.clear()
+    ep.exchange(8, states)  # announced once
+    assert not [m for m in got if m.name == "PARAM_VALUE"]
+    ep.close()

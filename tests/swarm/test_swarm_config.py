@@ -155,6 +155,22 @@ def test_speed_never_below_the_stall_speed_in_the_current_bank() -> None:
             assert (wire == 26.0).all()
 
 
+def test_the_loiter_floor_follows_the_bank_limit_the_vehicles_announce() -> None:
+    # level flight, tiny k_s: the floor decides. At the default 45 deg limit the
+    # loiter floor (21.8 / sqrt(cos 45) = 25.9 m/s) is under AIRSPEED_MIN (26);
+    # once the vehicles announce ROLL_LIMIT_DEG 70 it is k / sqrt(cos 70), about 37 m/s
+    ctl = _controller(0.0)
+    assert all(o.fields["param1"] == pytest.approx(26.0) for o in ctl.step(0))
+    for sysid in range(1, 5):
+        ctl.on_message(mav.make_message("PARAM_VALUE", src_system=sysid, src_component=1,
+                                        param_id="ROLL_LIMIT_DEG", param_value=70.0,
+                                        param_type=9, param_count=11, param_index=0))
+    k = ctl.stall_mps(np.arange(4))  # level: the stall constant itself
+    speeds = np.array([o.fields["param1"] for o in ctl.step(120)])
+    assert speeds == pytest.approx(k / math.sqrt(math.cos(math.radians(70))), abs=1e-4)
+    assert (speeds > 36.0).all()  # about 37 m/s, well above AIRSPEED_MIN
+
+
 def test_monitor_separations_match_brute_force() -> None:
     from cosim.swarm.config import SwarmGroup
     from cosim.swarm.metrics import SwarmMonitor
