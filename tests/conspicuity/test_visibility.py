@@ -80,7 +80,11 @@ def test_overhead_frame_is_least_eccentricity(tmp_path: Path) -> None:
                                                      (500, 51.4, 15)])
 def test_straight_pass_formula_within_one_frame(tmp_path: Path, alt_m: float,
                                                 speed_mps: float, rate_hz: float) -> None:
-    """Synthetic nadir pass: in view while the target's extent overlaps the footprint."""
+    """The frame-count convention of ``visible_s`` against the formula, on
+    synthetic flags (in view while the target's extent overlaps the footprint):
+    it fails if ``visible_s`` counted the interval differently (last - first,
+    or without the frame period). The rendered pass is checked end to end in
+    test_visibility_rendered.py."""
     vfov_deg, length_m = 40.0, 8.0
     half_m = alt_m * math.tan(math.radians(vfov_deg / 2))
     x0_m = -(half_m + length_m / 2 + 3 * speed_mps)  # 3 s before entry

@@ -123,12 +123,25 @@ def test_commands_never_below_the_stall_speed(
     rows = list(csv.DictReader(open(out / "swarm_commands.csv")))
     assert len(rows) == summary["swarm"]["commands_sent"] > 8 * 30
     assert summary["swarm"]["acks"] == {"accepted": len(rows)}
+    # the telemetry it used is the truth at the command's tick (the controller acts
+    # right after that tick's telemetry; float32 roll, millimetre altitude)
+    t = read_states(out)
+    truth = {(tk, v): (rl, al) for tk, v, rl, al in zip(
+        t["tick"].to_pylist(), t["vehicle"].to_pylist(), t["roll_deg"].to_pylist(),
+        t["alt_msl_m"].to_pylist())}
+    checked = 0
     for r in rows:
         k = laws.level_stall_constant_mps(nums.mass_kg, nums.wing_area_m2, nums.clmax,
                                           float(r["alt_msl_m"]))
         stall = float(k) / math.sqrt(math.cos(float(r["roll_rad"])))
         assert float(r["speed_mps"]) >= stall, r
         assert float(r["speed_mps"]) >= 26.0  # AIRSPEED_MIN of the uav700
+        true = truth.get((int(r["tick"]), r["vehicle"]))
+        if true is not None:
+            assert float(r["roll_rad"]) == pytest.approx(math.radians(true[0]), abs=1e-6), r
+            assert float(r["alt_msl_m"]) == pytest.approx(true[1], abs=1e-3), r
+            checked += 1
+    assert checked == len(rows)
 
 
 def test_swarm_plot_and_phase_events(rendezvous: tuple[Scenario, dict[str, Any], Path]) -> None:
