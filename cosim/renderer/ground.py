@@ -13,18 +13,24 @@ fields in a gently warped grid (crop colours, crop rows), hedgerows and woods
 of individual tree crowns, roads, and a tileable fine-detail texture down to
 the base level (5 cm/px by default). Every feature is band-limited to the
 level it is drawn at (crop rows and noise octaves finer than two pixels are
-left out, roads and tree crowns are drawn with their pixel coverage), and
-tiles are cheap (a few ms), so they are regenerated rather than stored on
-disk. A user image (PNG/JPG, north up, ``m_per_px``, top-left corner
+left out, roads and tree crowns are drawn with their pixel coverage). A tile
+costs about 3 ms to make, so tiles are also kept on disk (``ground_cache_dir``:
+one raw BGR file of 192 kB per 256 px tile, keyed by everything its pixels
+depend on; no more written once a seed's folder holds ``CACHE_MB``): the
+first run over a piece of ground pays for it, later runs and the other runs
+of a sweep read it (0.05 ms a tile). A user image (PNG/JPG, north up, ``m_per_px``, top-left corner
 ``origin``) gets its own pyramid; outside it the procedural ground shows.
 """
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import math
+import os
 from collections import OrderedDict
 from collections.abc import Callable
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -38,6 +44,11 @@ MACRO_STEP_M = 0.5  # macro features (fields, roads, trees) sampled at least thi
 DETAIL_PX = 512  # the tileable detail texture's size at the base level
 MAX_TILES = 384  # LRU size per process (256 px BGRA tiles: ~100 MB)
 MACRO_OVERSAMPLE = 2.0  # macro features sampled at most every this many pixels, then upsampled
+#: bump whenever a tile's pixels change for the same seed and ground parameters
+#: (old cache folders are then ignored; delete ~/.cache/cosim/ground to reclaim the space)
+TEXTURE_VERSION = 2
+CACHE_ENV = "COSIM_GROUND_CACHE"  # a folder for the tile cache, or "off"
+CACHE_MB_ENV, CACHE_MB = "COSIM_GROUND_CACHE_MB", 2048  # no more tiles written past this
 
 # field palette, RGB: crops, pasture, wheat, ploughed soil, dry grass, dark crop
 _FIELDS = np.array([[96, 128, 58], [118, 140, 72], [176, 160, 96], [122, 98, 72],
@@ -118,19 +129,34 @@ def _smooth(n: np.ndarray, e: np.ndarray, spacing_m: float,
     fn = nv / spacing_m - kn0
     i = np.minimum(np.floor(fn).astype(np.int64), len(gn) - 2)
     wn = (fn - i).astype(np.float32)[:, None]
-    rows = coarse[i] + (coarse[i + 1] - coarse[i]) * wn
+    rows = coarse[i] + (coarse[i + 1] - coarse[i]) * wn  # (R, lattice columns): small
     fe = ev / spacing_m - ke0
     j = np.minimum(np.floor(fe).astype(np.int64), len(ge) - 2)
     we = (fe - j).astype(np.float32)[None, :]
-    out: np.ndarray = rows[:, j] + (rows[:, j + 1] - rows[:, j]) * we
+    left = rows.take(j, axis=1)
+    out: np.ndarray = left + (rows.take(j + 1, axis=1) - left) * we
     return out
+
+
+class _CellTable:
+    """Per-cell values looked up at every sample: the cells of ``floor(a / size)``
+    (a float array of any shape) are numbered from its smallest one, so a value
+    computed once per cell (a few dozen) is gathered instead of evaluated per
+    sample (thousands)."""
+
+    def __init__(self, k: np.ndarray) -> None:
+        self.k0 = float(k.min())
+        self.keys = np.arange(self.k0, float(k.max()) + 1.0)  # the cells, as floats
+        self.idx = (k - self.k0).astype(np.intp)
 
 
 def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int) -> np.ndarray:
     """The procedural ground's colour (float32 RGB 0..255, shape (R, C, 3)) at
     the scenario-frame grid ``n`` (R x 1) x ``e`` (1 x C), drawn for a sample
     spacing of ``step_m``. Low-frequency fields (field-grid warp, woods, the
-    brightness noise) are evaluated on coarser lattices and interpolated."""
+    brightness noise) are evaluated on coarser lattices and interpolated; what
+    depends only on a field or a tree cell is computed once per cell and
+    gathered."""
     n = n.astype(np.float64)
     e = e.astype(np.float64)
     wn = n + _smooth(n, e, 8.0, lambda a, b: 30.0 * (_vnoise(a / 230.0, b / 230.0, seed + 1)
@@ -138,41 +164,51 @@ def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int) -> np.ndar
     we = e + _smooth(n, e, 8.0, lambda a, b: 30.0 * (_vnoise(a / 230.0, b / 230.0, seed + 2)
                                                     - 0.5))
     fn, fe = 160.0, 220.0  # field size
-    ci, cj = np.floor(wn / fn), np.floor(we / fe)
-    hf = _hash(ci, cj, seed + 3)
+    # fields: one row of the table per (ci, cj) cell of the warped field grid
+    ti, tj = _CellTable(np.floor(wn / fn)), _CellTable(np.floor(we / fe))
+    cell = ti.idx * len(tj.keys) + tj.idx
+    hf = _hash(ti.keys[:, None], tj.keys[None, :], seed + 3).ravel()
     kind = np.minimum((hf * len(_FIELDS)).astype(np.int64), len(_FIELDS) - 1)
-    rgb = _FIELDS[kind] * (0.88 + 0.24 * _derive(hf, 613.37))[..., None]
+    colour = _FIELDS[kind] * (0.88 + 0.24 * _derive(hf, 613.37))[..., None]
+    rgb = colour.take(cell, axis=0)
     # crop rows: 2.5-4 m apart, along or across the field, only where resolvable
     period = 2.5 + 1.5 * _derive(hf, 2713.91)
     along = _derive(hf, 97.13) < 0.5
-    coord = np.where(along, wn, we)
     fade = np.clip((period / step_m - 4.0) / 4.0, 0.0, 1.0).astype(np.float32)
-    rows = kind != 1  # pasture has none
-    rgb *= (1.0 + (0.10 * fade * rows) * np.sin(2 * np.pi * coord / period)
-            .astype(np.float32))[..., None]
+    amp = 0.10 * fade * (kind != 1)  # pasture has none
+    phase = np.where(along.take(cell), wn, we) / period.take(cell)
+    phase -= np.floor(phase)  # sin in float32 of the phase in [0, 1): 6x faster than float64
+    rgb *= (1.0 + amp.take(cell) * np.sin(np.float32(2 * np.pi) * phase.astype(np.float32))
+            )[..., None]
     # brightness variation within fields (soil moisture, growth)
     rgb *= (1.0 + 0.35 * _smooth(n, e, 2.0, lambda a, b: _fbm(a, b, 60.0, 4, step_m, seed + 7))
             )[..., None]
     # roads along some warped grid lines
-    dn = wn - fn * np.round(wn / fn)
-    de = we - fe * np.round(we / fe)
-    road_n = _hash(np.round(wn / fn), np.zeros_like(ci), seed + 8) < 0.3
-    road_e = _hash(np.zeros_like(cj), np.round(we / fe), seed + 9) < 0.3
+    rn, re_ = _CellTable(np.round(wn / fn)), _CellTable(np.round(we / fe))
+    dn = wn - fn * rn.keys.take(rn.idx)
+    de = we - fe * re_.keys.take(re_.idx)
+    road_n = (_hash(rn.keys, np.zeros_like(rn.keys), seed + 8) < 0.3).take(rn.idx)
+    road_e = (_hash(np.zeros_like(re_.keys), re_.keys, seed + 9) < 0.3).take(re_.idx)
     road = np.maximum(_coverage(3.0 - np.abs(dn), step_m) * road_n,
                       _coverage(3.0 - np.abs(de), step_m) * road_e)
     # trees: woods where low-frequency noise is high, hedgerows on field edges
     woods = _smooth(n, e, 8.0, lambda a, b: _vnoise(a / 500.0, b / 500.0, seed + 10)) > 0.76
     edge = np.minimum(np.abs(dn), np.abs(de))
-    hedge = (edge > 4.0) & (edge < 9.0) & (_derive(hf, 31.77) < 0.5)
-    cell = 7.0
-    ti, tj = np.floor(n / cell), np.floor(e / cell)
-    ht = _hash(ti, tj, seed + 12)
-    tn = (ti + 0.25 + 0.5 * ht) * cell
-    te = (tj + 0.25 + 0.5 * _derive(ht, 577.31)) * cell
-    radius = 1.6 + 1.2 * _derive(ht, 1291.7)
-    present = (woods & (_derive(ht, 43.9) < 0.9)) | (hedge & (_derive(ht, 71.3) < 0.7))
-    tree = _coverage(radius - np.hypot(n - tn, e - te), step_m) * present
-    tree_rgb = _TREE * (0.75 + 0.5 * _derive(ht, 3343.1))[..., None]
+    hedge = (edge > 4.0) & (edge < 9.0) & (_derive(hf, 31.77) < 0.5).take(cell)
+    size = 7.0  # one tree at most per 7 m cell, at a random place in its middle half
+    cn, ce = _CellTable(np.floor(n / size)), _CellTable(np.floor(e / size))
+    kn, ke = cn.keys[:, None], ce.keys[None, :]
+    ht = _hash(kn, ke, seed + 12)
+    tc = cn.idx * len(ce.keys) + ce.idx  # (R, 1) and (1, C) -> the (R, C) tree cell
+    tn = ((kn + 0.25 + 0.5 * ht) * size).take(tc)
+    te = ((ke + 0.25 + 0.5 * _derive(ht, 577.31)) * size).take(tc)
+    radius = (1.6 + 1.2 * _derive(ht, 1291.7)).take(tc)
+    present = ((woods & (_derive(ht, 43.9) < 0.9).take(tc))
+               | (hedge & (_derive(ht, 71.3) < 0.7).take(tc)))
+    dtn, dte = n - tn, e - te
+    tree = _coverage(radius - np.sqrt(dtn * dtn + dte * dte), step_m) * present
+    tree_rgb = (_TREE * (0.75 + 0.5 * _derive(ht, 3343.1))[..., None]).reshape(-1, 3).take(
+        tc, axis=0)
     rgb = rgb + (_ROAD - rgb) * road[..., None]
     rgb = rgb + (tree_rgb - rgb) * tree[..., None]
     out: np.ndarray = np.clip(rgb, 0, 255).astype(np.float32)
@@ -194,6 +230,31 @@ def _detail_pyramid(seed: int) -> list[np.ndarray]:
         a = levels[-1]
         levels.append(0.25 * (a[0::2, 0::2] + a[1::2, 0::2] + a[0::2, 1::2] + a[1::2, 1::2]))
     return [lv.astype(np.float32) for lv in levels]
+
+
+def ground_cache_dir(spec: GroundSpec, seed: int) -> Path | None:
+    """The disk cache folder for the procedural tiles of ``seed`` and ``spec``, or
+    None if caching is off (``COSIM_GROUND_CACHE=off``). Default
+    ``$XDG_CACHE_HOME/cosim/ground`` (``~/.cache/cosim/ground``); one subfolder per
+    texture version, seed, base resolution, tile size and the numpy/OpenCV
+    versions (their float maths makes the pixels), so a cached tile is the very
+    tile this process would generate."""
+    env = os.environ.get(CACHE_ENV, "")
+    if env.lower() in ("off", "0", "no", "false"):
+        return None
+    root = Path(env) if env else Path(os.environ.get("XDG_CACHE_HOME") or
+                                      Path.home() / ".cache") / "cosim" / "ground"
+    key = f"{TEXTURE_VERSION}|{seed}|{spec.base_m_per_px!r}|{spec.tile_px}|{np.__version__}|" \
+          f"{cv2.__version__}"
+    return root / f"v{TEXTURE_VERSION}-{hashlib.sha1(key.encode()).hexdigest()[:16]}"
+
+
+def _folder_bytes(folder: Path) -> int:
+    total = 0
+    for sub in (folder.iterdir() if folder.is_dir() else ()):
+        for f in (os.scandir(sub) if sub.is_dir() else ()):
+            total += f.stat().st_size
+    return total
 
 
 class _ImageLayer:
@@ -244,6 +305,13 @@ class GroundTexture:
         self._tiles: OrderedDict[tuple[int, int, int], np.ndarray] = OrderedDict()
         self.image = _ImageLayer(spec, frame) if spec.kind == "image" else None
         self.tiles_made = 0
+        self.tiles_loaded = 0
+        self._slabs: dict[tuple[int, int, int], np.ndarray] = {}
+        self._cache_dir = ground_cache_dir(spec, self.seed)
+        self._cache_room = 0  # bytes this process may still add to the cache
+        if self._cache_dir is not None:
+            mb = float(os.environ.get(CACHE_MB_ENV) or CACHE_MB)
+            self._cache_room = int(mb * 2**20) - _folder_bytes(self._cache_dir)
         self._patch = np.empty((0, 0, 4), dtype=np.uint8)
 
     def mpp(self, level: int) -> float:
@@ -266,12 +334,72 @@ class GroundTexture:
             return t
         t = self._make_tile(level, ti, tj)
         self._tiles[key] = t
-        self.tiles_made += 1
         if len(self._tiles) > MAX_TILES:
             self._tiles.popitem(last=False)
         return t
 
     def _make_tile(self, level: int, ti: int, tj: int) -> np.ndarray:
+        """Tile (ti, tj) of ``level`` (BGRA uint8): from the disk cache if there,
+        else generated (and stored there)."""
+        path = self._cache_path(level, ti, tj)
+        T = self.tile_px
+        if path is not None:
+            try:
+                with open(path, "rb") as f:
+                    bgr = np.empty((T, T, 3), np.uint8)
+                    if f.readinto(bgr.data.cast("B")) == bgr.nbytes and not f.read(1):
+                        self.tiles_loaded += 1
+                        out: np.ndarray = cv2.cvtColor(bgr, cv2.COLOR_BGR2BGRA)
+                        return out
+                os.unlink(path)  # cut short (a crash, or being written): make it anew
+            except OSError:
+                pass  # not cached yet
+        bgra = self._generate_tile(level, ti, tj)
+        self.tiles_made += 1
+        if path is not None and self._cache_room > 0:
+            self._store(path, cv2.cvtColor(bgra, cv2.COLOR_BGRA2BGR))
+        return bgra
+
+    def _store(self, path: Path, bgr: np.ndarray) -> None:
+        """Write a tile's raw BGR bytes. A tile is written once (O_EXCL: parallel
+        render workers and sweep runs race for it) in one call; a reader takes
+        only a file of the full size. A cache that cannot be written is skipped."""
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        except FileExistsError:
+            return
+        except OSError as e:
+            log.debug("ground tile cache: cannot write %s: %s", path, e)
+            self._cache_room = 0
+            return
+        try:
+            os.write(fd, bgr.data)
+            self._cache_room -= bgr.nbytes
+        except OSError as e:
+            log.debug("ground tile cache: cannot write %s: %s", path, e)
+            self._cache_room = 0
+        finally:
+            os.close(fd)
+
+    def _cache_path(self, level: int, ti: int, tj: int) -> Path | None:
+        if self._cache_dir is None:
+            return None
+        return self._cache_dir / f"L{level}" / f"{ti}_{tj}.bgr"
+
+    def _detail_slab(self, level: int, r0: int, c0: int) -> np.ndarray:
+        """The fine-detail multiplier over one tile's pixels (T x T x 1)."""
+        d = self.detail[level]
+        s = d.shape[0]
+        key = (level, r0 % s, c0 % s)
+        slab = self._slabs.get(key)
+        if slab is None:
+            T = self.tile_px
+            ri, ci = (np.arange(r0, r0 + T) % s), (np.arange(c0, c0 + T) % s)
+            slab = self._slabs[key] = np.ascontiguousarray(d[np.ix_(ri, ci)][..., None])
+        return slab
+
+    def _generate_tile(self, level: int, ti: int, tj: int) -> np.ndarray:
         T, m = self.tile_px, self.mpp(level)
         rows = np.arange(ti * T, ti * T + T, dtype=np.float64)
         cols = np.arange(tj * T, tj * T + T, dtype=np.float64)
@@ -288,18 +416,14 @@ class GroundTexture:
             gn = np.arange(ka1, ka0 - 1, -1, dtype=np.float64) * step  # north descending
             ge = np.arange(kb0, kb1 + 1, dtype=np.float64) * step
             coarse = macro_rgb(gn[:, None], ge[None, :], step, self.seed)
-            map_x = ((cols + 0.5) * m / step - kb0).astype(np.float32)
-            map_y = (ka1 - (-(rows + 0.5) * m) / step).astype(np.float32)
-            mx, my = np.broadcast_to(map_x[None, :], (T, T)), np.broadcast_to(map_y[:, None],
-                                                                             (T, T))
-            rgb = cv2.remap(coarse, np.ascontiguousarray(mx), np.ascontiguousarray(my),
-                            cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+            # lattice position of tile pixel (r, c): an axis-aligned affine map
+            k = m / step
+            M = np.array([[k, 0.0, (tj * T + 0.5) * k - kb0],
+                          [0.0, k, ka1 + (ti * T + 0.5) * k]])
+            rgb = cv2.warpAffine(coarse, M, (T, T), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                 borderMode=cv2.BORDER_REPLICATE)
         if level < len(self.detail) - 1:
-            d = self.detail[level]
-            s = d.shape[0]
-            ri = (np.arange(ti * T, ti * T + T) % s)
-            ci = (np.arange(tj * T, tj * T + T) % s)
-            rgb *= d[np.ix_(ri, ci)][..., None]
+            rgb *= self._detail_slab(level, ti * T, tj * T)
         # BGRA (alpha 255): OpenCV's bilinear warp is ~2.5x faster on four channels
         np.clip(rgb, 0, 255, out=rgb)
         bgra: np.ndarray = cv2.cvtColor(rgb.astype(np.uint8), cv2.COLOR_RGB2BGRA)

@@ -20,6 +20,7 @@ from cosim.renderer import video
 from cosim.renderer.camera import camera_pose
 from cosim.renderer.config import TARGET_DEFAULTS, CameraSpec, GroundSpec, TargetSpec
 from cosim.renderer.frame import World, WorldSpec, render_frame
+from cosim.renderer.ground import GroundTexture
 from cosim.renderer.participant import CameraParticipant
 from cosim.renderer.video import have_pyav
 from cosim.scenario import parse_scenario
@@ -188,6 +189,29 @@ def test_mjpg_video_reads_back(tmp_path: Path) -> None:
     assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 10
     assert (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))) \
         == (160, 120)
+
+
+def test_ground_tiles_from_the_disk_cache_are_the_generated_ones(
+        ground_cache: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    frame = LocalFrame(LAT0, LON0, GROUND_M)
+    keys = [(0, 3, -2), (2, -1, 0), (4, 0, 0)]
+    cold = GroundTexture(GroundSpec(), frame, 5)
+    made = [cold.tile(*k) for k in keys]
+    assert (cold.tiles_made, cold.tiles_loaded) == (3, 0)
+    files = sorted(ground_cache.rglob("*.bgr"))
+    assert len(files) == 3
+    files[0].write_bytes(files[0].read_bytes()[:1000])  # a partial file is not used
+    warm = GroundTexture(GroundSpec(), frame, 5)
+    assert all(np.array_equal(a, warm.tile(*k)) for a, k in zip(made, keys))
+    assert (warm.tiles_made, warm.tiles_loaded) == (1, 2)
+    assert files[0].stat().st_size == 256 * 256 * 3  # written anew
+    other_seed = GroundTexture(GroundSpec(), frame, 6)
+    assert not np.array_equal(made[1], other_seed.tile(*keys[1]))
+    assert other_seed.tiles_loaded == 0
+    monkeypatch.setenv("COSIM_GROUND_CACHE", "off")
+    off = GroundTexture(GroundSpec(), frame, 5)
+    assert all(np.array_equal(a, off.tile(*k)) for a, k in zip(made, keys))
+    assert off.tiles_loaded == 0 and len(list(ground_cache.rglob("*.bgr"))) == 4
 
 
 def _decoded(path: Path) -> list[np.ndarray]:
