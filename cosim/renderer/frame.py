@@ -85,6 +85,35 @@ class World:
         self.origin_ecef = np.array(geodetic_to_ecef(spec.origin_lat_deg, spec.origin_lon_deg,
                                                      spec.ground_alt_m))
         self._scratch: dict[tuple[str, int, int], np.ndarray] = {}
+        self._grids: dict[tuple[int, int, int], np.ndarray] = {}
+        self._ids: dict[tuple[int, int], tuple[np.ndarray, list[int]]] = {}
+
+    def ids_buffer(self, h: int, w: int) -> tuple[np.ndarray, list[int]]:
+        """The target-id image for h x w, all zero, and its dirty rectangle
+        ``[x0, y0, x1, y1]`` (to be grown by whoever draws into it): only that
+        rectangle is cleared for the next frame, not the whole image."""
+        held = self._ids.get((h, w))
+        if held is None:
+            held = self._ids[(h, w)] = (np.zeros((h, w), np.uint16), [0, 0, 0, 0])
+        ids, dirty = held
+        x0, y0, x1, y1 = dirty
+        if x1 > x0 and y1 > y0:
+            ids[y0:y1, x0:x1] = 0
+        dirty[:] = [w, h, 0, 0]
+        return ids, dirty
+
+    def pixel_grid(self, y0: int, y1: int, w: int, rows: int) -> np.ndarray:
+        """3 x (rows * 9) homogeneous image points: 9 columns across the width
+        and ``rows`` rows over the pixel rows [y0, y1), edges included
+        (constant per camera: built once)."""
+        key = (y0, y1, w * 16 + rows)
+        p = self._grids.get(key)
+        if p is None:
+            xs = np.linspace(-0.5, w - 0.5, 9)
+            ys = np.linspace(y0 - 0.5, y1 - 0.5, rows)
+            gx, gy = np.meshgrid(xs, ys)
+            p = self._grids[key] = np.stack([gx.ravel(), gy.ravel(), np.ones(gx.size)])
+        return p
 
     def scratch(self, name: str, h: int, w: int, channels: int, dtype: Any = np.uint8
                 ) -> np.ndarray:
@@ -134,9 +163,7 @@ def _draw_ground(world: World, cam: CameraSpec, pose: Pose, K: np.ndarray,
     H = ground_homography(K, pose)
     max_r = world.spec.ground.max_range_m
     # visibility: a ray reaches the ground (w > 0) within max range
-    ys, xs = np.linspace(-0.5, h_img - 0.5, 9), np.linspace(-0.5, w_img - 0.5, 9)
-    gx, gy = np.meshgrid(xs, ys)
-    p = np.stack([gx.ravel(), gy.ravel(), np.ones(gx.size)])
+    p = world.pixel_grid(0, h_img, w_img, 9)
     q = H @ p
     wq = q[2]
     horiz = np.hypot(q[0], q[1])
@@ -199,18 +226,14 @@ def _gsd(H: np.ndarray, p: np.ndarray) -> np.ndarray:
     return out
 
 
-def _band_extent(H_up: np.ndarray, y0: int, y1: int, w_img: int,
+def _band_extent(world: World, H_up: np.ndarray, y0: int, y1: int, w_img: int,
                  max_r: float) -> np.ndarray:
-    """Scenario (north, east) points bounding the ground seen in rows [y0, y1)."""
-    xs = np.linspace(-0.5, w_img - 0.5, 9)
-    ys = np.linspace(y0 - 0.5, y1 - 0.5, 5)
-    gx, gy = np.meshgrid(xs, ys)
-    p = np.stack([gx.ravel(), gy.ravel(), np.ones(gx.size)])
-    q = H_up @ p  # L ground homogeneous
+    """L (north, east) points bounding the ground seen in rows [y0, y1)."""
+    q = H_up @ world.pixel_grid(y0, y1, w_img, 5)  # L ground homogeneous
     w = q[2]
     horiz = np.hypot(q[0], q[1])
     far = (w <= 1e-9) | (horiz > max_r * np.maximum(w, 1e-12))
-    ne = np.empty((2, p.shape[1]))
+    ne = np.empty((2, q.shape[1]))
     ok = ~far
     ne[:, ok] = q[:2, ok] / w[ok]
     if far.any():  # clamp to the range limit along the ray's horizontal direction
@@ -226,7 +249,7 @@ def _draw_band(world: World, H: np.ndarray, A: np.ndarray, max_r: float, y0: int
     scenario north/east)."""
     ground = world.ground
     HA = A @ H
-    ne_l = _band_extent(H, y0, y1, w_img, max_r)
+    ne_l = _band_extent(world, H, y0, y1, w_img, max_r)
     ne = A[:2, :2] @ ne_l + A[:2, 2:3]
     while True:
         P = ground.ne_to_px(level)
@@ -283,11 +306,13 @@ def _fixed(uv: np.ndarray) -> np.ndarray:
 
 def _culled(K: np.ndarray, w_img: int, h_img: int, pts_c: np.ndarray) -> bool:
     """True if every point lies outside one of the view frustum's planes."""
-    x, y, z = pts_c[:, 0], pts_c[:, 1], pts_c[:, 2]
     f, cx, cy = K[0, 0], K[0, 2], K[1, 2]
-    planes = (z - NEAR_M, f * x + (cx + 0.5) * z, (w_img - 0.5 - cx) * z - f * x,
-              f * y + (cy + 0.5) * z, (h_img - 0.5 - cy) * z - f * y)
-    return any(bool((p < 0).all()) for p in planes)
+    # the planes' (x, y, z) coefficients: near, left, right, top, bottom
+    planes = np.array([[0.0, 0.0, 1.0], [f, 0.0, cx + 0.5], [-f, 0.0, w_img - 0.5 - cx],
+                       [0.0, f, cy + 0.5], [0.0, -f, h_img - 0.5 - cy]])
+    side = planes @ pts_c.T
+    side[0] -= NEAR_M
+    return bool((side < 0).all(axis=1).any())
 
 
 def _sky_image(world: World, h: int, w: int) -> np.ndarray:
@@ -358,8 +383,7 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
         out = np.empty((h_img, w_img, 3), dtype=np.uint8)
     img = out
     _draw_ground(world, cam, pose, K, img)
-    ids = world.scratch("ids", h_img, w_img, 1, np.uint16)
-    ids.fill(0)
+    ids, dirty = world.ids_buffer(h_img, w_img)
     time_s = tick / world.spec.physics_hz
     seed = world.spec.seed
     targets = world.targets
@@ -382,6 +406,10 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
         pts = _fixed(project(K, v_c))
         cv2.fillConvexPoly(img, pts, bgr, cv2.LINE_8, SHIFT)
         cv2.fillConvexPoly(ids, pts, tid, cv2.LINE_8, SHIFT)
+        lo_px, hi_px = pts.min(axis=0) >> SHIFT, (pts.max(axis=0) >> SHIFT) + 2
+        dirty[:] = [max(0, min(dirty[0], int(lo_px[0]))), max(0, min(dirty[1], int(lo_px[1]))),
+                    min(w_img, max(dirty[2], int(hi_px[0]))),
+                    min(h_img, max(dirty[3], int(hi_px[1])))]
     for k, t in enumerate(targets.specs):
         if visible[k] and t.kind == "fire":
             _draw_smoke(K, pose, t, origins[k], time_s, seed + k, img)
@@ -424,13 +452,16 @@ def _ground_truth(K: np.ndarray, cam: CameraSpec, pose: Pose, box_c: np.ndarray,
         c_uv = project(K, centre[None, :])[0]
         row.update(center_x_px=float(c_uv[0]), center_y_px=float(c_uv[1]),
                    eccentricity_px=math.hypot(c_uv[0] - K[0, 2], c_uv[1] - K[1, 2]))
-    lim = np.array([[-0.5, -0.5], [w_img - 0.5, -0.5], [w_img - 0.5, h_img - 0.5],
-                    [-0.5, h_img - 0.5]], dtype=np.float32)
     if visible and x1 >= -0.5 and y1 >= -0.5 and x0 <= w_img - 0.5 and y0 <= h_img - 0.5:
-        hull = cv2.convexHull(uv.astype(np.float32))
-        area, _ = cv2.intersectConvexConvex(hull, lim)
         inside_bbox = x0 >= -0.5 and y0 >= -0.5 and x1 <= w_img - 0.5 and y1 <= h_img - 0.5
-        row["in_view"] = int(area > 0 or inside_bbox)
+        if inside_bbox:
+            row["in_view"] = 1
+        else:  # does the projected box's hull overlap the image?
+            lim = np.array([[-0.5, -0.5], [w_img - 0.5, -0.5], [w_img - 0.5, h_img - 0.5],
+                            [-0.5, h_img - 0.5]], dtype=np.float32)
+            hull = cv2.convexHull(uv.astype(np.float32))
+            area, _ = cv2.intersectConvexConvex(hull, lim)
+            row["in_view"] = int(area > 0)
         row["fully_in_view"] = int(inside_bbox and bool((box_c[:, 2] >= NEAR_M).all()))
     if not row["in_view"]:
         return row

@@ -312,7 +312,7 @@ class GroundTexture:
         if self._cache_dir is not None:
             mb = float(os.environ.get(CACHE_MB_ENV) or CACHE_MB)
             self._cache_room = int(mb * 2**20) - _folder_bytes(self._cache_dir)
-        self._patch = np.empty((0, 0, 4), dtype=np.uint8)
+        self._patches: dict[int, tuple[tuple[int, int, int, int], np.ndarray]] = {}
 
     def mpp(self, level: int) -> float:
         return float(self.base_mpp * 2 ** level)
@@ -431,18 +431,23 @@ class GroundTexture:
 
     def patch(self, level: int, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
         """Global pixels rows [r0, r1) x cols [c0, c1) of ``level`` (BGRA uint8,
-        alpha 255); a view of a buffer reused by the next call."""
+        alpha 255): a view into the whole tiles covering it, assembled when the
+        set of tiles changes (not every frame) and valid until the next call for
+        the same level."""
         T = self.tile_px
-        h, w = r1 - r0, c1 - c0
-        if self._patch.shape[0] < h or self._patch.shape[1] < w:
-            self._patch = np.empty((max(h, self._patch.shape[0]), max(w, self._patch.shape[1]),
-                                    4), dtype=np.uint8)
-        out = self._patch[:h, :w]
-        for ti in range(r0 // T, (r1 - 1) // T + 1):
-            for tj in range(c0 // T, (c1 - 1) // T + 1):
-                t = self.tile(level, ti, tj)
-                ra, rb = max(r0, ti * T), min(r1, ti * T + T)
-                ca, cb = max(c0, tj * T), min(c1, tj * T + T)
-                out[ra - r0:rb - r0, ca - c0:cb - c0] = t[ra - ti * T:rb - ti * T,
-                                                          ca - tj * T:cb - tj * T]
+        key = (r0 // T, (r1 - 1) // T + 1, c0 // T, (c1 - 1) // T + 1)
+        held = self._patches.get(level)
+        if held is None or held[0] != key:
+            ta, tb, tc, td = key
+            h, w = (tb - ta) * T, (td - tc) * T
+            buf = held[1] if held is not None else np.empty((0, 0, 4), np.uint8)
+            if buf.shape[0] < h or buf.shape[1] < w:
+                buf = np.empty((max(h, buf.shape[0]), max(w, buf.shape[1]), 4), np.uint8)
+            for ti in range(ta, tb):
+                for tj in range(tc, td):
+                    buf[(ti - ta) * T:(ti - ta + 1) * T, (tj - tc) * T:(tj - tc + 1) * T] = \
+                        self.tile(level, ti, tj)
+            held = self._patches[level] = (key, buf)
+        y, x = r0 - key[0] * T, c0 - key[2] * T
+        out: np.ndarray = held[1][y:y + r1 - r0, x:x + c1 - c0]
         return out

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cosim.geo import LocalFrame
+from cosim.geo import LocalFrame, geodetic_to_ecef
 from cosim.renderer.config import TargetSpec
 
 SUN_ELEVATION_DEG, SUN_AZIMUTH_DEG = 50.0, 135.0  # from the south-east
@@ -133,14 +133,25 @@ class TargetSet:
         self.ground_alt_m = ground_alt_m
         ne = frame.geodetic_to_ned(self.lat_deg, self.lon_deg, np.full(len(lat), ground_alt_m))
         self.north_m, self.east_m = ne[0], ne[1]  # in the scenario frame (for maps)
+        self.ecef_m = geodetic_to_ecef(self.lat_deg, self.lon_deg,
+                                       np.full(len(lat), ground_alt_m))
 
     def origins_in(self, local: LocalFrame) -> np.ndarray:
         """(n, 3) each target's ground point in the frame ``local``."""
         if not self.specs:
             return np.zeros((0, 3))
-        n, e, d = local.geodetic_to_ned(self.lat_deg, self.lon_deg,
-                                        np.full(len(self.specs), self.ground_alt_m))
-        return np.stack([n, e, d], axis=1)
+        # LocalFrame.geodetic_to_ned's arithmetic, from the ECEF points kept at start
+        x, y, z = self.ecef_m
+        ox, oy, oz = geodetic_to_ecef(local.lat_deg, local.lon_deg, local.alt_m)
+        dx, dy, dz = x - ox, y - oy, z - oz
+        lat, lon = np.radians(local.lat_deg), np.radians(local.lon_deg)
+        sl, cl, so, co = (float(np.sin(lat)), float(np.cos(lat)), float(np.sin(lon)),
+                          float(np.cos(lon)))
+        out = np.empty((len(self.specs), 3))
+        out[:, 0] = (-sl * co) * dx + (-sl * so) * dy + cl * dz
+        out[:, 1] = -so * dx + co * dy
+        out[:, 2] = (-cl * co) * dx + (-cl * so) * dy - sl * dz
+        return out
 
 
 def heading_rotation(t: TargetSpec) -> np.ndarray:
