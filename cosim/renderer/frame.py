@@ -80,6 +80,15 @@ class World:
         self.frame = LocalFrame(spec.origin_lat_deg, spec.origin_lon_deg, spec.ground_alt_m)
         self.ground = GroundTexture(spec.ground, self.frame, spec.seed)
         self.targets = TargetSet(spec.targets, self.frame, spec.ground_alt_m)
+        # per target, in L axes from its ground point: the 8 ground-truth box corners
+        # and a ninth probe point for culling (a fire's smoke top, else a corner again)
+        self.probe_offsets = np.zeros((len(spec.targets), 9, 3))
+        for k, t in enumerate(spec.targets):
+            lo, hi = bounding_part(t)
+            self.probe_offsets[k, :8] = box_corners(lo, hi) @ heading_rotation(t).T
+            top = np.array([[0.0, 0.0, -(t.height_m + 20.0)]]) @ heading_rotation(t).T \
+                if t.kind == "fire" else self.probe_offsets[k, :1]
+            self.probe_offsets[k, 8] = top[0]
         self.sky: dict[tuple[int, int], np.ndarray] = {}
         self.ecef_to_ned = _ecef_to_ned(self.frame)
         self.origin_ecef = np.array(geodetic_to_ecef(spec.origin_lat_deg, spec.origin_lon_deg,
@@ -304,15 +313,17 @@ def _fixed(uv: np.ndarray) -> np.ndarray:
     return np.round(uv * (1 << SHIFT)).astype(np.int32)
 
 
-def _culled(K: np.ndarray, w_img: int, h_img: int, pts_c: np.ndarray) -> bool:
-    """True if every point lies outside one of the view frustum's planes."""
+def _culled(K: np.ndarray, w_img: int, h_img: int, pts_c: np.ndarray) -> np.ndarray:
+    """(T,) True where every one of a target's points (T x n x 3, camera axes)
+    lies outside one of the view frustum's planes."""
     f, cx, cy = K[0, 0], K[0, 2], K[1, 2]
     # the planes' (x, y, z) coefficients: near, left, right, top, bottom
     planes = np.array([[0.0, 0.0, 1.0], [f, 0.0, cx + 0.5], [-f, 0.0, w_img - 0.5 - cx],
                        [0.0, f, cy + 0.5], [0.0, -f, h_img - 0.5 - cy]])
-    side = planes @ pts_c.T
-    side[0] -= NEAR_M
-    return bool((side < 0).all(axis=1).any())
+    side = pts_c @ planes.T  # (T, n, 5)
+    side[..., 0] -= NEAR_M
+    out: np.ndarray = (side < 0).all(axis=1).any(axis=1)
+    return out
 
 
 def _sky_image(world: World, h: int, w: int) -> np.ndarray:
@@ -389,18 +400,11 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
     targets = world.targets
     origins = targets.origins_in(pose.local)
     faces: list[tuple[float, np.ndarray, tuple[int, int, int], int]] = []
-    gt_boxes, visible = [], []
-    for k, t in enumerate(targets.specs):
-        lo, hi = bounding_part(t)
-        box_c = to_camera(pose, to_local(t, origins[k], box_corners(lo, hi)))
-        gt_boxes.append(box_c)
-        smoke_top = np.array([[0.0, 0.0, -(t.height_m + 20.0)]]) if t.kind == "fire" else None
-        probe = box_c if smoke_top is None else np.vstack(
-            [box_c, to_camera(pose, to_local(t, origins[k], smoke_top))])
-        vis = not _culled(K, w_img, h_img, probe)
-        visible.append(vis)
-        if vis:
-            faces.extend(_target_faces(pose, t, origins[k], time_s, seed + k, k + 1))
+    probe_c = (origins[:, None, :] + world.probe_offsets - pose.c_l) @ pose.R_cl.T  # (T, 9, 3)
+    box_c = probe_c[:, :8]
+    visible = ~_culled(K, w_img, h_img, probe_c)
+    for k in np.flatnonzero(visible).tolist():
+        faces.extend(_target_faces(pose, targets.specs[k], origins[k], time_s, seed + k, k + 1))
     faces.sort(key=lambda f: -f[0])  # painter's order: far to near
     for _, v_c, bgr, tid in faces:
         pts = _fixed(project(K, v_c))
@@ -413,8 +417,7 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
     for k, t in enumerate(targets.specs):
         if visible[k] and t.kind == "fire":
             _draw_smoke(K, pose, t, origins[k], time_s, seed + k, img)
-    rows = [_ground_truth(K, cam, pose, box_c, img, ids, k + 1, visible[k])
-            for k, box_c in enumerate(gt_boxes)]
+    rows = _ground_truth(K, cam, box_c, img, ids, visible)
     return img, rows
 
 
@@ -424,47 +427,70 @@ def _luminance(bgr: np.ndarray) -> np.ndarray:
     return out
 
 
-def _ground_truth(K: np.ndarray, cam: CameraSpec, pose: Pose, box_c: np.ndarray,
-                  img: np.ndarray, ids: np.ndarray, tid: int, visible: bool) -> dict[str, Any]:
+def _ground_truth(K: np.ndarray, cam: CameraSpec, box_c: np.ndarray, img: np.ndarray,
+                  ids: np.ndarray, visible: np.ndarray) -> list[dict[str, Any]]:
+    """One row per target from its box corners ``box_c`` (T x 8 x 3, camera axes):
+    the geometry of all targets at once, then the pixels of those in view."""
     w_img, h_img = cam.width_px, cam.height_px
-    centre = box_c.mean(axis=0)
-    rng_m = float(np.linalg.norm(centre))
-    ecc_deg = math.degrees(math.atan2(math.hypot(centre[0], centre[1]), centre[2]))
-    dirs = box_c / np.linalg.norm(box_c, axis=1, keepdims=True)
-    ang = math.degrees(math.acos(float(np.clip((dirs @ dirs.T).min(), -1.0, 1.0))))
-    row: dict[str, Any] = {"in_view": 0, "fully_in_view": 0, "bbox_x0_px": None,
-                           "bbox_y0_px": None, "bbox_x1_px": None, "bbox_y1_px": None,
-                           "center_x_px": None, "center_y_px": None, "eccentricity_px": None,
-                           "eccentricity_deg": ecc_deg, "angular_size_deg": ang,
-                           "pixels_on_target": 0, "range_m": rng_m, "contrast": None}
-    if (box_c[:, 2] >= NEAR_M).all():
-        uv = project(K, box_c)
-    else:
-        pts = [project(K, fc) for v, _ in faces_of(box_c) if len(fc := _clip_near(v)) >= 3]
-        if not pts:
-            return row
-        uv = np.concatenate(pts)
-    x0, y0 = uv.min(axis=0)
-    x1, y1 = uv.max(axis=0)
-    row.update(bbox_x0_px=float(x0), bbox_y0_px=float(y0), bbox_x1_px=float(x1),
-               bbox_y1_px=float(y1))
-    if centre[2] >= NEAR_M:
-        c_uv = project(K, centre[None, :])[0]
-        row.update(center_x_px=float(c_uv[0]), center_y_px=float(c_uv[1]),
-                   eccentricity_px=math.hypot(c_uv[0] - K[0, 2], c_uv[1] - K[1, 2]))
-    if visible and x1 >= -0.5 and y1 >= -0.5 and x0 <= w_img - 0.5 and y0 <= h_img - 0.5:
-        inside_bbox = x0 >= -0.5 and y0 >= -0.5 and x1 <= w_img - 0.5 and y1 <= h_img - 0.5
-        if inside_bbox:
-            row["in_view"] = 1
-        else:  # does the projected box's hull overlap the image?
-            lim = np.array([[-0.5, -0.5], [w_img - 0.5, -0.5], [w_img - 0.5, h_img - 0.5],
-                            [-0.5, h_img - 0.5]], dtype=np.float32)
-            hull = cv2.convexHull(uv.astype(np.float32))
-            area, _ = cv2.intersectConvexConvex(hull, lim)
-            row["in_view"] = int(area > 0)
-        row["fully_in_view"] = int(inside_bbox and bool((box_c[:, 2] >= NEAR_M).all()))
-    if not row["in_view"]:
-        return row
+    f, cx, cy = K[0, 0], K[0, 2], K[1, 2]
+    centre = box_c.mean(axis=1)
+    rng_m = np.sqrt((centre * centre).sum(axis=1))
+    ecc_deg = np.degrees(np.arctan2(np.hypot(centre[:, 0], centre[:, 1]), centre[:, 2]))
+    dirs = box_c / np.sqrt((box_c * box_c).sum(axis=2, keepdims=True))
+    cos_min = np.einsum("tik,tjk->tij", dirs, dirs).min(axis=(1, 2))
+    ang_deg = np.degrees(np.arccos(np.clip(cos_min, -1.0, 1.0)))
+    z = box_c[:, :, 2]
+    front = np.asarray((z >= NEAR_M).all(axis=1))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uv_all = np.stack([f * box_c[:, :, 0] / z + cx, f * box_c[:, :, 1] / z + cy], axis=2)
+        c_uv = np.stack([f * centre[:, 0] / centre[:, 2] + cx,
+                         f * centre[:, 1] / centre[:, 2] + cy], axis=1)
+    rows = []
+    for k in range(len(box_c)):
+        row: dict[str, Any] = {"in_view": 0, "fully_in_view": 0, "bbox_x0_px": None,
+                               "bbox_y0_px": None, "bbox_x1_px": None, "bbox_y1_px": None,
+                               "center_x_px": None, "center_y_px": None,
+                               "eccentricity_px": None, "eccentricity_deg": float(ecc_deg[k]),
+                               "angular_size_deg": float(ang_deg[k]), "pixels_on_target": 0,
+                               "range_m": float(rng_m[k]), "contrast": None}
+        rows.append(row)
+        if front[k]:
+            uv = uv_all[k]
+        else:  # the box crosses the near plane: its faces clipped to it
+            pts = [project(K, fc) for v, _ in faces_of(box_c[k])
+                   if len(fc := _clip_near(v)) >= 3]
+            if not pts:
+                continue
+            uv = np.concatenate(pts)
+        x0, y0 = uv.min(axis=0)
+        x1, y1 = uv.max(axis=0)
+        row.update(bbox_x0_px=float(x0), bbox_y0_px=float(y0), bbox_x1_px=float(x1),
+                   bbox_y1_px=float(y1))
+        if centre[k, 2] >= NEAR_M:
+            row.update(center_x_px=float(c_uv[k, 0]), center_y_px=float(c_uv[k, 1]),
+                       eccentricity_px=math.hypot(c_uv[k, 0] - cx, c_uv[k, 1] - cy))
+        if visible[k] and x1 >= -0.5 and y1 >= -0.5 and x0 <= w_img - 0.5 \
+                and y0 <= h_img - 0.5:
+            inside_bbox = x0 >= -0.5 and y0 >= -0.5 and x1 <= w_img - 0.5 \
+                and y1 <= h_img - 0.5
+            if inside_bbox:
+                row["in_view"] = 1
+            else:  # does the projected box's hull overlap the image?
+                lim = np.array([[-0.5, -0.5], [w_img - 0.5, -0.5], [w_img - 0.5, h_img - 0.5],
+                                [-0.5, h_img - 0.5]], dtype=np.float32)
+                hull = cv2.convexHull(uv.astype(np.float32))
+                area, _ = cv2.intersectConvexConvex(hull, lim)
+                row["in_view"] = int(area > 0)
+            row["fully_in_view"] = int(inside_bbox and bool(front[k]))
+        if row["in_view"]:
+            _pixels(row, img, ids, k + 1, x0, y0, x1, y1)
+    return rows
+
+
+def _pixels(row: dict[str, Any], img: np.ndarray, ids: np.ndarray, tid: int, x0: float,
+            y0: float, x1: float, y1: float) -> None:
+    """``pixels_on_target`` and ``contrast`` of target ``tid`` (bbox x0..y1)."""
+    h_img, w_img = ids.shape
     bx0, by0 = max(0, math.floor(x0)), max(0, math.floor(y0))
     bx1, by1 = min(w_img, math.ceil(x1) + 1), min(h_img, math.ceil(y1) + 1)
     sub = ids[by0:by1, bx0:bx1] == tid
@@ -480,4 +506,3 @@ def _ground_truth(K: np.ndarray, cam: CameraSpec, pose: Pose, box_c: np.ndarray,
             y_t = float(_luminance(img[by0:by1, bx0:bx1][sub]).mean())
             y_b = float(_luminance(img[ry0:ry1, rx0:rx1][ring]).mean())
             row["contrast"] = (y_t - y_b) / y_b if y_b > 0 else None
-    return row

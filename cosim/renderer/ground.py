@@ -79,6 +79,8 @@ def _derive(h: np.ndarray, k: float) -> np.ndarray:
 
 def _vnoise(x: np.ndarray, y: np.ndarray, seed: int, period: int = 0) -> np.ndarray:
     """Smooth value noise in [0, 1) on the unit lattice (periodic if ``period``)."""
+    if not period and x.ndim == 2 and y.ndim == 2 and x.shape[1] == 1 and y.shape[0] == 1:
+        return _vnoise_grid(x[:, 0], y[0, :], seed)
     xi, yi = np.floor(x), np.floor(y)
     fx, fy = (x - xi).astype(np.float32), (y - yi).astype(np.float32)
     fx, fy = fx * fx * (3 - 2 * fx), fy * fy * (3 - 2 * fy)
@@ -90,6 +92,26 @@ def _vnoise(x: np.ndarray, y: np.ndarray, seed: int, period: int = 0) -> np.ndar
     c, d = _hash(xi, y1, seed), _hash(x1, y1, seed)
     top = a + (b - a) * fx
     return top + ((c + (d - c) * fx) - top) * fy
+
+
+def _vnoise_grid(x: np.ndarray, y: np.ndarray, seed: int) -> np.ndarray:
+    """``_vnoise`` on the grid x (R) by y (C), the same values: the lattice
+    corners it needs are hashed once each (a few) and gathered."""
+    xi, yi = np.floor(x), np.floor(y)
+    fx, fy = (x - xi).astype(np.float32), (y - yi).astype(np.float32)
+    fx, fy = (fx * fx * (3 - 2 * fx))[:, None], (fy * fy * (3 - 2 * fy))[None, :]
+    xi, yi = xi.astype(np.int64), yi.astype(np.int64)
+    x0, y0 = int(xi.min()), int(yi.min())
+    kx = np.arange(x0, int(xi.max()) + 2, dtype=np.int64)
+    ky = np.arange(y0, int(yi.max()) + 2, dtype=np.int64)
+    table = _hash(kx[:, None], ky[None, :], seed)  # (corner x, corner y)
+    ny = len(ky)
+    base = ((xi - x0) * ny)[:, None] + (yi - y0)[None, :]
+    a, b = table.take(base), table.take(base + ny)
+    c, d = table.take(base + 1), table.take(base + (ny + 1))
+    top = a + (b - a) * fx
+    out: np.ndarray = top + ((c + (d - c) * fx) - top) * fy
+    return out
 
 
 def _fbm(n: np.ndarray, e: np.ndarray, wavelength_m: float, octaves: int, step_m: float,
@@ -307,6 +329,7 @@ class GroundTexture:
         self.tiles_made = 0
         self.tiles_loaded = 0
         self._slabs: dict[tuple[int, int, int], np.ndarray] = {}
+        self._read_buf = np.empty((self.tile_px, self.tile_px, 3), np.uint8)
         self._cache_dir = ground_cache_dir(spec, self.seed)
         self._cache_room = 0  # bytes this process may still add to the cache
         if self._cache_dir is not None:
@@ -342,11 +365,10 @@ class GroundTexture:
         """Tile (ti, tj) of ``level`` (BGRA uint8): from the disk cache if there,
         else generated (and stored there)."""
         path = self._cache_path(level, ti, tj)
-        T = self.tile_px
         if path is not None:
             try:
                 with open(path, "rb") as f:
-                    bgr = np.empty((T, T, 3), np.uint8)
+                    bgr = self._read_buf  # reused: the tile itself is a new BGRA array
                     if f.readinto(bgr.data.cast("B")) == bgr.nbytes and not f.read(1):
                         self.tiles_loaded += 1
                         out: np.ndarray = cv2.cvtColor(bgr, cv2.COLOR_BGR2BGRA)
