@@ -46,7 +46,7 @@ MAX_TILES = 384  # LRU size per process (256 px BGRA tiles: ~100 MB)
 MACRO_OVERSAMPLE = 2.0  # macro features sampled at most every this many pixels, then upsampled
 #: bump whenever a tile's pixels change for the same seed and ground parameters
 #: (old cache folders are then ignored; delete ~/.cache/cosim/ground to reclaim the space)
-TEXTURE_VERSION = 2
+TEXTURE_VERSION = 3
 CACHE_ENV = "COSIM_GROUND_CACHE"  # a folder for the tile cache, or "off"
 CACHE_MB_ENV, CACHE_MB = "COSIM_GROUND_CACHE_MB", 2048  # no more tiles written past this
 
@@ -410,7 +410,8 @@ class GroundTexture:
         return self._cache_dir / f"L{level}" / f"{ti}_{tj}.bgr"
 
     def _detail_slab(self, level: int, r0: int, c0: int) -> np.ndarray:
-        """The fine-detail multiplier over one tile's pixels (T x T x 1)."""
+        """The fine-detail multiplier over one tile's pixels (T x T x 4 float32: the
+        same factor for B, G, R and 255 for alpha, which the warp leaves at 1)."""
         d = self.detail[level]
         s = d.shape[0]
         key = (level, r0 % s, c0 % s)
@@ -418,7 +419,10 @@ class GroundTexture:
         if slab is None:
             T = self.tile_px
             ri, ci = (np.arange(r0, r0 + T) % s), (np.arange(c0, c0 + T) % s)
-            slab = self._slabs[key] = np.ascontiguousarray(d[np.ix_(ri, ci)][..., None])
+            slab = np.empty((T, T, 4), np.float32)
+            slab[..., :3] = d[np.ix_(ri, ci)][..., None]
+            slab[..., 3] = 255.0
+            self._slabs[key] = slab
         return slab
 
     def _generate_tile(self, level: int, ti: int, tj: int) -> np.ndarray:
@@ -429,7 +433,7 @@ class GroundTexture:
         if step <= m * 1.0001:
             n = -(rows[:, None] + 0.5) * m
             e = (cols[None, :] + 0.5) * m
-            rgb = macro_rgb(n, e, m, self.seed)
+            bgra = cv2.cvtColor(macro_rgb(n, e, m, self.seed), cv2.COLOR_RGB2BGRA)
         else:  # sample the macro colour on a coarser global lattice, interpolate
             n0, n1 = -(rows[-1] + 0.5) * m, -(rows[0] + 0.5) * m
             e0, e1 = (cols[0] + 0.5) * m, (cols[-1] + 0.5) * m
@@ -438,18 +442,22 @@ class GroundTexture:
             gn = np.arange(ka1, ka0 - 1, -1, dtype=np.float64) * step  # north descending
             ge = np.arange(kb0, kb1 + 1, dtype=np.float64) * step
             coarse = macro_rgb(gn[:, None], ge[None, :], step, self.seed)
-            # lattice position of tile pixel (r, c): an axis-aligned affine map
+            # lattice position of tile pixel (r, c): an axis-aligned affine map; four
+            # float channels warp 2.7x faster than three
             k = m / step
             M = np.array([[k, 0.0, (tj * T + 0.5) * k - kb0],
                           [0.0, k, ka1 + (ti * T + 0.5) * k]])
-            rgb = cv2.warpAffine(coarse, M, (T, T), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
-                                 borderMode=cv2.BORDER_REPLICATE)
+            bgra = cv2.warpAffine(cv2.cvtColor(coarse, cv2.COLOR_RGB2BGRA), M, (T, T),
+                                  flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                                  borderMode=cv2.BORDER_REPLICATE)
+        # BGRA uint8 (alpha 255): OpenCV's bilinear warp is ~2.5x faster on four channels
         if level < len(self.detail) - 1:
-            rgb *= self._detail_slab(level, ti * T, tj * T)
-        # BGRA (alpha 255): OpenCV's bilinear warp is ~2.5x faster on four channels
-        np.clip(rgb, 0, 255, out=rgb)
-        bgra: np.ndarray = cv2.cvtColor(rgb.astype(np.uint8), cv2.COLOR_RGB2BGRA)
-        return bgra
+            out: np.ndarray = cv2.multiply(bgra, self._detail_slab(level, ti * T, tj * T),
+                                           dtype=cv2.CV_8U)  # rounded, saturated
+        else:
+            out = cv2.convertScaleAbs(bgra)
+            out[..., 3] = 255
+        return out
 
     def patch(self, level: int, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
         """Global pixels rows [r0, r1) x cols [c0, c1) of ``level`` (BGRA uint8,
