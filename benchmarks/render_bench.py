@@ -7,14 +7,15 @@
    first with an empty ground tile cache (every tile generated: the cost of
    a first run over new ground), then again over the same ground with the
    tiles on disk (a repeated run or the next run of a sweep);
-2. a real run: N uav700s each with a 10 Hz 640x480 nadir camera for D s through
+2. a real run (ground tile cache empty at start): N uav700s each with a 10 Hz
+   640x480 nadir camera for D s through
    the lockstep loop (render pool), its real-time factor (the loop's, and end
    to end including the render pool's drain) and the CPU seconds all processes
    spent per simulated second (what a machine with that many idle cores needs
    for 1x; the shared machine's wall clock depends on others' load).
 
     python benchmarks/render_bench.py [--frames 200] [--vehicles 20] [--duration-s 10]
-        [--backend process|inline] [--workers N] [--render-workers N]
+        [--backend process|inline] [--workers N] [--render-workers N] [--codec mp4v|h264|mjpg]
 """
 
 from __future__ import annotations
@@ -32,7 +33,9 @@ import cv2
 
 from cosim.geo import LocalFrame
 from cosim.renderer.config import CameraSpec
+from cosim.renderer.ground import CACHE_ENV
 from cosim.renderer.participant import RenderWorker, Stream
+from cosim.renderer.video import EXTENSIONS
 from cosim.scenario import load_scenario, parse_scenario
 from cosim.sync.runner import run_scenario
 
@@ -62,9 +65,9 @@ class _Video:
         self.video.release()
 
 
-def per_frame(frames: int, cache_dir: str) -> dict[str, float]:
+def per_frame(frames: int, cache_dir: str, codec: str = "mp4v") -> dict[str, float]:
     """One camera's frames; ground tiles cached in ``cache_dir``."""
-    os.environ["COSIM_GROUND_CACHE"] = cache_dir
+    os.environ[CACHE_ENV] = cache_dir
     cv2.setNumThreads(1)
     scn = load_scenario(REPO / "scenarios/cameras/flyover.yaml", check_properties=False)
     from cosim.renderer.frame import WorldSpec
@@ -80,8 +83,8 @@ def per_frame(frames: int, cache_dir: str) -> dict[str, float]:
         poses.append((float(la), float(lo), scn.origin.ground_alt_m + 100, 0.0, 0.0, 0.0))
     with tempfile.TemporaryDirectory() as d:
         (Path(d) / "cameras").mkdir()
-        s = Stream(0, "uav1", 0, cam, "cameras/b.mp4", "cameras/b.gt.csv", None)
-        w = RenderWorker(ws, [s], Path(d), "mp4v", False)
+        s = Stream(0, "uav1", 0, cam, f"cameras/b.{EXTENSIONS[codec]}", "cameras/b.gt.csv", None)
+        w = RenderWorker(ws, [s], Path(d), codec, False)
         video = _Video(w.writers[0].video)
         w.writers[0].video = video  # type: ignore[assignment]
         ground = w.world.ground
@@ -118,6 +121,7 @@ def swarm(n: int, duration_s: float, backend: str, workers: int | None,
     scn = parse_scenario(text, str(REPO / "scenarios/cameras/bench.yaml")).with_duration(
         duration_s)
     with tempfile.TemporaryDirectory() as d:
+        os.environ[CACHE_ENV] = str(Path(d) / "ground_cache")  # empty: every tile generated
         cpu0, wall0 = _cpu_s(), time.perf_counter()
         r = run_scenario(scn, d, backend=backend, workers=workers)
         wall = time.perf_counter() - wall0
@@ -140,14 +144,16 @@ def main() -> None:
     ap.add_argument("--backend", default="process", choices=("process", "inline"))
     ap.add_argument("--workers", type=int, default=None, help="physics workers")
     ap.add_argument("--render-workers", type=int, default=None)
+    ap.add_argument("--codec", default="mp4v", choices=tuple(EXTENSIONS),
+                    help="for the per-frame cost")
     a = ap.parse_args()
     if a.frames:
         with tempfile.TemporaryDirectory() as cache:
             for label in ("tiles generated", "tiles from disk"):
-                f = per_frame(a.frames, cache)
-                print(f"640x480 nadir frame incl. ground truth + mp4v, {label}: "
+                f = per_frame(a.frames, cache, a.codec)
+                print(f"640x480 nadir frame incl. ground truth + {a.codec}, {label}: "
                       f"{f['cpu_ms']:.2f} ms CPU ({f['wall_ms']:.2f} ms wall), "
-                      f"{1000 / f['cpu_ms']:.0f} frames/s per core; of which mp4v encoding "
+                      f"{1000 / f['cpu_ms']:.0f} frames/s per core; of which {a.codec} encoding "
                       f"{f['encode_ms']:.2f} ms, new ground tiles {f['tiles_ms']:.2f} ms "
                       f"({f['tiles']:.0f} tiles, {f['tile_ms']:.2f} ms each: "
                       f"{f['tiles_generated']} generated, {f['tiles_from_disk']} read), "
