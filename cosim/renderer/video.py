@@ -6,7 +6,8 @@ with ``write(bgr_frame)`` and ``release()``. ``mp4v`` (MPEG-4 Part 2 in
 (FFmpeg's own encoders, one thread per writer: a render worker owns one core)
 from the YUV 4:2:0 planes of ``cv2.cvtColor(..., COLOR_BGR2YUV_I420)``;
 OpenCV's ``VideoWriter`` converts the colour itself at about six times the
-cost (see benchmarks/README.md). Without PyAV, ``mp4v`` falls back to
+cost (see benchmarks/README.md). Without PyAV, or for an odd frame size
+(OpenCV's writer then drops the last column or row, as before), ``mp4v`` falls back to
 OpenCV's writer (same format, ~0.6 ms more a 640x480 frame); ``h264`` needs
 PyAV (OpenCV's wheels have no H.264 encoder). ``mjpg`` (Motion JPEG in .avi)
 is always OpenCV's.
@@ -113,13 +114,14 @@ def open_video(path: str, codec: str, rate_hz: float, width_px: int, height_px: 
                ) -> VideoSink:
     """A writer for ``codec`` (see the module docstring); raises CosimError if
     the file cannot be opened or ``h264`` is asked for without PyAV."""
-    if codec in ("mp4v", "h264") and have_pyav():
+    if codec == "h264" and not have_pyav():
+        raise CosimError(f"cannot write {path}: codec h264 needs PyAV (pip install av)")
+    odd = bool(width_px % 2 or height_px % 2)  # 4:2:0 needs even sizes: OpenCV crops a pixel
+    if codec == "h264" or (codec == "mp4v" and not odd and have_pyav()):
         try:
             return _PyAvWriter(path, codec, rate_hz, width_px, height_px)
         except CosimError:
             raise
         except Exception as e:
             raise CosimError(f"cannot open a {codec} video writer for {path}: {e}") from e
-    if codec == "h264":
-        raise CosimError(f"cannot write {path}: codec h264 needs PyAV (pip install av)")
     return _OpenCvWriter(path, codec, rate_hz, width_px, height_px)

@@ -243,6 +243,12 @@ def test_pyav_and_opencv_mp4v_and_h264_read_back_alike(tmp_path: Path,
         assert min(cv2.PSNR(g, r) for g, r in zip(got, ref)) > 28.0
 
 
+def test_odd_frame_size_mp4v_reads_back(tmp_path: Path) -> None:
+    summary, out = _fly(tmp_path, "odd", rate=10.0, dur=1.0, w=161, h=121)
+    got = _decoded(out / summary["streams"][0]["video"])
+    assert len(got) == 10 == summary["streams"][0]["frames"]
+
+
 def test_h264_without_pyav_is_a_config_error(tmp_path: Path,
                                               monkeypatch: pytest.MonkeyPatch) -> None:
     import importlib.util
