@@ -16,6 +16,15 @@ REPO = Path(__file__).resolve().parent.parent
 SCENARIOS = REPO / "scenarios"
 
 
+@pytest.fixture(autouse=True, scope="session")
+def _ground_cache(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """Rendered tests keep their ground tiles in a temporary folder, never the
+    user's ~/.cache/cosim/ground (subprocesses inherit the variable)."""
+    import os
+
+    os.environ.setdefault("COSIM_GROUND_CACHE", str(tmp_path_factory.mktemp("ground-cache")))
+
+
 @pytest.fixture
 def specs() -> Callable[..., list[VehicleSpec]]:
     """``specs(n, **changes)``: n c172p vehicles in a grid at 1000 m, 100 kt."""

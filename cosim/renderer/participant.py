@@ -21,6 +21,7 @@ import logging
 import multiprocessing as mp
 import os
 import queue
+import time
 import traceback
 from dataclasses import dataclass
 from pathlib import Path
@@ -149,6 +150,7 @@ def _worker_main(world_spec: WorldSpec, streams: list[Stream], out_dir: str, cod
         w = RenderWorker(world_spec, streams, Path(out_dir), codec, digest)
     except BaseException:
         results.put(("error", streams[0].index if streams else -1, None, traceback.format_exc()))
+        results.put(("done", {}))  # finish() need not wait for a worker that never started
         return
     try:
         while True:
@@ -293,12 +295,19 @@ class CameraParticipant:
             for q in self.jobs:
                 q.put(None)
             done = 0
+            deadline = time.monotonic() + _RESULT_TIMEOUT_S
             while done < len(self.procs):
                 try:
-                    msg = self.results.get(timeout=_RESULT_TIMEOUT_S)
+                    msg = self.results.get(timeout=1.0)
                 except queue.Empty:
-                    error = RenderError("?", "?", tick, "render workers did not finish")
-                    break
+                    dead = [p for p in self.procs if not p.is_alive() and p.exitcode != 0]
+                    if dead or time.monotonic() > deadline:
+                        why = (f"render worker {dead[0].name} died (exit code "
+                               f"{dead[0].exitcode})" if dead else
+                               f"render workers did not finish in {_RESULT_TIMEOUT_S:g} s")
+                        error = error or RenderError("?", "?", tick, why)
+                        break
+                    continue
                 if msg[0] == "done":
                     done += 1
                     self.closed.update(msg[1])

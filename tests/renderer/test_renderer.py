@@ -94,6 +94,45 @@ def test_projected_corners_match_an_analytic_pinhole(mount: str, pitch: float,
     assert r["pixels_on_target"] > 0
 
 
+@pytest.mark.parametrize("mount,pitch,att,cam_ne,offset_ne", [
+    ("nadir", -90.0, (4.0, -3.0, 30.0), (14000.0, 14000.0), (12.0, -7.0)),
+    ("gimbal", -45.0, (-6.0, 2.0, -40.0), (-25000.0, 9000.0), (70.0, -40.0)),
+])
+def test_projection_far_from_the_origin_matches_an_independent_pinhole(
+        mount: str, pitch: float, att: tuple[float, float, float],
+        cam_ne: tuple[float, float], offset_ne: tuple[float, float]) -> None:
+    """A camera 20-27 km from the scenario origin, where the scenario's tangent
+    plane is 30-60 m above the ground: corners built on the ellipsoid at the
+    target (its own local level frame) and seen from the camera's local level
+    frame, both through exact WGS-84; the renderer must agree within 0.5 px."""
+    frame = LocalFrame(LAT0, LON0, GROUND_M)
+    n_t, e_t = cam_ne[0] + offset_ne[0], cam_ne[1] + offset_ne[1]
+    t = _target("truck", n_t, e_t, heading=25.0)
+    world = World(WorldSpec(LAT0, LON0, GROUND_M, 1, 120.0, GroundSpec(), (t,)))
+    cam = _cam(mount, pitch)
+    alt_agl = 100.0
+    la_c, lo_c = frame.place(*cam_ne, GROUND_M + alt_agl)
+    pose = camera_pose(cam, float(la_c), float(lo_c), GROUND_M + alt_agl, *att,
+                       ground_alt_m=GROUND_M)
+    _, rows = render_frame(world, cam, pose, 0)
+    la_t, lo_t = frame.place(n_t, e_t, GROUND_M)
+    at_target = LocalFrame(float(la_t), float(lo_t), GROUND_M)
+    a = math.radians(t.heading_deg)
+    fwd, rgt = np.array([math.cos(a), math.sin(a), 0]), np.array([-math.sin(a), math.cos(a), 0])
+    local = np.array([sx * t.length_m / 2 * fwd + sy * t.width_m / 2 * rgt
+                      - np.array([0, 0, hz]) for sx in (-1, 1) for sy in (-1, 1)
+                      for hz in (0.0, t.height_m)])
+    geo = at_target.ned_to_geodetic(local[:, 0], local[:, 1], local[:, 2])
+    at_camera = LocalFrame(float(la_c), float(lo_c), GROUND_M + alt_agl)
+    corners = np.stack(at_camera.geodetic_to_ned(*geo), axis=1)
+    uv = _analytic_uv(cam, corners, np.zeros(3), *att)
+    r = rows[0]
+    assert r["in_view"] == 1 and r["fully_in_view"] == 1
+    got = [r["bbox_x0_px"], r["bbox_y0_px"], r["bbox_x1_px"], r["bbox_y1_px"]]
+    want = [uv[:, 0].min(), uv[:, 1].min(), uv[:, 0].max(), uv[:, 1].max()]
+    assert np.allclose(got, want, atol=0.5), (got, want)
+
+
 # --- runs through the participant, with synthetic straight and level poses -------------
 
 SCENARIO = """\
@@ -117,15 +156,21 @@ cameras:
   views:
     - {{name: belly, vehicles: u1, mount: nadir, vfov_deg: 40, width_px: {w}, height_px: {h},
        rate_hz: {rate}}}
+{more}"""
+MORE_VIEWS = """\
+    - {name: fwd, vehicles: u1, mount: forward, hfov_deg: 60, width_px: 96, height_px: 64,
+       rate_hz: 10}
+    - {name: tilt, vehicles: u1, mount: {pitch_deg: -45}, hfov_deg: 50, width_px: 96,
+       height_px: 64, rate_hz: 10}
 """
 
 
 def _fly(tmp_path: Path, name: str, *, workers: int = 0, rate: float = 30.0, dur: float = 4.0,
          w: int = 160, h: int = 120, alt_agl_m: float = 100.0, v_mps: float = 51.4,
-         codec: str = "mp4v", op: bool = False) -> tuple[dict[str, Any], Path]:
+         codec: str = "mp4v", op: bool = False, more: str = "") -> tuple[dict[str, Any], Path]:
     """Fly u1 north at v_mps and alt_agl_m, passing over the truck at mid-run."""
     text = SCENARIO.format(lat=LAT0, lon=LON0, g=GROUND_M, dur=dur, workers=workers, w=w, h=h,
-                           rate=rate, codec=codec, op=str(op).lower())
+                           rate=rate, codec=codec, op=str(op).lower(), more=more)
     scn = parse_scenario(text, str(tmp_path / f"{name}.yaml"), check_properties=False)
     out = tmp_path / name
     out.mkdir()
@@ -165,11 +210,16 @@ def test_level_pass_time_in_view_matches_the_field_of_view(tmp_path: Path) -> No
 
 
 def test_frames_identical_whatever_the_render_worker_count(tmp_path: Path) -> None:
+    # three streams (nadir, forward, a -45 deg gimbal), so 2 and 3 workers really
+    # split them (a worker count is capped at the number of streams)
     digests = []
-    for n in (0, 1, 2):
-        summary, out = _fly(tmp_path, f"w{n}", workers=n, rate=10.0, dur=1.5, op=n == 2)
-        digests.append(summary["streams"][0]["frames_sha256"])
-    assert digests[0] == digests[1] == digests[2]
+    for n in (0, 1, 2, 3):
+        summary, out = _fly(tmp_path, f"w{n}", workers=n, rate=10.0, dur=1.5, op=n == 3,
+                            more=MORE_VIEWS)
+        assert [s["camera"] for s in summary["streams"]] == ["belly", "fwd", "tilt"]
+        digests.append([s["frames_sha256"] for s in summary["streams"]])
+    assert digests[0] == digests[1] == digests[2] == digests[3]
+    assert len(set(digests[0])) == 3  # three different views
     cap = cv2.VideoCapture(str(out / "cameras/u1_belly.mp4"))
     n_read = 0
     while True:
@@ -257,7 +307,7 @@ def test_h264_without_pyav_is_a_config_error(tmp_path: Path,
     monkeypatch.setattr(importlib.util, "find_spec",
                         lambda name, *a: None if name == "av" else real(name, *a))
     text = SCENARIO.format(lat=LAT0, lon=LON0, g=GROUND_M, dur=1, workers=0, w=160, h=120,
-                           rate=10, codec="h264", op="false")
+                           rate=10, codec="h264", op="false", more="")
     f = str(tmp_path / "h264.yaml")
     with pytest.raises(ConfigError, match=r"h264.yaml:\d+: cameras.codec: h264 needs PyAV"):
         parse_scenario(text, f, check_properties=False)
