@@ -14,7 +14,7 @@ of individual tree crowns, roads, and a tileable fine-detail texture down to
 the base level (5 cm/px by default). Every feature is band-limited to the
 level it is drawn at (crop rows and noise octaves finer than two pixels are
 left out, roads and tree crowns are drawn with their pixel coverage). A tile
-costs about 3 ms to make, so tiles are also kept on disk (``ground_cache_dir``:
+costs about 1 to 2 ms to make, so tiles are also kept on disk (``ground_cache_dir``:
 one raw BGR file of 192 kB per 256 px tile, keyed by everything its pixels
 depend on; no more written once a seed's folder holds ``CACHE_MB``): the
 first run over a piece of ground pays for it, later runs and the other runs
@@ -29,7 +29,6 @@ import logging
 import math
 import os
 from collections import OrderedDict
-from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -46,7 +45,7 @@ MAX_TILES = 384  # LRU size per process (256 px BGRA tiles: ~100 MB)
 MACRO_OVERSAMPLE = 2.0  # macro features sampled at most every this many pixels, then upsampled
 #: bump whenever a tile's pixels change for the same seed and ground parameters
 #: (old cache folders are then ignored; delete ~/.cache/cosim/ground to reclaim the space)
-TEXTURE_VERSION = 4
+TEXTURE_VERSION = 5
 CACHE_ENV = "COSIM_GROUND_CACHE"  # a folder for the tile cache, or "off"
 CACHE_MB_ENV, CACHE_MB = "COSIM_GROUND_CACHE_MB", 2048  # no more tiles written past this
 
@@ -79,8 +78,6 @@ def _derive(h: np.ndarray, k: float) -> np.ndarray:
 
 def _vnoise(x: np.ndarray, y: np.ndarray, seed: int, period: int = 0) -> np.ndarray:
     """Smooth value noise in [0, 1) on the unit lattice (periodic if ``period``)."""
-    if not period and x.ndim == 2 and y.ndim == 2 and x.shape[1] == 1 and y.shape[0] == 1:
-        return _vnoise_grid(x[:, 0], y[0, :], seed)
     xi, yi = np.floor(x), np.floor(y)
     fx, fy = (x - xi).astype(np.float32), (y - yi).astype(np.float32)
     fx, fy = fx * fx * (3 - 2 * fx), fy * fy * (3 - 2 * fy)
@@ -94,149 +91,198 @@ def _vnoise(x: np.ndarray, y: np.ndarray, seed: int, period: int = 0) -> np.ndar
     return top + ((c + (d - c) * fx) - top) * fy
 
 
-def _vnoise_grid(x: np.ndarray, y: np.ndarray, seed: int) -> np.ndarray:
-    """``_vnoise`` on the grid x (R) by y (C), the same values: the lattice
-    corners it needs are hashed once each (a few) and gathered."""
-    xi, yi = np.floor(x), np.floor(y)
-    fx, fy = (x - xi).astype(np.float32), (y - yi).astype(np.float32)
-    fx, fy = (fx * fx * (3 - 2 * fx))[:, None], (fy * fy * (3 - 2 * fy))[None, :]
-    xi, yi = xi.astype(np.int64), yi.astype(np.int64)
-    x0, y0 = int(xi.min()), int(yi.min())
-    kx = np.arange(x0, int(xi.max()) + 2, dtype=np.int64)
-    ky = np.arange(y0, int(yi.max()) + 2, dtype=np.int64)
-    table = _hash(kx[:, None], ky[None, :], seed)  # (corner x, corner y)
-    ny = len(ky)
-    base = ((xi - x0) * ny)[:, None] + (yi - y0)[None, :]
-    a, b = table.take(base), table.take(base + ny)
-    c, d = table.take(base + 1), table.take(base + (ny + 1))
-    top = a + (b - a) * fx
-    out: np.ndarray = top + ((c + (d - c) * fx) - top) * fy
-    return out
-
-
-def _fbm(n: np.ndarray, e: np.ndarray, wavelength_m: float, octaves: int, step_m: float,
-         seed: int) -> np.ndarray:
-    """Fractal noise around 0 (about +-0.5), octaves finer than two samples left out."""
-    out = np.zeros(np.broadcast_shapes(n.shape, e.shape), dtype=np.float32)
-    amp, wl = 1.0, wavelength_m
-    for k in range(octaves):
-        if wl < 2 * step_m:
-            break
-        out += amp * (_vnoise(n / wl, e / wl, seed + 17 * k) - 0.5)
-        amp *= 0.5
-        wl *= 0.5
-    return out
-
-
 def _coverage(signed_dist_m: np.ndarray, step_m: float) -> np.ndarray:
     """Pixel coverage of a shape from the signed distance to its edge (inside > 0)."""
     out: np.ndarray = np.clip(signed_dist_m / max(step_m, 1e-6) + 0.5, 0.0, 1.0)
     return out.astype(np.float32)
 
 
-def _smooth(n: np.ndarray, e: np.ndarray, spacing_m: float,
-            field: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> np.ndarray:
-    """``field`` (a smooth function of north, east) at the grid ``n`` (R x 1) x
-    ``e`` (1 x C), evaluated on the global lattice of ``spacing_m`` that covers
-    the grid and interpolated bilinearly (exact at lattice points; a pure
-    function of position, so neighbouring tiles agree)."""
-    nv, ev = n[:, 0], e[0, :]
-    if len(nv) * len(ev) <= 64 or (len(nv) > 1 and abs(nv[1] - nv[0]) >= spacing_m):
-        return field(n, e)
-    kn0, kn1 = math.floor(nv.min() / spacing_m), math.floor(nv.max() / spacing_m) + 1
-    ke0, ke1 = math.floor(ev.min() / spacing_m), math.floor(ev.max() / spacing_m) + 1
-    gn = np.arange(kn0, kn1 + 1, dtype=np.float64) * spacing_m
-    ge = np.arange(ke0, ke1 + 1, dtype=np.float64) * spacing_m
-    coarse = field(gn[:, None], ge[None, :])
-    fn = nv / spacing_m - kn0
-    i = np.minimum(np.floor(fn).astype(np.int64), len(gn) - 2)
-    wn = (fn - i).astype(np.float32)[:, None]
-    rows = coarse[i] + (coarse[i + 1] - coarse[i]) * wn  # (R, lattice columns): small
-    fe = ev / spacing_m - ke0
-    j = np.minimum(np.floor(fe).astype(np.int64), len(ge) - 2)
-    we = (fe - j).astype(np.float32)[None, :]
-    left = rows.take(j, axis=1)
-    out: np.ndarray = left + (rows.take(j + 1, axis=1) - left) * we
+def _noise_weights(x: np.ndarray, wavelengths_m: list[float]) -> list[tuple[int, np.ndarray]]:
+    """Value noise of each wavelength along one axis: ``(k0, W)``, the smoothstep
+    weights ``W`` (len(x) x K, float32, two non-zero per row summing to 1) of the
+    lattice corners ``k0 .. k0 + K - 1`` at the positions ``x`` (metres); all
+    wavelengths at once (one weight matrix, sliced)."""
+    u = x[None, :] / np.asarray(wavelengths_m, np.float64)[:, None]
+    k = np.floor(u)
+    f = (u - k).astype(np.float32)
+    s = f * f * (3 - 2 * f)
+    ki = k.astype(np.int64)
+    k0 = ki.min(axis=1)
+    width = ki.max(axis=1) - k0 + 2
+    start = np.concatenate(([0], np.cumsum(width)[:-1]))
+    w = np.zeros((len(x), int(width.sum())), np.float32)
+    col = ki - (k0 - start)[:, None]
+    r = np.arange(len(x))[None, :]
+    w[r, col] = 1 - s
+    w[r, col + 1] = s
+    return [(int(a), w[:, b:b + c]) for a, b, c in zip(k0, start, width)]
+
+
+def _product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a @ b`` (float32) in row blocks small enough that OpenBLAS keeps each on
+    the calling thread (it spreads a product of more than 2**18 multiply-adds over
+    its thread pool, whose idle threads then spin: more CPU for these sizes)."""
+    rows = max(1, (1 << 17) // max(1, b.shape[0] * b.shape[1]))
+    if a.shape[0] <= rows:
+        out: np.ndarray = a @ b
+        return out
+    out = np.empty((a.shape[0], b.shape[1]), np.float32)
+    for r in range(0, a.shape[0], rows):
+        np.matmul(a[r:r + rows], b, out=out[r:r + rows])
     return out
 
 
-class _CellTable:
-    """Per-cell values looked up at every sample: the cells of ``floor(a / size)``
-    (a float array of any shape) are numbered from its smallest one, so a value
-    computed once per cell (a few dozen) is gathered instead of evaluated per
-    sample (thousands)."""
-
-    def __init__(self, k: np.ndarray) -> None:
-        self.k0 = float(k.min())
-        self.keys = np.arange(self.k0, float(k.max()) + 1.0)  # the cells, as floats
-        self.idx = (k - self.k0).astype(np.intp)
+def _noise_on_grid(wn: tuple[int, np.ndarray], we: tuple[int, np.ndarray], seed: int,
+                   scale: float = 1.0, offset: float = 0.0) -> np.ndarray:
+    """``scale * (value noise + offset)`` at a grid (R, C) from its weights along
+    north ``wn`` and east ``we`` (``_noise_weights``): the same smoothstep
+    interpolation of hashed lattice values as ``_vnoise``, as two small matrix
+    products (a pure function of position: neighbouring tiles agree)."""
+    h = _hash(np.arange(wn[0], wn[0] + wn[1].shape[1])[:, None],
+              np.arange(we[0], we[0] + we[1].shape[1])[None, :], seed)
+    if offset or scale != 1.0:
+        h = ((h + np.float32(offset)) * np.float32(scale)).astype(np.float32)
+    return _product(wn[1] @ h, we[1].T)
 
 
 def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int) -> np.ndarray:
-    """The procedural ground's colour (float32 RGB 0..255, shape (R, C, 3)) at
-    the scenario-frame grid ``n`` (R x 1) x ``e`` (1 x C), drawn for a sample
-    spacing of ``step_m``. Low-frequency fields (field-grid warp, woods, the
-    brightness noise) are evaluated on coarser lattices and interpolated; what
-    depends only on a field or a tree cell is computed once per cell and
-    gathered."""
-    n = n.astype(np.float64)
-    e = e.astype(np.float64)
-    wn = n + _smooth(n, e, 8.0, lambda a, b: 30.0 * (_vnoise(a / 230.0, b / 230.0, seed + 1)
-                                                    - 0.5))
-    we = e + _smooth(n, e, 8.0, lambda a, b: 30.0 * (_vnoise(a / 230.0, b / 230.0, seed + 2)
-                                                    - 0.5))
+    """The procedural ground's colour as float32 planes (3, R, C), RGB about 0..255
+    (not clipped), at the scenario-frame grid ``n`` (R x 1) x ``e`` (1 x C), drawn
+    for a sample spacing of ``step_m``. Smooth fields (field-grid warp, woods,
+    brightness) are value noise evaluated as small matrix products; what depends
+    only on a field, a grid line or a tree cell is computed once per cell and
+    gathered; trees are drawn only where some may stand."""
+    nv, ev = n.ravel().astype(np.float64), e.ravel().astype(np.float64)
+    R, C = len(nv), len(ev)
+    f32 = np.float32
     fn, fe = 160.0, 220.0  # field size
-    # fields: one row of the table per (ci, cj) cell of the warped field grid
-    ti, tj = _CellTable(np.floor(wn / fn)), _CellTable(np.floor(we / fe))
-    cell = ti.idx * len(tj.keys) + tj.idx
-    hf = _hash(ti.keys[:, None], tj.keys[None, :], seed + 3).ravel()
+    warp = 15.0  # the field grid's warp, at most this many metres
+    # value noise weights: field-grid warp, woods, brightness octaves (finer than
+    # two samples left out)
+    octaves = [wl for wl in (60.0, 30.0, 15.0, 7.5) if wl >= 2 * step_m]
+    wts_n = _noise_weights(nv, [230.0, 500.0] + octaves)
+    wts_e = _noise_weights(ev, [230.0, 500.0] + octaves)
+    # warped coordinates in field units: u = (north + warp) / fn, v = (east + warp) / fe
+    u = _noise_on_grid(wts_n[0], wts_e[0], seed + 1, 2 * warp / fn, -0.5)
+    u += (nv / fn).astype(np.float32)[:, None]
+    v = _noise_on_grid(wts_n[0], wts_e[0], seed + 2, 2 * warp / fe, -0.5)
+    v += (ev / fe).astype(np.float32)[None, :]
+    # fields: one entry of the tables per (ci, cj) cell of the warped field grid
+    ci0 = math.floor((nv.min() - warp) / fn) - 1
+    ci1 = math.floor((nv.max() + warp) / fn) + 1
+    cj0 = math.floor((ev.min() - warp) / fe) - 1
+    cj1 = math.floor((ev.max() + warp) / fe) + 1
+    ki = np.arange(ci0, ci1 + 1, dtype=np.float64)
+    kj = np.arange(cj0, cj1 + 1, dtype=np.float64)
+    nj = len(kj)
+    fu, fv = np.floor(u), np.floor(v)
+    cell = (fu.astype(np.intp) - ci0) * nj
+    cell += fv.astype(np.intp) - cj0
+    hf = _hash(ki[:, None], kj[None, :], seed + 3).ravel()
     kind = np.minimum((hf * len(_FIELDS)).astype(np.int64), len(_FIELDS) - 1)
-    colour = _FIELDS[kind] * (0.88 + 0.24 * _derive(hf, 613.37))[..., None]
-    # colours are planar (3, R, C) until the end: numpy broadcasts an (R, C) factor
-    # over a leading axis of 3 several times faster than over a trailing one
-    rgb = colour.T.take(cell, axis=1)
+    colour = (_FIELDS[kind] * (0.88 + 0.24 * _derive(hf, 613.37))[..., None]).T.copy()
     # crop rows: 2.5-4 m apart, along or across the field, only where resolvable
     period = 2.5 + 1.5 * _derive(hf, 2713.91)
     along = _derive(hf, 97.13) < 0.5
     fade = np.clip((period / step_m - 4.0) / 4.0, 0.0, 1.0).astype(np.float32)
-    amp = 0.10 * fade * (kind != 1)  # pasture has none
-    phase = np.where(along.take(cell), wn, we) / period.take(cell)
-    phase -= np.floor(phase)  # sin in float32 of the phase in [0, 1): 6x faster than float64
-    factor = 1.0 + amp.take(cell) * np.sin(np.float32(2 * np.pi) * phase.astype(np.float32))
+    amp = (0.10 * fade * (kind != 1)).astype(np.float32)  # pasture has none
+    if amp.any():
+        cu = np.where(along, fn / period, 0.0).astype(np.float32)  # cycles per field unit
+        cv = np.where(along, 0.0, fe / period).astype(np.float32)
+        phase = u * cu.take(cell)
+        phase += v * cv.take(cell)
+        phase -= np.floor(phase)  # sin in float32 of the phase in [0, 1)
+        phase *= f32(2 * np.pi)
+        factor = np.sin(phase, out=phase)
+        factor *= amp.take(cell)
+        factor += f32(1.0)
+    else:
+        factor = np.ones((R, C), np.float32)
     # brightness variation within fields (soil moisture, growth)
-    factor *= 1.0 + 0.35 * _smooth(n, e, 2.0, lambda a, b: _fbm(a, b, 60.0, 4, step_m,
-                                                                seed + 7))
-    rgb *= factor
-    # roads along some warped grid lines
-    rn, re_ = _CellTable(np.round(wn / fn)), _CellTable(np.round(we / fe))
-    dn = wn - fn * rn.keys.take(rn.idx)
-    de = we - fe * re_.keys.take(re_.idx)
-    road_n = (_hash(rn.keys, np.zeros_like(rn.keys), seed + 8) < 0.3).take(rn.idx)
-    road_e = (_hash(np.zeros_like(re_.keys), re_.keys, seed + 9) < 0.3).take(re_.idx)
-    road = np.maximum(_coverage(3.0 - np.abs(dn), step_m) * road_n,
-                      _coverage(3.0 - np.abs(de), step_m) * road_e)
+    if octaves:
+        left = []
+        for k in range(len(octaves)):
+            (on, w_n), (oe, w_e) = wts_n[2 + k], wts_e[2 + k]
+            h = _hash(np.arange(on, on + w_n.shape[1])[:, None],
+                      np.arange(oe, oe + w_e.shape[1])[None, :], seed + 7 + 17 * k)
+            left.append(w_n @ ((h - f32(0.5)) * f32(0.35 * 0.5**k)))
+        bright = _product(np.hstack(left), np.hstack([w for _, w in wts_e[2:]]).T)
+        bright += f32(1.0)
+    else:
+        bright = np.ones((R, C), np.float32)
+    factor *= bright
+    # distances to the nearest grid lines (roads, hedgerows), in metres
+    du = u - fu
+    dv = v - fv
+    near_u = du > 0.5  # the nearest line is the next one
+    near_v = dv > 0.5
+    np.abs(du - near_u, out=du)
+    du *= f32(fn)
+    np.abs(dv - near_v, out=dv)
+    dv *= f32(fe)
+    # roads along some warped grid lines (a road's half width, or none)
+    road_n = np.where(_hash(ki, np.zeros_like(ki), seed + 8) < 0.3, 3.0, -1e3).astype(np.float32)
+    road_e = np.where(_hash(np.zeros_like(kj), kj, seed + 9) < 0.3, 3.0, -1e3).astype(np.float32)
+    road: np.ndarray | None = None
+    for d, li, half in ((du, fu.astype(np.intp) - ci0 + near_u, road_n),
+                        (dv, fv.astype(np.intp) - cj0 + near_v, road_e)):
+        if half.max() < 0:
+            continue
+        line = half.take(li)
+        line -= d
+        line *= f32(1.0 / max(step_m, 1e-6))
+        line += f32(0.5)
+        np.clip(line, 0.0, 1.0, out=line)
+        road = line if road is None else np.maximum(road, line, out=road)
     # trees: woods where low-frequency noise is high, hedgerows on field edges
-    woods = _smooth(n, e, 8.0, lambda a, b: _vnoise(a / 500.0, b / 500.0, seed + 10)) > 0.76
-    edge = np.minimum(np.abs(dn), np.abs(de))
+    woods = _noise_on_grid(wts_n[1], wts_e[1], seed + 10) > 0.76
+    edge = np.minimum(du, dv)
     hedge = (edge > 4.0) & (edge < 9.0) & (_derive(hf, 31.77) < 0.5).take(cell)
     size = 7.0  # one tree at most per 7 m cell, at a random place in its middle half
-    cn, ce = _CellTable(np.floor(n / size)), _CellTable(np.floor(e / size))
-    kn, ke = cn.keys[:, None], ce.keys[None, :]
-    ht = _hash(kn, ke, seed + 12)
-    tc = cn.idx * len(ce.keys) + ce.idx  # (R, 1) and (1, C) -> the (R, C) tree cell
-    tn = ((kn + 0.25 + 0.5 * ht) * size).take(tc)
-    te = ((ke + 0.25 + 0.5 * _derive(ht, 577.31)) * size).take(tc)
-    radius = (1.6 + 1.2 * _derive(ht, 1291.7)).take(tc)
-    present = ((woods & (_derive(ht, 43.9) < 0.9).take(tc))
-               | (hedge & (_derive(ht, 71.3) < 0.7).take(tc)))
-    dtn, dte = n - tn, e - te
-    tree = _coverage(radius - np.sqrt(dtn * dtn + dte * dte), step_m) * present
-    tree_rgb = (_TREE * (0.75 + 0.5 * _derive(ht, 3343.1))[..., None]).reshape(-1, 3).T.take(
-        tc, axis=1)
-    rgb += (_ROAD[:, None, None] - rgb) * road
-    rgb += (tree_rgb - rgb) * tree
-    out = np.empty(rgb.shape[1:] + (3,), np.float32)
-    np.clip(np.moveaxis(rgb, 0, -1), 0, 255, out=out)
+    cn, ce = np.floor(nv / size), np.floor(ev / size)
+    kn = np.arange(min(cn[0], cn[-1]), max(cn[0], cn[-1]) + 1.0)
+    ke = np.arange(min(ce[0], ce[-1]), max(ce[0], ce[-1]) + 1.0)
+    ht = _hash(kn[:, None], ke[None, :], seed + 12)
+    maybe = np.flatnonzero(woods | hedge)
+    tree: np.ndarray | None = None
+    if len(maybe):
+        r, c = np.divmod(maybe, C)
+        tc = ((cn - kn[0]).astype(np.intp) * len(ke)).take(r) + (ce - ke[0]).astype(np.intp).take(c)
+        present = ((woods.ravel().take(maybe) & (_derive(ht, 43.9) < 0.9).ravel().take(tc))
+                   | (hedge.ravel().take(maybe) & (_derive(ht, 71.3) < 0.7).ravel().take(tc)))
+        maybe, r, c, tc = maybe[present], r[present], c[present], tc[present]
+    if len(maybe):
+        tn = ((kn[:, None] + 0.25 + 0.5 * ht) * size).ravel().take(tc)
+        te = ((ke[None, :] + 0.25 + 0.5 * _derive(ht, 577.31)) * size).ravel().take(tc)
+        radius = (1.6 + 1.2 * _derive(ht, 1291.7)).ravel().take(tc)
+        dtn, dte = nv.take(r) - tn, ev.take(c) - te
+        cov = _coverage(radius - np.sqrt(dtn * dtn + dte * dte), step_m)
+        tree = np.zeros((R, C), np.float32)
+        tree.ravel()[maybe] = cov
+        tone = np.zeros((R, C), np.float32)
+        tone.ravel()[maybe] = cov * (0.75 + 0.5 * _derive(ht, 3343.1)).ravel().take(tc)
+    # blend: field colour x factor, then road, then tree over it
+    keep = factor
+    if road is not None:
+        keep *= 1.0 - road
+    if tree is not None:
+        keep *= 1.0 - tree
+        if road is not None:
+            road *= 1.0 - tree
+    rgb = np.empty((3, R, C), np.float32)
+    for ch in range(3):
+        p = colour[ch].take(cell, out=rgb[ch])
+        p *= keep
+        if road is not None:
+            p += _ROAD[ch] * road
+        if tree is not None:
+            p += _TREE[ch] * tone
+    return rgb
+
+
+def _bgra(rgb: np.ndarray) -> np.ndarray:
+    """Planar float32 RGB (3, R, C) -> interleaved BGRA (R, C, 4), alpha 1."""
+    out: np.ndarray = cv2.merge([rgb[2], rgb[1], rgb[0], np.ones(rgb.shape[1:], np.float32)])
     return out
 
 
@@ -436,7 +482,7 @@ class GroundTexture:
         if step <= m * 1.0001:
             n = -(rows[:, None] + 0.5) * m
             e = (cols[None, :] + 0.5) * m
-            bgra = cv2.cvtColor(macro_rgb(n, e, m, self.seed), cv2.COLOR_RGB2BGRA)
+            bgra = _bgra(macro_rgb(n, e, m, self.seed))
         else:  # sample the macro colour on a coarser global lattice, interpolate
             n0, n1 = -(rows[-1] + 0.5) * m, -(rows[0] + 0.5) * m
             e0, e1 = (cols[0] + 0.5) * m, (cols[-1] + 0.5) * m
@@ -450,7 +496,7 @@ class GroundTexture:
             k = m / step
             M = np.array([[k, 0.0, (tj * T + 0.5) * k - kb0],
                           [0.0, k, ka1 + (ti * T + 0.5) * k]])
-            bgra = cv2.warpAffine(cv2.cvtColor(coarse, cv2.COLOR_RGB2BGRA), M, (T, T),
+            bgra = cv2.warpAffine(_bgra(coarse), M, (T, T),
                                   flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                                   borderMode=cv2.BORDER_REPLICATE)
         # BGRA uint8 (alpha 255): OpenCV's bilinear warp is ~2.5x faster on four channels
