@@ -141,5 +141,15 @@ class Rig:
         self.ep.close()
 
 
+def free_udp_port() -> int:
+    """A loopback UDP port nobody holds right now (bind, read, release: another
+    process could take it before the caller binds it; fine on a test machine)."""
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
 def of_type(msgs: list[Any], kind: str, src: int | None = None) -> list[Any]:
     return [m for m in msgs if m.get_type() == kind and (src is None or m.get_srcSystem() == src)]

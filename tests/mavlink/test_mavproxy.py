@@ -13,7 +13,6 @@ from __future__ import annotations
 import json
 import os
 import re
-import socket
 import subprocess
 import sys
 import threading
@@ -30,17 +29,10 @@ pytest.importorskip("MAVProxy", reason="MAVProxy is in the test extras: pip inst
 mavutil = pytest.importorskip("pymavlink.mavutil")
 
 from cosim.logs import read_states  # noqa: E402
-from tests.mavlink.mavtest import GroundStation  # noqa: E402
+from tests.mavlink.mavtest import GroundStation, free_udp_port  # noqa: E402
 from tests.mavlink.test_mav_run import _dist_m, _start_sim, _stop_sim  # noqa: E402
 
 LOITER, GUIDED = 12, 15  # ArduPlane custom modes
-
-
-def _free_udp_port() -> int:
-    """A loopback UDP port nobody holds right now (for MAVProxy's udpin)."""
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 class MavProxy:
@@ -145,7 +137,7 @@ def _session(tmp_path: Path, duration_s: int, realtime: str, *sim_args: str
     with ExitStack() as stack:
         watch = GroundStation("udpin:127.0.0.1:0")
         stack.callback(watch.close)
-        port = _free_udp_port()
+        port = free_udp_port()
         sim, out = _start_sim(tmp_path, duration_s, realtime, port, *sim_args)
         s = Session(sim, out, watch)
         stack.callback(s.stop_sim)

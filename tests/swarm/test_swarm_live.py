@@ -7,7 +7,6 @@ from __future__ import annotations
 import csv
 import json
 import math
-import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -23,6 +22,7 @@ from cosim.logs import read_states
 from cosim.scenario import Scenario, parse_scenario
 from cosim.swarm import laws
 from cosim.sync import run_scenario
+from tests.mavlink.mavtest import free_udp_port
 
 ORIGIN = "origin: {lat_deg: 36.95, lon_deg: -116.05, ground_alt_m: 1000}\n"
 
@@ -250,14 +250,6 @@ def test_mixed_group_converges(tmp_path: Path) -> None:
     assert min(cessna) >= 29.0 and min(jet) >= 26.0
 
 
-def _free_udp_port() -> int:
-    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    s.bind(("127.0.0.1", 0))
-    port = int(s.getsockname()[1])
-    s.close()
-    return port
-
-
 def test_external_controller_gives_the_same_tracks_as_in_process(tmp_path: Path) -> None:
     p = _scenario(tmp_path, "ext", 15, EIGHT_ON_4KM, """\
   rate_hz: 2
@@ -268,7 +260,7 @@ def test_external_controller_gives_the_same_tracks_as_in_process(tmp_path: Path)
       phases: [{behaviour: rendezvous, mu: 0.7, k_s: 0.03, radius_m: 300}]
 """)
     _run(p, tmp_path / "inproc")
-    port = _free_udp_port()
+    port = free_udp_port()
     sim = subprocess.Popen(
         [sys.executable, "-m", "cosim", "run", str(p), "--out", str(tmp_path / "ext"),
          "--backend", "inline", "--no-progress", "--mavlink", f"udpin:127.0.0.1:{port}",
@@ -309,7 +301,7 @@ def test_cosim_swarm_usage_and_no_simulation(tmp_path: Path, capsys: pytest.Capt
 """)
     assert main(["swarm", str(p), "--connect", "udpin:127.0.0.1:5"]) == 2
     assert "expected udpout:HOST:PORT" in capsys.readouterr().err
-    port = _free_udp_port()  # nobody listens there
+    port = free_udp_port()  # nobody listens there
     assert main(["swarm", str(p), "--connect", f"udpout:127.0.0.1:{port}",
                  "--connect-timeout-s", "0.6"]) == 1
     assert "no answer from the simulation" in capsys.readouterr().err
