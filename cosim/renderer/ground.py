@@ -27,6 +27,7 @@ from __future__ import annotations
 import hashlib
 import logging
 import math
+import mmap
 import os
 from collections import OrderedDict
 from pathlib import Path
@@ -45,9 +46,10 @@ MAX_TILES = 384  # LRU size per process (256 px BGRA tiles: ~100 MB)
 MACRO_OVERSAMPLE = 2.0  # macro features sampled at most every this many pixels, then upsampled
 #: bump whenever a tile's pixels change for the same seed and ground parameters
 #: (old cache folders are then ignored; delete ~/.cache/cosim/ground to reclaim the space)
-TEXTURE_VERSION = 5
+TEXTURE_VERSION = 6
 CACHE_ENV = "COSIM_GROUND_CACHE"  # a folder for the tile cache, or "off"
 CACHE_MB_ENV, CACHE_MB = "COSIM_GROUND_CACHE_MB", 2048  # no more tiles written past this
+_CHUNK = 2 << 20  # new tiles are carved from 2 MB blocks of memory mapped in one call
 
 # field palette, RGB: crops, pasture, wheat, ploughed soil, dry grass, dark crop
 _FIELDS = np.array([[96, 128, 58], [118, 140, 72], [176, 160, 96], [122, 98, 72],
@@ -58,14 +60,19 @@ _ROAD = np.array([118, 116, 112], dtype=np.float32)
 
 def _hash(i: np.ndarray, j: np.ndarray, seed: int) -> np.ndarray:
     """Uniform [0, 1) from integer lattice coordinates (vectorised, stateless;
-    uint32 arithmetic wraps by design)."""
-    with np.errstate(over="ignore"):
-        h = (i.astype(np.int64).astype(np.uint32) * np.uint32(374761393)
-             + j.astype(np.int64).astype(np.uint32) * np.uint32(668265263)
-             + np.uint32((seed * 2246822519 + 0x9E3779B9) & 0xFFFFFFFF))
-        h = (h ^ (h >> np.uint32(13))) * np.uint32(1274126177)
-        h = h ^ (h >> np.uint32(16))
-    out: np.ndarray = (h >> np.uint32(8)).astype(np.float32) * np.float32(1.0 / 0x1000000)
+    uint32 arithmetic wraps by design: numpy does not check array overflow)."""
+    h = i.astype(np.int64, copy=False).astype(np.uint32)
+    h *= np.uint32(374761393)
+    hj = j.astype(np.int64, copy=False).astype(np.uint32)
+    hj *= np.uint32(668265263)
+    hj += np.uint32((seed * 2246822519 + 0x9E3779B9) & 0xFFFFFFFF)
+    h = h + hj
+    h ^= h >> np.uint32(13)
+    h *= np.uint32(1274126177)
+    h ^= h >> np.uint32(16)
+    h >>= np.uint32(8)
+    out: np.ndarray = h.astype(np.float32)
+    out *= np.float32(1.0 / 0x1000000)
     return out
 
 
@@ -97,7 +104,24 @@ def _coverage(signed_dist_m: np.ndarray, step_m: float) -> np.ndarray:
     return out.astype(np.float32)
 
 
+_WEIGHTS: OrderedDict[bytes, list[tuple[int, np.ndarray]]] = OrderedDict()
+
+
 def _noise_weights(x: np.ndarray, wavelengths_m: list[float]) -> list[tuple[int, np.ndarray]]:
+    """``_make_noise_weights``, remembered for the last few sample rows and columns
+    (tiles side by side share them; the arrays returned are not to be written)."""
+    key = x.tobytes() + np.asarray(wavelengths_m, np.float64).tobytes()
+    out = _WEIGHTS.get(key)
+    if out is None:
+        out = _WEIGHTS[key] = _make_noise_weights(x, wavelengths_m)
+        if len(_WEIGHTS) > 16:
+            _WEIGHTS.popitem(last=False)
+    else:
+        _WEIGHTS.move_to_end(key)
+    return out
+
+
+def _make_noise_weights(x: np.ndarray, wavelengths_m: list[float]) -> list[tuple[int, np.ndarray]]:
     """Value noise of each wavelength along one axis: ``(k0, W)``, the smoothstep
     weights ``W`` (len(x) x K, float32, two non-zero per row summing to 1) of the
     lattice corners ``k0 .. k0 + K - 1`` at the positions ``x`` (metres); all
@@ -176,8 +200,12 @@ def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int) -> np.ndar
     kj = np.arange(cj0, cj1 + 1, dtype=np.float64)
     nj = len(kj)
     fu, fv = np.floor(u), np.floor(v)
-    cell = (fu.astype(np.intp) - ci0) * nj
-    cell += fv.astype(np.intp) - cj0
+    iu = fu.astype(np.intp)  # field-grid row and column, from 0
+    iu -= ci0
+    iv = fv.astype(np.intp)
+    iv -= cj0
+    cell = iu * nj
+    cell += iv
     hf = _hash(ki[:, None], kj[None, :], seed + 3).ravel()
     kind = np.minimum((hf * len(_FIELDS)).astype(np.int64), len(_FIELDS) - 1)
     colour = (_FIELDS[kind] * (0.88 + 0.24 * _derive(hf, 613.37))[..., None]).T.copy()
@@ -224,11 +252,10 @@ def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int) -> np.ndar
     road_n = np.where(_hash(ki, np.zeros_like(ki), seed + 8) < 0.3, 3.0, -1e3).astype(np.float32)
     road_e = np.where(_hash(np.zeros_like(kj), kj, seed + 9) < 0.3, 3.0, -1e3).astype(np.float32)
     road: np.ndarray | None = None
-    for d, li, half in ((du, fu.astype(np.intp) - ci0 + near_u, road_n),
-                        (dv, fv.astype(np.intp) - cj0 + near_v, road_e)):
+    for d, i, near, half in ((du, iu, near_u, road_n), (dv, iv, near_v, road_e)):
         if half.max() < 0:
             continue
-        line = half.take(li)
+        line = half.take(i + near)
         line -= d
         line *= f32(1.0 / max(step_m, 1e-6))
         line += f32(0.5)
@@ -237,19 +264,21 @@ def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int) -> np.ndar
     # trees: woods where low-frequency noise is high, hedgerows on field edges
     woods = _noise_on_grid(wts_n[1], wts_e[1], seed + 10) > 0.76
     edge = np.minimum(du, dv)
-    hedge = (edge > 4.0) & (edge < 9.0) & (_derive(hf, 31.77) < 0.5).take(cell)
+    edge -= f32(6.5)  # exact here (Sterbenz): |edge - 6.5| < 2.5 is 4 < edge < 9
+    band = np.abs(edge, out=edge) < f32(2.5)  # hedgerows where the field has one
     size = 7.0  # one tree at most per 7 m cell, at a random place in its middle half
     cn, ce = np.floor(nv / size), np.floor(ev / size)
     kn = np.arange(min(cn[0], cn[-1]), max(cn[0], cn[-1]) + 1.0)
     ke = np.arange(min(ce[0], ce[-1]), max(ce[0], ce[-1]) + 1.0)
     ht = _hash(kn[:, None], ke[None, :], seed + 12)
-    maybe = np.flatnonzero(woods | hedge)
+    maybe = np.flatnonzero(woods | band)
     tree: np.ndarray | None = None
     if len(maybe):
         r, c = np.divmod(maybe, C)
         tc = ((cn - kn[0]).astype(np.intp) * len(ke)).take(r) + (ce - ke[0]).astype(np.intp).take(c)
+        hedge = band.ravel().take(maybe) & (_derive(hf, 31.77) < 0.5).take(cell.ravel().take(maybe))
         present = ((woods.ravel().take(maybe) & (_derive(ht, 43.9) < 0.9).ravel().take(tc))
-                   | (hedge.ravel().take(maybe) & (_derive(ht, 71.3) < 0.7).ravel().take(tc)))
+                   | (hedge & (_derive(ht, 71.3) < 0.7).ravel().take(tc)))
         maybe, r, c, tc = maybe[present], r[present], c[present], tc[present]
     if len(maybe):
         tn = ((kn[:, None] + 0.25 + 0.5 * ht) * size).ravel().take(tc)
@@ -280,10 +309,15 @@ def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int) -> np.ndar
     return rgb
 
 
-def _bgra(rgb: np.ndarray) -> np.ndarray:
-    """Planar float32 RGB (3, R, C) -> interleaved BGRA (R, C, 4), alpha 1."""
-    out: np.ndarray = cv2.merge([rgb[2], rgb[1], rgb[0], np.ones(rgb.shape[1:], np.float32)])
-    return out
+def _bgra(rgb: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """Planar float32 RGB (3, R, C) -> interleaved BGRA (R, C, 4), alpha 1 (into
+    ``out`` if given and of that shape)."""
+    ones = np.ones(rgb.shape[1:], np.float32)
+    if out is not None and out.shape == (*rgb.shape[1:], 4):
+        res: np.ndarray = cv2.merge([rgb[2], rgb[1], rgb[0], ones], dst=out)
+    else:
+        res = cv2.merge([rgb[2], rgb[1], rgb[0], ones])
+    return res
 
 
 def _detail_pyramid(seed: int) -> list[np.ndarray]:
@@ -301,6 +335,22 @@ def _detail_pyramid(seed: int) -> list[np.ndarray]:
         a = levels[-1]
         levels.append(0.25 * (a[0::2, 0::2] + a[1::2, 0::2] + a[0::2, 1::2] + a[1::2, 1::2]))
     return [lv.astype(np.float32) for lv in levels]
+
+
+def _resize_plan(k: float, p0: int, T: int) -> tuple[int, int, int] | None:
+    """How a bilinear resize by ``1 / k`` of lattice samples makes the pixels
+    ``p0 .. p0 + T - 1`` along one axis (``k`` = lattice points per pixel, lattice
+    point ``K`` at ``(K + 1/2) / k`` pixels): ``(x0, K0, n)``: resize the ``n``
+    points from ``K0`` on and the pixels are the resize's ``x0 .. x0 + T - 1``
+    (OpenCV maps output ``x`` to input ``k (x + 1/2) - 1/2``: ``K0 = k (p0 - x0)``
+    must be whole, and ``x0`` large enough that no pixel needs a point before
+    ``K0``). None if ``k`` is no fraction with a small denominator."""
+    lo = max(0, math.ceil(0.5 / k - 0.5 - 1e-9))
+    for x0 in range(lo, lo + 64):
+        k0 = k * (p0 - x0)
+        if abs(k0 - round(k0)) < 1e-6:
+            return x0, round(k0), math.floor(k * (x0 + T - 0.5) - 0.5) + 2
+    return None
 
 
 def ground_cache_dir(spec: GroundSpec, seed: int) -> Path | None:
@@ -378,13 +428,43 @@ class GroundTexture:
         self.tiles_made = 0
         self.tiles_loaded = 0
         self._slabs: dict[tuple[int, int, int], np.ndarray] = {}
-        self._read_buf = np.empty((self.tile_px, self.tile_px, 3), np.uint8)
+        T = self.tile_px
+        self._read_buf = np.empty((T, T, 3), np.uint8)  # also the BGR of a tile written
+        # reused float buffers of a tile being made (no fresh ~1 MB temporaries, whose
+        # pages the kernel would fault in again for every tile)
+        self._warp_buf = np.empty((T, T, 4), np.float32)
+        self._coarse_buf = np.empty((0, 0, 4), np.float32)
+        self._big_bufs: dict[int, np.ndarray] = {}  # resized lattice, by level
         self._cache_dir = ground_cache_dir(spec, self.seed)
         self._cache_room = 0  # bytes this process may still add to the cache
+        self._dirs_made: set[Path] = set()
         if self._cache_dir is not None:
             mb = float(os.environ.get(CACHE_MB_ENV) or CACHE_MB)
             self._cache_room = int(mb * 2**20) - _folder_bytes(self._cache_dir)
         self._patches: dict[int, tuple[tuple[int, int, int, int], np.ndarray]] = {}
+        self._chunk = np.empty((0, T, T, 4), np.uint8)  # fresh tile memory (_new_tile)
+        self._chunk_used = 0
+
+    def _new_tile(self) -> np.ndarray:
+        """Memory for one tile (T x T x 4 uint8, contents undefined): the next slot of
+        a 2 MB anonymous mapping whose pages are made present in one call
+        (MAP_POPULATE where there is one) rather than by 64 page faults per tile as
+        it is first written (~3 us each on the benchmark's VM: about 0.1 ms a tile);
+        the mapping is released with the last of its tiles (views keep it alive)."""
+        if self._chunk_used == len(self._chunk):
+            T = self.tile_px
+            per = max(1, _CHUNK // (T * T * 4))
+            flags = mmap.MAP_PRIVATE | getattr(mmap, "MAP_ANONYMOUS", 0) | \
+                getattr(mmap, "MAP_POPULATE", 0)
+            try:
+                raw = np.frombuffer(mmap.mmap(-1, per * T * T * 4, flags=flags), np.uint8)
+            except (OSError, TypeError, ValueError):  # no such mapping here
+                raw = np.empty(per * T * T * 4, np.uint8)
+            self._chunk = raw.reshape(per, T, T, 4)
+            self._chunk_used = 0
+        out: np.ndarray = self._chunk[self._chunk_used]
+        self._chunk_used += 1
+        return out
 
     def mpp(self, level: int) -> float:
         return float(self.base_mpp * 2 ** level)
@@ -420,7 +500,8 @@ class GroundTexture:
                     bgr = self._read_buf  # reused: the tile itself is a new BGRA array
                     if f.readinto(bgr.data.cast("B")) == bgr.nbytes and not f.read(1):
                         self.tiles_loaded += 1
-                        out: np.ndarray = cv2.cvtColor(bgr, cv2.COLOR_BGR2BGRA)
+                        out: np.ndarray = cv2.cvtColor(bgr, cv2.COLOR_BGR2BGRA,
+                                                       dst=self._new_tile())
                         return out
                 os.unlink(path)  # cut short (a crash, or being written): make it anew
             except OSError:
@@ -428,7 +509,7 @@ class GroundTexture:
         bgra = self._generate_tile(level, ti, tj)
         self.tiles_made += 1
         if path is not None and self._cache_room > 0:
-            self._store(path, cv2.cvtColor(bgra, cv2.COLOR_BGRA2BGR))
+            self._store(path, cv2.cvtColor(bgra, cv2.COLOR_BGRA2BGR, dst=self._read_buf))
         return bgra
 
     def _store(self, path: Path, bgr: np.ndarray) -> None:
@@ -436,11 +517,16 @@ class GroundTexture:
         render workers and sweep runs race for it) in one call; a reader takes
         only a file of the full size. A cache that cannot be written is skipped."""
         try:
-            path.parent.mkdir(parents=True, exist_ok=True)
+            if path.parent not in self._dirs_made:  # a mkdir call costs as much as 0.04 ms
+                path.parent.mkdir(parents=True, exist_ok=True)
+                self._dirs_made.add(path.parent)
             fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
         except FileExistsError:
             return
         except OSError as e:
+            if isinstance(e, FileNotFoundError) and path.parent in self._dirs_made:
+                self._dirs_made.discard(path.parent)  # removed meanwhile: made anew next time
+                return
             log.debug("ground tile cache: cannot write %s: %s", path, e)
             self._cache_room = 0
             return
@@ -482,8 +568,23 @@ class GroundTexture:
         if step <= m * 1.0001:
             n = -(rows[:, None] + 0.5) * m
             e = (cols[None, :] + 0.5) * m
-            bgra = _bgra(macro_rgb(n, e, m, self.seed))
-        else:  # sample the macro colour on a coarser global lattice, interpolate
+            bgra = _bgra(macro_rgb(n, e, m, self.seed), self._warp_buf)
+        elif (pr := _resize_plan(m / step, ti * T, T)) and \
+                (pc := _resize_plan(m / step, tj * T, T)):
+            # the macro colour on the coarser global lattice of points at (K + 1/2) step
+            # south and east, scaled up by OpenCV's bilinear resize (4x cheaper than
+            # the equivalent warpAffine), of which the tile is a crop
+            (y0, ka, na), (x0, kb, nb) = pr, pc
+            gn = -(np.arange(ka, ka + na, dtype=np.float64) + 0.5) * step
+            ge = (np.arange(kb, kb + nb, dtype=np.float64) + 0.5) * step
+            coarse = macro_rgb(gn[:, None], ge[None, :], step, self.seed)
+            if self._coarse_buf.shape[:2] != coarse.shape[1:]:
+                self._coarse_buf = np.empty((*coarse.shape[1:], 4), np.float32)
+            big = cv2.resize(_bgra(coarse, self._coarse_buf), None, fx=step / m, fy=step / m,
+                             dst=self._big_bufs.get(level), interpolation=cv2.INTER_LINEAR)
+            self._big_bufs[level] = big  # the next tile's if of the same size (most are)
+            bgra = big[y0:y0 + T, x0:x0 + T]
+        else:  # sample the macro colour on a coarser global lattice, warp
             n0, n1 = -(rows[-1] + 0.5) * m, -(rows[0] + 0.5) * m
             e0, e1 = (cols[0] + 0.5) * m, (cols[-1] + 0.5) * m
             ka0, ka1 = math.floor(n0 / step), math.ceil(n1 / step)
@@ -491,20 +592,23 @@ class GroundTexture:
             gn = np.arange(ka1, ka0 - 1, -1, dtype=np.float64) * step  # north descending
             ge = np.arange(kb0, kb1 + 1, dtype=np.float64) * step
             coarse = macro_rgb(gn[:, None], ge[None, :], step, self.seed)
+            if self._coarse_buf.shape[:2] != coarse.shape[1:]:
+                self._coarse_buf = np.empty((*coarse.shape[1:], 4), np.float32)
             # lattice position of tile pixel (r, c): an axis-aligned affine map; four
             # float channels warp 2.7x faster than three
             k = m / step
             M = np.array([[k, 0.0, (tj * T + 0.5) * k - kb0],
                           [0.0, k, ka1 + (ti * T + 0.5) * k]])
-            bgra = cv2.warpAffine(_bgra(coarse), M, (T, T),
+            bgra = cv2.warpAffine(_bgra(coarse, self._coarse_buf), M, (T, T),
+                                  dst=self._warp_buf,
                                   flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                                   borderMode=cv2.BORDER_REPLICATE)
         # BGRA uint8 (alpha 255): OpenCV's bilinear warp is ~2.5x faster on four channels
         if level < len(self.detail) - 1:
             out: np.ndarray = cv2.multiply(bgra, self._detail_slab(level, ti * T, tj * T),
-                                           dtype=cv2.CV_8U)  # rounded, saturated
+                                           dst=self._new_tile(), dtype=cv2.CV_8U)  # rounded
         else:
-            out = cv2.convertScaleAbs(bgra)
+            out = cv2.convertScaleAbs(bgra, dst=self._new_tile())
             out[..., 3] = 255
         return out
 
