@@ -8,6 +8,7 @@ Only this module configures logging handlers.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import logging
 import os
 import signal
@@ -214,7 +215,6 @@ def _load_scenario(path: str) -> Scenario:
 
 
 def _cmd_run(a: argparse.Namespace) -> int:
-    from cosim.logs import clear_outputs
     from cosim.sync import Run
 
     if a.workers is not None and a.workers < 1:
@@ -228,8 +228,7 @@ def _cmd_run(a: argparse.Namespace) -> int:
     if (out / "summary.json").exists() or (out / "events.jsonl").exists():
         if not a.overwrite:
             raise ConfigError(f"{out} already holds a run; choose another --out or pass "
-                              f"--overwrite")
-        clear_outputs(out)  # Run does it too: a run never mixes with an old one's files
+                              f"--overwrite")  # Run clears it: never mixed with the new one
     progress = None if a.no_progress else Progress(sys.stderr, scn.rates.physics_hz)
     mav_cfg = None
     if a.mavlink:  # overrides the scenario's URL, keeps its stream rates
@@ -237,27 +236,22 @@ def _cmd_run(a: argparse.Namespace) -> int:
         from cosim.mavlink.link import LinkUrl
 
         LinkUrl.parse(a.mavlink)  # a bad URL is a usage error before anything is built
-        rates = dict(scn.mavlink["rates_hz"]) if scn.mavlink else {}
-        mav_cfg = MavlinkConfig(url=a.mavlink, rates_hz=rates)
+        mav_cfg = dataclasses.replace(MavlinkConfig.of_scenario(scn.mavlink) or MavlinkConfig(),
+                                      url=a.mavlink)
     signing = a.mavlink_signing_key_file or a.mavlink_signing_key_env
     if signing:
-        import dataclasses
-
         from cosim.mavlink import MavlinkConfig, load_signing_key
 
         if mav_cfg is None and scn.mavlink is None:
             raise ConfigError("--mavlink-signing-key-* needs MAVLink: pass --mavlink or give "
                               "the scenario a mavlink: section")
-        if mav_cfg is None:
-            assert scn.mavlink is not None
-            mav_cfg = MavlinkConfig(url=scn.mavlink["url"], rates_hz=dict(scn.mavlink["rates_hz"]))
+        mav_cfg = mav_cfg or MavlinkConfig.of_scenario(scn.mavlink)
+        assert mav_cfg is not None
         mav_cfg = dataclasses.replace(mav_cfg, signing_key_file=a.mavlink_signing_key_file,
                                       signing_key_env=a.mavlink_signing_key_env,
                                       signing_link_id=a.mavlink_signing_link_id)
         load_signing_key(mav_cfg)  # a missing or bad key is a usage error before the build
     if a.external_controller:
-        import dataclasses
-
         from cosim.mavlink import CONTROLLER_SYSID
         from cosim.sync.participants import needs_mavlink
 

@@ -77,7 +77,6 @@ class StateLog:
         self._journal_file: Any = None
         self._parts = 0
         self._last_flush = time.monotonic()
-        self.rows_written = 0  # rows in parts
         self.rows_logged = 0  # rows appended (in parts or journalled)
         self.last_tick: int | None = None
         self._cols = [STATE_INDEX[c] for c in _FROM_STATE]
@@ -148,7 +147,6 @@ class StateLog:
         self._close_journal()
         self._journal_path(self._parts).unlink(missing_ok=True)
         self._parts += 1
-        self.rows_written += table.num_rows
         self._batches = []
         self._last_flush = time.monotonic()
 

@@ -80,7 +80,7 @@ from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -90,7 +90,7 @@ from cosim.guidance.commands import Command
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.batch import BatchEncoder
 from cosim.mavlink.errors import EndpointClosed, LockstepTimeout
-from cosim.mavlink.handlers import Handler, Outcome
+from cosim.mavlink.handlers import Handler, Outcome, command_ack
 from cosim.mavlink.link import DEFAULT_URL, NullLink, UdpLink
 from cosim.mavlink.tlog import STAMP_LEN as TLOG_STAMP_LEN
 from cosim.mavlink.tlog import TlogWriter
@@ -170,6 +170,13 @@ class MavlinkConfig:
     #: lockstep with an outside controller of this system id (see ``MavlinkEndpoint``)
     lockstep_sysid: int | None = None
     lockstep_timeout_s: float = 30.0
+
+    @classmethod
+    def of_scenario(cls, section: Mapping[str, Any] | None) -> MavlinkConfig | None:
+        """The config a scenario's ``mavlink:`` section asks for (None: no section)."""
+        if section is None:
+            return None
+        return cls(url=section["url"], rates_hz=dict(section["rates_hz"]))
 
     @property
     def signing(self) -> bool:
@@ -294,6 +301,8 @@ class MavlinkEndpoint:
         self._injected: list[mav.Message] = []
         self._last_tick: int | None = None
         self._rows = np.array([v.row for v in self.vehicles], dtype=np.intp)
+        self._rows_needed = int(self._rows.max(initial=-1)) + 1  # state rows receive() reads
+        self._zero_rates = np.zeros((len(self.vehicles), 3))
         self._prev_att: np.ndarray | None = None
         self._bank = np.full(len(self.vehicles), np.nan)  # ROLL_LIMIT_DEG as last synced
         self._autopilot = np.array([v.spec.has_autopilot for v in self.vehicles], dtype=bool)
@@ -393,7 +402,7 @@ class MavlinkEndpoint:
         if self._last_tick is not None and tick < self._last_tick:
             raise ValueError(f"mavlink receive: tick {tick} is before the previous "
                              f"exchange's tick {self._last_tick}")
-        rows = int(self._rows.max(initial=-1)) + 1
+        rows = self._rows_needed
         if states.ndim != 2 or states.shape[0] < rows or states.shape[1] < N_STATE:
             raise ValueError(f"mavlink receive: states must be (n >= {rows}, {N_STATE}), "
                              f"got {states.shape}")
@@ -412,7 +421,7 @@ class MavlinkEndpoint:
             for j in np.flatnonzero(changed).tolist():
                 v = self.vehicles[j]
                 before = v.params["ROLL_LIMIT_DEG"]
-                v.sync_roll_limit()
+                v.params.force("ROLL_LIMIT_DEG", float(bank[j]))
                 if v.params["ROLL_LIMIT_DEG"] != before:  # announced, as ArduPilot does
                     self._send(v, *self.handler.param_value(v, "ROLL_LIMIT_DEG"), tick)
             self._bank = np.where(changed, bank, self._bank)
@@ -467,7 +476,7 @@ class MavlinkEndpoint:
     def _last_rates(self) -> np.ndarray:
         """Body rates at the latest exchange (zeros before the second)."""
         r = self.frame.rates
-        return np.zeros((len(self.vehicles), 3)) if r is None else r
+        return self._zero_rates if r is None else r
 
     def _period_changed(self, v: MavVehicle, name: str) -> None:
         k, j = STREAMABLE.index(name), v.index
@@ -511,8 +520,9 @@ class MavlinkEndpoint:
             if build is not None:
                 rows = self.frame.rows
                 assert rows is not None
-                cols = build(rows[idx], self._last_rates[idx], self._home_alt[idx], self.clock,
-                             tick)
+                # only ATTITUDE reads the body rates: the others need not compute them
+                pqr = self._last_rates if name == "ATTITUDE" else self._zero_rates
+                cols = build(rows[idx], pqr[idx], self._home_alt[idx], self.clock, tick)
             else:
                 dicts = [v.fields(name, tick) for v in vs]
                 cols = {f: [d[f] for d in dicts] for f in dicts[0]}
@@ -574,10 +584,14 @@ class MavlinkEndpoint:
             msgs = [a for a in (self._authenticate(m) for m in msgs) if a is not None]
         return msgs
 
+    def _poll(self) -> list[tuple[list[mav.Message], tuple[str, int]]]:
+        """The datagrams waiting now, decoded (and authenticated), with their senders."""
+        return [(self._decode(data), addr) for data, addr in self.link.poll()]
+
     def _receive(self, tick: int) -> list[tuple[list[mav.Message], tuple[str, int]]]:
         """The datagrams waiting, decoded; in lockstep, first wait for the
         controller (see the module docstring)."""
-        got = [(self._decode(data), addr) for data, addr in self.link.poll()]
+        got = self._poll()
         sysid = self.config.lockstep_sysid
         if sysid is None:
             return got
@@ -607,7 +621,7 @@ class MavlinkEndpoint:
                     f"within {self.config.lockstep_timeout_s:g} s at tick {tick}; is it "
                     f"running and talking to {self.link.url}?")
             if self.link.wait_readable(min(left, 0.5)):
-                batch = [(self._decode(data), addr) for data, addr in self.link.poll()]
+                batch = self._poll()
                 got.extend(batch)
                 done = answered(batch)
         self._lockstep_pending = None
@@ -687,9 +701,8 @@ class MavlinkEndpoint:
                 self.counts["handler_errors"] += 1
                 out = Outcome()
                 if m.name in ("COMMAND_LONG", "COMMAND_INT"):
-                    out.replies.append(("COMMAND_ACK", {
-                        "command": int(m.fields["command"]), "result": mav.MAV_RESULT_FAILED,
-                        "target_system": m.src_system, "target_component": m.src_component}))
+                    out.replies.append(command_ack(m, int(m.fields["command"]),
+                                                   mav.MAV_RESULT_FAILED))
             for name, fields in out.replies:
                 self._send(v, name, fields, tick)
             if out.commands:

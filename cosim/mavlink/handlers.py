@@ -139,7 +139,8 @@ def _int(x: float) -> int | None:
     return int(round(x)) if math.isfinite(x) else None
 
 
-def _ack(m: mav.Message, command: int, result: int) -> Reply:
+def command_ack(m: mav.Message, command: int, result: int) -> Reply:
+    """The COMMAND_ACK answering ``m``."""
     return ("COMMAND_ACK", {"command": command, "result": result, "progress": 0,
                             "result_param2": 0, "target_system": m.src_system,
                             "target_component": m.src_component})
@@ -197,10 +198,9 @@ class Handler:
         return fn(v, m, tick)
 
     # -- helpers -----------------------------------------------------------
-    def _row(self, v: MavVehicle) -> Any:
-        if v.row_values is None:
-            raise RuntimeError(f"vehicle {v.spec.name!r}: no state observed yet")
-        return v.row_values
+    @staticmethod
+    def _row(v: MavVehicle) -> list[float]:
+        return v.row_or_raise()
 
     def _alt(self, v: MavVehicle, frame: int, z: float) -> tuple[str, float] | None:
         """An altitude in a global frame -> (vocabulary key, metres); None: bad frame."""
@@ -316,7 +316,7 @@ class Handler:
         out = Outcome()
         res = self._set_mode(v, int(m.fields["base_mode"]), float(m.fields["custom_mode"]),
                              tick, out)
-        out.replies.append(_ack(m, mav.MAV_CMD_DO_SET_MODE, res))
+        out.replies.append(command_ack(m, mav.MAV_CMD_DO_SET_MODE, res))
         return out
 
     def _set_mode(self, v: MavVehicle, base_mode: int | None, custom: float, tick: int,
@@ -340,7 +340,7 @@ class Handler:
             res = fn(self, v, req, tick, out)
         if res != mav.MAV_RESULT_ACCEPTED:
             self.counts["commands_refused"] += 1
-        out.replies.insert(self._ack_position(out, req), _ack(m, req.command, res))
+        out.replies.insert(self._ack_position(out, req), command_ack(m, req.command, res))
         return out
 
     @staticmethod

@@ -277,14 +277,6 @@ class MavVehicle:
         self.mission = Mission()
 
     # -- state -------------------------------------------------------------
-    def observe(self, row: Sequence[float], body_rates: Sequence[float]) -> None:
-        """Take a state row and body rates (p, q, r in rad/s) for a vehicle
-        with its own frame (an endpoint's vehicles share the endpoint's)."""
-        self.frame.update(np.asarray([row], dtype=float),
-                          np.asarray([body_rates], dtype=float))
-        self.index = 0
-        self.sync_roll_limit()
-
     @property
     def row_values(self) -> list[float] | None:
         """The latest state row as Python floats (None before any)."""
@@ -310,14 +302,6 @@ class MavVehicle:
             return int(VehicleStatus.ACTIVE)
         st = row[_S["status"]]
         return int(st) if st == st else int(VehicleStatus.DIVERGED)
-
-    def sync_roll_limit(self) -> None:
-        """ROLL_LIMIT_DEG follows the autopilot's actual bank limit."""
-        row = self.row_values
-        if row is not None and self.spec.has_autopilot:
-            bank = row[_S["bank_limit_deg"]]
-            if 5.0 <= bank <= 75.0:
-                self.params.force("ROLL_LIMIT_DEG", bank)
 
     def in_air(self) -> bool:
         row = self.row_values
@@ -374,7 +358,7 @@ class MavVehicle:
         build = STATE_COLUMNS.get(name)
         if build is not None:
             if name != "SYSTEM_TIME":
-                self._row_or_raise()
+                self.row_or_raise()
             cols = build(self.frame.rows[self.index:self.index + 1]
                          if self.frame.rows is not None else np.zeros((1, 0)),
                          self.frame.rates[self.index:self.index + 1]
@@ -384,9 +368,12 @@ class MavVehicle:
         fields: dict[str, Any] = getattr(self, "_f_" + name.lower())(tick)
         return fields
 
-    def _row_or_raise(self) -> None:
-        if self.row_values is None:
+    def row_or_raise(self) -> list[float]:
+        """The latest state row; RuntimeError if there is none yet."""
+        row = self.row_values
+        if row is None:
             raise RuntimeError(f"vehicle {self.spec.name!r}: no state observed yet")
+        return row
 
     def _f_heartbeat(self, tick: int) -> dict[str, Any]:
         return {"type": mav.MAV_TYPE_FIXED_WING, "autopilot": mav.MAV_AUTOPILOT_ARDUPILOTMEGA,

@@ -106,8 +106,7 @@ class Scenario:
     @property
     def total_ticks(self) -> int:
         """Physics ticks in the run, rounded up to whole control exchanges."""
-        k = self.rates.control_every
-        return math.ceil(round(self.duration_s * self.rates.physics_hz, 6) / k) * k
+        return _schedule_tick(self.duration_s, self.rates)
 
     @property
     def autopilot(self) -> bool:

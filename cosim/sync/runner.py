@@ -48,6 +48,7 @@ _FLAG_EVENTS = {
     "stall_protection_active": ("stall_protection", "active", "inactive"),
 }
 _FLAG_COLS = [STATE_INDEX[c] for c in _FLAG_EVENTS]
+_FLAG_KINDS = tuple(_FLAG_EVENTS.values())  # by column of _FLAG_COLS
 
 
 @dataclass
@@ -78,15 +79,11 @@ class Run:
         self.progress = progress
         self.step_timeout_s = step_timeout_s  # a worker silent this long is a failure
         #: a cosim.mavlink.MavlinkConfig: every vehicle on one MAVLink link
-        if mavlink is None and scenario.mavlink is not None:
+        if mavlink is None and (scenario.mavlink is not None or needs_mavlink(scenario)):
             from cosim.mavlink import MavlinkConfig
 
-            mavlink = MavlinkConfig(url=scenario.mavlink["url"],
-                                    rates_hz=dict(scenario.mavlink["rates_hz"]))
-        if mavlink is None and needs_mavlink(scenario):
-            from cosim.mavlink import MavlinkConfig
-
-            mavlink = MavlinkConfig(url=None)  # in-process only: no socket
+            # the scenario's link, else in-process only (no socket) for its controller
+            mavlink = MavlinkConfig.of_scenario(scenario.mavlink) or MavlinkConfig(url=None)
         self.mavlink_config = mavlink
         #: the scenario's controller runs in another process (``cosim swarm
         #: --connect``), kept in lockstep over ``mavlink`` (lockstep_sysid set)
@@ -353,7 +350,7 @@ class Run:
     def _flag_events(self, events: EventLog, tick: int, new: np.ndarray, old: np.ndarray,
                      ids: list[str]) -> None:
         for i, j in np.argwhere(new != old).tolist():
-            kind, on, off = list(_FLAG_EVENTS.values())[j]
+            kind, on, off = _FLAG_KINDS[j]
             events.emit(kind, tick, vehicle=ids[i], phase=on if new[i, j] else off)
 
     def _summary(self, reason: str, tick: int, startup_s: float, loop_s: float, workers: int,
