@@ -31,7 +31,6 @@ import math
 import tempfile
 import time
 from collections import defaultdict
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -106,9 +105,7 @@ def main(argv: list[str] | None = None) -> int:
     _wrap(MavlinkEndpoint, "receive", "mavlink exchange")
     _wrap(MavlinkEndpoint, "send_telemetry", "mavlink exchange")
     _wrap(SwarmController, "step", "swarm controller (laws + commands)")
-    to_message: Callable[..., Any] = swarm_participant.to_message
     _wrap(swarm_participant, "to_message", "swarm commands -> messages")
-    assert swarm_participant.to_message is not to_message
     _wrap(SwarmMonitor, "update", "swarm monitor (separation)")
     _wrap(FixedWingGuidance, "update", "guidance")
     _wrap(FixedWingGuidance, "command", "guidance")

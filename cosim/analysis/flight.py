@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from cosim.geo import FT_TO_M, KT_TO_MPS
-from cosim.guidance.commands import G_MPS2
+from cosim.guidance.commands import G_MPS2, min_turn_radius_m
 from cosim.logs import read_states
 
 LB_TO_KG = 0.45359237
@@ -41,9 +41,8 @@ def level_stall_speed_mps(mass_kg: float, wing_area_m2: float, clmax: float,
     return math.sqrt(2.0 * mass_kg * G_MPS2 / (rho * wing_area_m2 * clmax))
 
 
-def turn_radius_m(v_mps: float, bank_deg: float) -> float:
-    """R = v^2 / (g tan(phi))."""
-    return v_mps ** 2 / (G_MPS2 * math.tan(math.radians(bank_deg)))
+#: R = v^2 / (g tan(phi)): guidance's own formula
+turn_radius_m = min_turn_radius_m
 
 
 def circle_fit(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:

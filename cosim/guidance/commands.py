@@ -47,6 +47,11 @@ def min_turn_radius_m(airspeed_mps: float, bank_limit_deg: float) -> float:
     return airspeed_mps ** 2 / (G_MPS2 * math.tan(math.radians(bank_limit_deg)))
 
 
+def waypoint_accept_radius_m(airspeed_mps: float, bank_limit_deg: float) -> float:
+    """A waypoint counts as reached within half the turn radius (at least 50 m)."""
+    return max(0.5 * min_turn_radius_m(airspeed_mps, bank_limit_deg), 50.0)
+
+
 @dataclass(frozen=True)
 class Point:
     """A horizontal position: geodetic, scenario-frame metres, or metres from

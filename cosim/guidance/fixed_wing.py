@@ -30,6 +30,7 @@ from cosim.guidance.commands import (
     Command,
     Point,
     min_turn_radius_m,
+    waypoint_accept_radius_m,
 )
 
 #: the autopilot setpoints guidance writes (see aircraft/systems/cosim_autopilot.xml)
@@ -250,7 +251,7 @@ class FixedWingGuidance:
                 self._begin_loiter(i, b.copy(), float(radius))
                 self.labels[i] = f"loiter ({self.kind[i]} reached)"
             return
-        accept = max(0.5 * min_turn_radius_m(v, float(self.bank_limit[i])), 50.0)
+        accept = waypoint_accept_radius_m(v, float(self.bank_limit[i]))
         if dist <= accept or along >= length:
             n_done = int(self.wp_index[i]) + 1
             events.append(GuidanceEvent("waypoint_reached", i, {

@@ -24,7 +24,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Final
 
-from cosim.guidance.commands import min_turn_radius_m
+from cosim.guidance.commands import waypoint_accept_radius_m
 from cosim.mavlink import adapter as mav
 
 #: seconds of simulation time between re-requests of an item during an upload
@@ -225,7 +225,7 @@ class Mission:
         bank = float(row[index["bank_limit_deg"]])
         if not 5.0 <= bank <= 75.0:
             bank = 45.0
-        accept = max(0.5 * min_turn_radius_m(v, bank), 50.0)
+        accept = waypoint_accept_radius_m(v, bank)
         coslat = math.cos(math.radians(p.lat_deg))
         bn = (p.lat_deg - lat) * _M_PER_DEG
         be = (p.lon_deg - lon) * _M_PER_DEG * coslat

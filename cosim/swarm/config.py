@@ -40,12 +40,12 @@ period). Parsing reports every problem (file:line: path: message) through
 
 from __future__ import annotations
 
-import math
 import re
 from dataclasses import dataclass
 from typing import Any
 
 from cosim.scenario.schema import SectionInfo
+from cosim.swarm import laws
 
 P = tuple[Any, ...]
 _NAME = re.compile(r"^[A-Za-z0-9_.\-]+$")
@@ -112,10 +112,9 @@ def _phase(info: SectionInfo, d: Any, p: P) -> Phase | None:
     radius = duration = None
     q = None
     if beh == "flocking":
-        for key in ("radius_m",):
-            if r.has(key):
-                info.err(p + (key,), "flocking ends after duration_s, not at a radius")
-                ok = False
+        if r.has("radius_m"):
+            info.err(p + ("radius_m",), "flocking ends after duration_s, not at a radius")
+            ok = False
         duration = r.num("duration_s", lo=0, lo_open=True)
         ok = ok and duration is not None
         if not r.has("q"):
@@ -134,7 +133,8 @@ def _phase(info: SectionInfo, d: Any, p: P) -> Phase | None:
                 b = qr.num("bearing_deg", lo=-360, hi=360)
                 dist = qr.num("distance_m", lo=0, lo_open=True)
                 if b is not None and dist is not None:
-                    q = (dist * math.cos(math.radians(b)), dist * math.sin(math.radians(b)))
+                    qn, qe = laws.q_vector_ne_m(b, dist).tolist()
+                    q = (qn, qe)
             else:
                 n, e = qr.num("north_m", 0.0), qr.num("east_m", 0.0)
                 if n is not None and e is not None:

@@ -201,27 +201,27 @@ class SwarmController:
         n, e, d = self.frame.geodetic_to_ned(self.lat_deg, self.lon_deg, self.alt_msl_m)
         return np.stack([n, e, d], axis=1)
 
-    def stall_mps(self, idx: np.ndarray) -> np.ndarray:
+    def level_stall_mps(self, idx: np.ndarray) -> np.ndarray:
+        """The level-flight stall TAS at the current altitude (the stall constant)."""
+        return laws.level_stall_constant_mps(self.mass_kg[idx], self.wing_area_m2[idx],
+                                             self.clmax[idx], self.alt_msl_m[idx])
+
+    def stall_mps(self, idx: np.ndarray, level_mps: np.ndarray | None = None) -> np.ndarray:
         """The stall TAS in the current bank at the current altitude."""
-        k = laws.level_stall_constant_mps(self.mass_kg[idx], self.wing_area_m2[idx],
-                                          self.clmax[idx], self.alt_msl_m[idx])
+        k = self.level_stall_mps(idx) if level_mps is None else level_mps
         return laws.stall_speed_mps(k, self.roll_rad[idx])
 
-    def speed_floor_mps(self, idx: np.ndarray, stall_mps: np.ndarray) -> np.ndarray:
+    def speed_floor_mps(self, idx: np.ndarray, stall_mps: np.ndarray,
+                        level_mps: np.ndarray | None = None) -> np.ndarray:
         """The lowest speed commanded: the current stall speed, or the loiter
         floor ``stall_margin * stall speed at the bank limit`` if higher."""
-        k = laws.level_stall_constant_mps(self.mass_kg[idx], self.wing_area_m2[idx],
-                                          self.clmax[idx], self.alt_msl_m[idx])
+        k = self.level_stall_mps(idx) if level_mps is None else level_mps
         loiter = self.spec.stall_margin * laws.stall_speed_mps(k, self.bank_limit_rad[idx])
         return np.maximum(stall_mps, loiter)
 
     @property
     def finished(self) -> bool:
         return all(g.done for g in self.groups)
-
-    def current_phases(self) -> dict[str, int | None]:
-        return {g.group.name: (None if g.done or g.start_tick is None else g.phase)
-                for g in self.groups}
 
     # -- the step ----------------------------------------------------------
     def due(self, tick: int) -> bool:
@@ -312,7 +312,8 @@ class SwarmController:
     def _commands(self, gs: GroupState, p: np.ndarray, tick: int) -> list[Outbound]:
         ph = self._phase(gs)
         idx = gs.idx
-        stall = self.stall_mps(idx)
+        level = self.level_stall_mps(idx)
+        stall = self.stall_mps(idx, level)
         if ph.behaviour == "rendezvous":
             goal, speed = laws.rendezvous(p, ph.mu, ph.k_s, stall)
         elif ph.behaviour == "anti_rendezvous":
@@ -320,7 +321,7 @@ class SwarmController:
         else:
             assert ph.q_ne_m is not None
             goal, speed = laws.flocking(p, ph.mu, ph.k_s, ph.q_ne_m, stall)
-        floor = self.speed_floor_mps(idx, stall)
+        floor = self.speed_floor_mps(idx, stall, level)
         speed = laws.clip_speed_mps(speed, floor, self.min_mps[idx], self.max_mps[idx])
         over = floor > self.max_mps[idx]
         if over.any():

@@ -153,7 +153,7 @@ class UdpController:
             self.events.append({"event": kind, "tick": tick, "time_s": tick / self.hz, **fields})
 
     def finish(self) -> dict[str, Any]:
-        from cosim.swarm.participant import merged_summary, write_commands_csv
+        from cosim.swarm.participant import merged_summary, write_swarm_outputs
 
         # the run ends one exchange after the last one seen (its final step), as
         # the in-process participant's finish(tick) has it
@@ -169,12 +169,5 @@ class UdpController:
             with open(self.out / "swarm_events.jsonl", "w") as f:
                 for e in self.events:
                     f.write(json.dumps(e) + "\n")
-            write_commands_csv(self.out / "swarm_commands.csv", self.ctl, self.hz)
-            self.mon.write_separation_csv(self.out / "swarm_separation.csv")
-            if self.mon.track_ticks:
-                from cosim.swarm.plot import plot_swarm
-
-                plot_swarm(self.out / "swarm.png", self.ctl.spec,
-                           [g.idx for g in self.ctl.groups], self.mon.track_ticks,
-                           self.mon.track_pos, self.mon.track_phase, self.hz, self.scn.name)
+            write_swarm_outputs(self.out, self.ctl, self.mon, self.scn.name)
         return summary

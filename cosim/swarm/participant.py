@@ -52,6 +52,20 @@ def write_commands_csv(path: Path, ctl: SwarmController, physics_hz: float) -> N
                     f"{alt!r}\n")
 
 
+def write_swarm_outputs(out_dir: Path, ctl: SwarmController, mon: SwarmMonitor,
+                        title: str) -> None:
+    """``swarm_commands.csv``, ``swarm_separation.csv`` and ``swarm.png`` (in-process
+    and ``cosim swarm --connect`` alike)."""
+    write_commands_csv(out_dir / "swarm_commands.csv", ctl, mon.hz)
+    mon.write_separation_csv(out_dir / "swarm_separation.csv")
+    if mon.track_ticks:
+        from cosim.swarm.plot import plot_swarm
+
+        p = plot_swarm(out_dir / "swarm.png", ctl.spec, [g.idx for g in ctl.groups],
+                       mon.track_ticks, mon.track_pos, mon.track_phase, mon.hz, title)
+        log.info("swarm plot: %s", p)
+
+
 class SwarmParticipant:
     name = "swarm"
 
@@ -70,12 +84,10 @@ class SwarmParticipant:
                                "for a swarm: section)")
         self.ctx = ctx
         scn = self.scenario
-        # more than 240 vehicles: several links (cosim.mavlink.MavlinkLinks, whose
-        # subscribe callbacks get (message, link) and inject takes the link)
-        links = getattr(ctx.mavlink, "specs", None)
-        self.multi_link = links is not None
+        # the run's cosim.mavlink.MavlinkLinks: subscribe callbacks get (message,
+        # link), inject takes the link (one link per 240 vehicles)
         self.ctl = SwarmController(self.spec, scn.vehicles, ctx.frame, ctx.physics_hz,
-                                   links=links)
+                                   links=ctx.mavlink.specs)
         self.mon = SwarmMonitor(self.spec, self.ctl.ids, [g.idx for g in self.ctl.groups],
                                 ctx.physics_hz)
         self.rows = self.ctl.rows
@@ -90,10 +102,7 @@ class SwarmParticipant:
         mon.update(tick, np.stack([n, e, d], axis=1))
         if ctl.due(tick):
             for o in ctl.step(tick):
-                if self.multi_link:
-                    ctx.mavlink.inject(to_message(o), o.link)
-                else:
-                    ctx.mavlink.inject(to_message(o))
+                ctx.mavlink.inject(to_message(o), o.link)
         self._flush_events()
 
     def _flush_events(self) -> None:
@@ -113,15 +122,5 @@ class SwarmParticipant:
         return merged_summary(self.ctl, self.mon)
 
     def after_run(self, out_dir: Path) -> None:
-        ctl, mon = self.ctl, self.mon
-        if ctl is None or mon is None:
-            return
-        write_commands_csv(out_dir / "swarm_commands.csv", ctl, mon.hz)
-        mon.write_separation_csv(out_dir / "swarm_separation.csv")
-        if mon.track_ticks:
-            from cosim.swarm.plot import plot_swarm
-
-            p = plot_swarm(out_dir / "swarm.png", self.spec, [g.idx for g in ctl.groups],
-                           mon.track_ticks, mon.track_pos, mon.track_phase, mon.hz,
-                           self.scenario.name)
-            log.info("swarm plot: %s", p)
+        if self.ctl is not None and self.mon is not None:
+            write_swarm_outputs(out_dir, self.ctl, self.mon, self.scenario.name)
