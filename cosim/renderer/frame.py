@@ -37,10 +37,10 @@ from cosim.renderer.ground import GroundTexture
 from cosim.renderer.targets import (
     FACE_IDX,
     FACE_NORMALS,
+    UNIT_CORNERS,
     TargetSet,
     bounding_part,
     box_corners,
-    faces_of,
     heading_rotation,
     lambert,
     parts_of,
@@ -57,7 +57,6 @@ SKY_HORIZON_BGR = np.array([235, 220, 205], dtype=np.float32)
 MAX_PATCH_PX = 3000
 _SMOKE_BGR = np.array([150.0, 150.0, 155.0])
 SHIFT = 4  # sub-pixel bits for polygon filling
-_UNIT_CORNERS = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
 _LIN = ((np.arange(256) / 255.0) ** 2.2).astype(np.float32)  # sRGB -> linear (approx.)
 
 
@@ -158,7 +157,7 @@ def _ecef_to_ned(frame: LocalFrame) -> np.ndarray:
     return np.array([[-sl * co, -sl * so, cl], [-so, co, 0.0], [-cl * co, -cl * so, -sl]])
 
 
-def _sky(h: int, w: int, v_horizon: np.ndarray) -> np.ndarray:
+def _sky(h: int, w: int) -> np.ndarray:
     """A vertical sky gradient (BGR uint8) for an image of h x w."""
     t = np.clip(np.arange(h, dtype=np.float32) / max(h - 1, 1), 0, 1)[:, None]
     rows = SKY_TOP_BGR + (SKY_HORIZON_BGR - SKY_TOP_BGR) * t
@@ -297,14 +296,14 @@ def _draw_band(world: World, H: np.ndarray, A: np.ndarray, max_r: float, y0: int
     cv2.cvtColor(out4, cv2.COLOR_BGRA2BGR, dst=out3)
     if ground.image is not None:
         lay = ground.image
-        g = float(np.median(np.abs(np.linalg.det(M[:2, :2])) ** -0.5)) * ground.mpp(level)
+        g = float(abs(np.linalg.det(M[:2, :2])) ** -0.5) * ground.mpp(level)
         k = lay.level_for(g)
         src = lay.levels[k]
         Mi = lay.ne_to_px(k) @ HA @ band
         over = cv2.warpPerspective(src, Mi, (w_img, y1 - y0),
                                    flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                                    borderMode=cv2.BORDER_CONSTANT)
-        inside = cv2.warpPerspective(np.full(src.shape[:2], 255, np.uint8), Mi,
+        inside = cv2.warpPerspective(lay.coverage(k), Mi,
                                      (w_img, y1 - y0),
                                      flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP,
                                      borderMode=cv2.BORDER_CONSTANT)
@@ -347,7 +346,7 @@ def _sky_image(world: World, h: int, w: int) -> np.ndarray:
     """The sky gradient for h x w (shared: do not modify)."""
     key = (h, w)
     if key not in world.sky:
-        world.sky[key] = _sky(h, w, np.zeros(0))
+        world.sky[key] = _sky(h, w)
     return world.sky[key]
 
 
@@ -358,7 +357,7 @@ def _target_faces(pose: Pose, t: TargetSpec, origin_l: np.ndarray, time_s: float
     lo = np.array([p.lo for p in parts])[:, None, :]
     hi = np.array([p.hi for p in parts])[:, None, :]
     rot = heading_rotation(t)
-    corners_l = origin_l + (lo + _UNIT_CORNERS * (hi - lo)) @ rot.T  # (P, 8, 3)
+    corners_l = origin_l + (lo + UNIT_CORNERS * (hi - lo)) @ rot.T  # (P, 8, 3)
     normals = FACE_NORMALS @ rot.T  # (6, 3)
     faces_l = corners_l[:, FACE_IDX]  # (P, 6, 4, 3)
     cent = faces_l.mean(axis=2)
@@ -474,7 +473,7 @@ def _ground_truth(K: np.ndarray, cam: CameraSpec, box_c: np.ndarray, img: np.nda
         if front[k]:
             uv = uv_all[k]
         else:  # the box crosses the near plane: its faces clipped to it
-            pts = [project(K, fc) for v, _ in faces_of(box_c[k])
+            pts = [project(K, fc) for v in box_c[k][FACE_IDX]
                    if len(fc := _clip_near(v)) >= 3]
             if not pts:
                 continue

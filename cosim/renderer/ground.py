@@ -401,10 +401,18 @@ class _ImageLayer:
                                           interpolation=cv2.INTER_AREA))
         h, w = img.shape[:2]
         self.bounds_ne = (self.n0 - h * self.mpp, self.n0, self.e0, self.e0 + w * self.mpp)
+        self._coverage: dict[int, np.ndarray] = {}
 
     def level_for(self, gsd_m: float) -> int:
         k = math.floor(math.log2(max(gsd_m, 1e-9) / self.mpp) + 0.3)
         return min(max(k, 0), len(self.levels) - 1)
+
+    def coverage(self, level: int) -> np.ndarray:
+        """255 over the whole of ``level`` (warped like the image, it marks the
+        frame pixels the image covers); made once per level."""
+        if level not in self._coverage:
+            self._coverage[level] = np.full(self.levels[level].shape[:2], 255, np.uint8)
+        return self._coverage[level]
 
     def ne_to_px(self, level: int) -> np.ndarray:
         """3x3: scenario (north, east, 1) -> pixel (col, row, 1) of ``level``."""

@@ -26,7 +26,8 @@ SUN_TO_L = np.array([math.cos(_el) * math.cos(_az), math.cos(_el) * math.sin(_az
 AMBIENT = 0.45
 
 # unit box corners (x, y, z in 0..1) and faces (outward, counter-clockwise seen from outside)
-_CORNERS = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=float)
+#: a unit box's 8 corners (x, y, z in 0/1), the order FACE_IDX refers to
+UNIT_CORNERS = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=float)
 _FACES = ((0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3))
 FACE_IDX = np.array(_FACES)
 FACE_NORMALS = np.array([[-1.0, 0, 0], [1, 0, 0], [0, -1, 0], [0, 1, 0], [0, 0, -1], [0, 0, 1]])
@@ -102,7 +103,7 @@ def smoke_puffs(t: TargetSpec, time_s: float, seed: int) -> list[tuple[np.ndarra
 
 def box_corners(lo: tuple[float, float, float], hi: tuple[float, float, float]) -> np.ndarray:
     lo_a, hi_a = np.array(lo), np.array(hi)
-    out: np.ndarray = lo_a + _CORNERS * (hi_a - lo_a)
+    out: np.ndarray = lo_a + UNIT_CORNERS * (hi_a - lo_a)
     return out
 
 
@@ -164,23 +165,6 @@ def to_local(t: TargetSpec, origin_l: np.ndarray, pts_t: np.ndarray) -> np.ndarr
     """Target-frame points -> L (rotation by the heading; the target's own north
     differs from L's by far less than a millimetre over a target's size)."""
     out: np.ndarray = origin_l + pts_t @ heading_rotation(t).T
-    return out
-
-
-def faces_of(corners_l: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
-    """The six faces of a box given by its 8 corners in L: (4x3 vertices, normal)."""
-    out = []
-    centre = corners_l.mean(axis=0)
-    for f in _FACES:
-        v = corners_l[list(f)]
-        nrm = np.cross(v[1] - v[0], v[3] - v[0])
-        norm = np.linalg.norm(nrm)
-        if norm == 0:
-            continue
-        nrm = nrm / norm
-        if np.dot(nrm, v.mean(axis=0) - centre) < 0:
-            nrm = -nrm
-        out.append((v, nrm))
     return out
 
 

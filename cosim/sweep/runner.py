@@ -219,16 +219,24 @@ def run_sweep(scenario: str | Path, out_dir: str | Path, jobs: int | None = None
     return result
 
 
-def _measured(run_dir: Path, vehicle: str, t0_s: float | None, t1_s: float | None
-              ) -> tuple[float, float]:
-    """Mean airspeed (kt) and height above ground (m) of ``vehicle`` between
-    t0_s and t1_s (the whole run when None)."""
-    from cosim.geo import KT_TO_MPS
+def _states(run_dir: Path) -> dict[str, list[Any]] | None:
+    """The columns ``_measured`` reads from a run's states (None: unreadable)."""
     from cosim.logs import read_states
 
     try:
-        t = read_states(run_dir).to_pydict()
-    except (OSError, CosimError, ValueError):
+        return read_states(run_dir).select(
+            ["vehicle", "time_s", "airspeed_mps", "alt_agl_m"]).to_pydict()
+    except (OSError, CosimError, ValueError, KeyError):
+        return None
+
+
+def _measured(t: dict[str, list[Any]] | None, vehicle: str, t0_s: float | None,
+              t1_s: float | None) -> tuple[float, float]:
+    """Mean airspeed (kt) and height above ground (m) of ``vehicle`` between
+    t0_s and t1_s (the whole run when None), from ``_states``."""
+    from cosim.geo import KT_TO_MPS
+
+    if t is None:
         return math.nan, math.nan
     rows = [i for i, v in enumerate(t["vehicle"]) if v == vehicle
             and (t0_s is None or t0_s - 1e-9 <= t["time_s"][i])
@@ -253,8 +261,9 @@ def visibility_rows(spec: SweepSpec, outcome: RunOutcome, run_dir: Path
 
     rows = []
     swept = {n: format_value(outcome.point[n]) for n in spec.swept}
+    states = _states(run_dir)  # once per run, not per target
     for tv in run_visibility(run_dir):
-        spd, agl = _measured(run_dir, tv.vehicle, tv.first_visible_s, tv.last_visible_s)
+        spd, agl = _measured(states, tv.vehicle, tv.first_visible_s, tv.last_visible_s)
         row = {"speed_kt": _f(spd, 2), "alt_agl_m": _f(agl, 2), "target": tv.target,
                "visible_s": _f(tv.visible_s), "first_visible_s": _f(tv.first_visible_s),
                "last_visible_s": _f(tv.last_visible_s), "passes": str(len(tv.passes)),
