@@ -24,10 +24,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
-from cosim.geo import LocalFrame
+from cosim.geo import LocalFrame, geodetic_to_ecef
 from cosim.renderer.config import CameraSpec
 
 NEAR_M = 0.05  # points closer than this along the optical axis are clipped
@@ -63,18 +64,27 @@ def intrinsics(cam: CameraSpec) -> np.ndarray:
 
 def mount_rotation(cam: CameraSpec) -> np.ndarray:
     """R_bc: camera axes -> body axes."""
-    return rot_y(math.radians(cam.pitch_deg)) @ _R_BC_FORWARD
+    return _mount_rotation(cam.pitch_deg)
+
+
+@lru_cache(maxsize=64)
+def _mount_rotation(pitch_deg: float) -> np.ndarray:
+    out: np.ndarray = rot_y(math.radians(pitch_deg)) @ _R_BC_FORWARD
+    out.flags.writeable = False
+    return out
 
 
 @dataclass(frozen=True)
 class Pose:
     """A camera at one frame: ``R_cl`` maps L vectors to camera vectors; ``c_l``
-    is the camera position in L; ``local`` is L itself."""
+    is the camera position in L; ``local`` is L itself and ``local_ecef_m`` its
+    origin in ECEF (what the ground and target placement need, computed once)."""
 
     R_cl: np.ndarray
     c_l: np.ndarray
     local: LocalFrame
     height_m: float  # above the ground plane
+    local_ecef_m: np.ndarray
 
 
 def camera_pose(cam: CameraSpec, lat_deg: float, lon_deg: float, alt_msl_m: float,
@@ -88,7 +98,9 @@ def camera_pose(cam: CameraSpec, lat_deg: float, lon_deg: float, alt_msl_m: floa
                 @ rot_x(math.radians(roll_deg)))
     r_lc = r_nb @ mount_rotation(cam)
     h = float(alt_msl_m) - float(ground_alt_m)
-    return Pose(R_cl=r_lc.T.copy(), c_l=np.array([0.0, 0.0, -h]), local=local, height_m=h)
+    return Pose(R_cl=r_lc.T.copy(), c_l=np.array([0.0, 0.0, -h]), local=local, height_m=h,
+                local_ecef_m=np.array(geodetic_to_ecef(local.lat_deg, local.lon_deg,
+                                                       local.alt_m)))
 
 
 def to_camera(pose: Pose, pts_l: np.ndarray) -> np.ndarray:
@@ -106,12 +118,13 @@ def project(K: np.ndarray, pts_c: np.ndarray) -> np.ndarray:
     return np.stack([u, v], axis=1)
 
 
-def ground_homography(K: np.ndarray, pose: Pose) -> np.ndarray:
+def ground_homography(K: np.ndarray, pose: Pose, K_inv: np.ndarray | None = None
+                      ) -> np.ndarray:
     """3x3 H: image pixel (u, v, 1) -> ground point (north, east, 1) of L, up to
     scale; the third component of ``H @ p`` is the ray's downward component
-    (<= 0: the ray does not reach the ground)."""
+    (<= 0: the ray does not reach the ground). ``K_inv``: ``inv(K)`` if known."""
     h = pose.height_m
     c = pose.c_l
     g = np.array([[h, 0.0, c[0]], [0.0, h, c[1]], [0.0, 0.0, 1.0]])
-    out: np.ndarray = g @ pose.R_cl.T @ np.linalg.inv(K)
+    out: np.ndarray = g @ pose.R_cl.T @ (np.linalg.inv(K) if K_inv is None else K_inv)
     return out

@@ -379,15 +379,16 @@ def _folder_bytes(folder: Path) -> int:
 
 
 class _ImageLayer:
-    """A user's north-up image with its pyramid (BGR uint8)."""
+    """A user's north-up image with its pyramid (BGRA uint8, opaque, like the frames)."""
 
     def __init__(self, spec: GroundSpec, frame: LocalFrame) -> None:
         assert spec.image is not None
-        img = cv2.imread(spec.image, cv2.IMREAD_COLOR)
-        if img is None:
+        bgr = cv2.imread(spec.image, cv2.IMREAD_COLOR)
+        if bgr is None:
             from cosim.errors import ConfigError
 
             raise ConfigError(f"ground.image: cannot read {spec.image} as an image")
+        img = cv2.cvtColor(bgr, cv2.COLOR_BGR2BGRA)
         if spec.origin_latlon_deg is not None:
             la, lo = spec.origin_latlon_deg
             n, e, _ = frame.geodetic_to_ned(la, lo, frame.alt_m)
@@ -450,6 +451,7 @@ class GroundTexture:
             mb = float(os.environ.get(CACHE_MB_ENV) or CACHE_MB)
             self._cache_room = int(mb * 2**20) - _folder_bytes(self._cache_dir)
         self._patches: dict[int, tuple[tuple[int, int, int, int], np.ndarray]] = {}
+        self._ne_to_px: dict[int, np.ndarray] = {}
         self._chunk = np.empty((0, T, T, 4), np.uint8)  # fresh tile memory (_new_tile)
         self._chunk_used = 0
 
@@ -482,9 +484,15 @@ class GroundTexture:
         return max(0, math.floor(math.log2(max(gsd_m, 1e-9) / self.base_mpp) + 0.5))
 
     def ne_to_px(self, level: int) -> np.ndarray:
-        """3x3: scenario (north, east, 1) -> global pixel (col, row, 1) of ``level``."""
-        m = self.mpp(level)
-        return np.array([[0.0, 1.0 / m, -0.5], [-1.0 / m, 0.0, -0.5], [0.0, 0.0, 1.0]])
+        """3x3: scenario (north, east, 1) -> global pixel (col, row, 1) of ``level``
+        (read-only)."""
+        P = self._ne_to_px.get(level)
+        if P is None:
+            m = self.mpp(level)
+            P = self._ne_to_px[level] = np.array([[0.0, 1.0 / m, -0.5], [-1.0 / m, 0.0, -0.5],
+                                                  [0.0, 0.0, 1.0]])
+            P.flags.writeable = False
+        return P
 
     def tile(self, level: int, ti: int, tj: int) -> np.ndarray:
         key = (level, ti, tj)

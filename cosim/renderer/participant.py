@@ -92,9 +92,9 @@ class StreamWriter:
         self.video.write(img)
         if self.hash is not None:
             self.hash.update(img.tobytes())
-        for tid, r in zip(target_ids, rows):
-            self.gt.writerow([frame_no, f"{time_s:.6f}", self.s.vehicle, self.s.camera.name, tid]
-                             + [_fmt(r[c]) for c in GT_COLUMNS[5:]])
+        head = [frame_no, f"{time_s:.6f}", self.s.vehicle, self.s.camera.name]
+        self.gt.writerows([*head, tid, *[_fmt(r[c]) for c in _GT_VALUES]]
+                          for tid, r in zip(target_ids, rows))
         self.gt_file.flush()
         self.frames += 1
 
@@ -103,6 +103,9 @@ class StreamWriter:
         self.gt_file.close()
         return {"frames": self.frames,
                 **({"frames_sha256": self.hash.hexdigest()} if self.hash is not None else {})}
+
+
+_GT_VALUES = GT_COLUMNS[5:]  # the columns of a ground-truth row after its target
 
 
 def _fmt(v: Any) -> str:
@@ -122,8 +125,8 @@ class RenderWorker:
         self.streams = {s.index: s for s in streams}
         self.writers = {s.index: StreamWriter(out_dir, s, codec, digest) for s in streams}
         self.target_ids = [t.id for t in world_spec.targets]
-        self.frames = {s.index: np.empty((s.camera.height_px, s.camera.width_px, 3), np.uint8)
-                       for s in streams}  # one reused frame buffer per stream
+        self.frames = {s.index: np.empty((s.camera.height_px, s.camera.width_px, 4), np.uint8)
+                       for s in streams}  # one reused (BGRA) frame buffer per stream
 
     def render(self, stream: int, frame_no: int, tick: int, pose6: tuple[float, ...]
                ) -> np.ndarray | None:
@@ -135,7 +138,8 @@ class RenderWorker:
                                    self.target_ids)
         if s.thumb_px is None:
             return None
-        thumb: np.ndarray = cv2.resize(img, s.thumb_px, interpolation=cv2.INTER_AREA)
+        thumb: np.ndarray = cv2.cvtColor(cv2.resize(img, s.thumb_px, interpolation=cv2.INTER_AREA),
+                                         cv2.COLOR_BGRA2BGR)
         return thumb
 
     def close(self) -> dict[int, dict[str, Any]]:

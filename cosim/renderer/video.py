@@ -1,10 +1,11 @@
 """Video files for the cameras and the operator view: one writer per file.
 
 ``open_video(path, codec, rate_hz, width_px, height_px)`` returns an object
-with ``write(bgr_frame)`` and ``release()``. ``mp4v`` (MPEG-4 Part 2 in
-.mp4) and ``h264`` (H.264 in .mp4, plays in browsers) are encoded with PyAV
-(FFmpeg's own encoders, one thread per writer: a render worker owns one core)
-from the YUV 4:2:0 planes of ``cv2.cvtColor(..., COLOR_BGR2YUV_I420)``;
+with ``write(frame)`` (BGR or BGRA uint8; alpha is ignored) and ``release()``.
+``mp4v`` (MPEG-4 Part 2 in .mp4) and ``h264`` (H.264 in .mp4, plays in
+browsers) are encoded with PyAV (FFmpeg's own encoders, one thread per writer:
+a render worker owns one core) from the YUV 4:2:0 planes of
+``cv2.cvtColor(..., COLOR_BGR[A]2YUV_I420)``;
 OpenCV's ``VideoWriter`` converts the colour itself at about six times the
 cost (see benchmarks/README.md). Without PyAV, or for an odd frame size
 (OpenCV's writer then drops the last column or row, as before), ``mp4v`` falls back to
@@ -70,17 +71,30 @@ class _PyAvWriter:
         self.yuv = np.empty((height_px * 3 // 2, width_px), np.uint8)
         self.frame = av.VideoFrame(width_px, height_px, "yuv420p")
         self.n = 0
+        # the frame handed to the encoder wraps ``yuv`` itself (no copy into
+        # FFmpeg's planes) where this PyAV can; both encoders copy or finish with
+        # their input within encode(), which the tests check by reading frames back
+        self.wrap = getattr(av.VideoFrame, "from_numpy_buffer", None)
 
     def write(self, img: np.ndarray) -> None:
-        cv2.cvtColor(img, cv2.COLOR_BGR2YUV_I420, dst=self.yuv)
-        f = self.frame
-        f.make_writable()  # copies only if the encoder still holds the last frame's buffer
-        w, h, y = self.w, self.h, self.yuv.reshape(-1)
-        offs = (0, w * h, w * h + w * h // 4, w * h * 3 // 2)
-        for k, (pw, ph) in enumerate(((w, h), (w // 2, h // 2), (w // 2, h // 2))):
-            plane = f.planes[k]
-            dst = np.frombuffer(memoryview(plane), np.uint8).reshape(-1, plane.line_size)[:ph, :pw]
-            dst[...] = y[offs[k]:offs[k + 1]].reshape(ph, pw)
+        cv2.cvtColor(img, cv2.COLOR_BGRA2YUV_I420 if img.shape[2] == 4 else cv2.COLOR_BGR2YUV_I420,
+                     dst=self.yuv)
+        f = None
+        if self.wrap is not None:
+            try:
+                f = self.wrap(self.yuv, format="yuv420p")
+            except (TypeError, ValueError):
+                self.wrap = None
+        if f is None:
+            f = self.frame
+            f.make_writable()  # copies only if the encoder still holds the last frame's buffer
+            w, h, y = self.w, self.h, self.yuv.reshape(-1)
+            offs = (0, w * h, w * h + w * h // 4, w * h * 3 // 2)
+            for k, (pw, ph) in enumerate(((w, h), (w // 2, h // 2), (w // 2, h // 2))):
+                plane = f.planes[k]
+                dst = np.frombuffer(memoryview(plane), np.uint8).reshape(
+                    -1, plane.line_size)[:ph, :pw]
+                dst[...] = y[offs[k]:offs[k + 1]].reshape(ph, pw)
         f.pts = self.n
         f.time_base = self.time_base
         self.container.mux(self.stream.encode(f))
@@ -104,7 +118,7 @@ class _OpenCvWriter:
             raise CosimError(f"cannot open a {codec} video writer for {path}")
 
     def write(self, img: np.ndarray) -> None:
-        self.video.write(img)
+        self.video.write(cv2.cvtColor(img, cv2.COLOR_BGRA2BGR) if img.shape[2] == 4 else img)
 
     def release(self) -> None:
         self.video.release()

@@ -293,6 +293,27 @@ def test_pyav_and_opencv_mp4v_and_h264_read_back_alike(tmp_path: Path,
         assert min(cv2.PSNR(g, r) for g, r in zip(got, ref)) > 28.0
 
 
+@pytest.mark.skipif(not have_pyav(), reason="PyAV not installed")
+@pytest.mark.parametrize("codec", ["mp4v", "h264"])
+def test_each_encoded_frame_is_its_own_picture(tmp_path: Path, codec: str) -> None:
+    """The writer reuses one YUV buffer for every frame: each decoded frame must
+    match the picture written at its place, not a later one written into the
+    same buffer (an encoder holding on to its input past encode() would)."""
+    rng = np.random.default_rng(3)
+    base = cv2.GaussianBlur(rng.integers(0, 256, (96, 128, 3), np.uint8), (0, 0), 2.0)
+    pics = [np.ascontiguousarray(np.roll(base, 9 * k, axis=1)) for k in range(12)]
+    path = str(tmp_path / f"v.{video.EXTENSIONS[codec]}")
+    w = video.open_video(path, codec, 10.0, 128, 96)
+    for p in pics:
+        w.write(p)
+    w.release()
+    got = _decoded(Path(path))
+    assert len(got) == len(pics)
+    for k, g in enumerate(got):
+        scores = [cv2.PSNR(g, p) for p in pics]
+        assert int(np.argmax(scores)) == k and scores[k] > 30.0, (k, scores)
+
+
 def test_odd_frame_size_mp4v_reads_back(tmp_path: Path) -> None:
     summary, out = _fly(tmp_path, "odd", rate=10.0, dur=1.0, w=161, h=121)
     got = _decoded(out / summary["streams"][0]["video"])
