@@ -14,8 +14,9 @@
    spent per simulated second (what a machine with that many idle cores needs
    for 1x; the shared machine's wall clock depends on others' load).
 
-    python benchmarks/render_bench.py [--frames 200] [--vehicles 20] [--duration-s 10]
-        [--backend process|inline] [--workers N] [--render-workers N] [--codec mp4v|h264|mjpg]
+    python benchmarks/render_bench.py [--frames 200] [--repeat 1] [--vehicles 20]
+        [--duration-s 10] [--backend process|inline] [--workers N] [--render-workers N]
+        [--codec mp4v|h264|mjpg]
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ import argparse
 import json
 import os
 import resource
+import statistics
 import tempfile
 import time
 from pathlib import Path
@@ -146,18 +148,30 @@ def main() -> None:
     ap.add_argument("--render-workers", type=int, default=None)
     ap.add_argument("--codec", default="mp4v", choices=tuple(EXTENSIONS),
                     help="for the per-frame cost")
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="per-frame cost: this many runs (each new ground, then cached); "
+                         "prints the median and range")
     a = ap.parse_args()
     if a.frames:
-        with tempfile.TemporaryDirectory() as cache:
-            for label in ("tiles generated", "tiles from disk"):
-                f = per_frame(a.frames, cache, a.codec)
-                print(f"640x480 nadir frame incl. ground truth + {a.codec}, {label}: "
-                      f"{f['cpu_ms']:.2f} ms CPU ({f['wall_ms']:.2f} ms wall), "
-                      f"{1000 / f['cpu_ms']:.0f} frames/s per core; of which {a.codec} encoding "
-                      f"{f['encode_ms']:.2f} ms, new ground tiles {f['tiles_ms']:.2f} ms "
-                      f"({f['tiles']:.0f} tiles, {f['tile_ms']:.2f} ms each: "
-                      f"{f['tiles_generated']} generated, {f['tiles_from_disk']} read), "
-                      f"the rest {f['cpu_ms'] - f['encode_ms'] - f['tiles_ms']:.2f} ms")
+        runs: dict[str, list[dict[str, float]]] = {"tiles generated": [], "tiles from disk": []}
+        for _ in range(a.repeat):  # each repeat: a new empty tile cache, then the same again
+            with tempfile.TemporaryDirectory() as cache:
+                for label, got in runs.items():
+                    f = per_frame(a.frames, cache, a.codec)
+                    got.append(f)
+                    print(f"640x480 nadir frame incl. ground truth + {a.codec}, {label}: "
+                          f"{f['cpu_ms']:.2f} ms CPU ({f['wall_ms']:.2f} ms wall), "
+                          f"{1000 / f['cpu_ms']:.0f} frames/s per core; of which {a.codec} "
+                          f"encoding {f['encode_ms']:.2f} ms, new ground tiles "
+                          f"{f['tiles_ms']:.2f} ms ({f['tiles']:.0f} tiles, "
+                          f"{f['tile_ms']:.2f} ms each: {f['tiles_generated']} generated, "
+                          f"{f['tiles_from_disk']} read), the rest "
+                          f"{f['cpu_ms'] - f['encode_ms'] - f['tiles_ms']:.2f} ms", flush=True)
+        if a.repeat > 1:
+            for label, got in runs.items():
+                ms = sorted(f["cpu_ms"] for f in got)
+                print(f"{label}: median {statistics.median(ms):.2f} ms CPU a frame "
+                      f"(min {ms[0]:.2f}, max {ms[-1]:.2f}, {len(ms)} runs)")
     if a.vehicles:
         res = swarm(a.vehicles, a.duration_s, a.backend, a.workers, a.render_workers)
         print(f"{a.vehicles} uav700 x 10 Hz 640x480 cameras, {a.duration_s:g} s: "

@@ -235,10 +235,9 @@ def _draw_ground(world: World, cam: CameraSpec, pose: Pose, view: _View,
     # bands of rows, each from the level its finest visible ground needs
     strips = STRIPS
     bounds = view.bounds
-    levels = []
-    for s in range(strips):
-        g = min(gsd_rows[s], gsd_rows[s + 1])
-        levels.append(world.ground.level_for(g) if math.isfinite(g) else -1)
+    level_for = world.ground.level_for
+    levels = [level_for(g) if math.isfinite(g) else -1
+              for g in np.minimum(gsd_rows[:-1], gsd_rows[1:]).tolist()]
     ground = img if mask is None else world.scratch("ground", h_img, w_img, 4)
     s = 0
     while s < strips:
