@@ -24,12 +24,15 @@ of a sweep read it (0.05 ms a tile). A user image (PNG/JPG, north up, ``m_per_px
 
 from __future__ import annotations
 
+import functools
 import hashlib
+import itertools
 import logging
 import math
 import mmap
 import os
 from collections import OrderedDict
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import cv2
@@ -50,6 +53,10 @@ TEXTURE_VERSION = 6
 CACHE_ENV = "COSIM_GROUND_CACHE"  # a folder for the tile cache, or "off"
 CACHE_MB_ENV, CACHE_MB = "COSIM_GROUND_CACHE_MB", 2048  # no more tiles written past this
 _CHUNK = 2 << 20  # new tiles are carved from 2 MB blocks of memory mapped in one call
+_HUGE_PAGE = 2 << 20  # a transparent huge page (x86-64, and arm64 with 4 kB pages)
+_MADV_POPULATE_WRITE = 23  # Linux >= 5.14: make a range present, as if written
+FIELD_N_M, FIELD_E_M = 160.0, 220.0  # field size
+TREE_M = 7.0  # one tree at most per cell of this size, at a random place in its middle half
 
 # field palette, RGB: crops, pasture, wheat, ploughed soil, dry grass, dark crop
 _FIELDS = np.array([[96, 128, 58], [118, 140, 72], [176, 160, 96], [122, 98, 72],
@@ -76,11 +83,16 @@ def _hash(i: np.ndarray, j: np.ndarray, seed: int) -> np.ndarray:
     return out
 
 
-def _derive(h: np.ndarray, k: float) -> np.ndarray:
-    """Another uniform [0, 1) value from one hash (cheaper than hashing again)."""
-    x = h.astype(np.float64) * k
-    out: np.ndarray = (x - np.floor(x)).astype(np.float32)
-    return out
+def _derive(h: np.ndarray, *k: float) -> Iterator[np.ndarray]:
+    """Other uniform [0, 1) values from one hash (cheaper than hashing again), one
+    per factor in ``k``: for a small ``h`` all in one pass (fewer calls), else one
+    by one as they are taken (no large temporaries)."""
+    h64 = h.astype(np.float64)
+    n = len(k) if h.size * len(k) <= 1 << 14 else 1
+    for i in range(0, len(k), n):
+        x = h64 * np.reshape(k[i:i + n], (-1,) + (1,) * h.ndim)
+        x -= np.floor(x)
+        yield from x.astype(np.float32)
 
 
 def _vnoise(x: np.ndarray, y: np.ndarray, seed: int, period: int = 0) -> np.ndarray:
@@ -100,8 +112,9 @@ def _vnoise(x: np.ndarray, y: np.ndarray, seed: int, period: int = 0) -> np.ndar
 
 def _coverage(signed_dist_m: np.ndarray, step_m: float) -> np.ndarray:
     """Pixel coverage of a shape from the signed distance to its edge (inside > 0)."""
-    out: np.ndarray = np.clip(signed_dist_m / max(step_m, 1e-6) + 0.5, 0.0, 1.0)
-    return out.astype(np.float32)
+    out: np.ndarray = signed_dist_m / max(step_m, 1e-6)
+    out += 0.5
+    return np.clip(out, 0.0, 1.0, out=out).astype(np.float32)
 
 
 _WEIGHTS: OrderedDict[bytes, list[tuple[int, np.ndarray]]] = OrderedDict()
@@ -131,15 +144,18 @@ def _make_noise_weights(x: np.ndarray, wavelengths_m: list[float]) -> list[tuple
     f = (u - k).astype(np.float32)
     s = f * f * (3 - 2 * f)
     ki = k.astype(np.int64)
-    k0 = ki.min(axis=1)
-    width = ki.max(axis=1) - k0 + 2
-    start = np.concatenate(([0], np.cumsum(width)[:-1]))
-    w = np.zeros((len(x), int(width.sum())), np.float32)
-    col = ki - (k0 - start)[:, None]
-    r = np.arange(len(x))[None, :]
-    w[r, col] = 1 - s
-    w[r, col + 1] = s
-    return [(int(a), w[:, b:b + c]) for a, b, c in zip(k0, start, width)]
+    k0, k1 = ki.min(axis=1).tolist(), ki.max(axis=1).tolist()
+    width = [b - a + 2 for a, b in zip(k0, k1)]
+    start = [0, *itertools.accumulate(width[:-1])]
+    n, total = len(x), sum(width)
+    w = np.zeros((n, total), np.float32)
+    at = ki - np.array([a - b for a, b in zip(k0, start)])[:, None]  # column, then flat
+    at += np.arange(0, n * total, total)
+    flat = w.reshape(-1)
+    flat[at] = 1 - s
+    at += 1
+    flat[at] = s
+    return [(a, w[:, b:b + c]) for a, b, c in zip(k0, start, width)]
 
 
 def _product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -156,17 +172,109 @@ def _product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
+class _Tables:
+    """Per-cell tables kept across tiles (an LRU of at most ``max_bytes``). Each is
+    a pure function of its key (seed, cells, parameters), so a tile gathering from
+    one gets the values it would compute itself, whichever tiles came before."""
+
+    def __init__(self, max_bytes: int) -> None:
+        self.max_bytes, self.nbytes = max_bytes, 0
+        self._held: OrderedDict[tuple[object, ...], tuple[np.ndarray, ...]] = OrderedDict()
+
+    def cover(self, key: tuple[object, ...], i0: int, i1: int, j0: int, j1: int, size: int,
+              make: Callable[[int, int, int, int], tuple[np.ndarray, ...]]
+              ) -> tuple[int, int, int, int, tuple[np.ndarray, ...]] | None:
+        """``(a0, a1, b0, b1, make(a0, a1, b0, b1))``: the tables of the cells
+        ``[a0, a1) x [b0, b1)``, the whole blocks of ``size`` x ``size`` cells that hold
+        ``i0 .. i1`` x ``j0 .. j1``, kept (the tiles over the same blocks share them).
+        None if those span more than ``size / 2`` cells either way: a tile's blocks
+        would then be mostly its own, and up to 4x its cells."""
+        if i1 - i0 >= size // 2 or j1 - j0 >= size // 2:
+            return None
+        a0, a1 = i0 - i0 % size, i1 - i1 % size + size
+        b0, b1 = j0 - j0 % size, j1 - j1 % size + size
+        key = (*key, a0, a1, b0, b1)
+        out = self._held.get(key)
+        if out is None:
+            out = self._held[key] = make(a0, a1, b0, b1)
+            self.nbytes += sum(a.nbytes for a in out)
+            while self.nbytes > self.max_bytes and len(self._held) > 1:
+                self.nbytes -= sum(a.nbytes for a in self._held.popitem(last=False)[1])
+        else:
+            self._held.move_to_end(key)
+        return a0, a1, b0, b1, out
+
+
+_TABLES = _Tables(16 << 20)
+
+
+
+def _lattice(wn: tuple[int, np.ndarray], we: tuple[int, np.ndarray], seed: int,
+             offset: float, scale: float) -> np.ndarray:
+    """The hashed lattice values ``scale * (hash + offset)`` (float32, contiguous) of
+    the corners under the weights ``wn`` (north) and ``we`` (east), cut from a kept
+    table of whole 32 x 32 blocks of corners (a large grid's: made for it)."""
+    (i0, w_n), (j0, w_e) = wn, we
+    ni, nj = w_n.shape[1], w_e.shape[1]
+
+    def make(a0: int, a1: int, b0: int, b1: int) -> tuple[np.ndarray, ...]:
+        h = _hash(np.arange(a0, a1)[:, None], np.arange(b0, b1)[None, :], seed)
+        if offset or scale != 1.0:
+            h = ((h + np.float32(offset)) * np.float32(scale)).astype(np.float32)
+        return (h,)
+
+    got = _TABLES.cover(("lattice", seed, offset, scale), i0, i0 + ni - 1, j0, j0 + nj - 1,
+                        32, make)
+    if got is None:
+        return make(i0, i0 + ni, j0, j0 + nj)[0]
+    a0, _, b0, _, (tab,) = got
+    return np.ascontiguousarray(tab[i0 - a0:i0 - a0 + ni, j0 - b0:j0 - b0 + nj])
+
+
 def _noise_on_grid(wn: tuple[int, np.ndarray], we: tuple[int, np.ndarray], seed: int,
                    scale: float = 1.0, offset: float = 0.0) -> np.ndarray:
     """``scale * (value noise + offset)`` at a grid (R, C) from its weights along
     north ``wn`` and east ``we`` (``_noise_weights``): the same smoothstep
     interpolation of hashed lattice values as ``_vnoise``, as two small matrix
     products (a pure function of position: neighbouring tiles agree)."""
-    h = _hash(np.arange(wn[0], wn[0] + wn[1].shape[1])[:, None],
-              np.arange(we[0], we[0] + we[1].shape[1])[None, :], seed)
-    if offset or scale != 1.0:
-        h = ((h + np.float32(offset)) * np.float32(scale)).astype(np.float32)
-    return _product(wn[1] @ h, we[1].T)
+    return _product(wn[1] @ _lattice(wn, we, seed, offset, scale), we[1].T)
+
+
+def _field_cells(seed: int, step_m: float, a0: int, a1: int, b0: int,
+                 b1: int) -> tuple[np.ndarray, ...]:
+    """What depends only on a field: for the cells ``[a0, a1) x [b0, b1)`` of the
+    field grid (flat, row-major) its colour (3 x cells), crop-row amplitude and
+    cycles per field unit along u and v, whether it has a hedgerow; and whether the
+    grid lines ``a0 .. a1 - 1`` (north) and ``b0 .. b1 - 1`` (east) are roads (a
+    road's half width, or -1000)."""
+    ki = np.arange(a0, a1, dtype=np.float64)
+    kj = np.arange(b0, b1, dtype=np.float64)
+    hf = _hash(ki[:, None], kj[None, :], seed + 3).ravel()
+    kind = np.minimum((hf * len(_FIELDS)).astype(np.int64), len(_FIELDS) - 1)
+    shade, rows, across, hedge = _derive(hf, 613.37, 2713.91, 97.13, 31.77)
+    colour = (_FIELDS[kind] * (0.88 + 0.24 * shade)[..., None]).T.copy()
+    # crop rows: 2.5-4 m apart, along or across the field, only where resolvable
+    period = 2.5 + 1.5 * rows
+    along = across < 0.5
+    fade = np.clip((period / step_m - 4.0) / 4.0, 0.0, 1.0).astype(np.float32)
+    amp = (0.10 * fade * (kind != 1)).astype(np.float32)  # pasture has none
+    cu = np.where(along, FIELD_N_M / period, 0.0).astype(np.float32)  # cycles per field unit
+    cv = np.where(along, 0.0, FIELD_E_M / period).astype(np.float32)
+    road_n = np.where(_hash(ki, np.zeros_like(ki), seed + 8) < 0.3, 3.0, -1e3).astype(np.float32)
+    road_e = np.where(_hash(np.zeros_like(kj), kj, seed + 9) < 0.3, 3.0, -1e3).astype(np.float32)
+    return colour, amp, cu, cv, hedge < 0.5, road_n, road_e
+
+
+def _tree_cells(kn: np.ndarray, ke: np.ndarray, seed: int) -> tuple[np.ndarray, ...]:
+    """What depends only on a tree cell (``TREE_M`` square; ``kn``, ``ke`` its
+    row and column, broadcast together), flat: whether a tree stands there in a
+    wood, or on a hedgerow; its centre north and east; its radius and shade."""
+    ht = _hash(kn, ke, seed + 12)
+    d = _derive(ht, 43.9, 71.3, 577.31, 1291.7, 3343.1)  # taken in this order
+    return ((next(d) < 0.9).ravel(), (next(d) < 0.7).ravel(),
+            ((kn + 0.25 + 0.5 * ht) * TREE_M).ravel(),
+            ((ke + 0.25 + 0.5 * next(d)) * TREE_M).ravel(), (1.6 + 1.2 * next(d)).ravel(),
+            (0.75 + 0.5 * next(d)).ravel())
 
 
 def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int) -> np.ndarray:
@@ -174,12 +282,13 @@ def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int) -> np.ndar
     (not clipped), at the scenario-frame grid ``n`` (R x 1) x ``e`` (1 x C), drawn
     for a sample spacing of ``step_m``. Smooth fields (field-grid warp, woods,
     brightness) are value noise evaluated as small matrix products; what depends
-    only on a field, a grid line or a tree cell is computed once per cell and
-    gathered; trees are drawn only where some may stand."""
+    only on a field, a grid line, a tree cell or a noise lattice corner is computed
+    once per cell, kept across calls (``_TABLES``) and gathered; trees are drawn
+    only where some may stand."""
     nv, ev = n.ravel().astype(np.float64), e.ravel().astype(np.float64)
     R, C = len(nv), len(ev)
     f32 = np.float32
-    fn, fe = 160.0, 220.0  # field size
+    fn, fe = FIELD_N_M, FIELD_E_M
     warp = 15.0  # the field grid's warp, at most this many metres
     # value noise weights: field-grid warp, woods, brightness octaves (finer than
     # two samples left out)
@@ -191,32 +300,30 @@ def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int) -> np.ndar
     u += (nv / fn).astype(np.float32)[:, None]
     v = _noise_on_grid(wts_n[0], wts_e[0], seed + 2, 2 * warp / fe, -0.5)
     v += (ev / fe).astype(np.float32)[None, :]
-    # fields: one entry of the tables per (ci, cj) cell of the warped field grid
+    # fields: the (ci, cj) cells of the warped field grid here are ci0..ci1 x cj0..cj1;
+    # their tables (_field_cells) are kept for whole blocks of 8 x 8 cells (a large
+    # grid's: made for it)
     ci0 = math.floor((nv.min() - warp) / fn) - 1
     ci1 = math.floor((nv.max() + warp) / fn) + 1
     cj0 = math.floor((ev.min() - warp) / fe) - 1
     cj1 = math.floor((ev.max() + warp) / fe) + 1
-    ki = np.arange(ci0, ci1 + 1, dtype=np.float64)
-    kj = np.arange(cj0, cj1 + 1, dtype=np.float64)
-    nj = len(kj)
+    got = _TABLES.cover(("field", seed, step_m), ci0, ci1, cj0, cj1, 8,
+                        functools.partial(_field_cells, seed, step_m))
+    if got is None:
+        got = (ci0, ci1 + 1, cj0, cj1 + 1,
+               _field_cells(seed, step_m, ci0, ci1 + 1, cj0, cj1 + 1))
+    a0, a1, b0, b1, (colour, amp, cu, cv, hedge_cell, road_n, road_e) = got
+    nj = b1 - b0
+    here = (slice(ci0 - a0, ci1 + 1 - a0), slice(cj0 - b0, cj1 + 1 - b0))  # of a table
     fu, fv = np.floor(u), np.floor(v)
-    iu = fu.astype(np.intp)  # field-grid row and column, from 0
-    iu -= ci0
+    iu = fu.astype(np.intp)  # field-grid row and column in the tables
+    iu -= a0
     iv = fv.astype(np.intp)
-    iv -= cj0
+    iv -= b0
     cell = iu * nj
     cell += iv
-    hf = _hash(ki[:, None], kj[None, :], seed + 3).ravel()
-    kind = np.minimum((hf * len(_FIELDS)).astype(np.int64), len(_FIELDS) - 1)
-    colour = (_FIELDS[kind] * (0.88 + 0.24 * _derive(hf, 613.37))[..., None]).T.copy()
     # crop rows: 2.5-4 m apart, along or across the field, only where resolvable
-    period = 2.5 + 1.5 * _derive(hf, 2713.91)
-    along = _derive(hf, 97.13) < 0.5
-    fade = np.clip((period / step_m - 4.0) / 4.0, 0.0, 1.0).astype(np.float32)
-    amp = (0.10 * fade * (kind != 1)).astype(np.float32)  # pasture has none
-    if amp.any():
-        cu = np.where(along, fn / period, 0.0).astype(np.float32)  # cycles per field unit
-        cv = np.where(along, 0.0, fe / period).astype(np.float32)
+    if amp.reshape(-1, nj)[here].any():
         phase = u * cu.take(cell)
         phase += v * cv.take(cell)
         phase -= np.floor(phase)  # sin in float32 of the phase in [0, 1)
@@ -228,12 +335,8 @@ def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int) -> np.ndar
         factor = np.ones((R, C), np.float32)
     # brightness variation within fields (soil moisture, growth)
     if octaves:
-        left = []
-        for k in range(len(octaves)):
-            (on, w_n), (oe, w_e) = wts_n[2 + k], wts_e[2 + k]
-            h = _hash(np.arange(on, on + w_n.shape[1])[:, None],
-                      np.arange(oe, oe + w_e.shape[1])[None, :], seed + 7 + 17 * k)
-            left.append(w_n @ ((h - f32(0.5)) * f32(0.35 * 0.5**k)))
+        left = [wts_n[2 + k][1] @ _lattice(wts_n[2 + k], wts_e[2 + k], seed + 7 + 17 * k,
+                                           -0.5, 0.35 * 0.5**k) for k in range(len(octaves))]
         bright = _product(np.hstack(left), np.hstack([w for _, w in wts_e[2:]]).T)
         bright += f32(1.0)
     else:
@@ -249,11 +352,10 @@ def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int) -> np.ndar
     np.abs(dv - near_v, out=dv)
     dv *= f32(fe)
     # roads along some warped grid lines (a road's half width, or none)
-    road_n = np.where(_hash(ki, np.zeros_like(ki), seed + 8) < 0.3, 3.0, -1e3).astype(np.float32)
-    road_e = np.where(_hash(np.zeros_like(kj), kj, seed + 9) < 0.3, 3.0, -1e3).astype(np.float32)
     road: np.ndarray | None = None
-    for d, i, near, half in ((du, iu, near_u, road_n), (dv, iv, near_v, road_e)):
-        if half.max() < 0:
+    for d, i, near, half, lines in ((du, iu, near_u, road_n, here[0]),
+                                    (dv, iv, near_v, road_e, here[1])):
+        if half[lines].max() < 0:
             continue
         line = half.take(i + near)
         line -= d
@@ -266,31 +368,63 @@ def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int) -> np.ndar
     edge = np.minimum(du, dv)
     edge -= f32(6.5)  # exact here (Sterbenz): |edge - 6.5| < 2.5 is 4 < edge < 9
     band = np.abs(edge, out=edge) < f32(2.5)  # hedgerows where the field has one
-    size = 7.0  # one tree at most per 7 m cell, at a random place in its middle half
-    cn, ce = np.floor(nv / size), np.floor(ev / size)
-    kn = np.arange(min(cn[0], cn[-1]), max(cn[0], cn[-1]) + 1.0)
-    ke = np.arange(min(ce[0], ce[-1]), max(ce[0], ce[-1]) + 1.0)
-    ht = _hash(kn[:, None], ke[None, :], seed + 12)
     maybe = np.flatnonzero(woods | band)
+    # a tree's coverage and shade: over the whole grid (tree, tone) where most of it
+    # may have trees, else at the flat indices ``at`` only (cov, shade; zero elsewhere)
     tree: np.ndarray | None = None
+    at: np.ndarray | None = None
     if len(maybe):
-        r, c = np.divmod(maybe, C)
-        tc = ((cn - kn[0]).astype(np.intp) * len(ke)).take(r) + (ce - ke[0]).astype(np.intp).take(c)
-        hedge = band.ravel().take(maybe) & (_derive(hf, 31.77) < 0.5).take(cell.ravel().take(maybe))
-        present = ((woods.ravel().take(maybe) & (_derive(ht, 43.9) < 0.9).ravel().take(tc))
-                   | (hedge & (_derive(ht, 71.3) < 0.7).ravel().take(tc)))
-        maybe, r, c, tc = maybe[present], r[present], c[present], tc[present]
-    if len(maybe):
-        tn = ((kn[:, None] + 0.25 + 0.5 * ht) * size).ravel().take(tc)
-        te = ((ke[None, :] + 0.25 + 0.5 * _derive(ht, 577.31)) * size).ravel().take(tc)
-        radius = (1.6 + 1.2 * _derive(ht, 1291.7)).ravel().take(tc)
-        dtn, dte = nv.take(r) - tn, ev.take(c) - te
-        cov = _coverage(radius - np.sqrt(dtn * dtn + dte * dte), step_m)
-        tree = np.zeros((R, C), np.float32)
-        tree.ravel()[maybe] = cov
-        tone = np.zeros((R, C), np.float32)
-        tone.ravel()[maybe] = cov * (0.75 + 0.5 * _derive(ht, 3343.1)).ravel().take(tc)
-    # blend: field colour x factor, then road, then tree over it
+        # the tree cells' tables (_tree_cells): kept for whole blocks of 32 x 32 cells,
+        # made for this grid's cells, or (more cells than samples) for the candidates'
+        cn, ce = np.floor(nv / TREE_M), np.floor(ev / TREE_M)
+        kn0, kn1 = int(min(cn[0], cn[-1])), int(max(cn[0], cn[-1]))
+        ke0, ke1 = int(min(ce[0], ce[-1])), int(max(ce[0], ce[-1]))
+
+        def trees(a0: int, a1: int, b0: int, b1: int) -> tuple[np.ndarray, ...]:
+            return _tree_cells(np.arange(a0, a1, dtype=np.float64)[:, None],
+                               np.arange(b0, b1, dtype=np.float64)[None, :], seed)
+
+        got = _TABLES.cover(("tree", seed), kn0, kn1, ke0, ke1, 32, trees)
+        if got is None and (kn1 - kn0 + 1) * (ke1 - ke0 + 1) <= R * C:
+            got = (kn0, kn1 + 1, ke0, ke1 + 1, trees(kn0, kn1 + 1, ke0, ke1 + 1))
+        if got is None:
+            r, c = np.divmod(maybe, C)
+            cells = _tree_cells(cn.take(r), ce.take(c), seed)
+            tc = np.arange(len(maybe))
+        else:
+            a0, _, b0, b1, cells = got
+            tc_row = (cn - a0).astype(np.intp) * (b1 - b0)
+            tc_col = (ce - b0).astype(np.intp)
+            if len(maybe) > R * C // 4:  # the same values, in fewer whole-grid passes
+                tc = tc_row[:, None] + tc_col[None, :]
+            else:
+                r, c = np.divmod(maybe, C)
+                tc = tc_row.take(r) + tc_col.take(c)
+        in_wood, on_hedge, tn_cell, te_cell, radius_cell, tone_cell = cells
+        if tc.ndim == 2:
+            present = woods & in_wood.take(tc)
+            present |= band & hedge_cell.take(cell) & on_hedge.take(tc)
+            dist = tn_cell.take(tc)  # in place: fewer large float64 temporaries
+            np.subtract(nv[:, None], dist, out=dist)
+            dist *= dist
+            dte = te_cell.take(tc)
+            np.subtract(ev[None, :], dte, out=dte)
+            dte *= dte
+            dist += dte
+            np.sqrt(dist, out=dist)
+            cov = _coverage(np.subtract(radius_cell.take(tc), dist, out=dist), step_m)
+            tree = np.where(present, cov, f32(0.0))
+            tone = tree * tone_cell.take(tc)
+        else:
+            hedge = band.ravel().take(maybe) & hedge_cell.take(cell.ravel().take(maybe))
+            present = ((woods.ravel().take(maybe) & in_wood.take(tc))
+                       | (hedge & on_hedge.take(tc)))
+            at, r, c, tc = maybe[present], r[present], c[present], tc[present]
+            dtn, dte = nv.take(r) - tn_cell.take(tc), ev.take(c) - te_cell.take(tc)
+            cov = _coverage(radius_cell.take(tc) - np.sqrt(dtn * dtn + dte * dte), step_m)
+            shade = cov * tone_cell.take(tc)
+    # blend: field colour x factor, then road, then tree over it (where a tree's
+    # coverage is zero, x 1 and + 0 leave the values as they are)
     keep = factor
     if road is not None:
         keep *= 1.0 - road
@@ -298,14 +432,21 @@ def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int) -> np.ndar
         keep *= 1.0 - tree
         if road is not None:
             road *= 1.0 - tree
-    rgb = np.empty((3, R, C), np.float32)
-    for ch in range(3):
-        p = colour[ch].take(cell, out=rgb[ch])
+    elif at is not None:
+        clear = 1.0 - cov
+        keep.reshape(-1)[at] *= clear
+        if road is not None:
+            road.reshape(-1)[at] *= clear
+    rgb = np.take(colour, cell, axis=1, out=np.empty((3, R, C), np.float32),
+                  mode="clip")  # in range: "clip" only spares take's copy of out
+    for p, road_ch, tree_ch in zip(rgb, _ROAD, _TREE):  # planes: smaller temporaries
         p *= keep
         if road is not None:
-            p += _ROAD[ch] * road
+            p += road_ch * road
         if tree is not None:
-            p += _TREE[ch] * tone
+            p += tree_ch * tone
+        elif at is not None:
+            p.reshape(-1)[at] += tree_ch * shade
     return rgb
 
 
@@ -378,6 +519,34 @@ def _folder_bytes(folder: Path) -> int:
     return total
 
 
+def _fresh_memory(nbytes: int) -> np.ndarray:
+    """``nbytes`` of memory (uint8, contents undefined) whose pages are present: an
+    anonymous mapping made present in one call, in transparent huge pages where
+    the kernel has them (asked for with MADV_HUGEPAGE on a 2 MB aligned range:
+    0.03 ms a 256 px tile against 0.12 ms in 4 kB pages with MAP_POPULATE on the
+    benchmark's VM, where page zeroing and mapping is most of it)."""
+    if hasattr(mmap, "MADV_HUGEPAGE"):
+        try:
+            m = mmap.mmap(-1, nbytes + _HUGE_PAGE,
+                          flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
+            raw = np.frombuffer(m, np.uint8)
+            off = -raw.ctypes.data % _HUGE_PAGE  # the unused rest is never made present
+            m.madvise(mmap.MADV_HUGEPAGE, off, nbytes)
+            try:
+                m.madvise(_MADV_POPULATE_WRITE, off, nbytes)
+            except OSError:  # before Linux 5.14: a write per page
+                raw[off:off + nbytes:mmap.PAGESIZE] = 0
+            return raw[off:off + nbytes]
+        except (OSError, ValueError):
+            pass
+    flags = mmap.MAP_PRIVATE | getattr(mmap, "MAP_ANONYMOUS", 0) | \
+        getattr(mmap, "MAP_POPULATE", 0)
+    try:
+        return np.frombuffer(mmap.mmap(-1, nbytes, flags=flags), np.uint8)
+    except (OSError, TypeError, ValueError):  # no such mapping here
+        return np.empty(nbytes, np.uint8)
+
+
 class _ImageLayer:
     """A user's north-up image with its pyramid (BGRA uint8, opaque, like the frames)."""
 
@@ -446,7 +615,8 @@ class GroundTexture:
         self._big_bufs: dict[int, np.ndarray] = {}  # resized lattice, by level
         self._cache_dir = ground_cache_dir(spec, self.seed)
         self._cache_room = 0  # bytes this process may still add to the cache
-        self._dirs_made: set[Path] = set()
+        self._dirs_made: set[str] = set()
+        self._level_dirs: dict[int, str] = {}  # a level's cache folder, "/" at the end
         if self._cache_dir is not None:
             mb = float(os.environ.get(CACHE_MB_ENV) or CACHE_MB)
             self._cache_room = int(mb * 2**20) - _folder_bytes(self._cache_dir)
@@ -457,20 +627,14 @@ class GroundTexture:
 
     def _new_tile(self) -> np.ndarray:
         """Memory for one tile (T x T x 4 uint8, contents undefined): the next slot of
-        a 2 MB anonymous mapping whose pages are made present in one call
-        (MAP_POPULATE where there is one) rather than by 64 page faults per tile as
-        it is first written (~3 us each on the benchmark's VM: about 0.1 ms a tile);
-        the mapping is released with the last of its tiles (views keep it alive)."""
+        a 2 MB block of fresh memory (``_fresh_memory``) rather than pages faulted in
+        one by one as the tile is first written (~3 us each on the benchmark's VM:
+        about 0.1 ms a tile); the block is released with the last of its tiles
+        (views keep it alive)."""
         if self._chunk_used == len(self._chunk):
             T = self.tile_px
             per = max(1, _CHUNK // (T * T * 4))
-            flags = mmap.MAP_PRIVATE | getattr(mmap, "MAP_ANONYMOUS", 0) | \
-                getattr(mmap, "MAP_POPULATE", 0)
-            try:
-                raw = np.frombuffer(mmap.mmap(-1, per * T * T * 4, flags=flags), np.uint8)
-            except (OSError, TypeError, ValueError):  # no such mapping here
-                raw = np.empty(per * T * T * 4, np.uint8)
-            self._chunk = raw.reshape(per, T, T, 4)
+            self._chunk = _fresh_memory(per * T * T * 4).reshape(per, T, T, 4)
             self._chunk_used = 0
         out: np.ndarray = self._chunk[self._chunk_used]
         self._chunk_used += 1
@@ -525,23 +689,24 @@ class GroundTexture:
         bgra = self._generate_tile(level, ti, tj)
         self.tiles_made += 1
         if path is not None and self._cache_room > 0:
-            self._store(path, cv2.cvtColor(bgra, cv2.COLOR_BGRA2BGR, dst=self._read_buf))
+            self._store(level, path, cv2.cvtColor(bgra, cv2.COLOR_BGRA2BGR, dst=self._read_buf))
         return bgra
 
-    def _store(self, path: Path, bgr: np.ndarray) -> None:
+    def _store(self, level: int, path: str, bgr: np.ndarray) -> None:
         """Write a tile's raw BGR bytes. A tile is written once (O_EXCL: parallel
         render workers and sweep runs race for it) in one call; a reader takes
         only a file of the full size. A cache that cannot be written is skipped."""
         try:
-            if path.parent not in self._dirs_made:  # a mkdir call costs as much as 0.04 ms
-                path.parent.mkdir(parents=True, exist_ok=True)
-                self._dirs_made.add(path.parent)
+            folder = self._level_dirs[level]
+            if folder not in self._dirs_made:  # a mkdir call costs as much as 0.04 ms
+                os.makedirs(folder, exist_ok=True)
+                self._dirs_made.add(folder)
             fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
         except FileExistsError:
             return
         except OSError as e:
-            if isinstance(e, FileNotFoundError) and path.parent in self._dirs_made:
-                self._dirs_made.discard(path.parent)  # removed meanwhile: made anew next time
+            if isinstance(e, FileNotFoundError) and folder in self._dirs_made:
+                self._dirs_made.discard(folder)  # removed meanwhile: made anew next time
                 return
             log.debug("ground tile cache: cannot write %s: %s", path, e)
             self._cache_room = 0
@@ -555,10 +720,14 @@ class GroundTexture:
         finally:
             os.close(fd)
 
-    def _cache_path(self, level: int, ti: int, tj: int) -> Path | None:
+    def _cache_path(self, level: int, ti: int, tj: int) -> str | None:
+        """The tile's file (a string: a ``Path`` costs ~8 us to build), or None."""
         if self._cache_dir is None:
             return None
-        return self._cache_dir / f"L{level}" / f"{ti}_{tj}.bgr"
+        folder = self._level_dirs.get(level)
+        if folder is None:
+            folder = self._level_dirs[level] = os.path.join(self._cache_dir, f"L{level}", "")
+        return f"{folder}{ti}_{tj}.bgr"
 
     def _detail_slab(self, level: int, r0: int, c0: int) -> np.ndarray:
         """The fine-detail multiplier over one tile's pixels (T x T x 4 float32: the
@@ -575,6 +744,24 @@ class GroundTexture:
             slab[..., 3] = 255.0
             self._slabs[key] = slab
         return slab
+
+    def _coarse(self, rows: int, cols: int) -> np.ndarray:
+        """The reused (rows, cols, 4) float32 buffer of a tile's coarse lattice
+        (contiguous: cv2.merge is 7x slower into a strided view)."""
+        if self._coarse_buf.shape[:2] != (rows, cols):
+            self._coarse_buf = np.empty((rows, cols, 4), np.float32)
+        return self._coarse_buf
+
+    def _big_buf(self, level: int, rows: int, cols: int) -> np.ndarray:
+        """A (rows, cols, 4) float32 view of a buffer kept for ``level`` and grown as
+        needed: the coarse lattice's size varies by a point or two from tile to tile,
+        and a new ~1 MB array for its resize would have its pages faulted in again
+        (cv2.resize writes into the strided view at the same speed)."""
+        buf = self._big_bufs.get(level, np.empty((0, 0, 4), np.float32))
+        if buf.shape[0] < rows or buf.shape[1] < cols:
+            buf = self._big_bufs[level] = np.empty((max(rows, buf.shape[0]) + 2,
+                                                    max(cols, buf.shape[1]) + 2, 4), np.float32)
+        return buf[:rows, :cols]
 
     def _generate_tile(self, level: int, ti: int, tj: int) -> np.ndarray:
         T, m = self.tile_px, self.mpp(level)
@@ -594,11 +781,10 @@ class GroundTexture:
             gn = -(np.arange(ka, ka + na, dtype=np.float64) + 0.5) * step
             ge = (np.arange(kb, kb + nb, dtype=np.float64) + 0.5) * step
             coarse = macro_rgb(gn[:, None], ge[None, :], step, self.seed)
-            if self._coarse_buf.shape[:2] != coarse.shape[1:]:
-                self._coarse_buf = np.empty((*coarse.shape[1:], 4), np.float32)
-            big = cv2.resize(_bgra(coarse, self._coarse_buf), None, fx=step / m, fy=step / m,
-                             dst=self._big_bufs.get(level), interpolation=cv2.INTER_LINEAR)
-            self._big_bufs[level] = big  # the next tile's if of the same size (most are)
+            up = step / m  # the resize's size is its own rounding of na x up, nb x up
+            big = cv2.resize(_bgra(coarse, self._coarse(na, nb)), None, fx=up, fy=up,
+                             dst=self._big_buf(level, round(na * up), round(nb * up)),
+                             interpolation=cv2.INTER_LINEAR)
             bgra = big[y0:y0 + T, x0:x0 + T]
         else:  # sample the macro colour on a coarser global lattice, warp
             n0, n1 = -(rows[-1] + 0.5) * m, -(rows[0] + 0.5) * m
@@ -608,14 +794,12 @@ class GroundTexture:
             gn = np.arange(ka1, ka0 - 1, -1, dtype=np.float64) * step  # north descending
             ge = np.arange(kb0, kb1 + 1, dtype=np.float64) * step
             coarse = macro_rgb(gn[:, None], ge[None, :], step, self.seed)
-            if self._coarse_buf.shape[:2] != coarse.shape[1:]:
-                self._coarse_buf = np.empty((*coarse.shape[1:], 4), np.float32)
             # lattice position of tile pixel (r, c): an axis-aligned affine map; four
             # float channels warp 2.7x faster than three
             k = m / step
             M = np.array([[k, 0.0, (tj * T + 0.5) * k - kb0],
                           [0.0, k, ka1 + (ti * T + 0.5) * k]])
-            bgra = cv2.warpAffine(_bgra(coarse, self._coarse_buf), M, (T, T),
+            bgra = cv2.warpAffine(_bgra(coarse, self._coarse(*coarse.shape[1:])), M, (T, T),
                                   dst=self._warp_buf,
                                   flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                                   borderMode=cv2.BORDER_REPLICATE)

@@ -1,0 +1,52 @@
+"""Procedural ground tiles are a pure function of (seed, level, tile): the per-cell
+tables kept across tiles (ground._TABLES) and the order tiles are made in do not
+change a pixel."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cosim.geo import LocalFrame
+from cosim.renderer import ground
+from cosim.renderer.config import GroundSpec
+from cosim.renderer.ground import GroundTexture
+
+KEYS = [(0, 3, -2), (0, -4000, 3000), (1, -1, 0), (2, 0, -1), (2, 0, 0), (2, -1, -1),
+        (2, 7, 5), (3, -2, 1), (4, 0, 0), (6, -1, 2), (8, 0, -1), (9, 1, 1)]
+
+
+def _tiles(keys: list[tuple[int, int, int]], seed: int = 7) -> dict[tuple[int, int, int], bytes]:
+    tex = GroundTexture(GroundSpec(), LocalFrame(37.0, -122.0, 10.0), seed)
+    return {k: tex.tile(*k).tobytes() for k in keys}
+
+
+def _forget(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(ground, "_TABLES", ground._Tables(ground._TABLES.max_bytes))
+    ground._WEIGHTS.clear()
+
+
+def test_tiles_do_not_depend_on_the_kept_tables_or_the_order(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("COSIM_GROUND_CACHE", "off")
+    _forget(monkeypatch)
+    made = _tiles(KEYS)
+    assert _tiles(KEYS[::-1]) == made  # tables kept by the first texture, other order
+    _forget(monkeypatch)
+    assert {k: _tiles([k])[k] for k in KEYS} == made  # each alone, from the start
+    # no table kept at all: each made for exactly its tile's cells (tree cells: for
+    # the candidate samples where a tile spans more cells than it has samples)
+    monkeypatch.setattr(ground._Tables, "cover", lambda self, *a: None)
+    _forget(monkeypatch)
+    assert _tiles(KEYS) == made
+
+
+def test_kept_tables_are_bounded(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("COSIM_GROUND_CACHE", "off")
+    monkeypatch.setattr(ground, "_TABLES", ground._Tables(200_000))
+    made = _tiles([(2, i, -i) for i in range(-20, 20, 3)])
+    assert 0 < ground._TABLES.nbytes <= 200_000
+    assert ground._TABLES.nbytes == sum(a.nbytes for t in ground._TABLES._held.values()
+                                        for a in t)
+    assert all(np.frombuffer(t, np.uint8).reshape(256, 256, 4)[..., 3].min() == 255
+               for t in made.values())
