@@ -24,6 +24,7 @@ that do not exist (a target behind the camera, no visible pixels) are empty.
 from __future__ import annotations
 
 import math
+from collections.abc import Hashable
 from dataclasses import dataclass
 from typing import Any
 
@@ -209,7 +210,7 @@ def _sky(h: int, w: int) -> np.ndarray:
 
 
 def _draw_ground(world: World, cam: CameraSpec, pose: Pose, view: _View,
-                 img: np.ndarray) -> None:
+                 img: np.ndarray, slot: Hashable) -> None:
     """Draw the sky and the ground into ``img`` (every pixel is written)."""
     h_img, w_img = cam.height_px, cam.width_px
     H = ground_homography(view.K, pose, view.K_inv)
@@ -246,7 +247,7 @@ def _draw_ground(world: World, cam: CameraSpec, pose: Pose, view: _View,
             e += 1
         y0, y1 = bounds[s], bounds[e + 1]
         if levels[s] >= 0:
-            _draw_band(world, H, A, max_r, y0, y1, w_img, levels[s], ground[y0:y1])
+            _draw_band(world, H, A, max_r, y0, y1, w_img, levels[s], ground[y0:y1], slot)
         else:  # no ground in the band (sky where the mask has none)
             ground[y0:y1] = _sky_image(world, h_img, w_img)[y0:y1]
         s = e + 1
@@ -308,9 +309,9 @@ def _band_extent(world: World, H_up: np.ndarray, y0: int, y1: int, w_img: int,
 
 
 def _draw_band(world: World, H: np.ndarray, A: np.ndarray, max_r: float, y0: int, y1: int,
-               w_img: int, level: int, out: np.ndarray) -> None:
+               w_img: int, level: int, out: np.ndarray, slot: Hashable) -> None:
     """Rows [y0, y1) of the ground from ``level`` into ``out`` (BGRA) (H: image ->
-    L ground, A: L ground -> scenario north/east)."""
+    L ground, A: L ground -> scenario north/east; ``slot``: GroundTexture.patch)."""
     ground = world.ground
     HA = A @ H
     ne_l = _band_extent(world, H, y0, y1, w_img, max_r)
@@ -324,7 +325,7 @@ def _draw_band(world: World, H: np.ndarray, A: np.ndarray, max_r: float, y0: int
         if max(c1 - c0, r1 - r0) <= MAX_PATCH_PX:
             break
         level += 1
-    patch = ground.patch(level, r0, r1, c0, c1)
+    patch = ground.patch(level, r0, r1, c0, c1, slot)
     shift = np.array([[1.0, 0.0, -c0], [0.0, 1.0, -r0], [0.0, 0.0, 1.0]])
     band = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, float(y0)], [0.0, 0.0, 1.0]])
     M = shift @ P @ HA @ band  # band pixel -> patch pixel
@@ -436,20 +437,23 @@ def _draw_smoke(K: np.ndarray, pose: Pose, t: TargetSpec, origin_l: np.ndarray, 
 
 
 def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
-                 out: np.ndarray | None = None) -> tuple[np.ndarray, list[dict[str, Any]]]:
+                 out: np.ndarray | None = None, stream: Hashable = None
+                 ) -> tuple[np.ndarray, list[dict[str, Any]]]:
     """The frame (h x w x 4 uint8, BGRA, alpha 255 everywhere: the ground is warped
     from four-channel tiles, OpenCV's fast path, and the video encoder takes BGRA
     as it is) and one ground-truth dict per target (without frame/vehicle/camera).
 
     ``out`` (h x w x 4 uint8, C-contiguous), if given, receives the frame and is
-    returned (a caller rendering many frames reuses one buffer)."""
+    returned (a caller rendering many frames reuses one buffer). ``stream`` names
+    the camera stream (its ground patch is kept apart from other streams'; the
+    pixels do not depend on it)."""
     view = world.view(cam)
     K = view.K
     w_img, h_img = cam.width_px, cam.height_px
     if out is None:
         out = np.empty((h_img, w_img, 4), dtype=np.uint8)
     img = out
-    _draw_ground(world, cam, pose, view, img)
+    _draw_ground(world, cam, pose, view, img, stream)
     ids, dirty = world.ids_buffer(h_img, w_img)
     time_s = tick / world.spec.physics_hz
     seed = world.spec.seed

@@ -32,7 +32,7 @@ import math
 import mmap
 import os
 from collections import OrderedDict
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Hashable, Iterator
 from pathlib import Path
 
 import cv2
@@ -46,6 +46,7 @@ log = logging.getLogger(__name__)
 MACRO_STEP_M = 0.5  # macro features (fields, roads, trees) sampled at least this fine
 DETAIL_PX = 512  # the tileable detail texture's size at the base level
 MAX_TILES = 384  # LRU size per process (256 px BGRA tiles: ~100 MB)
+PATCH_MB = 256  # assembled patches kept per process (GroundTexture.patch)
 MACRO_OVERSAMPLE = 2.0  # macro features sampled at most every this many pixels, then upsampled
 #: bump whenever a tile's pixels change for the same seed and ground parameters
 #: (old cache folders are then ignored; delete ~/.cache/cosim/ground to reclaim the space)
@@ -620,7 +621,9 @@ class GroundTexture:
         if self._cache_dir is not None:
             mb = float(os.environ.get(CACHE_MB_ENV) or CACHE_MB)
             self._cache_room = int(mb * 2**20) - _folder_bytes(self._cache_dir)
-        self._patches: dict[int, tuple[tuple[int, int, int, int], np.ndarray]] = {}
+        # assembled patches by (slot, level): the tile range held and its buffer
+        self._patches: OrderedDict[tuple[Hashable, int],
+                                   tuple[tuple[int, int, int, int], np.ndarray]] = OrderedDict()
         self._ne_to_px: dict[int, np.ndarray] = {}
         self._chunk = np.empty((0, T, T, 4), np.uint8)  # fresh tile memory (_new_tile)
         self._chunk_used = 0
@@ -812,14 +815,18 @@ class GroundTexture:
             out[..., 3] = 255
         return out
 
-    def patch(self, level: int, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
+    def patch(self, level: int, r0: int, r1: int, c0: int, c1: int,
+              slot: Hashable = None) -> np.ndarray:
         """Global pixels rows [r0, r1) x cols [c0, c1) of ``level`` (BGRA uint8,
         alpha 255): a view into the whole tiles covering it, assembled when the
         set of tiles changes (not every frame) and valid until the next call for
-        the same level."""
+        the same ``slot`` and level. A render process gives each camera stream its
+        own slot: streams looking at different ground would otherwise take turns
+        reassembling one buffer every frame. At most ``PATCH_MB`` of buffers are
+        kept (least recently used dropped)."""
         T = self.tile_px
         key = (r0 // T, (r1 - 1) // T + 1, c0 // T, (c1 - 1) // T + 1)
-        held = self._patches.get(level)
+        held = self._patches.get((slot, level))
         if held is None or held[0] != key:
             ta, tb, tc, td = key
             h, w = (tb - ta) * T, (td - tc) * T
@@ -830,7 +837,12 @@ class GroundTexture:
                 for tj in range(tc, td):
                     buf[(ti - ta) * T:(ti - ta + 1) * T, (tj - tc) * T:(tj - tc + 1) * T] = \
                         self.tile(level, ti, tj)
-            held = self._patches[level] = (key, buf)
+            held = self._patches[(slot, level)] = (key, buf)
+            total = sum(b.nbytes for _, b in self._patches.values())
+            while total > PATCH_MB * 2**20 and len(self._patches) > 1:
+                _, (_, old) = self._patches.popitem(last=False)
+                total -= old.nbytes
+        self._patches.move_to_end((slot, level))
         y, x = r0 - key[0] * T, c0 - key[2] * T
         out: np.ndarray = held[1][y:y + r1 - r0, x:x + c1 - c0]
         return out

@@ -133,7 +133,7 @@ class RenderWorker:
         s = self.streams[stream]
         la, lo, alt, roll, pitch, yaw = pose6
         pose = camera_pose(s.camera, la, lo, alt, roll, pitch, yaw, self.world.spec.ground_alt_m)
-        img, rows = render_frame(self.world, s.camera, pose, tick, self.frames[stream])
+        img, rows = render_frame(self.world, s.camera, pose, tick, self.frames[stream], stream)
         self.writers[stream].write(frame_no, tick / self.world.spec.physics_hz, img, rows,
                                    self.target_ids)
         if s.thumb_px is None:

@@ -50,3 +50,30 @@ def test_kept_tables_are_bounded(monkeypatch: pytest.MonkeyPatch) -> None:
                                         for a in t)
     assert all(np.frombuffer(t, np.uint8).reshape(256, 256, 4)[..., 3].min() == 255
                for t in made.values())
+
+
+def test_each_slot_keeps_its_own_patch_within_the_bound(monkeypatch: pytest.MonkeyPatch
+                                                        ) -> None:
+    """Two streams looking at different ground keep their patches apart (no
+    reassembly when they take turns), a patch is the tiles it covers, and no more
+    than PATCH_MB of patches is kept."""
+    monkeypatch.setenv(ground.CACHE_ENV, "off")
+    tex = GroundTexture(GroundSpec(), LocalFrame(37.0, -122.0, 10.0), 7)
+    T = tex.tile_px
+    made = []
+    tile = tex.tile
+    monkeypatch.setattr(tex, "tile", lambda *k: made.append(k) or tile(*k))
+    a = tex.patch(2, 10, 300, 20, 200, slot="a")
+    b = tex.patch(2, 5000, 5200, 7000, 7300, slot="b")
+    assert np.array_equal(a[:T - 10], tile(2, 0, 0)[10:, 20:200])
+    assert np.array_equal(b[:100, :50], tile(2, 5000 // T, 7000 // T)[5000 % T:5000 % T + 100,
+                                                                        7000 % T:7000 % T + 50])
+    n = len(made)
+    for _ in range(3):  # taking turns, same tiles: nothing is assembled again
+        assert np.array_equal(tex.patch(2, 10, 300, 20, 200, slot="a"), a)
+        assert np.array_equal(tex.patch(2, 5000, 5200, 7000, 7300, slot="b"), b)
+    assert len(made) == n
+    monkeypatch.setattr(ground, "PATCH_MB", 1)  # one 2 x 2 tile patch is 1 MB
+    for s in range(5):
+        tex.patch(2, 0, 300, 0, 300, slot=s)
+    assert len(tex._patches) == 1
