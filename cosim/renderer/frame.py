@@ -61,6 +61,7 @@ _SMOKE_BGR = np.array([150.0, 150.0, 155.0])
 OPAQUE = 255  # the frame's alpha channel: frames are BGRA (see render_frame)
 SHIFT = 4  # sub-pixel bits for polygon filling
 _LIN = ((np.arange(256) / 255.0) ** 2.2).astype(np.float32)  # sRGB -> linear (approx.)
+_LIN_BGRA = np.repeat(_LIN[None, :, None], 4, axis=2)  # cv2.LUT's table for BGRA pixels
 
 
 @dataclass(frozen=True)
@@ -481,11 +482,12 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
     return img, rows
 
 
-def _luminance(bgr: np.ndarray) -> np.ndarray:
-    """Relative luminance of (..., 3 or 4) BGR(A) pixels (alpha ignored)."""
-    lin = _LIN[bgr[..., :3]]
-    out: np.ndarray = 0.0722 * lin[..., 0] + 0.7152 * lin[..., 1] + 0.2126 * lin[..., 2]
-    return out
+def _mean_luminance(bgra: np.ndarray, mask: np.ndarray) -> float:
+    """Mean relative luminance of the BGRA pixels where ``mask`` (uint8) is set:
+    the Rec. 709 weights applied to the mean linearised channels (equal to the
+    mean of the pixels' luminances)."""
+    b, g, r, _ = cv2.mean(cv2.LUT(bgra, _LIN_BGRA), mask)
+    return 0.0722 * b + 0.7152 * g + 0.2126 * r
 
 
 def _ground_truth(view: _View, cam: CameraSpec, box_c: np.ndarray, img: np.ndarray,
@@ -566,16 +568,16 @@ def _pixels(row: dict[str, Any], img: np.ndarray, ids: np.ndarray, tid: int, x0:
     h_img, w_img = ids.shape
     bx0, by0 = max(0, math.floor(x0)), max(0, math.floor(y0))
     bx1, by1 = min(w_img, math.ceil(x1) + 1), min(h_img, math.ceil(y1) + 1)
-    sub = ids[by0:by1, bx0:bx1] == tid
-    n_px = int(sub.sum())
+    sub = (ids[by0:by1, bx0:bx1] == tid).view(np.uint8)
+    n_px = cv2.countNonZero(sub)
     row["pixels_on_target"] = n_px
     if n_px:
         m = max(4, int(0.5 * max(bx1 - bx0, by1 - by0)))
         rx0, ry0 = max(0, bx0 - m), max(0, by0 - m)
         rx1, ry1 = min(w_img, bx1 + m), min(h_img, by1 + m)
-        ring = ids[ry0:ry1, rx0:rx1] == 0
-        ring[by0 - ry0:by1 - ry0, bx0 - rx0:bx1 - rx0] = False
-        if ring.any():
-            y_t = float(_luminance(img[by0:by1, bx0:bx1][sub]).mean())
-            y_b = float(_luminance(img[ry0:ry1, rx0:rx1][ring]).mean())
+        ring = (ids[ry0:ry1, rx0:rx1] == 0).view(np.uint8)
+        ring[by0 - ry0:by1 - ry0, bx0 - rx0:bx1 - rx0] = 0
+        if cv2.countNonZero(ring):
+            y_t = _mean_luminance(img[by0:by1, bx0:bx1], sub)
+            y_b = _mean_luminance(img[ry0:ry1, rx0:rx1], ring)
             row["contrast"] = (y_t - y_b) / y_b if y_b > 0 else None

@@ -54,8 +54,6 @@ TEXTURE_VERSION = 6
 CACHE_ENV = "COSIM_GROUND_CACHE"  # a folder for the tile cache, or "off"
 CACHE_MB_ENV, CACHE_MB = "COSIM_GROUND_CACHE_MB", 2048  # no more tiles written past this
 _CHUNK = 2 << 20  # new tiles are carved from 2 MB blocks of memory mapped in one call
-_HUGE_PAGE = 2 << 20  # a transparent huge page (x86-64, and arm64 with 4 kB pages)
-_MADV_POPULATE_WRITE = 23  # Linux >= 5.14: make a range present, as if written
 FIELD_N_M, FIELD_E_M = 160.0, 220.0  # field size
 TREE_M = 7.0  # one tree at most per cell of this size, at a random place in its middle half
 
@@ -522,24 +520,10 @@ def _folder_bytes(folder: Path) -> int:
 
 def _fresh_memory(nbytes: int) -> np.ndarray:
     """``nbytes`` of memory (uint8, contents undefined) whose pages are present: an
-    anonymous mapping made present in one call, in transparent huge pages where
-    the kernel has them (asked for with MADV_HUGEPAGE on a 2 MB aligned range:
-    0.03 ms a 256 px tile against 0.12 ms in 4 kB pages with MAP_POPULATE on the
-    benchmark's VM, where page zeroing and mapping is most of it)."""
-    if hasattr(mmap, "MADV_HUGEPAGE"):
-        try:
-            m = mmap.mmap(-1, nbytes + _HUGE_PAGE,
-                          flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
-            raw = np.frombuffer(m, np.uint8)
-            off = -raw.ctypes.data % _HUGE_PAGE  # the unused rest is never made present
-            m.madvise(mmap.MADV_HUGEPAGE, off, nbytes)
-            try:
-                m.madvise(_MADV_POPULATE_WRITE, off, nbytes)
-            except OSError:  # before Linux 5.14: a write per page
-                raw[off:off + nbytes:mmap.PAGESIZE] = 0
-            return raw[off:off + nbytes]
-        except (OSError, ValueError):
-            pass
+    anonymous mapping made present in one call (MAP_POPULATE). Not transparent
+    huge pages: where the kernel must compact memory to find one (``defrag:
+    madvise``, as on the benchmark's VM) a 2 MB block took 4 to 8 ms against 0.8 ms
+    in 4 kB pages."""
     flags = mmap.MAP_PRIVATE | getattr(mmap, "MAP_ANONYMOUS", 0) | \
         getattr(mmap, "MAP_POPULATE", 0)
     try:

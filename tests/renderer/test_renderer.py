@@ -209,6 +209,44 @@ def test_level_pass_time_in_view_matches_the_field_of_view(tmp_path: Path) -> No
     assert float(mid["range_m"]) == pytest.approx(h - 3.5 / 2, abs=0.5)
 
 
+def test_contrast_is_the_weber_contrast_of_relative_luminance() -> None:
+    """pixels_on_target and contrast (frame module docstring) against the definition
+    written out: target pixels vs a ring around the box (the box grown by half its
+    size, at least 4 px) without the box and without other targets' pixels; Y from
+    linearised sRGB (gamma 2.2) with Rec. 709 weights."""
+    from cosim.renderer.frame import _pixels
+
+    rng = np.random.default_rng(5)
+    img = rng.integers(0, 256, (120, 160, 4), np.uint8)
+    img[..., 3] = 255
+    ids = np.zeros((120, 160), np.uint16)
+    ids[40:60, 50:90] = 1  # the target (its box)
+    ids[44:50, 60:66] = 0  # a hole: ground seen through it is not target
+    ids[30:38, 95:110] = 2  # another target inside the ring: excluded from it
+    row: dict[str, Any] = {}
+    _pixels(row, img, ids, 1, 50.0, 40.0, 89.0, 59.0)
+
+    def lum(px: np.ndarray) -> np.ndarray:
+        lin = (px[:, :3].astype(np.float64) / 255.0) ** 2.2
+        out: np.ndarray = lin @ np.array([0.0722, 0.7152, 0.2126])
+        return out
+
+    target = ids == 1
+    box = np.zeros_like(target)
+    box[40:60, 50:90] = True  # the pixels floor(x0)..ceil(x1), floor(y0)..ceil(y1)
+    m = max(4, int(0.5 * 40))
+    ring = np.zeros_like(target)
+    ring[40 - m:60 + m, 50 - m:90 + m] = True
+    ring &= ~box & (ids == 0)
+    y_t, y_b = lum(img[target]).mean(), lum(img[ring]).mean()
+    assert row["pixels_on_target"] == int(target.sum()) == 20 * 40 - 36
+    assert row["contrast"] == pytest.approx((y_t - y_b) / y_b, rel=1e-5, abs=1e-6)
+    img[target] = (40, 40, 40, 255)  # a dark target on the same ground: negative
+    _pixels(row, img, ids, 1, 50.0, 40.0, 89.0, 59.0)
+    assert row["contrast"] == pytest.approx(((40 / 255) ** 2.2 - y_b) / y_b, rel=1e-5)
+    assert row["contrast"] < 0
+
+
 def test_frames_identical_whatever_the_render_worker_count(tmp_path: Path) -> None:
     # three streams (nadir, forward, a -45 deg gimbal), so 2 and 3 workers really
     # split them (a worker count is capped at the number of streams)
