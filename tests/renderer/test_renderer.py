@@ -332,16 +332,19 @@ def test_pyav_and_opencv_mp4v_and_h264_read_back_alike(tmp_path: Path,
 
 
 @pytest.mark.skipif(not have_pyav(), reason="PyAV not installed")
-@pytest.mark.parametrize("codec", ["mp4v", "h264"])
-def test_each_encoded_frame_is_its_own_picture(tmp_path: Path, codec: str) -> None:
+@pytest.mark.parametrize("codec,wrap", [("mp4v", True), ("h264", True), ("mp4v", False)])
+def test_each_encoded_frame_is_its_own_picture(tmp_path: Path, codec: str, wrap: bool) -> None:
     """The writer reuses one YUV buffer for every frame: each decoded frame must
     match the picture written at its place, not a later one written into the
-    same buffer (an encoder holding on to its input past encode() would)."""
+    same buffer (an encoder holding on to its input past encode() would); also
+    through the copy into PyAV's own planes (``wrap`` off, older PyAV)."""
     rng = np.random.default_rng(3)
     base = cv2.GaussianBlur(rng.integers(0, 256, (96, 128, 3), np.uint8), (0, 0), 2.0)
     pics = [np.ascontiguousarray(np.roll(base, 9 * k, axis=1)) for k in range(12)]
     path = str(tmp_path / f"v.{video.EXTENSIONS[codec]}")
     w = video.open_video(path, codec, 10.0, 128, 96)
+    if not wrap:
+        w.wrap = None  # type: ignore[attr-defined]
     for p in pics:
         w.write(p)
     w.release()
