@@ -822,11 +822,13 @@ class GroundTexture:
                     buf[(ti - ta) * T:(ti - ta + 1) * T, (tj - tc) * T:(tj - tc + 1) * T] = \
                         self.tile(level, ti, tj)
             held = self._patches[(slot, level)] = (key, buf)
+            self._patches.move_to_end((slot, level))  # never the one dropped below
             total = sum(b.nbytes for _, b in self._patches.values())
             while total > PATCH_MB * 2**20 and len(self._patches) > 1:
                 _, (_, old) = self._patches.popitem(last=False)
                 total -= old.nbytes
-        self._patches.move_to_end((slot, level))
+        else:
+            self._patches.move_to_end((slot, level))
         y, x = r0 - key[0] * T, c0 - key[2] * T
         out: np.ndarray = held[1][y:y + r1 - r0, x:x + c1 - c0]
         return out

@@ -77,3 +77,11 @@ def test_each_slot_keeps_its_own_patch_within_the_bound(monkeypatch: pytest.Monk
     for s in range(5):
         tex.patch(2, 0, 300, 0, 300, slot=s)
     assert len(tex._patches) == 1
+    # the oldest slot moving onto more tiles, over the bound: its new patch is kept
+    monkeypatch.setattr(ground, "PATCH_MB", 2)
+    tex.patch(2, 0, 300, 0, 300, slot="x")
+    tex.patch(2, 0, 300, 0, 300, slot="y")
+    assert list(tex._patches) == [("x", 2), ("y", 2)]
+    moved = tex.patch(2, 600, 1100, 0, 300, slot="x")  # 3 x 2 tiles: 1.5 MB
+    assert list(tex._patches) == [("x", 2)]
+    assert np.array_equal(moved[:100, :100], tile(2, 600 // T, 0)[600 % T:600 % T + 100, :100])
