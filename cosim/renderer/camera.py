@@ -118,13 +118,13 @@ def project(K: np.ndarray, pts_c: np.ndarray) -> np.ndarray:
     return np.stack([u, v], axis=1)
 
 
-def ground_homography(K: np.ndarray, pose: Pose, K_inv: np.ndarray | None = None
-                      ) -> np.ndarray:
+def ground_homography(K_inv: np.ndarray, pose: Pose) -> np.ndarray:
     """3x3 H: image pixel (u, v, 1) -> ground point (north, east, 1) of L, up to
-    scale; the third component of ``H @ p`` is the ray's downward component
-    (<= 0: the ray does not reach the ground). ``K_inv``: ``inv(K)`` if known."""
+    scale, from the inverse of the intrinsics ``K_inv``; the third component of
+    ``H @ p`` is the ray's downward component (<= 0: the ray does not reach the
+    ground)."""
     h = pose.height_m
     c = pose.c_l
     g = np.array([[h, 0.0, c[0]], [0.0, h, c[1]], [0.0, 0.0, 1.0]])
-    out: np.ndarray = g @ pose.R_cl.T @ (np.linalg.inv(K) if K_inv is None else K_inv)
+    out: np.ndarray = g @ pose.R_cl.T @ K_inv
     return out

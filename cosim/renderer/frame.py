@@ -214,7 +214,7 @@ def _draw_ground(world: World, cam: CameraSpec, pose: Pose, view: _View,
                  img: np.ndarray, slot: Hashable) -> None:
     """Draw the sky and the ground into ``img`` (every pixel is written)."""
     h_img, w_img = cam.height_px, cam.width_px
-    H = ground_homography(view.K, pose, view.K_inv)
+    H = ground_homography(view.K_inv, pose)
     max_r = world.spec.ground.max_range_m
     # visibility: a ray reaches the ground (w > 0) within max range
     q_all = H @ view.grid
@@ -235,16 +235,15 @@ def _draw_ground(world: World, cam: CameraSpec, pose: Pose, view: _View,
     gsd = _gsd(q_all)
     gsd_rows = np.where(near_ok, gsd, np.inf).reshape(9, 9).min(axis=1)
     # bands of rows, each from the level its finest visible ground needs
-    strips = STRIPS
     bounds = view.bounds
     level_for = world.ground.level_for
     levels = [level_for(g) if math.isfinite(g) else -1
               for g in np.minimum(gsd_rows[:-1], gsd_rows[1:]).tolist()]
     ground = img if mask is None else world.scratch("ground", h_img, w_img, 4)
     s = 0
-    while s < strips:
+    while s < STRIPS:
         e = s
-        while e + 1 < strips and levels[e + 1] == levels[s]:
+        while e + 1 < STRIPS and levels[e + 1] == levels[s]:
             e += 1
         y0, y1 = bounds[s], bounds[e + 1]
         if levels[s] >= 0:
@@ -530,8 +529,8 @@ def _ground_truth(view: _View, cam: CameraSpec, box_c: np.ndarray, img: np.ndarr
                                "angular_size_deg": ang_l[k], "pixels_on_target": 0,
                                "range_m": rng_l[k], "contrast": None}
         rows.append(row)
-        uv: np.ndarray | None = None
         if front_l[k]:
+            uv = uv_all[k]
             us, vs = [p[0] for p in uv_l[k]], [p[1] for p in uv_l[k]]
             x0, y0, x1, y1 = min(us), min(vs), max(us), max(vs)
         else:  # the box crosses the near plane: its faces clipped to it
@@ -552,8 +551,7 @@ def _ground_truth(view: _View, cam: CameraSpec, box_c: np.ndarray, img: np.ndarr
             if inside_bbox:
                 row["in_view"] = 1
             else:  # does the projected box's hull overlap the image?
-                pts_uv = uv_all[k] if uv is None else uv
-                hull = cv2.convexHull(pts_uv.astype(np.float32))
+                hull = cv2.convexHull(uv.astype(np.float32))
                 area, _ = cv2.intersectConvexConvex(hull, view.image_quad)
                 row["in_view"] = int(area > 0)
             row["fully_in_view"] = int(inside_bbox and front_l[k])

@@ -181,15 +181,16 @@ class _Tables:
         self._held: OrderedDict[tuple[object, ...], tuple[np.ndarray, ...]] = OrderedDict()
 
     def cover(self, key: tuple[object, ...], i0: int, i1: int, j0: int, j1: int, size: int,
-              make: Callable[[int, int, int, int], tuple[np.ndarray, ...]]
+              make: Callable[[int, int, int, int], tuple[np.ndarray, ...]], own: bool = True
               ) -> tuple[int, int, int, int, tuple[np.ndarray, ...]] | None:
         """``(a0, a1, b0, b1, make(a0, a1, b0, b1))``: the tables of the cells
         ``[a0, a1) x [b0, b1)``, the whole blocks of ``size`` x ``size`` cells that hold
         ``i0 .. i1`` x ``j0 .. j1``, kept (the tiles over the same blocks share them).
-        None if those span more than ``size / 2`` cells either way: a tile's blocks
-        would then be mostly its own, and up to 4x its cells."""
+        If those span more than ``size / 2`` cells either way (a tile's blocks would
+        then be mostly its own, and up to 4x its cells): the tables of exactly
+        ``i0 .. i1`` x ``j0 .. j1``, not kept, or None if not ``own``."""
         if i1 - i0 >= size // 2 or j1 - j0 >= size // 2:
-            return None
+            return (i0, i1 + 1, j0, j1 + 1, make(i0, i1 + 1, j0, j1 + 1)) if own else None
         a0, a1 = i0 - i0 % size, i1 - i1 % size + size
         b0, b1 = j0 - j0 % size, j1 - j1 % size + size
         key = (*key, a0, a1, b0, b1)
@@ -205,7 +206,6 @@ class _Tables:
 
 
 _TABLES = _Tables(16 << 20)
-
 
 
 def _lattice(wn: tuple[int, np.ndarray], we: tuple[int, np.ndarray], seed: int,
@@ -224,8 +224,7 @@ def _lattice(wn: tuple[int, np.ndarray], we: tuple[int, np.ndarray], seed: int,
 
     got = _TABLES.cover(("lattice", seed, offset, scale), i0, i0 + ni - 1, j0, j0 + nj - 1,
                         32, make)
-    if got is None:
-        return make(i0, i0 + ni, j0, j0 + nj)[0]
+    assert got is not None
     a0, _, b0, _, (tab,) = got
     return np.ascontiguousarray(tab[i0 - a0:i0 - a0 + ni, j0 - b0:j0 - b0 + nj])
 
@@ -308,9 +307,7 @@ def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int) -> np.ndar
     cj1 = math.floor((ev.max() + warp) / fe) + 1
     got = _TABLES.cover(("field", seed, step_m), ci0, ci1, cj0, cj1, 8,
                         functools.partial(_field_cells, seed, step_m))
-    if got is None:
-        got = (ci0, ci1 + 1, cj0, cj1 + 1,
-               _field_cells(seed, step_m, ci0, ci1 + 1, cj0, cj1 + 1))
+    assert got is not None
     a0, a1, b0, b1, (colour, amp, cu, cv, hedge_cell, road_n, road_e) = got
     nj = b1 - b0
     here = (slice(ci0 - a0, ci1 + 1 - a0), slice(cj0 - b0, cj1 + 1 - b0))  # of a table
@@ -383,9 +380,8 @@ def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int) -> np.ndar
             return _tree_cells(np.arange(a0, a1, dtype=np.float64)[:, None],
                                np.arange(b0, b1, dtype=np.float64)[None, :], seed)
 
-        got = _TABLES.cover(("tree", seed), kn0, kn1, ke0, ke1, 32, trees)
-        if got is None and (kn1 - kn0 + 1) * (ke1 - ke0 + 1) <= R * C:
-            got = (kn0, kn1 + 1, ke0, ke1 + 1, trees(kn0, kn1 + 1, ke0, ke1 + 1))
+        got = _TABLES.cover(("tree", seed), kn0, kn1, ke0, ke1, 32, trees,
+                            own=(kn1 - kn0 + 1) * (ke1 - ke0 + 1) <= R * C)
         if got is None:
             r, c = np.divmod(maybe, C)
             cells = _tree_cells(cn.take(r), ce.take(c), seed)

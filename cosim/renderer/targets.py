@@ -137,16 +137,14 @@ class TargetSet:
         self.ecef_m = geodetic_to_ecef(self.lat_deg, self.lon_deg,
                                        np.full(len(lat), ground_alt_m))
 
-    def origins_in(self, local: LocalFrame, local_ecef_m: np.ndarray | None = None
-                   ) -> np.ndarray:
+    def origins_in(self, local: LocalFrame, local_ecef_m: np.ndarray) -> np.ndarray:
         """(n, 3) each target's ground point in the frame ``local`` (whose origin
-        in ECEF is ``local_ecef_m``, if known)."""
+        in ECEF is ``local_ecef_m``)."""
         if not self.specs:
             return np.zeros((0, 3))
         # LocalFrame.geodetic_to_ned's arithmetic, from the ECEF points kept at start
         x, y, z = self.ecef_m
-        ox, oy, oz = geodetic_to_ecef(local.lat_deg, local.lon_deg, local.alt_m) \
-            if local_ecef_m is None else local_ecef_m
+        ox, oy, oz = local_ecef_m
         dx, dy, dz = x - ox, y - oy, z - oz
         lat, lon = np.radians(local.lat_deg), np.radians(local.lon_deg)
         sl, cl, so, co = (float(np.sin(lat)), float(np.cos(lat)), float(np.sin(lon)),
