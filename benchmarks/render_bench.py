@@ -3,7 +3,8 @@
 1. ms CPU per 640x480 frame on one core, including the ground-truth rows and
    mp4v encoding (a nadir camera at 100 m AGL, 51 m/s over the flyover
    targets, tile generation included as it happens in flight), frames/s per
-   core, and where the time goes (encoding, new ground tiles, the rest):
+   core, and where the time goes (encoding, of it the codec library's own
+   call; OpenCV's warp of the ground; new ground tiles; the rest, ours):
    first with an empty ground tile cache (every tile generated: the cost of
    a first run over new ground), then again over the same ground with the
    tiles on disk (a repeated run or the next run of a sweep);
@@ -62,9 +63,19 @@ class _Timed:
 class _Video:
     def __init__(self, video: Any) -> None:
         self.video, self.write = video, _Timed(video.write)
+        self.codec: _Encoder | None = None  # the codec library's own encode (PyAV's writers)
+        if hasattr(video, "stream"):
+            self.codec = video.stream = _Encoder(video.stream)
 
     def release(self) -> None:
         self.video.release()
+
+
+class _Encoder:
+    """A PyAV stream whose ``encode`` (FFmpeg's encoder) is timed."""
+
+    def __init__(self, stream: Any) -> None:
+        self.stream, self.encode = stream, _Timed(stream.encode)
 
 
 def per_frame(frames: int, cache_dir: str, codec: str = "mp4v") -> dict[str, float]:
@@ -88,18 +99,25 @@ def per_frame(frames: int, cache_dir: str, codec: str = "mp4v") -> dict[str, flo
         s = Stream(0, "uav1", 0, cam, f"cameras/b.{EXTENSIONS[codec]}", "cameras/b.gt.csv", None)
         w = RenderWorker(ws, [s], Path(d), codec, False)
         video = _Video(w.writers[0].video)
-        w.writers[0].video = video  # type: ignore[assignment]
+        w.writers[0].video = video
         ground = w.world.ground
         tiles = _Timed(ground._make_tile)
         ground._make_tile = tiles  # type: ignore[method-assign]
-        cpu0, wall0 = time.process_time(), time.perf_counter()
-        for i, pose in enumerate(poses):
-            w.render(0, i, i * 12, pose)
-        cpu = time.process_time() - cpu0
-        wall = time.perf_counter() - wall0
+        warp_fn = cv2.warpPerspective
+        warp = cv2.warpPerspective = _Timed(warp_fn)  # the ground's warp (frame.py)
+        try:
+            cpu0, wall0 = time.process_time(), time.perf_counter()
+            for i, pose in enumerate(poses):
+                w.render(0, i, i * 12, pose)
+            cpu = time.process_time() - cpu0
+            wall = time.perf_counter() - wall0
+        finally:
+            cv2.warpPerspective = warp_fn
         w.close()
+    codec_s = video.codec.encode.cpu_s if video.codec else float("nan")
     return {"cpu_ms": cpu / frames * 1000, "wall_ms": wall / frames * 1000,
             "encode_ms": video.write.cpu_s / frames * 1000,
+            "codec_ms": codec_s / frames * 1000, "warp_ms": warp.cpu_s / frames * 1000,
             "tiles_ms": tiles.cpu_s / frames * 1000, "tiles": tiles.calls,
             "tile_ms": tiles.cpu_s / max(tiles.calls, 1) * 1000,
             "tiles_generated": ground.tiles_made, "tiles_from_disk": ground.tiles_loaded}
@@ -159,19 +177,25 @@ def main() -> None:
                 for label, got in runs.items():
                     f = per_frame(a.frames, cache, a.codec)
                     got.append(f)
+                    rest = f["cpu_ms"] - f["encode_ms"] - f["warp_ms"] - f["tiles_ms"]
                     print(f"640x480 nadir frame incl. ground truth + {a.codec}, {label}: "
                           f"{f['cpu_ms']:.2f} ms CPU ({f['wall_ms']:.2f} ms wall), "
                           f"{1000 / f['cpu_ms']:.0f} frames/s per core; of which {a.codec} "
-                          f"encoding {f['encode_ms']:.2f} ms, new ground tiles "
-                          f"{f['tiles_ms']:.2f} ms ({f['tiles']:.0f} tiles, "
+                          f"encoding {f['encode_ms']:.2f} ms (the codec itself "
+                          f"{f['codec_ms']:.2f} ms), the ground's warp {f['warp_ms']:.2f} ms, "
+                          f"new ground tiles {f['tiles_ms']:.2f} ms ({f['tiles']:.0f} tiles, "
                           f"{f['tile_ms']:.2f} ms each: {f['tiles_generated']} generated, "
-                          f"{f['tiles_from_disk']} read), the rest "
-                          f"{f['cpu_ms'] - f['encode_ms'] - f['tiles_ms']:.2f} ms", flush=True)
+                          f"{f['tiles_from_disk']} read), the rest {rest:.2f} ms", flush=True)
         if a.repeat > 1:
             for label, got in runs.items():
                 ms = sorted(f["cpu_ms"] for f in got)
+                parts = {k: statistics.median(f[k] for f in got)
+                         for k in ("encode_ms", "codec_ms", "warp_ms", "tiles_ms")}
                 print(f"{label}: median {statistics.median(ms):.2f} ms CPU a frame "
-                      f"(min {ms[0]:.2f}, max {ms[-1]:.2f}, {len(ms)} runs)")
+                      f"(min {ms[0]:.2f}, max {ms[-1]:.2f}, {len(ms)} runs); medians of the "
+                      f"parts: encoding {parts['encode_ms']:.2f} (codec "
+                      f"{parts['codec_ms']:.2f}), warp {parts['warp_ms']:.2f}, new tiles "
+                      f"{parts['tiles_ms']:.2f} ms")
     if a.vehicles:
         res = swarm(a.vehicles, a.duration_s, a.backend, a.workers, a.render_workers)
         print(f"{a.vehicles} uav700 x 10 Hz 640x480 cameras, {a.duration_s:g} s: "

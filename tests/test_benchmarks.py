@@ -1,0 +1,44 @@
+"""The benchmark scripts still run and their breakdowns add up (a few frames; the
+figures themselves are for benchmarks/README.md, not for assertions)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO / "benchmarks"))
+
+pytest.importorskip("av")
+
+
+def test_render_bench_parts_add_up(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import cv2
+    import render_bench
+
+    from cosim.renderer.ground import CACHE_ENV
+
+    monkeypatch.setenv(CACHE_ENV, "off")  # per_frame sets it: restored after the test
+    monkeypatch.setattr(cv2, "setNumThreads", lambda n: None)  # and this, for the process
+    f = render_bench.per_frame(6, str(tmp_path / "ground"))
+    assert f["tiles_generated"] > 0 and f["tiles_from_disk"] == 0
+    # each part was caught where it runs, and the parts fit inside the whole
+    assert 0 < f["codec_ms"] < f["encode_ms"]
+    assert f["warp_ms"] > 0 and f["tiles_ms"] > 0
+    assert f["encode_ms"] + f["warp_ms"] + f["tiles_ms"] < f["cpu_ms"]
+    again = render_bench.per_frame(6, str(tmp_path / "ground"))
+    assert again["tiles_generated"] == 0 and again["tiles_from_disk"] == f["tiles_generated"]
+
+
+def test_floor_bench_runs() -> None:
+    proc = subprocess.run([sys.executable, str(REPO / "benchmarks/floor_bench.py"),
+                           "--frames", "4", "--rounds", "1"], cwd=REPO, capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    out = proc.stdout
+    assert "encoder mpeg4 q4 (mp4v, the default)" in out and "(4 frames decoded)" in out
+    assert "warp bilinear BGRA perspective (the renderer's)" in out
+    assert "floor of a frame with these libraries" in out
