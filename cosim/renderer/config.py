@@ -38,13 +38,15 @@ TARGET_DEFAULTS: dict[str, tuple[float, float, float, tuple[int, int, int]]] = {
 class GroundSpec:
     """The ground texture. ``kind`` procedural: generated from the scenario seed;
     ``image``: a north-up picture whose top-left corner is at ``origin_ne_m``
-    (local frame metres) with ``m_per_px``; outside it the procedural ground."""
+    (local frame metres) with ``m_per_px``, or a GeoTIFF (``geotiff``) placed by
+    its own tags; outside it the procedural ground."""
 
     kind: str = "procedural"
     image: str | None = None
     origin_ne_m: tuple[float, float] | None = None  # top-left corner (north, east)
     origin_latlon_deg: tuple[float, float] | None = None  # or its lat/lon
     m_per_px: float = 1.0
+    geotiff: bool = False  # placed by the file's own georeference (cosim/renderer/geotiff.py)
     base_m_per_px: float = 0.05  # finest procedural level (no blur at 30 m)
     tile_px: int = 256
     max_range_m: float = 5000.0  # ground farther than this is drawn as haze/sky
@@ -117,32 +119,56 @@ def parse_ground(info: SectionInfo, node: Any, path: P) -> GroundSpec:
     o_ne: tuple[float, float] | None = None
     o_ll: tuple[float, float] | None = None
     mpp = 1.0
+    geotiff = False
     if kind == "image":
         raw = r.string("image")
         if raw is not None:
             p = (info.path.resolve().parent / raw).resolve()
-            if p.suffix.lower() in (".tif", ".tiff"):
-                info.err(path + ("image",), "GeoTIFF is not supported yet; convert it to PNG "
-                                            "and give origin and m_per_px")
-            elif not p.is_file():
+            if not p.is_file():
                 info.err(path + ("image",), f"no such image file: {p}")
+            elif p.suffix.lower() in (".tif", ".tiff"):
+                # a TIFF without origin and m_per_px must place itself (GeoTIFF)
+                geotiff = not (r.has("origin") or r.has("m_per_px"))
+                _check_geotiff(info, str(p), geotiff, path)
             image = str(p)
-        mpp = r.num("m_per_px", lo=0.0, lo_open=True) or 1.0
-        o = info.reader(r.d.get("origin"), path + ("origin",),
-                        ("north_m", "east_m", "lat_deg", "lon_deg"))
-        if o.has("lat_deg") or o.has("lon_deg"):
-            la, lo = o.num("lat_deg", lo=-90, hi=90), o.num("lon_deg", lo=-180, hi=180)
-            if la is not None and lo is not None:
-                o_ll = (la, lo)
-        else:
-            n, e = o.num("north_m"), o.num("east_m")
-            if n is not None and e is not None:
-                o_ne = (n, e)
+        if not geotiff:
+            mpp = r.num("m_per_px", lo=0.0, lo_open=True) or 1.0
+            o = info.reader(r.d.get("origin"), path + ("origin",),
+                            ("north_m", "east_m", "lat_deg", "lon_deg"))
+            if o.has("lat_deg") or o.has("lon_deg"):
+                la, lo = o.num("lat_deg", lo=-90, hi=90), o.num("lon_deg", lo=-180, hi=180)
+                if la is not None and lo is not None:
+                    o_ll = (la, lo)
+            else:
+                n, e = o.num("north_m"), o.num("east_m")
+                if n is not None and e is not None:
+                    o_ne = (n, e)
     elif r.has("image"):
         info.err(path + ("image",), "an image needs 'texture: image'")
     return GroundSpec(kind=kind or "procedural", image=image, origin_ne_m=o_ne,
-                      origin_latlon_deg=o_ll, m_per_px=mpp, base_m_per_px=base or 0.05,
+                      origin_latlon_deg=o_ll, m_per_px=mpp, geotiff=geotiff,
+                      base_m_per_px=base or 0.05,
                       tile_px=tile or 256, max_range_m=max_range or 5000.0)
+
+
+def _check_geotiff(info: SectionInfo, image: str, geotiff: bool, path: P) -> None:
+    """Report what stops the TIFF ``image`` from being used: as a GeoTIFF (placed by
+    its own tags: ``geotiff``) or as a picture placed by origin and m_per_px."""
+    from cosim.renderer import geotiff as gt
+
+    try:
+        ref = gt.read_georef(image)
+    except gt.GeoTiffError as e:
+        if geotiff:  # neither georeferenced nor placed by hand
+            info.err(path + ("image",), str(e))
+        return
+    if not geotiff:
+        info.err(path, f"{image} is a GeoTIFF and carries its own georeference: leave out "
+                       "origin and m_per_px")
+        return
+    why = gt.check_crs(ref.epsg)
+    if why is not None:
+        info.err(path + ("image",), f"{image}: {why}")
 
 
 def parse_targets(info: SectionInfo, node: Any, path: P) -> tuple[TargetSpec, ...]:

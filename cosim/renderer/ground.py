@@ -18,8 +18,10 @@ costs about 1 to 2 ms to make, so tiles are also kept on disk (``ground_cache_di
 one raw BGR file of 192 kB per 256 px tile, keyed by everything its pixels
 depend on; no more written once a seed's folder holds ``CACHE_MB``): the
 first run over a piece of ground pays for it, later runs and the other runs
-of a sweep read it (0.05 ms a tile). A user image (PNG/JPG, north up, ``m_per_px``, top-left corner
-``origin``) gets its own pyramid; outside it the procedural ground shows.
+of a sweep read it (0.05 ms a tile). A user image (PNG/JPG/TIFF, north up,
+``m_per_px``, top-left corner ``origin``; or a GeoTIFF, resampled onto the
+scenario's grid by its own georeference) gets its own pyramid; outside it the
+procedural ground shows.
 """
 
 from __future__ import annotations
@@ -529,27 +531,43 @@ def _fresh_memory(nbytes: int) -> np.ndarray:
 
 
 class _ImageLayer:
-    """A user's north-up image with its pyramid (BGRA uint8, opaque, like the frames)."""
+    """A user's north-up image with its pyramid (BGRA uint8, opaque, like the frames):
+    a picture placed by ``origin`` and ``m_per_px``, or a GeoTIFF resampled onto the
+    scenario's grid (cosim/renderer/geotiff.py), with a mask of where it has data."""
 
     def __init__(self, spec: GroundSpec, frame: LocalFrame) -> None:
-        assert spec.image is not None
-        bgr = cv2.imread(spec.image, cv2.IMREAD_COLOR)
-        if bgr is None:
-            from cosim.errors import ConfigError
+        from cosim.errors import ConfigError
 
-            raise ConfigError(f"ground.image: cannot read {spec.image} as an image")
-        img = cv2.cvtColor(bgr, cv2.COLOR_BGR2BGRA)
-        if spec.origin_latlon_deg is not None:
-            la, lo = spec.origin_latlon_deg
-            n, e, _ = frame.geodetic_to_ned(la, lo, frame.alt_m)
-            self.n0, self.e0 = float(n), float(e)
+        assert spec.image is not None
+        mask: np.ndarray | None = None
+        if spec.geotiff:
+            from cosim.renderer import geotiff
+
+            try:
+                img, mask, self.n0, self.e0, self.mpp = geotiff.resample(
+                    spec.image, geotiff.read_georef(spec.image), frame)
+            except geotiff.GeoTiffError as err:
+                raise ConfigError(f"ground.image: {err}") from err
         else:
-            self.n0, self.e0 = spec.origin_ne_m or (0.0, 0.0)
-        self.mpp = spec.m_per_px
+            bgr = cv2.imread(spec.image, cv2.IMREAD_COLOR)
+            if bgr is None:
+                raise ConfigError(f"ground.image: cannot read {spec.image} as an image")
+            img = cv2.cvtColor(bgr, cv2.COLOR_BGR2BGRA)
+            if spec.origin_latlon_deg is not None:
+                la, lo = spec.origin_latlon_deg
+                n, e, _ = frame.geodetic_to_ned(la, lo, frame.alt_m)
+                self.n0, self.e0 = float(n), float(e)
+            else:
+                self.n0, self.e0 = spec.origin_ne_m or (0.0, 0.0)
+            self.mpp = spec.m_per_px
         self.levels = [img]
+        self._masks = None if mask is None else [mask]
         while min(self.levels[-1].shape[:2]) >= 8:
             self.levels.append(cv2.resize(self.levels[-1], None, fx=0.5, fy=0.5,
                                           interpolation=cv2.INTER_AREA))
+            if self._masks is not None:
+                self._masks.append(cv2.resize(self._masks[-1], None, fx=0.5, fy=0.5,
+                                              interpolation=cv2.INTER_AREA))
         h, w = img.shape[:2]
         self.bounds_ne = (self.n0 - h * self.mpp, self.n0, self.e0, self.e0 + w * self.mpp)
         self._coverage: dict[int, np.ndarray] = {}
@@ -559,10 +577,15 @@ class _ImageLayer:
         return min(max(k, 0), len(self.levels) - 1)
 
     def coverage(self, level: int) -> np.ndarray:
-        """255 over the whole of ``level`` (warped like the image, it marks the
+        """255 where ``level`` has data, else 0: all of it, or for a GeoTIFF where
+        at least half of a pixel is the file's (warped like the image, it marks the
         frame pixels the image covers); made once per level."""
         if level not in self._coverage:
-            self._coverage[level] = np.full(self.levels[level].shape[:2], 255, np.uint8)
+            if self._masks is None:
+                self._coverage[level] = np.full(self.levels[level].shape[:2], 255, np.uint8)
+            else:
+                self._coverage[level] = cv2.threshold(self._masks[level], 127, 255,
+                                                      cv2.THRESH_BINARY)[1]
         return self._coverage[level]
 
     def ne_to_px(self, level: int) -> np.ndarray:
