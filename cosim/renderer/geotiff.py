@@ -89,7 +89,7 @@ def read_georef(path: str) -> GeoRef:
         with Image.open(path) as im:
             tags = dict(getattr(im, "tag_v2", {}))
             w, h = im.size
-    except (OSError, UnidentifiedImageError) as err:
+    except (OSError, UnidentifiedImageError, Image.DecompressionBombError) as err:
         raise GeoTiffError(f"{path}: cannot read it as a TIFF: {err}") from err
     if TAG_GEOKEYS not in tags or not (TAG_TRANSFORM in tags
                                        or (TAG_TIEPOINT in tags and TAG_PIXEL_SCALE in tags)):
