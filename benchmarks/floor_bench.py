@@ -61,9 +61,6 @@ def frames_of(n: int) -> list[np.ndarray]:
     got: list[np.ndarray] = []
 
     class Keep:
-        def __init__(self, *a: Any) -> None:
-            pass
-
         def write(self, img: np.ndarray) -> None:
             got.append(img.copy())
 
@@ -119,7 +116,7 @@ def per_call_ms(fn: Callable[[], Any], n: int) -> float:
     return (time.process_time() - c) / n * 1000
 
 
-def warps(frames: int) -> dict[str, Callable[[], Any]]:
+def warps() -> dict[str, Callable[[], Any]]:
     """OpenCV warps of a 900 x 700 ground patch to 640 x 480 at the scale and tilt
     a frame has (a texel about a pixel)."""
     rng = np.random.default_rng(1)
@@ -156,7 +153,8 @@ def main() -> None:
     quality: dict[str, tuple[int, float, int]] = {}
     missing: dict[str, str] = {}
     conv: list[float] = []
-    warp: dict[str, list[float]] = {k: [] for k in warps(1)}
+    warp_fns = warps()
+    warp: dict[str, list[float]] = {k: [] for k in warp_fns}
     yuv = np.empty_like(yuvs[0])
     with tempfile.TemporaryDirectory() as d:
         for _ in range(a.rounds):
@@ -173,7 +171,7 @@ def main() -> None:
                     quality[name] = (os.path.getsize(path), *psnr_y(path, yuvs))
             conv.append(per_call_ms(lambda: [cv2.cvtColor(f, cv2.COLOR_BGRA2YUV_I420, dst=yuv)
                                              for f in frames], 1) / len(frames))
-            for name, fn in warps(1).items():
+            for name, fn in warp_fns.items():
                 warp[name].append(per_call_ms(fn, len(frames)))
     print(f"{len(frames)} frames 640x480 from render_bench's camera, min of {a.rounds} "
           "rounds, ms CPU a frame (one thread):")

@@ -75,7 +75,7 @@ class _Encoder:
     """A PyAV stream whose ``encode`` (FFmpeg's encoder) is timed."""
 
     def __init__(self, stream: Any) -> None:
-        self.stream, self.encode = stream, _Timed(stream.encode)
+        self.encode = _Timed(stream.encode)
 
 
 def per_frame(frames: int, cache_dir: str, codec: str = "mp4v") -> dict[str, float]:

@@ -9,7 +9,6 @@ of exchanges.
 
 from __future__ import annotations
 
-import importlib.util
 import math
 import re
 from dataclasses import dataclass
@@ -272,7 +271,9 @@ def parse_cameras(info: SectionInfo, node: Any, path: P) -> CamerasSpec:
     r = info.reader(node, path, ("views", "codec", "render_workers", "operator_view",
                                  "operator_width_px", "digest", "max_in_flight"))
     codec = r.string("codec", "mp4v", choices=CODECS)
-    if codec == "h264" and importlib.util.find_spec("av") is None:
+    from cosim.renderer.video import have_pyav
+
+    if codec == "h264" and not have_pyav():
         info.err(path + ("codec",), "h264 needs PyAV (pip install av); OpenCV's wheels have "
                                     "no H.264 encoder (mp4v and mjpg work without it)")
     workers = r.integer("render_workers", None, lo=0)

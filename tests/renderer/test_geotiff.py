@@ -6,6 +6,7 @@ config's errors, and a rendered frame showing the file's colours."""
 from __future__ import annotations
 
 import math
+import sys
 import textwrap
 from pathlib import Path
 
@@ -61,10 +62,8 @@ GEOGRAPHIC = [1024, 2, 1025, 1, 2048, 4326]
 LON_UL, LAT_UL, DLON, DLAT = LON0 - 0.002, LAT0 + 0.0015, 3e-5, 1.5e-5  # 2.7 x 1.7 m pixels
 
 
-def _geographic(tmp_path: Path, **kw: object) -> Path:
-    keys = list(kw.pop("keys", GEOGRAPHIC))  # type: ignore[call-overload]
-    return _write(tmp_path / "geo.tif", keys, (0, 0, 0, LON_UL, LAT_UL, 0),
-                  (DLON, DLAT, 0), **kw)  # type: ignore[arg-type]
+def _geographic(tmp_path: Path) -> Path:
+    return _write(tmp_path / "geo.tif", GEOGRAPHIC, (0, 0, 0, LON_UL, LAT_UL, 0), (DLON, DLAT, 0))
 
 
 def _sample(img: np.ndarray, n0: float, e0: float, mpp: float, n: np.ndarray,
@@ -193,8 +192,7 @@ def _errors(tmp_path: Path, ground: str) -> str:
 def test_config_accepts_a_geotiff_and_says_what_is_wrong(tmp_path: Path,
                                                          monkeypatch: pytest.MonkeyPatch) -> None:
     _geographic(tmp_path)
-    base = SCENARIO
-    scn = parse_scenario(base + "ground: {image: geo.tif}\n", str(tmp_path / "s.yaml"))
+    scn = parse_scenario(SCENARIO + "ground: {image: geo.tif}\n", str(tmp_path / "s.yaml"))
     assert scn.sections["ground"].geotiff and scn.sections["ground"].kind == "image"
     # a GeoTIFF placed by hand as well: ambiguous
     msg = _errors(tmp_path, "ground: {image: geo.tif, m_per_px: 1.0}\n")
@@ -205,12 +203,12 @@ def test_config_accepts_a_geotiff_and_says_what_is_wrong(tmp_path: Path,
     assert "no GeoTIFF georeference" in msg and "origin and m_per_px" in msg
     # ... which is fine once placed by hand (a plain picture)
     by_hand = "ground: {image: plain.tif, m_per_px: 0.5, origin: {north_m: 0, east_m: 0}}\n"
-    scn = parse_scenario(base + by_hand, str(tmp_path / "s.yaml"))
+    scn = parse_scenario(SCENARIO + by_hand, str(tmp_path / "s.yaml"))
     assert not scn.sections["ground"].geotiff
     # a projected system without pyproj: the message says what to install or do
     _write(tmp_path / "utm.tif", [1024, 1, 1025, 1, 3072, 32610], (0, 0, 0, 5e5, 4e6, 0),
            (5.0, 5.0, 0))
-    monkeypatch.setitem(__import__("sys").modules, "pyproj", None)  # import fails
+    monkeypatch.setitem(sys.modules, "pyproj", None)  # import fails
     msg = _errors(tmp_path, "ground: {image: utm.tif}\n")
     assert "EPSG:32610 needs pyproj" in msg and "gdalwarp -t_srs EPSG:4326" in msg
     # a user-defined system
