@@ -502,7 +502,6 @@ class MavlinkEndpoint:
             return
         signing = self.signature_checker is not None
         seq = None if signing else self._seq
-        sent = np.zeros(len(self.vehicles), dtype=np.int64)
         blobs: list[bytes] = []
         lengths: list[np.ndarray] = []
         who: list[np.ndarray] = []
@@ -530,13 +529,12 @@ class MavlinkEndpoint:
             rec = enc.payloads(len(idx), cols)
             blob, lens = enc.encode(rec, self._sysids[idx], seq[idx])
             seq[idx] = (seq[idx] + 1) % 256
-            sent[idx] += 1
+            self.counts["packets_out"] += len(idx)
             blobs.append(blob)
             lengths.append(lens)
             who.append(idx)
             if self._subscribers:
                 self._deliver_batch(name, vs, rec)
-        self.counts["packets_out"] += int(sent.sum())
         if blobs:
             blob = b"".join(blobs)
             lens = np.concatenate(lengths)

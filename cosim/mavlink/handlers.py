@@ -198,10 +198,6 @@ class Handler:
         return fn(v, m, tick)
 
     # -- helpers -----------------------------------------------------------
-    @staticmethod
-    def _row(v: MavVehicle) -> list[float]:
-        return v.row_or_raise()
-
     def _alt(self, v: MavVehicle, frame: int, z: float) -> tuple[str, float] | None:
         """An altitude in a global frame -> (vocabulary key, metres); None: bad frame."""
         if frame in (mav.MAV_FRAME_GLOBAL, mav.MAV_FRAME_GLOBAL_INT):
@@ -255,7 +251,7 @@ class Handler:
             return mav.MAV_RESULT_FAILED
         if mode == v.mode:
             return mav.MAV_RESULT_ACCEPTED
-        row = self._row(v)
+        row = v.row_or_raise()
         d: dict[str, Any]
         cw_override: bool | None = None
         if mode in (PlaneMode.GUIDED, PlaneMode.LOITER):
@@ -308,7 +304,7 @@ class Handler:
             out.replies.append(_text("TAKEOFF: arm first"))
             return mav.MAV_RESULT_FAILED
         lo = self._loiter_here(v)
-        if float(self._row(v)[_S["alt_msl_m"]]) < alt_msl_m:  # takeoff climbs, never descends
+        if float(v.row_or_raise()[_S["alt_msl_m"]]) < alt_msl_m:  # takeoff climbs, never descends
             lo["alt_msl_m"] = alt_msl_m
         return self._switch_to(v, PlaneMode.TAKEOFF, {"loiter": lo}, out, "TAKEOFF")
 
@@ -425,7 +421,7 @@ class Handler:
         """The horizontal point and altitude of a positional command (None: DENIED)."""
         loc = req.location()
         if loc is None:
-            row = self._row(v)
+            row = v.row_or_raise()
             loc = (float(row[_S["lat_deg"]]), float(row[_S["lon_deg"]]))
         lat, lon = loc
         if not (-90 <= lat <= 90 and -180 <= lon <= 180):
@@ -619,7 +615,7 @@ class Handler:
             self.counts["position_targets_unsupported"] += 1
             return Outcome()
         has_xy, has_z = mask
-        row = self._row(v)
+        row = v.row_or_raise()
         if frame == mav.MAV_FRAME_LOCAL_NED:  # relative to the vehicle's start
             alt = v.spec.start_alt_msl_m - z
             if not has_xy:
@@ -870,7 +866,7 @@ class Handler:
             out.replies.append(_text(f"AUTO: {built}"))
             return mav.MAV_RESULT_FAILED
         cmd, route = built
-        row = self._row(v)
+        row = v.row_or_raise()
         ms.fly(route, (float(row[_S["lat_deg"]]), float(row[_S["lon_deg"]])))
         v.mode = int(PlaneMode.AUTO)
         out.commands.append(cmd)
@@ -890,7 +886,7 @@ class Handler:
         takeoff altitude. The loiter at the end of a mission without one is
         around its last point (``waypoints`` always ends in a loiter).
         """
-        row = self._row(v)
+        row = v.row_or_raise()
         here = (float(row[_S["lat_deg"]]), float(row[_S["lon_deg"]]))
         prev = here
         speed = v.params["AIRSPEED_CRUISE"] if v.armed else None

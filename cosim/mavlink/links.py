@@ -90,19 +90,6 @@ class MavlinkLinks:
             raise
 
     @property
-    def links(self) -> int:
-        return len(self.endpoints)
-
-    @property
-    def closed(self) -> bool:
-        return all(e.closed for e in self.endpoints)
-
-    @property
-    def local_address(self) -> tuple[str, int]:
-        """The first link's socket address."""
-        return self.endpoints[0].local_address
-
-    @property
     def local_addresses(self) -> list[tuple[str, int]]:
         return [e.local_address for e in self.endpoints]
 

@@ -23,7 +23,7 @@ STAMP_LEN = _STAMP.size
 
 
 def stamp(unix_us: int) -> bytes:
-    """A record's packed timestamp (for ``TlogWriter.write_stamped``)."""
+    """A record's packed timestamp (for ``TlogWriter.write_records``)."""
     return _STAMP.pack(int(unix_us))
 
 
@@ -40,13 +40,8 @@ class TlogWriter:
 
     def write(self, unix_us: int, packet: bytes) -> None:
         """Queue one record; timestamps never go backwards within a file."""
-        if self._f is None:
-            raise ValueError(f"tlog {self.path} is closed")
         t = max(int(unix_us), self._last_us)
-        self._last_us = t
-        self._buf += _STAMP.pack(t)
-        self._buf += packet
-        self.records += 1
+        self.write_records(t, _STAMP.pack(t) + packet, 1)
 
     def write_records(self, unix_us: int, records: bytes, count: int) -> None:
         """Queue ``count`` whole records (stamp + packet each) all stamped

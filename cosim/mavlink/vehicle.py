@@ -287,15 +287,6 @@ class MavVehicle:
         return self._row
 
     @property
-    def body_rates(self) -> tuple[float, float, float]:
-        """p, q, r (rad/s) at the latest state."""
-        r = self.frame.rates
-        if r is None:
-            return (0.0, 0.0, 0.0)
-        p, q, rr = r[self.index].tolist()
-        return (p, q, rr)
-
-    @property
     def status(self) -> int:
         row = self.row_values
         if row is None:
