@@ -179,9 +179,11 @@ def parse_swarm(info: SectionInfo, node: Any, path: P) -> SwarmSpec | None:
     """The ``SECTIONS`` parser of ``swarm:`` (see the module docstring)."""
     r = info.reader(node, path, ("rate_hz", "separation_warn_m", "stall_margin", "groups"))
     rate, every = _rate(info, r, path)
+    from cosim.mavlink.vehicle import DEFAULT_RATES_HZ
+
     rates = (info.mavlink or {}).get("rates_hz", {})
     for msg in ("GLOBAL_POSITION_INT", "ATTITUDE"):  # what the controller reads
-        if rates.get(msg, 1.0) <= 0:
+        if rates.get(msg, DEFAULT_RATES_HZ.get(msg, 0.0)) <= 0:
             info.err(("mavlink", "rates_hz", msg), f"the swarm controller reads {msg}: its "
                                                    "rate must be above 0")
     warn = r.num("separation_warn_m", DEFAULT_SEPARATION_WARN_M, lo=0)

@@ -212,11 +212,12 @@ class SwarmController:
         return laws.stall_speed_mps(k, self.roll_rad[idx])
 
     def speed_floor_mps(self, idx: np.ndarray, stall_mps: np.ndarray,
-                        level_mps: np.ndarray | None = None) -> np.ndarray:
+                        level_mps: np.ndarray) -> np.ndarray:
         """The lowest speed commanded: the current stall speed, or the loiter
-        floor ``stall_margin * stall speed at the bank limit`` if higher."""
-        k = self.level_stall_mps(idx) if level_mps is None else level_mps
-        loiter = self.spec.stall_margin * laws.stall_speed_mps(k, self.bank_limit_rad[idx])
+        floor ``stall_margin * stall speed at the bank limit`` if higher
+        (``level_mps``: ``level_stall_mps(idx)``)."""
+        loiter = self.spec.stall_margin * laws.stall_speed_mps(level_mps,
+                                                               self.bank_limit_rad[idx])
         return np.maximum(stall_mps, loiter)
 
     @property

@@ -84,20 +84,19 @@ class _ExprError(Exception):
     pass
 
 
-def _eval(node: ast.AST, env: Mapping[str, Scalar], used: set[str]) -> Any:
+def _eval(node: ast.AST, env: Mapping[str, Scalar]) -> Any:
     if isinstance(node, ast.Expression):
-        return _eval(node.body, env, used)
+        return _eval(node.body, env)
     if isinstance(node, ast.Constant) and isinstance(node.value, (int, float, str, bool)):
         return node.value
     if isinstance(node, ast.Name):
-        used.add(node.id)
         if node.id not in env:
             raise _ExprError(f"unknown name {node.id!r}")
         return env[node.id]
     if isinstance(node, ast.BinOp) and type(node.op) in _BINOPS:
-        return _BINOPS[type(node.op)](_eval(node.left, env, used), _eval(node.right, env, used))
+        return _BINOPS[type(node.op)](_eval(node.left, env), _eval(node.right, env))
     if isinstance(node, ast.UnaryOp):
-        v = _eval(node.operand, env, used)
+        v = _eval(node.operand, env)
         if isinstance(node.op, ast.USub):
             return -v
         if isinstance(node.op, ast.UAdd):
@@ -105,22 +104,22 @@ def _eval(node: ast.AST, env: Mapping[str, Scalar], used: set[str]) -> Any:
         if isinstance(node.op, ast.Not):
             return not v
     if isinstance(node, ast.BoolOp):
-        vals = [_eval(v, env, used) for v in node.values]
+        vals = [_eval(v, env) for v in node.values]
         return all(vals) if isinstance(node.op, ast.And) else any(vals)
     if isinstance(node, ast.Compare) and all(type(o) in _CMPOPS for o in node.ops):
-        left = _eval(node.left, env, used)
+        left = _eval(node.left, env)
         for op, comp in zip(node.ops, node.comparators):
-            right = _eval(comp, env, used)
+            right = _eval(comp, env)
             if not _CMPOPS[type(op)](left, right):
                 return False
             left = right
         return True
     if isinstance(node, ast.IfExp):
-        cond = _eval(node.test, env, used)
-        return _eval(node.body if cond else node.orelse, env, used)
+        cond = _eval(node.test, env)
+        return _eval(node.body if cond else node.orelse, env)
     if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
             and node.func.id in _FUNCS and not node.keywords):
-        return _FUNCS[node.func.id](*[_eval(a, env, used) for a in node.args])
+        return _FUNCS[node.func.id](*[_eval(a, env) for a in node.args])
     raise _ExprError(f"not allowed in a placeholder: {ast.unparse(node)!r}")
 
 
@@ -136,7 +135,7 @@ def evaluate(expr: str, env: Mapping[str, Scalar], used: set[str] | None = None)
     # every name the expression mentions counts as used, also in a branch not taken
     used.update(n.id for n in ast.walk(tree) if isinstance(n, ast.Name))
     try:
-        value = _eval(tree, env, used)
+        value = _eval(tree, env)
     except _ExprError:
         raise
     except (ArithmeticError, TypeError, ValueError) as e:
