@@ -46,6 +46,34 @@ class JSBSimError(CosimError):
         return self.message
 
 
+class BuildError(CosimError):
+    """Vehicles could not be built or trimmed: every one of them, found in one
+    pass over all vehicles (and all workers). ``failures``: (vehicle id,
+    message naming its model and settings), in vehicle order."""
+
+    SHOWN = 20
+
+    def __init__(self, failures: list[tuple[str, str]], total: int | None = None) -> None:
+        super().__init__(failures, total)
+        self.failures = list(failures)
+        self.total = total
+
+    @property
+    def vehicles(self) -> list[str]:
+        return [v for v, _ in self.failures]
+
+    def __str__(self) -> str:
+        n = len(self.failures)
+        of = f" of {self.total}" if self.total is not None else ""
+        plural = "s" if n != 1 or self.total is not None else ""
+        lines = [f"{n}{of} vehicle{plural} could not be built and trimmed "
+                 f"(try another airspeed or altitude, or trim: false):"]
+        lines += [f"  {msg}" for _, msg in self.failures[:self.SHOWN]]
+        if n > self.SHOWN:
+            lines.append(f"  ... and {n - self.SHOWN} more")
+        return "\n".join(lines)
+
+
 class VehicleError(CosimError):
     """Applying setpoints to or stepping one vehicle failed during an exchange
     (a JSBSim call returned False or raised, or anything else went wrong).

@@ -13,6 +13,8 @@ idempotent.
 from __future__ import annotations
 
 import enum
+import logging
+import time
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from types import TracebackType
@@ -21,6 +23,25 @@ import numpy as np
 
 from cosim.errors import PoolStateError
 from cosim.fdm_pool.spec import N_STATE, VehicleSpec
+
+log = logging.getLogger(__name__)
+
+
+class BuildProgress:
+    """Logs how many of ``total`` vehicles are built and trimmed, at most every
+    ``every_s`` seconds (a build quicker than that says nothing)."""
+
+    def __init__(self, total: int, every_s: float = 5.0) -> None:
+        self.total = total
+        self.every_s = every_s
+        self.t0 = self.last = time.monotonic()
+
+    def __call__(self, done: int) -> None:
+        now = time.monotonic()
+        if now - self.last >= self.every_s and done < self.total:
+            self.last = now
+            log.info("building: %d of %d vehicles built and trimmed (%.0f s)", done,
+                     self.total, now - self.t0)
 
 
 class PoolState(enum.Enum):

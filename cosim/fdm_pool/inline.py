@@ -8,7 +8,7 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 
-from cosim.fdm_pool.base import Pool
+from cosim.fdm_pool.base import BuildProgress, Pool
 from cosim.fdm_pool.shard import Shard
 from cosim.fdm_pool.spec import VehicleSpec
 
@@ -19,7 +19,8 @@ class InlinePool(Pool):
     def __init__(self, specs: Sequence[VehicleSpec], dt_s: float,
                  channels: Sequence[str] = ()) -> None:
         super().__init__(specs, dt_s, channels)
-        self._shard = Shard.build(self.specs, self.dt_s, self.channels)
+        self._shard = Shard.build(self.specs, self.dt_s, self.channels,
+                                  on_built=BuildProgress(self.n))
         self._shard.write_states(self.states)
 
     def _send(self, nsub: int) -> None:

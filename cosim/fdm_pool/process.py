@@ -40,15 +40,15 @@ from typing import Any
 
 import numpy as np
 
-from cosim.errors import WorkerDied, WorkerError, WorkerTimeout
-from cosim.fdm_pool.base import Pool
+from cosim.errors import BuildError, WorkerDied, WorkerError, WorkerTimeout
+from cosim.fdm_pool.base import BuildProgress, Pool
 from cosim.fdm_pool.shard import Shard
 from cosim.fdm_pool.spec import N_STATE, VehicleSpec
 
 log = logging.getLogger(__name__)
 
-# control block: one 64-byte line of int64 per worker
-_SEQ, _DONE, _CMD, _NSUB, _STATUS = 0, 1, 2, 3, 4
+# control block: one 64-byte line of int64 per worker (_BUILT: vehicles built so far)
+_SEQ, _DONE, _CMD, _NSUB, _STATUS, _BUILT = 0, 1, 2, 3, 4, 5
 _CTRL_W = 8
 _CMD_STEP, _CMD_STOP = 1, 2
 _OK, _ERR = 0, 1
@@ -122,7 +122,11 @@ def _worker_main(w: int, specs: list[VehicleSpec], start: int, stop: int, dt_s: 
     shard = Shard()
     try:
         t0 = time.perf_counter()
-        Shard.build(specs, dt_s, channels, into=shard)
+
+        def built(k: int) -> None:
+            ctrl[_BUILT] = k
+
+        Shard.build(specs, dt_s, channels, into=shard, on_built=built)
         log.debug("worker %d (pid %d): %d vehicles built and trimmed in %.2f s", w,
                   os.getpid(), len(specs), time.perf_counter() - t0)
         shard.write_states(sh.states[start:stop])
@@ -150,12 +154,14 @@ def _worker_main(w: int, specs: list[VehicleSpec], start: int, stop: int, dt_s: 
             shard.exchange(sp, nsub, out)
             busy[0] = time.perf_counter() - t0
             ctrl[_DONE] = last
-    except BaseException:
+    except BaseException as e:
         # status first: the driver then reads the pipe, so a traceback longer
-        # than the pipe's buffer cannot block this send
+        # than the pipe's buffer cannot block this send; vehicles that could not
+        # be built travel as they are (the driver reports all of them together)
         ctrl[_STATUS] = _ERR
         try:
-            err.send((shard.current, traceback.format_exc()))
+            err.send((shard.current, traceback.format_exc(),
+                      e if isinstance(e, BuildError) else None))
         finally:
             ctrl[_DONE] = -2
 
@@ -216,12 +222,8 @@ class ProcessPool(Pool):
                 finally:
                     signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
                 s.close()
-            if self._driver_steps:
-                a, b = self.bounds[0]
-                self._own = Shard.build(self.specs[a:b], self.dt_s, self.channels)
-                self._own.write_states(self.states[a:b])
-            timeout = start_timeout_s if start_timeout_s is not None else 60.0 + 0.05 * self.n
-            self._await(0, timeout, what="build and trim its vehicles")
+            self._build(start_timeout_s if start_timeout_s is not None
+                        else 60.0 + 0.05 * self.n)
         except BaseException:
             self._close()
             raise
@@ -289,13 +291,61 @@ class ProcessPool(Pool):
                         raise WorkerTimeout(i, proc.pid, self._vehicles_of(i), self.tick,
                                             timeout_s, what)
 
-    def _raise_remote(self, i: int) -> None:
+    def _build(self, timeout_s: float) -> None:
+        """Build the driver's own shard (if it steps one) while the children
+        build theirs, then wait for every child; vehicles that could not be
+        built, in any shard, are raised together as one ``BuildError``."""
+        progress = BuildProgress(self.n)
+        ctrl = self._sh.ctrl
+        children = list(self._procs)
+        failures: list[tuple[str, str]] = []
+        own = 0
+
+        def built(k: int) -> None:
+            nonlocal own
+            own = k
+            progress(own + int(ctrl[children, _BUILT].sum()))
+
+        if self._driver_steps:
+            a, b = self.bounds[0]
+            try:
+                self._own = Shard.build(self.specs[a:b], self.dt_s, self.channels,
+                                        on_built=built)
+                self._own.write_states(self.states[a:b])
+            except BuildError as e:
+                failures += e.failures
+        deadline = time.monotonic() + timeout_s
+        for i, proc in self._procs.items():
+            while ctrl[i, _DONE] != 0:
+                if ctrl[i, _STATUS] == _ERR:
+                    remote = self._remote(i)
+                    if not isinstance(remote, BuildError):
+                        raise remote
+                    failures += remote.failures
+                    break
+                if proc.exitcode is not None and ctrl[i, _STATUS] != _ERR:
+                    raise WorkerDied(i, proc.pid, proc.exitcode, self._vehicles_of(i), 0)
+                if time.monotonic() > deadline:
+                    raise WorkerTimeout(i, proc.pid, self._vehicles_of(i), 0, timeout_s,
+                                        "build and trim its vehicles")
+                progress(own + int(ctrl[children, _BUILT].sum()))
+                time.sleep(0.005)
+        if failures:
+            order = {v: k for k, v in enumerate(self.ids)}
+            raise BuildError(sorted(failures, key=lambda f: order.get(f[0], 0)), self.n)
+
+    def _remote(self, i: int) -> BaseException:
+        """What child ``i`` reported: the vehicles it could not build
+        (``BuildError``), or any other failure as a ``WorkerError``."""
         conn = self._errs[i]
         if conn.poll(5.0):
-            vehicle, tb = conn.recv()
+            vehicle, tb, built = conn.recv()
         else:
-            vehicle, tb = None, "(the worker reported an error but sent no traceback)"
-        raise WorkerError(i, vehicle, self.tick, tb)
+            vehicle, tb, built = None, "(the worker reported an error but sent no traceback)", None
+        return built if built is not None else WorkerError(i, vehicle, self.tick, tb)
+
+    def _raise_remote(self, i: int) -> None:
+        raise self._remote(i)
 
     def _close(self) -> None:
         ctrl = self._sh.ctrl

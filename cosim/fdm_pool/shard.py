@@ -19,11 +19,11 @@ its cost.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from cosim.errors import CosimError, JSBSimError, VehicleError
+from cosim.errors import BuildError, CosimError, JSBSimError, VehicleError
 from cosim.fdm_pool.spec import (
     N_STATE,
     STATE_FIELDS,
@@ -53,15 +53,27 @@ class Shard:
 
     @classmethod
     def build(cls, specs: Sequence[VehicleSpec], dt_s: float, channels: Sequence[str],
-              into: Shard | None = None) -> Shard:
-        """Build and trim every vehicle; on failure ``current`` names the culprit."""
+              into: Shard | None = None, on_built: Callable[[int], None] | None = None
+              ) -> Shard:
+        """Build and trim every vehicle. A vehicle JSBSim cannot load or trim
+        does not stop the others: all such failures are raised together as one
+        ``BuildError``; on any other failure ``current`` names the culprit.
+        ``on_built(k)`` is called after each vehicle with the count so far."""
         shard = into if into is not None else cls()
         shard.n_channels = len(channels)
         shard.dt_s = dt_s
-        for spec in specs:
+        failures: list[tuple[str, str]] = []
+        for k, spec in enumerate(specs, 1):
             shard.current = spec.id
-            shard.vehicles.append(Vehicle(spec, dt_s, channels))
+            try:
+                shard.vehicles.append(Vehicle(spec, dt_s, channels))
+            except JSBSimError as e:
+                failures.append((spec.id, str(e)))
+            if on_built is not None:
+                on_built(k)
         shard.current = None
+        if failures:
+            raise BuildError(failures, len(specs))
         shard._radius_m = np.array([v.contact_radius_m for v in shard.vehicles])
         shard._active = list(range(len(shard.vehicles)))
         shard._check = [True] * len(shard._active)

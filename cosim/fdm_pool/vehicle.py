@@ -16,7 +16,7 @@ import numpy as np
 
 from cosim.errors import JSBSimError
 from cosim.fdm_pool.spec import STATE_FIELDS, VehicleSpec, VehicleStatus
-from cosim.geo import FT_TO_M
+from cosim.geo import FT_TO_M, KT_TO_MPS
 from cosim.jsb import ModelInfo, has_property, new_fdm
 
 _MPS_TO_FPS = 1.0 / FT_TO_M
@@ -99,11 +99,12 @@ class Vehicle:
             try:
                 fdm.do_trim(1)  # full trim
             except (jsbsim.BaseError, RuntimeError) as e:
+                agl = s.alt_msl_m - s.terrain_alt_m
                 raise JSBSimError(
                     f"vehicle {s.id!r} ({s.model}): JSBSim could not trim at "
-                    f"{s.airspeed_mps:.1f} m/s TAS, {s.alt_msl_m:.1f} m MSL, heading "
-                    f"{s.heading_deg:.1f} deg: {e}. Try another airspeed/altitude or "
-                    f"set trim: false", s.id) from None
+                    f"{s.airspeed_mps:.1f} m/s TAS ({s.airspeed_mps / KT_TO_MPS:.0f} kt), "
+                    f"{s.alt_msl_m:.1f} m MSL ({agl:.1f} m above the ground), heading "
+                    f"{s.heading_deg:.1f} deg: {' '.join(str(e).split())}", s.id) from None
         for name, value in s.initial_props:
             fdm[name] = value
 
