@@ -103,6 +103,11 @@ def _build_parser() -> _Parser:
 
     v = sub.add_parser("validate", help="check scenario files and report every problem")
     v.add_argument("scenarios", nargs="+", metavar="SCENARIO")
+    v.add_argument("--deep", action="store_true",
+                   help="also build and trim every vehicle (as a run would), so a vehicle "
+                        "JSBSim cannot trim is found before a long run starts")
+    v.add_argument("--workers", type=int, metavar="N",
+                   help="worker processes for --deep (default: one per core)")
 
     m = sub.add_parser("models", help="list usable aircraft models")
     m.add_argument("--check", action="store_true", help="load each model to prove it works")
@@ -207,11 +212,7 @@ class Progress:
 def _load_scenario(path: str) -> Scenario:
     from cosim.scenario import load_scenario  # imported here: a fast --help
 
-    try:
-        return load_scenario(path)
-    except UnicodeDecodeError as e:
-        raise ConfigError(f"{path}: cannot read scenario: not UTF-8 text (byte "
-                          f"{e.object[e.start]:#04x} at offset {e.start})") from None
+    return load_scenario(path)
 
 
 def _cmd_run(a: argparse.Namespace) -> int:
@@ -222,7 +223,8 @@ def _cmd_run(a: argparse.Namespace) -> int:
     scn = _load_scenario(a.scenario)
     if a.duration_s:
         scn = scn.with_duration(a.duration_s)
-    out = Path(a.out) if a.out else Path("runs") / f"{scn.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+    out = Path(a.out) if a.out else Path("runs") / (
+        f"{scn.folder_name}-{time.strftime('%Y%m%d-%H%M%S')}")
     if out.exists() and not out.is_dir():
         raise ConfigError(f"--out {out}: exists and is not a folder")
     if (out / "summary.json").exists() or (out / "events.jsonl").exists():
@@ -298,14 +300,22 @@ def _cmd_run(a: argparse.Namespace) -> int:
         return EXIT_OK
     if res.stop_reason in ("interrupted", "terminated"):
         return EXIT_INTERRUPTED
+    from cosim.errors import BuildError
+
+    if isinstance(res.error, BuildError):  # the scenario's starts: a config error
+        return EXIT_USAGE
     return EXIT_FAIL
 
 
 def _cmd_validate(a: argparse.Namespace) -> int:
+    if a.workers is not None and a.workers < 1:
+        raise ConfigError(f"--workers must be >= 1, got {a.workers}")
     bad = 0
     for f in a.scenarios:
         try:
             scn = _load_scenario(f)
+            if a.deep:
+                _build_all(scn, f, a.workers)
         except ConfigError as e:
             bad += 1
             print(e, file=sys.stderr)
@@ -314,9 +324,34 @@ def _cmd_validate(a: argparse.Namespace) -> int:
             bad += 1
             print(f"{f}: {e}", file=sys.stderr)
             continue
+        deep = ", every vehicle built and trimmed" if a.deep else ""
         print(f"{f}: ok ({len(scn.vehicles)} vehicles, {scn.duration_s:g} s, "
-              f"{scn.rates.physics_hz:g}/{scn.rates.control_hz:g}/{scn.rates.log_hz:g} Hz)")
+              f"{scn.rates.physics_hz:g}/{scn.rates.control_hz:g}/{scn.rates.log_hz:g} Hz"
+              f"{deep})")
     return EXIT_USAGE if bad else EXIT_OK
+
+
+def _build_all(scn: Scenario, fname: str, workers: int | None) -> None:
+    """Build and trim every vehicle of ``scn`` as a run would (process
+    backend); the vehicles that fail become a ``ConfigError`` with the line of
+    each one's scenario entry."""
+    from cosim.errors import BuildError
+    from cosim.fdm_pool import make_pool
+    from cosim.scenario.yaml_lines import format_path
+
+    try:
+        with make_pool(scn.vehicles, scn.rates.dt_s, scn.channels, "process", workers):
+            pass
+    except BuildError as e:
+        index = {v.id: i for i, v in enumerate(scn.vehicles)}
+        paths, lines = scn.extra.get("vehicle_paths", []), scn.extra.get("vehicle_lines", [])
+        problems = []
+        for vid, msg in e.failures:
+            i = index.get(vid)
+            where = f"{lines[i]}: {format_path(paths[i])}" if i is not None and i < len(
+                lines) else "1: vehicles"
+            problems.append(f"{fname}:{where}: {msg}")
+        raise ConfigError(problems) from None
 
 
 def _cmd_models(a: argparse.Namespace) -> int:

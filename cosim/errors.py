@@ -15,18 +15,33 @@ class CosimError(Exception):
 class ConfigError(CosimError):
     """A scenario (or command-line value) is invalid.
 
-    ``problems`` holds every problem found, each already formatted as
-    ``file:line: path: message``; ``str()`` lists them one per line.
+    ``problems`` holds the problems found, each already formatted as
+    ``file:line: path: message``; ``more`` counts those found but not kept.
+    ``str()`` lists the first ``SHOWN`` one per line, then how many more
+    there are (a file with thousands of mistakes prints a screenful).
     """
 
-    def __init__(self, problems: list[str] | str) -> None:
+    SHOWN = 50
+
+    def __init__(self, problems: list[str] | str, more: int = 0) -> None:
         if isinstance(problems, str):
             problems = [problems]
-        super().__init__(problems)
+        super().__init__(problems, more)
         self.problems = list(problems)
+        self.more = more
+
+    @property
+    def count(self) -> int:
+        """Every problem found (kept and not)."""
+        return len(self.problems) + self.more
 
     def __str__(self) -> str:
-        return "\n".join(self.problems)
+        shown = self.problems[:self.SHOWN]
+        rest = self.count - len(shown)
+        if rest > 0:
+            shown = [*shown, f"... and {rest} more problem{'s' if rest > 1 else ''} "
+                             f"({self.count} in all)"]
+        return "\n".join(shown)
 
 
 class ModelNotFound(ConfigError):

@@ -162,7 +162,7 @@ def test_a_scenario_that_is_not_utf8_is_a_config_error(tmp_path: Path, capsys) -
     bad = tmp_path / "latin1.yaml"
     bad.write_bytes("name: caf\xe9\n".encode("latin-1"))
     assert main(["validate", str(bad)]) == 2
-    assert f"{bad}: cannot read scenario: not UTF-8 text (byte 0xe9 at offset 9)" in \
+    assert f"{bad}:1: cannot read scenario: not UTF-8 text (byte 0xe9 at offset 9)" in \
         capsys.readouterr().err
     assert main(["run", str(bad), "--out", str(tmp_path / "o")]) == 2
 

@@ -702,7 +702,7 @@ def test_resolved_round_trip_at_altitude_limits(tmp_path: Path, init_alt: str,
     with pytest.raises(ConfigError,
                        match=r"init\.alt_agl_m: gives altitudes .* allowed -500\.\.100000"):
         parse(text)
-    ok = parse(text.replace("99900", "99000").replace("-800.0", "-100.0"))
+    ok = parse(text.replace("99900", "99000").replace("-800.0", "-90.0"))
     p = tmp_path / "resolved.yaml"
     p.write_text(yaml.safe_dump(ok.resolved_dict()))
     assert load_scenario(p).vehicles == ok.vehicles
@@ -763,10 +763,12 @@ def test_yaml_merge_key_accepted() -> None:
             init: {north_m: 0, east_m: 0, alt_agl_m: 500, heading_deg: 0, airspeed_kt: 90}
           - <<: *base
             id: b
+            init: {north_m: 0, east_m: 0, alt_agl_m: 600, heading_deg: 0, airspeed_kt: 90}
     """)
     scn = parse(text)
     assert [v.id for v in scn.vehicles] == ["a", "b"]
-    assert scn.vehicles[0].lat_deg == scn.vehicles[1].lat_deg
+    assert scn.vehicles[0].model == scn.vehicles[1].model == "c172p"
+    assert scn.vehicles[0].heading_deg == scn.vehicles[1].heading_deg
 
 
 def test_random_seed_with_count_is_an_error() -> None:

@@ -29,7 +29,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from cosim.geo import KT_TO_MPS
+from cosim.geo import KT_TO_MPS, MAX_DISTANCE_M
 
 G_MPS2 = 9.80665
 DEFAULT_BANK_LIMIT_DEG = 45.0
@@ -161,8 +161,9 @@ def _point(d: Any, path: P, report: Report, extra: tuple[str, ...] = _TARGET_EXT
         a, b = _num(d, "lat_deg", path, report, -90, 90), _num(d, "lon_deg", path, report,
                                                                  -180, 180)
     elif ned:
-        a = _num(d, "north_m", path, report) if "north_m" in d else 0.0
-        b = _num(d, "east_m", path, report) if "east_m" in d else 0.0
+        far = MAX_DISTANCE_M
+        a = _num(d, "north_m", path, report, -far, far) if "north_m" in d else 0.0
+        b = _num(d, "east_m", path, report, -far, far) if "east_m" in d else 0.0
     else:
         report(path, "missing the position: lat_deg/lon_deg or north_m/east_m")
         return None

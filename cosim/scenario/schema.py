@@ -30,12 +30,23 @@ from cosim.guidance import (
     parse_command,
 )
 from cosim.jsb import find_model, has_property, is_writable, new_fdm
+from cosim.scenario import limits as lim
 from cosim.scenario.formation import FORMATIONS, formation_offsets
-from cosim.scenario.yaml_lines import YamlProblem, format_path, load_with_lines
+from cosim.scenario.yaml_lines import (
+    YamlProblem,
+    format_path,
+    load_with_lines,
+    read_scenario_text,
+)
 
 SCHEMA_VERSION = 1
 ALT_MIN_M, ALT_MAX_M = -500.0, 100_000.0  # every vehicle's resolved height must lie here
-_ID = re.compile(r"^[A-Za-z0-9_.\-]+$")
+#: an identifier that may become part of a file name (vehicle ids)
+_ID = re.compile(rf"^[A-Za-z0-9_\-][A-Za-z0-9_.\-]{{0,{lim.MAX_NAME_CHARS - 1}}}$")
+_ID_RULE = (f"may only contain letters, digits, '_', '.', '-', must not start with '.' and "
+            f"may be at most {lim.MAX_NAME_CHARS} characters")
+#: what a scenario name may not hold (it names the run's folder)
+_NAME_UNSAFE = re.compile(r"[/\\\x00-\x1f\x7f]")
 P = tuple[Any, ...]
 
 
@@ -105,8 +116,14 @@ class Scenario:
 
     @property
     def total_ticks(self) -> int:
-        """Physics ticks in the run, rounded up to whole control exchanges."""
-        return _schedule_tick(self.duration_s, self.rates)
+        """Physics ticks in the run, rounded up to whole control exchanges (at least one)."""
+        return _total_ticks(self.duration_s, self.rates)
+
+    @property
+    def folder_name(self) -> str:
+        """The name as a folder name (``runs/<folder_name>-<date>-<time>``): every
+        character but letters, digits, ``_ . -`` becomes ``_``."""
+        return safe_folder_name(self.name)
 
     @property
     def autopilot(self) -> bool:
@@ -181,6 +198,7 @@ class _Ctx:
         self.fname = fname
         self.lines = lines
         self.problems: list[tuple[int, str]] = []
+        self.more = 0  # problems found beyond MAX_PROBLEMS_KEPT (counted only)
 
     def line(self, path: P) -> int:
         while path and path not in self.lines:
@@ -188,13 +206,71 @@ class _Ctx:
         return self.lines.get(path, 1)
 
     def err(self, path: P, msg: str) -> None:
+        if len(self.problems) >= lim.MAX_PROBLEMS_KEPT:
+            self.more += 1
+            return
         self.problems.append((self.line(path), f"{format_path(path)}: {msg}"))
 
     def format(self) -> list[str]:
         return [f"{self.fname}:{ln}: {m}" for ln, m in sorted(self.problems, key=lambda x: x[0])]
 
+    def error(self) -> ConfigError:
+        return ConfigError(self.format(), self.more)
+
 
 _MISSING = object()
+
+
+def _clip(text: str, n: int = 80) -> str:
+    """``text`` cut to ``n`` characters for a message (with how long it was)."""
+    return text if len(text) <= n else f"{text[:n]}... ({len(text)} characters)"
+
+
+def safe_folder_name(name: str) -> str:
+    """``name`` as one safe folder name: letters, digits and ``_ . -`` kept,
+    everything else ``_``, no leading ``.``, at most ``MAX_NAME_CHARS``."""
+    out = re.sub(r"[^A-Za-z0-9_.\-]", "_", name)[:lim.MAX_NAME_CHARS].lstrip(".")
+    return out or "run"
+
+
+def _name(ctx: _Ctx, name: str | None, given: bool) -> str | None:
+    """The scenario's ``name`` (it names the run folder): refused when it could
+    leave its folder (a path separator, ``..``) or is unprintable or long."""
+    if name is None or not given:
+        return name
+    path: P = ("name",)
+    if _NAME_UNSAFE.search(name) or ".." in name:
+        ctx.err(path, f"{_clip(name)!r} may not contain '/', '\\', '..' or control "
+                      f"characters: it names the run's folder (runs/<name>-<date>-<time>)")
+        return None
+    if not name.strip() or len(name) > lim.MAX_NAME_CHARS:
+        ctx.err(path, f"{_clip(name)!r}: expected 1 to {lim.MAX_NAME_CHARS} characters")
+        return None
+    return name
+
+
+def _aircraft_path(ctx: _Ctx, entries: list[str], base: Path) -> list[str]:
+    """The ``aircraft_path`` folders, resolved against the scenario's folder;
+    each must exist and hold at least one JSBSim model (``NAME/NAME.xml``)."""
+    out = []
+    for i, raw in enumerate(entries):
+        p = (base / raw).resolve()
+        where: P = ("aircraft_path", i)
+        if not p.is_dir():
+            ctx.err(where, f"{raw!r}: {'not a folder' if p.exists() else 'no such folder'} "
+                           f"({p})")
+            continue
+        try:
+            has_model = any((sub / f"{sub.name}.xml").is_file() for sub in p.iterdir())
+        except OSError as e:
+            ctx.err(where, f"{raw!r}: cannot list {p}: {e.strerror or e}")
+            continue
+        if not has_model:
+            ctx.err(where, f"{raw!r}: {p} holds no aircraft model (a folder NAME with "
+                           f"NAME.xml in it)")
+            continue
+        out.append(str(p))
+    return out
 
 
 def _describe(v: Any) -> str:
@@ -241,9 +317,14 @@ class _Reader:
         if hi is not None and v > hi:
             self.ctx.err(p, f"must be <= {hi:g}, got {v!r}")
             return None
+        if abs(v) > lim.MAX_NUMBER:  # a field without its own range: still bounded
+            self.ctx.err(p, f"{v:g} is out of range (no scenario value exceeds "
+                            f"+-{lim.MAX_NUMBER:g}; a unit mistake?)")
+            return None
         return float(v)
 
-    def integer(self, key: str, default: Any = _MISSING, lo: int | None = None) -> Any:
+    def integer(self, key: str, default: Any = _MISSING, lo: int | None = None,
+                hi: int | None = None) -> Any:
         p = self.path + (key,)
         if key not in self.d:
             if default is _MISSING:
@@ -256,6 +337,9 @@ class _Reader:
             return None
         if lo is not None and v < lo:
             self.ctx.err(p, f"must be >= {lo}, got {v}")
+            return None
+        if hi is not None and v > hi:
+            self.ctx.err(p, f"must be <= {hi}, got {v}")
             return None
         return v
 
@@ -275,7 +359,7 @@ class _Reader:
             self.ctx.err(p, f"expected one of: {', '.join(choices)}; got {v!r}")
             return None
         if pattern is not None and not pattern.match(v):
-            self.ctx.err(p, f"{v!r} may only contain letters, digits, '_', '.', '-'")
+            self.ctx.err(p, f"{_clip(v)!r} {_ID_RULE}")
             return None
         return v
 
@@ -318,11 +402,7 @@ def load_scenario(path: str | Path, check_properties: bool = True,
     """Read, validate and resolve a scenario file; ``ConfigError`` lists every problem.
     ``sweep_point``: the values of the ``sweep:`` names (default: the first of each)."""
     p = Path(path)
-    try:
-        text = p.read_text()
-    except OSError as e:
-        raise ConfigError(f"{p}: cannot read scenario: {e.strerror or e}") from None
-    return parse_scenario(text, str(p), check_properties=check_properties,
+    return parse_scenario(read_scenario_text(p), str(p), check_properties=check_properties,
                           sweep_point=sweep_point)
 
 
@@ -334,7 +414,7 @@ def parse_scenario(text: str, fname: str = "<scenario>", check_properties: bool 
     try:
         data, lines, dups = load_with_lines(text)
     except YamlProblem as e:
-        raise ConfigError([f"{fname}:{e.line}: {e.message}"]) from None
+        raise ConfigError([f"{fname}:{ln}: {m}" for ln, m in e.problems]) from None
     ctx = _Ctx(fname, lines)
     ctx.problems.extend(dups)
     data = substitute(data, ctx.err, sweep_point, fname, placeholders)
@@ -345,15 +425,15 @@ def parse_scenario(text: str, fname: str = "<scenario>", check_properties: bool 
     if version is not None and version != SCHEMA_VERSION:
         ctx.err(("schema_version",), f"unsupported schema_version {version}; this cosim reads "
                                      f"{SCHEMA_VERSION}")
-    name = top.string("name", Path(fname).stem)
+    name = _name(ctx, top.string("name", Path(fname).stem), top.has("name"))
     description = top.string("description", "")
     o = _Reader(ctx, top.d.get("origin"), ("origin",), ("lat_deg", "lon_deg", "ground_alt_m"))
     origin = Origin(o.num("lat_deg", lo=-90, hi=90) or 0.0,
                     o.num("lon_deg", lo=-180, hi=180) or 0.0,
                     o.num("ground_alt_m", 0.0, lo=-500, hi=9000) or 0.0)
     rates = _rates(ctx, top.d.get("rates", {}))
-    duration = top.num("duration_s", lo=0, lo_open=True)
-    seed = top.integer("seed", 0, lo=0)
+    duration = top.num("duration_s", lo=0, lo_open=True, hi=lim.MAX_DURATION_S)
+    seed = top.integer("seed", 0, lo=0, hi=lim.MAX_SEED)
     plot = top.boolean("plot", False)
     mavlink = _mavlink(ctx, top.d["mavlink"]) if top.has("mavlink") else None
     apath: list[str] = []
@@ -363,8 +443,7 @@ def parse_scenario(text: str, fname: str = "<scenario>", check_properties: bool 
     if not isinstance(raw_ap, list) or not all(isinstance(x, str) for x in raw_ap):
         ctx.err(("aircraft_path",), "expected a folder or a list of folders")
     else:
-        base = Path(fname).resolve().parent
-        apath = [str((base / x).resolve()) for x in raw_ap]
+        apath = _aircraft_path(ctx, raw_ap, Path(fname).resolve().parent)
 
     vehicles = _vehicles(ctx, top.d.get("vehicles", _MISSING), origin, tuple(apath), seed or 0)
     if duration is None:
@@ -379,13 +458,15 @@ def parse_scenario(text: str, fname: str = "<scenario>", check_properties: bool 
         if key in top.d:
             sections[key] = _section_parser(key)(info, top.d[key], (key,))
     if ctx.problems:
-        raise ConfigError(ctx.format())
-    return Scenario(name=name, path=fname, origin=origin, rates=rates, duration_s=duration,
+        raise ctx.error()
+    return Scenario(name=name or Path(fname).stem, path=fname, origin=origin, rates=rates,
+                    duration_s=duration,
                     seed=seed, vehicles=tuple(v for v, _ in vehicles), schedule=tuple(schedule),
                     description=description, aircraft_path=tuple(apath), plot=plot,
                     mavlink=mavlink, sections=sections,
                     section_sources={k: top.d[k] for k in sections},
-                    extra={"vehicle_paths": [pp for _, pp in vehicles]})
+                    extra={"vehicle_paths": [pp for _, pp in vehicles],
+                           "vehicle_lines": [ctx.line(pp) for _, pp in vehicles]})
 
 
 #: top-level sections parsed by the part that owns them: key -> "module:function".
@@ -473,9 +554,9 @@ def _mavlink(ctx: _Ctx, d: Any) -> dict[str, Any] | None:
 
 def _rates(ctx: _Ctx, d: Any) -> Rates:
     r = _Reader(ctx, d, ("rates",), ("physics_hz", "control_hz", "log_hz"))
-    ph = r.num("physics_hz", 120.0, lo=0, lo_open=True, hi=10000)
-    ch = r.num("control_hz", 30.0, lo=0, lo_open=True)
-    lh = r.num("log_hz", 10.0, lo=0, lo_open=True)
+    ph = r.num("physics_hz", 120.0, lo=lim.PHYSICS_HZ_RANGE[0], hi=lim.PHYSICS_HZ_RANGE[1])
+    ch = r.num("control_hz", 30.0, lo=lim.MIN_EXCHANGE_HZ)
+    lh = r.num("log_hz", 10.0, lo=lim.MIN_EXCHANGE_HZ)
     if None in (ph, ch, lh):
         return Rates()
 
@@ -489,7 +570,9 @@ def _rates(ctx: _Ctx, d: Any) -> Rates:
     elif not divides(lh, ch):
         ctx.err(("rates", "log_hz"), f"log_hz {lh:g} must divide control_hz {ch:g} (states "
                                      f"are exchanged at control_hz; physics_hz is {ph:g})")
-    return Rates(ph, ch, lh)
+    else:
+        return Rates(ph, ch, lh)
+    return Rates()  # reported: the rest of the file is checked against the defaults
 
 
 def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: int
@@ -502,18 +585,29 @@ def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: i
         ctx.err(path, f"expected a non-empty list of vehicles, got {_describe(d)}")
         return []
     frame = origin.frame
+    ground = origin.ground_alt_m
     out: list[tuple[VehicleSpec, P]] = []
+    where_ned: list[np.ndarray] = []  # (count, 3) north, east, height of each entry's vehicles
     seen: dict[str, P] = {}
+    planned = 0  # vehicles asked for so far (count included)
+    dist = lim.MAX_DISTANCE_M
     for i, vd in enumerate(d):
         vp = path + (i,)
         r = _Reader(ctx, vd, vp, ("id", "model", "count", "formation", "init", "trim", "set",
                                   "random_seed"))
         vid = r.string("id", pattern=_ID)
         model_name = r.string("model")
-        count = r.integer("count", 1, lo=1)
+        count = r.integer("count", 1, lo=1, hi=lim.MAX_VEHICLES)
+        if count is not None:
+            planned += count
+            if planned > lim.MAX_VEHICLES:
+                ctx.err(vp + (("count",) if r.has("count") else ()),
+                        f"the scenario would have {planned} or more vehicles; at most "
+                        f"{lim.MAX_VEHICLES} (each takes about {lim.MIB_PER_VEHICLE} MiB)")
+                count = None
         trim = r.boolean("trim", True)
         props = _prop_values(ctx, r.d["set"], vp + ("set",)) if r.has("set") else []
-        fixed_seed = r.integer("random_seed", None, lo=0)
+        fixed_seed = r.integer("random_seed", None, lo=0, hi=lim.MAX_VEHICLE_SEED)
         if fixed_seed is not None and count is not None and count > 1:
             ctx.err(vp + ("random_seed",), "random_seed is for a single vehicle; with count, "
                                            "each vehicle's seed derives from the scenario seed")
@@ -537,7 +631,8 @@ def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: i
             lat, lon = ini.num("lat_deg", lo=-90, hi=90), ini.num("lon_deg", lo=-180, hi=180)
             n0 = e0 = None
         else:
-            n0, e0 = ini.num("north_m", 0.0), ini.num("east_m", 0.0)
+            n0 = ini.num("north_m", 0.0, lo=-dist, hi=dist)
+            e0 = ini.num("east_m", 0.0, lo=-dist, hi=dist)
             lat = lon = None
         alt_key = ini.one_of("alt_msl_m", "alt_agl_m")
         alt = None
@@ -546,7 +641,7 @@ def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: i
         else:
             a = ini.num(alt_key, lo=ALT_MIN_M, hi=ALT_MAX_M)
             if a is not None:
-                alt = a + (origin.ground_alt_m if alt_key == "alt_agl_m" else 0.0)
+                alt = a + (ground if alt_key == "alt_agl_m" else 0.0)
         heading = ini.num("heading_deg", 0.0, lo=-360, hi=360)
         spd_key = ini.one_of("airspeed_kt", "airspeed_mps")
         speed = None
@@ -556,6 +651,11 @@ def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: i
             s = ini.num(spd_key, lo=0, hi=2000)
             if s is not None:
                 speed = s * (KT_TO_MPS if spd_key == "airspeed_kt" else 1.0)
+                if trim and s == 0:
+                    ctx.err(vp + ("init", spd_key), "a trimmed start flies: it needs an "
+                                                    "airspeed > 0 (give trim: false for a "
+                                                    "vehicle at rest)")
+                    speed = None
         offsets = (np.zeros(1), np.zeros(1))
         alt_step = 0.0
         no_formation = count is not None and count > 1 and not r.has("formation")
@@ -563,17 +663,24 @@ def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: i
             ctx.err(vp, f"count {count} needs a formation (type: line, grid or circle, "
                         f"with spacing_m)")
         if r.has("formation"):
-            f = _Reader(ctx, r.d.get("formation"), vp + ("formation",),
+            fp = vp + ("formation",)
+            f = _Reader(ctx, r.d.get("formation"), fp,
                         ("type", "spacing_m", "bearing_deg", "columns", "radius_m", "alt_step_m"))
             kind = f.string("type", choices=FORMATIONS)
-            spacing = f.num("spacing_m", None if f.has("radius_m") else _MISSING, lo=0)
+            spacing = f.num("spacing_m", None if f.has("radius_m") else _MISSING, lo=0, hi=dist)
             bearing = f.num("bearing_deg", None, lo=-360, hi=360)
-            columns = f.integer("columns", None, lo=1)
-            radius = f.num("radius_m", None, lo=0)
-            alt_step = f.num("alt_step_m", 0.0) or 0.0
+            columns = f.integer("columns", None, lo=1, hi=lim.MAX_VEHICLES)
+            radius = f.num("radius_m", None, lo=0, hi=dist)
+            alt_step = f.num("alt_step_m", 0.0, lo=-ALT_MAX_M, hi=ALT_MAX_M) or 0.0
             if kind is not None and (spacing is not None or radius is not None) and count:
                 offsets = formation_offsets(kind, count, spacing or 0.0, heading or 0.0,
                                             bearing, columns, radius)
+                size = (radius if kind == "circle" and radius is not None else spacing) or 0.0
+                if count > 1 and size == 0 and alt_step == 0:
+                    ctx.err(fp, f"{count} vehicles would start on one point: give "
+                                f"{'radius_m' if kind == 'circle' else 'spacing_m'} > 0 "
+                                f"(or alt_step_m)")
+                    no_formation = True
         if None in (vid, model, alt, heading, speed, count) or (pos_geo and None in (lat, lon)) \
                 or (not pos_geo and None in (n0, e0)) or no_formation:
             continue
@@ -581,10 +688,22 @@ def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: i
         assert alt is not None and heading is not None and speed is not None
         dn, de = offsets
         alts = alt + np.arange(count) * alt_step
+        alt_p = vp + ("init", alt_key or "alt_msl_m")
         if alts.min() < ALT_MIN_M or alts.max() > ALT_MAX_M:
-            ctx.err(vp + ("init", alt_key or "alt_msl_m"),
-                    f"gives altitudes {alts.min():g}..{alts.max():g} m above the ellipsoid "
-                    f"(with ground_alt_m and alt_step_m); allowed {ALT_MIN_M:g}..{ALT_MAX_M:g}")
+            ctx.err(alt_p, f"gives altitudes {alts.min():g}..{alts.max():g} m above the "
+                           f"ellipsoid (with ground_alt_m and alt_step_m); allowed "
+                           f"{ALT_MIN_M:g}..{ALT_MAX_M:g}")
+            continue
+        agl_min = float(alts.min()) - ground
+        if agl_min < 0:
+            step = ", with alt_step_m" if count > 1 else ""
+            ctx.err(alt_p, f"starts {-agl_min:g} m below the ground (the ground is at "
+                           f"{ground:g} m, origin.ground_alt_m{step})")
+            continue
+        if trim and agl_min < lim.MIN_TRIM_AGL_M:
+            ctx.err(alt_p, f"starts {agl_min:g} m above the ground; a trimmed start is in the "
+                           f"air: at least {lim.MIN_TRIM_AGL_M:g} m (give trim: false for a "
+                           f"vehicle on the ground)")
             continue
         if pos_geo:
             assert lat is not None and lon is not None
@@ -592,13 +711,24 @@ def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: i
         else:
             assert n0 is not None and e0 is not None
             n_base, e_base = np.asarray(n0), np.asarray(e0)
+        north, east = n_base + dn, e_base + de
+        far = float(np.hypot(north, east).max())
+        if far > dist:
+            ctx.err(vp + ("init",), f"places a vehicle {far / 1000:.0f} km from the origin; at "
+                                    f"most {dist / 1000:.0f} km (move origin: closer)")
+            continue
         # exact: each vehicle's local north/east are the formation's, at its own height
-        lats, lons = frame.place(n_base + dn, e_base + de, alts)
+        lats, lons = frame.place(north, east, alts)
         if count == 1 and pos_geo:
             lats, lons = np.array([lat]), np.array([lon])
         width = len(str(count - 1))
+        rows = []
         for j in range(count):
             uid = vid if count == 1 else f"{vid}{j:0{width}d}"
+            if len(uid) > lim.MAX_NAME_CHARS:
+                ctx.err(vp + ("id",), f"id {_clip(uid)!r} (with the number count adds) is "
+                                      f"longer than {lim.MAX_NAME_CHARS} characters")
+                break
             if uid in seen:
                 ctx.err(vp + ("id",), f"duplicate vehicle id {uid!r} (also at "
                                       f"{format_path(seen[uid])}, line {ctx.line(seen[uid])})")
@@ -611,9 +741,41 @@ def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: i
                 id=uid, model=model.name, aircraft_dir=model.aircraft_dir,
                 model_source=model.source, lat_deg=float(lats[j]), lon_deg=float(lons[j]),
                 alt_msl_m=float(alts[j]), heading_deg=float(heading) % 360.0,
-                airspeed_mps=float(speed), terrain_alt_m=origin.ground_alt_m, trim=trim,
+                airspeed_mps=float(speed), terrain_alt_m=ground, trim=trim,
                 random_seed=vseed, initial_props=tuple(props), profile=model.profile), vp))
+            rows.append(j)
+        where_ned.append(np.stack([np.broadcast_to(north, (count,))[rows],
+                                   np.broadcast_to(east, (count,))[rows], alts[rows]], axis=1))
+    if where_ned and not ctx.problems:
+        _check_separation(ctx, out, np.concatenate(where_ned))
     return out
+
+
+#: vehicles closer than this at the start are reported (stacked on one point)
+MIN_SEPARATION_M = 1.0
+
+
+def _check_separation(ctx: _Ctx, vehicles: list[tuple[VehicleSpec, P]], ned: np.ndarray
+                      ) -> None:
+    """Report vehicles that start within ``MIN_SEPARATION_M`` of each other (a
+    hash grid of that cell size: each vehicle is compared with its neighbours'
+    cells only, so this is linear in the number of vehicles)."""
+    cells: dict[tuple[int, int, int], list[int]] = {}
+    keys = np.floor(ned / MIN_SEPARATION_M).astype(np.int64)
+    reported = 0
+    for i, key in enumerate(map(tuple, keys.tolist())):
+        for dx in (-1, 0, 1):
+            for dy in (-1, 0, 1):
+                for dz in (-1, 0, 1):
+                    for j in cells.get((key[0] + dx, key[1] + dy, key[2] + dz), ()):
+                        gap = float(np.linalg.norm(ned[i] - ned[j]))
+                        if gap < MIN_SEPARATION_M and reported < 20:
+                            reported += 1
+                            a, b = vehicles[j][0].id, vehicles[i][0].id
+                            ctx.err(vehicles[i][1], f"vehicles {a!r} and {b!r} start "
+                                                    f"{gap:.2f} m apart (at least "
+                                                    f"{MIN_SEPARATION_M:g} m)")
+        cells.setdefault(key, []).append(i)
 
 
 def _select(ctx: _Ctx, sel: Any, path: P, ids: list[str]) -> list[int]:
@@ -640,6 +802,11 @@ def _schedule_tick(at_s: float, rates: Rates) -> int:
     return math.ceil(round(at_s * rates.physics_hz, 6) / k) * k
 
 
+def _total_ticks(duration_s: float, rates: Rates) -> int:
+    """Ticks in a run of ``duration_s``: rounded up to whole exchanges, at least one."""
+    return max(rates.control_every, _schedule_tick(duration_s, rates))
+
+
 def _schedule(ctx: _Ctx, d: Any, vehicles: list[tuple[VehicleSpec, P]], rates: Rates,
               duration: float) -> list[ScheduleItem]:
     if not isinstance(d, list):
@@ -648,7 +815,7 @@ def _schedule(ctx: _Ctx, d: Any, vehicles: list[tuple[VehicleSpec, P]], rates: R
     ids = [v.id for v, _ in vehicles]
     out = []
     k = rates.control_every
-    total = _schedule_tick(duration, rates)  # Scenario.total_ticks
+    total = _total_ticks(duration, rates)  # Scenario.total_ticks
     for i, sd in enumerate(d):
         sp: P = ("schedule", i)
         r = _Reader(ctx, sd, sp, ("at_s", "vehicles", "set", "command"))

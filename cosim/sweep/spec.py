@@ -42,6 +42,7 @@ single values, so ``scenario.resolved.yaml`` records it and loads again.
 from __future__ import annotations
 
 import ast
+import hashlib
 import itertools
 import logging
 import math
@@ -69,36 +70,101 @@ _FUNCS: dict[str, Callable[..., Any]] = {
     "acos": math.acos, "radians": math.radians, "degrees": math.degrees, "sqrt": math.sqrt,
     "abs": abs, "min": min, "max": max, "round": round,
 }
-_BINOPS: dict[type, Callable[[Any, Any], Any]] = {
-    ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: operator.mul,
-    ast.Div: operator.truediv, ast.FloorDiv: operator.floordiv, ast.Mod: operator.mod,
-    ast.Pow: operator.pow,
-}
 _CMPOPS: dict[type, Callable[[Any, Any], Any]] = {
     ast.Eq: operator.eq, ast.NotEq: operator.ne, ast.Lt: operator.lt, ast.LtE: operator.le,
     ast.Gt: operator.gt, ast.GtE: operator.ge,
 }
+
+#: what one placeholder may ask for: its text, its syntax tree, whole numbers
+#: (as the scenario's, a signed 64-bit integer), text results, arguments
+MAX_EXPR_CHARS = 500
+MAX_EXPR_NODES = 200
+MAX_INT = 2 ** 63 - 1
+MAX_STR_CHARS = 1000
+MAX_ARGS = 16
+#: ``round(x, n)``: |n| at most this
+MAX_ROUND_DIGITS = 20
 
 
 class _ExprError(Exception):
     pass
 
 
+def _number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _checked(v: Any) -> Any:
+    """``v`` if it is within the limits (whole numbers, text length)."""
+    if isinstance(v, int) and not isinstance(v, bool) and abs(v) > MAX_INT:
+        raise _ExprError(f"a whole number beyond +-{MAX_INT} (2**63 - 1)")
+    if isinstance(v, str) and len(v) > MAX_STR_CHARS:
+        raise _ExprError(f"text longer than {MAX_STR_CHARS} characters")
+    return v
+
+
+def _pow(a: Any, b: Any) -> Any:
+    """``a ** b`` for numbers, refused before computing when the result would
+    exceed the limits (``10**10**10`` would otherwise run for hours)."""
+    if not (_number(a) and _number(b)):
+        raise _ExprError("** takes numbers")
+    if abs(a) not in (0, 1) and b > 0:
+        bits = b * math.log2(abs(a))
+        limit = 63 if isinstance(a, int) and isinstance(b, int) else 1023
+        if bits > limit:
+            raise _ExprError(f"{format_value(a)} ** {format_value(b)} is too large")
+    if a == 0 and b < 0:
+        raise _ExprError("0 to a negative power")
+    return a ** b
+
+
+def _mul(a: Any, b: Any) -> Any:
+    if isinstance(a, str) or isinstance(b, str):  # text repeated: bound its length first
+        text, n = (a, b) if isinstance(a, str) else (b, a)
+        if not isinstance(n, int) or isinstance(n, (bool, str)) \
+                or len(text) * max(n, 0) > MAX_STR_CHARS:
+            raise _ExprError(f"text repeated beyond {MAX_STR_CHARS} characters")
+    return a * b
+
+
+def _mod(a: Any, b: Any) -> Any:
+    if not (_number(a) and _number(b)):
+        raise _ExprError("% takes numbers (no text formatting)")
+    return a % b
+
+
+_BINOPS: dict[type, Callable[[Any, Any], Any]] = {
+    ast.Add: operator.add, ast.Sub: operator.sub, ast.Mult: _mul,
+    ast.Div: operator.truediv, ast.FloorDiv: operator.floordiv, ast.Mod: _mod,
+    ast.Pow: _pow,
+}
+
+
+def _call(name: str, args: list[Any]) -> Any:
+    if len(args) > MAX_ARGS:
+        raise _ExprError(f"{name}() with more than {MAX_ARGS} arguments")
+    if name == "round" and len(args) == 2:
+        if not isinstance(args[1], int) or isinstance(args[1], bool) \
+                or abs(args[1]) > MAX_ROUND_DIGITS:
+            raise _ExprError(f"round(x, n) takes a whole n within +-{MAX_ROUND_DIGITS}")
+    return _FUNCS[name](*args)
+
+
 def _eval(node: ast.AST, env: Mapping[str, Scalar]) -> Any:
     if isinstance(node, ast.Expression):
         return _eval(node.body, env)
     if isinstance(node, ast.Constant) and isinstance(node.value, (int, float, str, bool)):
-        return node.value
+        return _checked(node.value)
     if isinstance(node, ast.Name):
         if node.id not in env:
             raise _ExprError(f"unknown name {node.id!r}")
         return env[node.id]
     if isinstance(node, ast.BinOp) and type(node.op) in _BINOPS:
-        return _BINOPS[type(node.op)](_eval(node.left, env), _eval(node.right, env))
+        return _checked(_BINOPS[type(node.op)](_eval(node.left, env), _eval(node.right, env)))
     if isinstance(node, ast.UnaryOp):
         v = _eval(node.operand, env)
         if isinstance(node.op, ast.USub):
-            return -v
+            return _checked(-v)
         if isinstance(node.op, ast.UAdd):
             return +v
         if isinstance(node.op, ast.Not):
@@ -119,26 +185,36 @@ def _eval(node: ast.AST, env: Mapping[str, Scalar]) -> Any:
         return _eval(node.body if cond else node.orelse, env)
     if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
             and node.func.id in _FUNCS and not node.keywords):
-        return _FUNCS[node.func.id](*[_eval(a, env) for a in node.args])
-    raise _ExprError(f"not allowed in a placeholder: {ast.unparse(node)!r}")
+        return _checked(_call(node.func.id, [_eval(a, env) for a in node.args]))
+    raise _ExprError(f"not allowed in a placeholder: {ast.unparse(node)[:80]!r}")
 
 
 def evaluate(expr: str, env: Mapping[str, Scalar], used: set[str] | None = None) -> Scalar:
-    """The value of one placeholder's expression; ``used`` collects the names it reads."""
+    """The value of one placeholder's expression; ``used`` collects the names it
+    reads. The work is bounded: at most ``MAX_EXPR_CHARS`` characters and
+    ``MAX_EXPR_NODES`` syntax nodes, whole numbers within +-``MAX_INT``
+    (powers checked before they are computed), text within ``MAX_STR_CHARS``;
+    anything beyond is an ``_ExprError``, found in microseconds."""
     used = used if used is not None else set()
+    if len(expr) > MAX_EXPR_CHARS:
+        used.update(re.findall(r"[A-Za-z_][A-Za-z0-9_]*", expr[:MAX_EXPR_CHARS * 4]))
+        raise _ExprError(f"longer than {MAX_EXPR_CHARS} characters")
     try:
         tree = ast.parse(expr.strip(), mode="eval")
-    except SyntaxError:
+    except (SyntaxError, ValueError, RecursionError, MemoryError):
         # record the names it mentions, so a typo is not also reported as "unused"
         used.update(re.findall(r"[A-Za-z_][A-Za-z0-9_]*", expr))
         raise _ExprError("not a valid expression") from None
     # every name the expression mentions counts as used, also in a branch not taken
-    used.update(n.id for n in ast.walk(tree) if isinstance(n, ast.Name))
+    nodes = list(ast.walk(tree))
+    used.update(n.id for n in nodes if isinstance(n, ast.Name))
+    if len(nodes) > MAX_EXPR_NODES:
+        raise _ExprError(f"more than {MAX_EXPR_NODES} terms")
     try:
         value = _eval(tree, env)
     except _ExprError:
         raise
-    except (ArithmeticError, TypeError, ValueError) as e:
+    except (ArithmeticError, TypeError, ValueError, RecursionError, MemoryError) as e:
         raise _ExprError(f"{type(e).__name__}: {e}") from None
     if isinstance(value, float) and not math.isfinite(value):
         raise _ExprError(f"the result is {value}")
@@ -302,6 +378,12 @@ def parse_sweep(info: Any, node: Any, path: P) -> dict[str, Scalar]:
     return dict(node) if isinstance(node, dict) else {}
 
 
+#: runs in one sweep (every combination of the swept values)
+MAX_SWEEP_RUNS = 10_000
+#: characters in a run's folder name (file systems allow 255 bytes)
+MAX_FOLDER_CHARS = 120
+
+
 @dataclass(frozen=True)
 class SweepSpec:
     path: str
@@ -316,24 +398,32 @@ class SweepSpec:
 
     def folder(self, point: Mapping[str, Scalar]) -> str:
         """The run's folder name: ``speed_kt=50,alt_agl_m=30,target=truck``
-        (swept names only; characters unsafe in file names become ``_``)."""
+        (swept names only; characters unsafe in file names become ``_``). A name
+        longer than ``MAX_FOLDER_CHARS`` is cut and ends in a hash of the whole,
+        so it stays one valid, unique file name."""
         parts = [f"{n}={format_value(point[n])}" for n in self.swept] or ["run"]
-        return re.sub(r"[^A-Za-z0-9_.=,+\-]", "_", ",".join(parts))
+        name = re.sub(r"[^A-Za-z0-9_.=,+\-]", "_", ",".join(parts))
+        if len(name) > MAX_FOLDER_CHARS:
+            digest = hashlib.sha256(name.encode()).hexdigest()[:16]
+            name = f"{name[:MAX_FOLDER_CHARS - 17]}-{digest}"
+        return name
 
 
 def read_sweep(path: str | Path) -> SweepSpec:
     """The ``sweep:`` section of a scenario file; ``ConfigError`` with lines."""
-    from cosim.scenario.yaml_lines import YamlProblem, format_path, load_with_lines
+    from cosim.scenario.yaml_lines import (
+        YamlProblem,
+        format_path,
+        load_with_lines,
+        read_scenario_text,
+    )
 
     p = Path(path)
-    try:
-        text = p.read_text()
-    except OSError as e:
-        raise ConfigError(f"{p}: cannot read scenario: {e.strerror or e}") from None
+    text = read_scenario_text(p)
     try:
         data, lines, _ = load_with_lines(protect_placeholders(text)[0])
     except YamlProblem as e:
-        raise ConfigError(f"{p}:{e.line}: {e.message}") from None
+        raise ConfigError([f"{p}:{ln}: {m}" for ln, m in e.problems]) from None
     problems: list[tuple[int, str]] = []
 
     def err(q: P, msg: str) -> None:
@@ -345,6 +435,9 @@ def read_sweep(path: str | Path) -> SweepSpec:
     values = sweep_values(raw, err)
     if any(isinstance(v, str) and _TOKEN.search(v) for vals in values.values() for v in vals):
         err(("sweep",), "placeholders are not allowed in the sweep: section")
+    runs = math.prod(len(v) for v in values.values())
+    if runs > MAX_SWEEP_RUNS:
+        err(("sweep",), f"{runs} combinations; a sweep may have at most {MAX_SWEEP_RUNS} runs")
     if problems:
         raise ConfigError([f"{p}:{ln}: {m}" for ln, m in sorted(problems, key=lambda x: x[0])])
     return SweepSpec(path=str(p), values=values, swept=tuple(swept_names(raw)))
