@@ -264,8 +264,9 @@ def test_a_tiny_duration_still_runs_one_exchange(tmp_path: Path) -> None:
 
 
 def test_any_number_is_bounded_even_without_its_own_range() -> None:
-    refused(scenario(extra="targets: [{kind: truck, north_m: 0, east_m: 0, heading_deg: 1e300}]\n"),
-            "out of range", line=6)
+    swarm = ("swarm: {groups: [{name: g, vehicles: all, phases: [{behaviour: rendezvous, "
+             "radius_m: 100, mu: 1e300}]}]}\n")
+    refused(scenario(extra=swarm), "mu: 1e+300 is out of range", line=6)
 
 
 def test_vehicle_count_is_bounded_with_the_memory_it_would_take() -> None:
@@ -392,3 +393,27 @@ def test_exponent_numbers_are_numbers_in_flow_style_too() -> None:
     v = VEHICLE.replace("alt_agl_m: 500", "alt_agl_m: 5e2")
     scn = parse_scenario(scenario(vehicles=v), "s.yaml", check_properties=False)
     assert scn.vehicles[0].alt_msl_m == 900.0
+
+
+@pytest.mark.parametrize("camera, fragment", [
+    ("{name: c, width_px: 100000, height_px: 480}", "must be <= 8192"),
+    ("{name: c, width_px: 8192, height_px: 8192}", "67.1 Mpx a frame; at most 33.2 Mpx"),
+    ("{name: c, rate_hz: 1e-300}", "must be >= 0.01"),
+    ("{name: " + "c" * 65 + "}", "at most 64 characters"),
+    ("{name: .c}", "must not start with '.'"),
+])
+def test_camera_settings_that_would_fail_at_start_are_refused(camera: str,
+                                                              fragment: str) -> None:
+    refused(scenario(extra=f"cameras: [{camera}]\n"), fragment, line=6)
+
+
+@pytest.mark.parametrize("section, fragment", [
+    ("cameras: {views: [{name: c}], max_in_flight: 1000000}", "must be <= 1024"),
+    ("cameras: {views: [{name: c}], render_workers: 100000}", "must be <= 64"),
+    ("targets: [{kind: truck, north_m: 1e7, east_m: 0}]", "must be <= 1e+06"),
+    ("targets: [{kind: truck, north_m: 0, east_m: 0, length_m: 1e8}]", "must be <= 1000"),
+    ("targets: [{id: ../t, kind: truck, north_m: 0, east_m: 0}]", "may only contain"),
+    ("ground: {tile_px: 100000}", "must be <= 4096"),
+])
+def test_renderer_sections_are_bounded(section: str, fragment: str) -> None:
+    refused(scenario(extra=section + "\n"), fragment, line=6)

@@ -14,10 +14,22 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
+from cosim.geo import MAX_DISTANCE_M
+from cosim.scenario.limits import MAX_NAME_CHARS, MIN_EXCHANGE_HZ
 from cosim.scenario.schema import SectionInfo
 
 P = tuple[Any, ...]
-_NAME = re.compile(r"^[A-Za-z0-9_.\-]+$")
+#: camera names and target ids become parts of file names (as vehicle ids)
+_NAME = re.compile(rf"^[A-Za-z0-9_\-][A-Za-z0-9_.\-]{{0,{MAX_NAME_CHARS - 1}}}$")
+
+#: camera limits: each side, and the pixels of one frame (8K UHD); every
+#: stream keeps a frame buffer and its render worker a ground patch of this size
+MAX_SIDE_PX = 8192
+MAX_FRAME_PX = 7680 * 4320
+MAX_IN_FLIGHT = 1024
+MAX_RENDER_WORKERS = 64
+#: targets: the largest box side (m)
+MAX_TARGET_M = 1000.0
 
 MOUNTS = ("nadir", "forward")
 CODECS = ("mp4v", "h264", "mjpg")
@@ -112,8 +124,8 @@ def parse_ground(info: SectionInfo, node: Any, path: P) -> GroundSpec:
     kind = r.string("texture", "image" if r.has("image") else "procedural",
                     choices=("procedural", "image"))
     base = r.num("base_m_per_px", 0.05, lo=0.005, hi=10.0)
-    tile = r.integer("tile_px", 256, lo=32)
-    max_range = r.num("max_range_m", 5000.0, lo=100.0)
+    tile = r.integer("tile_px", 256, lo=32, hi=4096)
+    max_range = r.num("max_range_m", 5000.0, lo=100.0, hi=MAX_DISTANCE_M)
     image: str | None = None
     o_ne: tuple[float, float] | None = None
     o_ll: tuple[float, float] | None = None
@@ -131,7 +143,7 @@ def parse_ground(info: SectionInfo, node: Any, path: P) -> GroundSpec:
                 _check_geotiff(info, str(p), geotiff, path)
             image = str(p)
         if not geotiff:
-            mpp = r.num("m_per_px", lo=0.0, lo_open=True) or 1.0
+            mpp = r.num("m_per_px", lo=0.0, lo_open=True, hi=10_000.0) or 1.0
             o = info.reader(r.d.get("origin"), path + ("origin",),
                             ("north_m", "east_m", "lat_deg", "lon_deg"))
             if o.has("lat_deg") or o.has("lon_deg"):
@@ -139,7 +151,8 @@ def parse_ground(info: SectionInfo, node: Any, path: P) -> GroundSpec:
                 if la is not None and lo is not None:
                     o_ll = (la, lo)
             else:
-                n, e = o.num("north_m"), o.num("east_m")
+                n = o.num("north_m", lo=-MAX_DISTANCE_M, hi=MAX_DISTANCE_M)
+                e = o.num("east_m", lo=-MAX_DISTANCE_M, hi=MAX_DISTANCE_M)
                 if n is not None and e is not None:
                     o_ne = (n, e)
     elif r.has("image"):
@@ -191,15 +204,16 @@ def parse_targets(info: SectionInfo, node: Any, path: P) -> tuple[TargetSpec, ..
                 info.err(p, "give north_m/east_m or lat_deg/lon_deg, not both")
             la, lo = r.num("lat_deg", lo=-90, hi=90), r.num("lon_deg", lo=-180, hi=180)
         else:
-            n, e = r.num("north_m"), r.num("east_m")
+            n = r.num("north_m", lo=-MAX_DISTANCE_M, hi=MAX_DISTANCE_M)
+            e = r.num("east_m", lo=-MAX_DISTANCE_M, hi=MAX_DISTANCE_M)
         dl, dw, dh, dc = TARGET_DEFAULTS.get(kind or "truck", TARGET_DEFAULTS["truck"])
         color = _rgb(info, r.d["color"], p + ("color",)) if r.has("color") else dc
         out.append(TargetSpec(
             id=tid or f"target{i}", kind=kind or "truck", north_m=n, east_m=e, lat_deg=la,
-            lon_deg=lo, heading_deg=r.num("heading_deg", 0.0) or 0.0,
-            length_m=r.num("length_m", dl, lo=0.0, lo_open=True) or dl,
-            width_m=r.num("width_m", dw, lo=0.0, lo_open=True) or dw,
-            height_m=r.num("height_m", dh, lo=0.0, lo_open=True) or dh,
+            lon_deg=lo, heading_deg=r.num("heading_deg", 0.0, lo=-360, hi=360) or 0.0,
+            length_m=r.num("length_m", dl, lo=0.0, lo_open=True, hi=MAX_TARGET_M) or dl,
+            width_m=r.num("width_m", dw, lo=0.0, lo_open=True, hi=MAX_TARGET_M) or dw,
+            height_m=r.num("height_m", dh, lo=0.0, lo_open=True, hi=MAX_TARGET_M) or dh,
             color_rgb=color or dc))
     return tuple(out)
 
@@ -239,8 +253,12 @@ def _camera(info: SectionInfo, d: Any, p: P, i: int) -> CameraSpec | None:
         pitch = -90.0 if mount == "nadir" else 0.0
     else:
         info.err(p + ("mount",), f"expected nadir, forward or {{pitch_deg: N}}, got {mount_raw!r}")
-    w = r.integer("width_px", 640, lo=16)
-    h = r.integer("height_px", 480, lo=16)
+    w = r.integer("width_px", 640, lo=16, hi=MAX_SIDE_PX)
+    h = r.integer("height_px", 480, lo=16, hi=MAX_SIDE_PX)
+    if w is not None and h is not None and w * h > MAX_FRAME_PX:
+        info.err(p, f"{w}x{h} is {w * h / 1e6:.1f} Mpx a frame; at most "
+                    f"{MAX_FRAME_PX / 1e6:.1f} Mpx (7680x4320)")
+        w = None
     which = r.one_of("hfov_deg", "vfov_deg")
     fov = r.num(which or "hfov_deg", 60.0, lo=1.0, hi=170.0)
     hfov = vfov = 60.0
@@ -253,7 +271,7 @@ def _camera(info: SectionInfo, d: Any, p: P, i: int) -> CameraSpec | None:
         if max(hfov, vfov) >= 175.0:
             info.err(p + (which or "hfov_deg",), f"the other field of view would be "
                                                  f"{max(hfov, vfov):.0f} deg; keep both under 175")
-    rate = r.num("rate_hz", 10.0, lo=0.0, lo_open=True)
+    rate = r.num("rate_hz", 10.0, lo=MIN_EXCHANGE_HZ, hi=info.rates.physics_hz)
     every = _frame_every(info, rate, p + ("rate_hz",)) if rate is not None else 0
     stab = r.boolean("stabilised", False)
     if None in (name, w, h, rate) or not every:
@@ -276,7 +294,7 @@ def parse_cameras(info: SectionInfo, node: Any, path: P) -> CamerasSpec:
     if codec == "h264" and not have_pyav():
         info.err(path + ("codec",), "h264 needs PyAV (pip install av); OpenCV's wheels have "
                                     "no H.264 encoder (mp4v and mjpg work without it)")
-    workers = r.integer("render_workers", None, lo=0)
+    workers = r.integer("render_workers", None, lo=0, hi=MAX_RENDER_WORKERS)
     views_raw = r.d.get("views")
     views: list[CameraSpec] = []
     if not isinstance(views_raw, list) or not views_raw:
@@ -293,6 +311,8 @@ def parse_cameras(info: SectionInfo, node: Any, path: P) -> CamerasSpec:
             views.append(cam)
     return CamerasSpec(views=tuple(views), codec=codec or "mp4v", render_workers=workers,
                        operator_view=r.boolean("operator_view", False),
-                       operator_width_px=r.integer("operator_width_px", 960, lo=160) or 960,
+                       operator_width_px=r.integer("operator_width_px", 960, lo=160,
+                                                   hi=7680) or 960,
                        digest=r.boolean("digest", False),
-                       max_in_flight=r.integer("max_in_flight", 64, lo=1) or 64)
+                       max_in_flight=r.integer("max_in_flight", 64, lo=1,
+                                               hi=MAX_IN_FLIGHT) or 64)
