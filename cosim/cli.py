@@ -1,4 +1,5 @@
-"""The ``cosim`` command: run, validate, models, plot, bench, sweep, visibility.
+"""The ``cosim`` command: run, validate, models, plot, bench, sweep, visibility,
+swarm, recover.
 
 ``main(argv) -> int``: exit 0 ok, 1 runtime failure, 2 usage or config
 error, 130 stopped by Ctrl-C (after a clean stop with everything flushed).
@@ -117,6 +118,10 @@ def _build_parser() -> _Parser:
     pl = sub.add_parser("plot", help="plot a run's ground track and altitude (PNG)")
     pl.add_argument("run", metavar="RUN_DIR", help="a cosim run output folder")
     pl.add_argument("--out", metavar="PNG", help="output file (default RUN_DIR/track.png)")
+
+    rc = sub.add_parser("recover", help="make what a killed or failed run left readable "
+                                         "(journalled ticks into Parquet, a summary)")
+    rc.add_argument("run", metavar="RUN_DIR", help="a cosim run output folder")
 
     sw = sub.add_parser("sweep", help="run a scenario once per combination of its sweep: "
                                       "values, in parallel")
@@ -385,6 +390,20 @@ def _cmd_plot(a: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _cmd_recover(a: argparse.Namespace) -> int:
+    from cosim.logs.recover import recover_run
+
+    rec = recover_run(a.run)
+    if not rec.changed:
+        print(f"{a.run}: nothing to recover ({rec.rows} state rows readable)")
+        return EXIT_OK
+    for line in rec.actions:
+        print(f"{a.run}: {line}")
+    print(f"{a.run}: recovered; {rec.rows} state rows readable"
+          + (f", up to tick {rec.ticks}" if rec.ticks is not None else ""))
+    return EXIT_OK
+
+
 def _cmd_sweep(a: argparse.Namespace) -> int:
     from cosim.sweep.runner import run_sweep
 
@@ -493,6 +512,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     _setup_logging(a.verbose, a.quiet)
     handlers = {"run": _cmd_run, "validate": _cmd_validate, "models": _cmd_models,
                 "plot": _cmd_plot, "bench": _cmd_bench, "sweep": _cmd_sweep,
+                "recover": _cmd_recover,
                 "swarm": _cmd_swarm,
                 "visibility": _cmd_visibility}
     try:

@@ -142,6 +142,18 @@ def _vehicle_list(vehicles: list[str], shown: int = 10) -> str:
     return text
 
 
+def how_it_ended(exitcode: int | None) -> str:
+    """``killed by SIGKILL`` or ``exited with code 3`` for a process's exit code."""
+    import signal
+
+    if exitcode is not None and exitcode < 0:
+        try:
+            return f"killed by {signal.Signals(-exitcode).name}"
+        except ValueError:
+            return f"killed by signal {-exitcode}"
+    return f"exited with code {exitcode}"
+
+
 class WorkerDied(CosimError):
     """A worker process ended without being asked to (killed by the OS, crashed)."""
 
@@ -155,18 +167,9 @@ class WorkerDied(CosimError):
         self.tick = tick
 
     def __str__(self) -> str:
-        import signal
-
-        if self.exitcode is not None and self.exitcode < 0:
-            try:
-                how = f"killed by {signal.Signals(-self.exitcode).name}"
-            except ValueError:
-                how = f"killed by signal {-self.exitcode}"
-        else:
-            how = f"exited with code {self.exitcode}"
         at = f" at tick {self.tick}" if self.tick is not None else ""
-        return (f"worker {self.worker} (pid {self.pid}) {how}{at}; its vehicles: "
-                f"{_vehicle_list(self.vehicles)}")
+        return (f"worker {self.worker} (pid {self.pid}) {how_it_ended(self.exitcode)}{at}; "
+                f"its vehicles: {_vehicle_list(self.vehicles)}")
 
 
 class WorkerTimeout(WorkerDied):

@@ -21,6 +21,7 @@ This package writes files; it never steps vehicles or decides when to stop.
 from cosim.logs.writers import (
     RUN_OUTPUTS,
     STATE_COLUMNS,
+    DiskReserve,
     EventLog,
     StateLog,
     clear_outputs,
@@ -28,5 +29,5 @@ from cosim.logs.writers import (
     write_json_atomic,
 )
 
-__all__ = ["RUN_OUTPUTS", "STATE_COLUMNS", "EventLog", "StateLog", "clear_outputs",
+__all__ = ["RUN_OUTPUTS", "STATE_COLUMNS", "DiskReserve", "EventLog", "StateLog", "clear_outputs",
            "read_states", "write_json_atomic"]

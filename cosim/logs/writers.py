@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import json
 import math
 import os
@@ -57,6 +58,16 @@ class StateLog:
     journal is deleted once it is in place. The leading ``_`` keeps journals
     out of the dataset that pyarrow and pandas read from the folder;
     ``read_states`` reads them too.
+
+    A failed write (a full disk) raises one ``OSError`` naming the file and
+    leaves everything readable: a journal append that fails is cut back to
+    its last complete record batch (and journalling stops), a part that
+    fails leaves no temporary file and keeps its ticks buffered and
+    journalled. ``failed`` holds that first error; later appends only buffer,
+    and ``close`` tries once more to write the part (the run frees its disk
+    reserve first) without raising the same failure again. ``complete`` says
+    whether every logged tick is in a part. ``cosim recover`` turns what a
+    killed or failed run left into parts.
     """
 
     def __init__(self, folder: Path, ids: list[str], frame: LocalFrame, physics_hz: float,
@@ -81,6 +92,8 @@ class StateLog:
         self.last_tick: int | None = None
         self._cols = [STATE_INDEX[c] for c in _FROM_STATE]
         self._closed = False
+        self.failed: OSError | None = None  # the first failed write
+        self._journal_ok = 0  # bytes of the journal known to hold complete batches
 
     def _batch(self, tick: int, states: np.ndarray, commands: list[str] | None) -> pa.RecordBatch:
         block = states[:, self._cols]  # a copy (fancy indexing)
@@ -103,17 +116,55 @@ class StateLog:
         """Log one tick (journalled at once); ``commands``: each vehicle's
         active command, for the ``command`` column."""
         batch = self._batch(tick, states, commands)
-        if self._journal is None:
-            self._journal_file = open(self._journal_path(self._parts), "wb",  # noqa: SIM115
-                                      buffering=0)
-            self._journal = pa.ipc.new_stream(self._journal_file, self.schema)
-        self._journal.write_batch(batch)
         self._batches.append(batch)
         self.rows_logged += self.n
         self.last_tick = tick
+        if self.failed is not None:  # after a failure: kept for close() to try once more
+            return
+        self._journal_append(batch)
         buffered = len(self._batches) * self.n
         if buffered >= self.flush_rows or time.monotonic() - self._last_flush >= self.flush_s:
             self.flush()
+
+    def _journal_append(self, batch: pa.RecordBatch) -> None:
+        path = self._journal_path(self._parts)
+        try:
+            if self._journal is None:
+                self._journal_file = open(path, "wb", buffering=0)  # noqa: SIM115
+                self._journal = pa.ipc.new_stream(self._journal_file, self.schema)
+                self._journal_ok = self._journal_file.tell()
+            self._journal.write_batch(batch)
+            self._journal_ok = self._journal_file.tell()
+        except OSError as e:
+            self._abandon_journal()
+            self._fail(e, path)
+
+    def _abandon_journal(self) -> None:
+        """Stop journalling: cut the journal back to its last complete batch
+        (a write cut short leaves a partial one) and close it."""
+        f, self._journal_file, self._journal = self._journal_file, None, None
+        if f is None:
+            return
+        try:
+            os.ftruncate(f.fileno(), self._journal_ok)
+        except OSError:
+            pass
+        finally:
+            try:
+                f.close()  # the writer is dropped unclosed: no end-of-stream marker
+            except OSError:
+                pass
+
+    def _fail(self, e: OSError, path: Path) -> None:
+        err = OSError(e.errno, f"cannot write {path}: {e.strerror or e}")
+        if self.failed is None:
+            self.failed = err
+        raise err from e
+
+    @property
+    def complete(self) -> bool:
+        """Every logged tick is in a part (closed without a failure left over)."""
+        return self._closed and not self._batches
 
     def _journal_path(self, part: int) -> Path:
         return self.dir / f"_journal-{part:06d}.arrows"
@@ -143,7 +194,7 @@ class StateLog:
             os.replace(tmp, final)
         except OSError as e:
             tmp.unlink(missing_ok=True)
-            raise OSError(e.errno, f"cannot write {final}: {e.strerror or e}") from e
+            self._fail(e, final)
         self._close_journal()
         self._journal_path(self._parts).unlink(missing_ok=True)
         self._parts += 1
@@ -152,18 +203,28 @@ class StateLog:
 
     def close(self) -> None:
         """Write the last part. If that fails the journal stays on disk (and
-        ``read_states`` reads it); the error is raised."""
+        ``read_states`` reads it); the error is raised, unless it repeats an
+        earlier failure (``failed``): one failure, one error."""
         if self._closed:
             return
         self._closed = True
+        earlier = self.failed
         try:
             self.flush()
+        except OSError:
+            if earlier is None:
+                raise
         finally:
-            self._close_journal()
+            if self._journal is not None:
+                try:
+                    self._close_journal()
+                except OSError:  # the end-of-stream marker did not fit: the batches did
+                    self._abandon_journal()
 
 
-def _read_journal(path: Path) -> list[pa.RecordBatch]:
-    """Every complete record batch of a journal (a truncated last one is ignored)."""
+def journal_batches(path: Path) -> tuple[list[pa.RecordBatch], bool]:
+    """Every complete record batch of a journal, and whether it ended cleanly
+    (False: the last one was cut short by a crash or a full disk, and is left out)."""
     batches: list[pa.RecordBatch] = []
     try:
         with pa.OSFile(str(path)) as f:
@@ -171,10 +232,28 @@ def _read_journal(path: Path) -> list[pa.RecordBatch]:
             while True:
                 batches.append(reader.read_next_batch())
     except StopIteration:
+        return batches, True
+    except (ValueError, OSError):  # pa.ArrowInvalid: cut short
         pass
-    except (ValueError, OSError):  # pa.ArrowInvalid: cut short by a crash
-        pass
-    return batches
+    try:  # nothing after the last complete batch?
+        clean = os.path.getsize(path) == _journal_end(path, len(batches))
+    except (ValueError, OSError):  # not even the schema is whole
+        clean = False
+    return batches, clean
+
+
+def _journal_end(path: Path, n: int) -> int:
+    """The byte offset after the schema and ``n`` record batches of a journal."""
+    with pa.OSFile(str(path)) as f:
+        reader = pa.ipc.MessageReader.open_stream(f)
+        for _ in range(n + 1):
+            reader.read_next_message()
+        return int(f.tell())
+
+
+def _read_journal(path: Path) -> list[pa.RecordBatch]:
+    """Every complete record batch of a journal (a truncated last one is ignored)."""
+    return journal_batches(path)[0]
 
 
 def read_states(folder: str | Path) -> pa.Table:
@@ -207,7 +286,7 @@ def read_states(folder: str | Path) -> pa.Table:
 
 #: what a run writes into its output folder (``clear_outputs`` removes them)
 RUN_OUTPUTS = ("states.parquet", "events.jsonl", "summary.json", "scenario.resolved.yaml",
-               "track.png", "faulthandler.log")
+               "track.png", "faulthandler.log", ".cosim-reserve", ".cosim-reserve-summary")
 
 
 def clear_outputs(folder: str | Path) -> None:
@@ -232,28 +311,101 @@ def _jsonable(v: Any) -> Any:
 
 
 class EventLog:
-    """``events.jsonl``: one object per line, written and flushed as it happens."""
+    """``events.jsonl``: one object per line, written and flushed as it happens.
+
+    ``emit`` never raises: a line that cannot be written (a full disk) is kept
+    (at most ``MAX_PENDING`` of them) and written before the next one, or at
+    ``close``; what still cannot be written is counted in ``dropped``. Each
+    line is written whole or not at all (a partial line is cut back)."""
+
+    MAX_PENDING = 10_000
 
     def __init__(self, path: Path, physics_hz: float) -> None:
         self.path = Path(path)
         self.physics_hz = physics_hz
-        self._f = open(self.path, "a", buffering=1)  # noqa: SIM115 - closed in close()
+        self._fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
         self.counts: dict[str, int] = {}
+        self._pending: list[bytes] = []
+        self.dropped = 0
+        self.failed: OSError | None = None  # the latest failed write
 
     def emit(self, kind: str, tick: int, vehicle: str | None = None, **fields: Any) -> None:
         rec = {"event": kind, "tick": tick, "time_s": tick / self.physics_hz,
                "vehicle": vehicle}
         rec.update({k: _jsonable(v) for k, v in fields.items()})
-        self._f.write(json.dumps(rec) + "\n")
-        self._f.flush()
         self.counts[kind] = self.counts.get(kind, 0) + 1
+        if len(self._pending) >= self.MAX_PENDING:
+            self.dropped += 1
+            return
+        self._pending.append((json.dumps(rec) + "\n").encode())
+        self._write_pending()
+
+    def _write_pending(self) -> None:
+        while self._pending and self._fd >= 0:
+            line = self._pending[0]
+            try:
+                size = os.lseek(self._fd, 0, os.SEEK_END)
+                done = os.write(self._fd, line)
+                if done != len(line):  # cut short: take it back, try again later
+                    os.ftruncate(self._fd, size)
+                    raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+            except OSError as e:
+                self.failed = OSError(e.errno, f"cannot write {self.path}: {e.strerror or e}")
+                return
+            self._pending.pop(0)
+            self.failed = None
+
+    @property
+    def complete(self) -> bool:
+        """Every event emitted is in the file."""
+        return not self._pending and not self.dropped
 
     def close(self) -> None:
-        if not self._f.closed:
-            self._f.close()
+        if self._fd < 0:
+            return
+        self._write_pending()
+        self.dropped += len(self._pending)
+        self._pending.clear()
+        os.close(self._fd)
+        self._fd = -1
 
 
 def write_json_atomic(path: Path, data: Any) -> None:
+    """Replace ``path`` with ``data`` as JSON, whole or not at all: a failed
+    write (``OSError`` naming the file) leaves the old file and no ``.tmp``."""
     tmp = Path(str(path) + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2, default=_jsonable) + "\n")
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "w") as f:
+            f.write(json.dumps(data, indent=2, default=_jsonable) + "\n")
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except OSError as e:
+        tmp.unlink(missing_ok=True)
+        raise OSError(e.errno, f"cannot write {path}: {e.strerror or e}") from e
+
+
+class DiskReserve:
+    """A file of ``size`` bytes kept in a run folder so that the run's last
+    writes (closing videos and logs, the summary) find room on a full disk:
+    ``release()`` deletes it just before they are made."""
+
+    def __init__(self, path: Path, size: int) -> None:
+        self.path = Path(path)
+        try:
+            fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+            try:
+                if hasattr(os, "posix_fallocate"):
+                    os.posix_fallocate(fd, 0, size)  # real blocks, not a sparse file
+                else:
+                    os.write(fd, bytes(size))
+            finally:
+                os.close(fd)
+            self.held = size
+        except OSError:  # no room even for it: nothing held
+            self.path.unlink(missing_ok=True)
+            self.held = 0
+
+    def release(self) -> None:
+        self.path.unlink(missing_ok=True)
+        self.held = 0

@@ -11,6 +11,14 @@ loop waits. ``render_workers: 0`` renders inline (the reference). Frames are a
 pure function of the scenario, seed, pose and tick, hence identical for any
 worker count. ``finish`` drains every queued frame and closes the files; a
 worker also closes its files if the loop's process disappears.
+
+Failures end the run, naming what failed: a stream that cannot be opened or
+written (``RenderError``: camera, vehicle, tick, the worker's traceback) and
+a render worker that dies (``RenderWorkerDied``: worker, pid, signal or exit
+code, its cameras), noticed at the next exchange (its process sentinel is
+polled without blocking) or within ``_POLL_S`` while the loop waits for
+frames. An error the loop did not see yet is raised by ``finish`` as
+``ParticipantFailed`` with the section.
 """
 
 from __future__ import annotations
@@ -24,25 +32,29 @@ import queue
 import time
 import traceback
 from dataclasses import dataclass
+from multiprocessing.connection import Connection
+from multiprocessing.connection import wait as wait_any
 from pathlib import Path
 from typing import Any
 
 import cv2
 import numpy as np
 
-from cosim.errors import CosimError
+from cosim.errors import CosimError, how_it_ended
 from cosim.fdm_pool.spec import STATE_INDEX
 from cosim.renderer.camera import camera_pose
 from cosim.renderer.config import CameraSpec, CamerasSpec, GroundSpec
 from cosim.renderer.frame import GT_COLUMNS, World, WorldSpec, render_frame
 from cosim.renderer.video import EXTENSIONS, open_video
-from cosim.sync.participants import RunContext
+from cosim.sync.participants import ParticipantFailed, RunContext
 
 log = logging.getLogger(__name__)
 
 _POSE_COLS = [STATE_INDEX[c] for c in ("lat_deg", "lon_deg", "alt_msl_m", "roll_deg",
                                        "pitch_deg", "yaw_deg")]
 _RESULT_TIMEOUT_S = 60.0
+#: while waiting for frames, how often the render workers' liveness is checked
+_POLL_S = 0.2
 
 
 class RenderError(CosimError):
@@ -59,6 +71,27 @@ class RenderError(CosimError):
         at = f" at tick {self.tick}" if self.tick is not None else ""
         return (f"camera {self.camera!r} of vehicle {self.vehicle!r}{at}: {last[0]}\n"
                 f"--- render traceback ---\n{self.remote_traceback.rstrip()}")
+
+
+class RenderWorkerDied(CosimError):
+    """A render worker process ended without being asked to (killed, crashed)."""
+
+    def __init__(self, worker: int, pid: int | None, exitcode: int | None,
+                 cameras: list[str], tick: int | None) -> None:
+        super().__init__(worker, pid, exitcode, cameras, tick)
+        self.worker, self.pid, self.exitcode, self.cameras, self.tick = (
+            worker, pid, exitcode, list(cameras), tick)
+
+    @property
+    def vehicle(self) -> str | None:
+        """The vehicle of its first camera (for the run's error event)."""
+        return self.cameras[0].split("/")[0] if self.cameras else None
+
+    def __str__(self) -> str:
+        at = f" at tick {self.tick}" if self.tick is not None else ""
+        return (f"render worker {self.worker} (pid {self.pid}) "
+                f"{how_it_ended(self.exitcode)}{at}; its cameras (vehicle/camera): "
+                f"{', '.join(self.cameras)}")
 
 
 @dataclass(frozen=True)
@@ -123,7 +156,13 @@ class RenderWorker:
                  digest: bool) -> None:
         self.world = World(world_spec)
         self.streams = {s.index: s for s in streams}
-        self.writers = {s.index: StreamWriter(out_dir, s, codec, digest) for s in streams}
+        self.writers: dict[int, StreamWriter] = {}
+        for s in streams:
+            try:
+                self.writers[s.index] = StreamWriter(out_dir, s, codec, digest)
+            except Exception as e:  # say which stream; keep what is open closed
+                self.close()
+                raise StreamFailed(s.index, traceback.format_exc()) from e
         self.target_ids = [t.id for t in world_spec.targets]
         self.frames = {s.index: np.empty((s.camera.height_px, s.camera.width_px, 4), np.uint8)
                        for s in streams}  # one reused (BGRA) frame buffer per stream
@@ -146,15 +185,28 @@ class RenderWorker:
         return {i: w.close() for i, w in self.writers.items()}
 
 
+class StreamFailed(Exception):
+    """Opening stream ``index``'s files failed (``tb``: the traceback)."""
+
+    def __init__(self, index: int, tb: str) -> None:
+        super().__init__(index, tb)
+        self.index, self.tb = index, tb
+
+
 def _worker_main(world_spec: WorldSpec, streams: list[Stream], out_dir: str, codec: str,
-                 digest: bool, jobs: Any, results: Any) -> None:
+                 digest: bool, jobs: Any, results: Connection) -> None:
     cv2.setNumThreads(1)
     parent = os.getppid()
     try:
         w = RenderWorker(world_spec, streams, Path(out_dir), codec, digest)
+    except StreamFailed as e:
+        results.send(("error", e.index, None, e.tb))
+        results.send(("done", {}))  # finish() need not wait for a worker that never started
+        return
     except BaseException:
-        results.put(("error", streams[0].index if streams else -1, None, traceback.format_exc()))
-        results.put(("done", {}))  # finish() need not wait for a worker that never started
+        results.send(("error", streams[0].index if streams else -1, None,
+                      traceback.format_exc()))
+        results.send(("done", {}))
         return
     try:
         while True:
@@ -170,11 +222,11 @@ def _worker_main(world_spec: WorldSpec, streams: list[Stream], out_dir: str, cod
             try:
                 thumb = w.render(stream, frame_no, tick, pose6)
             except BaseException:
-                results.put(("error", stream, tick, traceback.format_exc()))
+                results.send(("error", stream, tick, traceback.format_exc()))
                 break
-            results.put(("frame", stream, frame_no, thumb))
+            results.send(("frame", stream, frame_no, thumb))
     finally:
-        results.put(("done", w.close()))
+        results.send(("done", w.close()))
 
 
 class CameraParticipant:
@@ -187,11 +239,16 @@ class CameraParticipant:
         self.inline: RenderWorker | None = None
         self.procs: list[Any] = []
         self.jobs: list[Any] = []
-        self.results: Any = None
+        #: one pipe of results per render worker, read only here: a worker that
+        #: dies mid-message is an end of file, never a read waiting forever
+        self.results: list[Connection] = []
         self.in_flight: list[int] = []
         self.closed: dict[int, dict[str, Any]] = {}
         self.operator: Any = None
         self.finished = False
+        self.tick = 0  # the latest exchange (named in errors)
+        self.failed: BaseException | None = None  # the error raised into the loop
+        self.done: set[int] = set()  # render workers that have closed their files
 
     # --- lifecycle -------------------------------------------------------------------
     def start(self, ctx: RunContext) -> None:
@@ -221,24 +278,34 @@ class CameraParticipant:
         if self.spec.operator_view:
             self.operator = OperatorView(self.spec, self.streams, ws, ctx, ext)
         if n == 0:
-            self.inline = RenderWorker(ws, self.streams, ctx.out_dir, self.spec.codec,
-                                       self.spec.digest)
+            try:
+                self.inline = RenderWorker(ws, self.streams, ctx.out_dir, self.spec.codec,
+                                           self.spec.digest)
+            except StreamFailed as e:
+                st = self.streams[e.index]
+                self.failed = RenderError(st.vehicle, st.camera.name, None, e.tb)
+                raise self.failed from None
             return
         mpc = mp.get_context("spawn")
-        self.results = mpc.Queue()
         for k in range(n):
             q = mpc.Queue()
+            reader, writer = mpc.Pipe(duplex=False)
             mine = [s for s in self.streams if s.index % n == k]
             p = mpc.Process(target=_worker_main, name=f"cosim-render-{k}", daemon=True,
                             args=(ws, mine, str(ctx.out_dir), self.spec.codec,
-                                  self.spec.digest, q, self.results))
+                                  self.spec.digest, q, writer))
             p.start()
+            writer.close()  # the worker holds the only writing end
             self.procs.append(p)
             self.jobs.append(q)
+            self.results.append(reader)
             self.in_flight.append(0)
         log.info("cameras: %d stream(s) on %d render worker(s)", len(self.streams), n)
 
     def on_exchange(self, tick: int, states: np.ndarray) -> None:
+        self.tick = tick
+        if self.procs:
+            self._check_workers()
         for s in self.streams:
             every = s.camera.frame_every
             if tick % every:
@@ -246,7 +313,12 @@ class CameraParticipant:
             pose6 = tuple(float(x) for x in states[s.row, _POSE_COLS])
             frame_no = tick // every
             if self.inline is not None:
-                thumb = self.inline.render(s.index, frame_no, tick, pose6)
+                try:
+                    thumb = self.inline.render(s.index, frame_no, tick, pose6)
+                except Exception:
+                    self.failed = RenderError(s.vehicle, s.camera.name, tick,
+                                              traceback.format_exc())
+                    raise self.failed from None
                 if self.operator is not None:
                     self.operator.thumb(s.index, frame_no, thumb)
             else:
@@ -260,70 +332,109 @@ class CameraParticipant:
         if self.procs:
             self._collect(block=False)
 
-    def _collect(self, block: bool) -> None:
-        while True:
-            try:
-                msg = self.results.get(timeout=1.0) if block else self.results.get_nowait()
-            except queue.Empty:
-                if not block:
-                    return
-                dead = [p for p in self.procs if not p.is_alive() and p.exitcode != 0]
-                if dead:
-                    raise RenderError("?", "?", None, f"render worker {dead[0].name} died "
-                                                      f"(exit code {dead[0].exitcode})"
-                                      ) from None
-                continue
-            kind = msg[0]
-            if kind == "frame":
-                _, stream, frame_no, thumb = msg
-                self.in_flight[stream % len(self.procs)] -= 1
-                if self.operator is not None and thumb is not None:
-                    self.operator.thumb(stream, frame_no, thumb)
-            elif kind == "done":
-                self.closed.update(msg[1])
-            elif kind == "error":
-                _, stream, tick, tb = msg
-                s = self.streams[stream] if 0 <= stream < len(self.streams) else None
-                raise RenderError(s.vehicle if s else "?", s.camera.name if s else "?", tick, tb)
-            if block:
+    def _cameras_of(self, k: int) -> list[str]:
+        n = len(self.procs)
+        return [f"{s.vehicle}/{s.camera.name}" for s in self.streams if s.index % n == k]
+
+    def _check_workers(self) -> None:
+        """Raise for a render worker that has ended (without blocking): first
+        whatever it reported (a failure at start), else ``RenderWorkerDied``."""
+        ended = wait_any([p.sentinel for p in self.procs], timeout=0)
+        if ended:
+            self._drain()  # a worker that failed says why before it exits
+            self._died(next(k for k, p in enumerate(self.procs) if p.sentinel in ended))
+
+    def _died(self, k: int) -> None:
+        p = self.procs[k]
+        p.join(1.0)
+        self.failed = RenderWorkerDied(k, p.pid, p.exitcode, self._cameras_of(k), self.tick)
+        raise self.failed
+
+    def _read(self, k: int) -> None:
+        """Handle one message from worker ``k`` (its pipe is readable)."""
+        try:
+            msg = self.results[k].recv()
+        except (EOFError, OSError):  # the worker is gone (mid-message, perhaps)
+            if k in self.done:  # it said goodbye first: a normal end
+                self.results[k].close()
                 return
+            self._died(k)
+        self._handle(k, msg)
+
+    def _drain(self) -> None:
+        """Handle every result waiting now (raises a reported error)."""
+        for k, conn in enumerate(self.results):
+            while not conn.closed and conn.poll(0):
+                self._read(k)
+
+    def _handle(self, k: int, msg: tuple[Any, ...]) -> None:
+        kind = msg[0]
+        if kind == "frame":
+            _, stream, frame_no, thumb = msg
+            self.in_flight[stream % len(self.procs)] -= 1
+            if self.operator is not None and thumb is not None:
+                self.operator.thumb(stream, frame_no, thumb)
+        elif kind == "done":
+            self.closed.update(msg[1])
+            self.done.add(k)
+        elif kind == "error":
+            _, stream, tick, tb = msg
+            s = self.streams[stream] if 0 <= stream < len(self.streams) else None
+            self.failed = RenderError(s.vehicle if s else "?", s.camera.name if s else "?",
+                                      tick, tb)
+            raise self.failed
+
+    def _collect(self, block: bool) -> None:
+        """Handle the results waiting; with ``block``, wait until at least one
+        arrives (a worker that dies meanwhile is noticed within ``_POLL_S``)."""
+        if not block:
+            self._drain()
+            return
+        while True:
+            ready = wait_any(self.results, timeout=_POLL_S)
+            if ready:
+                self._drain()
+                return
+            self._check_workers()
 
     def finish(self, tick: int, reason: str) -> dict[str, Any] | None:
         if self.finished:
             return None
         self.finished = True
+        self.tick = tick
+        raised = self.failed  # an error the loop has ended on already: said once
         error: BaseException | None = None
         if self.inline is not None:
             self.closed = self.inline.close()
         elif self.procs:
             for q in self.jobs:
                 q.put(None)
-            done = 0
             deadline = time.monotonic() + _RESULT_TIMEOUT_S
-            while done < len(self.procs):
-                try:
-                    msg = self.results.get(timeout=1.0)
-                except queue.Empty:
-                    dead = [p for p in self.procs if not p.is_alive() and p.exitcode != 0]
-                    if dead or time.monotonic() > deadline:
-                        why = (f"render worker {dead[0].name} died (exit code "
-                               f"{dead[0].exitcode})" if dead else
-                               f"render workers did not finish in {_RESULT_TIMEOUT_S:g} s")
-                        error = error or RenderError("?", "?", tick, why)
-                        break
-                    continue
-                if msg[0] == "done":
-                    done += 1
-                    self.closed.update(msg[1])
-                elif msg[0] == "frame" and self.operator is not None and msg[3] is not None:
-                    self.operator.thumb(msg[1], msg[2], msg[3])
-                elif msg[0] == "error" and error is None:
-                    s = self.streams[msg[1]]
-                    error = RenderError(s.vehicle, s.camera.name, msg[2], msg[3])
+            waiting = set(range(len(self.procs))) - self.done  # may still send
+            while waiting:
+                if time.monotonic() > deadline:
+                    error = error or RenderError("?", "?", tick, f"render workers did not "
+                                                 f"finish in {_RESULT_TIMEOUT_S:g} s")
+                    break
+                for conn in wait_any([self.results[k] for k in waiting], timeout=_POLL_S):
+                    k = self.results.index(conn)  # type: ignore[arg-type]
+                    try:
+                        self._read(k)
+                    except RenderWorkerDied as e:
+                        waiting.discard(k)
+                        error = error or e
+                    except RenderError as e:
+                        error = error or e
+                waiting -= self.done
             for p in self.procs:
                 p.join(timeout=10)
                 if p.is_alive():
                     p.kill()
+            for q in self.jobs:  # the workers are gone: nothing left to deliver at exit
+                q.cancel_join_thread()
+                q.close()
+            for conn in self.results:
+                conn.close()
         out: dict[str, Any] = {"streams": [], "codec": self.spec.codec}
         for s in self.streams:
             c = s.camera
@@ -335,9 +446,11 @@ class CameraParticipant:
                 **self.closed.get(s.index, {"frames": None})})
         if self.operator is not None:
             out["operator"] = self.operator.close()
-        if error is not None:
+        if raised is not None:
+            out["error"] = str(raised).splitlines()[0]
+        elif error is not None:
             out["error"] = str(error).splitlines()[0]
-            log.error("%s", error)
+            raise ParticipantFailed(error, out)
         return out
 
     def after_run(self, out_dir: Path) -> None:

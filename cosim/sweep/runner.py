@@ -116,14 +116,12 @@ def _run_one(scenario: str, point: dict[str, Scalar], run_dir: str, log_path: st
 
 
 def _died(exitcode: int | None) -> str:
-    import signal
+    from cosim.errors import how_it_ended
 
+    how = how_it_ended(exitcode)
     if exitcode is not None and exitcode < 0:
-        try:
-            return f"its process was killed by {signal.Signals(-exitcode).name}"
-        except ValueError:
-            return f"its process was killed by signal {-exitcode}"
-    return f"its process exited with code {exitcode} without a result"
+        return f"its process was {how}"  # killed by SIGKILL
+    return f"its process {how} without a result"  # exited with code 3
 
 
 def check_out_dir(out: Path, spec: SweepSpec, overwrite: bool) -> None:

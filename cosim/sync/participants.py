@@ -14,7 +14,12 @@ part's participant with ``make_participant(scenario)``. Per run:
   endpoint handles them at the next exchange, exactly like a ground
   station's;
 - ``finish(tick, reason)`` once, whatever the end (also after an error);
-  returns the participant's section of ``summary.json`` (or None).
+  returns the participant's section of ``summary.json`` (or None; an
+  ``"error"`` in it marks the run's outputs incomplete). A
+  participant that failed (at start, in the loop, or as it finishes) raises
+  ``ParticipantFailed`` here with its section: the run then ends as an
+  error, with one ``error`` event, and the section is still in the summary.
+  An exception from ``start`` or ``on_exchange`` ends the loop at once.
 - ``after_run(out_dir)`` after ``summary.json`` is written (plots); errors
   there are logged, never lose the run.
 
@@ -31,10 +36,25 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
+from cosim.errors import CosimError
+
 if TYPE_CHECKING:
     from cosim.geo import LocalFrame
     from cosim.logs import EventLog
     from cosim.scenario import Scenario
+
+class ParticipantFailed(CosimError):
+    """A participant failed: ``error`` says what (naming what failed, e.g. the
+    camera and vehicle), ``section`` is its part of ``summary.json`` anyway."""
+
+    def __init__(self, error: BaseException, section: dict[str, Any] | None = None) -> None:
+        super().__init__(error, section)
+        self.error = error
+        self.section = section
+
+    def __str__(self) -> str:
+        return str(self.error)
+
 
 #: scenario section -> "module:factory" building its participant
 PARTICIPANTS: dict[str, str] = {

@@ -31,10 +31,16 @@ from cosim.errors import VehicleError, WorkerDied, WorkerError
 from cosim.fdm_pool import STATE_INDEX, VehicleStatus, make_pool
 from cosim.fdm_pool.base import Pool
 from cosim.guidance import FixedWingGuidance
-from cosim.logs import EventLog, StateLog, clear_outputs, write_json_atomic
+from cosim.logs import DiskReserve, EventLog, StateLog, clear_outputs, write_json_atomic
 from cosim.scenario import Scenario
 from cosim.sync.pacing import Pacer
-from cosim.sync.participants import Participant, RunContext, build_participants, needs_mavlink
+from cosim.sync.participants import (
+    Participant,
+    ParticipantFailed,
+    RunContext,
+    build_participants,
+    needs_mavlink,
+)
 
 log = logging.getLogger(__name__)
 
@@ -49,6 +55,10 @@ _FLAG_EVENTS = {
 }
 _FLAG_COLS = [STATE_INDEX[c] for c in _FLAG_EVENTS]
 _FLAG_KINDS = tuple(_FLAG_EVENTS.values())  # by column of _FLAG_COLS
+#: disk kept free during a run (``DiskReserve``) for closing its files on a full
+#: disk, and separately for the final summary.json
+RESERVE_BYTES = 8 * 1024 * 1024
+SUMMARY_RESERVE_BYTES = 1024 * 1024
 
 
 @dataclass
@@ -135,6 +145,13 @@ class Run:
         loop0: float | None = None
         workers_used = 1
         events.emit("run_start", 0, scenario=scn.name, vehicles=len(ids), backend=self.backend)
+        # a summary from the start (replaced at the end), and room kept for the
+        # last writes: a full disk still leaves a readable summary.json
+        write_json_atomic(out / "summary.json", {
+            **self._summary("running", 0, 0.0, 0.0, 1, {}, 0, None), "complete": False})
+        reserve = DiskReserve(out / ".cosim-reserve", RESERVE_BYTES)
+        summary_reserve = DiskReserve(out / ".cosim-reserve-summary", SUMMARY_RESERVE_BYTES)
+        complete = True  # every output written and closed
         # a hard crash of this process (segfault, abort) leaves its Python traceback here
         fault_path = out / "faulthandler.log"
         fault_file = open(fault_path, "w")  # noqa: SIM115 - closed in the finally below
@@ -261,6 +278,7 @@ class Run:
                 log.warning("stopped while building the vehicles (%s)", reason)
         finally:
             self._building = False
+            reserve.release()  # room to close videos, logs and tlogs on a full disk
             if self.mavlink is not None:
                 self.mavlink.close()
             if loop0 is not None and loop_s == 0.0:
@@ -271,13 +289,26 @@ class Run:
                 t_fin = time.perf_counter()
                 sections: dict[str, Any] = {}
                 for part in self.participants:
+                    failure: BaseException | None = None
                     try:
                         section = part.finish(tick, reason)
+                    except ParticipantFailed as e:  # its section is still the summary's
+                        section, failure = e.section, e.error
                     except Exception as e:  # one part's failure must not lose the summary
                         log.exception("%s: finishing failed", part.name)
-                        section = {"error": f"{type(e).__name__}: {e}"}
+                        section, failure = {"error": f"{type(e).__name__}: {e}"}, e
                     if section is not None:
                         sections[part.name] = section
+                        if "error" in section:  # its outputs stopped short
+                            complete = False
+                    if failure is not None:  # a failed part fails the run, said once
+                        complete = False
+                        log.error("%s: %s", part.name, failure)
+                        if reason == "completed":
+                            reason = "error"
+                        error = error if error is not None else failure
+                        events.emit("error", tick, vehicle=getattr(failure, "vehicle", None),
+                                    message=f"{type(failure).__name__}: {failure}")
                 if loop0 is not None:
                     loop_s += time.perf_counter() - t_fin
                 try:
@@ -301,8 +332,20 @@ class Run:
                     summary["mavlink"] = {"url": self.mavlink_config.url,
                                           "counters": self.mavlink.counters()}
                 summary.update(sections)
-                write_json_atomic(out / "summary.json", summary)
+                if events.dropped:
+                    summary["events_dropped"] = events.dropped
+                summary["complete"] = complete and states_log.complete and events.complete
+                summary_reserve.release()
+                try:
+                    write_json_atomic(out / "summary.json", summary)
+                except OSError as e:  # the summary written at the start stays, incomplete
+                    log.error("could not write the final summary.json: %s", e)
+                    error = error if error is not None else e
+                    if reason == "completed":
+                        reason = "error"
             finally:
+                reserve.release()
+                summary_reserve.release()
                 self._end_fault_log(fault_file, fault_was_enabled)
         for part in self.participants:
             try:

@@ -438,7 +438,8 @@ def test_driver_crash_mid_run_keeps_journalled_ticks_and_a_fault_trace(
     p = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
                        timeout=60)
     assert p.returncode == -signal.SIGSEGV, p.stderr
-    assert not (out / "summary.json").exists()
+    s = json.loads((out / "summary.json").read_text())  # the one written at the start
+    assert s["complete"] is False and s["stop_reason"] == "running"
     trace = (out / "faulthandler.log").read_text()
     assert "Fatal Python error: Segmentation fault" in trace and "progress" in trace
     t = read_states(out)
