@@ -27,6 +27,7 @@ from __future__ import annotations
 import hashlib
 import hmac
 import struct
+import time
 from collections import Counter
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
@@ -387,12 +388,25 @@ def signing_timestamp(unix_us: int) -> int:
     return max(0, (int(unix_us) - SIGNING_EPOCH_UNIX_US) // 10)
 
 
+def wall_signing_timestamp() -> int:
+    """The wall clock now as a MAVLink 2 signature timestamp."""
+    return signing_timestamp(time.time_ns() // 1000)
+
+
+#: a new stream whose first timestamp is further behind the local timestamp
+#: than this (10 us units: one minute) is refused, as the MAVLink 2 signing
+#: specification, pymavlink and ArduPilot do
+NEW_STREAM_WINDOW: Final[int] = 6_000_000
+
 #: ``SignatureChecker.check`` verdicts
 SIG_OK: Final[str] = "ok"
 SIG_MAVLINK1: Final[str] = "mavlink1"
 SIG_UNSIGNED: Final[str] = "unsigned"
 SIG_BAD: Final[str] = "bad_signature"
 SIG_REPLAY: Final[str] = "replay"
+SIG_STALE: Final[str] = "stale_stream"
+
+Stream = tuple[int, int, int]  # (link id, system, component)
 
 
 class SignatureChecker:
@@ -400,22 +414,34 @@ class SignatureChecker:
 
     ``check(raw)`` (``raw``: one packet exactly as received, ``Message.raw``)
     returns ``SIG_OK``, ``SIG_MAVLINK1`` (a MAVLink 1 packet: it cannot carry
-    a signature), ``SIG_UNSIGNED``, ``SIG_BAD`` (wrong key or tampered) or
+    a signature), ``SIG_UNSIGNED``, ``SIG_BAD`` (wrong key or tampered),
     ``SIG_REPLAY`` (a correct signature whose timestamp is not newer than
-    the last accepted one of the same stream: link id, system, component).
-    The signature is checked before the timestamp, and only an accepted
-    packet advances its stream's timestamp, so forged packets cannot block a
-    stream. The first packet of a new stream is accepted at any timestamp
-    (the simulation clock need not follow the wall clock, so there is no
-    "recent enough" test to make against it).
+    the last accepted one of the same stream: link id, system, component) or
+    ``SIG_STALE`` (the first packet of a stream, stamped more than a minute
+    behind the local timestamp). The local timestamp is the latest of the
+    wall clock, ``timestamp`` (what was accepted or sent before, in this run
+    or, restored by the caller, in earlier ones) and every accepted packet's
+    stamp. The signature is checked before the timestamp, and only an
+    accepted packet advances anything, so forged packets cannot block a
+    stream. ``streams`` (the last accepted timestamp of each) and
+    ``timestamp`` may be given from an earlier run: a packet recorded then
+    is a replay now.
     """
 
-    def __init__(self, key: bytes) -> None:
+    def __init__(self, key: bytes, timestamp: int = 0,
+                 streams: Mapping[Stream, int] | None = None) -> None:
         if len(key) != SIGNING_KEY_LEN:
             raise ValueError(f"MAVLink signing key must be {SIGNING_KEY_LEN} bytes, "
                              f"got {len(key)}")
         self._key = bytes(key)
-        self.last_timestamp: dict[tuple[int, int, int], int] = {}
+        self.timestamp = int(timestamp)
+        self.last_timestamp: dict[Stream, int] = dict(streams or {})
+        self.changed = False  # something was accepted since the caller last looked
+
+    def local_timestamp(self) -> int:
+        """The latest of the wall clock and everything accepted or restored."""
+        self.timestamp = max(self.timestamp, wall_signing_timestamp())
+        return self.timestamp
 
     def check(self, raw: bytes) -> str:
         if not raw or raw[0] != _V2_MARKER:
@@ -430,9 +456,14 @@ class SignatureChecker:
         timestamp = int.from_bytes(raw[-12:-6], "little")
         stream = (int(link_id), int(raw[5]), int(raw[6]))
         last = self.last_timestamp.get(stream)
-        if last is not None and timestamp <= last:
-            return SIG_REPLAY
+        if last is not None:
+            if timestamp <= last:
+                return SIG_REPLAY
+        elif timestamp + NEW_STREAM_WINDOW < self.local_timestamp():
+            return SIG_STALE
         self.last_timestamp[stream] = timestamp
+        self.timestamp = max(self.timestamp, timestamp)
+        self.changed = True
         return SIG_OK
 
 

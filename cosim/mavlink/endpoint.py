@@ -29,24 +29,30 @@ what arrives from the network; problems are counted (``counters()``).
 MAVLink 2 signing (``MavlinkConfig.signing_key_file`` / ``signing_key_env``):
 
 - every packet the vehicles send is signed with the key and
-  ``signing_link_id``; the signature timestamp follows the simulation clock
-  (``unix_us(tick)``, in 10 us units since 2015-01-01) and never goes back
-  (each vehicle's packets carry strictly increasing timestamps);
+  ``signing_link_id``; the signature timestamp follows the WALL clock (10 us
+  units since 2015-01-01), as the specification asks, not the simulation
+  clock (which runs ahead of it in a run faster than real time), and never
+  goes back (each vehicle's packets carry strictly increasing timestamps,
+  starting above any timestamp this key has seen in earlier runs);
 - a received packet is handled only if it carries a valid signature made
-  with the same key, and its timestamp is newer than the last accepted one
-  of its stream (link id, system, component); otherwise it is dropped before
-  anything looks at it and counted: ``unsigned_dropped``,
-  ``bad_signature_dropped`` (wrong key, tampered), ``replay_dropped``.
-  MAVLink 1 packets cannot be signed, so they are dropped too (counted in
-  ``unsigned_dropped`` and, separately, ``mavlink1_dropped``);
-- only a sender of an accepted packet becomes a peer (gets telemetry);
+  with the same key and a timestamp newer than the last accepted one of its
+  stream (link id, system, component), or, for a stream not seen before,
+  not more than a minute behind the newest timestamp known; otherwise it is
+  dropped before anything looks at it and counted: ``unsigned_dropped``,
+  ``bad_signature_dropped`` (wrong key, tampered), ``replay_dropped``,
+  ``stale_stream_dropped``. MAVLink 1 packets cannot be signed, so they are
+  dropped too (counted in ``unsigned_dropped`` and, separately,
+  ``mavlink1_dropped``);
+- the newest timestamp and each stream's last one are kept between runs
+  (``cosim.mavlink.signing``, saved at most once a second and at close): a
+  signed packet recorded in one run, or read from its tlog, is a replay in
+  every later run;
+- only a sender of an accepted packet becomes a peer (gets telemetry): a
+  ground station without the key receives nothing from a ``udpin`` link
+  (from ``udpout`` it receives packets it cannot verify);
 - SETUP_SIGNING is never obeyed, even correctly signed
   (``setup_signing_ignored``): the key comes from the operator only;
 - ``inject()``-ed messages are in-process, not checked.
-
-Ground stations reject a new signed stream whose timestamp is more than a
-minute behind their clock: with signing on, keep the default clock anchor
-(now), not one in the past.
 
 In-process clients (the swarm controller) use the same messages without a
 socket: ``subscribe(callback)`` delivers every packet a vehicle sends as a
@@ -92,6 +98,7 @@ from cosim.mavlink.batch import BatchEncoder
 from cosim.mavlink.errors import EndpointClosed, LockstepTimeout
 from cosim.mavlink.handlers import Handler, Outcome, command_ack
 from cosim.mavlink.link import DEFAULT_URL, NullLink, UdpLink
+from cosim.mavlink.signing import SigningState
 from cosim.mavlink.tlog import STAMP_LEN as TLOG_STAMP_LEN
 from cosim.mavlink.tlog import TlogWriter
 from cosim.mavlink.tlog import stamp as tlog_stamp
@@ -126,13 +133,17 @@ TLOG_FLUSH_S = 0.5
 #: counters always present in ``counters()``
 ENDPOINT_COUNTERS = (
     "packets_out", "echoes", "unknown_target_system", "other_component", "gcs_heartbeats",
-    "ignored_messages", "unsupported_commands", "commands_refused", "commands_out",
+    "ignored_messages", "unsupported_commands", "commands_refused", "commands_unsafe",
+    "commands_out",
     "handler_errors", "param_unknown", "param_rejected", "ftp_naks",
     "position_targets_ignored", "position_targets_invalid", "position_targets_unsupported",
     "injected", "mission_uploads", "mission_upload_errors", "mission_upload_timeouts",
     "mission_rerequests", "mission_unexpected", "mission_downloads", "mission_items_reached",
     "unsigned_dropped", "mavlink1_dropped", "bad_signature_dropped", "replay_dropped",
-    "setup_signing_ignored")
+    "stale_stream_dropped", "setup_signing_ignored")
+
+#: the signing state is saved at most this often (wall clock) and at close
+SIGNING_SAVE_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -167,6 +178,9 @@ class MavlinkConfig:
     signing_key_file: str | Path | None = None
     signing_key_env: str | None = None
     signing_link_id: int = 0
+    #: where the signing timestamps are kept between runs (None: the cache
+    #: folder, ``cosim.mavlink.signing.default_folder()``)
+    signing_state_dir: str | Path | None = None
     #: lockstep with an outside controller of this system id (see ``MavlinkEndpoint``)
     lockstep_sysid: int | None = None
     lockstep_timeout_s: float = 30.0
@@ -285,14 +299,18 @@ class MavlinkEndpoint:
         self.vehicles = [MavVehicle(s, self.clock, config.rates_hz, self.frame, i)
                          for i, s in enumerate(vehicles)]
         #: verifies incoming signatures (None: signing off)
-        self.signature_checker = mav.SignatureChecker(key) if key is not None else None
+        self.signature_checker: mav.SignatureChecker | None = None
+        #: the key's replay-protection state between runs (None: signing off)
+        self.signing_state: SigningState | None = None
+        self._signing_saved = time.monotonic()
         if key is not None:
+            self.signing_state = SigningState(key, config.signing_state_dir)
+            timestamp, streams = self.signing_state.load()
+            self.signature_checker = mav.SignatureChecker(key, timestamp, streams)
+            start = self.signature_checker.local_timestamp()
             for v in self.vehicles:
                 v.packer.enable_signing(key, config.signing_link_id)
-            if anchor < time.time() * 1_000_000 - 60_000_000:
-                log.warning("mavlink signing: the simulation clock starts in the past; ground "
-                            "stations reject a new signed stream more than a minute behind "
-                            "their own clock")
+                v.packer.advance_signing_time(start)
         self._by_sysid = {v.sysid: v for v in self.vehicles}
         self._by_row = {v.row: v for v in self.vehicles}
         self.counts: Counter[str] = Counter({k: 0 for k in ENDPOINT_COUNTERS})
@@ -326,6 +344,13 @@ class MavlinkEndpoint:
         self.tlogs: dict[int, TlogWriter] = {}
         self.link: UdpLink | NullLink = NullLink() if config.url is None else UdpLink(
             config.url, config.max_peers, config.max_datagrams_per_exchange)
+        if not self.link.loopback and key is None:
+            host, port = self.link.local_address
+            log.warning("mavlink %s: listening on %s:%d, which other machines can reach, "
+                        "WITHOUT signing: anyone who can send to it can command every vehicle "
+                        "(modes, arming, gotos, parameters, missions). Keep it on 127.0.0.1, "
+                        "or sign: --mavlink-signing-key-file PATH or "
+                        "--mavlink-signing-key-env NAME", config.url, host, port)
         self._subscribers: list[Callable[[mav.Message], None]] = []
         self._lockstep_pending: int | None = None  # the tick whose answer is awaited
         self._lockstep_seen = False  # the controller has spoken
@@ -359,10 +384,33 @@ class MavlinkEndpoint:
         self.close()
 
     def close(self) -> None:
-        """Flush and close the tlogs and the socket (safe to call twice)."""
+        """Flush and close the tlogs and the socket, save the signing state
+        (safe to call twice)."""
         for t in self.tlogs.values():
             t.close()
+        if not self.link.closed:
+            self._save_signing(force=True)
         self.link.close()
+
+    def _save_signing(self, force: bool = False) -> None:
+        """Keep the signing timestamps for later runs (at most once a second
+        unless ``force``; only when something was accepted or sent)."""
+        chk, state = self.signature_checker, self.signing_state
+        if chk is None or state is None:
+            return
+        now = time.monotonic()
+        if not force and now - self._signing_saved < SIGNING_SAVE_S:
+            return
+        self._signing_saved = now
+        sent = max((v.packer.signing_timestamp for v in self.vehicles), default=0)
+        if not chk.changed and sent <= chk.timestamp:
+            return
+        chk.timestamp = max(chk.timestamp, sent)
+        chk.changed = False
+        try:
+            state.save(chk.timestamp, chk.last_timestamp)
+        except OSError as e:  # the run goes on; later runs start from the wall clock
+            log.error("%s", e)
 
     # -- per exchange ----------------------------------------------------------
     def inject(self, message: mav.Message) -> None:
@@ -432,9 +480,9 @@ class MavlinkEndpoint:
             self._dispatch(m, tick, commands)
         for msgs, addr in self._receive(tick):
             if msgs:
-                self.link.remember(addr)
+                self.link.remember(addr, len(msgs))
             for m in msgs:
-                self._dispatch(m, tick, commands)
+                self._dispatch(m, tick, commands, addr)
         self.counts["commands_out"] += len(commands)
         return commands
 
@@ -459,6 +507,7 @@ class MavlinkEndpoint:
             self._tlog_flushed = now
             for t in self.tlogs.values():
                 t.flush()
+        self._save_signing()
 
     def counters(self) -> dict[str, int]:
         """Every counter (decoding, link, handling), for summary.json."""
@@ -638,6 +687,8 @@ class MavlinkEndpoint:
                 self.counts["unsigned_dropped"] += 1
             elif verdict == mav.SIG_BAD:
                 self.counts["bad_signature_dropped"] += 1
+            elif verdict == mav.SIG_STALE:
+                self.counts["stale_stream_dropped"] += 1
             else:
                 self.counts["replay_dropped"] += 1
             return None
@@ -647,13 +698,16 @@ class MavlinkEndpoint:
             return None
         return replace(m, signed=True)
 
-    def _send(self, v: MavVehicle, name: str, fields: dict[str, object], tick: int) -> None:
+    def _send(self, v: MavVehicle, name: str, fields: dict[str, object], tick: int,
+              to: tuple[str, int] | None = None) -> None:
+        """Send one message from ``v`` to the peers (and ``to``: the sender of
+        the message it answers)."""
         if self.signature_checker is not None:
-            v.packer.advance_signing_time(mav.signing_timestamp(self.clock.unix_us(tick)))
+            v.packer.advance_signing_time(mav.wall_signing_timestamp())
         v.packer.seq = int(self._seq[v.index])  # one sequence per vehicle, batches included
         pkt = v.packer.pack(name, **fields)
         self._seq[v.index] = v.packer.seq
-        self.link.send(pkt)
+        self.link.send(pkt, also=to)
         if self._subscribers:
             m = mav.Message(name, v.sysid, mav.MAV_COMP_ID_AUTOPILOT1,
                             mav.wire_values(name, dict(fields)))
@@ -664,7 +718,8 @@ class MavlinkEndpoint:
         if t is not None:
             t.write(self.clock.unix_us(tick), pkt)
 
-    def _dispatch(self, m: mav.Message, tick: int, commands: list[VehicleCommand]) -> None:
+    def _dispatch(self, m: mav.Message, tick: int, commands: list[VehicleCommand],
+                  sender: tuple[str, int] | None = None) -> None:
         if m.src_system in self._by_sysid and m.src_component == mav.MAV_COMP_ID_AUTOPILOT1 \
                 and m.raw:
             self.counts["echoes"] += 1  # our own packets looped back by the network setup
@@ -702,7 +757,12 @@ class MavlinkEndpoint:
                     out.replies.append(command_ack(m, int(m.fields["command"]),
                                                    mav.MAV_RESULT_FAILED))
             for name, fields in out.replies:
-                self._send(v, name, fields, tick)
+                try:
+                    self._send(v, name, fields, tick, to=sender)
+                except ValueError:  # a reply that does not encode: a bug, never a crash
+                    log.exception("mavlink: answering %s for system %d failed", m.name,
+                                  v.sysid)
+                    self.counts["handler_errors"] += 1
             if out.commands:
                 origin = _origin(m)
                 commands.extend(VehicleCommand(v.row, c, origin) for c in out.commands)

@@ -43,6 +43,7 @@ while disarmed.
 
 from __future__ import annotations
 
+import itertools
 import logging
 import math
 import struct
@@ -53,7 +54,8 @@ from typing import Any
 
 from cosim.fdm_pool.spec import STATE_INDEX
 from cosim.geo import LocalFrame
-from cosim.guidance.commands import Command, parse_command
+from cosim.guidance.commands import Command, min_turn_radius_m, parse_command
+from cosim.guidance.safety import Limits, command_problems
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.mission import (
     MAX_ITEMS,
@@ -80,6 +82,8 @@ Reply = tuple[str, dict[str, Any]]
 _S = STATE_INDEX
 _INT32_MAX = 2 ** 31 - 1
 
+#: the longest stream interval SET_MESSAGE_INTERVAL may ask for (us): an hour
+MAX_INTERVAL_US = 3_600_000_000
 #: modes a vehicle with an autopilot can be switched to
 SETTABLE_MODES = (PlaneMode.GUIDED, PlaneMode.LOITER, PlaneMode.RTL, PlaneMode.TAKEOFF)
 
@@ -146,8 +150,22 @@ def command_ack(m: mav.Message, command: int, result: int) -> Reply:
                             "target_component": m.src_component})
 
 
-def _text(text: str, severity: int = mav.MAV_SEVERITY_WARNING) -> Reply:
-    return ("STATUSTEXT", {"severity": severity, "text": text[:50]})
+#: STATUSTEXT carries 50 characters; a longer text goes in chunks sharing an id
+_TEXT_CHARS = 50
+_text_ids = itertools.count(1)
+
+
+def _text(text: str, severity: int = mav.MAV_SEVERITY_WARNING) -> list[Reply]:
+    """STATUSTEXT for ``text``: one message, or for a longer text chunks of 50
+    characters with a common ``id`` and ``chunk_seq`` 0, 1, ... (MAVLink 2's
+    long STATUSTEXT, which QGroundControl and MAVProxy put back together)."""
+    text = text[:_TEXT_CHARS * 8]  # at most 400 characters
+    if len(text) <= _TEXT_CHARS:
+        return [("STATUSTEXT", {"severity": severity, "text": text})]
+    ident = next(_text_ids) % 65535 + 1
+    return [("STATUSTEXT", {"severity": severity, "text": text[i:i + _TEXT_CHARS], "id": ident,
+                            "chunk_seq": i // _TEXT_CHARS})
+            for i in range(0, len(text), _TEXT_CHARS)]
 
 
 def _vocab(d: dict[str, Any]) -> Command | str:
@@ -247,7 +265,7 @@ class Handler:
         if not v.spec.has_autopilot:
             if mode == v.mode:
                 return mav.MAV_RESULT_ACCEPTED
-            out.replies.append(_text(f"{mode_name(mode)}: this vehicle has no autopilot"))
+            out.replies.extend(_text(f"{mode_name(mode)}: this vehicle has no autopilot"))
             return mav.MAV_RESULT_FAILED
         if mode == v.mode:
             return mav.MAV_RESULT_ACCEPTED
@@ -272,24 +290,42 @@ class Handler:
         elif mode == PlaneMode.AUTO:
             return self._auto(v, v.mission.current, out)
         elif mode == PlaneMode.MANUAL:
-            out.replies.append(_text("MANUAL: no pilot in the simulation"))
+            out.replies.extend(_text("MANUAL: no pilot in the simulation"))
             return mav.MAV_RESULT_FAILED
         else:
-            out.replies.append(_text(f"{mode_name(mode)} is not supported by cosim"))
+            out.replies.extend(_text(f"{mode_name(mode)} is not supported by cosim"))
             return mav.MAV_RESULT_FAILED
         return self._switch_to(v, mode, d, out, mode_name(mode), mav.MAV_RESULT_FAILED,
                                cw_override)
 
-    @staticmethod
-    def _switch_to(v: MavVehicle, mode: int, d: dict[str, Any], out: Outcome, what: str,
+    def unsafe(self, v: MavVehicle, cmd: Command) -> str | None:
+        """Why ``cmd`` would fly ``v`` into the ground or ask for a turn it
+        cannot make (``cosim.guidance.safety``, the rule of every command
+        path), counted; None: it may fly it."""
+        row = v.row_values
+        speed = row[_S["airspeed_mps"]] if row is not None and math.isfinite(
+            row[_S["airspeed_mps"]]) else v.params["AIRSPEED_CRUISE"]
+        problems = command_problems(cmd, Limits(v.home[2], v.spec.min_alt_agl_m, speed,
+                                                v.params["ROLL_LIMIT_DEG"]))
+        if not problems:
+            return None
+        self.counts["commands_unsafe"] += 1
+        return "; ".join(problems)
+
+    def _switch_to(self, v: MavVehicle, mode: int, d: dict[str, Any], out: Outcome, what: str,
                    refused: int = mav.MAV_RESULT_DENIED, cw: bool | None = None) -> int:
         """Turn vocabulary mapping ``d`` into a command for ``v`` in ``mode``; a
         mapping the vocabulary rejects is answered with a STATUSTEXT and
-        ``refused``, leaving the mode as it was."""
+        ``refused``, a command that would crash (``unsafe``) with DENIED, both
+        leaving the mode as it was."""
         cmd = _vocab(d)
         if isinstance(cmd, str):
-            out.replies.append(_text(f"{what}: {cmd}"))
+            out.replies.extend(_text(f"{what}: {cmd}"))
             return refused
+        problem = self.unsafe(v, cmd)
+        if problem is not None:
+            out.replies.extend(_text(f"{what}: {problem}"))
+            return mav.MAV_RESULT_DENIED
         if cw is not None:
             cmd = replace(cmd, loiter_cw=cw)
         v.mode = int(mode)
@@ -298,10 +334,10 @@ class Handler:
 
     def _takeoff(self, v: MavVehicle, alt_msl_m: float, tick: int, out: Outcome) -> int:
         if not v.spec.has_autopilot:
-            out.replies.append(_text("TAKEOFF: this vehicle has no autopilot"))
+            out.replies.extend(_text("TAKEOFF: this vehicle has no autopilot"))
             return mav.MAV_RESULT_FAILED
         if not v.armed:
-            out.replies.append(_text("TAKEOFF: arm first"))
+            out.replies.extend(_text("TAKEOFF: arm first"))
             return mav.MAV_RESULT_FAILED
         lo = self._loiter_here(v)
         if float(v.row_or_raise()[_S["alt_msl_m"]]) < alt_msl_m:  # takeoff climbs, never descends
@@ -320,7 +356,7 @@ class Handler:
         mode = _int(custom)
         if base_mode is None or not base_mode & mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED \
                 or mode is None:
-            out.replies.append(_text("set mode: use ArduPlane custom modes"))
+            out.replies.extend(_text("set mode: use ArduPlane custom modes"))
             return mav.MAV_RESULT_DENIED
         return self.enter_mode(v, mode, tick, out)
 
@@ -350,7 +386,7 @@ class Handler:
             if v.armed:
                 return mav.MAV_RESULT_ACCEPTED
             if v.params["ARMING_CHECK"] != 0 and not force and not v.prearm_ok():
-                out.replies.append(_text("PreArm: vehicle crashed or diverged"))
+                out.replies.extend(_text("PreArm: vehicle crashed or diverged"))
                 return mav.MAV_RESULT_FAILED
             v.armed = True
             if v.spec.has_autopilot and v.mode in SETTABLE_MODES + (PlaneMode.AUTO,):
@@ -362,7 +398,7 @@ class Handler:
             if not v.armed:
                 return mav.MAV_RESULT_ACCEPTED
             if v.in_air() and not force:
-                out.replies.append(_text("Disarm refused in flight (param2=21196 forces)"))
+                out.replies.extend(_text("Disarm refused in flight (param2=21196 forces)"))
                 return mav.MAV_RESULT_FAILED
             v.armed = False
             if v.spec.has_autopilot:
@@ -382,7 +418,7 @@ class Handler:
         if math.isfinite(req.z) and req.z > 0:
             a = self._alt(v, req.frame, req.z)
             if a is None or a[0] != "alt_msl_m":
-                out.replies.append(_text("TAKEOFF: altitude frame not supported"))
+                out.replies.extend(_text("TAKEOFF: altitude frame not supported"))
                 return mav.MAV_RESULT_DENIED
             alt = a[1]
         else:
@@ -392,18 +428,18 @@ class Handler:
     def _change_speed(self, v: MavVehicle, req: CommandRequest, tick: int, out: Outcome) -> int:
         kind, spd, thr = _int(req.p[0]), req.p[1], req.p[2]
         if not v.spec.has_autopilot:
-            out.replies.append(_text("change speed: this vehicle has no autopilot"))
+            out.replies.extend(_text("change speed: this vehicle has no autopilot"))
             return mav.MAV_RESULT_FAILED
         if kind not in (0, 1):  # airspeed; ground speed flown as airspeed (no wind)
             return mav.MAV_RESULT_DENIED
         if not v.armed:
-            out.replies.append(_text("change speed: disarmed"))
+            out.replies.extend(_text("change speed: disarmed"))
             return mav.MAV_RESULT_FAILED
         d: dict[str, Any]
         if math.isfinite(spd) and spd > 0:
             problem = self._speed_ok(v, spd)
             if problem:
-                out.replies.append(_text(problem))
+                out.replies.extend(_text(problem))
                 return mav.MAV_RESULT_DENIED
             d = {"airspeed_mps": spd}
         elif math.isfinite(thr) and 0 <= thr <= 100:
@@ -425,14 +461,14 @@ class Handler:
             loc = (float(row[_S["lat_deg"]]), float(row[_S["lon_deg"]]))
         lat, lon = loc
         if not (-90 <= lat <= 90 and -180 <= lon <= 180):
-            out.replies.append(_text(f"bad position {lat:g}, {lon:g}"))
+            out.replies.extend(_text(f"bad position {lat:g}, {lon:g}"))
             return None
         d: dict[str, Any] = {"lat_deg": lat, "lon_deg": lon}
         alt_key = None
         if math.isfinite(req.z):
             a = self._alt(v, req.frame, req.z)
             if a is None:
-                out.replies.append(_text(f"frame {req.frame} not supported"))
+                out.replies.extend(_text(f"frame {req.frame} not supported"))
                 return None
             alt_key = a[0]
             d[a[0]] = a[1]
@@ -440,7 +476,7 @@ class Handler:
 
     def _reposition(self, v: MavVehicle, req: CommandRequest, tick: int, out: Outcome) -> int:
         if not v.spec.has_autopilot:
-            out.replies.append(_text("reposition: this vehicle has no autopilot"))
+            out.replies.extend(_text("reposition: this vehicle has no autopilot"))
             return mav.MAV_RESULT_FAILED
         pos = self._position(v, req, out)
         if pos is None:
@@ -450,7 +486,7 @@ class Handler:
         if math.isfinite(spd) and spd > 0 and v.armed:
             problem = self._speed_ok(v, spd)
             if problem:
-                out.replies.append(_text(problem))
+                out.replies.extend(_text(problem))
                 return mav.MAV_RESULT_DENIED
             goto["airspeed_mps"] = spd
         default_r, default_ccw = self._radius(v)
@@ -463,14 +499,14 @@ class Handler:
             ccw = (math.isfinite(direction) and direction != 0) or default_ccw
         change = (_int(flags) or 0) & mav.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE
         if v.mode != PlaneMode.GUIDED and not change:
-            out.replies.append(_text("reposition: switch to GUIDED first"))
+            out.replies.extend(_text("reposition: switch to GUIDED first"))
             return mav.MAV_RESULT_FAILED
         return self._switch_to(v, PlaneMode.GUIDED, {"goto": goto}, out, "reposition",
                                cw=not ccw)
 
     def _loiter_unlim(self, v: MavVehicle, req: CommandRequest, tick: int, out: Outcome) -> int:
         if not v.spec.has_autopilot:
-            out.replies.append(_text("loiter: this vehicle has no autopilot"))
+            out.replies.extend(_text("loiter: this vehicle has no autopilot"))
             return mav.MAV_RESULT_FAILED
         radius = req.p[2]
         lo = self._loiter_here(v)
@@ -511,7 +547,8 @@ class Handler:
     def _set_interval(self, v: MavVehicle, req: CommandRequest, tick: int, out: Outcome) -> int:
         mid, interval = _int(req.p[0]), req.p[1]
         name = None if mid is None else mav.msg_name(mid)
-        if name not in STREAMABLE or not math.isfinite(interval) or interval < -1:
+        if name not in STREAMABLE or not math.isfinite(interval) \
+                or not -1 <= interval <= MAX_INTERVAL_US:
             return mav.MAV_RESULT_DENIED
         hz = self.physics_hz
         if interval == -1:
@@ -526,7 +563,7 @@ class Handler:
     def _get_interval(self, v: MavVehicle, req: CommandRequest, tick: int, out: Outcome) -> int:
         mid = _int(req.p[0])
         name = None if mid is None else mav.msg_name(mid)
-        if mid is None or not 0 <= mid <= 0xFFFFFF:
+        if mid is None or not 0 <= mid <= 0xFFFF:  # MESSAGE_INTERVAL.message_id: uint16
             return mav.MAV_RESULT_DENIED
         if name not in STREAMABLE:
             us = 0  # not available
@@ -566,12 +603,16 @@ class Handler:
             return False
         return True
 
-    def _target_cmd(self, d: dict[str, Any]) -> Outcome:
+    def _target_cmd(self, v: MavVehicle, d: dict[str, Any]) -> Outcome:
         cmd = _vocab(d)
         if isinstance(cmd, str):
             self.counts["position_targets_invalid"] += 1
             log.debug("position target rejected: %s", cmd)
             return Outcome()
+        problem = self.unsafe(v, cmd)
+        if problem is not None:  # no ACK for position targets: a STATUSTEXT says why
+            self.counts["position_targets_invalid"] += 1
+            return Outcome(replies=_text(f"position target: {problem}"))
         return Outcome(commands=[cmd])
 
     @staticmethod
@@ -599,8 +640,8 @@ class Handler:
         d: dict[str, Any] = {alt[0]: alt[1]} if has_z else {}
         if has_xy:
             d.update(lat_deg=int(f["lat_int"]) / 1e7, lon_deg=int(f["lon_int"]) / 1e7)
-            return self._target_cmd({"goto": d})
-        return self._target_cmd(d)
+            return self._target_cmd(v, {"goto": d})
+        return self._target_cmd(v, d)
 
     def _target_local(self, v: MavVehicle, m: mav.Message, tick: int) -> Outcome:
         if not self._target_ok(v):
@@ -619,14 +660,14 @@ class Handler:
         if frame == mav.MAV_FRAME_LOCAL_NED:  # relative to the vehicle's start
             alt = v.spec.start_alt_msl_m - z
             if not has_xy:
-                return self._target_cmd({"alt_msl_m": alt})
+                return self._target_cmd(v, {"alt_msl_m": alt})
             goto: dict[str, Any] = {"frame": "start", "north_m": x, "east_m": y}
         else:  # offsets from where the vehicle is now
             lat0, lon0 = float(row[_S["lat_deg"]]), float(row[_S["lon_deg"]])
             alt0 = float(row[_S["alt_msl_m"]])
             alt = alt0 - z
             if not has_xy:
-                return self._target_cmd({"alt_msl_m": alt})
+                return self._target_cmd(v, {"alt_msl_m": alt})
             north, east = x, y
             if frame == mav.MAV_FRAME_BODY_OFFSET_NED:  # x forward, y right
                 psi = math.radians(float(row[_S["yaw_deg"]]))
@@ -636,7 +677,7 @@ class Handler:
             goto = {"lat_deg": float(lat), "lon_deg": float(lon)}
         if has_z:
             goto["alt_msl_m"] = alt
-        return self._target_cmd({"goto": goto})
+        return self._target_cmd(v, {"goto": goto})
 
     # -- parameters ------------------------------------------------------------
     def param_value(self, v: MavVehicle, name: str) -> Reply:
@@ -669,10 +710,11 @@ class Handler:
             return Outcome()
         value = float(m.fields["param_value"])
         out = Outcome()
-        problem = v.params.set(name, value)
+        problem = v.params.check(name, value) or self._param_unsafe(v, name, value) \
+            or v.params.set(name, value)
         if problem:
             self.counts["param_rejected"] += 1
-            out.replies.append(_text(f"{name}: {problem}"))
+            out.replies.extend(_text(f"{name}: {problem}"))
         else:
             d: dict[str, Any] | None = None
             if name == "ROLL_LIMIT_DEG":
@@ -685,6 +727,40 @@ class Handler:
                     out.commands.append(cmd)
         out.replies.append(self._param_value(v, idx))  # the value now in force
         return out
+
+    def _param_unsafe(self, v: MavVehicle, name: str, value: float) -> str | None:
+        """Why a parameter value would make a later command crash the vehicle
+        (the RTL and takeoff heights, the loiter radii), counted; None: fine."""
+        floor = v.spec.min_alt_agl_m
+        problem = None
+        if name == "ALT_HOLD_RTL" and value != -1 and value / 100.0 < floor:
+            problem = f"RTL at {value / 100:g} m above home: at least {floor:g} m (or -1)"
+        elif name == "TKOFF_ALT" and value < floor:
+            problem = f"takeoff to {value:g} m above home: at least {floor:g} m"
+        elif name in ("WP_LOITER_RAD", "RTL_RADIUS") and value != 0:
+            r_min = min_turn_radius_m(v.params["AIRSPEED_CRUISE"], v.params["ROLL_LIMIT_DEG"])
+            if abs(value) < r_min:
+                problem = (f"radius {abs(value):g} m is below the minimum turn radius "
+                           f"({r_min:.0f} m at AIRSPEED_CRUISE and ROLL_LIMIT_DEG; or 0)")
+        if problem is not None:
+            self.counts["commands_unsafe"] += 1
+        return problem
+
+    def _item_too_low(self, v: MavVehicle, item: MissionItem) -> str | None:
+        """Why a mission item's altitude is below the class minimum above the
+        ground (the rule of ``unsafe``); None: fine or no altitude."""
+        if item.command not in (mav.MAV_CMD_NAV_WAYPOINT, mav.MAV_CMD_NAV_LOITER_UNLIM,
+                                mav.MAV_CMD_NAV_TAKEOFF):
+            return None
+        alt = self._alt(v, item.frame, item.z)
+        if alt is None:
+            return None
+        agl = alt[1] if alt[0] == "alt_agl_m" else alt[1] - v.home[2]
+        if agl >= v.spec.min_alt_agl_m - 1e-6:
+            return None
+        self.counts["commands_unsafe"] += 1
+        return (f"at {agl:.0f} m above the ground refused (at least "
+                f"{v.spec.min_alt_agl_m:g} m)")
 
     # -- FTP: always NAK, so ground stations fall back at once --------------------
     def _ftp(self, v: MavVehicle, m: mav.Message, tick: int) -> Outcome:
@@ -766,11 +842,16 @@ class Handler:
         up.use_int = m.name == "MISSION_ITEM_INT"
         if item.seq > 0:  # item 0 is home: its contents are ignored
             result = item.check()
+            why = "refused"
+            if result == mav.MAV_MISSION_ACCEPTED:
+                low = self._item_too_low(v, item)
+                if low is not None:
+                    result, why = mav.MAV_MISSION_INVALID_PARAM7, low
             if result != mav.MAV_MISSION_ACCEPTED:
                 v.mission.upload = None  # the mission on board is unchanged
                 self.counts["mission_upload_errors"] += 1
-                out.replies.append(_text(f"Mission item {item.seq}: "
-                                         f"{mav.command_name(item.command)} refused"))
+                out.replies.extend(_text(f"Mission item {item.seq}: "
+                                         f"{mav.command_name(item.command)} {why}"))
                 out.replies.append(self._mission_ack(m, result))
                 return out
             up.received.append(item)
@@ -846,7 +927,7 @@ class Handler:
         MISSION_CURRENT follows at the end of the exchange."""
         ms = v.mission
         if not 1 <= seq < ms.count:
-            out.replies.append(_text(f"Mission item {seq} does not exist"))
+            out.replies.extend(_text(f"Mission item {seq} does not exist"))
             return mav.MAV_RESULT_DENIED
         if v.mode == PlaneMode.AUTO:
             return self._auto(v, seq, out)
@@ -859,13 +940,17 @@ class Handler:
         (0: from item 1) as one ``waypoints`` command."""
         ms = v.mission
         if not ms.items:
-            out.replies.append(_text("AUTO: no mission loaded"))
+            out.replies.extend(_text("AUTO: no mission loaded"))
             return mav.MAV_RESULT_FAILED
         built = self._mission_route(v, max(start, 1))
         if isinstance(built, str):
-            out.replies.append(_text(f"AUTO: {built}"))
+            out.replies.extend(_text(f"AUTO: {built}"))
             return mav.MAV_RESULT_FAILED
         cmd, route = built
+        problem = self.unsafe(v, cmd)
+        if problem is not None:
+            out.replies.extend(_text(f"AUTO: {problem}"))
+            return mav.MAV_RESULT_DENIED
         row = v.row_or_raise()
         ms.fly(route, (float(row[_S["lat_deg"]]), float(row[_S["lon_deg"]])))
         v.mode = int(PlaneMode.AUTO)
@@ -986,7 +1071,7 @@ class Handler:
         out = Outcome()
         item = MissionItem.of(m)
         if not v.spec.has_autopilot or v.mode != PlaneMode.GUIDED:
-            out.replies.append(_text("guided goto: switch to GUIDED first"))
+            out.replies.extend(_text("guided goto: switch to GUIDED first"))
             out.replies.append(self._mission_ack(m, mav.MAV_MISSION_ERROR))
             self.counts["commands_refused"] += 1
             return out
@@ -1002,13 +1087,22 @@ class Handler:
         radius, ccw = self._radius(v)
         if radius:
             goto["loiter_radius_m"] = radius
-        cmd = _vocab({"goto": goto})
-        if isinstance(cmd, str):
-            out.replies.append(_text(f"guided goto: {cmd}"))
-            out.replies.append(self._mission_ack(m, mav.MAV_MISSION_ERROR))
+        return self._guided_answer(v, m, {"goto": goto}, "guided goto", out, cw=not ccw)
+
+    def _guided_answer(self, v: MavVehicle, m: mav.Message, d: dict[str, Any], what: str,
+                       out: Outcome, cw: bool | None = None) -> Outcome:
+        """A guided MISSION_ITEM's command from vocabulary mapping ``d``, answered
+        with a MISSION_ACK: ERROR if the vocabulary refuses it, INVALID_PARAM7 if
+        it would crash (``unsafe``), else ACCEPTED."""
+        cmd = _vocab(d)
+        problem = cmd if isinstance(cmd, str) else self.unsafe(v, cmd)
+        if problem is not None or isinstance(cmd, str):
+            out.replies.extend(_text(f"{what}: {problem}"))
+            out.replies.append(self._mission_ack(m, mav.MAV_MISSION_ERROR if isinstance(cmd, str)
+                                                 else mav.MAV_MISSION_INVALID_PARAM7))
             self.counts["commands_refused"] += 1
             return out
-        out.commands.append(replace(cmd, loiter_cw=not ccw))
+        out.commands.append(cmd if cw is None else replace(cmd, loiter_cw=cw))
         out.replies.append(self._mission_ack(m, mav.MAV_MISSION_ACCEPTED))
         return out
 
@@ -1023,11 +1117,4 @@ class Handler:
             out.replies.append(self._mission_ack(m, mav.MAV_MISSION_ERROR))
             self.counts["commands_refused"] += 1
             return out
-        cmd = _vocab({alt[0]: alt[1]})
-        if isinstance(cmd, str):
-            out.replies.append(_text(f"change altitude: {cmd}"))
-            out.replies.append(self._mission_ack(m, mav.MAV_MISSION_ERROR))
-            return out
-        out.commands.append(cmd)
-        out.replies.append(self._mission_ack(m, mav.MAV_MISSION_ACCEPTED))
-        return out
+        return self._guided_answer(v, m, {alt[0]: alt[1]}, "change altitude", out)

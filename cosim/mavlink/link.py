@@ -15,8 +15,20 @@ host, the local address the OS routes to that host (never all interfaces).
 There is no thread: ``poll()`` is called once per exchange and returns the
 datagrams waiting, at most ``max_datagrams`` of them, so a flood cannot stall
 the simulation (the rest wait in the kernel buffer or are dropped by it).
-Peers are remembered (up to ``max_peers``) once they send a valid MAVLink
-packet; every outgoing packet goes to every peer.
+
+Peers (``PeerTable``): the addresses telemetry goes to. The ``udpout``
+target always is one; any other address becomes one when it sends a valid
+MAVLink packet (with signing on, a correctly signed one: the endpoint only
+reports those), up to ``max_peers``. A peer quiet for ``PEER_TIMEOUT_S``
+expires. When the table is full, a newcomer takes the place of the peer
+quiet longest among those that are not live, and is refused if every peer
+is live; live means heard within ``PEER_LIVE_S`` after sending at least
+two packets (a ground station's heartbeats), so a flood of one-packet
+senders, even from ever new addresses, never displaces a station, and a
+station arriving during such a flood gets in at its second packet (packet
+counts of recent senders are remembered, ``RECENT_SENDERS`` of them).
+Answers to a message (acknowledgements, parameters, mission items) also go
+to the address it came from, peer or not.
 
 The receive buffer is enlarged (``RCVBUF_BYTES``, as far as the OS allows)
 so a burst between two exchanges is not lost; what the kernel drops anyway
@@ -32,7 +44,9 @@ import ipaddress
 import logging
 import os
 import socket
-from collections import Counter
+import time
+from collections import Counter, OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from cosim.errors import ConfigError
@@ -48,6 +62,76 @@ RCVBUF_BYTES = 4 << 20
 #: telemetry packets are packed into datagrams up to this size (below the
 #: common 1500-byte Ethernet MTU, so nothing is fragmented on a real network)
 MAX_DATAGRAM_BYTES = 1400
+#: a peer quiet this long (wall clock) expires; ground stations heartbeat at 1 Hz
+PEER_TIMEOUT_S = 10.0
+#: a peer heard within this long, after two packets or more, cannot be displaced
+PEER_LIVE_S = 3.0
+#: senders whose packet counts are remembered (so a station's second packet
+#: makes it live even if a flood pushed it out of the table meanwhile)
+RECENT_SENDERS = 8192
+
+
+@dataclass
+class _Peer:
+    last_s: float
+    packets: int
+    permanent: bool = False
+
+
+class PeerTable:
+    """The addresses telemetry goes to (see the module docstring)."""
+
+    def __init__(self, max_peers: int, counts: Counter[str],
+                 clock: Callable[[], float] = time.monotonic,
+                 timeout_s: float = PEER_TIMEOUT_S, live_s: float = PEER_LIVE_S) -> None:
+        self.max_peers = max_peers
+        self.counts = counts
+        self.clock = clock
+        self.timeout_s = timeout_s
+        self.live_s = live_s
+        self._peers: dict[Address, _Peer] = {}
+        self._recent: OrderedDict[Address, int] = OrderedDict()  # sender -> packets
+
+    @property
+    def addresses(self) -> list[Address]:
+        return list(self._peers)
+
+    def add_permanent(self, addr: Address) -> None:
+        self._peers[addr] = _Peer(self.clock(), 2, permanent=True)
+
+    def expire(self) -> None:
+        """Drop peers quiet for longer than ``timeout_s``."""
+        now = self.clock()
+        for addr in [a for a, p in self._peers.items()
+                     if not p.permanent and now - p.last_s > self.timeout_s]:
+            del self._peers[addr]
+            self.counts["peers_expired"] += 1
+            log.info("mavlink: peer %s:%d expired", *addr)
+
+    def _live(self, p: _Peer, now: float) -> bool:
+        return p.permanent or (p.packets >= 2 and now - p.last_s <= self.live_s)
+
+    def seen(self, addr: Address, packets: int = 1) -> None:
+        """``addr`` sent ``packets`` valid packets just now."""
+        now = self.clock()
+        count = self._recent.pop(addr, 0) + packets
+        self._recent[addr] = count
+        if len(self._recent) > RECENT_SENDERS:
+            self._recent.popitem(last=False)
+        peer = self._peers.get(addr)
+        if peer is not None:
+            peer.last_s, peer.packets = now, max(peer.packets, count)
+            return
+        self.expire()
+        if len(self._peers) >= self.max_peers:
+            idle = [(p.last_s, a) for a, p in self._peers.items() if not self._live(p, now)]
+            if not idle:
+                self.counts["peers_refused"] += 1
+                return
+            del self._peers[min(idle)[1]]
+            self.counts["peers_displaced"] += 1
+        self._peers[addr] = _Peer(now, count)
+        log.info("mavlink: new peer %s:%d", *addr)
 
 
 @dataclass(frozen=True)
@@ -102,7 +186,8 @@ class UdpLink:
     """The shared MAVLink socket (see the module docstring)."""
 
     def __init__(self, url: str | LinkUrl = DEFAULT_URL, max_peers: int = 16,
-                 max_datagrams: int = 1000) -> None:
+                 max_datagrams: int = 1000, clock: Callable[[], float] = time.monotonic
+                 ) -> None:
         self.url = url if isinstance(url, LinkUrl) else LinkUrl.parse(url)
         if max_peers < 1 or max_datagrams < 1:
             raise ValueError(f"max_peers and max_datagrams must be >= 1, got {max_peers}, "
@@ -111,12 +196,13 @@ class UdpLink:
         self.max_datagrams = max_datagrams
         self.counts: Counter[str] = Counter({k: 0 for k in (
             "datagrams_in", "datagrams_out", "bytes_in", "bytes_out", "send_errors",
-            "recv_errors", "poll_capped", "peers_refused", "kernel_dropped")})
+            "recv_errors", "poll_capped", "peers_refused", "peers_expired", "peers_displaced",
+            "kernel_dropped")})
         ip = _resolve(self.url.host)
-        self.peers: list[Address] = []
+        self.table = PeerTable(max_peers, self.counts, clock)
         if self.url.mode == "udpout":
             bind: Address = (_route_source(ip), 0)
-            self.peers.append((ip, self.url.port))
+            self.table.add_permanent((ip, self.url.port))
         else:
             bind = (ip, self.url.port)
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -141,6 +227,17 @@ class UdpLink:
     def closed(self) -> bool:
         return self._sock is None
 
+    @property
+    def peers(self) -> list[Address]:
+        """The addresses telemetry goes to now."""
+        return self.table.addresses
+
+    @property
+    def loopback(self) -> bool:
+        """Whether the socket is bound to a loopback address (reachable from
+        this machine only)."""
+        return ipaddress.ip_address(self.local_address[0]).is_loopback
+
     def _socket(self) -> socket.socket:
         if self._sock is None:
             raise LinkError(f"mavlink {self.url}: the link is closed")
@@ -163,6 +260,7 @@ class UdpLink:
         else:
             self.counts["poll_capped"] += 1
         self.counts["datagrams_in"] += len(out)
+        self.table.expire()
         return out
 
     def wait_readable(self, timeout_s: float) -> bool:
@@ -172,20 +270,19 @@ class UdpLink:
         r, _, _ = select.select([self._socket()], [], [], max(0.0, timeout_s))
         return bool(r)
 
-    def remember(self, addr: Address) -> None:
-        """Answer ``addr`` from now on (it sent a valid MAVLink packet)."""
-        if addr in self.peers:
-            return
-        if len(self.peers) >= self.max_peers:
-            self.counts["peers_refused"] += 1
-            return
-        self.peers.append(addr)
-        log.info("mavlink: new peer %s:%d", *addr)
+    def remember(self, addr: Address, packets: int = 1) -> None:
+        """``addr`` sent ``packets`` valid MAVLink packets (``PeerTable.seen``)."""
+        self.table.seen(addr, packets)
 
-    def send(self, packet: bytes) -> None:
-        """Send one packet to every peer (errors are counted, never raised)."""
+    def send(self, packet: bytes, also: Address | None = None) -> None:
+        """Send one packet to every peer, and to ``also`` (the sender of the
+        message it answers) if that is not a peer; errors are counted, never
+        raised."""
         sock = self._socket()
-        for addr in self.peers:
+        peers = self.table.addresses
+        if also is not None and also not in peers:
+            peers.append(also)
+        for addr in peers:
             try:
                 sock.sendto(packet, addr)
                 self.counts["datagrams_out"] += 1
@@ -236,6 +333,7 @@ class NullLink:
 
     url = None
     local_address: Address = ("", 0)
+    loopback = True
 
     def __init__(self) -> None:
         self.peers: list[Address] = []
@@ -252,10 +350,10 @@ class NullLink:
     def wait_readable(self, timeout_s: float) -> bool:
         return False
 
-    def remember(self, addr: Address) -> None:
+    def remember(self, addr: Address, packets: int = 1) -> None:
         pass
 
-    def send(self, packet: bytes) -> None:
+    def send(self, packet: bytes, also: Address | None = None) -> None:
         pass
 
     def send_packets(self, blob: bytes, lengths: list[int]) -> None:

@@ -26,6 +26,7 @@ import numpy as np
 
 from cosim.fdm_pool.spec import STATE_INDEX, VehicleSpec, VehicleStatus
 from cosim.geo import KT_TO_MPS
+from cosim.guidance.safety import DEFAULT_MIN_ALT_AGL_M, min_alt_agl_m
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.mission import Mission
 from cosim.mavlink.params import ParamTable
@@ -153,6 +154,8 @@ class MavVehicleSpec:
     armed: bool = True
     mode: int | None = None
     params: Mapping[str, float] = field(default_factory=dict)
+    #: the class minimum height above the ground commands may ask for
+    min_alt_agl_m: float = DEFAULT_MIN_ALT_AGL_M
 
 
 def mav_specs(vehicles: Sequence[VehicleSpec], autopilot: bool = True, first_sysid: int = 1,
@@ -179,7 +182,8 @@ def mav_specs(vehicles: Sequence[VehicleSpec], autopilot: bool = True, first_sys
         out.append(MavVehicleSpec(row=first_row + k, sysid=first_sysid + k, name=v.id,
                                   start_lat_deg=v.lat_deg, start_lon_deg=v.lon_deg,
                                   start_alt_msl_m=v.alt_msl_m, home_alt_msl_m=v.terrain_alt_m,
-                                  has_autopilot=autopilot, params=params))
+                                  has_autopilot=autopilot, params=params,
+                                  min_alt_agl_m=min_alt_agl_m(v.profile)))
     return out
 
 

@@ -26,9 +26,9 @@ from cosim.guidance import (
     AP_CHANNELS,
     DEFAULT_BANK_LIMIT_DEG,
     Command,
-    min_turn_radius_m,
     parse_command,
 )
+from cosim.guidance.safety import Limits, command_problems, min_alt_agl_m, speed_after
 from cosim.jsb import find_model, has_property, is_writable, new_fdm
 from cosim.scenario import limits as lim
 from cosim.scenario.formation import FORMATIONS, formation_offsets
@@ -842,8 +842,10 @@ def _schedule(ctx: _Ctx, d: Any, vehicles: list[tuple[VehicleSpec, P]], rates: R
 
 def _check_commands(ctx: _Ctx, schedule: list[ScheduleItem], specs: list[VehicleSpec]) -> None:
     """Commands only for vehicles with the autopilot; airspeeds inside each
-    model's envelope; loiter radii no tighter than the minimum turn radius at
-    the speed and bank limit in force at that point of the schedule."""
+    model's envelope; then the rule of every command path
+    (``cosim.guidance.safety``): altitudes at least the class minimum above
+    the ground, loiter radii no tighter than the minimum turn radius at the
+    speed and bank limit in force at that point of the schedule."""
     speed = [v.airspeed_mps for v in specs]
     bank = [DEFAULT_BANK_LIMIT_DEG] * len(specs)
     for item in schedule:
@@ -870,19 +872,15 @@ def _check_commands(ctx: _Ctx, schedule: list[ScheduleItem], specs: list[Vehicle
                     ctx.err(path, f"airspeed {kt:.1f} kt is outside the envelope of "
                                   f"{specs[j].model} ({lo:g}..{hi:g} kt TAS)")
                     break
+            lim = Limits(specs[j].terrain_alt_m, min_alt_agl_m(prof), speed[j], bank[j])
             if cmd.bank_limit_deg is not None:
                 bank[j] = cmd.bank_limit_deg
-            for spd in speeds:
-                if spd is not None:
-                    speed[j] = spd
-            if cmd.loiter_radius_m is not None:
-                r_min = min_turn_radius_m(speed[j], bank[j])
-                if cmd.loiter_radius_m < r_min:
-                    ctx.err(path, f"loiter radius {cmd.loiter_radius_m:g} m is below the "
-                                  f"minimum turn radius of {specs[j].id} ({r_min:.0f} m at "
-                                  f"{speed[j] / KT_TO_MPS:.0f} kt and a {bank[j]:g} deg bank "
-                                  f"limit)")
-                    break
+            speed[j] = speed_after(cmd, speed[j])
+            problems = command_problems(cmd, lim, specs[j].id)
+            for problem in problems:  # the same rule as MAVLink's (cosim.guidance.safety)
+                ctx.err(path, problem)
+            if problems:
+                break
 
 
 def _check_properties(ctx: _Ctx, vehicles: list[tuple[VehicleSpec, P]],

@@ -4,10 +4,20 @@ peers, lifecycle, validation) holds."""
 from __future__ import annotations
 
 import socket
+import time
+from pathlib import Path
 
 import numpy as np
 import pytest
-from mavtest import PHYSICS_HZ, mavutil, of_type, state_rows, vehicle_specs
+from mavtest import (
+    PHYSICS_HZ,
+    GroundStation,
+    free_udp_port,
+    mavutil,
+    of_type,
+    state_rows,
+    vehicle_specs,
+)
 
 from cosim.errors import ConfigError
 from cosim.fdm_pool.spec import VehicleSpec
@@ -105,10 +115,137 @@ def test_peers_are_remembered_and_capped(rig) -> None:
             s.sendto(_command(), ("127.0.0.1", port))
         for _ in range(5):
             r.step()
-        assert len(r.ep.link.peers) == 2 and r.ep.counters()["peers_refused"] >= 1
+        c = r.ep.counters()
+        assert len(r.ep.link.peers) == 2 and c["peers_displaced"] >= 1
     finally:
         for s in socks:
             s.close()
+
+
+class FakeClock:
+    def __init__(self) -> None:
+        self.t = 1000.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def _heartbeat(sysid: int) -> bytes:
+    return Packer(sysid, 190).pack("HEARTBEAT", type=6, autopilot=8, base_mode=0,
+                                   custom_mode=0, system_status=0)
+
+
+def _flood(port: int, n: int) -> None:
+    """``n`` throwaway senders, one valid packet each, from their own sockets."""
+    for i in range(n):
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.sendto(_heartbeat(100 + i % 100), ("127.0.0.1", port))
+
+
+def _settle(r) -> None:
+    """Run exchanges until the endpoint has read everything waiting."""
+    for _ in range(20):
+        before = r.ep.counters()["datagrams_in"]
+        r.step()
+        time.sleep(0.005)
+        if r.ep.counters()["datagrams_in"] == before:
+            return
+
+
+@pytest.mark.parametrize("station_first", [True, False], ids=["station-first", "flood-first"])
+def test_a_hundred_throwaway_senders_never_cut_off_a_real_station(rig,
+                                                                  station_first: bool) -> None:
+    """A station heartbeating at 1 Hz keeps (or gets) its telemetry and its
+    acknowledgements beside 100 one-packet senders, whether it was there
+    before them or arrives after they filled the table."""
+    r = rig(2, config=MavlinkConfig(url="udpin:127.0.0.1:0"))
+    clock = FakeClock()
+    r.ep.link.table.clock = clock
+    port = r.ep.local_address[1]
+    if station_first:
+        station = r.gcs
+        station.hello()  # its second packet (the rig sent the first): live
+        _settle(r)
+    _flood(port, 100)
+    _settle(r)
+    if not station_first:
+        assert len(r.ep.link.peers) == 16  # full of throwaways
+        station = GroundStation(f"udpout:127.0.0.1:{port}")
+    try:
+        for _ in range(3):  # a few seconds of heartbeats, a flood between each
+            clock.t += 1.0
+            station.hello()
+            addr = ("127.0.0.1", station.port)  # bound by its first send
+            _settle(r)
+            _flood(port, 100)
+            _settle(r)
+        assert addr in r.ep.link.peers
+        station.drain(wait_s=0.1)
+        r.step(int(PHYSICS_HZ) + 1)  # telemetry due: the station gets it
+        beats = of_type(station.drain(wait_s=1.0), "HEARTBEAT")
+        assert {b.get_srcSystem() for b in beats} == {1, 2}
+        before = r.ep.counters()["datagrams_in"]
+        station.send_raw(_command(2))
+        cmds = []
+        while r.ep.counters()["datagrams_in"] == before:
+            cmds += r.step()
+        acks = of_type(station.drain(wait_s=1.0), "COMMAND_ACK")
+        assert len(cmds) == 1 and [a.result for a in acks] == [ML.MAV_RESULT_ACCEPTED]
+        c = r.ep.counters()
+        assert len(r.ep.link.peers) == 16 and c["peers_displaced"] + c["peers_refused"] >= 300
+    finally:
+        if station is not r.gcs:
+            station.close()
+
+
+def test_a_full_table_of_live_stations_refuses_a_newcomer_but_answers_it(rig) -> None:
+    r = rig(1, config=MavlinkConfig(url="udpin:127.0.0.1:0", max_peers=1))
+    r.ep.link.table.clock = FakeClock()
+    r.gcs.hello()  # the rig's station: two packets, live
+    _settle(r)
+    other = GroundStation(f"udpout:127.0.0.1:{r.ep.local_address[1]}")
+    try:
+        for _ in range(3):
+            other.hello()
+        _settle(r)
+        assert r.ep.link.peers == [("127.0.0.1", r.gcs.port)]
+        assert r.ep.counters()["peers_refused"] >= 3
+        before = r.ep.counters()["datagrams_in"]
+        other.send_raw(_command())
+        while r.ep.counters()["datagrams_in"] == before:
+            r.step()
+        acks = of_type(other.drain(wait_s=1.0), "COMMAND_ACK")  # its answer, not telemetry
+        assert [a.result for a in acks] == [ML.MAV_RESULT_ACCEPTED]
+        r.step(int(PHYSICS_HZ) + 1)
+        assert of_type(other.drain(wait_s=0.3), "HEARTBEAT") == []
+    finally:
+        other.close()
+
+
+def test_quiet_peers_expire_but_the_udpout_target_stays(tmp_path: Path) -> None:
+    ep = MavlinkEndpoint(vehicle_specs(1), PHYSICS_HZ,
+                         MavlinkConfig(url=f"udpout:127.0.0.1:{free_udp_port()}"))
+    try:
+        clock = FakeClock()
+        ep.link.table.clock = clock
+        target = list(ep.link.peers)
+        gcs = GroundStation(f"udpout:127.0.0.1:{ep.local_address[1]}")
+        try:
+            gcs.hello()
+            states = state_rows(1)
+            for _ in range(50):
+                ep.exchange(0, states)
+                if len(ep.link.peers) == 2:
+                    break
+                time.sleep(0.01)
+            assert len(ep.link.peers) == 2
+            clock.t += 10.5  # quiet for longer than PEER_TIMEOUT_S
+            ep.exchange(0, states)
+            assert ep.link.peers == target and ep.counters()["peers_expired"] == 1
+        finally:
+            gcs.close()
+    finally:
+        ep.close()
 
 
 @pytest.mark.parametrize("url, parsed", [

@@ -207,10 +207,16 @@ def test_signing_key_problems_are_usage_errors(tmp_path: Path, capsys) -> None:
 
 
 def test_fuzzing_a_live_run_leaves_the_vehicles_flying_and_answering(tmp_path: Path) -> None:
-    """Random bytes and random well-formed messages for a fixed time, then the
-    vehicles still fly and answer; everything bad is counted, nothing stops."""
+    """Random bytes, random well-formed messages and handled messages with
+    extreme fields for a fixed time, then the vehicles still fly and answer, no
+    handler failed and no vehicle was lost; everything bad is counted, nothing
+    stops."""
     import random
     import socket
+
+    from test_mav_fuzz import random_message
+
+    from cosim.mavlink.adapter import Packer
 
     rng = random.Random(20261121)
     gcs = GroundStation("udpin:127.0.0.1:0")
@@ -234,6 +240,13 @@ def test_fuzzing_a_live_run_leaves_the_vehicles_flying_and_answering(tmp_path: P
                 if rng.random() < 0.3:
                     data = b"\xfd" + data  # looks like a MAVLink 2 start
                 sent_random += 1
+            elif rng.random() < 0.5:  # a handled type with extreme fields (test_mav_fuzz)
+                m = random_message(rng)
+                try:
+                    data = Packer(m.src_system, m.src_component).pack(m.name, **dict(m.fields))
+                except ValueError:
+                    continue
+                sent_messages += 1
             else:  # a well-formed message of a random type with random fields
                 cls = rng.choice(kinds)
                 args = []
@@ -286,6 +299,9 @@ def test_fuzzing_a_live_run_leaves_the_vehicles_flying_and_answering(tmp_path: P
     assert summary["stop_reason"] == "interrupted"
     c = summary["mavlink"]["counters"]
     assert c["garbage"] + c["bad_crc"] + c["truncated"] + c["malformed"] > 0, c
+    assert c["handler_errors"] == 0, c
+    events = [json.loads(x)["event"] for x in (out / "events.jsonl").read_text().splitlines()]
+    assert "ground_impact" not in events and "divergence" not in events  # no vehicle lost
     if attempts > 1:  # a command went unanswered: only because the kernel dropped datagrams
         assert c["kernel_dropped"] > 0, c
     assert acks and acks[0].result == ML.MAV_RESULT_ACCEPTED, (acks, c)

@@ -28,14 +28,16 @@ def _now_us() -> int:
 
 
 @pytest.fixture
-def signed(monkeypatch: pytest.MonkeyPatch, rig: Any) -> Any:
-    """A rig with signing on (key from ENV, link id 7) and a ground station
-    holding the right key."""
+def signed(monkeypatch: pytest.MonkeyPatch, rig: Any, tmp_path: Path) -> Any:
+    """A rig with signing on (key from ENV, link id 7, signing state in
+    ``tmp_path/signing``) and a ground station holding the right key."""
     monkeypatch.setenv(ENV, PASSPHRASE)
 
-    def make(n: int = 2) -> Rig:
-        cfg = MavlinkConfig(url=URL, signing_key_env=ENV, signing_link_id=7)
-        return rig(n, config=cfg, anchor_us=_now_us(), gcs_key=KEY)
+    def make(n: int = 2, anchor_us: int | None = None) -> Rig:
+        cfg = MavlinkConfig(url=URL, signing_key_env=ENV, signing_link_id=7,
+                            signing_state_dir=tmp_path / "signing")
+        return rig(n, config=cfg, anchor_us=_now_us() if anchor_us is None else anchor_us,
+                   gcs_key=KEY)
 
     return make
 
@@ -79,8 +81,12 @@ def test_a_ground_station_with_the_key_is_answered_and_sees_signed_telemetry(sig
     assert {link for link, _ in stamps} == {7}
     ts = [t for _, t in stamps]
     assert ts == sorted(ts) and len(set(ts)) == len(ts)  # strictly increasing
-    # the timestamp follows the simulation clock (10 us units since 2015)
-    assert ts[-1] >= mav.signing_timestamp(r.ep.clock.unix_us(r.tick))
+    # the timestamp follows the wall clock (10 us units since 2015), not the
+    # simulation clock: one simulated hour later it has not jumped ahead
+    r.step(int(3600 * PHYSICS_HZ))
+    now = mav.wall_signing_timestamp()
+    later = [_signature(m)[1] for m in r.gcs.drain(wait_s=1.0) if m.get_srcSystem() == 1]
+    assert later and ts[-1] < later[0] <= now + 100_000
     c = r.ep.counters()
     assert c["unsigned_dropped"] == c["bad_signature_dropped"] == c["replay_dropped"] == 0
 
@@ -207,11 +213,12 @@ def test_signing_off_sends_unsigned_packets(rig) -> None:
 def test_signature_checker_verdicts() -> None:
     p = mav.Packer(255, 190)
     p.enable_signing(KEY, 3)
-    p.advance_signing_time(1000)
+    now = mav.wall_signing_timestamp()
+    p.advance_signing_time(now)
     hb = {"type": 6, "autopilot": 8, "base_mode": 0, "custom_mode": 0, "system_status": 0}
     first, second = p.pack("HEARTBEAT", **hb), p.pack("HEARTBEAT", **hb)
     p.advance_signing_time(5)  # never goes back
-    assert p.signing_timestamp == 1002
+    assert p.signing_timestamp == now + 2
     chk = mav.SignatureChecker(KEY)
     assert chk.check(second) == mav.SIG_OK
     assert chk.check(first) == mav.SIG_REPLAY
@@ -221,3 +228,121 @@ def test_signature_checker_verdicts() -> None:
     assert chk.check(mav.Packer(255, 190).pack("HEARTBEAT", **hb)) == mav.SIG_UNSIGNED
     assert chk.check(b"\xfe\x00") == mav.SIG_MAVLINK1
     assert mav.signing_timestamp(mav.SIGNING_EPOCH_UNIX_US + 1234) == 123
+    old = mav.Packer(254, 190)  # a new stream a minute and a bit behind: stale
+    old.enable_signing(KEY, 3)
+    old.advance_signing_time(now - mav.NEW_STREAM_WINDOW - 10_000)
+    assert chk.check(old.pack("HEARTBEAT", **hb)) == mav.SIG_STALE
+    # restored from an earlier run: that stream's old packets are replays at once
+    again = mav.SignatureChecker(KEY, chk.timestamp, chk.last_timestamp)
+    assert again.check(second) == mav.SIG_REPLAY
+
+
+# --- replay protection across runs ------------------------------------------------------
+
+def _rtl(gcs: GroundStation) -> bytes:
+    """A signed RTL command from ``gcs``, as bytes on the wire."""
+    return bytes(gcs.mav.command_long_encode(1, 1, ML.MAV_CMD_NAV_RETURN_TO_LAUNCH, 0, 0, 0, 0,
+                                             0, 0, 0, 0).pack(gcs.mav))
+
+
+def test_a_signed_command_captured_in_one_run_is_refused_in_every_later_run(
+        signed, tmp_path: Path) -> None:
+    from pymavlink import mavutil as mu
+
+    first = signed(1)
+    captured = _rtl(first.gcs)
+    assert len(_deliver(first, lambda: first.gcs.send_raw(captured))) == 1  # flown in run 1
+    first.close()
+    tlog = tmp_path / "tlogs" / "uav1.tlog"
+    log = mu.mavlink_connection(str(tlog), dialect="ardupilotmega")
+    from_tlog = None
+    while (m := log.recv_match(type="COMMAND_LONG")) is not None:
+        if m.get_srcSystem() == 255:
+            from_tlog = bytes(m.get_msgbuf())
+    assert from_tlog == captured
+    for _ in range(2):  # run 2 and run 3: each starts from the saved state
+        later = signed(1)
+        for packet in (captured, from_tlog):
+            assert _deliver(later, lambda p=packet, lt=later: lt.gcs.send_raw(p)) == []
+        c = later.ep.counters()
+        assert c["replay_dropped"] == 2 and c["commands_out"] == 0
+        # the real station, signing afresh, still commands
+        assert len(_deliver(later, lambda lt=later: lt.gcs.send_raw(_rtl(lt.gcs)))) == 1
+        later.close()
+
+
+@pytest.mark.parametrize("age_s", [86_400.0, None], ids=["a-day-old", "2015"])
+def test_a_new_stream_stamped_long_ago_is_refused(signed, age_s: float | None) -> None:
+    r = signed(1)
+    old = mav.Packer(200, 190)
+    old.enable_signing(KEY, 3)
+    stamp = 1 if age_s is None else mav.wall_signing_timestamp() - int(age_s * 100_000)
+    old.advance_signing_time(stamp)
+    pkt = old.pack("COMMAND_LONG", target_system=1, target_component=1,
+                   command=ML.MAV_CMD_NAV_RETURN_TO_LAUNCH, confirmation=0, param1=0, param2=0,
+                   param3=0, param4=0, param5=0, param6=0, param7=0)
+    assert _deliver(r, lambda: r.gcs.send_raw(pkt)) == []
+    assert r.ep.counters()["stale_stream_dropped"] == 1
+    fresh = mav.Packer(201, 190)  # a new stream of now: accepted
+    fresh.enable_signing(KEY, 3)
+    fresh.advance_signing_time(mav.wall_signing_timestamp())
+    pkt = fresh.pack("COMMAND_LONG", target_system=1, target_component=1,
+                     command=ML.MAV_CMD_NAV_RETURN_TO_LAUNCH, confirmation=0, param1=0,
+                     param2=0, param3=0, param4=0, param5=0, param6=0, param7=0)
+    assert len(_deliver(r, lambda: r.gcs.send_raw(pkt))) == 1
+
+
+def test_signing_state_holds_no_key_and_only_grows(tmp_path: Path) -> None:
+    from cosim.mavlink.signing import MAX_STREAMS, SigningState
+
+    st = SigningState(KEY, tmp_path)
+    assert st.load() == (0, {})
+    st.save(500, {(1, 2, 3): 400})
+    st.save(300, {(1, 2, 3): 100, (0, 9, 9): 450})  # merged: the maxima stay
+    assert st.load() == (500, {(1, 2, 3): 400, (0, 9, 9): 450})
+    text = st.path.read_text()
+    assert KEY.hex() not in text and PASSPHRASE not in text and KEY.hex()[:16] not in \
+        st.path.name
+    st.save(0, {(0, i % 256, i // 256): 1000 + i for i in range(MAX_STREAMS + 50)})
+    ts, streams = st.load()
+    assert len(streams) == MAX_STREAMS and min(streams.values()) == 1050 and ts == 1000 + \
+        MAX_STREAMS + 49
+    st.path.write_text("not json")
+    assert st.load() == (0, {})  # reported, treated as empty
+
+
+@pytest.mark.parametrize("loopback, signing", [(False, False), (False, True), (True, False)])
+def test_a_non_loopback_link_without_signing_is_warned_about(
+        monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture, tmp_path: Path,
+        loopback: bool, signing: bool) -> None:
+    """Tests bind loopback only: the link is told it is not, to check the rule."""
+    from cosim.mavlink.link import UdpLink
+
+    monkeypatch.setattr(UdpLink, "loopback", property(lambda self: loopback))
+    monkeypatch.setenv(ENV, PASSPHRASE)
+    cfg = MavlinkConfig(url=URL, signing_key_env=ENV if signing else None,
+                        signing_state_dir=tmp_path)
+    with caplog.at_level("WARNING", logger="cosim.mavlink"):
+        MavlinkEndpoint(vehicle_specs(1), PHYSICS_HZ, cfg).close()
+    warned = [r for r in caplog.records if "WITHOUT signing" in r.getMessage()]
+    assert bool(warned) == (not loopback and not signing)
+    if warned:
+        assert "anyone who can send to it can command every vehicle" in warned[0].getMessage()
+
+
+def test_an_unsigned_station_on_a_signed_udpin_link_gets_nothing(signed) -> None:
+    """With signing on, telemetry goes only to stations that sent a correctly
+    signed packet (the README says so): an unsigned one on a udpin link hears
+    nothing and its commands are dropped and counted."""
+    r = signed(2)
+    plain = GroundStation(f"udpout:127.0.0.1:{r.ep.local_address[1]}")
+    try:
+        for _ in range(3):
+            cmds = _deliver(r, lambda: (plain.hello(), _loiter(plain)))
+            assert cmds == []
+        r.step(int(PHYSICS_HZ) + 1)
+        assert plain.drain(wait_s=0.5) == []
+        assert r.ep.counters()["unsigned_dropped"] >= 6
+        assert of_type(r.gcs.drain(wait_s=0.5), "HEARTBEAT")  # the signed one does hear
+    finally:
+        plain.close()
