@@ -44,6 +44,7 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
+from cosim.guidance.safety import min_alt_agl_m
 from cosim.scenario.schema import SectionInfo
 from cosim.swarm import laws
 
@@ -216,6 +217,12 @@ def parse_swarm(info: SectionInfo, node: Any, path: P) -> SwarmSpec | None:
             elif "clmax" not in v.profile:
                 info.err(gp + ("vehicles",), f"model {v.model} has no clmax in its cosim "
                                              f"profile: its stall speed is unknown")
+            agl, floor = v.alt_msl_m - v.terrain_alt_m, min_alt_agl_m(v.profile)
+            if agl < floor:  # the group holds its start altitudes (or layers above them)
+                info.err(gp + ("vehicles",), f"vehicle {v.id!r} starts {agl:g} m above the "
+                                             f"ground: the swarm holds that altitude, and "
+                                             f"commands below {floor:g} m above the ground "
+                                             f"are refused")
         if len(rows) == 1:
             info.err(gp + ("vehicles",), "a swarm group needs at least 2 vehicles")
         spacing = g.num("layer_spacing_m", None, lo=0, lo_open=True)

@@ -230,3 +230,17 @@ swarm:
     assert ev == [(120, 0, "start", None), (360, 0, "end", "timeout"),
                   (360, 1, "start", None), (360, 1, "end", "converged")]
     assert ctl.finished and ctl.step(480) == []
+
+
+def test_a_group_held_below_the_command_floor_is_refused() -> None:
+    """The swarm holds start altitudes; commands below the class minimum above
+    the ground (20 m) are refused on every path, so validation says so."""
+    text = HEAD.replace("alt_agl_m: 300", "alt_agl_m: 15") + """\
+swarm:
+  groups:
+    - {vehicles: "uav*", phases: [{behaviour: rendezvous, radius_m: 300}]}
+"""
+    with pytest.raises(ConfigError, match=r"s\.yaml:\d+: swarm\.groups\[0\]\.vehicles: vehicle "
+                                          r"'uav0' starts 15 m above the ground: the swarm "
+                                          r"holds that altitude, and commands below 20 m"):
+        parse_scenario(text, "s.yaml")
