@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from cosim.errors import CosimError
-from cosim.fdm_pool import make_pool
+from cosim.fdm_pool import get_backend, make_pool
 from cosim.fdm_pool.process import default_workers, shard_bounds
 from cosim.fdm_pool.shard import Shard
 from cosim.fdm_pool.spec import VehicleSpec
@@ -255,7 +255,7 @@ def run_bench(vehicles: list[int], model: str = "c172p", backend: str = "process
     check_rates(physics_hz, control_hz)
     if workers is not None and workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
-    w = workers if workers is not None else (default_workers() if backend == "process" else 1)
+    w = workers if workers is not None else get_backend(backend).default_workers()
     print(f"cosim bench: model {model}, backend {backend}, workers {w}, "
           f"{physics_hz:g} Hz physics, {control_hz:g} Hz exchange, best of {repeat} x "
           f"{seconds:g} s simulated per size", flush=True)

@@ -62,6 +62,11 @@ def _positive_float(text: str) -> float:
 
 
 def _build_parser() -> _Parser:
+    from cosim.plugins import BACKENDS, DEFAULT_BACKEND, plugin_names
+
+    names = plugin_names(BACKENDS)  # registered ones included; nothing is loaded for --help
+    backend_help = ("inline runs every vehicle in this process (the reference), process "
+                    "shards them over worker processes; packages may register more")
     p = _Parser(prog="cosim", description="Lockstep co-simulation of UAV swarms on JSBSim.")
     p.add_argument("--version", action="version", version=f"cosim {__version__}")
     p.add_argument("-v", "--verbose", action="count", default=0, help="more log output")
@@ -74,11 +79,12 @@ def _build_parser() -> _Parser:
                    help="output folder (default: runs/<scenario>-<date>-<time>)")
     r.add_argument("--overwrite", action="store_true",
                    help="allow writing into a folder that already holds a run")
-    r.add_argument("--backend", choices=("inline", "process"), default="process",
-                   help="inline: one process (the reference); process: worker processes "
-                        "(default)")
+    r.add_argument("--backend", choices=names, default=DEFAULT_BACKEND,
+                   help=f"where the vehicles are stepped: {backend_help} (default "
+                        f"{DEFAULT_BACKEND})")
     r.add_argument("--workers", type=int, metavar="N",
-                   help="worker count for the process backend (default: one per core)")
+                   help="worker count (default: the backend's own, for process one per "
+                        "core)")
     r.add_argument("--realtime", nargs="?", const=1.0, type=_positive_float, metavar="FACTOR",
                    help="pace to the wall clock (FACTOR x real time, default 1)")
     r.add_argument("--duration-s", type=_positive_float, metavar="S",
@@ -156,7 +162,8 @@ def _build_parser() -> _Parser:
     b.add_argument("--vehicles", type=_positive_int_list, default=[1, 16, 128, 512, 1024],
                    metavar="N,N,...")
     b.add_argument("--model", default="c172p")
-    b.add_argument("--backend", choices=("inline", "process"), default="process")
+    b.add_argument("--backend", choices=names, default=DEFAULT_BACKEND,
+                   help=f"{backend_help} (default {DEFAULT_BACKEND})")
     b.add_argument("--workers", type=int, metavar="N")
     b.add_argument("--seconds", type=_positive_float, default=5.0, metavar="S",
                    help="simulated seconds per measured segment (default 5)")

@@ -72,6 +72,17 @@ class Pool(ABC):
     def workers(self) -> int:
         return 1
 
+    @classmethod
+    def default_workers(cls) -> int:
+        """The workers this backend uses when none are asked for."""
+        return 1
+
+    @property
+    def pids(self) -> dict[int, int]:
+        """Worker index -> pid of each worker process (none: every shard runs
+        in the calling process)."""
+        return {}
+
     def busy_s(self) -> list[float]:
         """Seconds each shard spent stepping in the last exchange (for benchmarks)."""
         return []

@@ -14,10 +14,14 @@ from cosim.fdm_pool.spec import VehicleSpec
 
 
 class InlinePool(Pool):
+    """Every vehicle in the calling process: the reference."""
+
     backend = "inline"
 
     def __init__(self, specs: Sequence[VehicleSpec], dt_s: float,
-                 channels: Sequence[str] = ()) -> None:
+                 channels: Sequence[str] = (), workers: int | None = None) -> None:
+        if workers not in (None, 1):
+            raise ValueError(f"the inline backend runs in one process; workers={workers}")
         super().__init__(specs, dt_s, channels)
         self._shard = Shard.build(self.specs, self.dt_s, self.channels,
                                   on_built=BuildProgress(self.n))

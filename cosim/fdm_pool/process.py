@@ -167,7 +167,13 @@ def _worker_main(w: int, specs: list[VehicleSpec], start: int, stop: int, dt_s: 
 
 
 class ProcessPool(Pool):
+    """Vehicles sharded over worker processes (shared memory, one round trip per exchange)."""
+
     backend = "process"
+
+    @classmethod
+    def default_workers(cls) -> int:
+        return default_workers()
 
     def __init__(self, specs: Sequence[VehicleSpec], dt_s: float, channels: Sequence[str] = (),
                  workers: int | None = None, driver_steps: bool | None = None,

@@ -1,0 +1,81 @@
+"""Pool backends by name: the built-in ones and any a package registers.
+
+A backend is a ``Pool`` subclass (or any callable with its constructor's
+signature) built as ``factory(specs, dt_s, channels, workers=None)``. cosim
+ships ``inline`` (every vehicle in the calling process: the reference) and
+``process`` (shards in worker processes, the default). Another package adds
+one without touching cosim, in its ``pyproject.toml``::
+
+    [project.entry-points."cosim.backends"]
+    mybackend = "mypackage.pools:MyPool"
+
+after which ``cosim run --backend mybackend`` and ``cosim bench --backend
+mybackend`` use it, and ``tests/fdm_pool/test_conformance.py`` can check it
+(``COSIM_CONFORMANCE_BACKENDS=mybackend python -m pytest
+tests/fdm_pool/test_conformance.py``): bit-identical states against
+``inline``, statuses, faults and misuse as the ``Pool`` contract says.
+
+Nothing outside a backend asks which backend runs: the CLI lists them from
+here, and each says how many workers it uses by default
+(``Pool.default_workers``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from functools import lru_cache
+
+from cosim import plugins
+from cosim.errors import ConfigError
+from cosim.fdm_pool.base import Pool
+from cosim.fdm_pool.spec import VehicleSpec
+from cosim.plugins import load_plugins, plugin_names
+
+#: the default backend of ``cosim run``
+DEFAULT = plugins.DEFAULT_BACKEND
+
+
+@dataclass(frozen=True)
+class Backend:
+    """A registered backend: ``factory(specs, dt_s, channels, workers=None) -> Pool``."""
+
+    name: str
+    factory: Callable[..., Pool]
+    source: str  # "cosim" or the distribution that registered it
+
+    @property
+    def description(self) -> str:
+        doc = getattr(self.factory, "__doc__", None) or ""
+        return doc.strip().splitlines()[0] if doc.strip() else ""
+
+    def default_workers(self) -> int:
+        """The workers it uses when none are asked for."""
+        fn = getattr(self.factory, "default_workers", None)
+        return int(fn()) if callable(fn) else 1
+
+    def make(self, specs: Sequence[VehicleSpec], dt_s: float, channels: Sequence[str] = (),
+             workers: int | None = None) -> Pool:
+        return self.factory(specs, dt_s, channels, workers=workers)
+
+
+@lru_cache(maxsize=1)
+def backends() -> dict[str, Backend]:
+    """Every backend by name: the built-in ones, then the registered ones."""
+    return {name: Backend(name, p.obj, p.source)
+            for name, p in load_plugins(plugins.BACKENDS).items()}
+
+
+def backend_names() -> list[str]:
+    """The names of every backend, without loading any (for ``--help``)."""
+    return plugin_names(plugins.BACKENDS)
+
+
+def get_backend(name: str) -> Backend:
+    """The backend called ``name``; ``ConfigError`` listing the others if none is."""
+    found = backends().get(name)
+    if found is None:
+        raise ConfigError(f"unknown backend {name!r}; available: {', '.join(backends())} "
+                          f"(packages add backends in the {plugins.BACKENDS!r} entry-point "
+                          f"group)")
+    return found

@@ -1,0 +1,75 @@
+"""Extension points: what other packages may add to cosim, found by name.
+
+Two Python entry-point groups, each with cosim's own entries built in:
+
+- ``cosim.backends``: pool backends (``cosim.fdm_pool.backends``);
+- ``cosim.vehicles``: vehicle classes (``cosim.vehicles``).
+
+A package adds an entry in its ``pyproject.toml``::
+
+    [project.entry-points."cosim.vehicles"]
+    my_rover = "my_package.rover:ROVER"
+
+This module only finds and loads entries; what an entry must be is said by
+the part that uses it. It imports nothing heavy, so ``cosim --help`` can list
+names without loading anything.
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+from dataclasses import dataclass
+from importlib.metadata import entry_points
+from typing import Any
+
+log = logging.getLogger(__name__)
+
+BACKENDS = "cosim.backends"
+VEHICLES = "cosim.vehicles"
+#: the backend ``cosim run`` uses unless told otherwise
+DEFAULT_BACKEND = "process"
+
+#: cosim's own entries, group -> name -> "module:attribute"
+BUILTIN: dict[str, dict[str, str]] = {
+    BACKENDS: {"inline": "cosim.fdm_pool.inline:InlinePool",
+               "process": "cosim.fdm_pool.process:ProcessPool"},
+    VEHICLES: {},
+}
+
+
+@dataclass(frozen=True)
+class Plugin:
+    name: str
+    obj: Any
+    source: str  # "cosim" or the distribution (else the entry point's value)
+
+
+def plugin_names(group: str) -> list[str]:
+    """Every entry's name in ``group``, cosim's first, without loading any."""
+    names = list(BUILTIN[group])
+    names += [ep.name for ep in entry_points(group=group) if ep.name not in names]
+    return names
+
+
+def load_plugins(group: str) -> dict[str, Plugin]:
+    """Every entry of ``group`` loaded, cosim's first. An entry whose name repeats
+    an earlier one is ignored, one that fails to load is skipped; both with a
+    warning (a broken plug-in must not stop cosim)."""
+    out: dict[str, Plugin] = {}
+    for name, target in BUILTIN[group].items():
+        module, attr = target.split(":")
+        out[name] = Plugin(name, getattr(importlib.import_module(module), attr), "cosim")
+    for ep in entry_points(group=group):
+        if ep.name in out:
+            log.warning("%s entry %r (%s) repeats a name: ignored", group, ep.name, ep.value)
+            continue
+        try:
+            obj = ep.load()
+        except Exception as e:
+            log.warning("%s entry %r (%s) cannot be loaded: %s: %s", group, ep.name,
+                        ep.value, type(e).__name__, e)
+            continue
+        dist = getattr(ep, "dist", None)
+        out[ep.name] = Plugin(ep.name, obj, getattr(dist, "name", None) or ep.value)
+    return out

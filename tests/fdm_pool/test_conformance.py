@@ -1,0 +1,177 @@
+"""The conformance suite every pool backend passes: the ``Pool`` contract.
+
+Run for every registered backend (``cosim.fdm_pool.backends``: the built-in
+ones and any a package registers in the ``cosim.backends`` entry-point
+group), and for the names in ``COSIM_CONFORMANCE_BACKENDS`` (comma
+separated), which must be registered:
+
+- bit-identical states against ``inline`` at every exchange, setpoints
+  (including extreme ones) and every worker count included;
+- statuses: ground impact and divergence freeze that vehicle only;
+- setpoints reach the model and reset to NaN; NaN means "leave unchanged";
+- misuse is a ``PoolStateError``; ``close`` can be called twice;
+- a vehicle failing mid-exchange is a ``CosimError`` naming it and the tick;
+- vehicles that cannot be built are reported together (``BuildError``);
+- a worker process killed by the OS is a ``WorkerDied`` naming it, within
+  seconds (backends with worker processes: ``Pool.pids``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import signal
+import time
+
+import numpy as np
+import pytest
+
+from cosim.errors import BuildError, CosimError, PoolStateError, WorkerDied
+from cosim.fdm_pool import STATE_FIELDS, STATE_INDEX, VehicleStatus, backends, make_pool
+
+CH = ("fcs/throttle-cmd-norm", "fcs/aileron-cmd-norm", "fcs/elevator-cmd-norm")
+DT = 1 / 120
+
+_extra = [n for n in os.environ.get("COSIM_CONFORMANCE_BACKENDS", "").split(",") if n]
+BACKENDS = list(dict.fromkeys(list(backends()) + _extra))
+
+
+@pytest.fixture(params=BACKENDS)
+def backend(request: pytest.FixtureRequest) -> str:
+    if request.param not in backends():
+        pytest.fail(f"backend {request.param!r} is not registered (COSIM_CONFORMANCE_BACKENDS)")
+    return str(request.param)
+
+
+def worker_counts(backend: str) -> list[int | None]:
+    """None (the backend's default), and 1 and 3 where it has workers."""
+    return [None] + ([1, 3] if backends()[backend].default_workers() > 1
+                     or backend == "process" else [])
+
+
+def _drive(pool, steps: int = 50) -> list[np.ndarray]:
+    out = []
+    for i in range(steps):
+        if i == 5:
+            pool.setpoints[1, 0] = 0.3
+        if i == 10:
+            pool.setpoints[[0, 4], 1] = 0.25
+        if i == 15:
+            pool.setpoints[5, 2] = 1e6  # an extreme value: whatever it does, the same
+        if i == 20:
+            pool.setpoints[6, 0] = -np.inf
+        if i == 30:
+            pool.setpoints[4, 1] = 0.0
+        out.append(pool.step(4).copy())
+    return out
+
+
+def _mismatches(a: np.ndarray, b: np.ndarray, ids: list[str]) -> list[str]:
+    bad = np.argwhere(~((a == b) | (np.isnan(a) & np.isnan(b))))
+    return [f"{ids[i]}.{STATE_FIELDS[j].name}: {a[i, j]!r} != {b[i, j]!r}" for i, j in bad[:10]]
+
+
+def test_states_match_inline_bit_for_bit_at_every_exchange(specs, backend: str) -> None:
+    vs = specs(7)
+    with make_pool(vs, DT, CH, "inline") as ref:
+        expected = [ref.states.copy()] + _drive(ref)
+    assert not np.array_equal(expected[0], expected[-1])  # something moved
+    for workers in worker_counts(backend):
+        with make_pool(vs, DT, CH, backend, workers) as pool:
+            assert pool.ids == [v.id for v in vs] and pool.n == 7
+            got = [pool.states.copy()] + _drive(pool)
+        for step, (e, g) in enumerate(zip(expected, got)):
+            bad = _mismatches(e, g, pool.ids)
+            assert not bad, f"{backend}, workers={workers}, exchange {step}: {bad}"
+
+
+def test_impact_and_divergence_freeze_that_vehicle_only(specs, backend: str) -> None:
+    vs = specs(3)
+    vs[0] = dataclasses.replace(vs[0], alt_msl_m=40.0, initial_props=(
+        ("fcs/throttle-cmd-norm", 0.0), ("fcs/elevator-cmd-norm", 0.6)))
+    st = STATE_INDEX["status"]
+    with make_pool(vs, DT, ("position/h-sl-ft",), backend) as pool:
+        pool.setpoints[2, 0] = 1e308
+        pool.step(4)
+        assert pool.states[2, st] == VehicleStatus.DIVERGED
+        assert np.isfinite(pool.states[2]).all()  # frozen at its last finite state
+        for _ in range(200):
+            pool.step(4)
+            if pool.states[0, st]:
+                break
+        assert pool.states[0, st] == VehicleStatus.GROUND_IMPACT
+        frozen, moving = pool.states[0].copy(), pool.states[1].copy()
+        for _ in range(5):
+            pool.step(4)
+        assert np.array_equal(pool.states[0], frozen)
+        assert not np.array_equal(pool.states[1], moving)
+        assert pool.states[1, st] == VehicleStatus.ACTIVE
+
+
+def test_setpoints_reset_to_nan_and_nan_leaves_the_model_alone(specs, backend: str) -> None:
+    vs = specs(2)
+    with make_pool(vs, DT, CH, "inline") as ref, make_pool(vs, DT, CH, backend) as pool:
+        for p in (ref, pool):
+            p.setpoints[1, 0] = 0.123
+            p.step(4)
+            assert np.isnan(p.setpoints).all()
+        for _ in range(10):  # NaN everywhere: nothing written
+            assert np.array_equal(ref.step(4), pool.step(4))
+        assert pool.states.shape == (2, len(STATE_FIELDS)) and pool.tick == 44
+
+
+def test_misuse_is_a_named_error_and_close_is_idempotent(specs, backend: str) -> None:
+    pool = make_pool(specs(2), DT, (), backend)
+    with pytest.raises(PoolStateError, match=r"cannot wait\(\).*ready"):
+        pool.wait()
+    pool.send(4)
+    with pytest.raises(PoolStateError, match=r"cannot send\(\).*waiting"):
+        pool.send(4)
+    pool.wait()
+    with pytest.raises(ValueError, match="nsub must be >= 1"):
+        pool.send(0)
+    pool.close()
+    pool.close()
+    with pytest.raises(PoolStateError, match="closed"):
+        pool.step(4)
+
+
+def test_a_vehicle_failing_mid_exchange_is_named_with_the_tick(specs, backend: str) -> None:
+    for workers in worker_counts(backend):
+        with make_pool(specs(4), DT, ("simulation/terminate",), backend, workers) as pool:
+            pool.step(4)
+            pool.setpoints[3, 0] = 1.0  # JSBSim's run() returns False
+            with pytest.raises(CosimError) as ei:
+                pool.step(4)
+            with pytest.raises(PoolStateError, match="failed"):
+                pool.step(4)
+        assert "b0003" in str(ei.value) and "tick 4" in str(ei.value), str(ei.value)
+
+
+def test_every_vehicle_that_cannot_be_built_is_reported_at_once(specs, backend: str) -> None:
+    vs = specs(5)
+    for j in (0, 3):
+        vs[j] = dataclasses.replace(vs[j], airspeed_mps=2.0 + j)  # far below any stall
+    for workers in worker_counts(backend):
+        with pytest.raises(BuildError) as ei:
+            make_pool(vs, DT, (), backend, workers)
+        assert ei.value.vehicles == ["b0000", "b0003"], (backend, workers)
+
+
+def test_a_killed_worker_is_workerdied_within_seconds(specs, backend: str) -> None:
+    pool = make_pool(specs(4), DT, (), backend, 2 if backend == "process" else None)
+    try:
+        pids = dict(pool.pids)
+        if not pids:
+            pytest.skip(f"backend {backend!r} has no worker processes")
+        pool.step(4)
+        worker, victim = sorted(pids.items())[-1]
+        os.kill(victim, signal.SIGKILL)
+        t0 = time.monotonic()
+        with pytest.raises(WorkerDied) as ei:
+            for _ in range(100_000):
+                pool.step(4)
+        assert time.monotonic() - t0 < 5.0
+        assert ei.value.pid == victim and "killed by SIGKILL" in str(ei.value)
+    finally:
+        pool.close()
