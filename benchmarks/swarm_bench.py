@@ -90,13 +90,13 @@ def main(argv: list[str] | None = None) -> int:
     a = ap.parse_args(argv)
 
     from cosim.fdm_pool.base import Pool
-    from cosim.guidance.fixed_wing import FixedWingGuidance
     from cosim.mavlink.endpoint import MavlinkEndpoint
     from cosim.scenario import parse_scenario
     from cosim.swarm import participant as swarm_participant
     from cosim.swarm.controller import SwarmController
     from cosim.swarm.metrics import SwarmMonitor
     from cosim.sync import Run
+    from cosim.vehicles.fixed_wing.guidance import FixedWingGuidance
 
     _wrap(Pool, "send", "physics (pool.send + wait)")  # both pools' (they implement _send)
     _wrap(Pool, "wait", "physics (pool.send + wait)")

@@ -39,10 +39,11 @@ from cosim.errors import CosimError
 from cosim.fdm_pool import get_backend, make_pool
 from cosim.fdm_pool.process import default_workers, shard_bounds
 from cosim.fdm_pool.shard import Shard
-from cosim.fdm_pool.spec import VehicleSpec
 from cosim.geo import KT_TO_MPS, LocalFrame
 from cosim.jsb import find_model
 from cosim.scenario.formation import formation_offsets
+from cosim.vehicles import DEFAULT_CLASS
+from cosim.vehicles.spec import VehicleSpec
 
 log = logging.getLogger(__name__)
 
@@ -55,7 +56,8 @@ def bench_specs(n: int, model: str = "c172p", spacing_m: float = 300.0) -> list[
     return [VehicleSpec(id=f"b{i:04d}", model=m.name, aircraft_dir=m.aircraft_dir,
                         model_source=m.source, lat_deg=float(lat[i]), lon_deg=float(lon[i]),
                         alt_msl_m=1000.0, heading_deg=0.0, airspeed_mps=100 * KT_TO_MPS,
-                        random_seed=i, profile=m.profile) for i in range(n)]
+                        random_seed=i, profile=m.profile,
+                        vehicle_class=m.profile.get("class", DEFAULT_CLASS)) for i in range(n)]
 
 
 def _serial_loop(shard: Shard, ticks: int, k: int) -> float:

@@ -98,17 +98,13 @@ class ModelInfo:
     source: str  # "cosim", "jsbsim" or "user"
     description: str = ""
     #: cosim profile (``aircraft/<name>/cosim.yaml`` or ``aircraft/profiles/<name>.yaml``):
-    #: class, autopilot (native | attach), clmax, alpha_stall_deg, airspeed envelope,
-    #: JSBSim properties to set after loading
+    #: its vehicle class, autopilot (native | attach), clmax, alpha_stall_deg, airspeed
+    #: envelope, JSBSim properties to set after loading
     profile: dict[str, Any] = field(default_factory=dict, compare=False, hash=False)
 
     @property
     def xml_path(self) -> Path:
         return Path(self.aircraft_dir) / self.name / f"{self.name}.xml"
-
-    @property
-    def fixed_wing(self) -> bool:
-        return self.profile.get("class") == "fixed_wing"
 
 
 def _load_profile(name: str, aircraft_dir: Path) -> dict[str, Any]:

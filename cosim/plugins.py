@@ -34,7 +34,8 @@ DEFAULT_BACKEND = "process"
 BUILTIN: dict[str, dict[str, str]] = {
     BACKENDS: {"inline": "cosim.fdm_pool.inline:InlinePool",
                "process": "cosim.fdm_pool.process:ProcessPool"},
-    VEHICLES: {},
+    VEHICLES: {"fixed_wing": "cosim.vehicles.fixed_wing:FIXED_WING",
+               "jsbsim": "cosim.vehicles.plain:PLAIN"},
 }
 
 

@@ -87,9 +87,9 @@ def test_quickstart_loads() -> None:
     assert item.sets == (("fcs/throttle-cmd-norm", 0.0),)
     # c172p has a fixed-wing profile: the autopilot's setpoints come first, then
     # the schedule's own properties (throttle is already one of them)
-    from cosim.guidance import AP_CHANNELS
+    from cosim.vehicles.fixed_wing.guidance import AP_CHANNELS
 
-    assert scn.autopilot and scn.channels == AP_CHANNELS
+    assert scn.classes == ("fixed_wing",) and scn.channels == AP_CHANNELS
     assert "fcs/throttle-cmd-norm" in scn.channels
     assert all(v.alt_msl_m == 610.0 for v in scn.vehicles)
     assert all(v.airspeed_mps == pytest.approx(100 * 1852 / 3600, rel=1e-15)
@@ -174,7 +174,7 @@ def test_unknown_key_nested() -> None:
     probs = problems(text)
     assert len(probs) == 1
     assert has(probs, line_of(text, "colour"), "vehicles[0].colour", "unknown key 'colour'")
-    assert "expected one of: id, model" in probs[0]
+    assert "expected one of: id, class, model" in probs[0]
 
 
 def test_control_hz_must_divide_physics_hz() -> None:

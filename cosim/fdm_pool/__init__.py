@@ -17,7 +17,7 @@ from cosim.fdm_pool.backends import Backend, backend_names, backends, get_backen
 from cosim.fdm_pool.base import Pool, PoolState
 from cosim.fdm_pool.inline import InlinePool
 from cosim.fdm_pool.process import ProcessPool, default_workers
-from cosim.fdm_pool.spec import (
+from cosim.vehicles.spec import (
     N_STATE,
     STATE_FIELDS,
     STATE_INDEX,

@@ -29,8 +29,8 @@ from functools import lru_cache
 from cosim import plugins
 from cosim.errors import ConfigError
 from cosim.fdm_pool.base import Pool
-from cosim.fdm_pool.spec import VehicleSpec
 from cosim.plugins import load_plugins, plugin_names
+from cosim.vehicles.spec import VehicleSpec
 
 #: the default backend of ``cosim run``
 DEFAULT = plugins.DEFAULT_BACKEND

@@ -1,8 +1,9 @@
 """The pool contract shared by every backend.
 
 A pool owns ``n`` vehicles, a ``(n, k)`` float64 ``states`` array (columns
-``STATE_FIELDS``) and a ``(n, c)`` float64 ``setpoints`` array whose columns
-are the JSBSim properties named in ``channels``. The caller writes
+``layout``: ``STATE_FIELDS``, then the columns their classes add) and a
+``(n, c)`` float64 ``setpoints`` array whose columns are the channels named
+in ``channels`` (JSBSim properties, or a batched class's inputs). The caller writes
 setpoints (NaN means "leave unchanged"), then ``send(nsub)`` starts one
 exchange of ``nsub`` physics substeps and ``wait(timeout_s)`` finishes it and
 returns ``states``. ``step(nsub)`` does both. After each exchange the pool
@@ -22,7 +23,7 @@ from types import TracebackType
 import numpy as np
 
 from cosim.errors import PoolStateError
-from cosim.fdm_pool.spec import N_STATE, VehicleSpec
+from cosim.vehicles.spec import VehicleSpec, state_layout
 
 log = logging.getLogger(__name__)
 
@@ -65,7 +66,9 @@ class Pool(ABC):
         self.n = len(specs)
         self.tick = 0  # physics ticks completed
         self._state = PoolState.READY
-        self.states: np.ndarray = np.zeros((self.n, N_STATE))
+        #: the state array's columns: ``STATE_FIELDS``, then those the classes add
+        self.layout = state_layout(self.specs)
+        self.states: np.ndarray = np.zeros((self.n, len(self.layout)))
         self.setpoints: np.ndarray = np.full((self.n, len(self.channels)), np.nan)
 
     @property

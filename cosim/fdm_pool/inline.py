@@ -10,7 +10,7 @@ from collections.abc import Sequence
 
 from cosim.fdm_pool.base import BuildProgress, Pool
 from cosim.fdm_pool.shard import Shard
-from cosim.fdm_pool.spec import VehicleSpec
+from cosim.vehicles.spec import VehicleSpec
 
 
 class InlinePool(Pool):
@@ -24,7 +24,8 @@ class InlinePool(Pool):
             raise ValueError(f"the inline backend runs in one process; workers={workers}")
         super().__init__(specs, dt_s, channels)
         self._shard = Shard.build(self.specs, self.dt_s, self.channels,
-                                  on_built=BuildProgress(self.n))
+                                  on_built=BuildProgress(self.n),
+                                  layout_names=[f.name for f in self.layout])
         self._shard.write_states(self.states)
 
     def _send(self, nsub: int) -> None:

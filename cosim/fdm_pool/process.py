@@ -43,7 +43,7 @@ import numpy as np
 from cosim.errors import BuildError, WorkerDied, WorkerError, WorkerTimeout
 from cosim.fdm_pool.base import BuildProgress, Pool
 from cosim.fdm_pool.shard import Shard
-from cosim.fdm_pool.spec import N_STATE, VehicleSpec
+from cosim.vehicles.spec import VehicleSpec
 
 log = logging.getLogger(__name__)
 
@@ -78,8 +78,8 @@ def shard_bounds(n: int, workers: int) -> list[tuple[int, int]]:
 class _Shared:
     """Views of the shared arrays (rebuilt in each process from the raw arrays)."""
 
-    def __init__(self, raw: dict[str, Any], n: int, c: int, w: int) -> None:
-        self.states = np.frombuffer(raw["states"], dtype=np.float64).reshape(n, N_STATE)
+    def __init__(self, raw: dict[str, Any], n: int, c: int, w: int, width: int) -> None:
+        self.states = np.frombuffer(raw["states"], dtype=np.float64).reshape(n, width)
         self.setpoints = np.frombuffer(raw["setpoints"], dtype=np.float64)[: n * c].reshape(n, c)
         self.ctrl = np.frombuffer(raw["ctrl"], dtype=np.int64).reshape(w, _CTRL_W)
         self.busy_s = np.frombuffer(raw["busy"], dtype=np.float64).reshape(w, _CTRL_W)
@@ -110,14 +110,15 @@ def _setup_worker_logging(cfg: dict[str, Any]) -> None:
 
 def _worker_main(w: int, specs: list[VehicleSpec], start: int, stop: int, dt_s: float,
                  channels: tuple[str, ...], raw: dict[str, Any], n: int, n_workers: int,
-                 err: Connection, parent_pid: int, log_cfg: dict[str, Any]) -> None:
+                 err: Connection, parent_pid: int, log_cfg: dict[str, Any],
+                 layout_names: list[str]) -> None:
     # the driver decides when to stop: ignore the stop signals, then unblock
     # them (the driver blocked them around our start, see ProcessPool)
     for sig in _STOP_SIGNALS:
         signal.signal(sig, signal.SIG_IGN)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
     _setup_worker_logging(log_cfg)
-    sh = _Shared(raw, n, len(channels), n_workers)
+    sh = _Shared(raw, n, len(channels), n_workers, len(layout_names))
     ctrl = sh.ctrl[w]
     shard = Shard()
     try:
@@ -126,7 +127,8 @@ def _worker_main(w: int, specs: list[VehicleSpec], start: int, stop: int, dt_s: 
         def built(k: int) -> None:
             ctrl[_BUILT] = k
 
-        Shard.build(specs, dt_s, channels, into=shard, on_built=built)
+        Shard.build(specs, dt_s, channels, into=shard, on_built=built,
+                    layout_names=layout_names)
         log.debug("worker %d (pid %d): %d vehicles built and trimmed in %.2f s", w,
                   os.getpid(), len(specs), time.perf_counter() - t0)
         shard.write_states(sh.states[start:stop])
@@ -189,12 +191,13 @@ class ProcessPool(Pool):
         c = len(self.channels)
         ctx = mp.get_context("spawn")
         self._raw = {
-            "states": ctx.RawArray("d", self.n * N_STATE),
+            "states": ctx.RawArray("d", self.n * len(self.layout)),
             "setpoints": ctx.RawArray("d", max(1, self.n * c)),
             "ctrl": ctx.RawArray("q", w * _CTRL_W),
             "busy": ctx.RawArray("d", w * _CTRL_W),
         }
-        self._sh = _Shared(self._raw, self.n, c, w)
+        self._sh = _Shared(self._raw, self.n, c, w, len(self.layout))
+        layout_names = [f.name for f in self.layout]
         self.states = self._sh.states
         self.setpoints = self._sh.setpoints
         self.setpoints.fill(np.nan)
@@ -217,7 +220,7 @@ class ProcessPool(Pool):
                 p = ctx.Process(
                     target=_worker_main, name=f"cosim-worker-{i}", daemon=True,
                     args=(i, self.specs[a:b], a, b, self.dt_s, self.channels, self._raw,
-                          self.n, w, s, os.getpid(), log_cfg))
+                          self.n, w, s, os.getpid(), log_cfg, layout_names))
                 # blocked until the child ignores them; in the driver, a stop
                 # signal arriving meanwhile is handled right after
                 old_mask = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
@@ -316,7 +319,8 @@ class ProcessPool(Pool):
             a, b = self.bounds[0]
             try:
                 self._own = Shard.build(self.specs[a:b], self.dt_s, self.channels,
-                                        on_built=built)
+                                        on_built=built,
+                                        layout_names=[f.name for f in self.layout])
                 self._own.write_states(self.states[a:b])
             except BuildError as e:
                 failures += e.failures

@@ -1,20 +1,23 @@
 """A shard: the vehicles one process owns, stepped back to back.
 
-Each vehicle runs all of its substeps before the next vehicle starts (many
-FDMs in one process are cache-bound, so this ordering is much faster than
-interleaving them). The shard writes its states into a caller-owned
-``(m, k)`` float64 view, which is a slice of shared memory in worker
-processes and of an ordinary array in the inline backend.
+Two model kinds (``cosim.vehicles``): JSBSim-backed vehicles, each running
+all of its substeps before the next one starts (many FDMs in one process
+are cache-bound, so this ordering is much faster than interleaving them);
+and batched classes, all of a class's vehicles in the shard advanced by its
+``BatchedModel`` (one vectorised call per substep). The shard writes its
+states into a caller-owned ``(m, k)`` float64 view, which is a slice of
+shared memory in worker processes and of an ordinary array in the inline
+backend.
 
-Unit scaling and the finiteness check run once per shard in numpy. Frozen
-vehicles (ground impact, divergence) are no longer stepped and their rows
-keep the state at which they froze. The per-substep ground-contact check is
-skipped for a vehicle that cannot reach the ground within the exchange
-(height of its CG above ground greater than ``(|vd| + 50 m/s) * exchange +
-2 m + contact radius``, the contact radius being the largest distance from
-the CG to any of the model's gear or structural contact points, so that any
-attitude is covered), which leaves the results unchanged and saves most of
-its cost.
+For JSBSim vehicles, unit scaling and the finiteness check run once per
+shard in numpy. Frozen vehicles (ground impact, divergence) are no longer
+stepped and their rows keep the state at which they froze. The per-substep
+ground-contact check is skipped for a vehicle that cannot reach the ground
+within the exchange (height of its CG above ground greater than ``(|vd| +
+50 m/s) * exchange + 2 m + contact radius``, the contact radius being the
+largest distance from the CG to any of the model's gear or structural
+contact points, so that any attitude is covered), which leaves the results
+unchanged and saves most of its cost.
 """
 
 from __future__ import annotations
@@ -24,7 +27,10 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from cosim.errors import BuildError, CosimError, JSBSimError, VehicleError
-from cosim.fdm_pool.spec import (
+from cosim.vehicles.base import BatchedModel
+from cosim.vehicles.jsbsim_model import Vehicle
+from cosim.vehicles.registry import get_class
+from cosim.vehicles.spec import (
     N_STATE,
     STATE_FIELDS,
     STATE_INDEX,
@@ -32,7 +38,6 @@ from cosim.fdm_pool.spec import (
     VehicleSpec,
     VehicleStatus,
 )
-from cosim.fdm_pool.vehicle import Vehicle
 
 _SCALES = np.array([f.scale for f in STATE_FIELDS if f.prop is not None])
 _AGL, _VD = STATE_INDEX["alt_agl_m"], STATE_INDEX["vd_mps"]
@@ -41,11 +46,15 @@ _MARGIN_MPS, _MARGIN_M = 50.0, 2.0
 
 class Shard:
     def __init__(self) -> None:
-        self.vehicles: list[Vehicle] = []
+        self.vehicles: list[Vehicle] = []  # the JSBSim-backed ones
         self.current: str | None = None  # id of the vehicle being built or stepped
         self.n_channels = 0
         self.dt_s = 0.0
-        self._active: list[int] = []  # indices still stepped
+        self._rows = np.zeros(0, dtype=np.intp)  # each JSBSim vehicle's row in the shard
+        #: the batched classes: (class name, model, its rows in the shard)
+        self.batches: list[tuple[str, BatchedModel, np.ndarray]] = []
+        self._extra: list[tuple[int, int]] = []  # (vehicle, first extra column) with extras
+        self._active: list[int] = []  # JSBSim vehicles still stepped (indices)
         self._check: list[bool] = []  # per active vehicle: check ground every substep
         self._radius_m = np.zeros(0)  # per vehicle: contact radius (m)
         self._nsub = 1
@@ -53,27 +62,47 @@ class Shard:
 
     @classmethod
     def build(cls, specs: Sequence[VehicleSpec], dt_s: float, channels: Sequence[str],
-              into: Shard | None = None, on_built: Callable[[int], None] | None = None
-              ) -> Shard:
-        """Build and trim every vehicle. A vehicle JSBSim cannot load or trim
-        does not stop the others: all such failures are raised together as one
-        ``BuildError``; on any other failure ``current`` names the culprit.
-        ``on_built(k)`` is called after each vehicle with the count so far."""
+              into: Shard | None = None, on_built: Callable[[int], None] | None = None,
+              layout_names: Sequence[str] = ()) -> Shard:
+        """Build and trim every vehicle. A JSBSim vehicle that cannot be loaded
+        or trimmed does not stop the others: all such failures are raised
+        together as one ``BuildError``; on any other failure ``current`` names
+        the culprit. ``on_built(k)`` is called after each vehicle with the
+        count so far. ``layout_names``: the run's state columns (the pool's
+        ``state_layout``), for the columns classes add."""
         shard = into if into is not None else cls()
         shard.n_channels = len(channels)
         shard.dt_s = dt_s
+        column = {name: j for j, name in enumerate(layout_names)}
         failures: list[tuple[str, str]] = []
+        rows: list[int] = []
+        batched: dict[str, list[int]] = {}
         for k, spec in enumerate(specs, 1):
             shard.current = spec.id
-            try:
-                shard.vehicles.append(Vehicle(spec, dt_s, channels))
-            except JSBSimError as e:
-                failures.append((spec.id, str(e)))
-            if on_built is not None:
+            vc = get_class(spec.vehicle_class)
+            if vc.model_kind == "batched":
+                batched.setdefault(vc.name, []).append(k - 1)
+            else:
+                try:
+                    shard.vehicles.append(Vehicle(spec, dt_s, channels))
+                    rows.append(k - 1)
+                    if vc.state_columns:
+                        shard._extra.append((len(shard.vehicles) - 1,
+                                             column[vc.state_columns[0].name]))
+                except JSBSimError as e:
+                    failures.append((spec.id, str(e)))
+            if on_built is not None and vc.model_kind != "batched":
                 on_built(k)
+        for name, brows in batched.items():
+            shard.current = None
+            model = get_class(name).make_batch([specs[r] for r in brows], dt_s, channels)
+            shard.batches.append((name, model, np.asarray(brows, dtype=np.intp)))
+            if on_built is not None:
+                on_built(len(specs))
         shard.current = None
         if failures:
             raise BuildError(failures, len(specs))
+        shard._rows = np.asarray(rows, dtype=np.intp)
         shard._radius_m = np.array([v.contact_radius_m for v in shard.vehicles])
         shard._active = list(range(len(shard.vehicles)))
         shard._check = [True] * len(shard._active)
@@ -81,6 +110,10 @@ class Shard:
 
     def write_states(self, out: np.ndarray) -> None:
         """Read every active vehicle into ``out`` (SI units, status column)."""
+        for _, model, rows in self.batches:
+            block = out[rows]
+            model.write_states(block)
+            out[rows] = block
         active = self._active
         if not active:
             return
@@ -94,17 +127,27 @@ class Shard:
             for j in np.flatnonzero(~finite).tolist():
                 vs[active[j]].status = VehicleStatus.DIVERGED
                 status[j] = VehicleStatus.DIVERGED
-        idx = np.asarray(active)
+        act = np.asarray(active)
+        idx = self._rows[act]
         out[idx[finite], :STATUS_COL] = block[finite]  # diverged rows keep their last state
         out[idx, STATUS_COL] = status
+        if self._extra:
+            self._write_extra(out, set(act[finite].tolist()))
         if (status != VehicleStatus.ACTIVE).any():
             keep = status == VehicleStatus.ACTIVE
-            idx = idx[keep]
-            self._active = idx.tolist()
+            act = act[keep]
+            self._active = act.tolist()
             block = block[keep]
         reach = ((np.abs(block[:, _VD]) + _MARGIN_MPS) * (self._nsub * self.dt_s) + _MARGIN_M
-                 + self._radius_m[idx])
+                 + self._radius_m[act])
         self._check = (block[:, _AGL] <= reach).tolist()
+
+    def _write_extra(self, out: np.ndarray, finite: set[int]) -> None:
+        """The columns classes add, for the active vehicles whose states are finite."""
+        for i, first in self._extra:
+            if i in finite:
+                values = self.vehicles[i].extra_state()
+                out[self._rows[i], first:first + len(values)] = values
 
     def exchange(self, setpoints: np.ndarray | None, nsub: int, out: np.ndarray) -> None:
         """Apply setpoints (NaN = leave as is), run ``nsub`` substeps per
@@ -128,10 +171,15 @@ class Shard:
     def _exchange(self, setpoints: np.ndarray | None, nsub: int, out: np.ndarray) -> None:
         vs = self.vehicles
         if setpoints is not None and self.n_channels:
-            written = np.flatnonzero(~np.isnan(setpoints).all(axis=1))
+            mine = setpoints[self._rows]
+            written = np.flatnonzero(~np.isnan(mine).all(axis=1))
             for j in written.tolist():
                 self.current = vs[j].spec.id
-                vs[j].apply(setpoints[j].tolist())
+                vs[j].apply(mine[j].tolist())
+            self.current = None
+            for name, model, rows in self.batches:
+                self.current = f"(the {name} vehicles)"
+                model.apply(setpoints[rows])
             self.current = None
         if nsub > self._nsub:  # the margin was computed for a shorter exchange
             self._check = [True] * len(self._active)
@@ -143,4 +191,8 @@ class Shard:
         except BaseException:
             self.current = vs[i].spec.id if i >= 0 else None
             raise
+        for name, model, _ in self.batches:
+            self.current = f"(the {name} vehicles)"
+            model.step(nsub)
+        self.current = None
         self.write_states(out)

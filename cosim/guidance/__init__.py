@@ -1,8 +1,11 @@
-"""guidance: the fixed-wing command vocabulary and path following.
+"""guidance: the command vocabulary every command path shares, and the
+safety rules classes build theirs from.
 
-Turns commands (from the schedule now; MAVLink and the swarm controller
-later) into setpoints for the cosim autopilot that runs inside JSBSim. It
-reads vehicles only through the state array and writes only setpoints.
+``Command`` is the one command object: the schedule's ``command:``,
+MAVLink clients (through the handlers), the swarm controller and outside
+controllers (through MAVLink) all produce it; the runner routes it to the
+vehicle's class, whose guidance (``cosim.vehicles``) turns it into
+setpoints. This package never reads vehicles or writes setpoints.
 """
 
 from cosim.guidance.commands import (
@@ -13,7 +16,6 @@ from cosim.guidance.commands import (
     min_turn_radius_m,
     parse_command,
 )
-from cosim.guidance.fixed_wing import AP_CHANNELS, FixedWingGuidance, GuidanceEvent
 
-__all__ = ["AP_CHANNELS", "COMMAND_KEYS", "DEFAULT_BANK_LIMIT_DEG", "Command",
-           "FixedWingGuidance", "GuidanceEvent", "Point", "min_turn_radius_m", "parse_command"]
+__all__ = ["COMMAND_KEYS", "DEFAULT_BANK_LIMIT_DEG", "Command", "Point", "min_turn_radius_m",
+           "parse_command"]

@@ -16,8 +16,8 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from cosim.fdm_pool.spec import STATE_INDEX
 from cosim.geo import LocalFrame
+from cosim.vehicles.spec import STATE_INDEX
 
 #: the columns of states.parquet, in order
 STATE_COLUMNS: tuple[str, ...] = (

@@ -4,7 +4,7 @@ UDP socket, driven once per exchange by the lockstep loop.
 Usage (the runner, once per exchange; ``MavlinkLinks`` has the same
 interface for runs of more than 240 vehicles)::
 
-    specs = mav_specs(scenario.vehicles, autopilot=scenario.autopilot)
+    specs = mav_specs(scenario.vehicles)
     with MavlinkEndpoint(specs, physics_hz, MavlinkConfig(url), tlog_dir=out) as mav:
         while ...:
             for vc in mav.receive(tick, states):
@@ -91,7 +91,6 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from cosim.errors import ConfigError
-from cosim.fdm_pool.spec import N_STATE, STATE_INDEX
 from cosim.guidance.commands import Command
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.batch import BatchEncoder
@@ -114,6 +113,7 @@ from cosim.mavlink.vehicle import (
     check_rates,
     safe_name,
 )
+from cosim.vehicles.spec import N_STATE, STATE_INDEX
 
 log = logging.getLogger(__name__)
 

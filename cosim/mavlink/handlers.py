@@ -52,10 +52,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from cosim.fdm_pool.spec import STATE_INDEX
 from cosim.geo import LocalFrame
 from cosim.guidance.commands import Command, min_turn_radius_m, parse_command
-from cosim.guidance.safety import Limits, command_problems
+from cosim.guidance.safety import Limits
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.mission import (
     MAX_ITEMS,
@@ -71,10 +70,11 @@ from cosim.mavlink.vehicle import (
     FORCE_MAGIC,
     STREAMABLE,
     MavVehicle,
-    PlaneMode,
-    mode_name,
     period_ticks,
 )
+from cosim.vehicles import get_class
+from cosim.vehicles.fixed_wing.mavlink import PlaneMode  # until the personality owns the modes
+from cosim.vehicles.spec import STATE_INDEX
 
 log = logging.getLogger(__name__)
 
@@ -265,7 +265,8 @@ class Handler:
         if not v.spec.has_autopilot:
             if mode == v.mode:
                 return mav.MAV_RESULT_ACCEPTED
-            out.replies.extend(_text(f"{mode_name(mode)}: this vehicle has no autopilot"))
+            name = v.personality.mode_name(mode)
+            out.replies.extend(_text(f"{name}: this vehicle has no autopilot"))
             return mav.MAV_RESULT_FAILED
         if mode == v.mode:
             return mav.MAV_RESULT_ACCEPTED
@@ -293,10 +294,11 @@ class Handler:
             out.replies.extend(_text("MANUAL: no pilot in the simulation"))
             return mav.MAV_RESULT_FAILED
         else:
-            out.replies.extend(_text(f"{mode_name(mode)} is not supported by cosim"))
+            out.replies.extend(_text(f"{v.personality.mode_name(mode)} is not supported by "
+                                     f"cosim"))
             return mav.MAV_RESULT_FAILED
-        return self._switch_to(v, mode, d, out, mode_name(mode), mav.MAV_RESULT_FAILED,
-                               cw_override)
+        return self._switch_to(v, mode, d, out, v.personality.mode_name(mode),
+                               mav.MAV_RESULT_FAILED, cw_override)
 
     def unsafe(self, v: MavVehicle, cmd: Command) -> str | None:
         """Why ``cmd`` would fly ``v`` into the ground or ask for a turn it
@@ -305,8 +307,9 @@ class Handler:
         row = v.row_values
         speed = row[_S["airspeed_mps"]] if row is not None and math.isfinite(
             row[_S["airspeed_mps"]]) else v.params["AIRSPEED_CRUISE"]
-        problems = command_problems(cmd, Limits(v.home[2], v.spec.min_alt_agl_m, speed,
-                                                v.params["ROLL_LIMIT_DEG"]))
+        problems = get_class(v.spec.vehicle_class).safety_problems(
+            cmd, Limits(v.home[2], v.spec.min_alt_agl_m, speed, v.params["ROLL_LIMIT_DEG"]),
+            "the vehicle")
         if not problems:
             return None
         self.counts["commands_unsafe"] += 1

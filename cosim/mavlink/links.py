@@ -27,7 +27,6 @@ from typing import Any
 import numpy as np
 
 from cosim.errors import ConfigError
-from cosim.fdm_pool.spec import VehicleSpec
 from cosim.guidance.commands import Command
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.endpoint import (
@@ -38,16 +37,15 @@ from cosim.mavlink.endpoint import (
 )
 from cosim.mavlink.link import LinkUrl
 from cosim.mavlink.vehicle import MavVehicleSpec, mav_specs
+from cosim.vehicles.spec import VehicleSpec
 
 
-def link_specs(vehicles: Sequence[VehicleSpec], autopilot: bool = True
-               ) -> list[list[MavVehicleSpec]]:
+def link_specs(vehicles: Sequence[VehicleSpec]) -> list[list[MavVehicleSpec]]:
     """The MAVLink identities of a run's vehicles, one list per link: rows in
     vehicle order, system ids 1..240 on each link."""
     out = []
     for a in range(0, len(vehicles), MAX_VEHICLES_PER_LINK):
-        out.append(mav_specs(vehicles[a:a + MAX_VEHICLES_PER_LINK], autopilot=autopilot,
-                             first_sysid=1, first_row=a))
+        out.append(mav_specs(vehicles[a:a + MAX_VEHICLES_PER_LINK], first_sysid=1, first_row=a))
     return out
 
 
@@ -68,8 +66,8 @@ class MavlinkLinks:
 
     def __init__(self, vehicles: Sequence[VehicleSpec], physics_hz: float,
                  config: MavlinkConfig, tlog_dir: str | Path | None = None,
-                 autopilot: bool = True, clock_anchor_unix_us: int | None = None) -> None:
-        self.specs = link_specs(vehicles, autopilot)
+                 clock_anchor_unix_us: int | None = None) -> None:
+        self.specs = link_specs(vehicles)
         n = len(self.specs)
         if n > 1 and config.lockstep_sysid is not None:
             raise ConfigError(f"mavlink: an outside controller in lockstep drives one link "

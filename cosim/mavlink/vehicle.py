@@ -1,6 +1,6 @@
-"""One simulated vehicle as an ArduPlane MAVLink vehicle: identity, mode and
-arming state, parameters, telemetry built from its state row, and the
-per-message schedule.
+"""One simulated vehicle as a MAVLink vehicle (as its class's personality
+says): identity, mode and arming state, parameters, telemetry built from its
+state row, and the per-message schedule.
 
 Telemetry is stamped from SIMULATION time only (``SimClock``): boot is tick
 0, ``time_boot_ms`` counts simulated milliseconds, and unix times are a
@@ -19,54 +19,19 @@ import math
 import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from enum import IntEnum
 from typing import Any
 
 import numpy as np
 
-from cosim.fdm_pool.spec import STATE_INDEX, VehicleSpec, VehicleStatus
 from cosim.geo import KT_TO_MPS
-from cosim.guidance.safety import DEFAULT_MIN_ALT_AGL_M, min_alt_agl_m
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.mission import Mission
 from cosim.mavlink.params import ParamTable
+from cosim.mavlink.personality import Personality
+from cosim.vehicles.spec import STATE_INDEX, VehicleSpec, VehicleStatus
 
 _S = STATE_INDEX
 
-
-class PlaneMode(IntEnum):
-    """ArduPlane custom mode numbers (HEARTBEAT.custom_mode)."""
-
-    MANUAL = 0
-    CIRCLE = 1
-    STABILIZE = 2
-    TRAINING = 3
-    ACRO = 4
-    FBWA = 5
-    FBWB = 6
-    CRUISE = 7
-    AUTOTUNE = 8
-    AUTO = 10
-    RTL = 11
-    LOITER = 12
-    TAKEOFF = 13
-    AVOID_ADSB = 14
-    GUIDED = 15
-    THERMAL = 24
-
-
-def mode_name(number: int) -> str:
-    try:
-        return PlaneMode(number).name
-    except ValueError:
-        return f"mode {number}"
-
-
-#: modes in which ArduPlane reports MAV_MODE_FLAG_MANUAL_INPUT_ENABLED only
-_MANUAL_MODES = {PlaneMode.MANUAL, PlaneMode.TRAINING, PlaneMode.ACRO}
-#: modes ArduPlane reports as GUIDED_ENABLED | STABILIZE_ENABLED
-_GUIDED_MODES = {PlaneMode.AUTO, PlaneMode.RTL, PlaneMode.LOITER, PlaneMode.AVOID_ADSB,
-                 PlaneMode.GUIDED, PlaneMode.CIRCLE, PlaneMode.TAKEOFF, PlaneMode.THERMAL}
 
 #: what ArduPlane 4.5.0 (official) would report; ground stations gate features on it
 FLIGHT_SW_VERSION = (4 << 24) | (5 << 16) | (0 << 8) | mav.FIRMWARE_VERSION_TYPE_OFFICIAL
@@ -150,21 +115,32 @@ class MavVehicleSpec:
     start_lon_deg: float
     start_alt_msl_m: float
     home_alt_msl_m: float
-    has_autopilot: bool = True
     armed: bool = True
     mode: int | None = None
     params: Mapping[str, float] = field(default_factory=dict)
+    #: how its class appears on MAVLink (None: the base personality, no modes)
+    personality: Personality | None = None
     #: the class minimum height above the ground commands may ask for
-    min_alt_agl_m: float = DEFAULT_MIN_ALT_AGL_M
+    min_alt_agl_m: float = 0.0
+    #: its vehicle class (the safety rule of its commands)
+    vehicle_class: str = "jsbsim"
+
+    @property
+    def has_autopilot(self) -> bool:
+        """Whether it takes commands (its personality's autopilot)."""
+        return self.personality is not None and self.personality.autopilot
 
 
-def mav_specs(vehicles: Sequence[VehicleSpec], autopilot: bool = True, first_sysid: int = 1,
+def mav_specs(vehicles: Sequence[VehicleSpec], first_sysid: int = 1,
               first_row: int = 0) -> list[MavVehicleSpec]:
     """MAVLink identities for scenario vehicles: system ids ``first_sysid``
-    upwards, airspeed limits from each model's profile, cruise speed from
-    its initial airspeed."""
+    upwards, each class's personality and command floor, airspeed limits
+    from each model's profile, cruise speed from its initial airspeed."""
+    from cosim.vehicles import get_class
+
     out = []
     for k, v in enumerate(vehicles):
+        cls = get_class(v.vehicle_class)
         params: dict[str, float] = {}
         lo_kt, hi_kt = v.profile.get("airspeed_min_kt"), v.profile.get("airspeed_max_kt")
         lo = math.ceil(lo_kt * KT_TO_MPS) if isinstance(lo_kt, (int, float)) else None
@@ -182,8 +158,9 @@ def mav_specs(vehicles: Sequence[VehicleSpec], autopilot: bool = True, first_sys
         out.append(MavVehicleSpec(row=first_row + k, sysid=first_sysid + k, name=v.id,
                                   start_lat_deg=v.lat_deg, start_lon_deg=v.lon_deg,
                                   start_alt_msl_m=v.alt_msl_m, home_alt_msl_m=v.terrain_alt_m,
-                                  has_autopilot=autopilot, params=params,
-                                  min_alt_agl_m=min_alt_agl_m(v.profile)))
+                                  params=params, personality=cls.mavlink,
+                                  min_alt_agl_m=cls.min_alt_agl_m(v.profile),
+                                  vehicle_class=v.vehicle_class))
     return out
 
 
@@ -265,8 +242,8 @@ class MavVehicle:
         self.params = ParamTable(spec.params)
         self.params.force("SYSID_THISMAV", spec.sysid)
         self.armed = spec.armed
-        default = PlaneMode.GUIDED if spec.has_autopilot else PlaneMode.MANUAL
-        self.mode = int(default if spec.mode is None else spec.mode)
+        self.personality = spec.personality or Personality()
+        self.mode = self.personality.default_mode() if spec.mode is None else int(spec.mode)
         self.home = (spec.start_lat_deg, spec.start_lon_deg, spec.home_alt_msl_m)
         self.period: dict[str, int | None] = {
             n: period_ticks(rates_hz.get(n, DEFAULT_RATES_HZ.get(n, 0.0)), clock.physics_hz)
@@ -307,17 +284,8 @@ class MavVehicle:
         return self.status == VehicleStatus.ACTIVE
 
     def base_mode(self) -> int:
-        """HEARTBEAT.base_mode as ArduPlane computes it (stick mixing off: no RC)."""
-        m = self.mode
-        if m in _MANUAL_MODES:
-            bm = mav.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
-        elif m in _GUIDED_MODES:
-            bm = mav.MAV_MODE_FLAG_GUIDED_ENABLED | mav.MAV_MODE_FLAG_STABILIZE_ENABLED
-        else:
-            bm = mav.MAV_MODE_FLAG_STABILIZE_ENABLED
-        if self.armed:
-            bm |= mav.MAV_MODE_FLAG_SAFETY_ARMED
-        return bm | mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+        """HEARTBEAT.base_mode (the personality's rule)."""
+        return self.personality.base_mode(self.mode, self.armed)
 
     def system_status(self) -> int:
         if self.status != VehicleStatus.ACTIVE:
@@ -371,13 +339,14 @@ class MavVehicle:
         return row
 
     def _f_heartbeat(self, tick: int) -> dict[str, Any]:
-        return {"type": mav.MAV_TYPE_FIXED_WING, "autopilot": mav.MAV_AUTOPILOT_ARDUPILOTMEGA,
+        p = self.personality
+        return {"type": p.mav_type, "autopilot": p.autopilot_type,
                 "base_mode": self.base_mode(), "custom_mode": self.mode,
                 "system_status": self.system_status(), "mavlink_version": 3}
 
     def _f_sys_status(self, tick: int) -> dict[str, Any]:
         enabled = _PRESENT
-        if self.mode in _MANUAL_MODES or not self.spec.has_autopilot:
+        if self.personality.manual(self.mode) or not self.spec.has_autopilot:
             enabled &= ~_CONTROL
         if not self.armed:
             enabled &= ~mav.SENSOR_MOTOR_OUTPUTS
@@ -407,7 +376,7 @@ class MavVehicle:
 
     def _f_mission_current(self, tick: int) -> dict[str, Any]:
         self.mission.reported_current = self.mission.current
-        return self.mission.state(self.mode == PlaneMode.AUTO)
+        return self.mission.state(self.mode == self.personality.auto_mode)
 
     def _f_autopilot_version(self, tick: int) -> dict[str, Any]:
         return {"capabilities": CAPABILITIES, "flight_sw_version": FLIGHT_SW_VERSION,

@@ -41,12 +41,12 @@ import cv2
 import numpy as np
 
 from cosim.errors import CosimError, how_it_ended
-from cosim.fdm_pool.spec import STATE_INDEX
 from cosim.renderer.camera import camera_pose
 from cosim.renderer.config import CameraSpec, CamerasSpec, GroundSpec
 from cosim.renderer.frame import GT_COLUMNS, World, WorldSpec, render_frame
 from cosim.renderer.video import EXTENSIONS, open_video
 from cosim.sync.participants import ParticipantFailed, RunContext
+from cosim.vehicles.spec import STATE_INDEX
 
 log = logging.getLogger(__name__)
 

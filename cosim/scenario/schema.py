@@ -20,15 +20,13 @@ from typing import Any
 import numpy as np
 
 from cosim.errors import ConfigError, CosimError
-from cosim.fdm_pool.spec import VehicleSpec
 from cosim.geo import KT_TO_MPS, LocalFrame
 from cosim.guidance import (
-    AP_CHANNELS,
     DEFAULT_BANK_LIMIT_DEG,
     Command,
     parse_command,
 )
-from cosim.guidance.safety import Limits, command_problems, min_alt_agl_m, speed_after
+from cosim.guidance.safety import Limits, speed_after
 from cosim.jsb import find_model, has_property, is_writable, new_fdm
 from cosim.scenario import limits as lim
 from cosim.scenario.formation import FORMATIONS, formation_offsets
@@ -38,6 +36,8 @@ from cosim.scenario.yaml_lines import (
     load_with_lines,
     read_scenario_text,
 )
+from cosim.vehicles import DEFAULT_CLASS, ModelChoice, VehicleClass, get_class
+from cosim.vehicles.spec import VehicleSpec
 
 SCHEMA_VERSION = 1
 ALT_MIN_M, ALT_MAX_M = -500.0, 100_000.0  # every vehicle's resolved height must lie here
@@ -126,15 +126,17 @@ class Scenario:
         return safe_folder_name(self.name)
 
     @property
-    def autopilot(self) -> bool:
-        """True if any vehicle carries the cosim autopilot (it can be commanded)."""
-        return any(v.profile.get("class") == "fixed_wing" for v in self.vehicles)
+    def classes(self) -> tuple[str, ...]:
+        """The vehicle classes of the run, in order of first appearance."""
+        return tuple(dict.fromkeys(v.vehicle_class for v in self.vehicles))
 
     @property
     def channels(self) -> tuple[str, ...]:
-        """Setpoint channels: the autopilot's, then every JSBSim property the
-        schedule writes, in first-use order."""
-        seen: dict[str, None] = dict.fromkeys(AP_CHANNELS) if self.autopilot else {}
+        """Setpoint channels: each class's (its guidance's), then every JSBSim
+        property the schedule writes, in first-use order."""
+        seen: dict[str, None] = {}
+        for name in self.classes:
+            seen.update(dict.fromkeys(get_class(name).channels))
         for item in self.schedule:
             for name, _ in item.sets:
                 seen.setdefault(name)
@@ -593,10 +595,10 @@ def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: i
     dist = lim.MAX_DISTANCE_M
     for i, vd in enumerate(d):
         vp = path + (i,)
-        r = _Reader(ctx, vd, vp, ("id", "model", "count", "formation", "init", "trim", "set",
-                                  "random_seed"))
+        vclass, model = _vehicle_class(ctx, vd, vp, apath)
+        r = _Reader(ctx, vd, vp, _VEHICLE_KEYS + (vclass.vehicle_keys if vclass else ("trim",
+                                                                                        "set")))
         vid = r.string("id", pattern=_ID)
-        model_name = r.string("model")
         count = r.integer("count", 1, lo=1, hi=lim.MAX_VEHICLES)
         if count is not None:
             planned += count
@@ -605,18 +607,14 @@ def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: i
                         f"the scenario would have {planned} or more vehicles; at most "
                         f"{lim.MAX_VEHICLES} (each takes about {lim.MIB_PER_VEHICLE} MiB)")
                 count = None
-        trim = r.boolean("trim", True)
+        jsbsim = vclass is None or vclass.model_kind == "jsbsim"
+        trim = r.boolean("trim", True) if jsbsim else False
         props = _prop_values(ctx, r.d["set"], vp + ("set",)) if r.has("set") else []
+        params = vclass.parse_vehicle(r, vp) if vclass else {}
         fixed_seed = r.integer("random_seed", None, lo=0, hi=lim.MAX_VEHICLE_SEED)
         if fixed_seed is not None and count is not None and count > 1:
             ctx.err(vp + ("random_seed",), "random_seed is for a single vehicle; with count, "
                                            "each vehicle's seed derives from the scenario seed")
-        model = None
-        if model_name is not None:
-            try:
-                model = find_model(model_name, apath)
-            except CosimError as e:
-                ctx.err(vp + ("model",), str(e))
         ini = _Reader(ctx, r.d.get("init"), vp + ("init",),
                       ("lat_deg", "lon_deg", "north_m", "east_m", "alt_msl_m", "alt_agl_m",
                        "heading_deg", "airspeed_kt", "airspeed_mps"))
@@ -685,6 +683,7 @@ def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: i
                 or (not pos_geo and None in (n0, e0)) or no_formation:
             continue
         assert model is not None and vid is not None and count is not None
+        assert vclass is not None
         assert alt is not None and heading is not None and speed is not None
         dn, de = offsets
         alts = alt + np.arange(count) * alt_step
@@ -740,9 +739,11 @@ def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: i
             out.append((VehicleSpec(
                 id=uid, model=model.name, aircraft_dir=model.aircraft_dir,
                 model_source=model.source, lat_deg=float(lats[j]), lon_deg=float(lons[j]),
+                vehicle_class=vclass.name, class_params=dict(params),
                 alt_msl_m=float(alts[j]), heading_deg=float(heading) % 360.0,
                 airspeed_mps=float(speed), terrain_alt_m=ground, trim=trim,
-                random_seed=vseed, initial_props=tuple(props), profile=model.profile), vp))
+                random_seed=vseed, initial_props=tuple(props),
+                profile=dict(model.profile or {})), vp))
             rows.append(j)
         where_ned.append(np.stack([np.broadcast_to(north, (count,))[rows],
                                    np.broadcast_to(east, (count,))[rows], alts[rows]], axis=1))
@@ -776,6 +777,47 @@ def _check_separation(ctx: _Ctx, vehicles: list[tuple[VehicleSpec, P]], ned: np.
                                                     f"{gap:.2f} m apart (at least "
                                                     f"{MIN_SEPARATION_M:g} m)")
         cells.setdefault(key, []).append(i)
+
+
+#: the keys of a vehicle entry every class has (a class adds its ``vehicle_keys``)
+_VEHICLE_KEYS = ("id", "class", "model", "count", "formation", "init", "random_seed")
+
+
+def _vehicle_class(ctx: _Ctx, vd: Any, vp: P, apath: tuple[str, ...]
+                   ) -> tuple[VehicleClass | None, ModelChoice | None]:
+    """A vehicle entry's class (its ``class:``, else its model profile's, else
+    ``jsbsim``) and its model as that class resolves it; problems reported."""
+    if not isinstance(vd, dict):
+        return None, None  # the entry's reader says what it is
+    raw, model_name = vd.get("class"), vd.get("model")
+    if raw is not None and not isinstance(raw, str):
+        ctx.err(vp + ("class",), f"expected a vehicle class name, got {_describe(raw)}")
+        return None, None
+    if model_name is not None and not isinstance(model_name, str):
+        ctx.err(vp + ("model",), f"expected a string, got {_describe(model_name)}")
+        return None, None
+    name = raw
+    if name is None:
+        if model_name is None:
+            ctx.err(vp, "missing required key 'model'")
+            return None, None
+        try:
+            name = str(find_model(model_name, apath).profile.get("class", DEFAULT_CLASS))
+        except CosimError as e:
+            ctx.err(vp + ("model",), str(e))
+            return None, None
+    try:
+        vclass = get_class(name)
+    except ConfigError as e:
+        where = vp + ("class",) if raw is not None else vp + ("model",)
+        ctx.err(where, str(e) if raw is not None else f"model {model_name!r}: its profile's "
+                                                        f"{e}")
+        return None, None
+    try:
+        return vclass, vclass.resolve_model(model_name, apath)
+    except CosimError as e:
+        ctx.err(vp if model_name is None else vp + ("model",), str(e))
+        return vclass, None
 
 
 def _select(ctx: _Ctx, sel: Any, path: P, ids: list[str]) -> list[int]:
@@ -841,11 +883,10 @@ def _schedule(ctx: _Ctx, d: Any, vehicles: list[tuple[VehicleSpec, P]], rates: R
 
 
 def _check_commands(ctx: _Ctx, schedule: list[ScheduleItem], specs: list[VehicleSpec]) -> None:
-    """Commands only for vehicles with the autopilot; airspeeds inside each
-    model's envelope; then the rule of every command path
-    (``cosim.guidance.safety``): altitudes at least the class minimum above
-    the ground, loiter radii no tighter than the minimum turn radius at the
-    speed and bank limit in force at that point of the schedule."""
+    """Commands only for vehicles whose class takes them, and each as its class
+    allows at that point of the schedule (``VehicleClass.command_problems``:
+    the model's envelope, then the rule of every command path, with the speed
+    and bank limit in force)."""
     speed = [v.airspeed_mps for v in specs]
     bank = [DEFAULT_BANK_LIMIT_DEG] * len(specs)
     for item in schedule:
@@ -853,31 +894,21 @@ def _check_commands(ctx: _Ctx, schedule: list[ScheduleItem], specs: list[Vehicle
         if cmd is None:
             continue
         path: P = ("schedule", item.index, "command")
-        no_ap = sorted({specs[j].model for j in item.vehicles
-                        if specs[j].profile.get("class") != "fixed_wing"})
-        if no_ap:
-            ctx.err(path, f"model {', '.join(no_ap)} has no cosim autopilot profile, so it "
-                          f"cannot take commands (fixed-wing profiles: aircraft/profiles/, "
-                          f"aircraft/<model>/cosim.yaml)")
+        mute = sorted({(specs[j].model, specs[j].vehicle_class) for j in item.vehicles
+                       if not get_class(specs[j].vehicle_class).commandable})
+        if mute:
+            ctx.err(path, "; ".join(f"model {m} (class {c}) takes no commands" for m, c in mute)
+                    + " (fixed-wing profiles: aircraft/profiles/, aircraft/<model>/cosim.yaml)")
             continue
-        speeds = [cmd.airspeed_mps] + [p.airspeed_mps for p in cmd.points]
         for j in item.vehicles:
-            prof = specs[j].profile
-            lo, hi = prof.get("airspeed_min_kt"), prof.get("airspeed_max_kt")
-            for spd in speeds:
-                if spd is None:
-                    continue
-                kt = spd / KT_TO_MPS
-                if (lo is not None and kt < lo - 1e-9) or (hi is not None and kt > hi + 1e-9):
-                    ctx.err(path, f"airspeed {kt:.1f} kt is outside the envelope of "
-                                  f"{specs[j].model} ({lo:g}..{hi:g} kt TAS)")
-                    break
-            lim = Limits(specs[j].terrain_alt_m, min_alt_agl_m(prof), speed[j], bank[j])
+            vc = get_class(specs[j].vehicle_class)
+            lim = Limits(specs[j].terrain_alt_m, vc.min_alt_agl_m(specs[j].profile), speed[j],
+                         bank[j])
             if cmd.bank_limit_deg is not None:
                 bank[j] = cmd.bank_limit_deg
             speed[j] = speed_after(cmd, speed[j])
-            problems = command_problems(cmd, lim, specs[j].id)
-            for problem in problems:  # the same rule as MAVLink's (cosim.guidance.safety)
+            problems = vc.command_problems(cmd, specs[j], lim)
+            for problem in problems:
                 ctx.err(path, problem)
             if problems:
                 break

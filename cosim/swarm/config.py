@@ -44,9 +44,9 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
-from cosim.guidance.safety import min_alt_agl_m
 from cosim.scenario.schema import SectionInfo
 from cosim.swarm import laws
+from cosim.vehicles import get_class
 
 P = tuple[Any, ...]
 _NAME = re.compile(r"^[A-Za-z0-9_.\-]+$")
@@ -211,13 +211,11 @@ def parse_swarm(info: SectionInfo, node: Any, path: P) -> SwarmSpec | None:
                 info.err(gp + ("vehicles",), f"vehicle {v.id!r} is already in group "
                                              f"{owner[row]!r}; a vehicle flies in one group")
             owner.setdefault(row, name or "")
-            if v.profile.get("class") != "fixed_wing":
-                info.err(gp + ("vehicles",), f"vehicle {v.id!r} (model {v.model}) has no cosim "
-                                             f"autopilot profile, so it cannot be commanded")
-            elif "clmax" not in v.profile:
-                info.err(gp + ("vehicles",), f"model {v.model} has no clmax in its cosim "
-                                             f"profile: its stall speed is unknown")
-            agl, floor = v.alt_msl_m - v.terrain_alt_m, min_alt_agl_m(v.profile)
+            vc = get_class(v.vehicle_class)
+            problem = vc.swarm_problem(v)
+            if problem is not None:
+                info.err(gp + ("vehicles",), problem)
+            agl, floor = v.alt_msl_m - v.terrain_alt_m, vc.min_alt_agl_m(v.profile)
             if agl < floor:  # the group holds its start altitudes (or layers above them)
                 info.err(gp + ("vehicles",), f"vehicle {v.id!r} starts {agl:g} m above the "
                                              f"ground: the swarm holds that altitude, and "

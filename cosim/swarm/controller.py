@@ -43,7 +43,6 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from cosim.fdm_pool.spec import VehicleSpec
 from cosim.geo import LocalFrame
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.endpoint import CONTROLLER_SYSID
@@ -51,6 +50,7 @@ from cosim.mavlink.params import PARAM_DEFS
 from cosim.mavlink.vehicle import MavVehicleSpec, mav_specs
 from cosim.swarm import laws
 from cosim.swarm.config import Phase, SwarmGroup, SwarmSpec
+from cosim.vehicles.spec import VehicleSpec
 
 log = logging.getLogger(__name__)
 

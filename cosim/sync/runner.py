@@ -28,11 +28,12 @@ import numpy as np
 import yaml
 
 from cosim.errors import VehicleError, WorkerDied, WorkerError
-from cosim.fdm_pool import STATE_INDEX, VehicleStatus, make_pool
+from cosim.fdm_pool import make_pool
 from cosim.fdm_pool.base import Pool
-from cosim.guidance import FixedWingGuidance
 from cosim.logs import DiskReserve, EventLog, StateLog, clear_outputs, write_json_atomic
 from cosim.scenario import Scenario
+from cosim.sync import parts
+from cosim.sync.commands import Commander
 from cosim.sync.pacing import Pacer
 from cosim.sync.participants import (
     Participant,
@@ -41,20 +42,11 @@ from cosim.sync.participants import (
     build_participants,
     needs_mavlink,
 )
+from cosim.sync.parts import StateLogger, StatusEvents
 
 log = logging.getLogger(__name__)
 
 ProgressFn = Callable[[int, int], None]
-_STATUS = STATE_INDEX["status"]
-_EVENT_OF_STATUS = {VehicleStatus.GROUND_IMPACT: "ground_impact",
-                    VehicleStatus.DIVERGED: "divergence"}
-#: flag columns whose changes are events: column -> (event, on, off)
-_FLAG_EVENTS = {
-    "stalled": ("stall", "onset", "recovery"),
-    "stall_protection_active": ("stall_protection", "active", "inactive"),
-}
-_FLAG_COLS = [STATE_INDEX[c] for c in _FLAG_EVENTS]
-_FLAG_KINDS = tuple(_FLAG_EVENTS.values())  # by column of _FLAG_COLS
 #: disk kept free during a run (``DiskReserve``) for closing its files on a full
 #: disk, and separately for the final summary.json
 RESERVE_BYTES = 8 * 1024 * 1024
@@ -129,9 +121,7 @@ class Run:
         hz = scn.rates.physics_hz
         events = EventLog(out / "events.jsonl", hz)
         states_log = StateLog(out / "states.parquet", ids, scn.origin.frame, hz)
-        k, every_log, total = scn.rates.control_every, scn.rates.log_every, scn.total_ticks
-        channels = scn.channels
-        chan_index = {c: i for i, c in enumerate(channels)}
+        k, total = scn.rates.control_every, scn.total_ticks
         # items a shortened duration (with_duration, --duration-s) leaves out
         skipped = [item for item in scn.schedule if item.tick >= total]
         for item in skipped:
@@ -162,7 +152,8 @@ class Run:
             self._building = True
             if self._stop.is_set():
                 raise KeyboardInterrupt
-            pool = make_pool(scn.vehicles, scn.rates.dt_s, channels, self.backend, self.workers)
+            pool = make_pool(scn.vehicles, scn.rates.dt_s, scn.channels, self.backend,
+                             self.workers)
             with pool:  # closed however the rest of the set-up ends
                 self._building = False
                 self.pool = pool
@@ -170,36 +161,12 @@ class Run:
                 startup_s = time.perf_counter() - wall0
                 log.info("%d vehicles ready in %.2f s on %d worker(s)", len(ids), startup_s,
                          workers_used)
-                start_ned = np.stack(scn.origin.frame.geodetic_to_ned(
-                    [v.lat_deg for v in scn.vehicles], [v.lon_deg for v in scn.vehicles],
-                    [v.alt_msl_m for v in scn.vehicles]), axis=1)
-                start_ne = start_ned[:, :2].copy()
-                guidance = FixedWingGuidance(len(ids), scn.origin.frame, start_ne, chan_index) \
-                    if scn.autopilot else None
-                labels = guidance.labels if guidance is not None else None
-                if self.mavlink_config is not None:
-                    from cosim.mavlink import MavlinkLinks
-
-                    self.mavlink = MavlinkLinks(scn.vehicles, hz, self.mavlink_config,
-                                                tlog_dir=out, autopilot=scn.autopilot)
-                    for url, specs, (host, port) in zip(self.mavlink.urls, self.mavlink.specs,
-                                                         self.mavlink.local_addresses):
-                        if url is not None:
-                            log.info("MAVLink: vehicles %s..%s (system ids 1..%d) on %s "
-                                     "(local %s:%d)", ids[specs[0].row], ids[specs[-1].row],
-                                     len(specs), url, host, port)
-                self.participants = build_participants(
-                    scn, skip=("swarm",) if self.external_controller else ())
-                ctx = RunContext(scn, out, ids, scn.origin.frame, start_ned, hz, k, events,
-                                 self.mavlink, workers_used)
-                for part in self.participants:
-                    part.start(ctx)
+                before, during, after, logger, status_events = self._parts(
+                    pool, events, states_log, ids, total)
                 states = pool.states
-                status = states[:, _STATUS].copy()
-                flags = states[:, _FLAG_COLS].copy()
-                self._status_events(events, 0, states, np.zeros_like(status), ids)
-                states_log.append(0, states, labels)
-                pending = [item for item in scn.schedule if item.tick < total]
+                status_events.start(states)
+                logger.record(0, states)
+                copy_states = bool(self.participants)  # they keep the states at ``tick``
                 loop0 = time.perf_counter()
                 if self.pacer:
                     self.pacer.start()
@@ -207,56 +174,19 @@ class Run:
                     if self._stop.is_set():
                         reason = self._stop_reason
                         break
-                    while pending and pending[0].tick <= tick:
-                        item = pending.pop(0)
-                        rows = list(item.vehicles)
-                        for name, value in item.sets:
-                            pool.setpoints[rows, chan_index[name]] = value
-                        if item.command is not None and guidance is not None:
-                            if self.mavlink is not None:  # the vehicles' MAVLink state follows
-                                for r in rows:
-                                    self.mavlink.local_command(r, item.command)
-                            guidance.command(rows, item.command, states, pool.setpoints)
-                        events.emit("schedule", tick, vehicle=None, vehicles=len(rows),
-                                    **({"set": dict(item.sets)} if item.sets else {}),
-                                    **({"command": item.command.source} if item.command else {}))
-                    if self.mavlink is not None:  # the same command path as the schedule
-                        for vc in self.mavlink.receive(tick, states):
-                            if guidance is not None:
-                                guidance.command([vc.row], vc.command, states, pool.setpoints)
-                            events.emit("mavlink_command", tick, vehicle=ids[vc.row],
-                                        origin=vc.origin, command=vc.command.source)
-                    if guidance is not None:
-                        for ge in guidance.update(states, pool.setpoints):
-                            events.emit(ge.kind, tick, vehicle=ids[ge.vehicle], **ge.fields)
-                    # telemetry and participants work on the states at ``tick`` while
-                    # the workers step (they see a copy: the step overwrites ``states``)
-                    at_tick = states.copy() if self.participants else states
+                    for step in before:  # commands, then guidance: setpoints
+                        step(tick, states, pool.setpoints)
+                    at_tick = states.copy() if copy_states else states  # the step overwrites
                     pool.send(k)
-                    if self.mavlink is not None:
-                        self.mavlink.send_telemetry(tick)
-                    for part in self.participants:
-                        part.on_exchange(tick, at_tick)
+                    for work in during:  # telemetry, controllers, cameras: while it steps
+                        work(tick, at_tick)
                     states = pool.wait(self.step_timeout_s)
                     tick += k
-                    new_status = states[:, _STATUS]
-                    if not np.array_equal(new_status, status):
-                        self._status_events(events, tick, states, status, ids)
-                        status = new_status.copy()
-                    new_flags = states[:, _FLAG_COLS]
-                    if not np.array_equal(new_flags, flags):
-                        self._flag_events(events, tick, new_flags, flags, ids)
-                        flags = new_flags.copy()
-                    if tick % every_log == 0:
-                        states_log.append(tick, states, labels)
-                    if self.pacer:
-                        self.pacer.pace(tick / hz)
-                    if self.progress:
-                        self.progress(tick, total)
+                    for record in after:  # events, logs, pacing, progress
+                        record(tick, states)
                 else:
                     reason = "completed"
-                if states_log.last_tick != tick:  # the tick the run ends on, once
-                    states_log.append(tick, states, labels)
+                logger.last(tick, states)
                 loop_s = time.perf_counter() - loop0
         except WorkerDied as e:
             reason, error = "worker_failure", e
@@ -361,6 +291,50 @@ class Run:
                 log.warning("could not write track.png: %s", e)
         return RunResult(out, reason, tick, summary, error)
 
+    def _parts(self, pool: Pool, events: EventLog, states_log: StateLog, ids: list[str],
+               total: int) -> tuple[list[Any], list[Any], list[Any], StateLogger,
+                                    StatusEvents]:
+        """The run's participants, started: the steps the loop calls before,
+        during and after each pool step (``cosim.sync.parts``)."""
+        scn = self.scn
+        hz = scn.rates.physics_hz
+        start_ned = np.stack(scn.origin.frame.geodetic_to_ned(
+            [v.lat_deg for v in scn.vehicles], [v.lon_deg for v in scn.vehicles],
+            [v.alt_msl_m for v in scn.vehicles]), axis=1)
+        commander = Commander(scn, scn.origin.frame, start_ned[:, :2].copy(),
+                              {c: i for i, c in enumerate(pool.channels)})
+        before: list[Any] = [parts.Schedule([i for i in scn.schedule if i.tick < total],
+                                            commander, events).before_step]
+        during: list[Any] = []
+        if self.mavlink_config is not None:
+            from cosim.mavlink import MavlinkLinks
+
+            self.mavlink = MavlinkLinks(scn.vehicles, hz, self.mavlink_config, tlog_dir=self.out)
+            for url, specs, (host, port) in zip(self.mavlink.urls, self.mavlink.specs,
+                                                 self.mavlink.local_addresses):
+                if url is not None:
+                    log.info("MAVLink: vehicles %s..%s (system ids 1..%d) on %s (local %s:%d)",
+                             ids[specs[0].row], ids[specs[-1].row], len(specs), url, host,
+                             port)
+            mav_part = parts.MavlinkPart(self.mavlink, commander, events, ids)
+            before.append(mav_part.before_step)
+            during.append(mav_part.on_exchange)
+        if commander.active:
+            before.append(parts.Guidance(commander, events, ids).before_step)
+        self.participants = build_participants(
+            scn, skip=("swarm",) if self.external_controller else ())
+        ctx = RunContext(scn, self.out, ids, scn.origin.frame, start_ned, hz,
+                         scn.rates.control_every, events, self.mavlink, pool.workers)
+        for part in self.participants:
+            part.start(ctx)
+            during.append(part.on_exchange)
+        index = {f.name: j for j, f in enumerate(pool.layout)}
+        status_events = parts.StatusEvents(scn, index, events, ids)
+        logger = parts.StateLogger(states_log, scn.rates.log_every, commander)
+        after = [status_events.after_step, logger.after_step,
+                 parts.Clock(self.pacer, self.progress, hz, total).after_step]
+        return before, during, after, logger, status_events
+
     @staticmethod
     def _end_fault_log(f: Any, was_enabled: bool) -> None:
         """Stop writing faulthandler.log (removed if empty); restore faulthandler
@@ -374,27 +348,6 @@ class Run:
                 os.unlink(f.name)
         except OSError:
             pass
-
-    def _status_events(self, events: EventLog, tick: int, states: np.ndarray,
-                       old: np.ndarray, ids: list[str]) -> None:
-        for i in np.flatnonzero(states[:, _STATUS] != old).tolist():
-            st = VehicleStatus(int(states[i, _STATUS]))
-            if st in _EVENT_OF_STATUS:
-                row = states[i]
-                events.emit(_EVENT_OF_STATUS[st], tick, vehicle=ids[i],
-                            lat_deg=row[STATE_INDEX["lat_deg"]],
-                            lon_deg=row[STATE_INDEX["lon_deg"]],
-                            alt_msl_m=row[STATE_INDEX["alt_msl_m"]],
-                            vd_mps=row[STATE_INDEX["vd_mps"]],
-                            airspeed_mps=row[STATE_INDEX["airspeed_mps"]])
-                log.warning("tick %d: vehicle %s: %s (frozen)", tick, ids[i],
-                            _EVENT_OF_STATUS[st])
-
-    def _flag_events(self, events: EventLog, tick: int, new: np.ndarray, old: np.ndarray,
-                     ids: list[str]) -> None:
-        for i, j in np.argwhere(new != old).tolist():
-            kind, on, off = _FLAG_KINDS[j]
-            events.emit(kind, tick, vehicle=ids[i], phase=on if new[i, j] else off)
 
     def _summary(self, reason: str, tick: int, startup_s: float, loop_s: float, workers: int,
                  counts: dict[str, int], rows: int, error: BaseException | None

@@ -183,7 +183,7 @@ schedule:
      r"deg bank limit\)"),
     ("a", "{bank_limit_deg: 20, goto: {north_m: 0, loiter_radius_m: 400}}",
      r"below the minimum turn radius of a \(\d+ m at 100 kt and a 20 deg bank limit\)"),
-    ("f", "{heading_deg: 5}", r"model f16 has no cosim autopilot profile"),
+    ("f", "{heading_deg: 5}", r"model f16 \(class jsbsim\) takes no commands"),
     ("a", "{goto: {north_m: 1}, heading_deg: 3}", r"heading_deg and goto conflict"),
     ("a", "{goto: {frame: start, lat_deg: 37, lon_deg: -122}}",
      r"frame: start takes north_m/east_m offsets"),

@@ -15,8 +15,8 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")  # before mavutil picks its dialect
 mavutil = pytest.importorskip("pymavlink.mavutil")
 
-from cosim.fdm_pool.spec import N_STATE, STATE_INDEX  # noqa: E402
 from cosim.mavlink import MavlinkConfig, MavlinkEndpoint, MavVehicleSpec  # noqa: E402
+from cosim.vehicles.spec import N_STATE, STATE_INDEX  # noqa: E402
 
 S = STATE_INDEX
 PHYSICS_HZ = 120.0
@@ -52,10 +52,18 @@ def state_rows(n: int) -> np.ndarray:
     return s
 
 
-def vehicle_specs(n: int, **kw: Any) -> list[MavVehicleSpec]:
+def vehicle_specs(n: int, has_autopilot: bool = True, **kw: Any) -> list[MavVehicleSpec]:
+    """n fixed-wing vehicles (ArduPlane; ``has_autopilot=False``: a plain JSBSim
+    model's personality, no autopilot)."""
+    from cosim.vehicles.fixed_wing import DEFAULT_MIN_ALT_AGL_M, FIXED_WING
+    from cosim.vehicles.plain import PLAIN
+
+    cls = FIXED_WING if has_autopilot else PLAIN
+    kw.setdefault("min_alt_agl_m", DEFAULT_MIN_ALT_AGL_M)
     return [MavVehicleSpec(row=i, sysid=i + 1, name=f"uav{i + 1}", start_lat_deg=start_of(i)[0],
                            start_lon_deg=start_of(i)[1], start_alt_msl_m=START_ALT_M,
-                           home_alt_msl_m=HOME_ALT_M, **kw) for i in range(n)]
+                           home_alt_msl_m=HOME_ALT_M, personality=cls.mavlink,
+                           vehicle_class=cls.name, **kw) for i in range(n)]
 
 
 class GroundStation:

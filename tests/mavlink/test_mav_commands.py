@@ -10,9 +10,9 @@ import pytest
 from mavtest import HOME_ALT_M, START_ALT_M, S, mavutil, of_type, start_of, state_rows
 
 from cosim.geo import LocalFrame
-from cosim.guidance import AP_CHANNELS, FixedWingGuidance
-from cosim.mavlink import PlaneMode
 from cosim.mavlink.adapter import make_message
+from cosim.vehicles.fixed_wing.guidance import AP_CHANNELS, FixedWingGuidance
+from cosim.vehicles.fixed_wing.mavlink import PlaneMode
 
 ML = mavutil.mavlink
 ACCEPTED, DENIED, UNSUPPORTED, FAILED = (ML.MAV_RESULT_ACCEPTED, ML.MAV_RESULT_DENIED,

@@ -28,11 +28,11 @@ import pytest
 from mavtest import PHYSICS_HZ, mavutil, state_rows, vehicle_specs
 
 from cosim.geo import LocalFrame
-from cosim.guidance import AP_CHANNELS, FixedWingGuidance
 from cosim.mavlink import MavlinkConfig, MavlinkEndpoint
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.handlers import Handler
 from cosim.mavlink.params import PARAM_DEFS
+from cosim.vehicles.fixed_wing.guidance import AP_CHANNELS, FixedWingGuidance
 
 ML = mavutil.mavlink
 MESSAGES = 3000  # random ones, after the sweep of every field's extremes

@@ -10,16 +10,17 @@ import pytest
 from mavtest import ANCHOR_US, PHYSICS_HZ, GroundStation, of_type, state_rows
 
 from cosim.errors import ConfigError
-from cosim.fdm_pool.spec import VehicleSpec
 from cosim.mavlink import MavlinkConfig, MavlinkLinks, link_specs
 from cosim.mavlink.links import link_urls
+from cosim.vehicles.spec import VehicleSpec
 
 
 def _vehicles(n: int) -> list[VehicleSpec]:
     return [VehicleSpec(id=f"v{i:03d}", model="uav700", aircraft_dir="", model_source="cosim",
                         lat_deg=47.0 + 1e-4 * i, lon_deg=8.0, alt_msl_m=1000.0,
                         heading_deg=0.0, airspeed_mps=40.0, terrain_alt_m=400.0,
-                        profile={"class": "fixed_wing"}) for i in range(n)]
+                        profile={"class": "fixed_wing"}, vehicle_class="fixed_wing")
+            for i in range(n)]
 
 
 def test_specs_and_urls_per_link() -> None:

@@ -20,7 +20,6 @@ from mavtest import (
 )
 
 from cosim.errors import ConfigError
-from cosim.fdm_pool.spec import VehicleSpec
 from cosim.mavlink import (
     EndpointClosed,
     LinkError,
@@ -30,6 +29,7 @@ from cosim.mavlink import (
     mav_specs,
 )
 from cosim.mavlink.adapter import Decoder, Packer
+from cosim.vehicles.spec import VehicleSpec
 
 ML = mavutil.mavlink
 

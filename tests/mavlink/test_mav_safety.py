@@ -15,8 +15,8 @@ from test_mav_commands import cint, long, one_ack
 
 from cosim.errors import ConfigError
 from cosim.guidance.commands import min_turn_radius_m
-from cosim.guidance.safety import DEFAULT_MIN_ALT_AGL_M
 from cosim.scenario import parse_scenario
+from cosim.vehicles.fixed_wing import DEFAULT_MIN_ALT_AGL_M
 
 ML = mavutil.mavlink
 GUIDED_FLAG = ML.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE

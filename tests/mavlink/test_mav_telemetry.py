@@ -19,8 +19,9 @@ from mavtest import (
     vehicle_specs,
 )
 
-from cosim.mavlink import DEFAULT_RATES_HZ, MavlinkConfig, MavlinkEndpoint, PlaneMode
+from cosim.mavlink import DEFAULT_RATES_HZ, MavlinkConfig, MavlinkEndpoint
 from cosim.mavlink.vehicle import MavVehicle, SimClock
+from cosim.vehicles.fixed_wing.mavlink import PlaneMode
 
 ML = mavutil.mavlink
 

@@ -14,7 +14,6 @@ import numpy as np
 import pytest
 
 from cosim.errors import ConfigError
-from cosim.fdm_pool.spec import N_STATE, STATE_INDEX
 from cosim.geo import LocalFrame
 from cosim.renderer import video
 from cosim.renderer.camera import camera_pose
@@ -25,6 +24,7 @@ from cosim.renderer.participant import CameraParticipant
 from cosim.renderer.video import have_pyav
 from cosim.scenario import parse_scenario
 from cosim.sync.participants import RunContext
+from cosim.vehicles.spec import N_STATE, STATE_INDEX
 
 LAT0, LON0, GROUND_M = 37.0, -122.0, 10.0
 

@@ -17,12 +17,10 @@ waypoints end in a loiter around the last one.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from cosim.fdm_pool.spec import STATE_INDEX
 from cosim.geo import FT_TO_M, KT_TO_MPS, LocalFrame, bearing_deg
 from cosim.guidance.commands import (
     DEFAULT_BANK_LIMIT_DEG,
@@ -32,6 +30,8 @@ from cosim.guidance.commands import (
     min_turn_radius_m,
     waypoint_accept_radius_m,
 )
+from cosim.vehicles.base import GuidanceEvent
+from cosim.vehicles.spec import STATE_INDEX
 
 #: the autopilot setpoints guidance writes (see aircraft/systems/cosim_autopilot.xml)
 AP_CHANNELS: tuple[str, ...] = (
@@ -45,14 +45,10 @@ _S = STATE_INDEX
 _M_TO_FT = 1.0 / FT_TO_M
 
 
-@dataclass
-class GuidanceEvent:
-    kind: str
-    vehicle: int
-    fields: dict[str, Any]
-
-
 class FixedWingGuidance:
+    """Guidance of a run's fixed-wing vehicles (arrays over every state row;
+    only its class's rows are ever commanded)."""
+
     def __init__(self, n: int, frame: LocalFrame, start_ne: np.ndarray,
                  channel_index: dict[str, int]) -> None:
         self.n = n

@@ -1,8 +1,11 @@
-"""One vehicle's FDM inside whichever process owns it: build, trim, step,
-read raw state, detect ground contact.
+"""The JSBSim-backed model kind: one vehicle's FDM inside whichever process
+owns it: build, trim, step, read raw state, detect ground contact.
 
 Used by every backend, so all of them step FDMs the same way. Scaling to SI
-units and the NaN check are done per shard in numpy (``shard.py``).
+units and the NaN check are done per shard in numpy
+(``cosim.fdm_pool.shard``). What ground contact means comes from the
+vehicle's class (``VehicleClass.contact_is_impact``); the columns its class
+adds (``VehicleClass.state_columns``) are read from their properties.
 """
 
 from __future__ import annotations
@@ -10,14 +13,15 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Sequence
+from typing import Any
 
 import jsbsim
 import numpy as np
 
 from cosim.errors import JSBSimError
-from cosim.fdm_pool.spec import STATE_FIELDS, VehicleSpec, VehicleStatus
 from cosim.geo import FT_TO_M, KT_TO_MPS
 from cosim.jsb import ModelInfo, has_property, new_fdm
+from cosim.vehicles.spec import STATE_FIELDS, StateField, VehicleSpec, VehicleStatus
 
 _MPS_TO_FPS = 1.0 / FT_TO_M
 _IN_TO_M = FT_TO_M / 12.0
@@ -48,10 +52,14 @@ class Vehicle:
     """A built, trimmed FDM with cached property nodes."""
 
     __slots__ = ("spec", "fdm", "_read", "_channels", "_agl", "_gear", "status", "airborne",
-                 "contact_radius_m")
+                 "contact_radius_m", "contact_is_impact", "_extra")
 
     def __init__(self, spec: VehicleSpec, dt_s: float, channels: Sequence[str]) -> None:
+        from cosim.vehicles.registry import get_class
+
         self.spec = spec
+        cls = get_class(spec.vehicle_class)
+        self.contact_is_impact = cls.contact_is_impact
         model = ModelInfo(spec.model, spec.aircraft_dir, spec.model_source, profile=spec.profile)
         fdm = new_fdm(model, dt_s)
         self.fdm = fdm
@@ -72,6 +80,7 @@ class Vehicle:
                     raise JSBSimError(f"vehicle {spec.id!r}: model {spec.model!r} lacks {f.prop}",
                                       spec.id)
                 self._read.append(node)
+        self._extra = [self._node(f, pm, spec) for f in cls.state_columns]
         self._channels = []
         for name in channels:
             node = pm.get_node(name) if has_property(fdm, name) else None
@@ -81,6 +90,18 @@ class Vehicle:
         self._agl, self._gear = agl, gear
         self.status = VehicleStatus.ACTIVE
         self.airborne = not self._touching()
+
+    def _node(self, f: StateField, pm: Any, spec: VehicleSpec) -> tuple[Any, float]:
+        """(property node, scale) of a class's own column."""
+        node = pm.get_node(f.prop) if f.prop and has_property(self.fdm, f.prop) else None
+        if node is None:
+            raise JSBSimError(f"vehicle {spec.id!r}: model {spec.model!r} lacks {f.prop} "
+                              f"(column {f.name} of class {spec.vehicle_class})", spec.id)
+        return node, f.scale
+
+    def extra_state(self) -> list[float]:
+        """The class's own columns, in SI units."""
+        return [node.get_double_value() * scale for node, scale in self._extra]
 
     def _set_ic(self) -> None:
         s, fdm = self.spec, self.fdm
@@ -132,6 +153,9 @@ class Vehicle:
                 self._run_failed()
             if self.airborne:
                 if self._touching():
+                    if not self.contact_is_impact:  # on the ground, as it should be
+                        self.airborne = False
+                        continue
                     self.status = VehicleStatus.GROUND_IMPACT
                     return
             elif not self._touching():

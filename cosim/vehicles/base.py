@@ -1,0 +1,192 @@
+"""What a vehicle class supplies: the ``VehicleClass`` base every class
+derives from (a class overrides what it has; the defaults describe a
+vehicle that flies as its model says and takes no commands).
+
+A class is found by name in the registry (``cosim.vehicles.registry``); a
+scenario vehicle is of the class its entry names (``class:``), else the one
+its model's cosim profile names (``class:`` in the profile), else
+``jsbsim`` (a JSBSim model and nothing more). Everything outside
+``cosim/vehicles/`` asks the class, never its name.
+
+Model kinds (``model_kind``):
+
+- ``"jsbsim"``: one JSBSim FDM per vehicle, built and trimmed in the worker
+  that owns it (``cosim.vehicles.jsbsim_model``), stepped one vehicle after
+  the other;
+- ``"batched"``: all vehicles of the class in a worker advanced together,
+  one vectorised call per substep (``BatchedModel``; ``make_batch``).
+
+Both are stepped by the pool in lockstep and must give the same states for
+any backend and worker count: a batched model must compute each vehicle's
+state from that vehicle's inputs alone, with operations whose result does
+not depend on the batch (elementwise arithmetic; avoid reductions across
+vehicles and functions whose vectorised and scalar paths may round
+differently).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Protocol
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from cosim.geo import LocalFrame
+    from cosim.guidance.commands import Command
+    from cosim.guidance.safety import Limits
+    from cosim.vehicles.spec import StateField, VehicleSpec
+
+
+@dataclass(frozen=True)
+class ModelChoice:
+    """The model a scenario vehicle uses, as a class resolves it: a name, the
+    folder it comes from (JSBSim kinds) and the cosim profile (class data)."""
+
+    name: str
+    aircraft_dir: str = ""
+    source: str = "cosim"
+    profile: Mapping[str, Any] | None = None
+
+
+@dataclass
+class GuidanceEvent:
+    """Something guidance noticed (``goal_reached``, ``waypoint_reached``, ...),
+    for ``events.jsonl``; ``vehicle`` is the state row."""
+
+    kind: str
+    vehicle: int
+    fields: dict[str, Any]
+
+
+class Guidance(Protocol):
+    """A class's guidance over the state rows of its vehicles: turns commands
+    into setpoints (``command``) and follows paths at every exchange
+    (``update``). It reads vehicles only through the state array and acts only
+    by writing setpoints. ``labels[row]``: the active command of each row, for
+    the ``command`` column of ``states.parquet``."""
+
+    labels: list[str]
+
+    def command(self, rows: list[int], cmd: Command, states: np.ndarray,
+                sp: np.ndarray) -> None: ...
+
+    def update(self, states: np.ndarray, sp: np.ndarray) -> list[GuidanceEvent]: ...
+
+
+class BatchedModel(Protocol):
+    """All vehicles of a batched class in one worker, built there from their
+    specs (``VehicleClass.make_batch``) and advanced together.
+
+    - ``apply(setpoints)``: a ``(m, channels)`` float64 block, NaN = leave as is;
+    - ``step(nsub)``: ``nsub`` physics substeps of ``dt_s``, vectorised;
+    - ``write_states(out)``: fill an ``(m, layout width)`` block, the status
+      column included (``VehicleStatus``); a frozen vehicle keeps its row.
+    """
+
+    def apply(self, setpoints: np.ndarray) -> None: ...
+
+    def step(self, nsub: int) -> None: ...
+
+    def write_states(self, out: np.ndarray) -> None: ...
+
+
+class VehicleClass:
+    """One kind of vehicle (see the module docstring). Subclass it, set
+    ``name``, and override what the class has."""
+
+    #: the registry key, as written in scenarios (``class: NAME``)
+    name: str = ""
+    #: one line for ``cosim models`` and the docs
+    description: str = ""
+    #: "jsbsim" or "batched" (see the module docstring)
+    model_kind: str = "jsbsim"
+    #: keys a scenario's vehicle entry may carry for this class, beyond the
+    #: common ones (id, class, model, count, formation, init, random_seed)
+    vehicle_keys: tuple[str, ...] = ("trim", "set")
+    #: state columns it fills beyond the common ones (``StateField``s; for
+    #: JSBSim kinds read from properties, for batched kinds written by the model)
+    state_columns: tuple[StateField, ...] = ()
+    #: the camera mount of a camera that names none
+    default_camera_mount: str = "nadir"
+    #: ground contact while airborne freezes the vehicle as a ground impact
+    #: (aircraft); False: driving on the ground is normal (JSBSim kinds)
+    contact_is_impact: bool = True
+    #: state flag columns whose changes are events: column -> (event, on, off)
+    flag_events: Mapping[str, tuple[str, str, str]] = {}
+
+    # -- scenario --------------------------------------------------------------
+    def resolve_model(self, model: str | None, aircraft_path: tuple[str, ...]
+                      ) -> ModelChoice:
+        """The model a vehicle entry names; ``CosimError`` (its message becomes
+        a line-numbered problem) if there is none. JSBSim kinds: a JSBSim
+        model on the aircraft search path."""
+        from cosim.errors import ConfigError
+        from cosim.jsb import find_model
+
+        if model is None:
+            raise ConfigError("missing required key 'model'")
+        m = find_model(model, aircraft_path)
+        return ModelChoice(m.name, m.aircraft_dir, m.source, m.profile)
+
+    def parse_vehicle(self, entry: Any, path: tuple[Any, ...]) -> dict[str, Any]:
+        """Read the class's own keys (``vehicle_keys``) of a scenario vehicle
+        entry: ``entry`` has ``num``, ``integer``, ``string``, ``boolean``,
+        ``has`` and ``d`` (the mapping), and reports problems with their lines
+        itself; ``ctx.err(path, message)`` reports others. The result becomes
+        ``VehicleSpec.class_params``. JSBSim kinds' ``trim`` and ``set`` are read
+        by the scenario loader."""
+        return {}
+
+    def check_start(self, spec: VehicleSpec) -> list[str]:
+        """Problems with a vehicle's start (besides the common rules)."""
+        return []
+
+    # -- model -----------------------------------------------------------------
+    def make_batch(self, specs: Sequence[VehicleSpec], dt_s: float,
+                   channels: Sequence[str]) -> BatchedModel:
+        """Batched kinds: the model of ``specs`` (in a worker)."""
+        raise NotImplementedError(f"vehicle class {self.name!r} is not batched")
+
+    # -- commands --------------------------------------------------------------
+    #: setpoint channels its guidance writes (JSBSim properties for JSBSim kinds)
+    channels: tuple[str, ...] = ()
+
+    @property
+    def commandable(self) -> bool:
+        """Whether it takes commands (the schedule's ``command:``, MAVLink, the swarm)."""
+        return False
+
+    def make_guidance(self, rows: Sequence[int], frame: LocalFrame, start_ne: np.ndarray,
+                      channel_index: Mapping[str, int]) -> Guidance:
+        """Its guidance over state rows ``rows`` (``start_ne``: every row's start)."""
+        raise NotImplementedError(f"vehicle class {self.name!r} takes no commands")
+
+    def min_alt_agl_m(self, profile: Mapping[str, Any]) -> float:
+        """How low a command may send it, above the ground."""
+        return 0.0
+
+    def command_problems(self, cmd: Command, spec: VehicleSpec, limits: Limits) -> list[str]:
+        """Why the scenario's schedule must not give ``cmd`` to ``spec``'s vehicle
+        (its model's envelope, then ``safety_problems``); empty: it may."""
+        return [f"{spec.id} ({self.name}) takes no commands"]
+
+    def safety_problems(self, cmd: Command, limits: Limits, who: str) -> list[str]:
+        """Why ``cmd`` would fly the vehicle into the ground or ask what it cannot
+        do (``cosim.guidance.safety``): asked on every command path, MAVLink's
+        included; empty: safe."""
+        return []
+
+    # -- swarm -----------------------------------------------------------------
+    def swarm_problem(self, spec: VehicleSpec) -> str | None:
+        """Why ``spec``'s vehicle cannot fly in a consensus swarm (None: it can)."""
+        return f"vehicle {spec.id!r} (class {self.name}) cannot be commanded"
+
+    # -- MAVLink ---------------------------------------------------------------
+    #: how its vehicles look on MAVLink (``cosim.mavlink.personality``), None: they
+    #: are not shown
+    mavlink: Any = None
+
+    def __repr__(self) -> str:
+        return f"<vehicle class {self.name}>"

@@ -1,0 +1,84 @@
+"""The ``fixed_wing`` class: a JSBSim fixed-wing aircraft flown by cosim's
+autopilot (JSBSim systems running at the physics rate, ``aircraft/systems``)
+through the command vocabulary (``cosim.guidance.commands``): headings,
+altitudes, airspeeds, gotos, waypoints and loiters, followed by this class's
+guidance (``guidance``: L1 path following, bank-limited turns). On MAVLink
+it is an ArduPlane (``mavlink``).
+
+A model is of this class when its cosim profile says ``class: fixed_wing``
+(``aircraft/profiles/<model>.yaml`` or ``aircraft/<model>/cosim.yaml``: the
+autopilot attachment, CL_max for stall speeds, the airspeed envelope, and
+optionally ``min_alt_agl_m``, the lowest height above the ground a command
+may ask for, 20 m unless set).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from cosim.geo import KT_TO_MPS, LocalFrame
+from cosim.guidance.commands import Command
+from cosim.guidance.safety import Limits, floor_problems, radius_problems
+from cosim.vehicles.base import Guidance, VehicleClass
+from cosim.vehicles.fixed_wing.guidance import AP_CHANNELS, FixedWingGuidance
+from cosim.vehicles.fixed_wing.mavlink import ARDUPLANE
+from cosim.vehicles.spec import VehicleSpec
+
+#: how low a fixed-wing may be commanded, above the ground (m); the study's
+#: lowest passes were 30 m above the ground
+DEFAULT_MIN_ALT_AGL_M = 20.0
+
+
+class FixedWing(VehicleClass):
+    name = "fixed_wing"
+    description = "JSBSim fixed-wing aircraft flown by cosim's autopilot (ArduPlane on MAVLink)"
+    model_kind = "jsbsim"
+    channels = AP_CHANNELS
+    default_camera_mount = "nadir"
+    contact_is_impact = True
+    flag_events = {"stalled": ("stall", "onset", "recovery"),
+                   "stall_protection_active": ("stall_protection", "active", "inactive")}
+    mavlink = ARDUPLANE
+
+    @property
+    def commandable(self) -> bool:
+        return True
+
+    def make_guidance(self, rows: Sequence[int], frame: LocalFrame, start_ne: np.ndarray,
+                      channel_index: Mapping[str, int]) -> Guidance:
+        return FixedWingGuidance(len(start_ne), frame, start_ne, dict(channel_index))
+
+    def min_alt_agl_m(self, profile: Mapping[str, Any]) -> float:
+        v = profile.get("min_alt_agl_m", DEFAULT_MIN_ALT_AGL_M)
+        return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) \
+            else DEFAULT_MIN_ALT_AGL_M
+
+    def command_problems(self, cmd: Command, spec: VehicleSpec, limits: Limits) -> list[str]:
+        """Airspeeds inside the model's envelope (its profile), then the rule of
+        every command path: no altitude below the class minimum above the
+        ground, no loiter tighter than the minimum turn radius."""
+        prof = spec.profile
+        lo, hi = prof.get("airspeed_min_kt"), prof.get("airspeed_max_kt")
+        for spd in [cmd.airspeed_mps] + [p.airspeed_mps for p in cmd.points]:
+            if spd is None:
+                continue
+            kt = spd / KT_TO_MPS
+            if (lo is not None and kt < lo - 1e-9) or (hi is not None and kt > hi + 1e-9):
+                return [f"airspeed {kt:.1f} kt is outside the envelope of {spec.model} "
+                        f"({lo:g}..{hi:g} kt TAS)"]
+        return self.safety_problems(cmd, limits, spec.id)
+
+    def safety_problems(self, cmd: Command, limits: Limits, who: str) -> list[str]:
+        return floor_problems(cmd, limits, who) + radius_problems(cmd, limits, who)
+
+    def swarm_problem(self, spec: VehicleSpec) -> str | None:
+        if "clmax" not in spec.profile:
+            return f"model {spec.model} has no clmax in its cosim profile: its stall speed " \
+                   f"is unknown"
+        return None
+
+
+FIXED_WING = FixedWing()
