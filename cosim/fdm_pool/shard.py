@@ -95,7 +95,8 @@ class Shard:
                 on_built(k)
         for name, brows in batched.items():
             shard.current = None
-            model = get_class(name).make_batch([specs[r] for r in brows], dt_s, channels)
+            model = get_class(name).make_batch([specs[r] for r in brows], dt_s, channels,
+                                               list(layout_names))
             shard.batches.append((name, model, np.asarray(brows, dtype=np.intp)))
             if on_built is not None:
                 on_built(len(specs))

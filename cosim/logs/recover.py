@@ -34,7 +34,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from cosim.errors import ConfigError
-from cosim.logs.writers import _schema, journal_batches, read_states, write_json_atomic
+from cosim.logs.writers import journal_batches, read_states, stored_schema, write_json_atomic
 
 log = logging.getLogger(__name__)
 
@@ -76,7 +76,8 @@ def _recover_states(states: Path, rec: Recovery) -> None:
     for tmp in sorted(states.glob(".part-*.tmp")):
         tmp.unlink()
         rec.actions.append(f"removed the unfinished part {tmp.name}")
-    schema = _schema()
+    schema = stored_schema(sorted(states.glob("part-*.parquet")),
+                           sorted(states.glob("_journal-*.arrows")))
     for journal in sorted(states.glob("_journal-*.arrows")):
         number = journal.name[len("_journal-"):-len(".arrows")]
         part = states / f"part-{number}.parquet"

@@ -8,6 +8,7 @@ import math
 import os
 import shutil
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +33,9 @@ _FROM_STATE = ("lat_deg", "lon_deg", "alt_msl_m", "alt_agl_m", "roll_deg", "pitc
 _FLAGS = ("ap_engaged", "stalled", "stall_protection_active", "status")
 
 
-def _schema() -> pa.Schema:
+def _schema(extra: Sequence[str] = ()) -> pa.Schema:
+    """The columns of states.parquet: ``STATE_COLUMNS``, then (float64) the
+    columns the run's vehicle classes add."""
     fields = []
     for c in STATE_COLUMNS:
         if c == "tick":
@@ -43,6 +46,7 @@ def _schema() -> pa.Schema:
             fields.append(pa.field(c, pa.int8()))
         else:
             fields.append(pa.field(c, pa.float64()))
+    fields += [pa.field(c, pa.float64()) for c in extra]
     return pa.schema(fields)
 
 
@@ -71,7 +75,8 @@ class StateLog:
     """
 
     def __init__(self, folder: Path, ids: list[str], frame: LocalFrame, physics_hz: float,
-                 flush_rows: int = 200_000, flush_s: float = 5.0) -> None:
+                 flush_rows: int = 200_000, flush_s: float = 5.0,
+                 extra: Sequence[tuple[str, int]] = ()) -> None:
         self.dir = Path(folder)
         self.dir.mkdir(parents=True, exist_ok=True)
         self.ids = pa.array(ids, pa.string())
@@ -80,7 +85,9 @@ class StateLog:
         self.physics_hz = physics_hz
         self.flush_rows = flush_rows
         self.flush_s = flush_s
-        self.schema = _schema()
+        #: the columns vehicle classes add: (name, state column), logged after ``status``
+        self.extra = list(extra)
+        self.schema = _schema([name for name, _ in self.extra])
         self._batches: list[pa.RecordBatch] = []
         self._vehicle = pa.DictionaryArray.from_arrays(
             pa.array(np.arange(self.n, dtype=np.int32)), self.ids)
@@ -110,7 +117,10 @@ class StateLog:
         cols["status"] = states[:, STATE_INDEX["status"]].astype(np.int8)
         labels = commands if commands is not None else [""] * self.n
         cols["command"] = pa.array(labels, pa.string()).dictionary_encode()
-        return pa.RecordBatch.from_arrays([cols[c] for c in STATE_COLUMNS], schema=self.schema)
+        for name, j in self.extra:
+            cols[name] = states[:, j].copy()
+        return pa.RecordBatch.from_arrays([cols[c] for c in self.schema.names],
+                                          schema=self.schema)
 
     def append(self, tick: int, states: np.ndarray, commands: list[str] | None = None) -> None:
         """Log one tick (journalled at once); ``commands``: each vehicle's
@@ -256,6 +266,20 @@ def _read_journal(path: Path) -> list[pa.RecordBatch]:
     return journal_batches(path)[0]
 
 
+def stored_schema(parts: Sequence[Path], journals: Sequence[Path] = ()) -> pa.Schema:
+    """The schema a run's states were written with (its first part's, else its
+    first journal's; the columns its classes added included)."""
+    for x in parts:
+        return pq.read_schema(x).remove_metadata()
+    for j in journals:
+        try:
+            with pa.OSFile(str(j)) as f:
+                return pa.ipc.open_stream(f).schema
+        except (ValueError, OSError):
+            continue
+    return _schema()
+
+
 def read_states(folder: str | Path) -> pa.Table:
     """Read a run's ``states.parquet`` (a file or a parts folder) as one table,
     in tick order: every part, then the ticks journalled but not yet in a part
@@ -265,13 +289,13 @@ def read_states(folder: str | Path) -> pa.Table:
         p = p / "states.parquet"
     if not p.is_dir():
         return pq.read_table(p)
-    schema = _schema()
     parts = sorted(p.glob("part-*.parquet"))
+    journals = [j for j in sorted(p.glob("_journal-*.arrows"))
+                if j.name[len("_journal-"):-len(".arrows")]
+                not in {x.name[len("part-"):-len(".parquet")] for x in parts}]
+    schema = stored_schema(parts, journals)
     tables = [pq.read_table(x, schema=schema) for x in parts]
-    done = {x.name[len("part-"):-len(".parquet")] for x in parts}
-    for j in sorted(p.glob("_journal-*.arrows")):
-        if j.name[len("_journal-"):-len(".arrows")] in done:
-            continue  # its part is in place (the crash came before the journal went)
+    for j in journals:  # (a journal whose part is in place: the crash came before it went)
         batches = _read_journal(j)
         if batches:
             tables.append(pa.Table.from_batches(batches, schema))

@@ -41,7 +41,10 @@ WIRE_PROTOCOL_VERSION: Final[str] = str(_d.WIRE_PROTOCOL_VERSION)
 # -- constants ---------------------------------------------------------------
 MAV_COMP_ID_AUTOPILOT1: Final[int] = int(_d.MAV_COMP_ID_AUTOPILOT1)
 MAV_COMP_ID_ALL: Final[int] = int(_d.MAV_COMP_ID_ALL)
+MAV_TYPE_GENERIC: Final[int] = int(_d.MAV_TYPE_GENERIC)
 MAV_TYPE_FIXED_WING: Final[int] = int(_d.MAV_TYPE_FIXED_WING)
+MAV_TYPE_QUADROTOR: Final[int] = int(_d.MAV_TYPE_QUADROTOR)
+MAV_TYPE_GROUND_ROVER: Final[int] = int(_d.MAV_TYPE_GROUND_ROVER)
 MAV_TYPE_GCS: Final[int] = int(_d.MAV_TYPE_GCS)
 MAV_AUTOPILOT_ARDUPILOTMEGA: Final[int] = int(_d.MAV_AUTOPILOT_ARDUPILOTMEGA)
 

@@ -17,6 +17,7 @@ from typing import Any
 from cosim.geo import MAX_DISTANCE_M
 from cosim.scenario.limits import MAX_NAME_CHARS, MIN_EXCHANGE_HZ
 from cosim.scenario.schema import SectionInfo
+from cosim.vehicles import get_class
 
 P = tuple[Any, ...]
 #: camera names and target ids become parts of file names (as vehicle ids)
@@ -242,7 +243,14 @@ def _camera(info: SectionInfo, d: Any, p: P, i: int) -> CameraSpec | None:
                            "width_px", "height_px", "rate_hz"))
     name = r.string("name", f"cam{i}", pattern=_NAME)
     rows = info.select(r.d.get("vehicles", "all"), p + ("vehicles",))
-    mount_raw = r.d.get("mount", "nadir")
+    mount_raw = r.d.get("mount")
+    if mount_raw is None:  # the vehicles' class's own mount
+        defaults = sorted({get_class(info.vehicles[row].vehicle_class).default_camera_mount
+                           for row in rows}) or ["nadir"]
+        if len(defaults) > 1:
+            info.err(p, f"its vehicles' classes mount cameras differently ({', '.join(defaults)})"
+                        f": give mount:")
+        mount_raw = defaults[0]
     mount, pitch = "nadir", -90.0
     if isinstance(mount_raw, dict):
         m = info.reader(mount_raw, p + ("mount",), ("pitch_deg",))

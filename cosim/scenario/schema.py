@@ -938,6 +938,13 @@ def _check_properties(ctx: _Ctx, vehicles: list[tuple[VehicleSpec, P]],
 
     def check(where: P, specs: list[VehicleSpec], props: list[tuple[str, float]],
               report: Callable[[P, str], None]) -> None:
+        batched = [s for s in specs if get_class(s.vehicle_class).model_kind != "jsbsim"]
+        specs = [s for s in specs if s not in batched]
+        for name, _ in props:  # a batched class's inputs are its channels
+            for bad in sorted({s.vehicle_class for s in batched
+                               if name not in get_class(s.vehicle_class).channels}):
+                report(where + (name,), f"{name!r} is not an input of class {bad} (its "
+                                        f"inputs: {', '.join(get_class(bad).channels) or 'none'})")
         for name, _ in props:
             missing = sorted({s.model for s in specs if not exists(s, name)})
             if missing:

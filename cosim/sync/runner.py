@@ -43,6 +43,7 @@ from cosim.sync.participants import (
     needs_mavlink,
 )
 from cosim.sync.parts import StateLogger, StatusEvents
+from cosim.vehicles.spec import STATE_FIELDS, state_layout
 
 log = logging.getLogger(__name__)
 
@@ -120,7 +121,10 @@ class Run:
         ids = [v.id for v in scn.vehicles]
         hz = scn.rates.physics_hz
         events = EventLog(out / "events.jsonl", hz)
-        states_log = StateLog(out / "states.parquet", ids, scn.origin.frame, hz)
+        layout = state_layout(scn.vehicles)
+        states_log = StateLog(out / "states.parquet", ids, scn.origin.frame, hz,
+                              extra=[(f.name, j) for j, f in enumerate(layout)
+                                     if j >= len(STATE_FIELDS)])
         k, total = scn.rates.control_every, scn.total_ticks
         # items a shortened duration (with_duration, --duration-s) leaves out
         skipped = [item for item in scn.schedule if item.tick >= total]

@@ -144,9 +144,11 @@ class VehicleClass:
         return []
 
     # -- model -----------------------------------------------------------------
-    def make_batch(self, specs: Sequence[VehicleSpec], dt_s: float,
-                   channels: Sequence[str]) -> BatchedModel:
-        """Batched kinds: the model of ``specs`` (in a worker)."""
+    def make_batch(self, specs: Sequence[VehicleSpec], dt_s: float, channels: Sequence[str],
+                   columns: Sequence[str]) -> BatchedModel:
+        """Batched kinds: the model of ``specs``, built in the worker that owns
+        them; ``channels`` name the setpoint columns, ``columns`` the state
+        array's (``STATE_FIELDS`` first, then the run's classes' own)."""
         raise NotImplementedError(f"vehicle class {self.name!r} is not batched")
 
     # -- commands --------------------------------------------------------------

@@ -12,10 +12,10 @@ import sys
 from pathlib import Path
 
 import pytest
-from conftest import install_out_of_tree
 
 from cosim.errors import ConfigError
 from cosim.fdm_pool import backend_names, backends, get_backend, make_pool
+from tests.helpers import install_out_of_tree
 
 REPO = Path(__file__).resolve().parent.parent.parent
 

@@ -1,0 +1,41 @@
+"""Helpers several test folders share (import as ``tests.helpers``)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+
+def install_out_of_tree(folder: Path, name: str, modules: dict[str, str],
+                        entry_points: dict[str, dict[str, str]]) -> Path:
+    """Build a small package ``name`` from ``modules`` (module name -> source)
+    with ``entry_points`` (group -> name -> "module:attr") and install it with
+    pip into ``folder/site`` (not into this environment); returns that folder,
+    to put on ``PYTHONPATH`` (or ``sys.path``). Offline: no build isolation."""
+    src = folder / "src"
+    src.mkdir(parents=True)
+    eps = "".join(f'\n[project.entry-points."{group}"]\n'
+                  + "".join(f'{k} = "{v}"\n' for k, v in entries.items())
+                  for group, entries in entry_points.items())
+    (src / "pyproject.toml").write_text(textwrap.dedent(f"""
+        [build-system]
+        requires = ["setuptools>=61"]
+        build-backend = "setuptools.build_meta"
+
+        [project]
+        name = "{name}"
+        version = "0.1"
+
+        [tool.setuptools]
+        py-modules = {sorted(modules)!r}
+    """).replace("'", '"') + eps)
+    for mod, code in modules.items():
+        (src / f"{mod}.py").write_text(textwrap.dedent(code))
+    site = folder / "site"
+    r = subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-deps",
+                        "--no-build-isolation", "--no-index", "--target", str(site), str(src)],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stdout + r.stderr
+    return site
