@@ -1,10 +1,12 @@
 """mavlink: every simulated vehicle as an ordinary MAVLink vehicle.
 
-Owns the MAVLink side of the simulation: vehicle identities (ArduPlane
-system ids, modes, arming, parameters), telemetry built from the state
-array and stamped with simulation time, one UDP socket for all vehicles,
-the translation of incoming commands into the fixed-wing command vocabulary
-(``cosim.guidance.commands``), and ``.tlog`` files.
+Owns the MAVLink side of the simulation: vehicle identities (system ids,
+modes, arming, parameters: what each class's personality says,
+``personality``), telemetry built from the state array and stamped with
+simulation time, one UDP socket for all vehicles, the microservices that
+turn incoming messages into replies and commands in the command vocabulary
+(``services``, routed by ``handlers``; ``cosim.guidance.commands``), and
+``.tlog`` files.
 
 It must not touch the pool, JSBSim or setpoints: it reads state rows and
 returns ``Command`` values; the runner hands them to guidance. Only

@@ -261,6 +261,34 @@ def _origin(m: mav.Message) -> str:
     return f"{what} {src}"
 
 
+@dataclass
+class _Followed:
+    """A parameter following a state column (``Personality.followed_params``)
+    on the vehicles in ``mask``, its values as last synced."""
+
+    name: str
+    column: int
+    mask: np.ndarray
+    lo: float
+    hi: float
+    last: np.ndarray
+
+
+def _followed_params(vehicles: Sequence[MavVehicle]) -> list[_Followed]:
+    pairs = sorted({(n, c) for v in vehicles for n, c in v.personality.followed_params.items()})
+    out = []
+    for name, column in pairs:
+        if column not in STATE_INDEX:
+            raise ValueError(f"parameter {name} follows {column!r}, not a state column; "
+                             f"known: {', '.join(STATE_INDEX)}")
+        mask = np.array([v.personality.followed_params.get(name) == column for v in vehicles],
+                        dtype=bool)
+        p = next(v.params.defs[v.params.index[name]] for v, m in zip(vehicles, mask) if m)
+        out.append(_Followed(name, STATE_INDEX[column], mask, p.lo, p.hi,
+                             np.full(len(vehicles), np.nan)))
+    return out
+
+
 class MavlinkEndpoint:
     """Vehicles on one MAVLink link (see the module docstring).
 
@@ -322,8 +350,7 @@ class MavlinkEndpoint:
         self._rows_needed = int(self._rows.max(initial=-1)) + 1  # state rows receive() reads
         self._zero_rates = np.zeros((len(self.vehicles), 3))
         self._prev_att: np.ndarray | None = None
-        self._bank = np.full(len(self.vehicles), np.nan)  # ROLL_LIMIT_DEG as last synced
-        self._autopilot = np.array([v.spec.has_autopilot for v in self.vehicles], dtype=bool)
+        self._followed = _followed_params(self.vehicles)
         self._sysids = np.array([v.sysid for v in self.vehicles], dtype=np.int64)
         self._home_alt = np.array([v.home[2] for v in self.vehicles], dtype=float)
         # stream schedule over all vehicles: period and next-due tick per
@@ -463,16 +490,17 @@ class MavlinkEndpoint:
             self.frame.update(mine, lambda: body_rates(prev_att, att, dt_s))
         else:  # the first exchange, or the same tick again: the rates stand
             self.frame.update(mine, self._last_rates)
-        bank = mine[:, STATE_INDEX["bank_limit_deg"]]
-        changed = self._autopilot & (bank != self._bank) & (bank >= 5.0) & (bank <= 75.0)
-        if changed.any():  # ROLL_LIMIT_DEG follows the autopilot's actual limit
-            for j in np.flatnonzero(changed).tolist():
-                v = self.vehicles[j]
-                before = v.params["ROLL_LIMIT_DEG"]
-                v.params.force("ROLL_LIMIT_DEG", float(bank[j]))
-                if v.params["ROLL_LIMIT_DEG"] != before:  # announced, as ArduPilot does
-                    self._send(v, *self.handler.param_value(v, "ROLL_LIMIT_DEG"), tick)
-            self._bank = np.where(changed, bank, self._bank)
+        for f in self._followed:  # parameters following a state column, announced
+            values = mine[:, f.column]  # on change, as ArduPilot does (ROLL_LIMIT_DEG)
+            changed = f.mask & (values != f.last) & (values >= f.lo) & (values <= f.hi)
+            if changed.any():
+                for j in np.flatnonzero(changed).tolist():
+                    v = self.vehicles[j]
+                    before = v.params[f.name]
+                    v.params.force(f.name, float(values[j]))
+                    if v.params[f.name] != before:
+                        self._send(v, *self.handler.param_value(v, f.name), tick)
+                f.last = np.where(changed, values, f.last)
         commands: list[VehicleCommand] = []
         injected, self._injected = self._injected, []
         for m in injected:

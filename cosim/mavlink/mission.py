@@ -91,9 +91,10 @@ class MissionItem:
     def lon_deg(self) -> float:
         return self.y / 1e7
 
-    def check(self) -> int:
-        """MAV_MISSION_ACCEPTED, or the MAV_MISSION_RESULT error for this item."""
-        if self.command not in SUPPORTED_COMMANDS:
+    def check(self, supported: frozenset[int] = SUPPORTED_COMMANDS) -> int:
+        """MAV_MISSION_ACCEPTED, or the MAV_MISSION_RESULT error for this item
+        (a command outside ``supported``, the vehicle's: UNSUPPORTED)."""
+        if self.command not in supported:
             return mav.MAV_MISSION_UNSUPPORTED
         if self.command in POSITION_COMMANDS:
             if self.frame not in GLOBAL_FRAMES:

@@ -23,20 +23,15 @@ from typing import Any
 
 import numpy as np
 
-from cosim.geo import KT_TO_MPS
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.mission import Mission
 from cosim.mavlink.params import ParamTable
 from cosim.mavlink.personality import Personality
+from cosim.vehicles.registry import DEFAULT_CLASS
 from cosim.vehicles.spec import STATE_INDEX, VehicleSpec, VehicleStatus
 
 _S = STATE_INDEX
 
-
-#: what ArduPlane 4.5.0 (official) would report; ground stations gate features on it
-FLIGHT_SW_VERSION = (4 << 24) | (5 << 16) | (0 << 8) | mav.FIRMWARE_VERSION_TYPE_OFFICIAL
-CAPABILITIES = (mav.CAP_MAVLINK2 | mav.CAP_COMMAND_INT | mav.CAP_PARAM_ENCODE_C_CAST
-                | mav.CAP_SET_POSITION_TARGET_GLOBAL_INT | mav.CAP_SET_POSITION_TARGET_LOCAL_NED)
 
 _SENSORS = (mav.SENSOR_GYRO | mav.SENSOR_ACCEL | mav.SENSOR_MAG | mav.SENSOR_ABS_PRESSURE
             | mav.SENSOR_DIFF_PRESSURE | mav.SENSOR_GPS | mav.SENSOR_AHRS)
@@ -55,8 +50,6 @@ DEFAULT_RATES_HZ: Mapping[str, float] = {
     "HEARTBEAT": 1.0, "GLOBAL_POSITION_INT": 5.0, "ATTITUDE": 5.0, "VFR_HUD": 2.0,
     "SYS_STATUS": 1.0, "GPS_RAW_INT": 1.0, "SYSTEM_TIME": 1.0, "MISSION_CURRENT": 1.0}
 
-#: ArduPilot's magic param2 of COMPONENT_ARM_DISARM that forces (dis)arming
-FORCE_MAGIC = 21196
 #: system ids a vehicle may take (0 is broadcast; 251..255 are left to ground stations)
 SYSID_RANGE = (1, 250)
 
@@ -123,7 +116,7 @@ class MavVehicleSpec:
     #: the class minimum height above the ground commands may ask for
     min_alt_agl_m: float = 0.0
     #: its vehicle class (the safety rule of its commands)
-    vehicle_class: str = "jsbsim"
+    vehicle_class: str = DEFAULT_CLASS
 
     @property
     def has_autopilot(self) -> bool:
@@ -134,27 +127,15 @@ class MavVehicleSpec:
 def mav_specs(vehicles: Sequence[VehicleSpec], first_sysid: int = 1,
               first_row: int = 0) -> list[MavVehicleSpec]:
     """MAVLink identities for scenario vehicles: system ids ``first_sysid``
-    upwards, each class's personality and command floor, airspeed limits
-    from each model's profile, cruise speed from its initial airspeed."""
+    upwards, each class's personality and command floor, the parameter
+    values its personality derives from the vehicle (e.g. airspeed limits)."""
     from cosim.vehicles import get_class
 
     out = []
     for k, v in enumerate(vehicles):
         cls = get_class(v.vehicle_class)
-        params: dict[str, float] = {}
-        lo_kt, hi_kt = v.profile.get("airspeed_min_kt"), v.profile.get("airspeed_max_kt")
-        lo = math.ceil(lo_kt * KT_TO_MPS) if isinstance(lo_kt, (int, float)) else None
-        hi = math.floor(hi_kt * KT_TO_MPS) if isinstance(hi_kt, (int, float)) else None
-        if lo is not None:
-            params["AIRSPEED_MIN"] = lo
-        if hi is not None:
-            params["AIRSPEED_MAX"] = hi
-        cruise = v.airspeed_mps
-        if lo is not None:
-            cruise = max(cruise, lo)
-        if hi is not None:
-            cruise = min(cruise, hi)
-        params["AIRSPEED_CRUISE"] = round(cruise, 2)
+        personality = cls.mavlink or Personality()
+        params = personality.spec_params(v)
         out.append(MavVehicleSpec(row=first_row + k, sysid=first_sysid + k, name=v.id,
                                   start_lat_deg=v.lat_deg, start_lon_deg=v.lon_deg,
                                   start_alt_msl_m=v.alt_msl_m, home_alt_msl_m=v.terrain_alt_m,
@@ -239,10 +220,11 @@ class MavVehicle:
         self.sysid = spec.sysid
         self.clock = clock
         self.packer = mav.Packer(spec.sysid)
-        self.params = ParamTable(spec.params)
-        self.params.force("SYSID_THISMAV", spec.sysid)
-        self.armed = spec.armed
         self.personality = spec.personality or Personality()
+        self.params = ParamTable(self.personality.param_defs, spec.params)
+        if "SYSID_THISMAV" in self.params:
+            self.params.force("SYSID_THISMAV", spec.sysid)
+        self.armed = spec.armed
         self.mode = self.personality.default_mode() if spec.mode is None else int(spec.mode)
         self.home = (spec.start_lat_deg, spec.start_lon_deg, spec.home_alt_msl_m)
         self.period: dict[str, int | None] = {
@@ -379,7 +361,8 @@ class MavVehicle:
         return self.mission.state(self.mode == self.personality.auto_mode)
 
     def _f_autopilot_version(self, tick: int) -> dict[str, Any]:
-        return {"capabilities": CAPABILITIES, "flight_sw_version": FLIGHT_SW_VERSION,
+        p = self.personality
+        return {"capabilities": p.capabilities, "flight_sw_version": p.flight_sw_version,
                 "middleware_sw_version": 0, "os_sw_version": 0, "board_version": 0,
                 "flight_custom_version": list(b"cosim\0\0\0"),
                 "middleware_custom_version": [0] * 8, "os_custom_version": [0] * 8,

@@ -46,7 +46,8 @@ import numpy as np
 from cosim.geo import LocalFrame
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.endpoint import CONTROLLER_SYSID
-from cosim.mavlink.params import PARAM_DEFS
+from cosim.mavlink.params import ParamTable
+from cosim.mavlink.personality import Personality
 from cosim.mavlink.vehicle import MavVehicleSpec, mav_specs
 from cosim.swarm import laws
 from cosim.swarm.config import Phase, SwarmGroup, SwarmSpec
@@ -123,7 +124,6 @@ class SwarmController:
         self.index_of_row = {r: i for i, r in enumerate(self.rows.tolist())}
         self._key: dict[tuple[int, int], int] = {}
         self.address: list[tuple[int, int]] = []
-        defaults = {p.name: float(p.default) for p in PARAM_DEFS}
         self.min_mps = np.empty(n)
         self.max_mps = np.empty(n)
         numbers = []
@@ -132,7 +132,7 @@ class SwarmController:
             li, ms = by_row[r]
             self._key[(li, ms.sysid)] = i
             self.address.append((li, ms.sysid))
-            params = {**defaults, **dict(ms.params)}
+            params = ParamTable((ms.personality or Personality()).param_defs, ms.params)
             self.min_mps[i] = params["AIRSPEED_MIN"]
             self.max_mps[i] = params["AIRSPEED_MAX"]
             bank_deg.append(params["ROLL_LIMIT_DEG"])

@@ -54,15 +54,16 @@ def state_rows(n: int) -> np.ndarray:
 
 def vehicle_specs(n: int, has_autopilot: bool = True, **kw: Any) -> list[MavVehicleSpec]:
     """n fixed-wing vehicles (ArduPlane; ``has_autopilot=False``: a plain JSBSim
-    model's personality, no autopilot)."""
+    model's personality, no autopilot; ``personality=``: another one)."""
     from cosim.vehicles.fixed_wing import DEFAULT_MIN_ALT_AGL_M, FIXED_WING
     from cosim.vehicles.plain import PLAIN
 
     cls = FIXED_WING if has_autopilot else PLAIN
     kw.setdefault("min_alt_agl_m", DEFAULT_MIN_ALT_AGL_M)
+    kw.setdefault("personality", cls.mavlink)
     return [MavVehicleSpec(row=i, sysid=i + 1, name=f"uav{i + 1}", start_lat_deg=start_of(i)[0],
                            start_lon_deg=start_of(i)[1], start_alt_msl_m=START_ALT_M,
-                           home_alt_msl_m=HOME_ALT_M, personality=cls.mavlink,
+                           home_alt_msl_m=HOME_ALT_M,
                            vehicle_class=cls.name, **kw) for i in range(n)]
 
 

@@ -31,8 +31,8 @@ from cosim.geo import LocalFrame
 from cosim.mavlink import MavlinkConfig, MavlinkEndpoint
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.handlers import Handler
-from cosim.mavlink.params import PARAM_DEFS
 from cosim.vehicles.fixed_wing.guidance import AP_CHANNELS, FixedWingGuidance
+from cosim.vehicles.fixed_wing.mavlink import ARDUPLANE, ARDUPLANE_PARAMS
 
 ML = mavutil.mavlink
 MESSAGES = 3000  # random ones, after the sweep of every field's extremes
@@ -46,8 +46,10 @@ _INT_LIMITS = {"u1": (0, 255), "i1": (-128, 127), "<u2": (0, 65535), "<i2": (-32
                "<u8": (0, 2 ** 64 - 1), "<i8": (-2 ** 63, 2 ** 63 - 1)}
 #: values handlers give meaning to: stream message ids, ArduPlane modes, arm/force
 MEANINGFUL = [0, 1, 2, 24, 30, 33, 74, 148, 242, 245, 5, 10, 11, 12, 13, 15, 21196, 65535, -1]
-HANDLED = sorted(Handler(__import__("collections").Counter(), PHYSICS_HZ)._by_name)
-COMMANDS = sorted(Handler._commands) + [0, 1, 31000, 65535, ML.MAV_CMD_DO_DIGICAM_CONTROL]
+_HANDLER = Handler(__import__("collections").Counter(), PHYSICS_HZ)
+HANDLED = sorted(_HANDLER.by_name)
+SUPPORTED = sorted(_HANDLER.commands.supported(ARDUPLANE))
+COMMANDS = SUPPORTED + [0, 1, 31000, 65535, ML.MAV_CMD_DO_DIGICAM_CONTROL]
 #: the message each handled one must be answered with (None: no answer in the protocol)
 ANSWER = {"COMMAND_LONG": "COMMAND_ACK", "COMMAND_INT": "COMMAND_ACK",
           "SET_MODE": "COMMAND_ACK", "MISSION_REQUEST_LIST": "MISSION_COUNT",
@@ -62,7 +64,7 @@ def _value(rng: random.Random, name: str, npt: str, length: int) -> Any:
     if npt.startswith("S"):  # char[n]
         choice = rng.randrange(4)
         if choice == 0:
-            return rng.choice([p.name for p in PARAM_DEFS])
+            return rng.choice([p.name for p in ARDUPLANE_PARAMS])
         if choice == 1:
             return ""
         n = int(npt[1:])
@@ -89,7 +91,7 @@ def sweep_messages(rng: random.Random) -> list[mav.Message]:
     out = []
     for name in HANDLED:
         _, _, layout = mav.wire_layout(name)
-        commands = Handler._commands if name.startswith("COMMAND") else [None]
+        commands = SUPPORTED if name.startswith("COMMAND") else [None]
         for command in commands:
             for fname, npt, length in layout:
                 if length or npt.startswith("S") or fname in ("command", "target_system",

@@ -7,7 +7,8 @@ import struct
 import pytest
 from mavtest import mavutil, of_type
 
-from cosim.mavlink.params import PARAM_DEFS, ParamTable
+from cosim.mavlink.params import ParamTable
+from cosim.vehicles.fixed_wing.mavlink import ARDUPLANE_PARAMS as PARAM_DEFS
 
 ML = mavutil.mavlink
 NAMES = [p.name for p in PARAM_DEFS]
@@ -69,7 +70,7 @@ def test_param_set_changes_the_value_and_the_behaviour(rig) -> None:
                                          ("SYSID_THISMAV", 9), ("ARMING_CHECK", float("nan"))])
 def test_param_set_refused_replies_with_the_value_in_force(rig, name: str, value: float) -> None:
     r = rig(1)
-    before = ParamTable({}).values[NAMES.index(name)] if name != "SYSID_THISMAV" else 1
+    before = ParamTable(PARAM_DEFS, {}).values[NAMES.index(name)] if name != "SYSID_THISMAV" else 1
     cmds, replies = r.request(lambda: r.gcs.mav.param_set_send(
         1, 1, name.encode(), value, ML.MAV_PARAM_TYPE_REAL32))
     v, = of_type(replies, "PARAM_VALUE")
@@ -79,11 +80,11 @@ def test_param_set_refused_replies_with_the_value_in_force(rig, name: str, value
 
 
 def test_param_overrides_are_validated() -> None:
-    assert ParamTable({"AIRSPEED_MIN": 28})["AIRSPEED_MIN"] == 28
+    assert ParamTable(PARAM_DEFS, {"AIRSPEED_MIN": 28})["AIRSPEED_MIN"] == 28
     with pytest.raises(ValueError, match="unknown MAVLink parameter 'NOPE'"):
-        ParamTable({"NOPE": 1})
+        ParamTable(PARAM_DEFS, {"NOPE": 1})
     with pytest.raises(ValueError, match="ROLL_LIMIT_DEG: 80 is outside 5..75"):
-        ParamTable({"ROLL_LIMIT_DEG": 80})
+        ParamTable(PARAM_DEFS, {"ROLL_LIMIT_DEG": 80})
 
 
 def _ftp_request(seq: int, opcode: int, session: int = 0) -> list[int]:

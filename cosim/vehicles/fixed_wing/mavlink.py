@@ -1,12 +1,71 @@
 """The fixed-wing class on MAVLink: an ArduPlane (MAV_TYPE_FIXED_WING,
-ArduPilot's autopilot type, ArduPlane's custom modes)."""
+ArduPilot's autopilot type, ArduPlane's custom modes, commands, mission
+items and parameter names), flown by cosim's autopilot.
+
+Modes: GUIDED (the default; outside guidance and ground stations steer),
+LOITER, RTL, TAKEOFF and AUTO (the mission) can be entered; MANUAL is the
+mode of a plain JSBSim model without an autopilot, which takes no commands.
+
+Commands: ARM_DISARM, NAV_RETURN_TO_LAUNCH, NAV_TAKEOFF, DO_CHANGE_SPEED,
+DO_REPOSITION, NAV_LOITER_UNLIM. Disarmed vehicles keep their engine off:
+arming restores the cruise airspeed, disarming sets throttle 0, and no other
+command carries a speed while disarmed.
+
+Missions: NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_TAKEOFF, NAV_RETURN_TO_LAUNCH
+and DO_CHANGE_SPEED, flown in AUTO as ONE ``waypoints`` command
+(``ArduPlane.mission_route`` says how each item maps). MISSION_ITEM(_INT)
+with current=2 is a guided goto (GUIDED only), current=3 an altitude change.
+
+Parameters (a small, real set: every one changes what the vehicle does):
+
+=================  =======  ========  ==================================================
+name               type     default   effect
+=================  =======  ========  ==================================================
+ARMING_CHECK       INT32    1         0: arm without pre-arm checks; otherwise arming a
+                                      crashed or diverged vehicle fails
+ALT_HOLD_RTL       INT32    10000     RTL altitude above home (cm); -1: keep altitude
+RTL_RADIUS         INT16    0         RTL loiter radius (m, <0 ccw); 0: WP_LOITER_RAD
+WP_LOITER_RAD      INT16    0         loiter radius (m, <0 ccw) for LOITER, GUIDED and
+                                      repositions without their own radius; 0 (cosim):
+                                      guidance's bank-limited default
+TKOFF_ALT          INT16    50        TAKEOFF climb target above home (m)
+AIRSPEED_CRUISE    REAL32   (model)   airspeed restored on arming and flown in RTL (m/s)
+AIRSPEED_MIN       INT16    (model)   lowest speed DO_CHANGE_SPEED/DO_REPOSITION accept
+AIRSPEED_MAX       INT16    (model)   highest speed they accept (m/s)
+ROLL_LIMIT_DEG     REAL32   45        guidance bank limit (sent as a command on change)
+STALL_PREVENTION   INT8     1         the autopilot's stall protection (sent on change)
+SYSID_THISMAV      INT16    (sysid)   read-only here (ArduPilot needs a reboot too)
+=================  =======  ========  ==================================================
+"""
 
 from __future__ import annotations
 
+import math
+from dataclasses import replace
 from enum import IntEnum
+from typing import TYPE_CHECKING, Any
 
+from cosim.geo import KT_TO_MPS, LocalFrame
+from cosim.guidance.commands import DEFAULT_BANK_LIMIT_DEG, Command, min_turn_radius_m
+from cosim.guidance.safety import Limits
 from cosim.mavlink import adapter as mav
-from cosim.mavlink.personality import Personality
+from cosim.mavlink.mission import SUPPORTED_COMMANDS, MissionItem, RoutePoint
+from cosim.mavlink.params import SYSID_THISMAV, ParamDef
+from cosim.mavlink.personality import CommandFn, Personality
+from cosim.mavlink.services.base import (
+    CommandRequest,
+    Context,
+    Outcome,
+    as_int,
+    mission_ack,
+    text,
+    vocab,
+)
+from cosim.vehicles.spec import STATE_INDEX as _S
+
+if TYPE_CHECKING:
+    from cosim.mavlink.vehicle import MavVehicle
+    from cosim.vehicles.spec import VehicleSpec
 
 
 class PlaneMode(IntEnum):
@@ -35,6 +94,27 @@ _MANUAL_MODES = {PlaneMode.MANUAL, PlaneMode.TRAINING, PlaneMode.ACRO}
 #: modes ArduPlane reports as GUIDED_ENABLED | STABILIZE_ENABLED
 _GUIDED_MODES = {PlaneMode.AUTO, PlaneMode.RTL, PlaneMode.LOITER, PlaneMode.AVOID_ADSB,
                  PlaneMode.GUIDED, PlaneMode.CIRCLE, PlaneMode.TAKEOFF, PlaneMode.THERMAL}
+#: modes a vehicle with an autopilot can be switched to by a ground station
+SETTABLE_MODES = (PlaneMode.GUIDED, PlaneMode.LOITER, PlaneMode.RTL, PlaneMode.TAKEOFF)
+#: modes in which the autopilot flies (settable ones and the mission)
+_FLYING_MODES = SETTABLE_MODES + (PlaneMode.AUTO,)
+#: ArduPilot's magic number in ARM_DISARM's param2: force (skip the checks)
+FORCE_MAGIC = 21196
+
+#: the parameter table, in index order (PARAM_VALUE.param_index)
+ARDUPLANE_PARAMS: tuple[ParamDef, ...] = (
+    ParamDef("AIRSPEED_CRUISE", mav.MAV_PARAM_TYPE_REAL32, 25.0, 1.0, 300.0),
+    ParamDef("AIRSPEED_MAX", mav.MAV_PARAM_TYPE_INT16, 100, 1, 300),
+    ParamDef("AIRSPEED_MIN", mav.MAV_PARAM_TYPE_INT16, 10, 1, 300),
+    ParamDef("ALT_HOLD_RTL", mav.MAV_PARAM_TYPE_INT32, 10000, -1, 3_000_000),
+    ParamDef("ARMING_CHECK", mav.MAV_PARAM_TYPE_INT32, 1, 0, 2 ** 31 - 1),
+    ParamDef("ROLL_LIMIT_DEG", mav.MAV_PARAM_TYPE_REAL32, DEFAULT_BANK_LIMIT_DEG, 5.0, 75.0),
+    ParamDef("RTL_RADIUS", mav.MAV_PARAM_TYPE_INT16, 0, -32767, 32767),
+    ParamDef("STALL_PREVENTION", mav.MAV_PARAM_TYPE_INT8, 1, 0, 1),
+    SYSID_THISMAV,
+    ParamDef("TKOFF_ALT", mav.MAV_PARAM_TYPE_INT16, 50, 0, 30000),
+    ParamDef("WP_LOITER_RAD", mav.MAV_PARAM_TYPE_INT16, 0, -32767, 32767),
+)
 
 
 class ArduPlane(Personality):
@@ -45,10 +125,28 @@ class ArduPlane(Personality):
     autopilot_type = mav.MAV_AUTOPILOT_ARDUPILOTMEGA
     modes = {int(m): m.name for m in PlaneMode}
     auto_mode = int(PlaneMode.AUTO)
+    hold_mode = int(PlaneMode.LOITER)
+    param_defs = ARDUPLANE_PARAMS
+    mission_items = SUPPORTED_COMMANDS
+    capabilities = (Personality.capabilities | mav.CAP_SET_POSITION_TARGET_GLOBAL_INT
+                    | mav.CAP_SET_POSITION_TARGET_LOCAL_NED)
+    #: what ArduPlane 4.5.0 (official) would report
+    flight_sw_version = (4 << 24) | (5 << 16) | (0 << 8) | mav.FIRMWARE_VERSION_TYPE_OFFICIAL
 
     def __init__(self, autopilot: bool = True) -> None:
         self.autopilot = autopilot
+        #: ROLL_LIMIT_DEG follows the autopilot's actual bank limit
+        self.followed_params = {"ROLL_LIMIT_DEG": "bank_limit_deg"} if autopilot else {}
+        self._commands: dict[int, CommandFn] = {
+            mav.MAV_CMD_COMPONENT_ARM_DISARM: self._arm_disarm,
+            mav.MAV_CMD_NAV_RETURN_TO_LAUNCH: self._rtl,
+            mav.MAV_CMD_NAV_TAKEOFF: self._nav_takeoff,
+            mav.MAV_CMD_DO_CHANGE_SPEED: self._change_speed,
+            mav.MAV_CMD_DO_REPOSITION: self._reposition,
+            mav.MAV_CMD_NAV_LOITER_UNLIM: self._loiter_unlim,
+        }
 
+    # -- heartbeat -----------------------------------------------------------------
     def default_mode(self) -> int:
         return int(PlaneMode.GUIDED if self.autopilot else PlaneMode.MANUAL)
 
@@ -66,6 +164,451 @@ class ArduPlane(Personality):
         if armed:
             bm |= mav.MAV_MODE_FLAG_SAFETY_ARMED
         return bm | mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+
+    # -- what it can fly -------------------------------------------------------------
+    def limits(self, v: MavVehicle) -> Limits:
+        row = v.row_values
+        speed = row[_S["airspeed_mps"]] if row is not None and math.isfinite(
+            row[_S["airspeed_mps"]]) else v.params["AIRSPEED_CRUISE"]
+        return Limits(v.home[2], v.spec.min_alt_agl_m, speed, v.params["ROLL_LIMIT_DEG"])
+
+    @staticmethod
+    def _radius(v: MavVehicle, name: str = "WP_LOITER_RAD") -> tuple[float | None, bool]:
+        """(radius_m or None for guidance's default, counter-clockwise)."""
+        r = v.params[name]
+        if name == "RTL_RADIUS" and r == 0:
+            r = v.params["WP_LOITER_RAD"]
+        return (abs(r) if r else None), r < 0
+
+    @staticmethod
+    def _speed_problem(v: MavVehicle, spd: float) -> str | None:
+        lo, hi = v.params["AIRSPEED_MIN"], v.params["AIRSPEED_MAX"]
+        if not lo <= spd <= hi:
+            return f"speed {spd:g} m/s outside AIRSPEED_MIN..MAX {lo:g}..{hi:g}"
+        return None
+
+    def _loiter_here(self, v: MavVehicle) -> dict[str, Any]:
+        radius, ccw = self._radius(v)
+        lo: dict[str, Any] = {}
+        if radius:
+            lo["radius_m"] = radius
+        if ccw:
+            lo["direction"] = "ccw"
+        return lo
+
+    @staticmethod
+    def _rtl_point(v: MavVehicle, row: list[float]) -> dict[str, Any]:
+        """Home at the RTL altitude (ALT_HOLD_RTL; -1: the altitude it is at)."""
+        alt_cm = v.params["ALT_HOLD_RTL"]
+        alt = float(row[_S["alt_msl_m"]]) if alt_cm < 0 else v.home[2] + alt_cm / 100.0
+        return {"lat_deg": v.home[0], "lon_deg": v.home[1], "alt_msl_m": alt}
+
+    def _no_autopilot(self, what: str, out: Outcome) -> int | None:
+        """FAILED with a STATUSTEXT for a vehicle without an autopilot."""
+        if self.autopilot:
+            return None
+        out.replies.extend(text(f"{what}: this vehicle has no autopilot"))
+        return mav.MAV_RESULT_FAILED
+
+    # -- modes ---------------------------------------------------------------------
+    def local_command(self, v: MavVehicle, cmd: Command) -> Command:
+        """One that steers the vehicle (a nav command or a heading) puts it in
+        GUIDED and so ends a mission flown in AUTO, as DO_REPOSITION does;
+        settings (speed, altitude, limits) leave the mode alone."""
+        if self.autopilot and (cmd.nav is not None or cmd.heading_deg is not None):
+            v.mode = int(PlaneMode.GUIDED)
+        return cmd
+
+    def takes_targets(self, v: MavVehicle) -> bool:
+        return self.autopilot and v.mode == PlaneMode.GUIDED  # ArduPlane: GUIDED only
+
+    def enter_mode(self, ctx: Context, v: MavVehicle, mode: int, tick: int,
+                   out: Outcome) -> int:
+        if mode == v.mode:
+            return mav.MAV_RESULT_ACCEPTED
+        refused = self._no_autopilot(self.mode_name(mode), out)
+        if refused is not None:
+            return refused
+        row = v.row_or_raise()
+        d: dict[str, Any]
+        cw_override: bool | None = None
+        if mode in (PlaneMode.GUIDED, PlaneMode.LOITER):
+            d = {"loiter": self._loiter_here(v)}
+        elif mode == PlaneMode.RTL:
+            goto = self._rtl_point(v, row)
+            radius, ccw = self._radius(v, "RTL_RADIUS")
+            if radius:
+                goto["loiter_radius_m"] = radius
+            cw_override = not ccw
+            if v.armed:
+                goto["airspeed_mps"] = v.params["AIRSPEED_CRUISE"]
+            d = {"goto": goto}
+        elif mode == PlaneMode.TAKEOFF:
+            return self._takeoff(ctx, v, v.home[2] + v.params["TKOFF_ALT"], out)
+        elif mode == PlaneMode.AUTO:
+            return ctx.fly_mission(v, v.mission.current, out)
+        elif mode == PlaneMode.MANUAL:
+            out.replies.extend(text("MANUAL: no pilot in the simulation"))
+            return mav.MAV_RESULT_FAILED
+        else:
+            out.replies.extend(text(f"{self.mode_name(mode)} is not supported by cosim"))
+            return mav.MAV_RESULT_FAILED
+        return ctx.switch_to(v, mode, d, out, self.mode_name(mode), mav.MAV_RESULT_FAILED,
+                             cw_override)
+
+    def _takeoff(self, ctx: Context, v: MavVehicle, alt_msl_m: float, out: Outcome) -> int:
+        refused = self._no_autopilot("TAKEOFF", out)
+        if refused is not None:
+            return refused
+        if not v.armed:
+            out.replies.extend(text("TAKEOFF: arm first"))
+            return mav.MAV_RESULT_FAILED
+        lo = self._loiter_here(v)
+        if float(v.row_or_raise()[_S["alt_msl_m"]]) < alt_msl_m:  # takeoff climbs, never descends
+            lo["alt_msl_m"] = alt_msl_m
+        return ctx.switch_to(v, PlaneMode.TAKEOFF, {"loiter": lo}, out, "TAKEOFF")
+
+    # -- commands ------------------------------------------------------------------
+    def command_handler(self, number: int) -> CommandFn | None:
+        return self._commands.get(number)
+
+    def supported_commands(self) -> frozenset[int]:
+        return frozenset(self._commands)
+
+    def _arm_disarm(self, ctx: Context, v: MavVehicle, req: CommandRequest, tick: int,
+                    out: Outcome) -> int:
+        want, force = as_int(req.p[0]), as_int(req.p[1]) == FORCE_MAGIC
+        if want == 1:
+            if v.armed:
+                return mav.MAV_RESULT_ACCEPTED
+            if v.params["ARMING_CHECK"] != 0 and not force and not v.prearm_ok():
+                out.replies.extend(text("PreArm: vehicle crashed or diverged"))
+                return mav.MAV_RESULT_FAILED
+            v.armed = True
+            if self.autopilot and v.mode in _FLYING_MODES:
+                cmd = vocab({"airspeed_mps": v.params["AIRSPEED_CRUISE"]})
+                if isinstance(cmd, Command):
+                    out.commands.append(cmd)
+            return mav.MAV_RESULT_ACCEPTED
+        if want == 0:
+            if not v.armed:
+                return mav.MAV_RESULT_ACCEPTED
+            if v.in_air() and not force:
+                out.replies.extend(text(f"Disarm refused in flight (param2={FORCE_MAGIC} "
+                                        f"forces)"))
+                return mav.MAV_RESULT_FAILED
+            v.armed = False
+            if self.autopilot:
+                cmd = vocab({"throttle": 0.0})
+                if isinstance(cmd, Command):
+                    out.commands.append(cmd)
+            return mav.MAV_RESULT_ACCEPTED
+        return mav.MAV_RESULT_DENIED
+
+    def _rtl(self, ctx: Context, v: MavVehicle, req: CommandRequest, tick: int,
+             out: Outcome) -> int:
+        return self.enter_mode(ctx, v, PlaneMode.RTL, tick, out)
+
+    def _nav_takeoff(self, ctx: Context, v: MavVehicle, req: CommandRequest, tick: int,
+                     out: Outcome) -> int:
+        if math.isfinite(req.z) and req.z > 0:
+            a = ctx.alt(v, req.frame, req.z)
+            if a is None or a[0] != "alt_msl_m":
+                out.replies.extend(text("TAKEOFF: altitude frame not supported"))
+                return mav.MAV_RESULT_DENIED
+            alt = a[1]
+        else:
+            alt = v.home[2] + v.params["TKOFF_ALT"]
+        return self._takeoff(ctx, v, alt, out)
+
+    def _change_speed(self, ctx: Context, v: MavVehicle, req: CommandRequest, tick: int,
+                      out: Outcome) -> int:
+        kind, spd, thr = as_int(req.p[0]), req.p[1], req.p[2]
+        refused = self._no_autopilot("change speed", out)
+        if refused is not None:
+            return refused
+        if kind not in (0, 1):  # airspeed; ground speed flown as airspeed (no wind)
+            return mav.MAV_RESULT_DENIED
+        if not v.armed:
+            out.replies.extend(text("change speed: disarmed"))
+            return mav.MAV_RESULT_FAILED
+        d: dict[str, Any]
+        if math.isfinite(spd) and spd > 0:
+            problem = self._speed_problem(v, spd)
+            if problem:
+                out.replies.extend(text(problem))
+                return mav.MAV_RESULT_DENIED
+            d = {"airspeed_mps": spd}
+        elif math.isfinite(thr) and 0 <= thr <= 100:
+            d = {"throttle": thr / 100.0}
+        else:
+            return mav.MAV_RESULT_DENIED
+        cmd = vocab(d)
+        if isinstance(cmd, str):
+            return mav.MAV_RESULT_DENIED
+        out.commands.append(cmd)
+        return mav.MAV_RESULT_ACCEPTED
+
+    @staticmethod
+    def _position(ctx: Context, v: MavVehicle, req: CommandRequest, out: Outcome
+                  ) -> tuple[dict[str, Any], str | None] | None:
+        """The horizontal point and altitude of a positional command (None: DENIED)."""
+        loc = req.location()
+        if loc is None:
+            row = v.row_or_raise()
+            loc = (float(row[_S["lat_deg"]]), float(row[_S["lon_deg"]]))
+        lat, lon = loc
+        if not (-90 <= lat <= 90 and -180 <= lon <= 180):
+            out.replies.extend(text(f"bad position {lat:g}, {lon:g}"))
+            return None
+        d: dict[str, Any] = {"lat_deg": lat, "lon_deg": lon}
+        alt_key = None
+        if math.isfinite(req.z):
+            a = ctx.alt(v, req.frame, req.z)
+            if a is None:
+                out.replies.extend(text(f"frame {req.frame} not supported"))
+                return None
+            alt_key = a[0]
+            d[a[0]] = a[1]
+        return d, alt_key
+
+    def _reposition(self, ctx: Context, v: MavVehicle, req: CommandRequest, tick: int,
+                    out: Outcome) -> int:
+        refused = self._no_autopilot("reposition", out)
+        if refused is not None:
+            return refused
+        pos = self._position(ctx, v, req, out)
+        if pos is None:
+            return mav.MAV_RESULT_DENIED
+        goto, _ = pos
+        spd, flags, radius, direction = req.p
+        if math.isfinite(spd) and spd > 0 and v.armed:
+            problem = self._speed_problem(v, spd)
+            if problem:
+                out.replies.extend(text(problem))
+                return mav.MAV_RESULT_DENIED
+            goto["airspeed_mps"] = spd
+        default_r, default_ccw = self._radius(v)
+        if math.isfinite(radius) and radius != 0:
+            goto["loiter_radius_m"] = abs(radius)
+            ccw = math.isfinite(direction) and direction != 0
+        else:
+            if default_r:
+                goto["loiter_radius_m"] = default_r
+            ccw = (math.isfinite(direction) and direction != 0) or default_ccw
+        change = (as_int(flags) or 0) & mav.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE
+        if v.mode != PlaneMode.GUIDED and not change:
+            out.replies.extend(text("reposition: switch to GUIDED first"))
+            return mav.MAV_RESULT_FAILED
+        return ctx.switch_to(v, PlaneMode.GUIDED, {"goto": goto}, out, "reposition", cw=not ccw)
+
+    def _loiter_unlim(self, ctx: Context, v: MavVehicle, req: CommandRequest, tick: int,
+                      out: Outcome) -> int:
+        refused = self._no_autopilot("loiter", out)
+        if refused is not None:
+            return refused
+        radius = req.p[2]
+        lo = self._loiter_here(v)
+        if math.isfinite(radius) and radius != 0:  # ArduPilot: negative = counter-clockwise
+            lo["radius_m"] = abs(radius)
+            lo["direction"] = "ccw" if radius < 0 else "cw"
+        z = req.z if math.isfinite(req.z) and req.z != 0 else math.nan
+        pos = self._position(ctx, v, replace(req, z=z), out)
+        if pos is None:
+            return mav.MAV_RESULT_DENIED
+        point, alt_key = pos
+        if req.location() is not None:
+            lo["center"] = {"lat_deg": point["lat_deg"], "lon_deg": point["lon_deg"]}
+        if alt_key is not None:
+            lo[alt_key] = point[alt_key]
+        return ctx.switch_to(v, PlaneMode.LOITER, {"loiter": lo}, out, "loiter")
+
+    # -- parameters ----------------------------------------------------------------
+    def spec_params(self, vehicle: VehicleSpec) -> dict[str, float]:
+        """Airspeed limits from the model's profile, the cruise speed from the
+        vehicle's initial airspeed (within them)."""
+        params: dict[str, float] = {}
+        lo_kt = vehicle.profile.get("airspeed_min_kt")
+        hi_kt = vehicle.profile.get("airspeed_max_kt")
+        lo = math.ceil(lo_kt * KT_TO_MPS) if isinstance(lo_kt, (int, float)) else None
+        hi = math.floor(hi_kt * KT_TO_MPS) if isinstance(hi_kt, (int, float)) else None
+        cruise = vehicle.airspeed_mps
+        if lo is not None:
+            params["AIRSPEED_MIN"] = lo
+            cruise = max(cruise, lo)
+        if hi is not None:
+            params["AIRSPEED_MAX"] = hi
+            cruise = min(cruise, hi)
+        params["AIRSPEED_CRUISE"] = round(cruise, 2)
+        return params
+
+    def param_problem(self, ctx: Context, v: MavVehicle, name: str, value: float) -> str | None:
+        """A value that would make a later command crash the vehicle (the RTL
+        and takeoff heights, the loiter radii), counted as unsafe."""
+        floor = v.spec.min_alt_agl_m
+        problem = None
+        if name == "ALT_HOLD_RTL" and value != -1 and value / 100.0 < floor:
+            problem = f"RTL at {value / 100:g} m above home: at least {floor:g} m (or -1)"
+        elif name == "TKOFF_ALT" and value < floor:
+            problem = f"takeoff to {value:g} m above home: at least {floor:g} m"
+        elif name in ("WP_LOITER_RAD", "RTL_RADIUS") and value != 0:
+            r_min = min_turn_radius_m(v.params["AIRSPEED_CRUISE"], v.params["ROLL_LIMIT_DEG"])
+            if abs(value) < r_min:
+                problem = (f"radius {abs(value):g} m is below the minimum turn radius "
+                           f"({r_min:.0f} m at AIRSPEED_CRUISE and ROLL_LIMIT_DEG; or 0)")
+        if problem is not None:
+            ctx.counts["commands_unsafe"] += 1
+        return problem
+
+    def param_command(self, v: MavVehicle, name: str) -> dict[str, Any] | None:
+        if not self.autopilot:
+            return None
+        if name == "ROLL_LIMIT_DEG":
+            return {"bank_limit_deg": v.params[name]}
+        if name == "STALL_PREVENTION":
+            return {"stall_protection": bool(v.params[name])}
+        return None
+
+    # -- missions ------------------------------------------------------------------
+    def item_problem(self, ctx: Context, v: MavVehicle, item: MissionItem) -> str | None:
+        """An item's altitude below the class minimum above the ground (the
+        rule of ``Context.unsafe``), counted as unsafe."""
+        if item.command not in (mav.MAV_CMD_NAV_WAYPOINT, mav.MAV_CMD_NAV_LOITER_UNLIM,
+                                mav.MAV_CMD_NAV_TAKEOFF):
+            return None
+        alt = ctx.alt(v, item.frame, item.z)
+        if alt is None:
+            return None
+        agl = alt[1] if alt[0] == "alt_agl_m" else alt[1] - v.home[2]
+        if agl >= v.spec.min_alt_agl_m - 1e-6:
+            return None
+        ctx.counts["commands_unsafe"] += 1
+        return (f"at {agl:.0f} m above the ground refused (at least "
+                f"{v.spec.min_alt_agl_m:g} m)")
+
+    def mission_route(self, ctx: Context, v: MavVehicle, start: int
+                      ) -> tuple[Command, list[RoutePoint]] | str:
+        """The ``waypoints`` command flying items ``start``.. and the route it flies.
+
+        NAV_WAYPOINT: a point; NAV_LOITER_UNLIM: the last point, loitered around
+        (its radius and direction); NAV_RETURN_TO_LAUNCH: home at the RTL
+        altitude, loitered around (RTL_RADIUS); items after those two are never
+        reached, as in ArduPlane. DO_CHANGE_SPEED sets the airspeed of the
+        following points (before one: AIRSPEED_CRUISE; none while disarmed).
+        NAV_TAKEOFF: skipped by a vehicle in the air (cosim's vehicles start
+        flying); on the ground, a point 1 km ahead on its heading at the
+        takeoff altitude. The loiter at the end of a mission without one is
+        around its last point (``waypoints`` always ends in a loiter).
+        """
+        row = v.row_or_raise()
+        here = (float(row[_S["lat_deg"]]), float(row[_S["lon_deg"]]))
+        prev = here
+        speed = v.params["AIRSPEED_CRUISE"] if v.armed else None
+        radius, ccw = self._radius(v)
+        points: list[dict[str, Any]] = []
+        route: list[RoutePoint] = []
+        for it in v.mission.items[start - 1:]:
+            c = it.command
+            if c == mav.MAV_CMD_DO_CHANGE_SPEED:
+                if it.param2 > 0 and v.armed:
+                    problem = self._speed_problem(v, it.param2)
+                    if problem:
+                        return f"item {it.seq}: {problem}"
+                    speed = it.param2
+                continue
+            end = False
+            p: dict[str, Any]
+            if c == mav.MAV_CMD_NAV_RETURN_TO_LAUNCH:
+                p = self._rtl_point(v, row)
+                radius, ccw = self._radius(v, "RTL_RADIUS")
+                end = True
+            else:
+                a = ctx.alt(v, it.frame, it.z)
+                if a is None:
+                    return f"item {it.seq}: frame {it.frame} not supported"
+                if c == mav.MAV_CMD_NAV_TAKEOFF:
+                    if v.in_air():
+                        continue
+                    psi = math.radians(float(row[_S["yaw_deg"]]))
+                    lat, lon = LocalFrame(here[0], here[1], v.home[2]).place(
+                        1000.0 * math.cos(psi), 1000.0 * math.sin(psi), v.home[2])
+                    p = {"lat_deg": float(lat), "lon_deg": float(lon)}
+                elif it.x == 0 and it.y == 0:  # ArduPilot: "here" (the previous point)
+                    p = {"lat_deg": prev[0], "lon_deg": prev[1]}
+                else:
+                    p = {"lat_deg": it.lat_deg, "lon_deg": it.lon_deg}
+                p[a[0]] = a[1]
+                if c == mav.MAV_CMD_NAV_LOITER_UNLIM:
+                    if it.param3 != 0:  # negative: counter-clockwise
+                        radius, ccw = abs(it.param3), it.param3 < 0
+                    end = True
+            if speed is not None:
+                p["airspeed_mps"] = speed
+            points.append(p)
+            prev = (p["lat_deg"], p["lon_deg"])
+            route.append(RoutePoint(it.seq, p["lat_deg"], p["lon_deg"]))
+            if end:
+                break
+        if not points:
+            return "no navigation items left in the mission"
+        wp: dict[str, Any] = {"points": points}
+        if radius:
+            wp["loiter_radius_m"] = radius
+        cmd = vocab({"waypoints": wp})
+        if isinstance(cmd, str):
+            return cmd
+        last = route[-1]
+        route[-1] = RoutePoint(last.seq, last.lat_deg, last.lon_deg, True, radius)
+        return replace(cmd, loiter_cw=not ccw), route
+
+    def guided_item(self, ctx: Context, v: MavVehicle, m: mav.Message, item: MissionItem,
+                    current: int) -> Outcome:
+        """current=2: "fly to here" in GUIDED (MAVProxy's and older stations'
+        guided goto); current=3: change the altitude (GUIDED and the other
+        autopilot modes). Answered with a MISSION_ACK."""
+        out = Outcome()
+        alt = ctx.alt(v, item.frame, item.z)
+        if current == 3:
+            if not self.autopilot or v.mode not in _FLYING_MODES or alt is None:
+                out.replies.append(mission_ack(m, mav.MAV_MISSION_ERROR))
+                ctx.counts["commands_refused"] += 1
+                return out
+            return self._guided_answer(ctx, v, m, {alt[0]: alt[1]}, "change altitude", out)
+        if not self.autopilot or v.mode != PlaneMode.GUIDED:
+            out.replies.extend(text("guided goto: switch to GUIDED first"))
+            out.replies.append(mission_ack(m, mav.MAV_MISSION_ERROR))
+            ctx.counts["commands_refused"] += 1
+            return out
+        result = item.check() if item.command == mav.MAV_CMD_NAV_WAYPOINT \
+            else mav.MAV_MISSION_UNSUPPORTED
+        if result != mav.MAV_MISSION_ACCEPTED or alt is None:
+            out.replies.append(mission_ack(m, result if result != mav.MAV_MISSION_ACCEPTED
+                                           else mav.MAV_MISSION_UNSUPPORTED_FRAME))
+            ctx.counts["commands_refused"] += 1
+            return out
+        goto: dict[str, Any] = {"lat_deg": item.lat_deg, "lon_deg": item.lon_deg, alt[0]: alt[1]}
+        radius, ccw = self._radius(v)
+        if radius:
+            goto["loiter_radius_m"] = radius
+        return self._guided_answer(ctx, v, m, {"goto": goto}, "guided goto", out, cw=not ccw)
+
+    @staticmethod
+    def _guided_answer(ctx: Context, v: MavVehicle, m: mav.Message, d: dict[str, Any],
+                       what: str, out: Outcome, cw: bool | None = None) -> Outcome:
+        """A guided item's command from vocabulary mapping ``d``, answered with a
+        MISSION_ACK: ERROR if the vocabulary refuses it, INVALID_PARAM7 if it
+        would crash (``unsafe``), else ACCEPTED."""
+        cmd = vocab(d)
+        problem = cmd if isinstance(cmd, str) else ctx.unsafe(v, cmd)
+        if problem is not None or isinstance(cmd, str):
+            out.replies.extend(text(f"{what}: {problem}"))
+            out.replies.append(mission_ack(m, mav.MAV_MISSION_ERROR if isinstance(cmd, str)
+                                           else mav.MAV_MISSION_INVALID_PARAM7))
+            ctx.counts["commands_refused"] += 1
+            return out
+        out.commands.append(cmd if cw is None else replace(cmd, loiter_cw=cw))
+        out.replies.append(mission_ack(m, mav.MAV_MISSION_ACCEPTED))
+        return out
 
 
 #: the fixed-wing class's personality, and a plain JSBSim model's
