@@ -24,7 +24,6 @@ from __future__ import annotations
 import json
 import logging
 import math
-import multiprocessing as mp
 import platform
 import sys
 import time
@@ -35,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from cosim import workers as worker_kit
 from cosim.errors import CosimError
 from cosim.fdm_pool import get_backend, make_pool
 from cosim.fdm_pool.process import default_workers, shard_bounds
@@ -99,15 +99,14 @@ class _Ceiling:
 
     def __init__(self, specs: list[VehicleSpec], dt_s: float, ticks: int, k: int,
                  workers: int, build_timeout_s: float | None = None) -> None:
-        ctx = mp.get_context("spawn")
+        ctx = worker_kit.context()
         self.procs: list[Any] = []
         self.conns: list[Connection] = []
         try:
             for a, b in shard_bounds(len(specs), workers):
                 mine, theirs = ctx.Pipe()
-                p = ctx.Process(target=_ceiling_worker, daemon=True,
-                                args=(specs[a:b], dt_s, ticks, k, theirs))
-                p.start()
+                p = worker_kit.start(_ceiling_worker, (specs[a:b], dt_s, ticks, k, theirs),
+                                  name=f"cosim-ceiling-{len(self.procs)}")
                 theirs.close()
                 self.procs.append(p)
                 self.conns.append(mine)
@@ -163,11 +162,7 @@ class _Ceiling:
                 c.send(None)
             except OSError:  # it is gone already
                 pass
-        for p in self.procs:
-            p.join(5)
-            if p.is_alive():
-                p.kill()
-                p.join(1)
+        worker_kit.stop(self.procs, 5.0)
         for c in self.conns:
             c.close()
 

@@ -15,31 +15,27 @@ becomes ``WorkerDied`` within a fraction of a second; a child whose parent
 died exits by itself. An exception inside a child comes back as
 ``WorkerError`` carrying the vehicle, the tick and the remote traceback.
 
-Children never act on SIGINT or SIGTERM: a signal sent to the whole process
-group (Ctrl-C in a terminal, ``timeout``, systemd) reaches the driver, which
-stops the run cleanly and then stops its children. Both signals are blocked
-while a child is started (the mask survives spawn's exec) and the child
-ignores them before unblocking them, so not even its start-up can be hit.
-Children log like the driver: its levels for ``cosim`` and ``cosim.jsbsim``
-and the format of its stream handler are passed to them.
+Children are started by ``cosim.workers.start``: they never act on SIGINT
+or SIGTERM (a signal sent to the whole process group, Ctrl-C in a terminal,
+``timeout``, systemd, reaches the driver, which stops the run cleanly and
+then stops its children; the signals are blocked from before a child's
+start until it ignores them, so not even its start-up can be hit) and they
+log like the driver.
 """
 
 from __future__ import annotations
 
 import atexit
 import logging
-import multiprocessing as mp
 import os
-import signal
-import sys
 import time
-import traceback
 from collections.abc import Sequence
 from multiprocessing.connection import Connection
 from typing import Any
 
 import numpy as np
 
+from cosim import workers as worker_kit
 from cosim.errors import BuildError, WorkerDied, WorkerError, WorkerTimeout
 from cosim.fdm_pool.base import BuildProgress, Pool
 from cosim.fdm_pool.shard import Shard
@@ -54,7 +50,6 @@ _CMD_STEP, _CMD_STOP = 1, 2
 _OK, _ERR = 0, 1
 _SPINS = 3000  # sched_yield spins (about 1-2 ms) before falling back to sleeping
 _LIVENESS_EVERY = 256
-_STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}  # the driver's to act on, never a child's
 
 
 def default_workers() -> int:
@@ -85,39 +80,11 @@ class _Shared:
         self.busy_s = np.frombuffer(raw["busy"], dtype=np.float64).reshape(w, _CTRL_W)
 
 
-def _log_config() -> dict[str, Any]:
-    """How the driver logs, for its children: the effective levels of the
-    ``cosim`` and ``cosim.jsbsim`` loggers and the format of the root
-    logger's first stream handler (None: the driver configured none)."""
-    fmt = datefmt = None
-    for h in logging.getLogger().handlers:
-        if isinstance(h, logging.StreamHandler) and h.formatter is not None:
-            fmt, datefmt = h.formatter._fmt, h.formatter.datefmt
-            break
-    levels = {name: logging.getLogger(name).getEffectiveLevel()
-              for name in ("cosim", "cosim.jsbsim")}
-    return {"levels": levels, "format": fmt, "datefmt": datefmt}
-
-
-def _setup_worker_logging(cfg: dict[str, Any]) -> None:
-    for name, level in cfg["levels"].items():
-        logging.getLogger(name).setLevel(level)
-    if cfg["format"] is not None:
-        h = logging.StreamHandler(sys.stderr)
-        h.setFormatter(logging.Formatter(cfg["format"], cfg["datefmt"]))
-        logging.getLogger().handlers[:] = [h]
-
-
 def _worker_main(w: int, specs: list[VehicleSpec], start: int, stop: int, dt_s: float,
                  channels: tuple[str, ...], raw: dict[str, Any], n: int, n_workers: int,
-                 err: Connection, parent_pid: int, log_cfg: dict[str, Any],
-                 layout_names: list[str]) -> None:
-    # the driver decides when to stop: ignore the stop signals, then unblock
-    # them (the driver blocked them around our start, see ProcessPool)
-    for sig in _STOP_SIGNALS:
-        signal.signal(sig, signal.SIG_IGN)
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
-    _setup_worker_logging(log_cfg)
+                 err: Connection, layout_names: list[str]) -> None:
+    # started by cosim.workers.start: shielded from the stop signals, logging
+    # as the driver does
     sh = _Shared(raw, n, len(channels), n_workers, len(layout_names))
     ctrl = sh.ctrl[w]
     shard = Shard()
@@ -145,7 +112,7 @@ def _worker_main(w: int, specs: list[VehicleSpec], start: int, stop: int, dt_s: 
                     os.sched_yield()
                 else:
                     time.sleep(0.0002)
-                if spins % _LIVENESS_EVERY == 0 and os.getppid() != parent_pid:
+                if spins % _LIVENESS_EVERY == 0 and worker_kit.parent_gone():
                     return  # the driver is gone: do not linger as an orphan
             last = int(ctrl[_SEQ])
             if ctrl[_CMD] == _CMD_STOP:
@@ -162,7 +129,7 @@ def _worker_main(w: int, specs: list[VehicleSpec], start: int, stop: int, dt_s: 
         # be built travel as they are (the driver reports all of them together)
         ctrl[_STATUS] = _ERR
         try:
-            err.send((shard.current, traceback.format_exc(),
+            err.send((shard.current, worker_kit.remote_traceback(),
                       e if isinstance(e, BuildError) else None))
         finally:
             ctrl[_DONE] = -2
@@ -189,7 +156,7 @@ class ProcessPool(Pool):
         self._driver_steps = (w >= 2) if driver_steps is None else bool(driver_steps)
         self.bounds = shard_bounds(self.n, w)
         c = len(self.channels)
-        ctx = mp.get_context("spawn")
+        ctx = worker_kit.context()
         self._raw = {
             "states": ctx.RawArray("d", self.n * len(self.layout)),
             "setpoints": ctx.RawArray("d", max(1, self.n * c)),
@@ -207,7 +174,6 @@ class ProcessPool(Pool):
         self._errs: dict[int, Connection] = {}
         self._own: Shard | None = None
         first_child = 1 if self._driver_steps else 0
-        log_cfg = _log_config()
         # children ignore SIGTERM, so multiprocessing's own exit handler (terminate,
         # then join every daemonic child) would wait forever for a pool left open
         # or half closed: close it first (atexit runs the last registered first;
@@ -217,19 +183,11 @@ class ProcessPool(Pool):
             for i in range(first_child, w):
                 a, b = self.bounds[i]
                 r, s = ctx.Pipe(duplex=False)
-                p = ctx.Process(
-                    target=_worker_main, name=f"cosim-worker-{i}", daemon=True,
-                    args=(i, self.specs[a:b], a, b, self.dt_s, self.channels, self._raw,
-                          self.n, w, s, os.getpid(), log_cfg, layout_names))
-                # blocked until the child ignores them; in the driver, a stop
-                # signal arriving meanwhile is handled right after
-                old_mask = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
-                try:
-                    p.start()
-                    self._procs[i] = p
-                    self._errs[i] = r
-                finally:
-                    signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
+                self._procs[i] = worker_kit.start(
+                    _worker_main, (i, self.specs[a:b], a, b, self.dt_s, self.channels,
+                                   self._raw, self.n, w, s, layout_names),
+                    name=f"cosim-worker-{i}")
+                self._errs[i] = r
                 s.close()
             self._build(start_timeout_s if start_timeout_s is not None
                         else 60.0 + 0.05 * self.n)
@@ -363,15 +321,10 @@ class ProcessPool(Pool):
         for i in self._procs:
             ctrl[i, _CMD] = _CMD_STOP
             ctrl[i, _SEQ] = self._seq
-        deadline = time.monotonic() + 2.0
         for i, p in self._procs.items():
             if ctrl[i, _DONE] == -1:  # still building: it would not see the stop yet
                 p.kill()
-            p.join(max(0.0, deadline - time.monotonic()))
-        for p in self._procs.values():
-            if p.is_alive():  # stuck or stopped (children ignore SIGTERM)
-                p.kill()
-                p.join(1.0)
+        worker_kit.stop(list(self._procs.values()), 2.0)  # stuck ones are killed
         for c in self._errs.values():
             c.close()
         self._procs.clear()

@@ -10,7 +10,10 @@ physics; at most ``max_in_flight`` frames per worker are queued before the
 loop waits. ``render_workers: 0`` renders inline (the reference). Frames are a
 pure function of the scenario, seed, pose and tick, hence identical for any
 worker count. ``finish`` drains every queued frame and closes the files; a
-worker also closes its files if the loop's process disappears.
+worker also closes its files if the loop's process disappears. Workers are
+started by ``cosim.workers.start``: Ctrl-C reaches the loop, which ends the
+run and then ``finish`` closes every video, rather than the workers dying
+mid-write.
 
 Failures end the run, naming what failed: a stream that cannot be opened or
 written (``RenderError``: camera, vehicle, tick, the worker's traceback) and
@@ -26,7 +29,6 @@ from __future__ import annotations
 import csv
 import hashlib
 import logging
-import multiprocessing as mp
 import os
 import queue
 import time
@@ -40,6 +42,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from cosim import workers as worker_kit
 from cosim.errors import CosimError, how_it_ended
 from cosim.renderer.camera import camera_pose
 from cosim.renderer.config import CameraSpec, CamerasSpec, GroundSpec
@@ -162,7 +165,7 @@ class RenderWorker:
                 self.writers[s.index] = StreamWriter(out_dir, s, codec, digest)
             except Exception as e:  # say which stream; keep what is open closed
                 self.close()
-                raise StreamFailed(s.index, traceback.format_exc()) from e
+                raise StreamFailed(s.index, worker_kit.remote_traceback()) from e
         self.target_ids = [t.id for t in world_spec.targets]
         self.frames = {s.index: np.empty((s.camera.height_px, s.camera.width_px, 4), np.uint8)
                        for s in streams}  # one reused (BGRA) frame buffer per stream
@@ -196,7 +199,6 @@ class StreamFailed(Exception):
 def _worker_main(world_spec: WorldSpec, streams: list[Stream], out_dir: str, codec: str,
                  digest: bool, jobs: Any, results: Connection) -> None:
     cv2.setNumThreads(1)
-    parent = os.getppid()
     try:
         w = RenderWorker(world_spec, streams, Path(out_dir), codec, digest)
     except StreamFailed as e:
@@ -205,7 +207,7 @@ def _worker_main(world_spec: WorldSpec, streams: list[Stream], out_dir: str, cod
         return
     except BaseException:
         results.send(("error", streams[0].index if streams else -1, None,
-                      traceback.format_exc()))
+                      worker_kit.remote_traceback()))
         results.send(("done", {}))
         return
     try:
@@ -213,7 +215,7 @@ def _worker_main(world_spec: WorldSpec, streams: list[Stream], out_dir: str, cod
             try:
                 job = jobs.get(timeout=1.0)
             except queue.Empty:
-                if os.getppid() != parent:  # the loop's process is gone: keep what we have
+                if worker_kit.parent_gone():  # the loop's process is gone: keep what we have
                     break
                 continue
             if job is None:
@@ -222,7 +224,7 @@ def _worker_main(world_spec: WorldSpec, streams: list[Stream], out_dir: str, cod
             try:
                 thumb = w.render(stream, frame_no, tick, pose6)
             except BaseException:
-                results.send(("error", stream, tick, traceback.format_exc()))
+                results.send(("error", stream, tick, worker_kit.remote_traceback()))
                 break
             results.send(("frame", stream, frame_no, thumb))
     finally:
@@ -286,15 +288,14 @@ class CameraParticipant:
                 self.failed = RenderError(st.vehicle, st.camera.name, None, e.tb)
                 raise self.failed from None
             return
-        mpc = mp.get_context("spawn")
+        mpc = worker_kit.context()
         for k in range(n):
             q = mpc.Queue()
             reader, writer = mpc.Pipe(duplex=False)
             mine = [s for s in self.streams if s.index % n == k]
-            p = mpc.Process(target=_worker_main, name=f"cosim-render-{k}", daemon=True,
-                            args=(ws, mine, str(ctx.out_dir), self.spec.codec,
-                                  self.spec.digest, q, writer))
-            p.start()
+            p = worker_kit.start(_worker_main, (ws, mine, str(ctx.out_dir), self.spec.codec,
+                                             self.spec.digest, q, writer),
+                              name=f"cosim-render-{k}")
             writer.close()  # the worker holds the only writing end
             self.procs.append(p)
             self.jobs.append(q)
@@ -339,10 +340,10 @@ class CameraParticipant:
     def _check_workers(self) -> None:
         """Raise for a render worker that has ended (without blocking): first
         whatever it reported (a failure at start), else ``RenderWorkerDied``."""
-        ended = wait_any([p.sentinel for p in self.procs], timeout=0)
+        ended = worker_kit.ended(self.procs)
         if ended:
             self._drain()  # a worker that failed says why before it exits
-            self._died(next(k for k, p in enumerate(self.procs) if p.sentinel in ended))
+            self._died(ended[0])
 
     def _died(self, k: int) -> None:
         p = self.procs[k]
@@ -426,10 +427,7 @@ class CameraParticipant:
                     except RenderError as e:
                         error = error or e
                 waiting -= self.done
-            for p in self.procs:
-                p.join(timeout=10)
-                if p.is_alive():
-                    p.kill()
+            worker_kit.stop(self.procs, 10.0)
             for q in self.jobs:  # the workers are gone: nothing left to deliver at exit
                 q.cancel_join_thread()
                 q.close()

@@ -22,8 +22,6 @@ from __future__ import annotations
 import json
 import logging
 import math
-import multiprocessing as mp
-import multiprocessing.connection
 import os
 import time
 import traceback
@@ -32,6 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from cosim import workers as worker_kit
 from cosim.errors import ConfigError, CosimError
 from cosim.sweep.spec import Scalar, SweepSpec, format_value, read_sweep
 
@@ -167,7 +166,6 @@ def run_sweep(scenario: str | Path, out_dir: str | Path, jobs: int | None = None
     log.info("sweep %s: %d runs (%s), %d at a time, into %s", scenario, len(points),
              " x ".join(f"{len(v)} {k}" for k, v in spec.values.items() if len(v) > 1) or "1",
              jobs, out)
-    ctx = mp.get_context("spawn")
     pending = list(range(len(points)))
     running: dict[int, tuple[Any, float]] = {}
     t0 = time.monotonic()
@@ -179,12 +177,14 @@ def run_sweep(scenario: str | Path, out_dir: str | Path, jobs: int | None = None
                 o = outcomes[i]
                 logf = out / "logs" / f"{o.name}.log"
                 logf.with_suffix(".json").unlink(missing_ok=True)
-                proc = ctx.Process(target=_run_one, name=f"sweep-{o.name}",
-                                   args=(str(scenario), o.point, str(out / o.name), str(logf),
-                                         duration_s))
-                proc.start()
+                # unshielded, with its own log: Ctrl-C stops each run as it
+                # would stop a run on its own (a summary, interrupted)
+                proc = worker_kit.start(_run_one, (str(scenario), o.point, str(out / o.name),
+                                                str(logf), duration_s),
+                                     name=f"sweep-{o.name}", shielded=False,
+                                     inherit_logging=False, daemon=False)
                 running[i] = (proc, time.monotonic())
-            multiprocessing.connection.wait([p.sentinel for p, _ in running.values()], timeout=5.0)
+            worker_kit.ended([p for p, _ in running.values()], timeout_s=5.0)
             for i, (proc, started) in list(running.items()):
                 if proc.is_alive():
                     continue
@@ -202,12 +202,8 @@ def run_sweep(scenario: str | Path, out_dir: str | Path, jobs: int | None = None
                 if on_done:
                     on_done(o, done, len(points), time.monotonic() - t0)
     except BaseException:
-        for proc, _ in running.values():  # Ctrl-C or an error here: stop every run cleanly
-            proc.terminate()
-        for proc, _ in running.values():
-            proc.join(10)
-            if proc.is_alive():
-                proc.kill()
+        # Ctrl-C or an error here: stop every run cleanly
+        worker_kit.stop([p for p, _ in running.values()], 10.0, terminate=True)
         for i in running:
             outcomes[i].status, outcomes[i].error = "interrupted", "the sweep was stopped"
         raise

@@ -1,0 +1,107 @@
+"""The worker toolkit the process pools share (``cosim.workers``): shielded
+children outlive a Ctrl-C until their driver stops them, children log as
+their driver does and know when it is gone, tracebacks travel bounded, and
+``stop`` ends what does not stop by itself."""
+
+from __future__ import annotations
+
+import logging
+import os
+import signal
+import time
+from multiprocessing.connection import Connection
+
+from cosim import workers as worker_kit
+from cosim.errors import how_it_ended
+
+
+def _report(conn: Connection) -> None:
+    """Send what the child sees of its setup, then wait to be told to end."""
+    conn.send({"cosim_level": logging.getLogger("cosim").getEffectiveLevel(),
+               "parent_gone": worker_kit.parent_gone(),
+               "sigint": signal.getsignal(signal.SIGINT) == signal.SIG_IGN})
+    conn.recv()
+
+
+def _fail(conn: Connection, size: int) -> None:
+    try:
+        raise ValueError("x" * size + " the end")
+    except ValueError:
+        conn.send(worker_kit.remote_traceback())
+
+
+def _exit(code: int) -> None:
+    os._exit(code)
+
+
+def _sleep() -> None:
+    time.sleep(60)
+
+
+def test_a_shielded_child_logs_like_its_driver_and_ignores_ctrl_c() -> None:
+    ctx = worker_kit.context()
+    mine, theirs = ctx.Pipe()
+    cosim_log = logging.getLogger("cosim")
+    before = cosim_log.level
+    cosim_log.setLevel(logging.DEBUG)
+    try:
+        p = worker_kit.start(_report, (theirs,), name="test-report")
+    finally:
+        cosim_log.setLevel(before)
+    try:
+        assert mine.poll(60), "the child did not report"
+        seen = mine.recv()
+        assert seen == {"cosim_level": logging.DEBUG, "parent_gone": False, "sigint": True}
+        os.kill(p.pid, signal.SIGINT)  # as Ctrl-C would, to the whole group
+        os.kill(p.pid, signal.SIGTERM)
+        time.sleep(0.3)
+        assert p.is_alive() and worker_kit.ended([p]) == []
+        mine.send("end")
+        assert worker_kit.ended([p], timeout_s=30) == [0]
+        assert p.exitcode == 0
+    finally:
+        worker_kit.stop([p], 1.0)
+
+
+def test_an_unshielded_child_keeps_the_default_signals() -> None:
+    ctx = worker_kit.context()
+    mine, theirs = ctx.Pipe()
+    p = worker_kit.start(_report, (theirs,), name="test-report", shielded=False,
+                         inherit_logging=False)
+    try:
+        assert mine.poll(60)
+        assert mine.recv()["sigint"] is False
+        worker_kit.stop([p], 10.0, terminate=True)
+        assert how_it_ended(p.exitcode) == "killed by SIGTERM"
+    finally:
+        worker_kit.stop([p], 1.0)
+
+
+def test_stop_kills_what_does_not_stop_and_ended_names_who_ended() -> None:
+    procs = [worker_kit.start(_sleep, (), name="test-sleep"),
+             worker_kit.start(_exit, (3,), name="test-exit")]
+    try:
+        assert worker_kit.ended(procs, timeout_s=30) == [1]
+        assert how_it_ended(procs[1].exitcode) == "exited with code 3"
+        t0 = time.monotonic()
+        worker_kit.stop(procs, 0.5)  # the shielded sleeper ignores SIGTERM: killed
+        assert time.monotonic() - t0 < 10
+        assert how_it_ended(procs[0].exitcode) == "killed by SIGKILL"
+    finally:
+        worker_kit.stop(procs, 1.0)
+
+
+def test_a_remote_traceback_is_bounded_and_keeps_the_error() -> None:
+    ctx = worker_kit.context()
+    for size, cut in ((100, False), (10 * worker_kit.MAX_TRACEBACK_CHARS, True)):
+        mine, theirs = ctx.Pipe()
+        p = worker_kit.start(_fail, (theirs, size), name="test-fail")
+        try:
+            assert mine.poll(60)
+            tb = mine.recv()
+        finally:
+            worker_kit.stop([p], 10.0)
+        assert tb.rstrip().endswith("the end")
+        assert tb.startswith("Traceback (most recent call last)")
+        assert "ValueError: xxx" in tb and ("(traceback cut" in tb) == cut
+        assert len(tb) <= worker_kit.MAX_TRACEBACK_CHARS + 100
