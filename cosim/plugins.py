@@ -19,9 +19,12 @@ from __future__ import annotations
 
 import importlib
 import logging
+from collections.abc import Mapping
 from dataclasses import dataclass
 from importlib.metadata import entry_points
-from typing import Any
+from typing import Any, TypeVar
+
+from cosim.errors import ConfigError
 
 log = logging.getLogger(__name__)
 
@@ -37,6 +40,9 @@ BUILTIN: dict[str, dict[str, str]] = {
     VEHICLES: {"fixed_wing": "cosim.vehicles.fixed_wing:FIXED_WING",
                "jsbsim": "cosim.vehicles.plain:PLAIN"},
 }
+
+
+T = TypeVar("T")
 
 
 @dataclass(frozen=True)
@@ -74,3 +80,14 @@ def load_plugins(group: str) -> dict[str, Plugin]:
         dist = getattr(ep, "dist", None)
         out[ep.name] = Plugin(ep.name, obj, getattr(dist, "name", None) or ep.value)
     return out
+
+
+def pick(group: str, loaded: Mapping[str, T], name: str, what: tuple[str, str]) -> T:
+    """The entry ``name`` of ``loaded`` (``group``'s entries as the part using
+    them made them); ``ConfigError`` naming the others if there is none.
+    ``what``: what an entry is, singular and plural."""
+    found = loaded.get(name)
+    if found is None:
+        raise ConfigError(f"unknown {what[0]} {name!r}; available: {', '.join(loaded)} "
+                          f"(packages add {what[1]} in the {group!r} entry-point group)")
+    return found

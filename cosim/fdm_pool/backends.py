@@ -27,7 +27,6 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 from cosim import plugins
-from cosim.errors import ConfigError
 from cosim.fdm_pool.base import Pool
 from cosim.plugins import load_plugins, plugin_names
 from cosim.vehicles.spec import VehicleSpec
@@ -73,9 +72,4 @@ def backend_names() -> list[str]:
 
 def get_backend(name: str) -> Backend:
     """The backend called ``name``; ``ConfigError`` listing the others if none is."""
-    found = backends().get(name)
-    if found is None:
-        raise ConfigError(f"unknown backend {name!r}; available: {', '.join(backends())} "
-                          f"(packages add backends in the {plugins.BACKENDS!r} entry-point "
-                          f"group)")
-    return found
+    return plugins.pick(plugins.BACKENDS, backends(), name, ("backend", "backends"))

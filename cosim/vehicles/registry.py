@@ -14,7 +14,6 @@ import logging
 from functools import lru_cache
 
 from cosim import plugins
-from cosim.errors import ConfigError
 from cosim.vehicles.base import VehicleClass
 
 log = logging.getLogger(__name__)
@@ -42,9 +41,5 @@ def vehicle_classes() -> dict[str, VehicleClass]:
 
 def get_class(name: str) -> VehicleClass:
     """The class called ``name``; ``ConfigError`` listing the others if none is."""
-    found = vehicle_classes().get(name)
-    if found is None:
-        raise ConfigError(f"unknown vehicle class {name!r}; available: "
-                          f"{', '.join(vehicle_classes())} (packages add classes in the "
-                          f"{plugins.VEHICLES!r} entry-point group)")
-    return found
+    return plugins.pick(plugins.VEHICLES, vehicle_classes(), name,
+                        ("vehicle class", "classes"))
