@@ -120,6 +120,8 @@ def _build_parser() -> _Parser:
     m.add_argument("--check", action="store_true", help="load each model to prove it works")
     m.add_argument("--properties", metavar="MODEL",
                    help="list the JSBSim properties of MODEL")
+    m.add_argument("--classes", action="store_true",
+                   help="list the vehicle classes instead (cosim's and installed packages')")
 
     pl = sub.add_parser("plot", help="plot a run's ground track and altitude (PNG)")
     pl.add_argument("run", metavar="RUN_DIR", help="a cosim run output folder")
@@ -372,6 +374,12 @@ def _cmd_models(a: argparse.Namespace) -> int:
     if a.properties:
         fdm = new_fdm(find_model(a.properties), 1 / 120)
         print(fdm.query_property_catalog(""))
+        return EXIT_OK
+    if a.classes:
+        from cosim.vehicles import vehicle_classes
+
+        for name, cls in vehicle_classes().items():
+            print(f"{name:12s} {cls.model_kind:8s} {type(cls).__module__:28s} {cls.description}")
         return EXIT_OK
     failed = 0
     for m in list_models():

@@ -74,6 +74,14 @@ def test_models_lists_bundled_aircraft(capsys) -> None:
     assert any(line.split()[0] == "c172p" and "jsbsim" in line for line in out.splitlines())
 
 
+def test_models_classes_lists_the_registered_classes(capsys) -> None:
+    from cosim.vehicles import vehicle_classes
+
+    assert main(["models", "--classes"]) == 0
+    names = [line.split()[0] for line in capsys.readouterr().out.splitlines()]
+    assert names == list(vehicle_classes()) and names[:2] == ["fixed_wing", "jsbsim"]
+
+
 def test_models_properties(capsys) -> None:
     assert main(["models", "--properties", "c172p"]) == 0
     assert "fcs/throttle-cmd-norm" in capsys.readouterr().out

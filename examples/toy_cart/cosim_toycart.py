@@ -4,7 +4,7 @@ small file: a batched model (all carts of a worker advanced by one numpy
 call per substep), its own scenario key (``accel_mps2``), a state column of
 its own (``odometer_m``), a command vocabulary (``airspeed_mps``/
 ``airspeed_kt``: the cart's speed) with its guidance, and a MAVLink
-personality (a ground rover, in mode 0 "DRIVE").
+personality (a ground rover, in mode 0 "DRIVE", that takes DO_CHANGE_SPEED).
 
 Scenario (``carts.yaml`` beside this file)::
 
@@ -28,7 +28,8 @@ from cosim.geo import LocalFrame
 from cosim.guidance.commands import Command
 from cosim.guidance.safety import Limits
 from cosim.mavlink import adapter as mav
-from cosim.mavlink.personality import Personality
+from cosim.mavlink.personality import CommandFn, Personality
+from cosim.mavlink.services.base import CommandRequest, Context, Outcome, text, vocab
 from cosim.vehicles import GuidanceEvent, ModelChoice, VehicleClass
 from cosim.vehicles.spec import STATE_INDEX, StateField, VehicleSpec, VehicleStatus
 
@@ -103,9 +104,29 @@ class CartGuidance:
 
 
 class Rover(Personality):
+    """How a cart looks on MAVLink: a ground rover in one mode, DRIVE, that
+    takes one command, DO_CHANGE_SPEED (param2: m/s). The services answer
+    the rest (one COMMAND_ACK each, UNSUPPORTED for what it lacks)."""
+
     mav_type = mav.MAV_TYPE_GROUND_ROVER
     autopilot = True
     modes = {0: "DRIVE"}
+
+    def command_handler(self, number: int) -> CommandFn | None:
+        return self._change_speed if number == mav.MAV_CMD_DO_CHANGE_SPEED else None
+
+    def supported_commands(self) -> frozenset[int]:
+        return frozenset({mav.MAV_CMD_DO_CHANGE_SPEED})
+
+    @staticmethod
+    def _change_speed(ctx: Context, v: Any, req: CommandRequest, tick: int,
+                      out: Outcome) -> int:
+        cmd = vocab({"airspeed_mps": req.p[1]})
+        if isinstance(cmd, str) or not 0 <= req.p[1] <= 30:
+            out.replies.extend(text("change speed: a toy cart drives at 0..30 m/s"))
+            return mav.MAV_RESULT_DENIED
+        out.commands.append(cmd)
+        return mav.MAV_RESULT_ACCEPTED
 
 
 class ToyCart(VehicleClass):

@@ -19,15 +19,7 @@ from tests.helpers import install_out_of_tree
 
 REPO = Path(__file__).resolve().parent.parent.parent
 
-WRAPPED = '''
-from cosim.fdm_pool.inline import InlinePool
-
-
-class WrappedInline(InlinePool):
-    """Every vehicle in the calling process, through a package of its own."""
-
-    backend = "wrapped"
-'''
+EXAMPLE = REPO / "examples" / "traced_backend"
 
 
 def test_the_builtin_backends_are_found_by_name(specs) -> None:
@@ -41,30 +33,34 @@ def test_the_builtin_backends_are_found_by_name(specs) -> None:
 
 def test_an_out_of_tree_backend_registers_runs_and_passes_the_conformance_suite(
         tmp_path: Path) -> None:
-    site = install_out_of_tree(tmp_path / "pkg", "cosim-wrapped-backend",
-                               {"cosim_wrapped": WRAPPED},
-                               {"cosim.backends": {"wrapped": "cosim_wrapped:WrappedInline"}})
+    """The example package (``examples/traced_backend``, a thin wrapper over
+    inline), installed with pip into a temporary folder."""
+    site = install_out_of_tree(tmp_path / "pkg", "cosim-traced-backend",
+                               {"cosim_traced": (EXAMPLE / "cosim_traced.py").read_text()},
+                               {"cosim.backends": {"traced": "cosim_traced:TracedPool"}})
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(
         [str(site), *os.environ.get("PYTHONPATH", "").split(os.pathsep)]).rstrip(os.pathsep),
-        "COSIM_CONFORMANCE_BACKENDS": "wrapped"}
+        "COSIM_CONFORMANCE_BACKENDS": "traced"}
 
     def cosim(*args: str) -> subprocess.CompletedProcess:
         return subprocess.run([sys.executable, "-m", "cosim", *args], capture_output=True,
                               text=True, env=env, timeout=300, cwd=tmp_path)
 
-    assert "{inline,process,wrapped}" in cosim("run", "--help").stdout
+    assert "{inline,process,traced}" in cosim("run", "--help").stdout
     out = tmp_path / "run"
-    r = cosim("run", str(REPO / "scenarios" / "quickstart.yaml"), "--backend", "wrapped",
+    r = cosim("run", str(REPO / "scenarios" / "quickstart.yaml"), "--backend", "traced",
               "--duration-s", "2", "--out", str(out), "--no-progress")
     assert r.returncode == 0, r.stderr
-    assert json.loads((out / "summary.json").read_text())["backend"] == "wrapped"
+    assert json.loads((out / "summary.json").read_text())["backend"] == "traced"
+    # its own log line: 2 s at the 30 Hz exchange rate
+    assert "traced: 60 exchanges of 5 vehicles" in r.stderr
     r = cosim("bench", "--vehicles", "2", "--seconds", "0.2", "--repeat", "1", "--backend",
-              "wrapped", "--no-baselines")
+              "traced", "--no-baselines")
     assert r.returncode == 0, r.stderr
-    assert "backend wrapped, workers 1" in r.stdout
+    assert "backend traced, workers 1" in r.stdout
     r = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
                         str(REPO / "tests" / "fdm_pool" / "test_conformance.py"), "-k",
-                        "wrapped"], capture_output=True, text=True, env=env, timeout=600,
+                        "traced"], capture_output=True, text=True, env=env, timeout=600,
                        cwd=REPO)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     assert " passed" in r.stdout and "failed" not in r.stdout

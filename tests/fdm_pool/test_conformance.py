@@ -10,6 +10,8 @@ separated), which must be registered:
 - statuses: ground impact and divergence freeze that vehicle only;
 - setpoints reach the model and reset to NaN; NaN means "leave unchanged";
 - misuse is a ``PoolStateError``; ``close`` can be called twice;
+- a stop in the middle of an exchange (``close`` after ``send``) returns
+  and leaves no worker process behind;
 - a vehicle failing mid-exchange is a ``CosimError`` naming it and the tick;
 - vehicles that cannot be built are reported together (``BuildError``);
 - a worker process killed by the OS is a ``WorkerDied`` naming it, within
@@ -134,6 +136,23 @@ def test_misuse_is_a_named_error_and_close_is_idempotent(specs, backend: str) ->
     pool.close()
     with pytest.raises(PoolStateError, match="closed"):
         pool.step(4)
+
+
+def test_a_stop_mid_exchange_returns_and_leaves_no_worker_behind(specs, backend: str) -> None:
+    for workers in worker_counts(backend):
+        pool = make_pool(specs(4), DT, CH, backend, workers)
+        pids = list(pool.pids.values())
+        pool.step(4)
+        pool.setpoints[:, 0] = 0.5
+        pool.send(40)  # and never wait: Ctrl-C arriving mid-exchange
+        pool.close()
+        with pytest.raises(PoolStateError, match="closed"):
+            pool.wait()
+        for pid in pids:  # reaped, not merely asked to stop
+            with pytest.raises(ChildProcessError):
+                os.waitpid(pid, os.WNOHANG)
+            with pytest.raises(ProcessLookupError):
+                os.kill(pid, 0)
 
 
 def test_a_vehicle_failing_mid_exchange_is_named_with_the_tick(specs, backend: str) -> None:

@@ -132,3 +132,34 @@ def test_the_class_has_its_own_mavlink_personality(toy_cart: Path, tmp_path: Pat
     assert types["uav0"][0] == mavutil.mavlink.MAV_TYPE_FIXED_WING
     s = json.loads((tmp_path / "m" / "summary.json").read_text())
     assert s["complete"] is True
+
+
+def test_its_personality_answers_its_own_command_and_refuses_the_planes(
+        toy_cart: Path, tmp_path: Path) -> None:
+    from pymavlink import mavutil
+
+    from cosim.mavlink import MavlinkConfig, MavlinkEndpoint, mav_specs
+    from cosim.mavlink.adapter import make_message
+    from cosim.vehicles.spec import N_STATE
+
+    ML = mavutil.mavlink
+    scn = load_scenario(_scenario(tmp_path))
+    ep = MavlinkEndpoint(mav_specs(scn.vehicles), 120.0, MavlinkConfig(url=None))
+    try:
+        states = np.zeros((len(scn.vehicles), N_STATE))
+
+        def long(sysid: int, command: int, *params: float) -> list:
+            p = list(params) + [0.0] * (7 - len(params))
+            ep.inject(make_message("COMMAND_LONG", target_system=sysid, target_component=1,
+                                   command=command, **{f"param{i + 1}": p[i]
+                                                       for i in range(7)}))
+            return ep.exchange(0, states)
+
+        cmds = long(1, ML.MAV_CMD_DO_CHANGE_SPEED, 0, 6.5)  # cart0: its own command
+        assert [(c.row, c.command.airspeed_mps) for c in cmds] == [(0, 6.5)]
+        assert long(1, ML.MAV_CMD_DO_CHANGE_SPEED, 0, 99) == []  # out of its range
+        assert long(1, ML.MAV_CMD_COMPONENT_ARM_DISARM, 1) == []  # ArduPlane's, not a cart's
+        counts = ep.counters()
+        assert counts["unsupported_commands"] == 1 and counts["commands_refused"] == 2
+    finally:
+        ep.close()
