@@ -23,7 +23,8 @@ from types import TracebackType
 import numpy as np
 
 from cosim.errors import PoolStateError
-from cosim.vehicles.spec import VehicleSpec, state_layout
+from cosim.vehicles.registry import state_layout
+from cosim.vehicles.spec import VehicleSpec
 
 log = logging.getLogger(__name__)
 

@@ -43,7 +43,8 @@ from cosim.sync.participants import (
     needs_mavlink,
 )
 from cosim.sync.parts import StateLogger, StatusEvents
-from cosim.vehicles.spec import STATE_FIELDS, state_layout
+from cosim.vehicles.registry import state_layout
+from cosim.vehicles.spec import STATE_FIELDS
 
 log = logging.getLogger(__name__)
 
@@ -65,6 +66,22 @@ class RunResult:
     @property
     def ok(self) -> bool:
         return self.stop_reason == "completed"
+
+
+@dataclass
+class _Outcome:
+    """How far a run got and how it ended, filled in as it goes."""
+    wall0: float
+    tick: int = 0
+    reason: str = "error"
+    error: BaseException | None = None
+    startup_s: float = 0.0
+    loop0: float | None = None  # when the tick loop started
+    loop_s: float = 0.0
+    workers: int = 1
+    complete: bool = True  # every output written and closed
+    sections: dict[str, Any] = field(default_factory=dict)  # participants' summary parts
+    summary: dict[str, Any] = field(default_factory=dict)
 
 
 class Run:
@@ -113,6 +130,8 @@ class Run:
         return self._building
 
     def run(self) -> RunResult:
+        """Build, fly, finish: the run's outputs are complete and closed, and
+        ``summary.json`` written, however the run ends."""
         scn, out = self.scn, self.out
         out.mkdir(parents=True, exist_ok=True)
         clear_outputs(out)  # a new run never mixes with an old one's files
@@ -125,19 +144,12 @@ class Run:
         states_log = StateLog(out / "states.parquet", ids, scn.origin.frame, hz,
                               extra=[(f.name, j) for j, f in enumerate(layout)
                                      if j >= len(STATE_FIELDS)])
-        k, total = scn.rates.control_every, scn.total_ticks
         # items a shortened duration (with_duration, --duration-s) leaves out
-        skipped = [item for item in scn.schedule if item.tick >= total]
+        skipped = [item for item in scn.schedule if item.tick >= scn.total_ticks]
         for item in skipped:
             log.warning("schedule[%d] at %g s is at or after the end of the run (%g s): "
-                        "skipped", item.index, item.at_s, total / hz)
-        tick = 0
-        reason = "error"
-        error: BaseException | None = None
-        wall0 = time.perf_counter()
-        startup_s = loop_s = 0.0
-        loop0: float | None = None
-        workers_used = 1
+                        "skipped", item.index, item.at_s, scn.total_ticks / hz)
+        o = _Outcome(wall0=time.perf_counter())
         events.emit("run_start", 0, scenario=scn.name, vehicles=len(ids), backend=self.backend)
         # a summary from the start (replaced at the end), and room kept for the
         # last writes: a full disk still leaves a readable summary.json
@@ -145,155 +157,185 @@ class Run:
             **self._summary("running", 0, 0.0, 0.0, 1, {}, 0, None), "complete": False})
         reserve = DiskReserve(out / ".cosim-reserve", RESERVE_BYTES)
         summary_reserve = DiskReserve(out / ".cosim-reserve-summary", SUMMARY_RESERVE_BYTES)
-        complete = True  # every output written and closed
         # a hard crash of this process (segfault, abort) leaves its Python traceback here
-        fault_path = out / "faulthandler.log"
-        fault_file = open(fault_path, "w")  # noqa: SIM115 - closed in the finally below
+        fault_file = open(out / "faulthandler.log", "w")  # noqa: SIM115 - closed below
         fault_was_enabled = faulthandler.is_enabled()
         faulthandler.enable(fault_file, all_threads=True)
         try:
-            log.info("building and trimming %d vehicles (%s backend)", len(ids), self.backend)
-            self._building = True
-            if self._stop.is_set():
-                raise KeyboardInterrupt
-            pool = make_pool(scn.vehicles, scn.rates.dt_s, scn.channels, self.backend,
-                             self.workers)
-            with pool:  # closed however the rest of the set-up ends
-                self._building = False
-                self.pool = pool
-                workers_used = pool.workers
-                startup_s = time.perf_counter() - wall0
-                log.info("%d vehicles ready in %.2f s on %d worker(s)", len(ids), startup_s,
-                         workers_used)
-                before, during, after, logger, status_events = self._parts(
-                    pool, events, states_log, ids, total)
-                states = pool.states
-                status_events.start(states)
-                logger.record(0, states)
-                copy_states = bool(self.participants)  # they keep the states at ``tick``
-                loop0 = time.perf_counter()
-                if self.pacer:
-                    self.pacer.start()
-                while tick < total:
-                    if self._stop.is_set():
-                        reason = self._stop_reason
-                        break
-                    for step in before:  # commands, then guidance: setpoints
-                        step(tick, states, pool.setpoints)
-                    at_tick = states.copy() if copy_states else states  # the step overwrites
-                    pool.send(k)
-                    for work in during:  # telemetry, controllers, cameras: while it steps
-                        work(tick, at_tick)
-                    states = pool.wait(self.step_timeout_s)
-                    tick += k
-                    for record in after:  # events, logs, pacing, progress
-                        record(tick, states)
-                else:
-                    reason = "completed"
-                logger.last(tick, states)
-                loop_s = time.perf_counter() - loop0
-        except WorkerDied as e:
-            reason, error = "worker_failure", e
-            events.emit("worker_failure", tick, vehicle=None, worker=e.worker, pid=e.pid,
-                        exitcode=e.exitcode, vehicles=e.vehicles, message=str(e))
-        except WorkerError as e:
-            reason, error = "error", e
-            events.emit("error", tick, vehicle=e.vehicle, worker=e.worker, message=str(e))
-        except VehicleError as e:
-            reason, error = "error", e
-            events.emit("error", tick, vehicle=e.vehicle, message=str(e))
-        except Exception as e:
-            reason, error = "error", e
-            events.emit("error", tick, vehicle=getattr(e, "vehicle", None),
-                        message=f"{type(e).__name__}: {e}")
+            self._fly(o, events, states_log)
         except KeyboardInterrupt:  # a stop, not an error
-            reason = self._stop_reason if self._stop.is_set() else "interrupted"
+            o.reason = self._stop_reason if self._stop.is_set() else "interrupted"
             if self.pool is None and self._building:
-                log.warning("stopped while building the vehicles (%s)", reason)
+                log.warning("stopped while building the vehicles (%s)", o.reason)
+        except Exception as e:
+            self._failed(o, e, events)
         finally:
             self._building = False
             reserve.release()  # room to close videos, logs and tlogs on a full disk
             if self.mavlink is not None:
                 self.mavlink.close()
-            if loop0 is not None and loop_s == 0.0:
-                loop_s = time.perf_counter() - loop0
+            if o.loop0 is not None and o.loop_s == 0.0:
+                o.loop_s = time.perf_counter() - o.loop0
             try:
-                # participants finish their work (a render queue drains) inside
-                # the run's wall time, and may still emit events
-                t_fin = time.perf_counter()
-                sections: dict[str, Any] = {}
-                for part in self.participants:
-                    failure: BaseException | None = None
-                    try:
-                        section = part.finish(tick, reason)
-                    except ParticipantFailed as e:  # its section is still the summary's
-                        section, failure = e.section, e.error
-                    except Exception as e:  # one part's failure must not lose the summary
-                        log.exception("%s: finishing failed", part.name)
-                        section, failure = {"error": f"{type(e).__name__}: {e}"}, e
-                    if section is not None:
-                        sections[part.name] = section
-                        if "error" in section:  # its outputs stopped short
-                            complete = False
-                    if failure is not None:  # a failed part fails the run, said once
-                        complete = False
-                        log.error("%s: %s", part.name, failure)
-                        if reason == "completed":
-                            reason = "error"
-                        error = error if error is not None else failure
-                        events.emit("error", tick, vehicle=getattr(failure, "vehicle", None),
-                                    message=f"{type(failure).__name__}: {failure}")
-                if loop0 is not None:
-                    loop_s += time.perf_counter() - t_fin
-                try:
-                    states_log.close()
-                except Exception as e:  # the ticks stay journalled; read_states reads them
-                    log.error("could not write states.parquet: %s", e)
-                    if reason != "worker_failure":
-                        reason = "error"
-                    error = error if error is not None else e
-                    events.emit("error", tick, vehicle=None,
-                                message=f"writing states.parquet failed: {type(e).__name__}: {e}")
-                for item in skipped:
-                    events.emit("schedule_skipped", tick, vehicle=None, index=item.index,
-                                at_s=item.at_s, vehicles=len(item.vehicles),
-                                reason=f"at or after the end of the run ({total / hz:g} s)")
-                events.emit("stop", tick, reason=reason)
-                events.close()
-                summary = self._summary(reason, tick, startup_s, loop_s, workers_used,
-                                        events.counts, states_log.rows_logged, error)
-                if self.mavlink is not None:
-                    summary["mavlink"] = {"url": self.mavlink_config.url,
-                                          "counters": self.mavlink.counters()}
-                summary.update(sections)
-                if events.dropped:
-                    summary["events_dropped"] = events.dropped
-                summary["complete"] = complete and states_log.complete and events.complete
+                self._finish_participants(o, events)
+                self._close_logs(o, events, states_log, skipped)
                 summary_reserve.release()
-                try:
-                    write_json_atomic(out / "summary.json", summary)
-                except OSError as e:  # the summary written at the start stays, incomplete
-                    log.error("could not write the final summary.json: %s", e)
-                    error = error if error is not None else e
-                    if reason == "completed":
-                        reason = "error"
+                self._write_summary(o, events, states_log)
             finally:
                 reserve.release()
                 summary_reserve.release()
                 self._end_fault_log(fault_file, fault_was_enabled)
+        self._after_run(states_log.rows_logged)
+        return RunResult(out, o.reason, o.tick, o.summary, o.error)
+
+    def _fly(self, o: _Outcome, events: EventLog, states_log: StateLog) -> None:
+        """Build the pool and the participants, then step to the end or a stop."""
+        scn = self.scn
+        log.info("building and trimming %d vehicles (%s backend)", len(scn.vehicles),
+                 self.backend)
+        self._building = True
+        if self._stop.is_set():
+            raise KeyboardInterrupt
+        pool = make_pool(scn.vehicles, scn.rates.dt_s, scn.channels, self.backend, self.workers)
+        with pool:  # closed however the rest of the set-up ends
+            self._building = False
+            self.pool = pool
+            o.workers = pool.workers
+            o.startup_s = time.perf_counter() - o.wall0
+            log.info("%d vehicles ready in %.2f s on %d worker(s)", len(scn.vehicles),
+                     o.startup_s, o.workers)
+            ids = [v.id for v in scn.vehicles]
+            before, during, after, logger, status_events = self._parts(
+                pool, events, states_log, ids, scn.total_ticks)
+            states = pool.states
+            status_events.start(states)
+            logger.record(0, states)
+            o.loop0 = time.perf_counter()
+            if self.pacer:
+                self.pacer.start()
+            states = self._loop(o, pool, states, before, during, after)
+            logger.last(o.tick, states)
+            o.loop_s = time.perf_counter() - o.loop0
+
+    def _loop(self, o: _Outcome, pool: Pool, states: np.ndarray, before: list[Any],
+              during: list[Any], after: list[Any]) -> np.ndarray:
+        """The lockstep tick loop: every participant's step, once per exchange."""
+        k, total = self.scn.rates.control_every, self.scn.total_ticks
+        copy_states = bool(self.participants)  # they keep the states at ``tick``
+        while o.tick < total:
+            if self._stop.is_set():
+                o.reason = self._stop_reason
+                return states
+            for step in before:  # commands, then guidance: setpoints
+                step(o.tick, states, pool.setpoints)
+            at_tick = states.copy() if copy_states else states  # the step overwrites
+            pool.send(k)
+            for work in during:  # telemetry, controllers, cameras: while it steps
+                work(o.tick, at_tick)
+            states = pool.wait(self.step_timeout_s)
+            o.tick += k
+            for record in after:  # events, logs, pacing, progress
+                record(o.tick, states)
+        o.reason = "completed"
+        return states
+
+    @staticmethod
+    def _failed(o: _Outcome, e: Exception, events: EventLog) -> None:
+        """An exception that ended the loop, as the run's reason and an event."""
+        o.error = e
+        o.reason = "worker_failure" if isinstance(e, WorkerDied) else "error"
+        if isinstance(e, WorkerDied):
+            events.emit("worker_failure", o.tick, vehicle=None, worker=e.worker, pid=e.pid,
+                        exitcode=e.exitcode, vehicles=e.vehicles, message=str(e))
+        elif isinstance(e, WorkerError):
+            events.emit("error", o.tick, vehicle=e.vehicle, worker=e.worker, message=str(e))
+        elif isinstance(e, VehicleError):
+            events.emit("error", o.tick, vehicle=e.vehicle, message=str(e))
+        else:
+            events.emit("error", o.tick, vehicle=getattr(e, "vehicle", None),
+                        message=f"{type(e).__name__}: {e}")
+
+    def _finish_participants(self, o: _Outcome, events: EventLog) -> None:
+        """Participants finish their work (a render queue drains) inside the
+        run's wall time, and may still emit events; each one's summary section
+        is kept, and one part's failure fails the run without losing the rest."""
+        t_fin = time.perf_counter()
+        for part in self.participants:
+            failure: BaseException | None = None
+            try:
+                section = part.finish(o.tick, o.reason)
+            except ParticipantFailed as e:  # its section is still the summary's
+                section, failure = e.section, e.error
+            except Exception as e:
+                log.exception("%s: finishing failed", part.name)
+                section, failure = {"error": f"{type(e).__name__}: {e}"}, e
+            if section is not None:
+                o.sections[part.name] = section
+                if "error" in section:  # its outputs stopped short
+                    o.complete = False
+            if failure is not None:  # a failed part fails the run, said once
+                o.complete = False
+                log.error("%s: %s", part.name, failure)
+                if o.reason == "completed":
+                    o.reason = "error"
+                o.error = o.error if o.error is not None else failure
+                events.emit("error", o.tick, vehicle=getattr(failure, "vehicle", None),
+                            message=f"{type(failure).__name__}: {failure}")
+        if o.loop0 is not None:
+            o.loop_s += time.perf_counter() - t_fin
+
+    def _close_logs(self, o: _Outcome, events: EventLog, states_log: StateLog,
+                    skipped: list[Any]) -> None:
+        try:
+            states_log.close()
+        except Exception as e:  # the ticks stay journalled; read_states reads them
+            log.error("could not write states.parquet: %s", e)
+            if o.reason != "worker_failure":
+                o.reason = "error"
+            o.error = o.error if o.error is not None else e
+            events.emit("error", o.tick, vehicle=None,
+                        message=f"writing states.parquet failed: {type(e).__name__}: {e}")
+        total_s = self.scn.total_ticks / self.scn.rates.physics_hz
+        for item in skipped:
+            events.emit("schedule_skipped", o.tick, vehicle=None, index=item.index,
+                        at_s=item.at_s, vehicles=len(item.vehicles),
+                        reason=f"at or after the end of the run ({total_s:g} s)")
+        events.emit("stop", o.tick, reason=o.reason)
+        events.close()
+
+    def _write_summary(self, o: _Outcome, events: EventLog, states_log: StateLog) -> None:
+        summary = self._summary(o.reason, o.tick, o.startup_s, o.loop_s, o.workers,
+                                events.counts, states_log.rows_logged, o.error)
+        if self.mavlink is not None:
+            summary["mavlink"] = {"url": self.mavlink_config.url,
+                                  "counters": self.mavlink.counters()}
+        summary.update(o.sections)
+        if events.dropped:
+            summary["events_dropped"] = events.dropped
+        summary["complete"] = o.complete and states_log.complete and events.complete
+        o.summary = summary
+        try:
+            write_json_atomic(self.out / "summary.json", summary)
+        except OSError as e:  # the summary written at the start stays, incomplete
+            log.error("could not write the final summary.json: %s", e)
+            o.error = o.error if o.error is not None else e
+            if o.reason == "completed":
+                o.reason = "error"
+
+    def _after_run(self, rows_logged: int) -> None:
+        """Plots and other after-the-fact outputs; never able to lose the run."""
         for part in self.participants:
             try:
-                part.after_run(out)
-            except Exception as e:  # a plot must never lose a finished run
+                part.after_run(self.out)
+            except Exception as e:
                 log.warning("%s: %s", part.name, e)
-        if scn.plot and states_log.rows_logged:
+        if self.scn.plot and rows_logged:
             try:
                 from cosim.logs.plot import plot_run
 
-                log.info("plot: %s", plot_run(out))
-            except Exception as e:  # a plot must never lose a finished run
+                log.info("plot: %s", plot_run(self.out))
+            except Exception as e:
                 log.warning("could not write track.png: %s", e)
-        return RunResult(out, reason, tick, summary, error)
 
     def _parts(self, pool: Pool, events: EventLog, states_log: StateLog, ids: list[str],
                total: int) -> tuple[list[Any], list[Any], list[Any], StateLogger,

@@ -17,7 +17,7 @@ from cosim.vehicles.base import (
     ModelChoice,
     VehicleClass,
 )
-from cosim.vehicles.registry import DEFAULT_CLASS, get_class, vehicle_classes
+from cosim.vehicles.registry import DEFAULT_CLASS, get_class, state_layout, vehicle_classes
 
 __all__ = ["DEFAULT_CLASS", "BatchedModel", "Guidance", "GuidanceEvent", "ModelChoice",
-           "VehicleClass", "get_class", "vehicle_classes"]
+           "VehicleClass", "get_class", "state_layout", "vehicle_classes"]

@@ -11,10 +11,12 @@ Worker processes find the same classes (they import the same packages).
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from functools import lru_cache
 
 from cosim import plugins
 from cosim.vehicles.base import VehicleClass
+from cosim.vehicles.spec import STATE_FIELDS, StateField, VehicleSpec
 
 log = logging.getLogger(__name__)
 
@@ -43,3 +45,17 @@ def get_class(name: str) -> VehicleClass:
     """The class called ``name``; ``ConfigError`` listing the others if none is."""
     return plugins.pick(plugins.VEHICLES, vehicle_classes(), name,
                         ("vehicle class", "classes"))
+
+
+def state_layout(specs: Sequence[VehicleSpec]) -> tuple[StateField, ...]:
+    """The state array's columns for these vehicles: ``STATE_FIELDS``, then
+    the columns each of their classes adds, in order of first appearance (a
+    name two classes share is one column)."""
+    fields = list(STATE_FIELDS)
+    names = {f.name for f in fields}
+    for cls_name in dict.fromkeys(s.vehicle_class for s in specs):
+        for f in get_class(cls_name).state_columns:
+            if f.name not in names:
+                names.add(f.name)
+                fields.append(f)
+    return tuple(fields)

@@ -5,12 +5,11 @@ build their own models. ``STATE_FIELDS`` are the columns every vehicle has
 (its position, attitude, velocities, the autopilot's flags, ``status``),
 in that order, at the same indices in every run (``STATE_INDEX``); a run's
 ``(n_vehicles, k)`` float64 state array has them, then the columns its
-vehicle classes add (``state_layout``).
+vehicle classes add (``registry.state_layout``).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import IntEnum
 from typing import Any
@@ -87,18 +86,3 @@ class VehicleSpec:
     #: what its class read from the scenario beyond the common keys
     class_params: dict[str, Any] = field(default_factory=dict)
 
-
-def state_layout(specs: Sequence[VehicleSpec]) -> tuple[StateField, ...]:
-    """The state array's columns for these vehicles: ``STATE_FIELDS``, then
-    the columns each of their classes adds, in order of first appearance (a
-    name two classes share is one column)."""
-    from cosim.vehicles.registry import get_class
-
-    fields = list(STATE_FIELDS)
-    names = {f.name for f in fields}
-    for cls_name in dict.fromkeys(s.vehicle_class for s in specs):
-        for f in get_class(cls_name).state_columns:
-            if f.name not in names:
-                names.add(f.name)
-                fields.append(f)
-    return tuple(fields)
