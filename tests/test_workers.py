@@ -66,8 +66,14 @@ def test_a_shielded_child_logs_like_its_driver_and_ignores_ctrl_c() -> None:
 def test_an_unshielded_child_keeps_the_default_signals() -> None:
     ctx = worker_kit.context()
     mine, theirs = ctx.Pipe()
-    p = worker_kit.start(_report, (theirs,), name="test-report", shielded=False,
-                         inherit_logging=False)
+    # a process started in the background (nohup, `cmd &`) inherits SIGINT
+    # ignored, and so would any child: give the child a driver that takes it
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        p = worker_kit.start(_report, (theirs,), name="test-report", shielded=False,
+                             inherit_logging=False)
+    finally:
+        signal.signal(signal.SIGINT, before)
     try:
         assert mine.poll(60)
         assert mine.recv()["sigint"] is False
