@@ -17,6 +17,9 @@ now and by MAVLink and the swarm controller later:
   own ``alt_*``/``airspeed_*``), then a loiter around the last
 - ``loiter``: ``center`` (a point; default: where the vehicle is),
   ``radius_m``, ``direction`` (``cw``/``ccw``), optional ``alt_*``/``airspeed_*``
+- ``gimbal``: point the vehicle's gimbal cameras: ``pitch_deg`` (-90 nadir
+  .. 30) and/or ``yaw_deg`` (relative to the nose, -180..180). Not a flight
+  command: a command of only ``gimbal`` leaves the flight as it is.
 
 Parsing returns a ``Command`` of plain values; problems are reported through
 a callback with the key path, so the scenario loader can attach file lines.
@@ -37,7 +40,11 @@ P = tuple[Any, ...]
 Report = Callable[[P, str], None]
 
 COMMAND_KEYS = ("heading_deg", "alt_msl_m", "alt_agl_m", "airspeed_kt", "airspeed_mps",
-                "throttle", "bank_limit_deg", "stall_protection", "goto", "waypoints", "loiter")
+                "throttle", "bank_limit_deg", "stall_protection", "goto", "waypoints", "loiter",
+                "gimbal")
+#: gimbal angle bounds: pitch (nadir -90, forward 0), yaw relative to the nose
+GIMBAL_PITCH_DEG = (-90.0, 30.0)
+GIMBAL_YAW_DEG = (-180.0, 180.0)
 _POINT_KEYS = ("lat_deg", "lon_deg", "north_m", "east_m", "frame")
 _TARGET_EXTRA = ("alt_msl_m", "alt_agl_m", "airspeed_kt", "airspeed_mps")
 
@@ -80,7 +87,23 @@ class Command:
     loiter_radius_m: float | None = None
     loiter_cw: bool = True
     loiter_here: bool = False  # loiter around the current position
+    #: gimbal cameras' new angles (None: unchanged); not part of the flight
+    gimbal_pitch_deg: float | None = None
+    gimbal_yaw_deg: float | None = None
     source: dict[str, Any] = field(default_factory=dict, compare=False)
+
+    @property
+    def flies(self) -> bool:
+        """Whether the command says anything to the vehicle's guidance (a
+        command of only gimbal angles does not)."""
+        return (self.heading_deg is not None or self.alt_m is not None
+                or self.airspeed_mps is not None or self.throttle is not None
+                or self.bank_limit_deg is not None or self.stall_protection is not None
+                or self.nav is not None)
+
+    @property
+    def points_gimbal(self) -> bool:
+        return self.gimbal_pitch_deg is not None or self.gimbal_yaw_deg is not None
 
     def label(self) -> str:
         """A short description for the state log's ``command`` column."""
@@ -95,6 +118,10 @@ class Command:
             parts.append(f"speed {self.airspeed_mps / KT_TO_MPS:.0f}kt")
         if self.throttle is not None:
             parts.append(f"throttle {self.throttle:g}")
+        if self.points_gimbal:
+            parts.append("gimbal " + " ".join(
+                f"{k} {v:g}" for k, v in (("pitch", self.gimbal_pitch_deg),
+                                          ("yaw", self.gimbal_yaw_deg)) if v is not None))
         return ", ".join(parts) or "settings"
 
 
@@ -199,6 +226,7 @@ def parse_command(d: Any, path: P, report: Report) -> Command | None:
     if stall is not None and not isinstance(stall, bool):
         report(path + ("stall_protection",), f"expected true or false, got {stall!r}")
         stall = None
+    gimbal = _gimbal(d["gimbal"], path + ("gimbal",), report) if "gimbal" in d else (None, None)
     nav = navs[0] if navs else None
     points: list[Point] = []
     radius = None
@@ -266,4 +294,17 @@ def parse_command(d: Any, path: P, report: Report) -> Command | None:
     return Command(heading_deg=None if heading is None else heading % 360.0, alt_m=alt,
                    alt_agl=agl, airspeed_mps=spd, throttle=throttle, bank_limit_deg=bank,
                    stall_protection=stall, nav=nav, points=tuple(points),
-                   loiter_radius_m=radius, loiter_cw=cw, loiter_here=here, source=d)
+                   loiter_radius_m=radius, loiter_cw=cw, loiter_here=here,
+                   gimbal_pitch_deg=gimbal[0], gimbal_yaw_deg=gimbal[1], source=d)
+
+
+def _gimbal(g: Any, path: P, report: Report) -> tuple[float | None, float | None]:
+    if not isinstance(g, dict) or not g:
+        report(path, f"expected a mapping with pitch_deg and/or yaw_deg, got {g!r}")
+        return None, None
+    for k in g:
+        if k not in ("pitch_deg", "yaw_deg"):
+            report(path + (k,), f"unknown key {k!r}; expected pitch_deg, yaw_deg")
+    pitch = _num(g, "pitch_deg", path, report, *GIMBAL_PITCH_DEG) if "pitch_deg" in g else None
+    yaw = _num(g, "yaw_deg", path, report, *GIMBAL_YAW_DEG) if "yaw_deg" in g else None
+    return pitch, yaw

@@ -62,14 +62,18 @@ def intrinsics(cam: CameraSpec) -> np.ndarray:
                      [0.0, 0.0, 1.0]])
 
 
-def mount_rotation(cam: CameraSpec) -> np.ndarray:
-    """R_bc: camera axes -> body axes."""
-    return _mount_rotation(cam.pitch_deg)
+def mount_rotation(cam: CameraSpec, gimbal: tuple[float, float] | None = None) -> np.ndarray:
+    """R_bc: camera axes -> body axes, for the mount's angles or a gimbal's
+    current ``(pitch_deg, yaw_deg)``: yaw about the body's down axis (positive
+    to the right), then pitch (nadir -90)."""
+    pitch, yaw = gimbal if gimbal is not None else (cam.pitch_deg, cam.yaw_deg)
+    return _mount_rotation(float(pitch), float(yaw))
 
 
-@lru_cache(maxsize=64)
-def _mount_rotation(pitch_deg: float) -> np.ndarray:
-    out: np.ndarray = rot_y(math.radians(pitch_deg)) @ _R_BC_FORWARD
+@lru_cache(maxsize=256)
+def _mount_rotation(pitch_deg: float, yaw_deg: float) -> np.ndarray:
+    out: np.ndarray = rot_z(math.radians(yaw_deg)) @ rot_y(math.radians(pitch_deg)) \
+        @ _R_BC_FORWARD
     out.flags.writeable = False
     return out
 
@@ -88,15 +92,17 @@ class Pose:
 
 
 def camera_pose(cam: CameraSpec, lat_deg: float, lon_deg: float, alt_msl_m: float,
-                roll_deg: float, pitch_deg: float, yaw_deg: float, ground_alt_m: float
-                ) -> Pose:
+                roll_deg: float, pitch_deg: float, yaw_deg: float, ground_alt_m: float,
+                gimbal: tuple[float, float] | None = None) -> Pose:
+    """The camera's pose for the vehicle's; ``gimbal``: a gimbal's current
+    ``(pitch_deg, yaw_deg)`` instead of the mount's."""
     local = LocalFrame(float(lat_deg), float(lon_deg), float(ground_alt_m))
     if cam.stabilised:
         r_nb = rot_z(math.radians(yaw_deg))
     else:
         r_nb = (rot_z(math.radians(yaw_deg)) @ rot_y(math.radians(pitch_deg))
                 @ rot_x(math.radians(roll_deg)))
-    r_lc = r_nb @ mount_rotation(cam)
+    r_lc = r_nb @ mount_rotation(cam, gimbal)
     h = float(alt_msl_m) - float(ground_alt_m)
     return Pose(R_cl=r_lc.T.copy(), c_l=np.array([0.0, 0.0, -h]), local=local, height_m=h,
                 local_ecef_m=np.array(geodetic_to_ecef(local.lat_deg, local.lon_deg,

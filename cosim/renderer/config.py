@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from cosim.geo import MAX_DISTANCE_M
+from cosim.guidance.commands import GIMBAL_PITCH_DEG, GIMBAL_YAW_DEG
 from cosim.scenario.limits import MAX_NAME_CHARS, MIN_EXCHANGE_HZ
 from cosim.scenario.schema import SectionInfo
 from cosim.vehicles import get_class
@@ -32,7 +33,7 @@ MAX_RENDER_WORKERS = 64
 #: targets: the largest box side (m)
 MAX_TARGET_M = 1000.0
 
-MOUNTS = ("nadir", "forward")
+MOUNTS = ("nadir", "forward", "gimbal")  # gimbal: starts at nadir, commands point it
 CODECS = ("mp4v", "h264", "mjpg")
 TARGET_KINDS = ("truck", "fire_truck", "car", "person", "fire")
 
@@ -83,8 +84,8 @@ class TargetSpec:
 class CameraSpec:
     name: str
     vehicles: tuple[int, ...]  # rows of Scenario.vehicles carrying this camera
-    mount: str  # nadir | forward | gimbal
-    pitch_deg: float  # gimbal pitch (nadir -90, forward 0)
+    mount: str  # nadir | forward | gimbal (only a gimbal follows gimbal commands)
+    pitch_deg: float  # the mount's pitch (nadir -90, forward 0); a gimbal's at the start
     stabilised: bool  # roll and pitch of the body removed (a stabilised gimbal)
     hfov_deg: float
     vfov_deg: float
@@ -92,6 +93,7 @@ class CameraSpec:
     height_px: int
     rate_hz: float
     frame_every: int  # physics ticks per frame
+    yaw_deg: float = 0.0  # the mount's yaw from the nose (positive: right); a gimbal's at start
 
     @property
     def fx_px(self) -> float:
@@ -251,16 +253,19 @@ def _camera(info: SectionInfo, d: Any, p: P, i: int) -> CameraSpec | None:
             info.err(p, f"its vehicles' classes mount cameras differently ({', '.join(defaults)})"
                         f": give mount:")
         mount_raw = defaults[0]
-    mount, pitch = "nadir", -90.0
-    if isinstance(mount_raw, dict):
-        m = info.reader(mount_raw, p + ("mount",), ("pitch_deg",))
-        pitch = m.num("pitch_deg", lo=-90, hi=30) or 0.0
+    mount, pitch, yaw = "nadir", -90.0, 0.0
+    if isinstance(mount_raw, dict):  # a gimbal at these angles
+        m = info.reader(mount_raw, p + ("mount",), ("pitch_deg", "yaw_deg"))
+        pitch = m.num("pitch_deg", GIMBAL_PITCH_DEG[0], lo=GIMBAL_PITCH_DEG[0],
+                      hi=GIMBAL_PITCH_DEG[1]) or 0.0
+        yaw = m.num("yaw_deg", 0.0, lo=GIMBAL_YAW_DEG[0], hi=GIMBAL_YAW_DEG[1]) or 0.0
         mount = "gimbal"
     elif mount_raw in MOUNTS:
         mount = str(mount_raw)
-        pitch = -90.0 if mount == "nadir" else 0.0
+        pitch = 0.0 if mount == "forward" else -90.0
     else:
-        info.err(p + ("mount",), f"expected nadir, forward or {{pitch_deg: N}}, got {mount_raw!r}")
+        info.err(p + ("mount",), f"expected nadir, forward, gimbal or {{pitch_deg: N, "
+                                 f"yaw_deg: N}}, got {mount_raw!r}")
     w = r.integer("width_px", 640, lo=16, hi=MAX_SIDE_PX)
     h = r.integer("height_px", 480, lo=16, hi=MAX_SIDE_PX)
     if w is not None and h is not None and w * h > MAX_FRAME_PX:
@@ -285,8 +290,8 @@ def _camera(info: SectionInfo, d: Any, p: P, i: int) -> CameraSpec | None:
     if None in (name, w, h, rate) or not every:
         return None
     return CameraSpec(name=name, vehicles=tuple(rows), mount=mount, pitch_deg=pitch,
-                      stabilised=stab, hfov_deg=hfov, vfov_deg=vfov, width_px=w, height_px=h,
-                      rate_hz=rate, frame_every=every)
+                      yaw_deg=yaw, stabilised=stab, hfov_deg=hfov, vfov_deg=vfov, width_px=w,
+                      height_px=h, rate_hz=rate, frame_every=every)
 
 
 def parse_cameras(info: SectionInfo, node: Any, path: P) -> CamerasSpec:

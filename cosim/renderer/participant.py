@@ -170,11 +170,14 @@ class RenderWorker:
         self.frames = {s.index: np.empty((s.camera.height_px, s.camera.width_px, 4), np.uint8)
                        for s in streams}  # one reused (BGRA) frame buffer per stream
 
-    def render(self, stream: int, frame_no: int, tick: int, pose6: tuple[float, ...]
-               ) -> np.ndarray | None:
+    def render(self, stream: int, frame_no: int, tick: int, pose6: tuple[float, ...],
+               gimbal: tuple[float, float] | None = None) -> np.ndarray | None:
+        """One frame of ``stream`` from the vehicle's pose (lat, lon, alt, roll,
+        pitch, yaw) and its gimbal's angles (None: the mount's)."""
         s = self.streams[stream]
         la, lo, alt, roll, pitch, yaw = pose6
-        pose = camera_pose(s.camera, la, lo, alt, roll, pitch, yaw, self.world.spec.ground_alt_m)
+        pose = camera_pose(s.camera, la, lo, alt, roll, pitch, yaw, self.world.spec.ground_alt_m,
+                           gimbal)
         img, rows = render_frame(self.world, s.camera, pose, tick, self.frames[stream], stream)
         self.writers[stream].write(frame_no, tick / self.world.spec.physics_hz, img, rows,
                                    self.target_ids)
@@ -220,9 +223,9 @@ def _worker_main(world_spec: WorldSpec, streams: list[Stream], out_dir: str, cod
                 continue
             if job is None:
                 break
-            stream, frame_no, tick, pose6 = job
+            stream, frame_no, tick, pose6, gimbal = job
             try:
-                thumb = w.render(stream, frame_no, tick, pose6)
+                thumb = w.render(stream, frame_no, tick, pose6, gimbal)
             except BaseException:
                 results.send(("error", stream, tick, worker_kit.remote_traceback()))
                 break
@@ -251,6 +254,9 @@ class CameraParticipant:
         self.tick = 0  # the latest exchange (named in errors)
         self.failed: BaseException | None = None  # the error raised into the loop
         self.done: set[int] = set()  # render workers that have closed their files
+        #: each gimbal stream's current (pitch_deg, yaw_deg), set by commands
+        self.gimbal: dict[int, tuple[float, float]] = {}
+        self.gimbal_moves: list[tuple[Stream, str]] = []
 
     # --- lifecycle -------------------------------------------------------------------
     def start(self, ctx: RunContext) -> None:
@@ -268,6 +274,10 @@ class CameraParticipant:
             show = tiles is not None and i < OperatorView.MAX_TILES
             self.streams.append(Stream(i, ctx.ids[row], row, cam, f"{base}.{ext}",
                                        f"{base}.gt.csv", tiles if show else None))
+        self.gimbal = {s.index: (s.camera.pitch_deg, s.camera.yaw_deg) for s in self.streams
+                       if s.camera.mount == "gimbal"}
+        if ctx.commander is not None:
+            ctx.commander.observers.append(self.point_gimbal)
         scn = ctx.scenario
         ws = WorldSpec(scn.origin.lat_deg, scn.origin.lon_deg, scn.origin.ground_alt_m,
                        int(scn.seed), float(ctx.physics_hz),
@@ -303,8 +313,33 @@ class CameraParticipant:
             self.in_flight.append(0)
         log.info("cameras: %d stream(s) on %d render worker(s)", len(self.streams), n)
 
+    def point_gimbal(self, row: int, cmd: Any, source: str) -> None:
+        """A command's gimbal angles, for the vehicle's gimbal cameras from this
+        exchange's frame on (a ``gimbal`` event); ignored, with a warning, by a
+        vehicle without one."""
+        if not cmd.points_gimbal:
+            return
+        moved = []
+        for s in self.streams:
+            if s.row == row and s.index in self.gimbal:
+                pitch, yaw = self.gimbal[s.index]
+                self.gimbal[s.index] = (
+                    pitch if cmd.gimbal_pitch_deg is None else cmd.gimbal_pitch_deg,
+                    yaw if cmd.gimbal_yaw_deg is None else cmd.gimbal_yaw_deg)
+                moved.append(s)
+        if not moved:
+            log.warning("vehicle %s has no camera on a gimbal: gimbal command (%s) ignored",
+                        self.ctx.ids[row], source)
+            return
+        self.gimbal_moves += [(s, source) for s in moved]  # events at this exchange's tick
+
     def on_exchange(self, tick: int, states: np.ndarray) -> None:
         self.tick = tick
+        for s, source in self.gimbal_moves:
+            pitch, yaw = self.gimbal[s.index]
+            self.ctx.events.emit("gimbal", tick, vehicle=s.vehicle, camera=s.camera.name,
+                                 pitch_deg=pitch, yaw_deg=yaw, source=source)
+        self.gimbal_moves.clear()
         if self.procs:
             self._check_workers()
         for s in self.streams:
@@ -312,10 +347,11 @@ class CameraParticipant:
             if tick % every:
                 continue
             pose6 = tuple(float(x) for x in states[s.row, _POSE_COLS])
+            gimbal = self.gimbal.get(s.index)
             frame_no = tick // every
             if self.inline is not None:
                 try:
-                    thumb = self.inline.render(s.index, frame_no, tick, pose6)
+                    thumb = self.inline.render(s.index, frame_no, tick, pose6, gimbal)
                 except Exception:
                     self.failed = RenderError(s.vehicle, s.camera.name, tick,
                                               traceback.format_exc())
@@ -324,7 +360,7 @@ class CameraParticipant:
                     self.operator.thumb(s.index, frame_no, thumb)
             else:
                 k = s.index % len(self.procs)
-                self.jobs[k].put((s.index, frame_no, tick, pose6))
+                self.jobs[k].put((s.index, frame_no, tick, pose6, gimbal))
                 self.in_flight[k] += 1
                 while self.in_flight[k] >= self.spec.max_in_flight:
                     self._collect(block=True)

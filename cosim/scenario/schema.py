@@ -891,7 +891,7 @@ def _check_commands(ctx: _Ctx, schedule: list[ScheduleItem], specs: list[Vehicle
     bank = [DEFAULT_BANK_LIMIT_DEG] * len(specs)
     for item in schedule:
         cmd = item.command
-        if cmd is None:
+        if cmd is None or not cmd.flies:  # gimbal angles are for the cameras
             continue
         path: P = ("schedule", item.index, "command")
         mute = sorted({(specs[j].model, specs[j].vehicle_class) for j in item.vehicles

@@ -55,6 +55,8 @@ class Commander:
         for r in rows:
             for observe in self.observers:
                 observe(r, cmd, source)
+        if not cmd.flies:  # only gimbal angles: for the cameras (an observer)
+            return
         if len(self.guidance) == 1:
             name, g = next(iter(self.guidance.items()))
             mine = [r for r in rows if self.row_class[r] == name]

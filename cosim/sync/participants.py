@@ -77,6 +77,9 @@ class RunContext:
     events: EventLog  # ``events.emit(kind, tick, vehicle=..., **fields)``
     mavlink: Any  # the run's cosim.mavlink.MavlinkLinks (None: no MAVLink)
     workers: int  # the pool's worker count (for parts with their own pools)
+    #: the run's cosim.sync.commands.Commander: ``commander.observers`` hear
+    #: every command, from every source (None: a context outside a run)
+    commander: Any = None
 
 
 class Participant(Protocol):

@@ -370,7 +370,8 @@ class Run:
         self.participants = build_participants(
             scn, skip=("swarm",) if self.external_controller else ())
         ctx = RunContext(scn, self.out, ids, scn.origin.frame, start_ned, hz,
-                         scn.rates.control_every, events, self.mavlink, pool.workers)
+                         scn.rates.control_every, events, self.mavlink, pool.workers,
+                         commander)
         for part in self.participants:
             part.start(ctx)
             during.append(part.on_exchange)

@@ -15,6 +15,7 @@ import pytest
 
 from cosim.errors import ConfigError
 from cosim.geo import LocalFrame
+from cosim.guidance.commands import Command
 from cosim.renderer import video
 from cosim.renderer.camera import camera_pose
 from cosim.renderer.config import TARGET_DEFAULTS, CameraSpec, GroundSpec, TargetSpec
@@ -29,10 +30,10 @@ from cosim.vehicles.spec import N_STATE, STATE_INDEX
 LAT0, LON0, GROUND_M = 37.0, -122.0, 10.0
 
 
-def _cam(mount: str, pitch: float, w: int = 320, h: int = 240, hfov: float = 60.0
-         ) -> CameraSpec:
+def _cam(mount: str, pitch: float, w: int = 320, h: int = 240, hfov: float = 60.0,
+         yaw: float = 0.0) -> CameraSpec:
     vfov = math.degrees(2 * math.atan(math.tan(math.radians(hfov) / 2) * h / w))
-    return CameraSpec("c", (0,), mount, pitch, False, hfov, vfov, w, h, 10.0, 12)
+    return CameraSpec("c", (0,), mount, pitch, False, hfov, vfov, w, h, 10.0, 12, yaw_deg=yaw)
 
 
 def _analytic_uv(cam: CameraSpec, pts_ned: np.ndarray, cam_ned: np.ndarray, roll: float,
@@ -46,10 +47,12 @@ def _analytic_uv(cam: CameraSpec, pts_ned: np.ndarray, cam_ned: np.ndarray, roll
     bx = np.array([cth * cps, cth * sps, -sth])
     by = np.array([sph * sth * cps - cph * sps, sph * sth * sps + cph * cps, sph * cth])
     bz = np.array([cph * sth * cps + sph * sps, cph * sth * sps - sph * cps, cph * cth])
-    g = math.radians(cam.pitch_deg)  # gimbal: optical axis = nose pitched by g
-    axis = math.cos(g) * bx - math.sin(g) * bz
-    down_img = math.sin(g) * bx + math.cos(g) * bz  # image "down" direction
-    right = by
+    # gimbal: turned by yaw gy about the body's down axis, then its nose pitched by g
+    gy = math.radians(cam.yaw_deg)
+    fwd, right = math.cos(gy) * bx + math.sin(gy) * by, -math.sin(gy) * bx + math.cos(gy) * by
+    g = math.radians(cam.pitch_deg)
+    axis = math.cos(g) * fwd - math.sin(g) * bz
+    down_img = math.sin(g) * fwd + math.cos(g) * bz  # image "down" direction
     f = cam.width_px / 2 / math.tan(math.radians(cam.hfov_deg) / 2)
     d = pts_ned - cam_ned
     x, y, z = d @ right, d @ down_img, d @ axis
@@ -62,17 +65,20 @@ def _target(kind: str, n: float, e: float, heading: float = 0.0, tid: str = "t")
     return TargetSpec(tid, kind, n, e, None, None, heading, L, W, H, c)
 
 
-@pytest.mark.parametrize("mount,pitch,att,offset_ne", [
-    ("nadir", -90.0, (4.0, -3.0, 30.0), (12.0, -7.0)),
-    ("forward", 0.0, (3.0, -20.0, 10.0), (120.0, 30.0)),
-    ("gimbal", -45.0, (-6.0, 2.0, -40.0), (70.0, -40.0)),
+@pytest.mark.parametrize("mount,pitch,att,offset_ne,yaw", [
+    ("nadir", -90.0, (4.0, -3.0, 30.0), (12.0, -7.0), 0.0),
+    ("forward", 0.0, (3.0, -20.0, 10.0), (120.0, 30.0), 0.0),
+    ("gimbal", -45.0, (-6.0, 2.0, -40.0), (70.0, -40.0), 0.0),
+    ("gimbal", -50.0, (5.0, -4.0, 20.0), (45.0, 65.0), 70.0),
+    ("gimbal", -90.0, (2.0, 3.0, 0.0), (20.0, 5.0), -90.0),
 ])
 def test_projected_corners_match_an_analytic_pinhole(mount: str, pitch: float,
                                                       att: tuple[float, float, float],
-                                                      offset_ne: tuple[float, float]) -> None:
+                                                      offset_ne: tuple[float, float],
+                                                      yaw: float) -> None:
     t = _target("truck", *offset_ne, heading=25.0)
     world = World(WorldSpec(LAT0, LON0, GROUND_M, 1, 120.0, GroundSpec(), (t,)))
-    cam = _cam(mount, pitch)
+    cam = _cam(mount, pitch, yaw=yaw)
     alt_agl = 100.0
     pose = camera_pose(cam, LAT0, LON0, GROUND_M + alt_agl, *att, ground_alt_m=GROUND_M)
     _, rows = render_frame(world, cam, pose, 0)
@@ -393,6 +399,10 @@ def test_config_errors_carry_file_and_line(tmp_path: Path) -> None:
             - {name: b, rate_hz: 7}
             - {name: c, rate_hz: 60}
             - {name: d, vehicles: nobody}
+            - {name: e, mount: {pitch_deg: -90, yaw_deg: 200}}
+        schedule:
+          - {at_s: 1, command: {gimbal: {pitch_deg: 45}}}
+          - {at_s: 1, command: {gimbal: {roll_deg: 5}}}
         """)
     f = str(tmp_path / "bad.yaml")
     with pytest.raises(ConfigError) as ei:
@@ -406,3 +416,81 @@ def test_config_errors_carry_file_and_line(tmp_path: Path) -> None:
     assert any(m.startswith(f"{f}:15: cameras.views[2].rate_hz: rate_hz 60: a frame every 2 "
                             "ticks is not a whole number of exchanges") for m in msgs)
     assert any(m.startswith(f"{f}:16: cameras.views[3].vehicles") for m in msgs)
+    assert f"{f}:17: cameras.views[4].mount.yaw_deg: must be <= 180, got 200" in msgs
+    assert f"{f}:19: schedule[0].command.gimbal.pitch_deg: must be -90..30, got 45" in msgs
+    assert any(m.startswith(f"{f}:20: schedule[1].command.gimbal.roll_deg: unknown key")
+               for m in msgs)
+
+
+class _Events:
+    def __init__(self) -> None:
+        self.got: list[tuple[str, int, dict[str, Any]]] = []
+
+    def emit(self, kind: str, tick: int, **fields: Any) -> None:
+        self.got.append((kind, tick, fields))
+
+
+class _Commander:
+    def __init__(self) -> None:
+        self.observers: list[Any] = []
+
+
+def _fly_gimbal(tmp_path: Path, name: str, mount: str, turn_at: int | None
+                ) -> tuple[list[dict[str, str]], _Events]:
+    """u1 flies north over the truck with a gimbal camera; a gimbal command
+    (yaw 90) through the run's command observers at tick ``turn_at``."""
+    view = (f"    - {{name: belly, vehicles: u1, mount: {mount}, vfov_deg: 40, width_px: 160,"
+            f" height_px: 120, rate_hz: 30}}\n")
+    text = SCENARIO.format(lat=LAT0, lon=LON0, g=GROUND_M, dur=4.0, workers=0, w=160, h=120,
+                           rate=30, codec="mp4v", op="false", more="")
+    text = text[:text.index("  views:\n") + len("  views:\n")] + view
+    scn = parse_scenario(text, str(tmp_path / f"{name}.yaml"), check_properties=False)
+    out = tmp_path / name
+    out.mkdir()
+    frame = LocalFrame(LAT0, LON0, GROUND_M)
+    part = CameraParticipant(scn)
+    events, commander = _Events(), _Commander()
+    ctx = RunContext(scn, out, ["u1"], frame, np.zeros((1, 3)), 120.0, 4, events, None, 1,
+                     commander)
+    part.start(ctx)
+    states = np.zeros((1, N_STATE))
+    for tick in range(0, scn.total_ticks, 4):
+        if tick == turn_at:
+            for observe in commander.observers:
+                observe(0, Command(gimbal_yaw_deg=90.0), "schedule")
+        la, lo = frame.place(-100.0 + 50.0 * tick / 120.0, 0.0, GROUND_M + 100.0)
+        states[0, STATE_INDEX["lat_deg"]], states[0, STATE_INDEX["lon_deg"]] = la, lo
+        states[0, STATE_INDEX["alt_msl_m"]] = GROUND_M + 100.0
+        part.on_exchange(tick, states)
+    part.finish(scn.total_ticks, "completed")
+    with open(out / "cameras/u1_belly.gt.csv") as f:
+        return [r for r in csv.DictReader(f) if r["target"] == "truck1"], events
+
+
+def test_a_gimbal_command_turns_the_camera_from_that_frame_on(tmp_path: Path) -> None:
+    """Turned 90 deg right, a nadir gimbal sees what was ahead (image up) on
+    the image's left; the frames after the command are those of a camera
+    mounted so from the start, those before it those of a plain nadir one."""
+    fixed, _ = _fly_gimbal(tmp_path, "nadir", "nadir", None)
+    turned, _ = _fly_gimbal(tmp_path, "turned", "{pitch_deg: -90, yaw_deg: 90}", None)
+    cmd, events = _fly_gimbal(tmp_path, "cmd", "gimbal", 240)  # 2 s: frame 60
+    assert len(fixed) == len(turned) == len(cmd) == 120
+    seen = [i for i, r in enumerate(fixed) if r["in_view"] == "1"]
+    assert seen
+    cx, cy = (160 - 1) / 2, (120 - 1) / 2
+    for i in seen:  # (dx, dy) -> (dy, -dx): a quarter turn of the image
+        a, b = fixed[i], turned[i]
+        dx, dy = float(a["center_x_px"]) - cx, float(a["center_y_px"]) - cy
+        assert float(b["center_x_px"]) - cx == pytest.approx(dy, abs=0.6)
+        assert float(b["center_y_px"]) - cy == pytest.approx(-dx, abs=0.6)
+    assert cmd[:60] == fixed[:60] and cmd[60:] == turned[60:]
+    assert cmd[60] != fixed[60]
+    assert [e for e in events.got if e[0] == "gimbal"] == [
+        ("gimbal", 240, {"vehicle": "u1", "camera": "belly", "pitch_deg": -90.0,
+                         "yaw_deg": 90.0, "source": "schedule"})]
+
+
+def test_a_fixed_mount_ignores_gimbal_commands(tmp_path: Path) -> None:
+    fixed, _ = _fly_gimbal(tmp_path, "nadir", "nadir", None)
+    cmd, events = _fly_gimbal(tmp_path, "cmd", "nadir", 240)
+    assert cmd == fixed and not [e for e in events.got if e[0] == "gimbal"]
