@@ -9,12 +9,14 @@ Frames (all right-handed):
 - body: x nose, y right wing, z down; ``R_nb = Rz(yaw) Ry(pitch) Rx(roll)``.
 - camera (OpenCV): x image right, y image down, z along the optical axis.
 
-Mounts are rigid: a ``nadir`` camera looks along body z with the image top
-toward the nose (so ``vfov`` is the along-track field of view); on a banked
-aircraft it therefore looks sideways. ``forward`` looks along the nose; a
-gimbal ``{pitch_deg: p}`` is the forward camera pitched by ``p`` about the
-body y axis (-90 is nadir). ``stabilised: true`` removes the body's roll and
-pitch (a stabilised gimbal keeps only the heading).
+A ``nadir`` camera looks along body z with the image top toward the nose
+(so ``vfov`` is the along-track field of view); on a banked aircraft it
+therefore looks sideways. ``forward`` looks along the nose; a gimbal at
+``(pitch p, yaw y)`` is the forward camera turned by ``y`` about the body z
+axis (positive to the right), then pitched by ``p`` about its own y axis
+(-90 is nadir): ``R_bc = Rz(y) Ry(p) R_forward``. ``stabilised: true``
+removes the body's roll and pitch (a stabilised gimbal keeps only the
+heading).
 
 Pixel coordinates put pixel centres at integers: the image spans
 ``[-0.5, W - 0.5] x [-0.5, H - 0.5]`` and the principal point is its centre.
@@ -133,4 +135,32 @@ def ground_homography(K_inv: np.ndarray, pose: Pose) -> np.ndarray:
     c = pose.c_l
     g = np.array([[h, 0.0, c[0]], [0.0, h, c[1]], [0.0, 0.0, 1.0]])
     out: np.ndarray = g @ pose.R_cl.T @ K_inv
+    return out
+
+
+def footprint(cam: CameraSpec, pose: Pose, max_range_m: float = 5000.0) -> np.ndarray:
+    """(4, 2) north/east in ``L`` of the image's corners on the ground (top
+    left, top right, bottom right, bottom left): the ground the camera sees.
+    A corner whose ray misses the ground (above the horizon) or meets it
+    beyond ``max_range_m`` is cut back to that horizontal range along its
+    direction."""
+    K_inv = np.linalg.inv(intrinsics(cam))
+    H = ground_homography(K_inv, pose)
+    w, h = cam.width_px, cam.height_px
+    corners = np.array([[-0.5, -0.5, 1.0], [w - 0.5, -0.5, 1.0], [w - 0.5, h - 0.5, 1.0],
+                        [-0.5, h - 0.5, 1.0]])
+    out = np.empty((4, 2))
+    for i, p in enumerate(corners):
+        q = H @ p
+        c = pose.c_l[:2]
+        if q[2] > 1e-12:
+            ne = q[:2] / q[2]
+            d = ne - c
+            r = float(np.hypot(*d))
+            out[i] = ne if r <= max_range_m else c + d * (max_range_m / r)
+        else:  # the ray's horizontal direction, from the camera's own
+            ray = pose.R_cl.T @ (K_inv @ p)
+            d = ray[:2]
+            n = float(np.hypot(*d))
+            out[i] = c + (d / n * max_range_m if n > 0 else 0.0)
     return out

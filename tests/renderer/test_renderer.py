@@ -494,3 +494,40 @@ def test_a_fixed_mount_ignores_gimbal_commands(tmp_path: Path) -> None:
     fixed, _ = _fly_gimbal(tmp_path, "nadir", "nadir", None)
     cmd, events = _fly_gimbal(tmp_path, "cmd", "nadir", 240)
     assert cmd == fixed and not [e for e in events.got if e[0] == "gimbal"]
+
+
+@pytest.mark.parametrize("yaw,gimbal_yaw", [(0.0, 0.0), (30.0, 0.0), (0.0, 90.0),
+                                            (-120.0, 45.0)])
+def test_a_level_nadir_footprint_is_the_field_of_view_turned_by_the_heading(
+        yaw: float, gimbal_yaw: float) -> None:
+    """At height h, level: a rectangle 2 h tan(hfov/2) across the image by
+    2 h tan(vfov/2) along it, image top toward heading + gimbal yaw."""
+    from cosim.renderer.camera import footprint
+
+    cam = _cam("gimbal", -90.0, w=320, h=240, hfov=60.0, yaw=gimbal_yaw)
+    h = 120.0
+    pose = camera_pose(cam, LAT0, LON0, GROUND_M + h, 0.0, 0.0, yaw, ground_alt_m=GROUND_M)
+    got = footprint(cam, pose)
+    half_x = h * math.tan(math.radians(cam.hfov_deg) / 2)  # the image edges, not pixel centres
+    half_y = h * math.tan(math.radians(cam.vfov_deg) / 2)
+    a = math.radians(yaw + gimbal_yaw)
+    up, right = np.array([math.cos(a), math.sin(a)]), np.array([-math.sin(a), math.cos(a)])
+    want = np.array([half_y * up - half_x * right, half_y * up + half_x * right,
+                     -half_y * up + half_x * right, -half_y * up - half_x * right])
+    assert np.allclose(got, want, atol=0.05), (got, want)
+
+
+def test_a_footprint_reaching_over_the_horizon_is_cut_at_the_range() -> None:
+    from cosim.renderer.camera import footprint
+
+    cam = _cam("forward", 0.0)
+    pose = camera_pose(cam, LAT0, LON0, GROUND_M + 100.0, 0.0, 0.0, 0.0,
+                       ground_alt_m=GROUND_M)
+    got = footprint(cam, pose, max_range_m=800.0)
+    # the top corners look above the horizon: cut at 800 m in their direction
+    tx = math.tan(math.radians(cam.hfov_deg) / 2)
+    ty = math.tan(math.radians(cam.vfov_deg) / 2)
+    top = 800.0 * np.array([[1.0, -tx], [1.0, tx]]) / math.hypot(1.0, tx)
+    # the bottom ones meet the ground where the ray (x, y, 1) has come down 100 m
+    bottom = 100.0 / ty * np.array([[1.0, tx], [1.0, -tx]])
+    assert np.allclose(got, np.vstack([top, bottom]), atol=1e-6), got
