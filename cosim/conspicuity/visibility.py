@@ -17,6 +17,12 @@ in-view frames, so ``last - first = visible_s - period``.
 The frame in a pass where the target is closest to the image centre (least
 ``eccentricity_deg``) is the **overhead** frame: for a nadir camera, the
 moment the vehicle is above the target (experiment 1's trial start).
+
+A pass's ``screen_direction`` is where the target travels across the image:
+``up``, ``down``, ``left`` or ``right``, the larger of the horizontal and
+vertical moves of its centre from the first to the last frame of the pass
+where the centre is known (empty if it is known in fewer than two).
+Experiment 1 needs all four.
 """
 
 from __future__ import annotations
@@ -47,6 +53,8 @@ class GtRow:
     eccentricity_deg: float = math.nan
     angular_size_deg: float = math.nan
     range_m: float = math.nan
+    center_x_px: float = math.nan
+    center_y_px: float = math.nan
 
 
 @dataclass(frozen=True)
@@ -63,6 +71,7 @@ class Pass:
     min_eccentricity_deg: float
     max_angular_size_deg: float
     min_range_m: float
+    screen_direction: str = ""
 
 
 @dataclass(frozen=True)
@@ -114,7 +123,9 @@ def read_ground_truth(path: str | Path) -> dict[tuple[str, str, str], list[GtRow
                             in_view=int(r["in_view"]) != 0,
                             eccentricity_deg=_num(r.get("eccentricity_deg")),
                             angular_size_deg=_num(r.get("angular_size_deg")),
-                            range_m=_num(r.get("range_m")))
+                            range_m=_num(r.get("range_m")),
+                            center_x_px=_num(r.get("center_x_px")),
+                            center_y_px=_num(r.get("center_y_px")))
             except (TypeError, ValueError) as e:
                 raise GroundTruthError(f"{p}:{n}: bad value: {e}") from None
             out.setdefault((r["vehicle"], r["camera"], r["target"]), []).append(row)
@@ -150,8 +161,23 @@ def passes(rows: Sequence[GtRow], frame_period_s: float) -> list[Pass]:
                         overhead_frame=over, overhead_s=over_row.time_s,
                         min_eccentricity_deg=_nanmin(x.eccentricity_deg for x in run),
                         max_angular_size_deg=max(sizes) if sizes else math.nan,
-                        min_range_m=_nanmin(x.range_m for x in run)))
+                        min_range_m=_nanmin(x.range_m for x in run),
+                        screen_direction=screen_direction(run)))
     return out
+
+
+def screen_direction(run: Sequence[GtRow]) -> str:
+    """Where the target travels across the image in a pass (module docstring)."""
+    known = [x for x in run if not (math.isnan(x.center_x_px) or math.isnan(x.center_y_px))]
+    if len(known) < 2:
+        return ""
+    dx = known[-1].center_x_px - known[0].center_x_px
+    dy = known[-1].center_y_px - known[0].center_y_px  # image y grows downwards
+    if dx == dy == 0:
+        return ""
+    if abs(dx) >= abs(dy):
+        return "right" if dx > 0 else "left"
+    return "down" if dy > 0 else "up"
 
 
 def _period_from_times(rows: Sequence[GtRow]) -> float:
@@ -220,7 +246,8 @@ def physics_hz_of(run_dir: str | Path) -> float | None:
 
 PASS_COLUMNS = ("vehicle", "camera", "target", "pass", "first_visible_s", "last_visible_s",
                 "visible_s", "frames", "overhead_s", "overhead_tick", "overhead_frame",
-                "min_eccentricity_deg", "max_angular_size_deg", "min_range_m")
+                "min_eccentricity_deg", "max_angular_size_deg", "min_range_m",
+                "screen_direction")
 
 
 def _fmt(x: float | int | None) -> str:
@@ -249,7 +276,8 @@ def pass_rows(results: Iterable[TargetVisibility], physics_hz: float | None
                          "overhead_frame": str(p.overhead_frame),
                          "min_eccentricity_deg": _fmt(p.min_eccentricity_deg),
                          "max_angular_size_deg": _fmt(p.max_angular_size_deg),
-                         "min_range_m": _fmt(p.min_range_m)})
+                         "min_range_m": _fmt(p.min_range_m),
+                         "screen_direction": p.screen_direction})
     return rows
 
 

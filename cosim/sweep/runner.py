@@ -38,8 +38,8 @@ log = logging.getLogger(__name__)
 
 #: measured columns of visibility.csv after the swept names
 VISIBILITY_COLUMNS = ("speed_kt", "alt_agl_m", "target", "visible_s", "first_visible_s",
-                      "last_visible_s", "passes", "overhead_s", "target_id", "vehicle",
-                      "camera", "run")
+                      "last_visible_s", "passes", "overhead_s", "screen_direction",
+                      "target_id", "vehicle", "camera", "run")
 MANIFEST_COLUMNS = ("run", "vehicle", "camera", "video", "ground_truth", "frames", "rate_hz",
                     "width_px", "height_px", "hfov_deg", "vfov_deg")
 
@@ -262,6 +262,7 @@ def visibility_rows(spec: SweepSpec, outcome: RunOutcome, run_dir: Path
                "visible_s": _f(tv.visible_s), "first_visible_s": _f(tv.first_visible_s),
                "last_visible_s": _f(tv.last_visible_s), "passes": str(len(tv.passes)),
                "overhead_s": _f(tv.passes[0].overhead_s) if tv.passes else "",
+               "screen_direction": tv.passes[0].screen_direction if tv.passes else "",
                "target_id": tv.target, "vehicle": tv.vehicle, "camera": tv.camera,
                "run": outcome.name}
         row.update(swept)  # a swept value wins over the measured one of the same name

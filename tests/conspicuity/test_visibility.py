@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from cosim.conspicuity import passes, read_ground_truth, run_visibility, visibility
-from cosim.conspicuity.visibility import GroundTruthError, write_visibility_csv
+from cosim.conspicuity.visibility import GroundTruthError, GtRow, write_visibility_csv
 
 GT_COLUMNS = ("frame", "time_s", "vehicle", "camera", "target", "in_view", "fully_in_view",
               "bbox_x0_px", "bbox_y0_px", "bbox_x1_px", "bbox_y1_px", "center_x_px",
@@ -122,3 +122,18 @@ def test_not_a_ground_truth_file(tmp_path: Path) -> None:
         visibility(bad)
     with pytest.raises(GroundTruthError, match="cannot read ground truth"):
         visibility(tmp_path / "missing.csv")
+
+
+@pytest.mark.parametrize("xs,ys,way", [
+    ((100, 101, 102), (10, 60, 110), "down"), ((100, 99, 97), (110, 60, 10), "up"),
+    ((10, 60, 110), (50, 52, 49), "right"), ((110, 60, 10), (50, 47, 52), "left"),
+    ((50, 50), (50, 50), ""),
+])
+def test_screen_direction_is_the_larger_move_of_the_centre(xs, ys, way) -> None:
+    nan = float("nan")
+    rows = [GtRow(frame=i, time_s=i / 10, in_view=True, center_x_px=x, center_y_px=y)
+            for i, (x, y) in enumerate(zip(xs, ys))]
+    rows.insert(0, GtRow(frame=-1, time_s=-0.1, in_view=True, center_x_px=nan,
+                         center_y_px=nan))  # the centre unknown (clipped): skipped
+    [p] = passes(rows, 0.1)
+    assert p.screen_direction == way

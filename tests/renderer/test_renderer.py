@@ -13,11 +13,12 @@ import cv2
 import numpy as np
 import pytest
 
+from cosim.conspicuity.visibility import passes, read_ground_truth
 from cosim.errors import ConfigError
 from cosim.geo import LocalFrame
 from cosim.guidance.commands import Command
 from cosim.renderer import video
-from cosim.renderer.camera import camera_pose
+from cosim.renderer.camera import camera_pose, footprint
 from cosim.renderer.config import TARGET_DEFAULTS, CameraSpec, GroundSpec, TargetSpec
 from cosim.renderer.frame import World, WorldSpec, render_frame
 from cosim.renderer.ground import GroundTexture
@@ -483,6 +484,11 @@ def test_a_gimbal_command_turns_the_camera_from_that_frame_on(tmp_path: Path) ->
         dx, dy = float(a["center_x_px"]) - cx, float(a["center_y_px"]) - cy
         assert float(b["center_x_px"]) - cx == pytest.approx(dy, abs=0.6)
         assert float(b["center_y_px"]) - cy == pytest.approx(-dx, abs=0.6)
+    # ahead of the nose comes in at the top, or on the left once turned
+    for name, way in (("nadir", "down"), ("turned", "right")):
+        rows = read_ground_truth(tmp_path / name / "cameras/u1_belly.gt.csv")
+        [p] = passes(rows[("u1", "belly", "truck1")], 1 / 30)
+        assert p.screen_direction == way
     assert cmd[:60] == fixed[:60] and cmd[60:] == turned[60:]
     assert cmd[60] != fixed[60]
     assert [e for e in events.got if e[0] == "gimbal"] == [
@@ -502,8 +508,6 @@ def test_a_level_nadir_footprint_is_the_field_of_view_turned_by_the_heading(
         yaw: float, gimbal_yaw: float) -> None:
     """At height h, level: a rectangle 2 h tan(hfov/2) across the image by
     2 h tan(vfov/2) along it, image top toward heading + gimbal yaw."""
-    from cosim.renderer.camera import footprint
-
     cam = _cam("gimbal", -90.0, w=320, h=240, hfov=60.0, yaw=gimbal_yaw)
     h = 120.0
     pose = camera_pose(cam, LAT0, LON0, GROUND_M + h, 0.0, 0.0, yaw, ground_alt_m=GROUND_M)
@@ -518,8 +522,6 @@ def test_a_level_nadir_footprint_is_the_field_of_view_turned_by_the_heading(
 
 
 def test_a_footprint_reaching_over_the_horizon_is_cut_at_the_range() -> None:
-    from cosim.renderer.camera import footprint
-
     cam = _cam("forward", 0.0)
     pose = camera_pose(cam, LAT0, LON0, GROUND_M + 100.0, 0.0, 0.0, 0.0,
                        ground_alt_m=GROUND_M)
