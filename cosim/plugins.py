@@ -38,7 +38,8 @@ BUILTIN: dict[str, dict[str, str]] = {
     BACKENDS: {"inline": "cosim.fdm_pool.inline:InlinePool",
                "process": "cosim.fdm_pool.process:ProcessPool"},
     VEHICLES: {"fixed_wing": "cosim.vehicles.fixed_wing:FIXED_WING",
-               "jsbsim": "cosim.vehicles.plain:PLAIN"},
+               "jsbsim": "cosim.vehicles.plain:PLAIN",
+               "ground": "cosim.vehicles.ground:GROUND"},
 }
 
 

@@ -32,6 +32,7 @@ import cv2
 import numpy as np
 
 from cosim.geo import LocalFrame, geodetic_to_ecef
+from cosim.obstacles import signed_area
 from cosim.renderer.camera import NEAR_M, Pose, ground_homography, intrinsics, project, to_camera
 from cosim.renderer.config import CameraSpec, GroundSpec, TargetSpec
 from cosim.renderer.ground import GroundTexture
@@ -75,6 +76,12 @@ class WorldSpec:
     physics_hz: float
     ground: GroundSpec
     targets: tuple[TargetSpec, ...]
+    #: the scenario's obstacles (``cosim.obstacles.Obstacle``): drawn as prisms
+    obstacles: tuple[Any, ...] = ()
+
+
+#: obstacles' colour (RGB): concrete grey
+OBSTACLE_RGB = (150, 148, 140)
 
 
 class World:
@@ -100,6 +107,9 @@ class World:
         self._grids: dict[tuple[int, int, int], np.ndarray] = {}
         self._ids: dict[tuple[int, int], tuple[np.ndarray, list[int]]] = {}
         self._views: dict[CameraSpec, _View] = {}
+        #: per obstacle, its corners (k, 2) in the scenario frame and its height
+        self.obstacles = [(np.array(o.polygon, dtype=float), float(o.height_m))
+                          for o in spec.obstacles]
 
     def view(self, cam: CameraSpec) -> _View:
         """What every frame of ``cam`` shares, built once."""
@@ -436,6 +446,44 @@ def _draw_smoke(K: np.ndarray, pose: Pose, t: TargetSpec, origin_l: np.ndarray, 
         bgr[m] = (bgr[m] * (1.0 - alpha) + _SMOKE_BGR * alpha).astype(np.uint8)
 
 
+def _obstacle_faces(world: World, pose: Pose
+                    ) -> list[tuple[float, np.ndarray, tuple[int, int, int, int], int]]:
+    """The front faces of every obstacle's prism (walls and roof), as
+    ``_target_faces`` gives them; their id is 0: they hide targets but are
+    none."""
+    if not world.obstacles:
+        return []
+    r_l = _ecef_to_ned(pose.local)
+    rot = r_l @ world.ecef_to_ned.T  # scenario NED -> L axes
+    shift = r_l @ (world.origin_ecef - pose.local_ecef_m)
+    out = []
+    for poly, height in world.obstacles:
+        k = len(poly)
+        ccw = poly if signed_area(poly) > 0 else poly[::-1]
+        base = np.column_stack([ccw, np.zeros(k)]) @ rot.T + shift
+        top = np.column_stack([ccw, np.full(k, -height)]) @ rot.T + shift
+        faces = [(top, rot @ np.array([0.0, 0.0, -1.0]))]
+        for i in range(k):
+            j = (i + 1) % k
+            d = ccw[j] - ccw[i]
+            n_s = np.array([d[1], -d[0], 0.0]) / math.hypot(d[0], d[1])  # outward
+            faces.append((np.array([base[i], base[j], top[j], top[i]]), rot @ n_s))
+        for f_l, normal in faces:
+            if np.dot(f_l.mean(axis=0) - pose.c_l, normal) >= 0:
+                continue  # faces away
+            v_c = (f_l - pose.c_l) @ pose.R_cl.T
+            if v_c[:, 2].min() < NEAR_M:
+                v_c = _clip_near(v_c)
+                if len(v_c) < 3:
+                    continue
+            kk = lambert(normal)
+            c = OBSTACLE_RGB
+            bgra = (min(255, int(c[2] * kk)), min(255, int(c[1] * kk)),
+                    min(255, int(c[0] * kk)), OPAQUE)
+            out.append((float(np.linalg.norm(v_c.mean(axis=0))), v_c, bgra, 0))
+    return out
+
+
 def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
                  out: np.ndarray | None = None, stream: Hashable = None
                  ) -> tuple[np.ndarray, list[dict[str, Any]]]:
@@ -465,11 +513,16 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
     visible = ~_culled(view.planes, probe_c)
     for k in np.flatnonzero(visible).tolist():
         faces.extend(_target_faces(pose, targets.specs[k], origins[k], time_s, seed + k, k + 1))
+    faces.extend(_obstacle_faces(world, pose))
     faces.sort(key=lambda f: -f[0])  # painter's order: far to near
     for _, v_c, bgra, tid in faces:
         pts = _fixed(project(K, v_c))
-        cv2.fillConvexPoly(img, pts, bgra, cv2.LINE_8, SHIFT)
-        cv2.fillConvexPoly(ids, pts, tid, cv2.LINE_8, SHIFT)
+        if tid:
+            cv2.fillConvexPoly(img, pts, bgra, cv2.LINE_8, SHIFT)
+            cv2.fillConvexPoly(ids, pts, tid, cv2.LINE_8, SHIFT)
+        else:  # an obstacle's face (a roof may be concave): hides what is behind it
+            cv2.fillPoly(img, [pts], bgra, cv2.LINE_8, SHIFT)
+            cv2.fillPoly(ids, [pts], 0, cv2.LINE_8, SHIFT)
         lo_px, hi_px = pts.min(axis=0) >> SHIFT, (pts.max(axis=0) >> SHIFT) + 2
         dirty[:] = [max(0, min(dirty[0], int(lo_px[0]))), max(0, min(dirty[1], int(lo_px[1]))),
                     min(w_img, max(dirty[2], int(hi_px[0]))),

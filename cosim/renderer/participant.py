@@ -282,7 +282,8 @@ class CameraParticipant:
         ws = WorldSpec(scn.origin.lat_deg, scn.origin.lon_deg, scn.origin.ground_alt_m,
                        int(scn.seed), float(ctx.physics_hz),
                        scn.sections.get("ground") or GroundSpec(),
-                       tuple(scn.sections.get("targets") or ()))
+                       tuple(scn.sections.get("targets") or ()),
+                       tuple(scn.sections.get("obstacles") or ()))
         n = self.spec.render_workers
         if n is None:
             n = min(len(self.streams), os.cpu_count() or 1)

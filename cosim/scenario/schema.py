@@ -459,6 +459,7 @@ def parse_scenario(text: str, fname: str = "<scenario>", check_properties: bool 
     for key in SECTIONS:
         if key in top.d:
             sections[key] = _section_parser(key)(info, top.d[key], (key,))
+    vehicles = _with_world(ctx, vehicles, sections, origin)
     if ctx.problems:
         raise ctx.error()
     return Scenario(name=name or Path(fname).stem, path=fname, origin=origin, rates=rates,
@@ -471,6 +472,21 @@ def parse_scenario(text: str, fname: str = "<scenario>", check_properties: bool 
                            "vehicle_lines": [ctx.line(pp) for _, pp in vehicles]})
 
 
+def _with_world(ctx: _Ctx, vehicles: list[tuple[VehicleSpec, P]], sections: dict[str, Any],
+                origin: Origin) -> list[tuple[VehicleSpec, P]]:
+    """Each vehicle given what of the world its class needs (``with_world``),
+    and checked in it."""
+    out = []
+    o = (origin.lat_deg, origin.lon_deg, origin.ground_alt_m)
+    for v, p in vehicles:
+        vc = get_class(v.vehicle_class)
+        v = vc.with_world(v, sections, o)
+        for problem in vc.world_problems(v):
+            ctx.err(p, problem)
+        out.append((v, p))
+    return out
+
+
 #: top-level sections parsed by the part that owns them: key -> "module:function".
 #: The function is ``parse(info: SectionInfo, node, path) -> object`` (the
 #: object lands in ``Scenario.sections[key]``); it reports problems with
@@ -481,6 +497,7 @@ SECTIONS: dict[str, str] = {
     "targets": "cosim.renderer.config:parse_targets",
     "cameras": "cosim.renderer.config:parse_cameras",
     "sweep": "cosim.sweep.spec:parse_sweep",
+    "obstacles": "cosim.obstacles:parse_obstacles",
 }
 
 
@@ -634,7 +651,10 @@ def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: i
             lat = lon = None
         alt_key = ini.one_of("alt_msl_m", "alt_agl_m")
         alt = None
-        if alt_key is None:
+        on_ground = vclass is not None and vclass.on_ground
+        if alt_key is None and on_ground:
+            alt = ground  # a ground vehicle: on the ground unless told otherwise
+        elif alt_key is None:
             ctx.err(vp + ("init",), "missing the altitude: give alt_msl_m or alt_agl_m")
         else:
             a = ini.num(alt_key, lo=ALT_MIN_M, hi=ALT_MAX_M)
@@ -643,7 +663,9 @@ def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: i
         heading = ini.num("heading_deg", 0.0, lo=-360, hi=360)
         spd_key = ini.one_of("airspeed_kt", "airspeed_mps")
         speed = None
-        if spd_key is None:
+        if spd_key is None and on_ground:
+            speed = 0.0  # at rest
+        elif spd_key is None:
             ctx.err(vp + ("init",), "missing the airspeed: give airspeed_kt or airspeed_mps")
         else:
             s = ini.num(spd_key, lo=0, hi=2000)

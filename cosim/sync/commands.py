@@ -36,7 +36,8 @@ class Commander:
             vc = get_class(name)
             if vc.commandable:
                 rows = [i for i, c in enumerate(self.row_class) if c == name]
-                self.guidance[name] = vc.make_guidance(rows, frame, start_ne, channel_index)
+                self.guidance[name] = vc.make_guidance(rows, frame, start_ne, channel_index,
+                                                      specs=scn.vehicles)
         self._rows_of = {name: [i for i, c in enumerate(self.row_class) if c == name]
                          for name in self.guidance}
         #: ``observe(row, command, source)`` for every command, before guidance sees it

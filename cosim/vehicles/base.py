@@ -113,6 +113,9 @@ class VehicleClass:
     #: ground contact while airborne freezes the vehicle as a ground impact
     #: (aircraft); False: driving on the ground is normal (JSBSim kinds)
     contact_is_impact: bool = True
+    #: a vehicle that drives on the ground: its scenario entry may leave out
+    #: the altitude (the ground) and the speed (at rest)
+    on_ground: bool = False
     #: state flag columns whose changes are events: column -> (event, on, off)
     flag_events: Mapping[str, tuple[str, str, str]] = {}
 
@@ -143,6 +146,18 @@ class VehicleClass:
         """Problems with a vehicle's start (besides the common rules)."""
         return []
 
+    def with_world(self, spec: VehicleSpec, sections: Mapping[str, Any],
+                   origin: tuple[float, float, float]) -> VehicleSpec:
+        """The vehicle given what of the world its class needs (the scenario's
+        parsed top-level ``sections``, e.g. ``obstacles``; ``origin``: the
+        scenario frame's lat, lon, ground altitude), usually in its
+        ``class_params``; the workers see only the spec. Default: unchanged."""
+        return spec
+
+    def world_problems(self, spec: VehicleSpec) -> list[str]:
+        """Problems with a vehicle's start in its world (``with_world`` done)."""
+        return []
+
     # -- model -----------------------------------------------------------------
     def make_batch(self, specs: Sequence[VehicleSpec], dt_s: float, channels: Sequence[str],
                    columns: Sequence[str]) -> BatchedModel:
@@ -161,8 +176,10 @@ class VehicleClass:
         return False
 
     def make_guidance(self, rows: Sequence[int], frame: LocalFrame, start_ne: np.ndarray,
-                      channel_index: Mapping[str, int]) -> Guidance:
-        """Its guidance over state rows ``rows`` (``start_ne``: every row's start)."""
+                      channel_index: Mapping[str, int], specs: Sequence[VehicleSpec] = ()
+                      ) -> Guidance:
+        """Its guidance over state rows ``rows`` (``start_ne``: every row's start,
+        ``specs``: every row's spec)."""
         raise NotImplementedError(f"vehicle class {self.name!r} takes no commands")
 
     def min_alt_agl_m(self, profile: Mapping[str, Any]) -> float:

@@ -159,7 +159,8 @@ class ToyCart(VehicleClass):
         return True
 
     def make_guidance(self, rows: Sequence[int], frame: LocalFrame, start_ne: np.ndarray,
-                      channel_index: Mapping[str, int]) -> CartGuidance:
+                      channel_index: Mapping[str, int], specs: Sequence[VehicleSpec] = ()
+                      ) -> CartGuidance:
         return CartGuidance(len(start_ne), channel_index)
 
     def command_problems(self, cmd: Command, spec: VehicleSpec, limits: Limits) -> list[str]:

@@ -17,12 +17,14 @@ from cosim.conspicuity.visibility import passes, read_ground_truth
 from cosim.errors import ConfigError
 from cosim.geo import LocalFrame
 from cosim.guidance.commands import Command
+from cosim.obstacles import Obstacle
 from cosim.renderer import video
 from cosim.renderer.camera import camera_pose, footprint
 from cosim.renderer.config import TARGET_DEFAULTS, CameraSpec, GroundSpec, TargetSpec
-from cosim.renderer.frame import World, WorldSpec, render_frame
+from cosim.renderer.frame import OBSTACLE_RGB, World, WorldSpec, render_frame
 from cosim.renderer.ground import GroundTexture
 from cosim.renderer.participant import CameraParticipant
+from cosim.renderer.targets import lambert
 from cosim.renderer.video import have_pyav
 from cosim.scenario import parse_scenario
 from cosim.sync.participants import RunContext
@@ -533,3 +535,28 @@ def test_a_footprint_reaching_over_the_horizon_is_cut_at_the_range() -> None:
     # the bottom ones meet the ground where the ray (x, y, 1) has come down 100 m
     bottom = 100.0 / ty * np.array([[1.0, tx], [1.0, -tx]])
     assert np.allclose(got, np.vstack([top, bottom]), atol=1e-6), got
+
+
+def test_obstacles_are_drawn_as_prisms_that_hide_what_is_behind_them() -> None:
+    """A nadir camera 100 m above a 10 m block: its roof fills the square the
+    pinhole puts it at (f * 10 m / 90 m around the centre), in the roof's
+    shade, and the truck under it is in view with no pixel of it seen."""
+    block = Obstacle("block", ((-10.0, -10.0), (-10.0, 10.0), (10.0, 10.0), (10.0, -10.0)), 10.0)
+    t = _target("truck", 0.0, 0.0)
+    cam = _cam("nadir", -90.0, w=320, h=240, hfov=60.0)
+    pose = camera_pose(cam, LAT0, LON0, GROUND_M + 100.0, 0.0, 0.0, 0.0, ground_alt_m=GROUND_M)
+    bare, rows_bare = render_frame(World(WorldSpec(LAT0, LON0, GROUND_M, 1, 120.0, GroundSpec(),
+                                                   (t,))), cam, pose, 0)
+    img, rows = render_frame(World(WorldSpec(LAT0, LON0, GROUND_M, 1, 120.0, GroundSpec(), (t,),
+                                             (block,))), cam, pose, 0)
+    assert rows_bare[0]["pixels_on_target"] > 0
+    assert rows[0]["in_view"] == 1 and rows[0]["pixels_on_target"] == 0
+    half = cam.fx_px * 10.0 / 90.0  # the roof's half side in pixels
+    cx, cy = (320 - 1) / 2, (240 - 1) / 2
+    k = lambert(np.array([0.0, 0.0, -1.0]))
+    roof = np.array([min(255, int(c * k)) for c in OBSTACLE_RGB[::-1]])
+    inner = img[int(cy - half + 2):int(cy + half - 1), int(cx - half + 2):int(cx + half - 1), :3]
+    assert (inner == roof).all()
+    for x, y in ((cx - half - 2, cy), (cx + half + 2, cy), (cx, cy - half - 2),
+                 (cx, cy + half + 2)):
+        assert (img[int(round(y)), int(round(x)), :3] != roof).any()

@@ -48,7 +48,8 @@ class FixedWing(VehicleClass):
         return True
 
     def make_guidance(self, rows: Sequence[int], frame: LocalFrame, start_ne: np.ndarray,
-                      channel_index: Mapping[str, int]) -> Guidance:
+                      channel_index: Mapping[str, int], specs: Sequence[VehicleSpec] = ()
+                      ) -> Guidance:
         return FixedWingGuidance(len(start_ne), frame, start_ne, dict(channel_index))
 
     def min_alt_agl_m(self, profile: Mapping[str, Any]) -> float:

@@ -1,0 +1,212 @@
+"""Obstacles: polygons on the ground that vehicles keep out of.
+
+The scenario's ``obstacles:`` section lists them in the scenario's local
+frame (north/east metres from the origin)::
+
+    obstacles:
+      - {id: barn, height_m: 6, polygon: [[40, -10], [40, 10], [60, 10], [60, -10]]}
+
+A polygon is simple (its edges do not cross), 3 to ``MAX_VERTICES`` corners
+in either winding, at most ``MAX_OBSTACLES`` of them, each within
+``MAX_DISTANCE_M`` of the origin. Vehicle classes that keep out of them read
+the section through ``VehicleClass.with_world``; everything here is plain
+geometry on ``(n, 2)`` arrays, elementwise, so results never depend on how
+many points are tested together.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from cosim.geo import MAX_DISTANCE_M
+
+MAX_OBSTACLES = 1000
+MAX_VERTICES = 64
+MAX_HEIGHT_M = 500.0
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    id: str
+    polygon: tuple[tuple[float, float], ...]  # (north_m, east_m) corners in order
+    height_m: float
+
+    @property
+    def array(self) -> np.ndarray:
+        return np.array(self.polygon, dtype=float)
+
+
+def parse_obstacles(info: Any, node: Any, path: tuple[Any, ...]) -> tuple[Obstacle, ...]:
+    """The ``obstacles:`` section (see the module docstring); problems go to ``info``."""
+    if not isinstance(node, list):
+        info.err(path, f"expected a list of obstacles, got {node!r}")
+        return ()
+    if len(node) > MAX_OBSTACLES:
+        info.err(path, f"{len(node)} obstacles; at most {MAX_OBSTACLES}")
+        return ()
+    out: list[Obstacle] = []
+    seen: set[str] = set()
+    for i, d in enumerate(node):
+        p = path + (i,)
+        r = info.reader(d, p, ("id", "polygon", "height_m"))
+        oid = r.string("id", f"obstacle{i}")
+        if oid in seen:
+            info.err(p + ("id",), f"id {oid!r} repeats an earlier obstacle's")
+        seen.add(oid)
+        height = r.num("height_m", 3.0, lo=0.0, lo_open=True, hi=MAX_HEIGHT_M)
+        poly = _polygon(info, r.d.get("polygon"), p + ("polygon",))
+        if oid is not None and height is not None and poly is not None:
+            out.append(Obstacle(oid, poly, height))
+    return tuple(out)
+
+
+def _polygon(info: Any, raw: Any, p: tuple[Any, ...]) -> tuple[tuple[float, float], ...] | None:
+    if not isinstance(raw, list) or not 3 <= len(raw) <= MAX_VERTICES:
+        info.err(p, f"expected a list of 3 to {MAX_VERTICES} [north_m, east_m] corners, "
+                    f"got {raw!r}"[:300])
+        return None
+    pts = []
+    for j, c in enumerate(raw):
+        ok = (isinstance(c, list) and len(c) == 2
+              and all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                      and math.isfinite(x) and abs(x) <= MAX_DISTANCE_M for x in c))
+        if not ok:
+            info.err(p + (j,), f"expected [north_m, east_m] within {MAX_DISTANCE_M:g} m of the "
+                               f"origin, got {c!r}"[:300])
+            return None
+        pts.append((float(c[0]), float(c[1])))
+    a = np.array(pts)
+    if _self_crossing(a):
+        info.err(p, "the polygon's edges cross each other")
+        return None
+    if abs(signed_area(a)) < 1e-6:
+        info.err(p, "the polygon has no area")
+        return None
+    return tuple(pts)
+
+
+def signed_area(a: np.ndarray) -> float:
+    """The shoelace area of polygon ``a`` ((k, 2)): positive counter-clockwise in
+    (north, east), i.e. clockwise seen from above."""
+    x, y = a[:, 0], a[:, 1]
+    return 0.5 * float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+
+
+def _self_crossing(a: np.ndarray) -> bool:
+    n = len(a)
+    for i in range(n):
+        for j in range(i + 2, n):
+            if i == 0 and j == n - 1:
+                continue  # neighbours through the closing edge
+            if segments_cross(a[i], a[(i + 1) % n], a[j], a[(j + 1) % n]):
+                return True
+    return False
+
+
+def inside(poly: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Whether each of ``pts`` ((n, 2) north/east) lies inside ``poly`` (even-odd
+    rule; a point on an edge may go either way). Elementwise over ``pts``."""
+    x, y = pts[:, 0], pts[:, 1]
+    out = np.zeros(len(pts), dtype=bool)
+    k = len(poly)
+    for i in range(k):
+        (x1, y1), (x2, y2) = poly[i], poly[(i + 1) % k]
+        if y1 == y2:
+            continue
+        crosses = (y1 > y) != (y2 > y)
+        xc = x1 + (y - y1) * (x2 - x1) / (y2 - y1)
+        out ^= crosses & (x < xc)
+    return out
+
+
+def _orient(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> float:
+    return float((b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]))
+
+
+def segments_cross(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray) -> bool:
+    """Whether segments ab and cd cross at a point inside both (touching ends do not)."""
+    o1, o2, o3, o4 = _orient(a, b, c), _orient(a, b, d), _orient(c, d, a), _orient(c, d, b)
+    return (o1 * o2 < 0) and (o3 * o4 < 0)
+
+
+def inflate(poly: np.ndarray, margin_m: float) -> np.ndarray:
+    """The polygon grown by ``margin_m``: each corner pushed out along the
+    bisector of its edges' outward normals, far enough that every edge moves
+    out by ``margin_m`` (a mitre; convex and concave corners alike)."""
+    a = poly if signed_area(poly) > 0 else poly[::-1]  # counter-clockwise in (north, east)
+    n = len(a)
+    out = np.empty_like(a)
+    for i in range(n):
+        p, c, q = a[i - 1], a[i], a[(i + 1) % n]
+        n1 = _normal(p, c)
+        n2 = _normal(c, q)
+        b = n1 + n2
+        cosh = float(np.dot(b / np.linalg.norm(b), n1)) if np.linalg.norm(b) > 1e-12 else 1.0
+        out[i] = c + b / np.linalg.norm(b) * margin_m / max(cosh, 0.2)
+    return out
+
+
+def _normal(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """The outward unit normal of edge pq of a counter-clockwise polygon."""
+    d = q - p
+    return np.array([d[1], -d[0]]) / math.hypot(d[0], d[1])
+
+
+def segment_clear(a: np.ndarray, b: np.ndarray, polys: Sequence[np.ndarray]) -> bool:
+    """Whether segment ab stays out of every polygon (crossing no edge, and
+    its midpoint outside: a segment between two corners of one polygon may
+    run through it)."""
+    mid = (a + b)[None, :] / 2
+    for poly in polys:
+        k = len(poly)
+        for i in range(k):
+            if segments_cross(a, b, poly[i], poly[(i + 1) % k]):
+                return False
+        if inside(poly, mid)[0]:
+            return False
+    return True
+
+
+def plan_route(start: np.ndarray, goal: np.ndarray, polys: Sequence[np.ndarray]
+               ) -> list[np.ndarray] | None:
+    """The shortest path from ``start`` to ``goal`` that keeps out of ``polys``
+    (already grown by the vehicle's margin), through their corners: a
+    visibility graph and Dijkstra. ``None`` if there is none (the goal inside
+    one, or enclosed). The start is not in the path; the goal is its last point."""
+    if segment_clear(start, goal, polys):
+        return [goal]
+    if any(inside(p, goal[None, :])[0] for p in polys):
+        return None
+    nodes = [start, goal] + [c for p in polys for c in p
+                             if not any(inside(q, c[None, :])[0] for q in polys)]
+    dist = {0: 0.0}
+    prev: dict[int, int] = {}
+    heap = [(0.0, 0)]
+    done: set[int] = set()
+    while heap:
+        d, i = heapq.heappop(heap)
+        if i in done:
+            continue
+        done.add(i)
+        if i == 1:
+            break
+        for j in range(1, len(nodes)):
+            if j in done:
+                continue
+            nd = d + float(np.hypot(*(nodes[j] - nodes[i])))
+            if nd < dist.get(j, math.inf) and segment_clear(nodes[i], nodes[j], polys):
+                dist[j] = nd
+                prev[j] = i
+                heapq.heappush(heap, (nd, j))
+    if 1 not in done:
+        return None
+    path = [1]
+    while path[-1] != 0:
+        path.append(prev[path[-1]])
+    return [nodes[k] for k in reversed(path[:-1])]
