@@ -1,6 +1,7 @@
 """Plots of a run: ground track (north/east) and altitude over time, per vehicle.
 
-Reads only the run's ``states.parquet`` and ``events.jsonl``; writes a PNG.
+Reads only the run's ``states.parquet``, ``events.jsonl`` and the obstacles of
+``scenario.resolved.yaml`` (drawn grey on the track); writes a PNG.
 matplotlib runs headless (Agg).
 """
 
@@ -36,6 +37,8 @@ def plot_run(run_dir: str | Path, png: str | Path | None = None, max_vehicles: i
         (line,) = ax_map.plot(east[m], north[m], lw=1.2, label=vid)
         ax_map.plot(east[m][:1], north[m][:1], "^", color=line.get_color(), ms=6)
         ax_alt.plot(time_s[m], alt[m], lw=1.2, color=line.get_color(), label=vid)
+    for poly in _obstacles(run):
+        ax_map.fill([p[1] for p in poly], [p[0] for p in poly], color="0.6", alpha=0.7, lw=0)
     events = run / "events.jsonl"
     if events.exists():
         for line_text in events.read_text().splitlines():
@@ -64,3 +67,18 @@ def plot_run(run_dir: str | Path, png: str | Path | None = None, max_vehicles: i
     fig.savefig(out, dpi=110)
     plt.close(fig)
     return out
+
+
+def _obstacles(run: Path) -> list[list[list[float]]]:
+    """The obstacles' corners ([north, east]) recorded in the run's resolved scenario."""
+    import yaml
+
+    try:
+        d = yaml.safe_load((run / "scenario.resolved.yaml").read_text()) or {}
+    except (OSError, yaml.YAMLError):
+        return []
+    obstacles = d.get("obstacles") if isinstance(d, dict) else None
+    if not isinstance(obstacles, list):
+        return []
+    return [o["polygon"] for o in obstacles
+            if isinstance(o, dict) and isinstance(o.get("polygon"), list)]

@@ -49,6 +49,7 @@ from cosim.renderer.config import CameraSpec, CamerasSpec, GroundSpec
 from cosim.renderer.frame import GT_COLUMNS, World, WorldSpec, render_frame
 from cosim.renderer.video import EXTENSIONS, open_video
 from cosim.sync.participants import ParticipantFailed, RunContext
+from cosim.vehicles import get_class
 from cosim.vehicles.spec import STATE_INDEX
 
 log = logging.getLogger(__name__)
@@ -106,6 +107,9 @@ class Stream:
     video: str  # relative to the run folder
     ground_truth: str
     thumb_px: tuple[int, int] | None  # (w, h) of the operator view's thumbnail, if any
+    #: the camera's height above the vehicle's reference point (its class's
+    #: ``camera_height_m``: a car's camera is not at the road surface)
+    lift_m: float = 0.0
 
 
 class StreamWriter:
@@ -272,8 +276,9 @@ class CameraParticipant:
         for i, (cam, row) in enumerate(streams):
             base = f"cameras/{ctx.ids[row]}_{cam.name}"
             show = tiles is not None and i < OperatorView.MAX_TILES
+            lift = get_class(ctx.scenario.vehicles[row].vehicle_class).camera_height_m
             self.streams.append(Stream(i, ctx.ids[row], row, cam, f"{base}.{ext}",
-                                       f"{base}.gt.csv", tiles if show else None))
+                                       f"{base}.gt.csv", tiles if show else None, lift))
         self.gimbal = {s.index: (s.camera.pitch_deg, s.camera.yaw_deg) for s in self.streams
                        if s.camera.mount == "gimbal"}
         if ctx.commander is not None:
@@ -348,6 +353,8 @@ class CameraParticipant:
             if tick % every:
                 continue
             pose6 = tuple(float(x) for x in states[s.row, _POSE_COLS])
+            if s.lift_m:
+                pose6 = pose6[:2] + (pose6[2] + s.lift_m,) + pose6[3:]
             gimbal = self.gimbal.get(s.index)
             frame_no = tick // every
             if self.inline is not None:

@@ -110,6 +110,8 @@ class VehicleClass:
     state_columns: tuple[StateField, ...] = ()
     #: the camera mount of a camera that names none
     default_camera_mount: str = "nadir"
+    #: how far above the vehicle's position (its state's altitude) its cameras sit
+    camera_height_m: float = 0.0
     #: ground contact while airborne freezes the vehicle as a ground impact
     #: (aircraft); False: driving on the ground is normal (JSBSim kinds)
     contact_is_impact: bool = True

@@ -275,3 +275,28 @@ vehicles:
         assert c.command.points[0].a == pytest.approx(47.0001)
     finally:
         ep.close()
+
+
+def test_a_cars_camera_sits_on_its_roof(tmp_path: Path) -> None:
+    """The forward camera is 1.5 m up (``camera_height_m``): a truck 15-25 m
+    ahead on flat ground has its near bottom edge f * 1.5 / 15 px below the
+    horizon (at the road surface it would be on the horizon)."""
+    import csv
+
+    body = """\
+duration_s: 0.5
+vehicles:
+  - {id: car, class: ground, init: {north_m: 0, east_m: 0}}
+targets:
+  - {id: truck, kind: truck, north_m: 20, east_m: 0, heading_deg: 0}
+cameras:
+  render_workers: 0
+  views:
+    - {name: front, vehicles: car, hfov_deg: 60, width_px: 320, height_px: 240, rate_hz: 10}
+"""
+    res = run_scenario(_scenario(tmp_path, body, "cam"), tmp_path / "cam", backend="inline")
+    assert res.stop_reason == "completed", res.error
+    with open(res.out_dir / "cameras/car_front.gt.csv") as f:
+        row = next(r for r in csv.DictReader(f) if r["target"] == "truck")
+    f_px = 320 / 2 / math.tan(math.radians(30.0))
+    assert float(row["bbox_y1_px"]) == pytest.approx((240 - 1) / 2 + f_px * 1.5 / 15.0, abs=1.0)

@@ -56,6 +56,7 @@ class Ground(VehicleClass):
     vehicle_keys = (*KEYS, "knows_obstacles")
     state_columns = (StateField("steer_deg", None), StateField("blocked", None))
     default_camera_mount = "forward"
+    camera_height_m = 1.5  # a camera on the roof
     contact_is_impact = False
     on_ground = True
     channels = (SPEED_CMD, STEER_CMD)
