@@ -39,7 +39,8 @@ BUILTIN: dict[str, dict[str, str]] = {
                "process": "cosim.fdm_pool.process:ProcessPool"},
     VEHICLES: {"fixed_wing": "cosim.vehicles.fixed_wing:FIXED_WING",
                "jsbsim": "cosim.vehicles.plain:PLAIN",
-               "ground": "cosim.vehicles.ground:GROUND"},
+               "ground": "cosim.vehicles.ground:GROUND",
+               "quadrotor": "cosim.vehicles.quadrotor:QUADROTOR"},
 }
 
 

@@ -17,6 +17,12 @@ now and by MAVLink and the swarm controller later:
   own ``alt_*``/``airspeed_*``), then a loiter around the last
 - ``loiter``: ``center`` (a point; default: where the vehicle is),
   ``radius_m``, ``direction`` (``cw``/``ccw``), optional ``alt_*``/``airspeed_*``
+- ``takeoff_agl_m``: (vertical-lift vehicles) take off and hold this height
+  above the ground where it is
+- ``land``: ``true``: (vertical-lift vehicles) land where it is, or with
+  ``waypoints``/``goto`` at the last point
+- ``velocity``: (vertical-lift vehicles) ``north_mps``/``east_mps``: fly this
+  ground velocity (ends a goto, waypoints or a hold)
 - ``gimbal``: point the vehicle's gimbal cameras: ``pitch_deg`` (-90 nadir
   .. 30) and/or ``yaw_deg`` (relative to the nose, -180..180). Not a flight
   command: a command of only ``gimbal`` leaves the flight as it is.
@@ -41,7 +47,7 @@ Report = Callable[[P, str], None]
 
 COMMAND_KEYS = ("heading_deg", "alt_msl_m", "alt_agl_m", "airspeed_kt", "airspeed_mps",
                 "throttle", "bank_limit_deg", "stall_protection", "goto", "waypoints", "loiter",
-                "gimbal")
+                "takeoff_agl_m", "land", "velocity", "gimbal")
 #: gimbal angle bounds: pitch (nadir -90, forward 0), yaw relative to the nose
 GIMBAL_PITCH_DEG = (-90.0, 30.0)
 GIMBAL_YAW_DEG = (-180.0, 180.0)
@@ -87,6 +93,10 @@ class Command:
     loiter_radius_m: float | None = None
     loiter_cw: bool = True
     loiter_here: bool = False  # loiter around the current position
+    #: vertical-lift vehicles: take off to this height, land, fly this (north, east) m/s
+    takeoff_agl_m: float | None = None
+    land: bool = False
+    velocity_ne: tuple[float, float] | None = None
     #: gimbal cameras' new angles (None: unchanged); not part of the flight
     gimbal_pitch_deg: float | None = None
     gimbal_yaw_deg: float | None = None
@@ -99,7 +109,8 @@ class Command:
         return (self.heading_deg is not None or self.alt_m is not None
                 or self.airspeed_mps is not None or self.throttle is not None
                 or self.bank_limit_deg is not None or self.stall_protection is not None
-                or self.nav is not None)
+                or self.nav is not None or self.takeoff_agl_m is not None or self.land
+                or self.velocity_ne is not None)
 
     @property
     def points_gimbal(self) -> bool:
@@ -118,6 +129,12 @@ class Command:
             parts.append(f"speed {self.airspeed_mps / KT_TO_MPS:.0f}kt")
         if self.throttle is not None:
             parts.append(f"throttle {self.throttle:g}")
+        if self.takeoff_agl_m is not None:
+            parts.append(f"takeoff {self.takeoff_agl_m:g} m")
+        if self.land:
+            parts.append("land")
+        if self.velocity_ne is not None:
+            parts.append("velocity {:g} {:g}".format(*self.velocity_ne))
         if self.points_gimbal:
             parts.append("gimbal " + " ".join(
                 f"{k} {v:g}" for k, v in (("pitch", self.gimbal_pitch_deg),
@@ -227,6 +244,17 @@ def parse_command(d: Any, path: P, report: Report) -> Command | None:
         report(path + ("stall_protection",), f"expected true or false, got {stall!r}")
         stall = None
     gimbal = _gimbal(d["gimbal"], path + ("gimbal",), report) if "gimbal" in d else (None, None)
+    takeoff = _num(d, "takeoff_agl_m", path, report, 0.5, 3000) if "takeoff_agl_m" in d else None
+    land = d.get("land", False)
+    if not isinstance(land, bool):
+        report(path + ("land",), f"expected true or false, got {land!r}")
+        land = False
+    velocity = _velocity(d["velocity"], path + ("velocity",), report) if "velocity" in d \
+        else None
+    if velocity is not None and (navs or "heading_deg" in d):
+        report(path, "velocity and a goto, waypoints, loiter or heading conflict: give one")
+    if takeoff is not None and land and not navs:
+        report(path, "takeoff_agl_m and land conflict: give one (or a route between them)")
     nav = navs[0] if navs else None
     points: list[Point] = []
     radius = None
@@ -295,7 +323,20 @@ def parse_command(d: Any, path: P, report: Report) -> Command | None:
                    alt_agl=agl, airspeed_mps=spd, throttle=throttle, bank_limit_deg=bank,
                    stall_protection=stall, nav=nav, points=tuple(points),
                    loiter_radius_m=radius, loiter_cw=cw, loiter_here=here,
+                   takeoff_agl_m=takeoff, land=land, velocity_ne=velocity,
                    gimbal_pitch_deg=gimbal[0], gimbal_yaw_deg=gimbal[1], source=d)
+
+
+def _velocity(v: Any, path: P, report: Report) -> tuple[float, float] | None:
+    if not isinstance(v, dict) or not v:
+        report(path, f"expected a mapping with north_mps and/or east_mps, got {v!r}")
+        return None
+    for k in v:
+        if k not in ("north_mps", "east_mps"):
+            report(path + (k,), f"unknown key {k!r}; expected north_mps, east_mps")
+    n = _num(v, "north_mps", path, report, -100, 100) if "north_mps" in v else 0.0
+    e = _num(v, "east_mps", path, report, -100, 100) if "east_mps" in v else 0.0
+    return None if n is None or e is None else (n, e)
 
 
 def _gimbal(g: Any, path: P, report: Report) -> tuple[float | None, float | None]:

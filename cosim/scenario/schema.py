@@ -625,7 +625,8 @@ def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: i
                         f"{lim.MAX_VEHICLES} (each takes about {lim.MIB_PER_VEHICLE} MiB)")
                 count = None
         jsbsim = vclass is None or vclass.model_kind == "jsbsim"
-        trim = r.boolean("trim", True) if jsbsim else False
+        trim = r.boolean("trim", True) if jsbsim and (vclass is None or vclass.trims) \
+            else False
         props = _prop_values(ctx, r.d["set"], vp + ("set",)) if r.has("set") else []
         params = vclass.parse_vehicle(r, vp) if vclass else {}
         fixed_seed = r.integer("random_seed", None, lo=0, hi=lim.MAX_VEHICLE_SEED)
@@ -663,7 +664,7 @@ def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: i
         heading = ini.num("heading_deg", 0.0, lo=-360, hi=360)
         spd_key = ini.one_of("airspeed_kt", "airspeed_mps")
         speed = None
-        if spd_key is None and on_ground:
+        if spd_key is None and vclass is not None and (on_ground or vclass.hovers):
             speed = 0.0  # at rest
         elif spd_key is None:
             ctx.err(vp + ("init",), "missing the airspeed: give airspeed_kt or airspeed_mps")

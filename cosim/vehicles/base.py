@@ -118,6 +118,10 @@ class VehicleClass:
     #: a vehicle that drives on the ground: its scenario entry may leave out
     #: the altitude (the ground) and the speed (at rest)
     on_ground: bool = False
+    #: a vehicle that can hover: its scenario entry may leave out the speed (at rest)
+    hovers: bool = False
+    #: JSBSim kinds: whether a vehicle is trimmed at its start (its entry's ``trim``)
+    trims: bool = True
     #: state flag columns whose changes are events: column -> (event, on, off)
     flag_events: Mapping[str, tuple[str, str, str]] = {}
 

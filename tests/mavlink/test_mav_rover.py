@@ -17,7 +17,7 @@ LAT0, LON0 = start_of(0)
 
 
 def test_a_rover_drives_its_mission_in_auto_and_holds_in_hold(rig) -> None:
-    r = rig(1, personality=ArduRover())
+    r = rig(1, personality=ArduRover(), vehicle_class="ground")
     hb = heartbeat(r)
     assert (hb.type, hb.autopilot, hb.custom_mode) == (
         ML.MAV_TYPE_GROUND_ROVER, ML.MAV_AUTOPILOT_ARDUPILOTMEGA, 4)

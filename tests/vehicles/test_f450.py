@@ -32,7 +32,8 @@ def _fdm(throttle: float, seconds: float = 4.0):
     f.run_ic()
     for i in range(4):
         f[f"propulsion/engine[{i}]/set-running"] = 1
-    f["fcs/throttle-cmd-norm"] = throttle
+    for esc in ("FR", "AL", "FL", "AR"):  # straight to the motors (cosim's controller off)
+        f[f"fcs/cmd{esc}_ext_nd"] = throttle
     for _ in range(round(seconds * 120)):
         f.run()
     return f

@@ -178,6 +178,8 @@ def test_routes_keep_clear_of_grown_obstacles() -> None:
 
 
 def test_the_mixed_world_is_identical_on_every_backend(tmp_path: Path) -> None:
+    """Cars, quadrotors and a fixed-wing in one clock: the same states, bit for
+    bit, inline and on 2 or 3 worker processes."""
     body = f"""\
 duration_s: 8
 vehicles:
@@ -185,10 +187,14 @@ vehicles:
      init: {{north_m: 0, east_m: -30, heading_deg: 90}}}}
   - {{id: uav, model: uav700, init: {{north_m: -2000, east_m: 0, alt_agl_m: 300,
      heading_deg: 0, airspeed_kt: 100}}}}
+  - {{id: quad, model: F450, count: 2, formation: {{type: line, spacing_m: 10}},
+     init: {{north_m: 0, east_m: -60, alt_agl_m: 0}}}}
 obstacles:
   - {{id: barn, polygon: {BARN}}}
 schedule:
   - {{at_s: 0, vehicles: "car*", command: {{airspeed_mps: 7, goto: {{north_m: 80, east_m: 5}}}}}}
+  - {{at_s: 0.5, vehicles: "quad*", command: {{takeoff_agl_m: 15}}}}
+  - {{at_s: 4, vehicles: "quad*", command: {{goto: {{north_m: 20, east_m: -40}}}}}}
 """
     scn = _scenario(tmp_path, body, "mixed")
     ref = None

@@ -73,7 +73,10 @@ class FixedWing(VehicleClass):
         return self.safety_problems(cmd, limits, spec.id)
 
     def safety_problems(self, cmd: Command, limits: Limits, who: str) -> list[str]:
-        return floor_problems(cmd, limits, who) + radius_problems(cmd, limits, who)
+        lift = [f"{who}: a fixed-wing cannot {what}" for what, asked in (
+            ("take off vertically", cmd.takeoff_agl_m is not None), ("land", cmd.land),
+            ("fly a velocity setpoint", cmd.velocity_ne is not None)) if asked]
+        return lift + floor_problems(cmd, limits, who) + radius_problems(cmd, limits, who)
 
     def swarm_problem(self, spec: VehicleSpec) -> str | None:
         if "clmax" not in spec.profile:

@@ -120,6 +120,9 @@ class Ground(VehicleClass):
             out.append(f"{who}: a ground vehicle takes a speed, not a throttle")
         if cmd.bank_limit_deg is not None or cmd.stall_protection is not None:
             out.append(f"{who}: bank limits and stall protection are for aircraft")
+        if cmd.takeoff_agl_m is not None or cmd.land or cmd.velocity_ne is not None:
+            out.append(f"{who}: take-off, landing and velocity setpoints are for aircraft "
+                       f"that hover")
         return out
 
 

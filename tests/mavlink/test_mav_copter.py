@@ -1,0 +1,46 @@
+"""The quadrotor's ArduCopter personality through the MAVLink services: its
+heartbeat, its modes by ArduCopter's numbers, NAV_TAKEOFF and NAV_LAND, and
+a take-off, waypoint and land mission flown in AUTO as one command."""
+
+from __future__ import annotations
+
+from mavtest import mavutil, of_type, start_of
+from test_mav_commands import heartbeat, long, one_ack
+from test_mav_mission import ack_result, set_mode, upload
+
+from cosim.vehicles.quadrotor.mavlink import ArduCopter
+
+ML = mavutil.mavlink
+REL = ML.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
+LAT0, LON0 = start_of(0)
+
+
+def test_copter_modes_takeoff_land_and_a_mission(rig) -> None:
+    r = rig(1, personality=ArduCopter(), vehicle_class="quadrotor")
+    hb = heartbeat(r)
+    assert (hb.type, hb.autopilot, hb.custom_mode) == (
+        ML.MAV_TYPE_QUADROTOR, ML.MAV_AUTOPILOT_ARDUPILOTMEGA, 5)
+    for number, nav in ((4, "loiter"), (9, None), (6, "goto"), (5, "loiter")):
+        cmds, replies = set_mode(r, number)
+        assert ack_result(replies) == ML.MAV_RESULT_ACCEPTED, number
+        assert heartbeat(r).custom_mode == number
+        c = cmds[0].command
+        assert c.nav == nav and c.land == (number in (6, 9))
+    cmds, replies = set_mode(r, 0)  # STABILIZE: no pilot
+    assert ack_result(replies) == ML.MAV_RESULT_FAILED and not cmds
+    cmds, replies = long(r, 1, ML.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 25.0)
+    assert one_ack(replies, ML.MAV_CMD_NAV_TAKEOFF) == ML.MAV_RESULT_ACCEPTED
+    assert cmds[0].command.takeoff_agl_m == 25.0 and heartbeat(r).custom_mode == 4
+    cmds, replies = long(r, 1, ML.MAV_CMD_NAV_LAND)
+    assert cmds[0].command.land and heartbeat(r).custom_mode == 9
+    proto, _, _ = upload(r, [(REL, ML.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0.0, 0.0, 30.0),
+                             (REL, ML.MAV_CMD_NAV_WAYPOINT, 0, 0, 0, 0, LAT0 + 0.001, LON0, 30.0),
+                             (REL, ML.MAV_CMD_NAV_LAND, 0, 0, 0, 0, LAT0 + 0.001,
+                              LON0 + 0.001, 0.0)])
+    assert proto[-1] == ("MISSION_ACK", ML.MAV_MISSION_ACCEPTED)
+    cmds, replies = set_mode(r, 3)
+    assert ack_result(replies) == ML.MAV_RESULT_ACCEPTED
+    c = cmds[0].command
+    assert (c.takeoff_agl_m, c.nav, len(c.points), c.land) == (30.0, "waypoints", 2, True)
+    assert (c.points[1].a, c.points[1].b) == (LAT0 + 0.001, LON0 + 0.001)
+    assert not of_type(replies, "STATUSTEXT")
