@@ -179,7 +179,10 @@ def plan_route(start: np.ndarray, goal: np.ndarray, polys: Sequence[np.ndarray]
     (already grown by the vehicle's margin), through their corners: a
     visibility graph and Dijkstra. ``None`` if there is none (the goal inside
     one, or enclosed). The start is not in the path; the goal is its last point."""
-    if segment_clear(start, goal, polys):
+    # a start inside a grown polygon (within the margin of an obstacle just
+    # learnt of) may leave it: those polygons do not block its first leg
+    around = [p for p in polys if not inside(p, start[None, :])[0]]
+    if segment_clear(start, goal, around):
         return [goal]
     if any(inside(p, goal[None, :])[0] for p in polys):
         return None
@@ -200,7 +203,8 @@ def plan_route(start: np.ndarray, goal: np.ndarray, polys: Sequence[np.ndarray]
             if j in done:
                 continue
             nd = d + float(np.hypot(*(nodes[j] - nodes[i])))
-            if nd < dist.get(j, math.inf) and segment_clear(nodes[i], nodes[j], polys):
+            if nd < dist.get(j, math.inf) and segment_clear(nodes[i], nodes[j],
+                                                            around if i == 0 else polys):
                 dist[j] = nd
                 prev[j] = i
                 heapq.heappush(heap, (nd, j))

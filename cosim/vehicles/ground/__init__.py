@@ -15,7 +15,11 @@ Its own keys, all optional: ``wheelbase_m`` (2.7), ``max_speed_mps`` (15),
 ``accel_mps2`` (2), ``brake_mps2`` (4), ``max_steer_deg`` (35),
 ``steer_rate_dps`` (60), ``margin_m`` (the clearance its routes keep from
 obstacles, 2), ``knows_obstacles`` (true: it plans around every obstacle
-from the start; false: only around those it learns of during the run).
+from the start; false: only around those it learns of during the run),
+``scout`` (a camera name: an obstacle is learnt, and the route planned
+again, once any of its corners falls in the ground footprint of that camera
+on any vehicle carrying it, or the footprint's corner in it; an
+``obstacle_discovered`` event says when and by whom).
 """
 
 from __future__ import annotations
@@ -53,7 +57,7 @@ class Ground(VehicleClass):
     name = "ground"
     description = "a car or UGV: batched kinematic bicycle, keeps out of obstacles"
     model_kind = "batched"
-    vehicle_keys = (*KEYS, "knows_obstacles")
+    vehicle_keys = (*KEYS, "knows_obstacles", "scout")
     state_columns = (StateField("steer_deg", None), StateField("blocked", None))
     default_camera_mount = "forward"
     camera_height_m = 1.5  # a camera on the roof
@@ -75,6 +79,7 @@ class Ground(VehicleClass):
             out[key] = default if v is None else v
         known = entry.boolean("knows_obstacles", True)
         out["knows_obstacles"] = True if known is None else known
+        out["scout"] = entry.string("scout", None)
         return out
 
     def with_world(self, spec: VehicleSpec, sections: Mapping[str, Any],
@@ -88,12 +93,19 @@ class Ground(VehicleClass):
                   "obstacle_ids": tuple(o.id for o in obstacles),
                   "known": tuple(bool(known) for _ in obstacles),
                   "start_ne": (float(n), float(e))}
+        scout = spec.class_params.get("scout")
+        cams = sections.get("cameras")
+        views = [c for c in (cams.views if cams is not None else ()) if c.name == scout]
+        params["scout_camera"] = views[0] if views else None
         # on the ground, whatever altitude the entry gave
         return replace(spec, alt_msl_m=spec.terrain_alt_m, class_params=params)
 
     def world_problems(self, spec: VehicleSpec) -> list[str]:
         p = np.array([spec.class_params["start_ne"]])
-        return [f"{spec.id} starts inside obstacle {oid!r}"
+        scout = spec.class_params.get("scout")
+        missing = [f"{spec.id}: scout camera {scout!r} is not in the scenario's cameras"] \
+            if scout is not None and spec.class_params.get("scout_camera") is None else []
+        return missing + [f"{spec.id} starts inside obstacle {oid!r}"
                 for oid, poly in zip(spec.class_params["obstacle_ids"],
                                      spec.class_params["obstacles"])
                 if inside(np.array(poly), p)[0]]

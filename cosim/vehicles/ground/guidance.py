@@ -12,11 +12,12 @@ Once per exchange, per vehicle:
 - **speed**: the cruise speed (``airspeed_*`` commands; default the start
   speed, else 5 m/s), capped by ``sqrt(2 b s)`` so it stops exactly at the
   route's end ``s`` metres ahead, and by the same rule for the nearest
-  obstacle straight ahead (less ``margin_m``): it stops short rather than
-  touching it. ``loiter`` and ``heading_deg`` stop it and steer straight on
+  known obstacle straight ahead (less ``STOP_SHORT_M``): it stops short
+  rather than touching it. ``loiter`` and ``heading_deg`` stop it and steer straight on
   a heading respectively.
 - **events**: ``waypoint_reached`` at each point, ``goal_reached`` when it is
-  stopped within ``ARRIVE_M`` of the end.
+  stopped within ``ARRIVE_M`` of the end, ``obstacle_discovered`` when its
+  scout camera shows it an obstacle it did not know (it then plans again).
 
 Altitudes in commands are ignored: a ground vehicle drives on the ground.
 """
@@ -31,7 +32,8 @@ import numpy as np
 
 from cosim.geo import LocalFrame
 from cosim.guidance.commands import Command, Point
-from cosim.obstacles import inflate, plan_route
+from cosim.obstacles import inflate, inside, plan_route
+from cosim.renderer.camera import camera_pose, footprint
 from cosim.vehicles.base import GuidanceEvent
 from cosim.vehicles.ground.model import SPEED_CMD, STEER_CMD
 from cosim.vehicles.spec import STATE_INDEX, VehicleSpec
@@ -39,6 +41,9 @@ from cosim.vehicles.spec import STATE_INDEX, VehicleSpec
 _S = STATE_INDEX
 #: within this of a route's end and stopped: arrived
 ARRIVE_M = 1.0
+#: how far short of a known obstacle straight ahead it stops (its routes keep
+#: margin_m clear; this is the rule when something else points it at one)
+STOP_SHORT_M = 0.5
 DEFAULT_CRUISE_MPS = 5.0
 
 
@@ -82,6 +87,9 @@ class GroundGuidance:
         self.known: dict[int, list[np.ndarray]] = {}  # obstacles, grown, each knows
         self.walls: dict[int, list[np.ndarray]] = {}  # the same, as they are
         self.wp: dict[int, int] = {}
+        #: per vehicle: the ids of the obstacles it does not know yet, and its scout
+        self.unknown: dict[int, dict[str, np.ndarray]] = {}
+        self.scout: dict[int, tuple[Any, list[int]]] = {}
         for r in self.rows:
             q = specs[r].class_params
             self.params[r] = q
@@ -89,6 +97,11 @@ class GroundGuidance:
             known = [np.array(p) for p, k in zip(q["obstacles"], q["known"]) if k]
             self.walls[r] = known
             self.known[r] = [inflate(p, q["margin_m"]) for p in known]
+            self.unknown[r] = {oid: np.array(p) for oid, p, k in
+                               zip(q["obstacle_ids"], q["obstacles"], q["known"]) if not k}
+            cam = q.get("scout_camera")
+            if cam is not None:
+                self.scout[r] = (cam, list(cam.vehicles))
 
     def resolve(self, p: Point, i: int) -> np.ndarray:
         if p.frame == "geodetic":
@@ -103,14 +116,17 @@ class GroundGuidance:
                                              states[i, _S["alt_msl_m"]])
         return np.array([float(n), float(e)])
 
-    def learn(self, i: int, polygon: np.ndarray, states: np.ndarray) -> None:
+    def learn(self, i: int, polygon: np.ndarray, states: np.ndarray) -> bool:
         """Vehicle ``i`` now knows of the obstacle ``polygon`` (a camera saw it):
-        its route is planned again around it."""
+        its route is planned again around it. False: no route is left."""
         self.walls[i].append(polygon)
         self.known[i].append(inflate(polygon, self.params[i]["margin_m"]))
         if i in self.route and self.route[i]:
-            goals = self.route[i]
-            self._plan(i, self._here(states, i), [goals[-1]])
+            goal = self.route[i][-1]
+            if not self._plan(i, self._here(states, i), [goal]):
+                self.labels[i] = "blocked"
+                return False
+        return True
 
     def _plan(self, i: int, here: np.ndarray, goals: list[np.ndarray]) -> bool:
         route: list[np.ndarray] = []
@@ -155,9 +171,41 @@ class GroundGuidance:
     def update(self, states: np.ndarray, sp: np.ndarray) -> list[GuidanceEvent]:
         events: list[GuidanceEvent] = getattr(self, "events_pending", [])
         self.events_pending = []
+        views: dict[int, np.ndarray] = {}  # scout row -> its camera's ground footprint
         for i in self.rows:
+            if i in self.scout and self.unknown[i]:
+                events += self._discover(i, states, views)
             events += self._drive(i, states, sp)
         return events
+
+    def _discover(self, i: int, states: np.ndarray,
+                  views: dict[int, np.ndarray]) -> list[GuidanceEvent]:
+        """Learn the unknown obstacles its scouts' cameras see now."""
+        cam, scouts = self.scout[i]
+        events = []
+        for r in scouts:
+            if r not in views:
+                views[r] = self._footprint(cam, states, r)
+            fp = views[r]
+            for oid, poly in list(self.unknown[i].items()):
+                if inside(fp, poly).any() or inside(poly, fp).any():
+                    del self.unknown[i][oid]
+                    ok = self.learn(i, poly, states)
+                    events.append(GuidanceEvent("obstacle_discovered", i, {
+                        "obstacle": oid, "by": int(r)}))
+                    if not ok:
+                        events.append(GuidanceEvent("route_blocked", i, {"obstacle": oid}))
+        return events
+
+    def _footprint(self, cam: Any, states: np.ndarray, r: int) -> np.ndarray:
+        """The ground that camera on vehicle row ``r`` sees, in the scenario frame."""
+        s = states[r]
+        ground = float(s[_S["alt_msl_m"]] - s[_S["alt_agl_m"]])
+        pose = camera_pose(cam, s[_S["lat_deg"]], s[_S["lon_deg"]], s[_S["alt_msl_m"]],
+                           s[_S["roll_deg"]], s[_S["pitch_deg"]], s[_S["yaw_deg"]], ground)
+        fp = footprint(cam, pose, max_range_m=2000.0)
+        n, e, _ = self.frame.geodetic_to_ned(s[_S["lat_deg"]], s[_S["lon_deg"]], ground)
+        return fp + np.array([float(n), float(e)])  # L is centred under the vehicle
 
     def _drive(self, i: int, states: np.ndarray, sp: np.ndarray) -> list[GuidanceEvent]:
         q = self.params[i]
@@ -196,11 +244,11 @@ class GroundGuidance:
             speed = self.cruise[i]
         else:
             speed, steer = 0.0, 0.0
-        # never drive into what it knows is there: stop short of it
-        reach = v * v / (2 * brake) + q["margin_m"] + 5.0
+        # never drive into what it knows is there: stop STOP_SHORT_M short of it
+        reach = v * v / (2 * brake) + STOP_SHORT_M + 5.0
         ahead = _ray_distance(here, psi, self.walls[i], reach)
         if math.isfinite(ahead):
-            speed = min(speed, math.sqrt(2 * brake * max(ahead - q["margin_m"], 0.0)))
+            speed = min(speed, math.sqrt(2 * brake * max(ahead - STOP_SHORT_M, 0.0)))
         sp[i, self.c_speed] = speed
         sp[i, self.c_steer] = math.degrees(steer)
         return events
