@@ -51,6 +51,7 @@ from cosim.mavlink.personality import Personality
 from cosim.mavlink.vehicle import MavVehicleSpec, mav_specs
 from cosim.swarm import laws
 from cosim.swarm.config import Phase, SwarmGroup, SwarmSpec
+from cosim.vehicles import get_class
 from cosim.vehicles.spec import VehicleSpec
 
 log = logging.getLogger(__name__)
@@ -74,6 +75,8 @@ class StallNumbers:
 
 
 _STALL_CACHE: dict[tuple[str, str], StallNumbers] = {}
+#: a vehicle without a stall speed (it hovers or stands)
+NO_STALL = StallNumbers(0.0, 1.0, 1.0)
 
 
 def stall_numbers(spec: VehicleSpec) -> StallNumbers:
@@ -133,10 +136,12 @@ class SwarmController:
             self._key[(li, ms.sysid)] = i
             self.address.append((li, ms.sysid))
             params = ParamTable((ms.personality or Personality()).param_defs, ms.params)
-            self.min_mps[i] = params["AIRSPEED_MIN"]
-            self.max_mps[i] = params["AIRSPEED_MAX"]
-            bank_deg.append(params["ROLL_LIMIT_DEG"])
-            numbers.append(stall_numbers(vehicles[r]))
+            lim = get_class(vehicles[r].vehicle_class).swarm_limits(vehicles[r], params)
+            self.min_mps[i] = lim.min_mps
+            self.max_mps[i] = lim.max_mps
+            bank_deg.append(lim.bank_limit_deg)
+            # a vehicle that can stop has no stall speed: a zero mass makes it 0
+            numbers.append(stall_numbers(vehicles[r]) if lim.stalls else NO_STALL)
         self.mass_kg = np.array([s.mass_kg for s in numbers])
         self.wing_area_m2 = np.array([s.wing_area_m2 for s in numbers])
         self.clmax = np.array([s.clmax for s in numbers])

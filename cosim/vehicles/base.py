@@ -92,6 +92,18 @@ class BatchedModel(Protocol):
     def write_states(self, out: np.ndarray) -> None: ...
 
 
+@dataclass(frozen=True)
+class SwarmLimits:
+    """What the swarm controller may command one vehicle: speeds (m/s), the
+    bank its turns are flown at, and whether it has a stall speed (then
+    computed from its model's mass, wing area and CL_max)."""
+
+    min_mps: float
+    max_mps: float
+    bank_limit_deg: float
+    stalls: bool
+
+
 class VehicleClass:
     """One kind of vehicle (see the module docstring). Subclass it, set
     ``name``, and override what the class has."""
@@ -207,6 +219,12 @@ class VehicleClass:
     def swarm_problem(self, spec: VehicleSpec) -> str | None:
         """Why ``spec``'s vehicle cannot fly in a consensus swarm (None: it can)."""
         return f"vehicle {spec.id!r} (class {self.name}) cannot be commanded"
+
+    def swarm_limits(self, spec: VehicleSpec, params: Any) -> SwarmLimits:
+        """The speeds the swarm controller may command ``spec``'s vehicle, from
+        its MAVLink parameters ``params``: a vehicle that can stop (hover,
+        stand) has no stall speed and no floor."""
+        return SwarmLimits(0.0, 15.0, 45.0, stalls=False)
 
     # -- MAVLink ---------------------------------------------------------------
     #: how its vehicles look on MAVLink (``cosim.mavlink.personality``), None: they

@@ -22,7 +22,7 @@ import numpy as np
 from cosim.geo import KT_TO_MPS, LocalFrame
 from cosim.guidance.commands import Command
 from cosim.guidance.safety import Limits, floor_problems, radius_problems
-from cosim.vehicles.base import Guidance, VehicleClass
+from cosim.vehicles.base import Guidance, SwarmLimits, VehicleClass
 from cosim.vehicles.fixed_wing.guidance import AP_CHANNELS, FixedWingGuidance
 from cosim.vehicles.fixed_wing.mavlink import ARDUPLANE
 from cosim.vehicles.spec import VehicleSpec
@@ -77,6 +77,11 @@ class FixedWing(VehicleClass):
             ("take off vertically", cmd.takeoff_agl_m is not None), ("land", cmd.land),
             ("fly a velocity setpoint", cmd.velocity_ne is not None)) if asked]
         return lift + floor_problems(cmd, limits, who) + radius_problems(cmd, limits, who)
+
+    def swarm_limits(self, spec: VehicleSpec, params: Any) -> SwarmLimits:
+        """ArduPlane's envelope (AIRSPEED_MIN/MAX) and bank limit; it stalls."""
+        return SwarmLimits(params["AIRSPEED_MIN"], params["AIRSPEED_MAX"],
+                           params["ROLL_LIMIT_DEG"], stalls=True)
 
     def swarm_problem(self, spec: VehicleSpec) -> str | None:
         if "clmax" not in spec.profile:

@@ -35,7 +35,7 @@ from cosim.geo import LocalFrame
 from cosim.guidance.commands import Command
 from cosim.guidance.safety import Limits
 from cosim.obstacles import Obstacle, inside
-from cosim.vehicles.base import ModelChoice, VehicleClass
+from cosim.vehicles.base import ModelChoice, SwarmLimits, VehicleClass
 from cosim.vehicles.ground.guidance import GroundGuidance
 from cosim.vehicles.ground.mavlink import ArduRover
 from cosim.vehicles.ground.model import SPEED_CMD, STEER_CMD, BicycleModel
@@ -122,6 +122,12 @@ class Ground(VehicleClass):
                       channel_index: Mapping[str, int], specs: Sequence[VehicleSpec] = ()
                       ) -> GroundGuidance:
         return GroundGuidance(rows, frame, start_ne, channel_index, specs)
+
+    def swarm_problem(self, spec: VehicleSpec) -> str | None:
+        return None  # it drives to its goals on the ground and stops there
+
+    def swarm_limits(self, spec: VehicleSpec, params: Any) -> SwarmLimits:
+        return SwarmLimits(0.0, float(spec.class_params["max_speed_mps"]), 45.0, stalls=False)
 
     def command_problems(self, cmd: Command, spec: VehicleSpec, limits: Limits) -> list[str]:
         return self.safety_problems(cmd, limits, spec.id)

@@ -23,7 +23,7 @@ import numpy as np
 from cosim.geo import LocalFrame
 from cosim.guidance.commands import Command
 from cosim.guidance.safety import Limits
-from cosim.vehicles.base import VehicleClass
+from cosim.vehicles.base import SwarmLimits, VehicleClass
 from cosim.vehicles.quadrotor.guidance import (
     ALT,
     CHANNELS,
@@ -78,6 +78,12 @@ class Quadrotor(VehicleClass):
                       channel_index: Mapping[str, int], specs: Sequence[VehicleSpec] = ()
                       ) -> QuadGuidance:
         return QuadGuidance(rows, frame, start_ne, channel_index)
+
+    def swarm_problem(self, spec: VehicleSpec) -> str | None:
+        return None  # it hovers at its goals
+
+    def swarm_limits(self, spec: VehicleSpec, params: Any) -> SwarmLimits:
+        return SwarmLimits(0.0, MAX_SPEED_MPS, 45.0, stalls=False)
 
     def command_problems(self, cmd: Command, spec: VehicleSpec, limits: Limits) -> list[str]:
         return self.safety_problems(cmd, limits, spec.id)
