@@ -1,8 +1,9 @@
 """What ArduPilot's vehicle firmwares share on MAVLink, for the personalities
-that copy one (ArduCopter, ArduRover): modes by a table, DO_REPOSITION and
-DO_CHANGE_SPEED. Each mode of the table is a vocabulary mapping (a function
-of the vehicle: home, ...), or ``None`` for a mode cosim refuses (with the
-reason in ``refused``); the mission mode flies the mission."""
+that copy one (ArduCopter, ArduRover): modes by a table, arming
+(COMPONENT_ARM_DISARM; disarming in the air needs param2 = 21196, as in
+ArduPilot), DO_REPOSITION and DO_CHANGE_SPEED. Each mode of the table is a
+vocabulary mapping (a function of the vehicle: home, ...); a mode in
+``refused`` is refused with its reason; the mission mode flies the mission."""
 
 from __future__ import annotations
 
@@ -11,12 +12,14 @@ from typing import TYPE_CHECKING, Any
 
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.personality import CommandFn, Personality
-from cosim.mavlink.services.base import CommandRequest, Context, Outcome, text
+from cosim.mavlink.services.base import CommandRequest, Context, Outcome, as_int, text
 
 if TYPE_CHECKING:
     from cosim.mavlink.vehicle import MavVehicle
 
 ModeVocab = Callable[["MavVehicle"], dict[str, Any]]
+#: COMPONENT_ARM_DISARM param2 that forces a disarm in the air (ArduPilot's)
+FORCE_MAGIC = 21196
 
 
 class ArduPilotLike(Personality):
@@ -57,10 +60,30 @@ class ArduPilotLike(Personality):
 
     def command_handler(self, number: int) -> CommandFn | None:
         return {mav.MAV_CMD_DO_REPOSITION: self._reposition,
-                mav.MAV_CMD_DO_CHANGE_SPEED: self._change_speed}.get(number)
+                mav.MAV_CMD_DO_CHANGE_SPEED: self._change_speed,
+                mav.MAV_CMD_COMPONENT_ARM_DISARM: self._arm_disarm}.get(number)
 
     def supported_commands(self) -> frozenset[int]:
-        return frozenset({mav.MAV_CMD_DO_REPOSITION, mav.MAV_CMD_DO_CHANGE_SPEED})
+        return frozenset({mav.MAV_CMD_DO_REPOSITION, mav.MAV_CMD_DO_CHANGE_SPEED,
+                          mav.MAV_CMD_COMPONENT_ARM_DISARM})
+
+    @staticmethod
+    def _arm_disarm(ctx: Context, v: Any, req: CommandRequest, tick: int, out: Outcome) -> int:
+        want, force = as_int(req.p[0]), as_int(req.p[1]) == FORCE_MAGIC
+        if want == 1:
+            if not v.armed and not force and not v.prearm_ok():
+                out.replies.extend(text("PreArm: vehicle crashed or diverged"))
+                return mav.MAV_RESULT_FAILED
+            v.armed = True
+            return mav.MAV_RESULT_ACCEPTED
+        if want == 0:
+            if v.armed and v.in_air() and not force:
+                out.replies.extend(text(f"Disarm refused in flight (param2={FORCE_MAGIC} "
+                                        f"forces)"))
+                return mav.MAV_RESULT_FAILED
+            v.armed = False
+            return mav.MAV_RESULT_ACCEPTED
+        return mav.MAV_RESULT_DENIED
 
     @staticmethod
     def _change_speed(ctx: Context, v: Any, req: CommandRequest, tick: int,

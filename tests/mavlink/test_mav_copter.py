@@ -28,6 +28,13 @@ def test_copter_modes_takeoff_land_and_a_mission(rig) -> None:
         assert c.nav == nav and c.land == (number in (6, 9))
     cmds, replies = set_mode(r, 0)  # STABILIZE: no pilot
     assert ack_result(replies) == ML.MAV_RESULT_FAILED and not cmds
+    _, replies = long(r, 1, ML.MAV_CMD_COMPONENT_ARM_DISARM, 0, 21196)  # forced
+    assert one_ack(replies, ML.MAV_CMD_COMPONENT_ARM_DISARM) == ML.MAV_RESULT_ACCEPTED
+    cmds, replies = long(r, 1, ML.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 25.0)
+    assert one_ack(replies, ML.MAV_CMD_NAV_TAKEOFF) == ML.MAV_RESULT_FAILED  # disarmed
+    assert not cmds and any("arm first" in t.text for t in of_type(replies, "STATUSTEXT"))
+    _, replies = long(r, 1, ML.MAV_CMD_COMPONENT_ARM_DISARM, 1)
+    assert one_ack(replies, ML.MAV_CMD_COMPONENT_ARM_DISARM) == ML.MAV_RESULT_ACCEPTED
     cmds, replies = long(r, 1, ML.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0, 0, 25.0)
     assert one_ack(replies, ML.MAV_CMD_NAV_TAKEOFF) == ML.MAV_RESULT_ACCEPTED
     assert cmds[0].command.takeoff_agl_m == 25.0 and heartbeat(r).custom_mode == 4

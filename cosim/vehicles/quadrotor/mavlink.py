@@ -4,8 +4,9 @@ HEARTBEAT type QUADROTOR, autopilot ARDUPILOTMEGA; custom modes as ArduCopter
 numbers them: STABILIZE 0 (refused: no pilot in the simulation), AUTO 3
 (fly the mission), GUIDED 4 and LOITER 5 (hold where it is; GUIDED then
 goes where DO_REPOSITION or a guided MISSION_ITEM says), RTL 6 (fly home
-and land), LAND 9 (land where it is). Commands: NAV_TAKEOFF (param7: metres
-above home), NAV_LAND, DO_REPOSITION, DO_CHANGE_SPEED (param2, m/s).
+and land), LAND 9 (land where it is). Commands: COMPONENT_ARM_DISARM, NAV_TAKEOFF
+(param7: metres above the ground; armed first), NAV_LAND, DO_REPOSITION,
+DO_CHANGE_SPEED (param2, m/s).
 Missions: NAV_TAKEOFF, NAV_WAYPOINT, NAV_LAND, NAV_RETURN_TO_LAUNCH and
 DO_CHANGE_SPEED.
 """
@@ -18,7 +19,7 @@ from cosim.guidance.commands import Command
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.ardupilot import ArduPilotLike, home_goto
 from cosim.mavlink.personality import CommandFn
-from cosim.mavlink.services.base import CommandRequest, Context, Outcome
+from cosim.mavlink.services.base import CommandRequest, Context, Outcome, text
 
 if TYPE_CHECKING:
     from cosim.mavlink.mission import RoutePoint
@@ -53,7 +54,10 @@ class ArduCopter(ArduPilotLike):
 
     @staticmethod
     def _takeoff(ctx: Context, v: Any, req: CommandRequest, tick: int, out: Outcome) -> int:
-        """NAV_TAKEOFF: climb to param7 metres above the ground, in GUIDED."""
+        """NAV_TAKEOFF: climb to param7 metres above the ground, in GUIDED (armed)."""
+        if not v.armed:
+            out.replies.extend(text("takeoff: arm first"))
+            return mav.MAV_RESULT_FAILED
         return ctx.switch_to(v, GUIDED, {"takeoff_agl_m": req.z}, out, "takeoff")
 
     @staticmethod
