@@ -1,7 +1,8 @@
 """The mixed-world demo (scenarios/hetero/quad_guides_car.yaml): a car that
 knows no obstacle learns each one when it enters the quadrotor's camera
 footprint, before it gets there, plans around it, never enters one and
-reaches its goal, while a fixed-wing loiters overhead."""
+reaches its goal, while a fixed-wing loiters overhead; the same states, bit
+for bit, inline and on 2 worker processes."""
 
 from __future__ import annotations
 
@@ -22,6 +23,15 @@ def test_the_scout_finds_the_obstacles_and_the_car_reaches_its_goal(tmp_path: Pa
     scn = load_scenario(SCENARIO)
     res = run_scenario(scn, tmp_path / "run", backend="inline")
     assert res.stop_reason == "completed", res.error
+    other = run_scenario(scn, tmp_path / "process2", backend="process", workers=2)
+    assert other.stop_reason == "completed", other.error
+    a, b = read_states(tmp_path / "run"), read_states(tmp_path / "process2")
+    assert a.column_names == b.column_names and a.num_rows == b.num_rows
+    for col in a.column_names:  # value by value (the two files' dictionaries may differ)
+        x, y = np.asarray(a[col].to_pylist()), np.asarray(b[col].to_pylist())
+        same = np.array_equal(x, y, equal_nan=True) if x.dtype.kind == "f" \
+            else np.array_equal(x, y)
+        assert same, col
     events = [json.loads(x) for x in (tmp_path / "run/events.jsonl").read_text().splitlines()]
     found = {e["obstacle"]: e["time_s"] for e in events if e["event"] == "obstacle_discovered"}
     assert set(found) >= {"block_a", "block_b", "wall_c"}
