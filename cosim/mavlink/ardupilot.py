@@ -1,12 +1,15 @@
 """What ArduPilot's vehicle firmwares share on MAVLink, for the personalities
 that copy one (ArduCopter, ArduRover): modes by a table, arming
 (COMPONENT_ARM_DISARM; disarming in the air needs param2 = 21196, as in
-ArduPilot), DO_REPOSITION and DO_CHANGE_SPEED. Each mode of the table is a
-vocabulary mapping (a function of the vehicle: home, ...); a mode in
-``refused`` is refused with its reason; the mission mode flies the mission."""
+ArduPilot), DO_REPOSITION, DO_CHANGE_SPEED and DO_ORBIT (where the class
+has an orbit mode). Each mode of the table is a vocabulary mapping (a
+function of the vehicle: home, ...); a mode in ``refused`` is refused with
+its reason; the mission mode flies the mission, each navigation item as the
+mapping ``nav_vocab`` makes of it."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
@@ -15,6 +18,7 @@ from cosim.mavlink.personality import CommandFn, Personality
 from cosim.mavlink.services.base import CommandRequest, Context, Outcome, as_int, text
 
 if TYPE_CHECKING:
+    from cosim.mavlink.mission import MissionItem
     from cosim.mavlink.vehicle import MavVehicle
 
 ModeVocab = Callable[["MavVehicle"], dict[str, Any]]
@@ -35,6 +39,8 @@ class ArduPilotLike(Personality):
     guided_mode: int = 0
     #: whether DO_REPOSITION keeps its altitude (aircraft) or drops it (ground)
     reposition_alt: bool = True
+    #: the mode DO_ORBIT flies in (None: DO_ORBIT unsupported)
+    orbit_mode: int | None = None
 
     def default_mode(self) -> int:
         return self.hold_mode if self.hold_mode is not None else super().default_mode()
@@ -56,16 +62,96 @@ class ArduPilotLike(Personality):
         if vocab_of is None:
             out.replies.extend(text(f"{name} is not supported by cosim"))
             return mav.MAV_RESULT_FAILED
-        return ctx.switch_to(v, mode, vocab_of(v), out, name, mav.MAV_RESULT_FAILED)
+        d = self.rtl_vocab(ctx, v) if mode == self.rtl_mode else vocab_of(v)
+        return ctx.switch_to(v, mode, d, out, name, mav.MAV_RESULT_FAILED)
+
+    def _handlers(self) -> dict[int, CommandFn]:
+        own: dict[int, CommandFn] = {mav.MAV_CMD_DO_REPOSITION: self._reposition,
+                                     mav.MAV_CMD_DO_CHANGE_SPEED: self._change_speed,
+                                     mav.MAV_CMD_COMPONENT_ARM_DISARM: self._arm_disarm,
+                                     mav.MAV_CMD_NAV_RETURN_TO_LAUNCH: self._rtl}
+        if self.orbit_mode is not None:
+            own[mav.MAV_CMD_DO_ORBIT] = self._orbit
+        return own
 
     def command_handler(self, number: int) -> CommandFn | None:
-        return {mav.MAV_CMD_DO_REPOSITION: self._reposition,
-                mav.MAV_CMD_DO_CHANGE_SPEED: self._change_speed,
-                mav.MAV_CMD_COMPONENT_ARM_DISARM: self._arm_disarm}.get(number)
+        return self._handlers().get(number)
 
     def supported_commands(self) -> frozenset[int]:
-        return frozenset({mav.MAV_CMD_DO_REPOSITION, mav.MAV_CMD_DO_CHANGE_SPEED,
-                          mav.MAV_CMD_COMPONENT_ARM_DISARM})
+        return frozenset(self._handlers())
+
+    def _rtl(self, ctx: Context, v: Any, req: CommandRequest, tick: int, out: Outcome) -> int:
+        if self.rtl_mode is None:
+            return mav.MAV_RESULT_UNSUPPORTED
+        return self.enter_mode(ctx, v, self.rtl_mode, tick, out)
+
+    def _orbit(self, ctx: Context, v: Any, req: CommandRequest, tick: int, out: Outcome) -> int:
+        """DO_ORBIT: circle a centre (x/y; none: where it is) at radius param1
+        (negative: counter-clockwise), speed param2 when > 0, in the orbit mode."""
+        radius, speed = req.p[0], req.p[1]
+        if not (math.isfinite(radius) and 1.0 <= abs(radius) <= 10_000.0):
+            out.replies.extend(text("orbit: radius must be 1..10000 m (param1)"))
+            return mav.MAV_RESULT_DENIED
+        row = v.row_or_raise()
+        from cosim.vehicles.spec import STATE_INDEX as _S
+
+        centre = req.location() or (float(row[_S["lat_deg"]]), float(row[_S["lon_deg"]]))
+        lo: dict[str, Any] = {"center": {"lat_deg": centre[0], "lon_deg": centre[1]},
+                              "radius_m": abs(radius), "direction": "ccw" if radius < 0 else "cw"}
+        if math.isfinite(req.z) and req.z != 0 and self.reposition_alt:
+            a = ctx.alt(v, req.frame, req.z)
+            if a is not None:
+                lo[a[0]] = a[1]
+        if math.isfinite(speed) and speed > 0:
+            lo["airspeed_mps"] = speed
+        assert self.orbit_mode is not None
+        return ctx.switch_to(v, self.orbit_mode, {"loiter": lo}, out, "orbit")
+
+    # -- missions ------------------------------------------------------------------
+    def rtl_vocab(self, ctx: Context, v: MavVehicle) -> dict[str, Any]:
+        """What its RTL flies (the RTL mode's mapping, to the return point)."""
+        from cosim.mavlink.mission import return_point
+
+        of = self.mode_vocab.get(self.rtl_mode) if self.rtl_mode is not None else None
+        d = dict(of(v)) if of is not None else {}
+        if "goto" in d:
+            d["goto"] = return_point(ctx, v)
+        return d
+
+    def nav_vocab(self, ctx: Context, v: MavVehicle, item: MissionItem,
+                  prev: tuple[float, float]) -> dict[str, Any] | str:
+        from cosim.mavlink import mission as mi
+
+        c = item.command
+        lat, lon = mi.point_of(v, item, prev)
+        pt: dict[str, Any] = {"lat_deg": lat, "lon_deg": lon}
+        alt = ctx.alt(v, item.frame, item.z) if self.reposition_alt else None
+        keeps_alt = item.z == 0 and item.frame not in (mav.MAV_FRAME_GLOBAL,
+                                                       mav.MAV_FRAME_GLOBAL_INT)
+        if alt is not None and not keeps_alt:  # altitude 0 above home: hold it
+            pt[alt[0]] = alt[1]
+        speed = v.mission.speed_mps
+        if speed is not None:
+            pt["airspeed_mps"] = speed
+        if c == mav.MAV_CMD_NAV_WAYPOINT:
+            return {"goto": pt}
+        if c in mi.LOITERS:
+            r = item.param2 if c == mav.MAV_CMD_NAV_LOITER_TO_ALT else item.param3
+            lo = {"center": {"lat_deg": lat, "lon_deg": lon},
+                  **{k: x for k, x in pt.items() if k not in ("lat_deg", "lon_deg")}}
+            if r:
+                lo["radius_m"] = abs(r)
+                lo["direction"] = "ccw" if r < 0 else "cw"
+            return {"loiter": lo}
+        if c == mav.MAV_CMD_NAV_TAKEOFF:
+            if alt is None:
+                return f"frame {item.frame} not supported"
+            return {"takeoff_agl_m": alt[1] - v.home[2] if alt[0] == "alt_msl_m" else alt[1]}
+        if c == mav.MAV_CMD_NAV_LAND:
+            return {"land": True} if item.here else {"goto": pt, "land": True}
+        if c == mav.MAV_CMD_NAV_RETURN_TO_LAUNCH:
+            return self.rtl_vocab(ctx, v)
+        return f"{mav.command_name(c)} is not flown by this vehicle"
 
     @staticmethod
     def _arm_disarm(ctx: Context, v: Any, req: CommandRequest, tick: int, out: Outcome) -> int:

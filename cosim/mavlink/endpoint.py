@@ -369,6 +369,10 @@ class MavlinkEndpoint:
         self._seq = np.zeros(n, dtype=np.int64)
         self._tlog_flushed = time.monotonic()
         self.tlogs: dict[int, TlogWriter] = {}
+        #: run events from the vehicles (a fence breach): (row, kind, fields)
+        self.events: list[tuple[int, str, dict[str, Any]]] = []
+        #: encoders of in-process clients' messages for the tlogs, by (system, component)
+        self._client_packers: dict[tuple[int, int], mav.Packer] = {}
         self.link: UdpLink | NullLink = NullLink() if config.url is None else UdpLink(
             config.url, config.max_peers, config.max_datagrams_per_exchange)
         if not self.link.loopback and key is None:
@@ -511,8 +515,20 @@ class MavlinkEndpoint:
                 self.link.remember(addr, len(msgs))
             for m in msgs:
                 self._dispatch(m, tick, commands, addr)
+        for v in self.vehicles:  # missions flown and the fence, after the messages
+            if v.mission.busy():
+                out = self.handler.mission_update(v, tick)
+                for name, fields in out.replies:
+                    self._send(v, name, fields, tick)
+                commands.extend(VehicleCommand(v.row, c, "mission") for c in out.commands)
+                self.events.extend((v.row, kind, f) for kind, f in out.events)
         self.counts["commands_out"] += len(commands)
         return commands
+
+    def drain_events(self) -> list[tuple[int, str, dict[str, Any]]]:
+        """Run events since the last call: (state row, kind, fields)."""
+        events, self.events = self.events, []
+        return events
 
     def send_telemetry(self, tick: int) -> None:
         """The second half of ``exchange``: mission progress and every stream
@@ -520,11 +536,6 @@ class MavlinkEndpoint:
         if self._last_tick != tick:
             raise ValueError(f"mavlink send_telemetry: tick {tick} is not the tick of the last "
                              f"receive ({self._last_tick})")
-        for v in self.vehicles:
-            ms = v.mission
-            if ms.upload is not None or ms.route or ms.reported_current != ms.current:
-                for name, fields in self.handler.mission_update(v, tick):
-                    self._send(v, name, fields, tick)
         self._telemetry(tick)
         if self.config.lockstep_sysid is not None:
             self._send(self.vehicles[0], "TIMESYNC",
@@ -746,6 +757,21 @@ class MavlinkEndpoint:
         if t is not None:
             t.write(self.clock.unix_us(tick), pkt)
 
+    def _client_bytes(self, m: mav.Message) -> bytes:
+        """The packet an in-process client's message would have been on the
+        network (for the tlogs: they hold what the vehicle received, whoever
+        sent it)."""
+        key = (m.src_system, m.src_component)
+        packer = self._client_packers.get(key)
+        if packer is None:
+            if not 1 <= m.src_system <= 255:
+                return b""
+            packer = self._client_packers[key] = mav.Packer(m.src_system, m.src_component)
+        try:
+            return packer.pack(m.name, **m.fields)
+        except (ValueError, TypeError, KeyError):
+            return b""
+
     def _dispatch(self, m: mav.Message, tick: int, commands: list[VehicleCommand],
                   sender: tuple[str, int] | None = None) -> None:
         if m.src_system in self._by_sysid and m.src_component == mav.MAV_COMP_ID_AUTOPILOT1 \
@@ -755,9 +781,10 @@ class MavlinkEndpoint:
         tgt = m.target_system
         if tgt is None:  # not addressed to a vehicle (a ground station's HEARTBEAT, ...)
             self.counts["gcs_heartbeats" if m.name == "HEARTBEAT" else "ignored_messages"] += 1
-            if m.raw:
+            raw = m.raw or (self._client_bytes(m) if self.tlogs else b"")
+            if raw:
                 for t in self.tlogs.values():
-                    t.write(self.clock.unix_us(tick), m.raw)
+                    t.write(self.clock.unix_us(tick), raw)
             return
         if tgt == 0:
             targets = self.vehicles
@@ -770,10 +797,11 @@ class MavlinkEndpoint:
         if comp not in (None, mav.MAV_COMP_ID_ALL, mav.MAV_COMP_ID_AUTOPILOT1):
             self.counts["other_component"] += 1  # a camera, gimbal, ...: not ours
             return
+        raw = m.raw or (self._client_bytes(m) if self.tlogs else b"")
         for v in targets:
             tlog = self.tlogs.get(v.sysid)
-            if tlog is not None and m.raw:
-                tlog.write(self.clock.unix_us(tick), m.raw)
+            if tlog is not None and raw:
+                tlog.write(self.clock.unix_us(tick), raw)
             try:
                 out = self.handler.handle(v, m, tick)
             except Exception:

@@ -40,6 +40,7 @@ class Handler:
 
     def handle(self, v: MavVehicle, m: mav.Message, tick: int) -> Outcome:
         """Handle one message for vehicle ``v`` at ``tick`` (its row observed)."""
+        self.ctx.tick = tick
         fn = self.by_name.get(m.name)
         if fn is None:
             self.ctx.counts["ignored_messages"] += 1
@@ -56,6 +57,7 @@ class Handler:
         """The PARAM_VALUE of one parameter (to announce a change)."""
         return self.params.value(v, name)
 
-    def mission_update(self, v: MavVehicle, tick: int) -> list[Reply]:
-        """Once per exchange: mission upload retries and progress."""
+    def mission_update(self, v: MavVehicle, tick: int) -> Outcome:
+        """Once per exchange before the step: mission upload retries, the
+        fence, and the mission being flown (its commands)."""
         return self.missions.update(v, tick)

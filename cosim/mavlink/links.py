@@ -129,6 +129,10 @@ class MavlinkLinks:
         for e in self.endpoints:
             e.send_telemetry(tick)
 
+    def drain_events(self) -> list[tuple[int, str, dict[str, Any]]]:
+        """See ``MavlinkEndpoint.drain_events``."""
+        return [ev for e in self.endpoints for ev in e.drain_events()]
+
     def counters(self) -> dict[str, Any]:
         """Every counter summed over the links (``links``: how many)."""
         total: Counter[str] = Counter()

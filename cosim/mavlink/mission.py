@@ -1,53 +1,131 @@
-"""The mission of one vehicle as ArduPlane keeps it: items, the upload in
-progress, and the progress of the mission being flown.
+"""The missions of one vehicle as ArduPilot keeps them: the plan (mission,
+fence and rally point lists), the upload in progress, and the mission being
+flown, item by item.
 
-Item 0 is home (ArduPilot's convention): it is never stored, whatever a
-client uploads as item 0, and downloads return the vehicle's home there.
-Items are kept in their MISSION_ITEM_INT form (x/y in degE7 for global
-frames) whichever message carried them.
+Item 0 of the mission list is home (ArduPilot's convention): it is never
+stored, whatever a client uploads as item 0, and downloads return the
+vehicle's home there. Fence and rally lists have no home item. Items are
+kept in their MISSION_ITEM_INT form (x/y in degE7 for global frames)
+whichever message carried them.
 
-Progress is tracked from the state rows alone (the endpoint sees no guidance
-events): an item counts as reached when the vehicle is within the acceptance
-radius guidance uses, ``max(0.5 * v^2 / (g tan(bank limit)), 50 m)``, or has
-passed the end of the leg (along-track), the same rule guidance switches
-waypoints on; the final item when within ``max(loiter radius, acceptance)``.
+Upload: an item that is malformed (a position outside the globe, a frame
+without an altitude cosim knows, a non-finite parameter, a DO_JUMP to an
+item that does not exist) ends the upload with its exact MAV_MISSION_*
+result and leaves the plan on board as it was, as the protocol says. An item
+that is well formed but that this vehicle's class cannot fly (a command
+outside its personality's ``mission_items``) is stored, reported once by a
+STATUSTEXT naming the item and its MAV_MISSION_* result, and skipped in
+flight, as ArduPilot skips commands it cannot run; the rest of the plan is
+flown as uploaded.
+
+Flying (``MissionRunner``, once per exchange from the state rows): one
+navigation item at a time, each as the command its class's personality
+makes of it (``Personality.nav_vocab``); the DO and CONDITION items after a
+navigation item run as soon as it starts, each CONDITION holding back the DO
+items after it (CONDITION_DELAY: seconds; CONDITION_DISTANCE: metres from
+the item's point); DO_JUMP jumps back with its repeat count (-1: for ever).
+An item is reached (MISSION_ITEM_REACHED) when:
+
+- NAV_WAYPOINT: within its acceptance radius (param2, else the class's:
+  ``max(0.5 v^2 / (g tan(bank limit)), 50 m)`` for a fixed-wing, which also
+  counts a waypoint whose leg it has passed), then after its hold time
+  (param1, rotorcraft and rovers);
+- NAV_LOITER_TURNS: after param1 turns round the centre, counted from the
+  first time within its radius plus the acceptance radius;
+- NAV_LOITER_TIME: param1 seconds after reaching the circle;
+- NAV_LOITER_TO_ALT: on the circle within 5 m of its altitude;
+- NAV_TAKEOFF: within 5 m of its altitude (1 m for rotorcraft);
+- NAV_LAND, and NAV_RETURN_TO_LAUNCH of a class that lands there: landed;
+  otherwise RTL at home (the mission then ends, loitering there);
+- NAV_LOITER_UNLIM: never.
+
 Distances use a flat-earth approximation (well under 1 m at these ranges).
-
-Nothing here reads the wall clock: the upload's retries and timeout count
-ticks of simulation time.
+Nothing here reads the wall clock: times count ticks of simulation time.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
-from typing import Any, Final
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, Any, Final
 
-from cosim.guidance.commands import waypoint_accept_radius_m
 from cosim.mavlink import adapter as mav
+from cosim.mavlink.services.base import Context, Outcome, text, vocab
+from cosim.vehicles.spec import STATE_INDEX as _S
+
+if TYPE_CHECKING:
+    from cosim.mavlink.vehicle import MavVehicle
 
 #: seconds of simulation time between re-requests of an item during an upload
 UPLOAD_RETRY_S: Final[float] = 1.0
 #: seconds without progress after which an upload is cancelled (ArduPilot: 8 s)
 UPLOAD_TIMEOUT_S: Final[float] = 8.0
-#: most items a mission may hold (excluding home)
+#: most items a list may hold: mission (excluding home), fence, rally
 MAX_ITEMS: Final[int] = 700
+MAX_FENCE_ITEMS: Final[int] = 200
+MAX_RALLY_ITEMS: Final[int] = 50
+#: DO_JUMPs followed in one advance before the mission is stopped as a loop
+#: without navigation (e.g. an item jumping to itself for ever)
+MAX_JUMPS_PER_ADVANCE: Final[int] = 64
+#: how close (m) to its altitude a take-off or LOITER_TO_ALT counts as there
+ALT_TOLERANCE_M: Final[float] = 5.0
 
 #: MISSION_CURRENT.mission_state values (MISSION_STATE enum)
 STATE_NO_MISSION, STATE_NOT_STARTED, STATE_ACTIVE, STATE_COMPLETE = 1, 2, 3, 5
 
+M = mav
 GLOBAL_FRAMES: Final[frozenset[int]] = frozenset((
-    mav.MAV_FRAME_GLOBAL, mav.MAV_FRAME_GLOBAL_INT, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT,
-    mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, mav.MAV_FRAME_GLOBAL_TERRAIN_ALT,
-    mav.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT))
-#: navigation commands that need a position in a global frame
+    M.MAV_FRAME_GLOBAL, M.MAV_FRAME_GLOBAL_INT, M.MAV_FRAME_GLOBAL_RELATIVE_ALT,
+    M.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, M.MAV_FRAME_GLOBAL_TERRAIN_ALT,
+    M.MAV_FRAME_GLOBAL_TERRAIN_ALT_INT))
+#: navigation items: one is flown at a time
+NAV_COMMANDS: Final[frozenset[int]] = frozenset((
+    M.MAV_CMD_NAV_WAYPOINT, M.MAV_CMD_NAV_LOITER_UNLIM, M.MAV_CMD_NAV_LOITER_TURNS,
+    M.MAV_CMD_NAV_LOITER_TIME, M.MAV_CMD_NAV_RETURN_TO_LAUNCH, M.MAV_CMD_NAV_LAND,
+    M.MAV_CMD_NAV_TAKEOFF, M.MAV_CMD_NAV_LOITER_TO_ALT))
+#: items whose x/y/z are a position in a global frame (x = y = 0: "here")
 POSITION_COMMANDS: Final[frozenset[int]] = frozenset((
-    mav.MAV_CMD_NAV_WAYPOINT, mav.MAV_CMD_NAV_LOITER_UNLIM, mav.MAV_CMD_NAV_TAKEOFF))
-SUPPORTED_COMMANDS: Final[frozenset[int]] = POSITION_COMMANDS | {
-    mav.MAV_CMD_NAV_RETURN_TO_LAUNCH, mav.MAV_CMD_DO_CHANGE_SPEED}
+    M.MAV_CMD_NAV_WAYPOINT, M.MAV_CMD_NAV_LOITER_UNLIM, M.MAV_CMD_NAV_LOITER_TURNS,
+    M.MAV_CMD_NAV_LOITER_TIME, M.MAV_CMD_NAV_LAND, M.MAV_CMD_NAV_TAKEOFF,
+    M.MAV_CMD_NAV_LOITER_TO_ALT, M.MAV_CMD_DO_SET_HOME, M.MAV_CMD_DO_SET_ROI,
+    M.MAV_CMD_DO_SET_ROI_LOCATION))
+LOITERS: Final[frozenset[int]] = frozenset((
+    M.MAV_CMD_NAV_LOITER_UNLIM, M.MAV_CMD_NAV_LOITER_TURNS, M.MAV_CMD_NAV_LOITER_TIME,
+    M.MAV_CMD_NAV_LOITER_TO_ALT))
+CONDITIONS: Final[frozenset[int]] = frozenset((
+    M.MAV_CMD_CONDITION_DELAY, M.MAV_CMD_CONDITION_DISTANCE))
+CAMERA_ITEMS: Final[frozenset[int]] = frozenset((
+    M.MAV_CMD_DO_SET_CAM_TRIGG_DIST, M.MAV_CMD_IMAGE_START_CAPTURE,
+    M.MAV_CMD_IMAGE_STOP_CAPTURE, M.MAV_CMD_DO_DIGICAM_CONTROL))
+#: DO and CONDITION items every ArduPilot-like class runs (``MissionRunner``)
+COMMON_DO_ITEMS: Final[frozenset[int]] = CONDITIONS | CAMERA_ITEMS | frozenset((
+    M.MAV_CMD_DO_JUMP, M.MAV_CMD_DO_CHANGE_SPEED, M.MAV_CMD_DO_SET_HOME, M.MAV_CMD_DO_SET_ROI,
+    M.MAV_CMD_DO_SET_ROI_LOCATION, M.MAV_CMD_DO_SET_ROI_NONE))
+FENCE_ITEMS: Final[frozenset[int]] = frozenset((
+    M.MAV_CMD_NAV_FENCE_RETURN_POINT, M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION,
+    M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION, M.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION,
+    M.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION))
+RALLY_ITEMS: Final[frozenset[int]] = frozenset((M.MAV_CMD_NAV_RALLY_POINT,))
+#: what each list may hold and how many
+LIST_RULES: Final[dict[int, tuple[frozenset[int] | None, int]]] = {
+    M.MAV_MISSION_TYPE_MISSION: (None, MAX_ITEMS),
+    M.MAV_MISSION_TYPE_FENCE: (FENCE_ITEMS, MAX_FENCE_ITEMS),
+    M.MAV_MISSION_TYPE_RALLY: (RALLY_ITEMS, MAX_RALLY_ITEMS)}
 
 _M_PER_DEG: Final[float] = 111_319.49
+
+
+def result_name(result: int) -> str:
+    """MAV_MISSION_RESULT number -> its name (MAV_MISSION_UNSUPPORTED, ...)."""
+    entry = mav.enum_entry("MAV_MISSION_RESULT", result)
+    return entry or f"MAV_MISSION_RESULT {result}"
+
+
+def flat_ne(lat0: float, lon0: float, lat: float, lon: float) -> tuple[float, float]:
+    """(north, east) metres of (lat, lon) from (lat0, lon0), flat earth."""
+    return ((lat - lat0) * _M_PER_DEG,
+            (lon - lon0) * _M_PER_DEG * math.cos(math.radians(lat0)))
 
 
 @dataclass(frozen=True)
@@ -66,6 +144,7 @@ class MissionItem:
     x: int = 0
     y: int = 0
     z: float = 0.0
+    mission_type: int = M.MAV_MISSION_TYPE_MISSION
 
     @classmethod
     def of(cls, m: mav.Message) -> MissionItem:
@@ -81,7 +160,8 @@ class MissionItem:
         yi = round(y) if math.isfinite(y) and abs(y) < 2 ** 31 else 2 ** 31 - 1
         return cls(int(f["seq"]), frame, int(f["command"]), int(f["current"]),
                    int(f["autocontinue"]), float(f["param1"]), float(f["param2"]),
-                   float(f["param3"]), float(f["param4"]), xi, yi, float(f["z"]))
+                   float(f["param3"]), float(f["param4"]), xi, yi, float(f["z"]),
+                   int(f.get("mission_type", M.MAV_MISSION_TYPE_MISSION)))
 
     @property
     def lat_deg(self) -> float:
@@ -91,25 +171,60 @@ class MissionItem:
     def lon_deg(self) -> float:
         return self.y / 1e7
 
-    def check(self, supported: frozenset[int] = SUPPORTED_COMMANDS) -> int:
-        """MAV_MISSION_ACCEPTED, or the MAV_MISSION_RESULT error for this item
-        (a command outside ``supported``, the vehicle's: UNSUPPORTED)."""
-        if self.command not in supported:
-            return mav.MAV_MISSION_UNSUPPORTED
-        if self.command in POSITION_COMMANDS:
+    @property
+    def here(self) -> bool:
+        """Whether its position means "where the vehicle is" (x = y = 0)."""
+        return self.x == 0 and self.y == 0
+
+    def check(self, count: int = 0) -> int:
+        """MAV_MISSION_ACCEPTED, or the MAV_MISSION_RESULT error that makes this
+        item malformed (``count``: the items of the list, home included, for
+        DO_JUMP's target). Whether the vehicle can fly it is not asked here."""
+        c = self.command
+        allowed, _ = LIST_RULES.get(self.mission_type, (frozenset(), 0))
+        if allowed is not None and c not in allowed:
+            return M.MAV_MISSION_UNSUPPORTED
+        if allowed is None and (c in FENCE_ITEMS or c in RALLY_ITEMS):  # in the wrong list
+            return M.MAV_MISSION_UNSUPPORTED
+        if c in POSITION_COMMANDS or c in FENCE_ITEMS or c in RALLY_ITEMS:
             if self.frame not in GLOBAL_FRAMES:
-                return mav.MAV_MISSION_UNSUPPORTED_FRAME
+                return M.MAV_MISSION_UNSUPPORTED_FRAME
             if not -900_000_000 <= self.x <= 900_000_000:
-                return mav.MAV_MISSION_INVALID_PARAM5_X
+                return M.MAV_MISSION_INVALID_PARAM5_X
             if not -1_800_000_000 <= self.y <= 1_800_000_000:
-                return mav.MAV_MISSION_INVALID_PARAM6_Y
+                return M.MAV_MISSION_INVALID_PARAM6_Y
             if not math.isfinite(self.z):
-                return mav.MAV_MISSION_INVALID_PARAM7
-        if self.command == mav.MAV_CMD_NAV_LOITER_UNLIM and not math.isfinite(self.param3):
-            return mav.MAV_MISSION_INVALID_PARAM3
-        if self.command == mav.MAV_CMD_DO_CHANGE_SPEED and not math.isfinite(self.param2):
-            return mav.MAV_MISSION_INVALID_PARAM2
-        return mav.MAV_MISSION_ACCEPTED
+                return M.MAV_MISSION_INVALID_PARAM7
+        p1, p2, p3 = self.param1, self.param2, self.param3
+        if c in LOITERS and c != M.MAV_CMD_NAV_LOITER_TO_ALT and not math.isfinite(p3):
+            return M.MAV_MISSION_INVALID_PARAM3
+        if c == M.MAV_CMD_NAV_LOITER_TO_ALT and not math.isfinite(p2):
+            return M.MAV_MISSION_INVALID_PARAM2
+        if c == M.MAV_CMD_NAV_LOITER_TURNS and not (math.isfinite(p1) and 0 < p1 <= 1000):
+            return M.MAV_MISSION_INVALID_PARAM1
+        if c in (M.MAV_CMD_NAV_LOITER_TIME, M.MAV_CMD_CONDITION_DELAY,
+                 M.MAV_CMD_CONDITION_DISTANCE) and not (math.isfinite(p1) and p1 >= 0):
+            return M.MAV_MISSION_INVALID_PARAM1
+        if c == M.MAV_CMD_NAV_WAYPOINT and not (math.isfinite(p1) and math.isfinite(p2)):
+            return M.MAV_MISSION_INVALID_PARAM1 if not math.isfinite(p1) \
+                else M.MAV_MISSION_INVALID_PARAM2
+        if c == M.MAV_CMD_DO_CHANGE_SPEED and not math.isfinite(p2):
+            return M.MAV_MISSION_INVALID_PARAM2
+        if c == M.MAV_CMD_DO_JUMP:
+            if not (math.isfinite(p1) and p1 == int(p1) and 1 <= p1 < max(count, 2)):
+                return M.MAV_MISSION_INVALID_PARAM1
+            if not (math.isfinite(p2) and p2 == int(p2) and -1 <= p2 <= 10_000):
+                return M.MAV_MISSION_INVALID_PARAM2
+        if c in (M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION,
+                 M.MAV_CMD_NAV_FENCE_POLYGON_VERTEX_EXCLUSION) \
+                and not (math.isfinite(p1) and p1 == int(p1) and 3 <= p1 <= MAX_FENCE_ITEMS):
+            return M.MAV_MISSION_INVALID_PARAM1
+        if c in (M.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION, M.MAV_CMD_NAV_FENCE_CIRCLE_EXCLUSION) \
+                and not (math.isfinite(p1) and p1 > 0):
+            return M.MAV_MISSION_INVALID_PARAM1
+        if c in CAMERA_ITEMS and not all(math.isfinite(p) for p in (p1, p2, p3, self.param4)):
+            return M.MAV_MISSION_INVALID_PARAM1
+        return M.MAV_MISSION_ACCEPTED
 
     def fields(self, as_int: bool, target: tuple[int, int], current: bool) -> dict[str, Any]:
         """The fields of a MISSION_ITEM_INT (``as_int``) or MISSION_ITEM to ``target``."""
@@ -122,84 +237,122 @@ class MissionItem:
                 "frame": self.frame, "command": self.command, "current": int(current),
                 "autocontinue": self.autocontinue, "param1": self.param1,
                 "param2": self.param2, "param3": self.param3, "param4": self.param4,
-                "x": x, "y": y, "z": self.z, "mission_type": mav.MAV_MISSION_TYPE_MISSION}
+                "x": x, "y": y, "z": self.z, "mission_type": self.mission_type}
 
 
 def home_item(home: tuple[float, float, float]) -> MissionItem:
     """Item 0: home, as a waypoint at its MSL altitude."""
-    return MissionItem(0, mav.MAV_FRAME_GLOBAL, mav.MAV_CMD_NAV_WAYPOINT,
+    return MissionItem(0, M.MAV_FRAME_GLOBAL, M.MAV_CMD_NAV_WAYPOINT,
                        x=round(home[0] * 1e7), y=round(home[1] * 1e7), z=float(home[2]))
 
 
 @dataclass
 class Upload:
-    """An upload in progress: who sends it, how many items, which is next."""
+    """An upload in progress: who sends it, which list, how many items, which is next."""
 
     partner: tuple[int, int]  # system, component
-    count: int  # including item 0
-    received: list[MissionItem] = field(default_factory=list)  # items 1.. so far
+    count: int  # including item 0 for the mission list
+    received: list[MissionItem] = field(default_factory=list)  # items stored so far
     next_seq: int = 0
     last_request_tick: int = 0
     last_progress_tick: int = 0
     use_int: bool = True  # request with MISSION_REQUEST_INT (False: MISSION_REQUEST)
+    mission_type: int = M.MAV_MISSION_TYPE_MISSION
+    #: (seq, result) of the items the vehicle cannot fly (stored, skipped in flight)
+    refused: list[tuple[int, int]] = field(default_factory=list)
 
 
-@dataclass(frozen=True)
-class RoutePoint:
-    """A navigation item being flown: its sequence number and position."""
+@dataclass
+class NavState:
+    """The navigation item being flown."""
 
-    seq: int
+    item: MissionItem
     lat_deg: float
     lon_deg: float
-    final: bool = False
-    loiter_radius_m: float | None = None
+    alt: tuple[str, float] | None  # (vocabulary key, metres) of its altitude
+    radius_m: float  # its loiter radius (0: a point)
+    leg_start: tuple[float, float]
+    start_tick: int
+    arrived_tick: int | None = None
+    swept_rad: float = 0.0
+    last_angle: float | None = None
 
 
 class Mission:
-    """The mission of one vehicle (see the module docstring)."""
+    """The plan and flight state of one vehicle (see the module docstring)."""
 
     def __init__(self) -> None:
         self.items: list[MissionItem] = []  # seq 1..n (item 0, home, is not stored)
+        self.fence: list[MissionItem] = []
+        self.rally: list[MissionItem] = []
+        self.refused: dict[int, int] = {}  # seq -> MAV_MISSION result: skipped in flight
         self.current = 0  # the item being (or to be) flown; 0: not started
         self.upload: Upload | None = None
-        self.route: list[RoutePoint] = []  # the points the active waypoints command flies
-        self.leg = 0  # index into route
-        self.leg_start: tuple[float, float] | None = None
+        self.nav: NavState | None = None
+        self.do_queue: list[MissionItem] = []
+        self.waiting: tuple[int, int] | None = None  # (condition seq, tick it started)
+        self.jumps: dict[int, int] = {}  # DO_JUMP seq -> jumps left (-1: for ever)
+        self.speed_mps: float | None = None
+        self.roi: tuple[float, float, float] | None = None  # lat, lon, alt MSL
+        self.roi_sent: tuple[float, float] | None = None
         self.complete = False
         self.reported_current = 0  # the seq of the last MISSION_CURRENT sent
         self.reached: list[int] = []  # MISSION_ITEM_REACHED still to send
+        self.breached = False  # outside the fence (an RTL was commanded)
 
     @property
     def count(self) -> int:
         """Items including home (MISSION_COUNT of a download)."""
         return len(self.items) + 1
 
-    def item(self, seq: int, home: tuple[float, float, float]) -> MissionItem | None:
+    @property
+    def route(self) -> bool:
+        """Whether a mission is being flown."""
+        return self.nav is not None
+
+    def list_of(self, mission_type: int) -> list[MissionItem]:
+        return self.fence if mission_type == M.MAV_MISSION_TYPE_FENCE else \
+            self.rally if mission_type == M.MAV_MISSION_TYPE_RALLY else self.items
+
+    def count_of(self, mission_type: int) -> int:
+        """MISSION_COUNT of a download of that list."""
+        return self.count if mission_type == M.MAV_MISSION_TYPE_MISSION \
+            else len(self.list_of(mission_type))
+
+    def item(self, seq: int, home: tuple[float, float, float],
+             mission_type: int = M.MAV_MISSION_TYPE_MISSION) -> MissionItem | None:
+        if mission_type != M.MAV_MISSION_TYPE_MISSION:
+            lst = self.list_of(mission_type)
+            return lst[seq] if 0 <= seq < len(lst) else None
         if seq == 0:
             return home_item(home)
         if 1 <= seq <= len(self.items):
             return self.items[seq - 1]
         return None
 
-    def replace(self, items: Sequence[MissionItem]) -> None:
-        """A new mission (items 1..n); flying state is reset."""
+    def replace(self, items: Sequence[MissionItem], refused: dict[int, int] | None = None,
+                mission_type: int = M.MAV_MISSION_TYPE_MISSION) -> None:
+        """A new list; for the mission, flying state is reset."""
+        if mission_type == M.MAV_MISSION_TYPE_FENCE:
+            self.fence = list(items)
+            self.breached = False
+            return
+        if mission_type == M.MAV_MISSION_TYPE_RALLY:
+            self.rally = list(items)
+            return
         self.items = list(items)
+        self.refused = dict(refused or {})
         self.current = 0
+        self.jumps = {}
         self.stop()
 
     def stop(self) -> None:
-        self.route = []
-        self.leg = 0
-        self.leg_start = None
+        """Stop flying it (the current item stays, to resume from)."""
+        self.nav = None
+        self.do_queue = []
+        self.waiting = None
         self.complete = False
-
-    def fly(self, route: Sequence[RoutePoint], here: tuple[float, float]) -> None:
-        """The waypoints command for ``route`` was just issued from ``here``."""
-        self.route = list(route)
-        self.leg = 0
-        self.leg_start = here
-        self.complete = False
-        self.current = self.route[0].seq
+        self.roi = self.roi_sent = None
 
     def state(self, auto: bool) -> dict[str, Any]:
         """MISSION_CURRENT fields (total excludes home, as ArduPilot reports)."""
@@ -207,44 +360,365 @@ class Mission:
             st = STATE_NO_MISSION
         elif self.complete:
             st = STATE_COMPLETE
-        elif auto and self.route:
+        elif auto and self.nav is not None:
             st = STATE_ACTIVE
         else:
             st = STATE_NOT_STARTED
         return {"seq": self.current, "total": len(self.items) if self.items else 65535,
                 "mission_state": st, "mission_mode": 1 if auto else 0}
 
-    def track(self, row: Sequence[float], index: Mapping[str, int]) -> None:
-        """Advance along the route from one state row (in AUTO only)."""
-        if not self.route or self.complete or self.leg_start is None:
+    def busy(self) -> bool:
+        """Whether the runner has anything to do at this exchange."""
+        return (self.upload is not None or self.nav is not None or bool(self.reached)
+                or self.reported_current != self.current or bool(self.fence))
+
+
+def point_of(v: MavVehicle, item: MissionItem, prev: tuple[float, float]
+             ) -> tuple[float, float]:
+    """An item's (lat, lon); x = y = 0: ``prev`` (ArduPilot: "here")."""
+    return prev if item.here else (item.lat_deg, item.lon_deg)
+
+
+def return_point(ctx: Context, v: MavVehicle) -> dict[str, Any]:
+    """Where an RTL goes: the nearest rally point (at its altitude), else home."""
+    row = v.row_values
+    best: dict[str, Any] = {"lat_deg": v.home[0], "lon_deg": v.home[1]}
+    if not v.mission.rally or row is None:
+        return best
+    lat, lon = float(row[_S["lat_deg"]]), float(row[_S["lon_deg"]])
+    best_d = math.hypot(*flat_ne(lat, lon, v.home[0], v.home[1]))
+    for r in v.mission.rally:
+        d = math.hypot(*flat_ne(lat, lon, r.lat_deg, r.lon_deg))
+        if d < best_d:
+            best_d = d
+            best = {"lat_deg": r.lat_deg, "lon_deg": r.lon_deg}
+            a = ctx.alt(v, r.frame, r.z)
+            if a is not None:
+                best[a[0]] = a[1]
+    return best
+
+
+class MissionRunner:
+    """Flies the missions of the vehicles of one endpoint (see the module
+    docstring); every command goes out in an ``Outcome``."""
+
+    def __init__(self, ctx: Context) -> None:
+        self.ctx = ctx
+
+    # -- starting and advancing ----------------------------------------------------
+    def start(self, v: MavVehicle, seq: int, tick: int, out: Outcome) -> str | None:
+        """Fly the mission from item ``seq``; why not (None: flying)."""
+        ms = v.mission
+        if seq <= 1:
+            ms.jumps = {}
+            ms.speed_mps = None
+        ms.stop()
+        return self._advance(v, max(seq, 1), tick, out, first=True)
+
+    def _advance(self, v: MavVehicle, seq: int, tick: int, out: Outcome,
+                 first: bool = False) -> str | None:
+        """Run the items from ``seq`` up to the next navigation item and start
+        it; at the end of the list the mission is complete."""
+        ms = v.mission
+        jumps = 0
+        i = seq
+        while 1 <= i <= len(ms.items):
+            it = ms.items[i - 1]
+            if it.seq in ms.refused:
+                self.ctx.counts["mission_items_skipped"] += 1
+                i += 1
+                continue
+            if it.command == M.MAV_CMD_DO_JUMP:
+                jumps += 1
+                if jumps > MAX_JUMPS_PER_ADVANCE:
+                    out.replies.extend(text(f"Mission: DO_JUMP loop at item {it.seq} "
+                                            f"without navigation; stopped"))
+                    return self._end(v, out, first, "a DO_JUMP loop without navigation")
+                left = ms.jumps.setdefault(it.seq, int(it.param2))
+                if left != 0:
+                    if left > 0:
+                        ms.jumps[it.seq] = left - 1
+                    i = int(it.param1)
+                else:
+                    i += 1
+                continue
+            if it.command in NAV_COMMANDS:
+                problem = self._start_nav(v, it, tick, out)
+                if problem is None:
+                    ms.current = it.seq
+                    ms.do_queue = self._dos_after(ms, i)
+                    ms.waiting = None
+                    self._run_dos(v, tick, out)
+                    return None
+                out.replies.extend(text(f"Mission item {it.seq}: "
+                                        f"{mav.command_name(it.command)}: {problem}; skipped"))
+                self.ctx.counts["mission_items_skipped"] += 1
+                i += 1
+                continue
+            if first:  # DO items before the first navigation item; later ones ran
+                self._do(v, it, tick, out)  # (or were abandoned) with the item before
+            i += 1
+        return self._end(v, out, first, "no navigation items left in the mission")
+
+    def _end(self, v: MavVehicle, out: Outcome, first: bool, why: str) -> str | None:
+        if first:
+            return why
+        v.mission.complete = True
+        v.mission.do_queue = []
+        return None
+
+    @staticmethod
+    def _dos_after(ms: Mission, i: int) -> list[MissionItem]:
+        """The DO and CONDITION items after item ``i``, up to the next
+        navigation item or DO_JUMP."""
+        out = []
+        for it in ms.items[i:]:
+            if it.command in NAV_COMMANDS or it.command == M.MAV_CMD_DO_JUMP:
+                break
+            if it.seq not in ms.refused:
+                out.append(it)
+        return out
+
+    def _start_nav(self, v: MavVehicle, it: MissionItem, tick: int, out: Outcome) -> str | None:
+        ms = v.mission
+        row = v.row_or_raise()
+        here = (float(row[_S["lat_deg"]]), float(row[_S["lon_deg"]]))
+        prev = (ms.nav.lat_deg, ms.nav.lon_deg) if ms.nav is not None else here
+        d = v.personality.nav_vocab(self.ctx, v, it, prev)
+        if isinstance(d, str):
+            return d
+        cw = d.pop("cw", None)  # the loiter direction of a goto's end, not vocabulary
+        cmd = vocab(d)
+        if isinstance(cmd, str):
+            return cmd
+        problem = self.ctx.unsafe(v, cmd)
+        if problem is not None:
+            return problem
+        target = _target_of(d, prev)
+        alt = self.ctx.alt(v, it.frame, it.z) if it.command != M.MAV_CMD_NAV_RETURN_TO_LAUNCH \
+            else None
+        radius = v.personality.loiter_radius_m(v, d)
+        ms.nav = NavState(it, target[0], target[1], alt, radius, prev, tick)
+        if cw is not None:
+            cmd = replace(cmd, loiter_cw=bool(cw))
+        out.commands.append(cmd)
+        return None
+
+    # -- every exchange --------------------------------------------------------------
+    def update(self, v: MavVehicle, tick: int, out: Outcome) -> None:
+        """Progress of the mission being flown from the latest state row."""
+        ms = v.mission
+        row = v.row_values
+        if ms.nav is None or ms.complete or row is None:
             return
-        lat, lon = float(row[index["lat_deg"]]), float(row[index["lon_deg"]])
+        lat, lon = float(row[_S["lat_deg"]]), float(row[_S["lon_deg"]])
         if not (math.isfinite(lat) and math.isfinite(lon)):
             return
-        p = self.route[self.leg]
-        v = max(float(row[index["airspeed_mps"]]), 1.0)
-        bank = float(row[index["bank_limit_deg"]])
-        if not 5.0 <= bank <= 75.0:
-            bank = 45.0
-        accept = waypoint_accept_radius_m(v, bank)
-        coslat = math.cos(math.radians(p.lat_deg))
-        bn = (p.lat_deg - lat) * _M_PER_DEG
-        be = (p.lon_deg - lon) * _M_PER_DEG * coslat
-        dist = math.hypot(bn, be)
-        if p.final:
-            if dist <= max(p.loiter_radius_m or 0.0, accept):
-                self.reached.append(p.seq)
-                self.complete = True
+        self._run_dos(v, tick, out)
+        self._point_roi(v, row, tick, out)
+        if self._nav_done(v, ms.nav, row, lat, lon, tick):
+            ms.reached.append(ms.nav.item.seq)
+            self.ctx.counts["mission_items_reached"] += 1
+            if ms.nav.item.command == M.MAV_CMD_NAV_LAND or (
+                    ms.nav.item.command == M.MAV_CMD_NAV_RETURN_TO_LAUNCH
+                    and v.personality.rtl_lands):
+                v.armed = False  # ArduPilot disarms once landed
+            self._advance(v, ms.nav.item.seq + 1, tick, out)
+
+    def _run_dos(self, v: MavVehicle, tick: int, out: Outcome) -> None:
+        ms = v.mission
+        while ms.do_queue:
+            it = ms.do_queue[0]
+            if it.command in CONDITIONS:
+                if ms.waiting is None or ms.waiting[0] != it.seq:
+                    ms.waiting = (it.seq, tick)
+                if not self._condition_met(v, it, ms.waiting[1], tick):
+                    return
+                ms.waiting = None
+            else:
+                self._do(v, it, tick, out)
+            ms.do_queue.pop(0)
+
+    def _condition_met(self, v: MavVehicle, it: MissionItem, since: int, tick: int) -> bool:
+        if it.command == M.MAV_CMD_CONDITION_DELAY:
+            return tick - since >= it.param1 * self.ctx.physics_hz
+        nav, row = v.mission.nav, v.row_values  # CONDITION_DISTANCE
+        if nav is None or row is None:
+            return True
+        d = math.hypot(*flat_ne(nav.lat_deg, nav.lon_deg, float(row[_S["lat_deg"]]),
+                                float(row[_S["lon_deg"]])))
+        return d <= it.param1
+
+    def _do(self, v: MavVehicle, it: MissionItem, tick: int, out: Outcome) -> None:
+        """Run one DO item."""
+        ms = v.mission
+        c = it.command
+        d: dict[str, Any] | None = None
+        if c == M.MAV_CMD_DO_CHANGE_SPEED:
+            if it.param2 > 0:
+                ms.speed_mps = it.param2
+                problem = v.personality.speed_problem(v, it.param2)
+                if problem is None and v.armed:
+                    d = {"airspeed_mps": it.param2}
+                elif problem is not None:
+                    out.replies.extend(text(f"Mission item {it.seq}: {problem}"))
+        elif c == M.MAV_CMD_DO_SET_HOME:
+            row = v.row_or_raise()
+            if it.param1 == 1 or it.here:
+                v.home = (float(row[_S["lat_deg"]]), float(row[_S["lon_deg"]]),
+                          float(row[_S["alt_msl_m"]] - row[_S["alt_agl_m"]]))
+            else:
+                a = self.ctx.alt(v, it.frame, it.z)
+                alt = a[1] if a is not None and a[0] == "alt_msl_m" else v.home[2]
+                v.home = (it.lat_deg, it.lon_deg, alt)
+            out.replies.append(("HOME_POSITION", v.fields("HOME_POSITION", tick)))
+        elif c in (M.MAV_CMD_DO_SET_ROI, M.MAV_CMD_DO_SET_ROI_LOCATION):
+            if it.here:
+                ms.roi = None
+            else:
+                a = self.ctx.alt(v, it.frame, it.z)
+                alt = a[1] if a is not None and a[0] == "alt_msl_m" else v.home[2]
+                ms.roi, ms.roi_sent = (it.lat_deg, it.lon_deg, alt), None
+        elif c == M.MAV_CMD_DO_SET_ROI_NONE:
+            ms.roi = ms.roi_sent = None
+        elif c in CAMERA_ITEMS:
+            d = camera_vocab(it)
+        if d is None:
             return
-        a_lat, a_lon = self.leg_start
-        dn = (p.lat_deg - a_lat) * _M_PER_DEG
-        de = (p.lon_deg - a_lon) * _M_PER_DEG * coslat
-        length = math.hypot(dn, de)
-        pn = (lat - a_lat) * _M_PER_DEG
-        pe = (lon - a_lon) * _M_PER_DEG * coslat
-        along = (pn * dn + pe * de) / length if length > 1e-6 else length
-        if dist <= accept or along >= length:
-            self.reached.append(p.seq)
-            self.leg_start = (p.lat_deg, p.lon_deg)
-            self.leg += 1
-            self.current = self.route[self.leg].seq
+        cmd = vocab(d)
+        if isinstance(cmd, str):
+            out.replies.extend(text(f"Mission item {it.seq}: {cmd}"))
+            self.ctx.counts["mission_items_skipped"] += 1
+            return
+        out.commands.append(cmd)
+
+    def _point_roi(self, v: MavVehicle, row: list[float], tick: int, out: Outcome) -> None:
+        """Keep the gimbal on the region of interest: a gimbal command when the
+        angles have moved by more than 2 degrees."""
+        roi = v.mission.roi
+        if roi is None:
+            return
+        n, e = flat_ne(float(row[_S["lat_deg"]]), float(row[_S["lon_deg"]]), roi[0], roi[1])
+        down = float(row[_S["alt_msl_m"]]) - roi[2]
+        pitch = max(-90.0, min(30.0, -math.degrees(math.atan2(down, math.hypot(n, e)))))
+        yaw = math.remainder(math.degrees(math.atan2(e, n)) - float(row[_S["yaw_deg"]]), 360.0)
+        sent = v.mission.roi_sent
+        if sent is not None and abs(sent[0] - pitch) <= 2.0 \
+                and abs(math.remainder(sent[1] - yaw, 360.0)) <= 2.0:
+            return
+        cmd = vocab({"gimbal": {"pitch_deg": round(pitch, 2), "yaw_deg": round(yaw, 2)}})
+        if not isinstance(cmd, str):
+            v.mission.roi_sent = (pitch, yaw)
+            out.commands.append(cmd)
+
+    def _nav_done(self, v: MavVehicle, nav: NavState, row: list[float], lat: float,
+                  lon: float, tick: int) -> bool:
+        p = v.personality
+        c = nav.item.command
+        hz = self.ctx.physics_hz
+        n, e = flat_ne(nav.lat_deg, nav.lon_deg, lat, lon)
+        dist = math.hypot(n, e)
+        accept = p.accept_radius_m(v, row)
+        if c == M.MAV_CMD_NAV_WAYPOINT:
+            if nav.item.param2 > 0:
+                accept = nav.item.param2
+            if nav.arrived_tick is None:
+                passed = p.passes_waypoints and _passed(nav, lat, lon)
+                if dist > accept and not passed:
+                    return False
+                nav.arrived_tick = tick
+            hold = nav.item.param1 if p.waypoint_hold else 0.0
+            return tick - nav.arrived_tick >= hold * hz
+        if c == M.MAV_CMD_NAV_TAKEOFF:
+            return self._at_alt(v, nav, row, p.takeoff_tolerance_m)
+        if c == M.MAV_CMD_NAV_LAND:
+            return _landed(row)
+        if c == M.MAV_CMD_NAV_RETURN_TO_LAUNCH:
+            if p.rtl_lands:
+                return _landed(row)
+            return dist <= max(nav.radius_m, accept)
+        if c == M.MAV_CMD_NAV_LOITER_UNLIM:
+            return False
+        # the loiters with an end: on the circle first
+        if nav.arrived_tick is None:
+            if dist > nav.radius_m + accept:
+                return False
+            nav.arrived_tick = tick
+        if c == M.MAV_CMD_NAV_LOITER_TIME:
+            return tick - nav.arrived_tick >= nav.item.param1 * hz
+        if c == M.MAV_CMD_NAV_LOITER_TO_ALT:
+            return self._at_alt(v, nav, row, ALT_TOLERANCE_M)
+        # LOITER_TURNS: the angle swept round the centre
+        if nav.radius_m < 1.0:
+            return True  # a point: nothing to turn round
+        angle = math.atan2(e, n)
+        if nav.last_angle is not None:
+            nav.swept_rad += abs(math.remainder(angle - nav.last_angle, math.tau))
+        nav.last_angle = angle
+        return nav.swept_rad >= abs(nav.item.param1) * math.tau
+
+    def _at_alt(self, v: MavVehicle, nav: NavState, row: list[float], tol: float) -> bool:
+        if nav.alt is None:
+            return True
+        key, want = nav.alt
+        have = float(row[_S["alt_agl_m"]] if key == "alt_agl_m" else row[_S["alt_msl_m"]])
+        if nav.item.command == M.MAV_CMD_NAV_TAKEOFF:
+            return have >= want - tol  # a take-off never descends
+        return abs(have - want) <= tol
+
+
+def _target_of(d: dict[str, Any], prev: tuple[float, float]) -> tuple[float, float]:
+    """The point a vocabulary mapping flies to (``prev``: none)."""
+    for key in ("goto", "loiter"):
+        p = d.get(key)
+        if isinstance(p, dict):
+            p = p.get("center", p)
+            if isinstance(p, dict) and "lat_deg" in p:
+                return float(p["lat_deg"]), float(p["lon_deg"])
+    return prev
+
+
+def _passed(nav: NavState, lat: float, lon: float) -> bool:
+    """Whether the vehicle has passed the end of its leg (along-track)."""
+    a_lat, a_lon = nav.leg_start
+    dn, de = flat_ne(a_lat, a_lon, nav.lat_deg, nav.lon_deg)
+    length = math.hypot(dn, de)
+    if length < 1e-6:
+        return False
+    pn, pe = flat_ne(a_lat, a_lon, lat, lon)
+    return (pn * dn + pe * de) / length >= length
+
+
+def _landed(row: list[float]) -> bool:
+    return (float(row[_S["alt_agl_m"]]) < 0.5 and abs(float(row[_S["vd_mps"]])) < 0.3
+            and math.hypot(float(row[_S["vn_mps"]]), float(row[_S["ve_mps"]])) < 0.5)
+
+
+def camera_vocab(it: MissionItem) -> dict[str, Any] | None:
+    """The ``camera`` command of a camera item (None: nothing to do)."""
+    c = it.command
+    cam: dict[str, Any]
+    if c == M.MAV_CMD_DO_SET_CAM_TRIGG_DIST:
+        if it.param1 > 0:
+            cam = {"distance_m": it.param1}
+        elif it.param3 == 1:
+            cam = {"shoot": True}
+        else:
+            cam = {"stop": True}
+    elif c == M.MAV_CMD_IMAGE_START_CAPTURE:
+        interval, total = it.param2, int(it.param3)
+        if interval <= 0 or total == 1:
+            cam = {"shoot": True}
+        else:
+            cam = {"interval_s": interval}
+            if total > 1:
+                cam["count"] = total
+    elif c == M.MAV_CMD_IMAGE_STOP_CAPTURE:
+        cam = {"stop": True}
+    elif c == M.MAV_CMD_DO_DIGICAM_CONTROL:
+        if it.x not in (1, 10_000_000):  # param5 "shoot" (a float item's 1.0 scaled as degE7)
+            return None
+        cam = {"shoot": True}
+    else:
+        return None
+    return {"camera": cam}

@@ -27,7 +27,7 @@ from cosim.mavlink.services.base import CommandRequest, Context, Outcome, missio
 from cosim.vehicles.spec import STATE_INDEX
 
 if TYPE_CHECKING:
-    from cosim.mavlink.mission import MissionItem, RoutePoint
+    from cosim.mavlink.mission import MissionItem
     from cosim.mavlink.vehicle import MavVehicle
     from cosim.vehicles.spec import VehicleSpec
 
@@ -54,12 +54,39 @@ class Personality:
     param_defs: tuple[ParamDef, ...] = (SYSID_THISMAV,)
     #: parameters that follow a state column (name -> column), announced on change
     followed_params: Mapping[str, str] = {}
-    #: the mission items it flies (MAV_CMD numbers; ``MissionItem.check``)
+    #: the mission items it flies (MAV_CMD numbers); others are stored and skipped
     mission_items: frozenset[int] = frozenset()
-    #: AUTOPILOT_VERSION.capabilities (MAV_PROTOCOL_CAPABILITY flags)
-    capabilities: int = mav.CAP_MAVLINK2 | mav.CAP_COMMAND_INT | mav.CAP_PARAM_ENCODE_C_CAST
+    #: the mode RTL is (a fence breach switches to it; None: none)
+    rtl_mode: int | None = None
+    #: the mode each kind of command from inside cosim (``command_kind``) puts it
+    #: in, so that the mode reported is what the vehicle is doing
+    command_modes: Mapping[str, int] = {}
+    #: whether a waypoint counts as reached once its leg is passed (fixed-wings)
+    passes_waypoints: bool = False
+    #: whether NAV_WAYPOINT's param1 (hold seconds) is honoured
+    waypoint_hold: bool = True
+    #: how close (m) below its altitude a NAV_TAKEOFF counts as done
+    takeoff_tolerance_m: float = 1.0
+    #: whether its RTL ends on the ground (a mission's RTL then ends when landed)
+    rtl_lands: bool = False
+    #: SYS_STATUS: the sensors it has beyond GPS and attitude (an airspeed sensor)
+    extra_sensors: int = 0
+    #: AUTOPILOT_VERSION.capabilities (MAV_PROTOCOL_CAPABILITY flags), beyond
+    #: those of missions (``capability_flags``)
+    capabilities: int = (mav.CAP_MAVLINK2 | mav.CAP_COMMAND_INT | mav.CAP_PARAM_ENCODE_C_CAST
+                         | mav.CAP_PARAM_FLOAT)
     #: AUTOPILOT_VERSION.flight_sw_version (ground stations gate features on it)
     flight_sw_version: int = 0
+
+    def capability_flags(self) -> int:
+        """AUTOPILOT_VERSION.capabilities: ``capabilities``, and the mission
+        protocol (MISSION_INT and MISSION_ITEM, fence and rally lists) for a
+        vehicle that flies missions."""
+        flags = self.capabilities
+        if self.auto_mode is not None and self.autopilot:
+            flags |= (mav.CAP_MISSION_INT | mav.CAP_MISSION_FLOAT | mav.CAP_MISSION_FENCE
+                      | mav.CAP_MISSION_RALLY)
+        return flags
 
     # -- modes and heartbeat ---------------------------------------------------
     def default_mode(self) -> int:
@@ -103,8 +130,12 @@ class Personality:
 
     def local_command(self, v: MavVehicle, cmd: Command) -> Command:
         """A command from inside cosim (a schedule item) for ``v``: its MAVLink
-        state follows as for a ground station's command; returns the command
-        for guidance, unchanged (one command path)."""
+        state follows as for a ground station's command (the mode of what it
+        now does, ``command_modes``); returns the command for guidance,
+        unchanged (one command path)."""
+        mode = self.command_modes.get(command_kind(cmd) or "")
+        if self.autopilot and mode is not None:
+            v.mode = mode
         return cmd
 
     def limits(self, v: MavVehicle) -> Limits:
@@ -140,11 +171,29 @@ class Personality:
         upload (None: fine)."""
         return None
 
-    def mission_route(self, ctx: Context, v: MavVehicle, start: int
-                      ) -> tuple[Command, list[RoutePoint]] | str:
-        """The command flying the mission from item ``start`` and the route it
-        flies, or why it cannot be flown."""
+    def nav_vocab(self, ctx: Context, v: MavVehicle, item: MissionItem,
+                  prev: tuple[float, float]) -> dict[str, Any] | str:
+        """The vocabulary mapping flying navigation item ``item`` (``prev``: the
+        point flown to before, for items at "here"), or why it cannot."""
         return "this vehicle flies no missions"
+
+    def loiter_radius_m(self, v: MavVehicle, d: Mapping[str, Any]) -> float:
+        """The loiter radius a navigation mapping flies (0: a point)."""
+        lo = d.get("loiter")
+        if isinstance(lo, Mapping):
+            return float(lo.get("radius_m", 0.0))
+        goto = d.get("goto")
+        if isinstance(goto, Mapping):
+            return float(goto.get("loiter_radius_m", 0.0))
+        return 0.0
+
+    def accept_radius_m(self, v: MavVehicle, row: list[float]) -> float:
+        """How close a waypoint counts as reached (ArduPilot's WP_RADIUS)."""
+        return 2.0
+
+    def speed_problem(self, v: MavVehicle, speed_mps: float) -> str | None:
+        """Why a commanded speed is refused (None: fine)."""
+        return None
 
     def guided_item(self, ctx: Context, v: MavVehicle, m: mav.Message, item: MissionItem,
                     current: int) -> Outcome:
@@ -152,3 +201,22 @@ class Personality:
         altitude), outside the mission protocol; answered with a MISSION_ACK."""
         ctx.counts["commands_refused"] += 1
         return Outcome(replies=[mission_ack(m, mav.MAV_MISSION_ERROR)])
+
+
+def command_kind(cmd: Command) -> str | None:
+    """What a command makes the vehicle do, for its mode: ``takeoff``,
+    ``land``, ``loiter``, ``goto`` (also ``waypoints``), ``heading``,
+    ``velocity``; None for settings (speed, altitude, limits, gimbal)."""
+    if cmd.takeoff_agl_m is not None:
+        return "takeoff"
+    if cmd.land and cmd.nav is None:
+        return "land"
+    if cmd.nav == "loiter":
+        return "loiter"
+    if cmd.nav in ("goto", "waypoints"):
+        return "goto"
+    if cmd.heading_deg is not None:
+        return "heading"
+    if cmd.velocity_ne is not None:
+        return "velocity"
+    return None

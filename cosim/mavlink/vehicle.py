@@ -33,12 +33,8 @@ from cosim.vehicles.spec import STATE_INDEX, VehicleSpec, VehicleStatus
 _S = STATE_INDEX
 
 
-_SENSORS = (mav.SENSOR_GYRO | mav.SENSOR_ACCEL | mav.SENSOR_MAG | mav.SENSOR_ABS_PRESSURE
-            | mav.SENSOR_DIFF_PRESSURE | mav.SENSOR_GPS | mav.SENSOR_AHRS)
 _CONTROL = (mav.SENSOR_RATE_CONTROL | mav.SENSOR_ATTITUDE_CONTROL | mav.SENSOR_YAW_CONTROL
             | mav.SENSOR_Z_CONTROL | mav.SENSOR_XY_CONTROL)
-_PRESENT = (_SENSORS | _CONTROL | mav.SENSOR_MOTOR_OUTPUTS | mav.SENSOR_GEOFENCE
-            | mav.SENSOR_PREARM_CHECK)
 
 #: messages a vehicle can produce on request or as a stream
 STREAMABLE: tuple[str, ...] = (
@@ -326,15 +322,34 @@ class MavVehicle:
                 "base_mode": self.base_mode(), "custom_mode": self.mode,
                 "system_status": self.system_status(), "mavlink_version": 3}
 
+    def sensors_present(self) -> int:
+        """What SYS_STATUS says the vehicle has: the position (GPS) and attitude
+        (AHRS) it reports, its class's extra sensors (an airspeed sensor), motor
+        outputs, and with an autopilot its control loops, pre-arm checks and,
+        once a fence is uploaded, the geofence. No gyro, accelerometer,
+        magnetometer or barometer: the simulation reports the flight model's
+        state, not sensor readings."""
+        present = (mav.SENSOR_GPS | mav.SENSOR_AHRS | mav.SENSOR_MOTOR_OUTPUTS
+                   | self.personality.extra_sensors)
+        if self.spec.has_autopilot:
+            present |= _CONTROL | mav.SENSOR_PREARM_CHECK
+            if self.mission.fence:
+                present |= mav.SENSOR_GEOFENCE
+        return present
+
     def _f_sys_status(self, tick: int) -> dict[str, Any]:
-        enabled = _PRESENT
+        present = self.sensors_present()
+        enabled = present
         if self.personality.manual(self.mode) or not self.spec.has_autopilot:
             enabled &= ~_CONTROL
         if not self.armed:
             enabled &= ~mav.SENSOR_MOTOR_OUTPUTS
-        health = _PRESENT if self.prearm_ok() else _PRESENT & ~(mav.SENSOR_PREARM_CHECK
-                                                                  | mav.SENSOR_AHRS)
-        return {"onboard_control_sensors_present": _PRESENT,
+        health = present
+        if not self.prearm_ok():
+            health &= ~(mav.SENSOR_PREARM_CHECK | mav.SENSOR_AHRS)
+        if self.mission.breached:
+            health &= ~mav.SENSOR_GEOFENCE
+        return {"onboard_control_sensors_present": present,
                 "onboard_control_sensors_enabled": enabled,
                 "onboard_control_sensors_health": health,
                 "load": 0, "voltage_battery": 65535, "current_battery": -1,
@@ -362,7 +377,7 @@ class MavVehicle:
 
     def _f_autopilot_version(self, tick: int) -> dict[str, Any]:
         p = self.personality
-        return {"capabilities": p.capabilities, "flight_sw_version": p.flight_sw_version,
+        return {"capabilities": p.capability_flags(), "flight_sw_version": p.flight_sw_version,
                 "middleware_sw_version": 0, "os_sw_version": 0, "board_version": 0,
                 "flight_custom_version": list(b"cosim\0\0\0"),
                 "middleware_custom_version": [0] * 8, "os_custom_version": [0] * 8,

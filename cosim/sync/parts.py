@@ -85,6 +85,8 @@ class MavlinkPart:
             self.commander.command([vc.row], vc.command, states, setpoints, "mavlink")
             self.events.emit("mavlink_command", tick, vehicle=self.ids[vc.row],
                              origin=vc.origin, command=vc.command.source)
+        for row, kind, fields in self.links.drain_events():
+            self.events.emit(kind, tick, vehicle=self.ids[row], **fields)
 
     def on_exchange(self, tick: int, states: np.ndarray) -> None:
         self.links.send_telemetry(tick)

@@ -474,3 +474,59 @@ def test_schedule_commands_take_the_vehicle_state_path(rig) -> None:
     assert r.ep.local_command(1, goto) is goto
     assert heartbeat(r, 2).custom_mode == PlaneMode.GUIDED
     assert heartbeat(r, 1).custom_mode == PlaneMode.GUIDED
+    loiter = cmd({"loiter": {"radius_m": 400}})
+    r.ep.local_command(1, loiter)
+    assert heartbeat(r, 2).custom_mode == PlaneMode.LOITER  # a scheduled loiter: LOITER
+    hdg = cmd({"heading_deg": 90})
+    r.ep.local_command(1, hdg)
+    assert heartbeat(r, 2).custom_mode == PlaneMode.GUIDED
+
+
+@pytest.mark.parametrize("vehicle_class, personality, kinds", [
+    ("quadrotor", "cosim.vehicles.quadrotor.mavlink:ArduCopter",
+     [({"takeoff_agl_m": 10}, 4), ({"loiter": {}}, 5), ({"land": True}, 9),
+      ({"goto": {"north_m": 10, "east_m": 0}}, 4), ({"velocity": {"north_mps": 1,
+                                                                  "east_mps": 0}}, 4)]),
+    ("ground", "cosim.vehicles.ground.mavlink:ArduRover",
+     [({"loiter": {}}, 4), ({"goto": {"north_m": 10, "east_m": 0}}, 15)])])
+def test_every_class_reports_the_mode_of_what_it_was_told(rig, vehicle_class: str,
+                                                          personality: str, kinds) -> None:
+    import importlib
+
+    from cosim.guidance.commands import parse_command
+
+    mod, name = personality.split(":")
+    r = rig(1, personality=getattr(importlib.import_module(mod), name)(),
+            vehicle_class=vehicle_class)
+    for d, mode in kinds:
+        c = parse_command(d, ("command",), lambda p, m: pytest.fail(m))
+        r.ep.local_command(0, c)
+        assert heartbeat(r, 1).custom_mode == mode, d
+
+
+def test_do_orbit_is_a_loiter_with_radius_and_direction(rig) -> None:
+    r = rig(1)
+    lat, lon = start_of(0)
+    cmds, replies = cint(r, 1, ML.MAV_CMD_DO_ORBIT, ML.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                         -400, 30, 0, 0, round((lat + 0.01) * 1e7), round(lon * 1e7), 200.0)
+    assert one_ack(replies, ML.MAV_CMD_DO_ORBIT) == ACCEPTED
+    c = cmds[0].command
+    assert (c.nav, c.loiter_radius_m, c.loiter_cw, c.airspeed_mps) == ("loiter", 400, False, 30)
+    assert (c.points[0].a, c.alt_m) == (pytest.approx(lat + 0.01), HOME_ALT_M + 200.0)
+    assert heartbeat(r).custom_mode == PlaneMode.LOITER
+    _, replies = cint(r, 1, ML.MAV_CMD_DO_ORBIT, ML.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, 0)
+    assert one_ack(replies, ML.MAV_CMD_DO_ORBIT) == DENIED
+
+
+@pytest.mark.parametrize("mode", list(PlaneMode))
+def test_do_set_mode_answers_every_mode_of_the_table(rig, mode: PlaneMode) -> None:
+    """Each mode is entered, or refused as FAILED with a STATUSTEXT saying why
+    (AUTO without a mission, a pilot's mode); never silently."""
+    r = rig(1)
+    _, replies = long(r, 1, ML.MAV_CMD_DO_SET_MODE, ML.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, mode)
+    res = one_ack(replies, ML.MAV_CMD_DO_SET_MODE)
+    if mode in (PlaneMode.GUIDED, PlaneMode.LOITER, PlaneMode.RTL, PlaneMode.TAKEOFF,
+                PlaneMode.CIRCLE):
+        assert res == ACCEPTED and heartbeat(r).custom_mode == mode
+    else:
+        assert res == FAILED and of_type(replies, "STATUSTEXT"), mode.name

@@ -143,20 +143,44 @@ def test_clear_all_empties_the_mission(rig) -> None:
 
 
 @pytest.mark.parametrize("item, result", [
-    ((REL, ML.MAV_CMD_NAV_LAND, 0, 0, 0, 0, LAT0, LON0, 0.0), ML.MAV_MISSION_UNSUPPORTED),
-    ((REL, ML.MAV_CMD_DO_SET_SERVO, 5, 1500, 0, 0, 0, 0, 0.0), ML.MAV_MISSION_UNSUPPORTED),
     ((ML.MAV_FRAME_LOCAL_NED, WP, 0, 0, 0, 0, 0.0, 0.0, 100.0),
      ML.MAV_MISSION_UNSUPPORTED_FRAME),
-    ((REL, WP, 0, 0, 0, 0, 95.0, LON0, 100.0), ML.MAV_MISSION_INVALID_PARAM5_X)])
-def test_unsupported_or_invalid_items_are_refused_and_keep_the_old_mission(
+    ((REL, WP, 0, 0, 0, 0, 95.0, LON0, 100.0), ML.MAV_MISSION_INVALID_PARAM5_X),
+    ((REL, ML.MAV_CMD_DO_JUMP, 9, 1, 0, 0, 0.0, 0.0, 0.0), ML.MAV_MISSION_INVALID_PARAM1),
+    ((REL, ML.MAV_CMD_NAV_LOITER_TURNS, 0, 0, 200, 0, LAT0, LON0, 100.0),
+     ML.MAV_MISSION_INVALID_PARAM1)])
+def test_malformed_items_end_the_upload_and_keep_the_old_mission(
         rig, item: tuple, result: int) -> None:
     r = rig(1)
     upload(r, MISSION4)
     seen, _, msgs = upload(r, [MISSION4[0], item])
     assert seen == [("MISSION_REQUEST_INT", 0), ("MISSION_REQUEST_INT", 1),
                     ("MISSION_REQUEST_INT", 2), ("MISSION_ACK", result)]
-    assert of_type(msgs, "STATUSTEXT")
+    texts = [t.text for t in of_type(msgs, "STATUSTEXT")]
+    assert any("Mission item 2" in t for t in texts), texts
     assert len(download(r)) == 5  # the mission on board is unchanged
+
+
+def test_items_the_vehicle_cannot_fly_are_refused_alone_and_skipped(rig) -> None:
+    r = rig(1)
+    items = [MISSION4[0], (REL, ML.MAV_CMD_NAV_LAND, 0, 0, 0, 0, LAT0, LON0, 0.0),
+             (REL, ML.MAV_CMD_DO_SET_SERVO, 5, 1500, 0, 0, 0, 0, 0.0), MISSION4[1]]
+    seen, _, msgs = upload(r, items)
+    assert seen[-1] == ("MISSION_ACK", ML.MAV_MISSION_ACCEPTED)
+    texts = " ".join(t.text for t in of_type(msgs, "STATUSTEXT"))
+    assert "Mission item 2" in texts and "Mission item 3" in texts
+    assert texts.count("MAV_MISSION_UNSUPPORTED") == 2
+    got = download(r)
+    assert [m.command for m in got[1:]] == [WP, ML.MAV_CMD_NAV_LAND, ML.MAV_CMD_DO_SET_SERVO, WP]
+    cmds, _ = set_mode(r, PlaneMode.AUTO)
+    assert cmds[0].command.nav == "goto"
+    r.states[0, S["lat_deg"]], r.states[0, S["lon_deg"]] = MISSION4[0][6], MISSION4[0][7]
+    cmds = r.step(4)
+    assert [m.seq for m in of_type(r.gcs.drain(wait_s=1.0), "MISSION_ITEM_REACHED")] == [1]
+    c = cmds[0].command  # items 2 and 3 skipped: on to item 4
+    assert (c.points[0].a, c.points[0].b) == (MISSION4[1][6], MISSION4[1][7])
+    assert r.ep.vehicles[0].mission.current == 4
+    assert r.ep.counters()["mission_items_refused"] == 2
 
 
 def test_out_of_sequence_item_is_answered_with_invalid_sequence(rig) -> None:
@@ -195,44 +219,63 @@ def test_auto_is_refused_without_a_mission(rig) -> None:
     assert r.ep.vehicles[0].mode == PlaneMode.GUIDED
 
 
-def test_auto_flies_the_mission_as_a_waypoints_command(rig) -> None:
+def test_auto_flies_the_first_navigation_item_as_a_goto(rig) -> None:
     r = rig(1)
     upload(r, MISSION4)
     cmds, replies = set_mode(r, PlaneMode.AUTO)
     assert ack_result(replies) == ML.MAV_RESULT_ACCEPTED
     cur = of_type(replies, "MISSION_CURRENT")
     assert cur and cur[-1].seq == 1 and cur[-1].total == 4
-    c = cmds[0].command
-    assert c.nav == "waypoints" and len(c.points) == 4
-    want_alt = [(HOME_ALT_M + 150.0, False), (HOME_ALT_M + 200.0, False), (900.0, False),
-                (300.0, True)]
-    for p, (*_, lat, lon, _z), (alt, agl) in zip(c.points, MISSION4, want_alt):
-        assert (p.frame, p.a, p.b) == ("geodetic", pytest.approx(lat), pytest.approx(lon))
-        assert p.alt_m == pytest.approx(alt) and p.alt_agl == agl
-        assert p.airspeed_mps == 25.0  # AIRSPEED_CRUISE until a DO_CHANGE_SPEED
+    c, = [vc.command for vc in cmds]
+    assert c.nav == "goto" and len(c.points) == 1
+    p = c.points[0]
+    assert (p.frame, p.a, p.b) == ("geodetic", pytest.approx(LAT0 + 0.02), pytest.approx(LON0))
+    assert c.alt_m == pytest.approx(HOME_ALT_M + 150.0) and not c.alt_agl
+    assert c.airspeed_mps == 25.0  # AIRSPEED_CRUISE until a DO_CHANGE_SPEED
     hb = None
     r.step(120)
     for m in r.gcs.drain(wait_s=1.0):
         if m.get_type() == "HEARTBEAT":
             hb = m
         if m.get_type() == "MISSION_CURRENT":  # the 1 Hz stream
-            assert (m.seq, m.mission_mode) == (1, 1)
+            assert (m.seq, m.mission_mode, m.mission_state) == (1, 1, 3)
     assert hb is not None and hb.custom_mode == PlaneMode.AUTO
 
 
-def test_progress_is_reported_with_item_reached_and_mission_current(rig) -> None:
+def reach(r, lat: float, lon: float, ticks: int = 4) -> tuple[list[Any], list[int]]:
+    """Put vehicle 1 at (lat, lon), run an exchange: (commands, items reached)."""
+    r.states[0, S["lat_deg"]], r.states[0, S["lon_deg"]] = lat, lon
+    cmds = r.step(ticks)
+    return cmds, [m.seq for m in of_type(r.gcs.drain(wait_s=0.5), "MISSION_ITEM_REACHED")]
+
+
+def test_each_item_reached_flies_the_next_in_its_altitude_frame(rig) -> None:
     r = rig(1)
     upload(r, MISSION4)
     set_mode(r, PlaneMode.AUTO)
-    r.states[0, S["lat_deg"]], r.states[0, S["lon_deg"]] = MISSION4[0][6], MISSION4[0][7]
-    r.step(4)
-    msgs = r.gcs.drain(wait_s=1.0)
-    assert [m.seq for m in of_type(msgs, "MISSION_ITEM_REACHED")] == [1]
-    assert of_type(msgs, "MISSION_CURRENT")[-1].seq == 2
+    want = [(HOME_ALT_M + 200.0, False), (900.0, False), (300.0, True)]
+    for k in range(3):
+        cmds, reached = reach(r, MISSION4[k][6], MISSION4[k][7])
+        assert reached == [k + 1]
+        c = cmds[0].command
+        assert (c.points[0].a, c.points[0].b) == (MISSION4[k + 1][6], MISSION4[k + 1][7])
+        assert (c.alt_m, c.alt_agl) == (pytest.approx(want[k][0]), want[k][1])
+    _, reached = reach(r, MISSION4[3][6], MISSION4[3][7])
+    assert reached == [4]
+    assert r.ep.vehicles[0].mission.state(True)["mission_state"] == 5  # complete
     # leaving AUTO keeps the current item; AUTO resumes from it
     set_mode(r, PlaneMode.LOITER)
-    cmds, _ = set_mode(r, PlaneMode.AUTO)
-    assert len(cmds[0].command.points) == 3
+    assert r.ep.vehicles[0].mission.current == 4
+
+
+def test_a_passed_leg_counts_as_reached(rig) -> None:
+    r = rig(1)
+    upload(r, MISSION4)
+    r.states[0, S["lat_deg"]], r.states[0, S["lon_deg"]] = LAT0, LON0
+    set_mode(r, PlaneMode.AUTO)
+    # 1 km east of the waypoint but past its latitude: the leg is passed
+    _, reached = reach(r, LAT0 + 0.021, LON0 + 0.013)
+    assert reached == [1]
 
 
 def test_set_current_restarts_from_that_item(rig) -> None:
@@ -243,32 +286,56 @@ def test_set_current_restarts_from_that_item(rig) -> None:
         1, 1, ML.MAV_CMD_DO_SET_MISSION_CURRENT, 0, 3, 0, 0, 0, 0, 0, 0))
     assert ack_result(replies) == ML.MAV_RESULT_ACCEPTED
     assert of_type(replies, "MISSION_CURRENT")[-1].seq == 3
-    assert [p.a for p in cmds[0].command.points] == [MISSION4[2][6], MISSION4[3][6]]
+    assert cmds[0].command.points[0].a == MISSION4[2][6]
     cmds, replies = r.request(lambda: r.gcs.mav.mission_set_current_send(1, 1, 2))
-    assert of_type(replies, "MISSION_CURRENT")[-1].seq == 2 and len(cmds[0].command.points) == 3
+    assert of_type(replies, "MISSION_CURRENT")[-1].seq == 2
+    assert cmds[0].command.points[0].a == MISSION4[1][6]
 
 
-def test_speed_loiter_takeoff_and_rtl_items(rig) -> None:
+def test_mission_start_enters_auto_from_its_first_item(rig) -> None:
     r = rig(1)
-    items = [(REL, ML.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0.0, 0.0, 100.0),  # airborne: skipped
+    upload(r, MISSION4)
+    cmds, replies = r.request(lambda: r.gcs.mav.command_long_send(
+        1, 1, ML.MAV_CMD_MISSION_START, 0, 2, 0, 0, 0, 0, 0, 0))
+    assert ack_result(replies) == ML.MAV_RESULT_ACCEPTED
+    assert r.ep.vehicles[0].mode == PlaneMode.AUTO
+    assert cmds[0].command.points[0].a == MISSION4[1][6]
+    _, replies = r.request(lambda: r.gcs.mav.command_long_send(
+        1, 1, ML.MAV_CMD_MISSION_START, 0, 9, 0, 0, 0, 0, 0, 0))
+    assert ack_result(replies) == ML.MAV_RESULT_DENIED
+
+
+def test_speed_takeoff_loiter_and_rtl_items(rig) -> None:
+    r = rig(1)
+    items = [(REL, ML.MAV_CMD_NAV_TAKEOFF, 0, 0, 0, 0, 0.0, 0.0, 100.0),  # airborne: done
              (REL, ML.MAV_CMD_DO_CHANGE_SPEED, 0, 30, -1, 0, 0.0, 0.0, 0.0),
              MISSION4[0],
              (REL, ML.MAV_CMD_NAV_LOITER_UNLIM, 0, 0, -300, 0, LAT0, LON0 + 0.01, 120.0),
              MISSION4[1]]  # after an unlimited loiter: never reached
     assert upload(r, items)[0][-1] == ("MISSION_ACK", ML.MAV_MISSION_ACCEPTED)
-    c = set_mode(r, PlaneMode.AUTO)[0][0].command
-    assert [(p.a, p.b) for p in c.points] == [(MISSION4[0][6], MISSION4[0][7]),
-                                              (LAT0, LON0 + 0.01)]
-    assert [p.airspeed_mps for p in c.points] == [30.0, 30.0]
-    assert c.loiter_radius_m == 300.0 and not c.loiter_cw
-    assert r.ep.vehicles[0].mission.current == 3
-
-    # RTL: home at ALT_HOLD_RTL, loitered around; items after it are never reached
-    _, cmds, _ = upload(r, [MISSION4[0], (REL, ML.MAV_CMD_NAV_RETURN_TO_LAUNCH, 0, 0, 0, 0,
-                                          0, 0, 0), MISSION4[1]])
+    cmds, _ = set_mode(r, PlaneMode.AUTO)
+    take, speed, c = (vc.command for vc in cmds)
+    assert take.nav == "loiter" and take.alt_m == pytest.approx(HOME_ALT_M + 100.0)
+    assert speed.airspeed_mps == 30.0 and speed.nav is None
+    # above its altitude already: the take-off is done in the same exchange
+    assert (c.points[0].a, c.airspeed_mps) == (MISSION4[0][6], 30.0)
+    cmds, reached = reach(r, MISSION4[0][6], MISSION4[0][7])
+    assert reached == [3]
+    c = cmds[0].command
+    assert c.nav == "loiter" and c.loiter_radius_m == 300.0 and not c.loiter_cw
+    assert (c.points[0].a, c.points[0].b) == (LAT0, LON0 + 0.01)
+    for _ in range(5):
+        assert reach(r, LAT0, LON0 + 0.01, 600)[1] == []  # never ends
+    # RTL: home at ALT_HOLD_RTL, circled; reached there, the mission goes on (ArduPlane)
+    _, cmds, _ = upload(r, [(REL, ML.MAV_CMD_NAV_RETURN_TO_LAUNCH, 0, 0, 0, 0, 0, 0, 0),
+                            MISSION4[1]])
     c = cmds[0].command  # already in AUTO: the new mission is flown at once
-    assert [(p.a, p.b) for p in c.points] == [(MISSION4[0][6], MISSION4[0][7]), (LAT0, LON0)]
-    assert c.points[1].alt_m == pytest.approx(HOME_ALT_M + 100.0)
+    assert (c.nav, c.points[0].a, c.points[0].b) == ("goto", LAT0, LON0)
+    assert c.alt_m == pytest.approx(HOME_ALT_M + 100.0)
+    cmds, reached = reach(r, LAT0, LON0)
+    assert reached == [1] and cmds[0].command.points[0].a == MISSION4[1][6]
+    _, reached = reach(r, MISSION4[1][6], MISSION4[1][7])
+    assert reached == [2] and r.ep.vehicles[0].mission.complete
 
 
 def test_new_mission_in_auto_is_flown_from_its_first_item(rig) -> None:
@@ -300,12 +367,3 @@ def test_guided_goto_by_mission_item_int_current_2(rig) -> None:
     assert not cmds and protocol(replies) == [("MISSION_ACK", ML.MAV_MISSION_ERROR)]
 
 
-def test_fence_and_rally_lists_are_empty(rig) -> None:
-    r = rig(1)
-    _, replies = r.request(lambda: r.gcs.mav.mission_request_list_send(
-        1, 1, ML.MAV_MISSION_TYPE_FENCE))
-    count, = of_type(replies, "MISSION_COUNT")
-    assert (count.count, count.mission_type) == (0, ML.MAV_MISSION_TYPE_FENCE)
-    _, replies = r.request(lambda: r.gcs.mav.mission_count_send(
-        1, 1, 3, ML.MAV_MISSION_TYPE_RALLY))
-    assert protocol(replies) == [("MISSION_ACK", ML.MAV_MISSION_UNSUPPORTED)]

@@ -83,13 +83,8 @@ def test_commands_are_the_personalitys_and_the_rest_unsupported(rig) -> None:
 def test_no_missions_and_no_position_targets_without_support(rig) -> None:
     r = rig(1, personality=Rover())
     _, replies = r.request(lambda: r.gcs.mav.mission_count_send(1, 1, 2))
-    _, replies = r.request(lambda: r.gcs.mav.mission_item_int_send(
-        1, 1, 0, ML.MAV_FRAME_GLOBAL, ML.MAV_CMD_NAV_WAYPOINT, 0, 1, 0, 0, 0, 0, 0, 0, 0))
-    _, replies = r.request(lambda: r.gcs.mav.mission_item_int_send(
-        1, 1, 1, ML.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, ML.MAV_CMD_NAV_WAYPOINT, 0, 1, 0, 0, 0,
-        0, 470100000, 80100000, 100))
     ack, = of_type(replies, "MISSION_ACK")
-    assert ack.type == ML.MAV_MISSION_UNSUPPORTED  # it flies no mission items
+    assert ack.type == ML.MAV_MISSION_UNSUPPORTED  # it flies no missions
     r.request(lambda: r.gcs.mav.set_position_target_global_int_send(
         0, 1, 1, ML.MAV_FRAME_GLOBAL_INT, 0b110111111000, 470100000, 80100000, 500,
         0, 0, 0, 0, 0, 0, 0, 0))

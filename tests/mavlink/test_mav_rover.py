@@ -4,7 +4,7 @@ driven in AUTO as one ``waypoints`` command."""
 
 from __future__ import annotations
 
-from mavtest import mavutil, of_type, start_of
+from mavtest import S, mavutil, of_type, start_of
 from test_mav_commands import heartbeat
 from test_mav_mission import ack_result, set_mode, upload
 
@@ -28,11 +28,13 @@ def test_a_rover_drives_its_mission_in_auto_and_holds_in_hold(rig) -> None:
     assert proto[-1] == ("MISSION_ACK", ML.MAV_MISSION_ACCEPTED)
     cmds, replies = set_mode(r, 10)
     assert ack_result(replies) == ML.MAV_RESULT_ACCEPTED
-    c = cmds[0].command
-    assert c.nav == "waypoints" and len(c.points) == 3
-    assert [p.airspeed_mps for p in c.points] == [None, 3.5, 3.5]
-    assert (c.points[0].a, c.points[1].b) == (LAT0 + 0.001, LON0 + 0.002)
+    goto, speed = (vc.command for vc in cmds)  # the speed item runs as item 1 starts
+    assert goto.nav == "goto" and (goto.points[0].a, goto.points[0].b) == (LAT0 + 0.001, LON0)
+    assert goto.alt_m is None and speed.airspeed_mps == 3.5
     assert heartbeat(r).custom_mode == 10
+    r.states[0, S["lat_deg"]], r.states[0, S["lon_deg"]] = LAT0 + 0.001, LON0
+    c = r.step(4)[0].command
+    assert (c.points[0].b, c.airspeed_mps) == (LON0 + 0.002, 3.5)
     cmds, replies = set_mode(r, 4)
     assert ack_result(replies) == ML.MAV_RESULT_ACCEPTED
     assert cmds[0].command.nav == "loiter" and heartbeat(r).custom_mode == 4

@@ -142,7 +142,8 @@ def test_ground_station_repositions_one_vehicle_and_flies_a_mission_on_another(
     cmds = [e for e in events if e["event"] == "mavlink_command"]
     assert [c["vehicle"] for c in cmds][:1] == ["uav2"]
     assert any("DO_REPOSITION" in c["origin"] for c in cmds)
-    assert any(c["vehicle"] == "uav1" and "waypoints" in c["command"] for c in cmds)
+    assert any(c["vehicle"] == "uav1" and c["origin"] == "mission" and "goto" in c["command"]
+               for c in cmds)
     tlogs = sorted(p.name for p in out.glob("*.tlog"))
     assert tlogs == ["uav0.tlog", "uav1.tlog", "uav2.tlog"]
     assert mavutil.mavlink_connection(str(out / "uav2.tlog")).recv_match(type="HEARTBEAT")

@@ -10,7 +10,7 @@ from __future__ import annotations
 import textwrap
 
 import pytest
-from mavtest import HOME_ALT_M, mavutil, of_type, start_of
+from mavtest import HOME_ALT_M, S, mavutil, of_type, start_of
 from test_mav_commands import cint, long, one_ack
 
 from cosim.errors import ConfigError
@@ -82,24 +82,30 @@ def test_position_targets_and_guided_items_below_the_floor_are_refused(rig) -> N
     assert cmds == [] and ack.type == ML.MAV_MISSION_INVALID_PARAM7
 
 
-def test_a_mission_item_below_the_floor_is_refused_at_upload(rig) -> None:
+def test_a_mission_item_below_the_floor_is_refused_alone_and_never_flown(rig) -> None:
     r = rig(1)
-    items = [(ML.MAV_CMD_NAV_WAYPOINT, 100.0), (ML.MAV_CMD_NAV_WAYPOINT, 10.0)]
+    items = [(ML.MAV_CMD_NAV_WAYPOINT, 100.0), (ML.MAV_CMD_NAV_WAYPOINT, 10.0),
+             (ML.MAV_CMD_NAV_WAYPOINT, 120.0)]
     cmds, replies = r.request(lambda: r.gcs.mav.mission_count_send(1, 1, len(items) + 1, 0))
+    seen = list(replies)
     for seq in range(len(items) + 1):
-        req = of_type(replies, "MISSION_REQUEST_INT") or of_type(replies, "MISSION_REQUEST")
-        assert req and req[-1].seq == seq, replies
         command, alt = (ML.MAV_CMD_NAV_WAYPOINT, 0.0) if seq == 0 else items[seq - 1]
         cmds, replies = r.request(lambda s=seq, c=command, a=alt: r.gcs.mav.mission_item_int_send(
             1, 1, s, ML.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, c, 0, 1, 0, 0, 0, 0,
-            int(LAT * 1e7), int(LON * 1e7), a, 0))
-        if seq == 2:
-            break
-    ack, = of_type(replies, "MISSION_ACK")
-    assert ack.type == ML.MAV_MISSION_INVALID_PARAM7
+            int(LAT * 1e7), int(LON * 1e7) + s * 10_000, a, 0))
+        seen += replies
+    ack, = of_type(seen, "MISSION_ACK")
+    assert ack.type == ML.MAV_MISSION_ACCEPTED
     assert any("Mission item 2" in t and "above the ground refused" in t
-               for t in _texts(replies))
-    assert r.ep.vehicles[0].mission.count <= 1  # the mission on board is unchanged
+               and "MAV_MISSION_INVALID_PARAM7" in t for t in _texts(seen))
+    assert r.ep.vehicles[0].mission.refused == {2: ML.MAV_MISSION_INVALID_PARAM7}
+    assert r.ep.counters()["commands_unsafe"] == 1
+    cmds, _ = r.request(lambda: r.gcs.mav.set_mode_send(1, ML.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+                                                        10))
+    r.states[0, S["lat_deg"]] = LAT
+    r.states[0, S["lon_deg"]] = (int(LON * 1e7) + 10_000) / 1e7
+    cmds = r.step(4)  # item 1 reached: item 2 is skipped, item 3 flown
+    assert cmds[0].command.alt_m == pytest.approx(HOME_ALT_M + 120.0)
 
 
 @pytest.mark.parametrize("name, value, ok", [

@@ -117,10 +117,11 @@ def test_telemetry_values_match_the_state_rows(rig) -> None:
         assert st.time_unix_usec == ANCHOR_US + 102_875_000
 
         ss, = of_type(msgs, "SYS_STATUS", sysid)
-        fence = ML.MAV_SYS_STATUS_GEOFENCE
-        assert ss.onboard_control_sensors_present & fence
-        assert ss.onboard_control_sensors_enabled & fence
-        assert ss.onboard_control_sensors_health & fence
+        gps = ML.MAV_SYS_STATUS_SENSOR_GPS
+        assert ss.onboard_control_sensors_present & gps
+        assert ss.onboard_control_sensors_enabled & gps
+        assert ss.onboard_control_sensors_health & gps
+        assert not ss.onboard_control_sensors_present & ML.MAV_SYS_STATUS_GEOFENCE  # none yet
         assert ss.onboard_control_sensors_health & ML.MAV_SYS_STATUS_PREARM_CHECK
 
 

@@ -117,3 +117,33 @@ schedule:
     assert "a fixed-wing cannot land" in msgs
     assert "a quadrotor flies at 0..15 m/s, not 40" in msgs
     assert "throttle, bank limits and stall protection are for fixed-wings" in msgs
+
+
+def test_a_loiter_with_a_radius_orbits_the_centre(tmp_path: Path) -> None:
+    """A loiter with radius 20 m at 4 m/s: after closing on the circle, the
+    quadrotor stays within 2 m of it and goes round clockwise (its bearing
+    from the centre grows) at close to 4 m/s: one turn in about 2 pi 20 / 4 s."""
+    body = """\
+schema_version: 1
+origin: {lat_deg: 47.0, lon_deg: 8.0, ground_alt_m: 400}
+rates: {physics_hz: 120, control_hz: 30, log_hz: 10}
+duration_s: 75
+vehicles:
+  - {id: quad, model: F450, init: {north_m: 0, east_m: 0, alt_agl_m: 15}}
+schedule:
+  - {at_s: 2, vehicles: quad, command: {airspeed_mps: 4,
+     loiter: {center: {north_m: 30, east_m: 0}, radius_m: 20}}}
+"""
+    scn = parse_scenario(body, str(tmp_path / "o.yaml"), check_properties=False)
+    res = run_scenario(scn, tmp_path / "o", backend="inline")
+    assert res.stop_reason == "completed", res.error
+    c = _columns(tmp_path / "o", "quad")
+    t = c["time_s"]
+    on = t >= 30.0
+    dn, de = c["north_m"][on] - 30.0, c["east_m"][on]
+    assert np.abs(np.hypot(dn, de) - 20.0).max() < 2.0
+    bearing = np.unwrap(np.arctan2(de, dn))
+    assert np.all(np.diff(bearing) > 0)  # clockwise seen from above
+    turns = (bearing[-1] - bearing[0]) / (2 * np.pi)
+    expected = 4.0 * (t[on][-1] - t[on][0]) / (2 * np.pi * 20.0)
+    assert turns == pytest.approx(expected, rel=0.15)

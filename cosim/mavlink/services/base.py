@@ -14,7 +14,6 @@ from typing import TYPE_CHECKING, Any
 
 from cosim.guidance.commands import Command, parse_command
 from cosim.mavlink import adapter as mav
-from cosim.vehicles.spec import STATE_INDEX as _S
 
 if TYPE_CHECKING:
     from cosim.mavlink.vehicle import MavVehicle
@@ -25,11 +24,12 @@ INT32_MAX = 2 ** 31 - 1
 
 @dataclass
 class Outcome:
-    """What handling one message produced, in order: replies to send and
-    commands for guidance."""
+    """What handling one message produced, in order: replies to send,
+    commands for guidance and run events (kind, fields)."""
 
     replies: list[Reply] = field(default_factory=list)
     commands: list[Command] = field(default_factory=list)
+    events: list[tuple[str, dict[str, Any]]] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -126,6 +126,8 @@ class Context:
     def __init__(self, counts: Counter[str], physics_hz: float) -> None:
         self.counts = counts
         self.physics_hz = physics_hz
+        #: the tick of the exchange being handled (set by the handler)
+        self.tick = 0
 
     @staticmethod
     def alt(v: MavVehicle, frame: int, z: float) -> tuple[str, float] | None:
@@ -174,29 +176,23 @@ class Context:
 
     def fly_mission(self, v: MavVehicle, start: int, out: Outcome) -> int:
         """Switch ``v`` to its personality's mission mode (or stay in it) flying
-        the mission from item ``start`` (0: from item 1) as the command its
-        personality builds (``Personality.mission_route``)."""
+        the mission from item ``start`` (0: from item 1), item by item
+        (``cosim.mavlink.mission.MissionRunner``)."""
+        from cosim.mavlink.mission import MissionRunner
+
         p = v.personality
         auto = p.auto_mode
-        if auto is None:
+        if auto is None or not p.autopilot:
             out.replies.extend(text("AUTO: this vehicle flies no missions"))
             return mav.MAV_RESULT_FAILED
         what = p.mode_name(auto)
-        ms = v.mission
-        if not ms.items:
+        if not v.mission.items:
             out.replies.extend(text(f"{what}: no mission loaded"))
             return mav.MAV_RESULT_FAILED
-        built = p.mission_route(self, v, max(start, 1))
-        if isinstance(built, str):
-            out.replies.extend(text(f"{what}: {built}"))
+        v.row_or_raise()
+        why = MissionRunner(self).start(v, start, self.tick, out)
+        if why is not None:
+            out.replies.extend(text(f"{what}: {why}"))
             return mav.MAV_RESULT_FAILED
-        cmd, route = built
-        problem = self.unsafe(v, cmd)
-        if problem is not None:
-            out.replies.extend(text(f"{what}: {problem}"))
-            return mav.MAV_RESULT_DENIED
-        row = v.row_or_raise()
-        ms.fly(route, (float(row[_S["lat_deg"]]), float(row[_S["lon_deg"]])))
         v.mode = auto
-        out.commands.append(cmd)
         return mav.MAV_RESULT_ACCEPTED

@@ -10,8 +10,8 @@ ArduPilot does). Results:
 
 Answered here alike for every vehicle: REQUEST_MESSAGE,
 REQUEST_AUTOPILOT_CAPABILITIES, GET_HOME_POSITION, SET/GET_MESSAGE_INTERVAL,
-DO_SET_MODE (the mode itself is the personality's) and
-DO_SET_MISSION_CURRENT (the mission service's). Every other command is the
+DO_SET_MODE (the mode itself is the personality's), DO_SET_MISSION_CURRENT
+and MISSION_START (the mission service's). Every other command is the
 vehicle's personality's (``Personality.command_handler``).
 
 Positions: COMMAND_LONG carries degrees in param5/6 and an altitude relative
@@ -62,6 +62,7 @@ class CommandService:
             mav.MAV_CMD_SET_MESSAGE_INTERVAL: self._set_interval,
             mav.MAV_CMD_GET_MESSAGE_INTERVAL: self._get_interval,
             mav.MAV_CMD_DO_SET_MISSION_CURRENT: self._do_set_mission_current,
+            mav.MAV_CMD_MISSION_START: self._mission_start,
         }
 
     def supported(self, personality: Personality) -> frozenset[int]:
@@ -158,6 +159,14 @@ class CommandService:
             us = -1 if p is None else round(p * 1e6 / self.ctx.physics_hz)
         out.replies.append(("MESSAGE_INTERVAL", {"message_id": mid, "interval_us": us}))
         return mav.MAV_RESULT_ACCEPTED
+
+    def _mission_start(self, v: MavVehicle, req: CommandRequest, tick: int,
+                       out: Outcome) -> int:
+        """MISSION_START: param1 the first item (0: the current one)."""
+        first = as_int(req.p[0])
+        if first is None or first < 0:
+            return mav.MAV_RESULT_DENIED
+        return self.missions.start(v, first, out)
 
     def _do_set_mission_current(self, v: MavVehicle, req: CommandRequest, tick: int,
                                 out: Outcome) -> int:

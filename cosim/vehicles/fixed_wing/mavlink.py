@@ -3,17 +3,24 @@ ArduPilot's autopilot type, ArduPlane's custom modes, commands, mission
 items and parameter names), flown by cosim's autopilot.
 
 Modes: GUIDED (the default; outside guidance and ground stations steer),
-LOITER, RTL, TAKEOFF and AUTO (the mission) can be entered; MANUAL is the
-mode of a plain JSBSim model without an autopilot, which takes no commands.
+LOITER, CIRCLE (a loiter where it is), RTL (home or the nearest rally
+point), TAKEOFF and AUTO (the mission) can be entered; the pilot's modes are
+refused (no pilot in the simulation); MANUAL is the mode of a plain JSBSim
+model without an autopilot, which takes no commands. A command from inside
+cosim (a schedule) reports the mode of what it does: a loiter LOITER, a
+goto, waypoints or heading GUIDED, a take-off TAKEOFF.
 
 Commands: ARM_DISARM, NAV_RETURN_TO_LAUNCH, NAV_TAKEOFF, DO_CHANGE_SPEED,
-DO_REPOSITION, NAV_LOITER_UNLIM. Disarmed vehicles keep their engine off:
-arming restores the cruise airspeed, disarming sets throttle 0, and no other
-command carries a speed while disarmed.
+DO_REPOSITION, NAV_LOITER_UNLIM, DO_ORBIT (a loiter: radius param1,
+negative counter-clockwise; speed param2). Disarmed vehicles keep their
+engine off: arming restores the cruise airspeed, disarming sets throttle 0,
+and no other command carries a speed while disarmed. NAV_LAND is not
+supported: cosim's fixed-wings do not land.
 
-Missions: NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_TAKEOFF, NAV_RETURN_TO_LAUNCH
-and DO_CHANGE_SPEED, flown in AUTO as ONE ``waypoints`` command
-(``ArduPlane.mission_route`` says how each item maps). MISSION_ITEM(_INT)
+Missions (flown in AUTO item by item, ``cosim.mavlink.mission``):
+NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_LOITER_TURNS, NAV_LOITER_TIME,
+NAV_LOITER_TO_ALT, NAV_TAKEOFF, NAV_RETURN_TO_LAUNCH and the DO/CONDITION
+items every ArduPilot-like class runs; NAV_LAND is skipped. MISSION_ITEM(_INT)
 with current=2 is a guided goto (GUIDED only), current=3 an altitude change.
 
 Parameters (a small, real set: every one changes what the vehicle does):
@@ -46,10 +53,16 @@ from enum import IntEnum
 from typing import TYPE_CHECKING, Any
 
 from cosim.geo import KT_TO_MPS, LocalFrame
-from cosim.guidance.commands import DEFAULT_BANK_LIMIT_DEG, Command, min_turn_radius_m
+from cosim.guidance.commands import (
+    DEFAULT_BANK_LIMIT_DEG,
+    Command,
+    min_turn_radius_m,
+    waypoint_accept_radius_m,
+)
 from cosim.guidance.safety import Limits
 from cosim.mavlink import adapter as mav
-from cosim.mavlink.mission import SUPPORTED_COMMANDS, MissionItem, RoutePoint
+from cosim.mavlink import mission as mi
+from cosim.mavlink.mission import COMMON_DO_ITEMS, MissionItem
 from cosim.mavlink.params import SYSID_THISMAV, ParamDef
 from cosim.mavlink.personality import CommandFn, Personality
 from cosim.mavlink.services.base import (
@@ -127,7 +140,18 @@ class ArduPlane(Personality):
     auto_mode = int(PlaneMode.AUTO)
     hold_mode = int(PlaneMode.LOITER)
     param_defs = ARDUPLANE_PARAMS
-    mission_items = SUPPORTED_COMMANDS
+    mission_items = COMMON_DO_ITEMS | {
+        mav.MAV_CMD_NAV_WAYPOINT, mav.MAV_CMD_NAV_LOITER_UNLIM, mav.MAV_CMD_NAV_LOITER_TURNS,
+        mav.MAV_CMD_NAV_LOITER_TIME, mav.MAV_CMD_NAV_LOITER_TO_ALT, mav.MAV_CMD_NAV_TAKEOFF,
+        mav.MAV_CMD_NAV_RETURN_TO_LAUNCH}
+    rtl_mode = int(PlaneMode.RTL)
+    command_modes = {"loiter": int(PlaneMode.LOITER), "goto": int(PlaneMode.GUIDED),
+                     "heading": int(PlaneMode.GUIDED), "velocity": int(PlaneMode.GUIDED),
+                     "takeoff": int(PlaneMode.TAKEOFF)}
+    passes_waypoints = True
+    waypoint_hold = False  # ArduPlane ignores a waypoint's hold time
+    takeoff_tolerance_m = mi.ALT_TOLERANCE_M
+    extra_sensors = mav.SENSOR_DIFF_PRESSURE  # an airspeed sensor
     capabilities = (Personality.capabilities | mav.CAP_SET_POSITION_TARGET_GLOBAL_INT
                     | mav.CAP_SET_POSITION_TARGET_LOCAL_NED)
     #: what ArduPlane 4.5.0 (official) would report
@@ -144,6 +168,7 @@ class ArduPlane(Personality):
             mav.MAV_CMD_DO_CHANGE_SPEED: self._change_speed,
             mav.MAV_CMD_DO_REPOSITION: self._reposition,
             mav.MAV_CMD_NAV_LOITER_UNLIM: self._loiter_unlim,
+            mav.MAV_CMD_DO_ORBIT: self._orbit,
         }
 
     # -- heartbeat -----------------------------------------------------------------
@@ -180,12 +205,22 @@ class ArduPlane(Personality):
             r = v.params["WP_LOITER_RAD"]
         return (abs(r) if r else None), r < 0
 
-    @staticmethod
-    def _speed_problem(v: MavVehicle, spd: float) -> str | None:
+    def speed_problem(self, v: MavVehicle, spd: float) -> str | None:
         lo, hi = v.params["AIRSPEED_MIN"], v.params["AIRSPEED_MAX"]
         if not lo <= spd <= hi:
             return f"speed {spd:g} m/s outside AIRSPEED_MIN..MAX {lo:g}..{hi:g}"
         return None
+
+    def _speed_into(self, v: MavVehicle, speed: float, d: dict[str, Any], out: Outcome) -> bool:
+        """A command's optional speed (> 0; ignored while disarmed) into
+        mapping ``d``; False (with a STATUSTEXT) when out of limits."""
+        if math.isfinite(speed) and speed > 0 and v.armed:
+            problem = self.speed_problem(v, speed)
+            if problem:
+                out.replies.extend(text(problem))
+                return False
+            d["airspeed_mps"] = speed
+        return True
 
     def _loiter_here(self, v: MavVehicle) -> dict[str, Any]:
         radius, ccw = self._radius(v)
@@ -197,11 +232,23 @@ class ArduPlane(Personality):
         return lo
 
     @staticmethod
-    def _rtl_point(v: MavVehicle, row: list[float]) -> dict[str, Any]:
-        """Home at the RTL altitude (ALT_HOLD_RTL; -1: the altitude it is at)."""
-        alt_cm = v.params["ALT_HOLD_RTL"]
-        alt = float(row[_S["alt_msl_m"]]) if alt_cm < 0 else v.home[2] + alt_cm / 100.0
-        return {"lat_deg": v.home[0], "lon_deg": v.home[1], "alt_msl_m": alt}
+    def _rtl_point(ctx: Context, v: MavVehicle, row: list[float]) -> dict[str, Any]:
+        """The nearest rally point at its altitude, else home at the RTL
+        altitude (ALT_HOLD_RTL; -1: the altitude it is at)."""
+        point = mi.return_point(ctx, v)
+        if "alt_msl_m" not in point and "alt_agl_m" not in point:
+            alt_cm = v.params["ALT_HOLD_RTL"]
+            point["alt_msl_m"] = float(row[_S["alt_msl_m"]]) if alt_cm < 0 \
+                else v.home[2] + alt_cm / 100.0
+        return point
+
+    def default_radius_m(self, v: MavVehicle, speed: float | None = None) -> float:
+        """Guidance's loiter radius at ``speed`` (default: the airspeed flown)."""
+        if speed is None:
+            row = v.row_values
+            speed = float(row[_S["airspeed_mps"]]) if row is not None and math.isfinite(
+                row[_S["airspeed_mps"]]) else v.params["AIRSPEED_CRUISE"]
+        return max(1.5 * min_turn_radius_m(speed, v.params["ROLL_LIMIT_DEG"]), 150.0)
 
     def _no_autopilot(self, what: str, out: Outcome) -> int | None:
         """FAILED with a STATUSTEXT for a vehicle without an autopilot."""
@@ -211,14 +258,6 @@ class ArduPlane(Personality):
         return mav.MAV_RESULT_FAILED
 
     # -- modes ---------------------------------------------------------------------
-    def local_command(self, v: MavVehicle, cmd: Command) -> Command:
-        """One that steers the vehicle (a nav command or a heading) puts it in
-        GUIDED and so ends a mission flown in AUTO, as DO_REPOSITION does;
-        settings (speed, altitude, limits) leave the mode alone."""
-        if self.autopilot and (cmd.nav is not None or cmd.heading_deg is not None):
-            v.mode = int(PlaneMode.GUIDED)
-        return cmd
-
     def takes_targets(self, v: MavVehicle) -> bool:
         return self.autopilot and v.mode == PlaneMode.GUIDED  # ArduPlane: GUIDED only
 
@@ -232,10 +271,10 @@ class ArduPlane(Personality):
         row = v.row_or_raise()
         d: dict[str, Any]
         cw_override: bool | None = None
-        if mode in (PlaneMode.GUIDED, PlaneMode.LOITER):
+        if mode in (PlaneMode.GUIDED, PlaneMode.LOITER, PlaneMode.CIRCLE):
             d = {"loiter": self._loiter_here(v)}
         elif mode == PlaneMode.RTL:
-            goto = self._rtl_point(v, row)
+            goto = self._rtl_point(ctx, v, row)
             radius, ccw = self._radius(v, "RTL_RADIUS")
             if radius:
                 goto["loiter_radius_m"] = radius
@@ -334,7 +373,7 @@ class ArduPlane(Personality):
             return mav.MAV_RESULT_FAILED
         d: dict[str, Any]
         if math.isfinite(spd) and spd > 0:
-            problem = self._speed_problem(v, spd)
+            problem = self.speed_problem(v, spd)
             if problem:
                 out.replies.extend(text(problem))
                 return mav.MAV_RESULT_DENIED
@@ -382,12 +421,8 @@ class ArduPlane(Personality):
             return mav.MAV_RESULT_DENIED
         goto, _ = pos
         spd, flags, radius, direction = req.p
-        if math.isfinite(spd) and spd > 0 and v.armed:
-            problem = self._speed_problem(v, spd)
-            if problem:
-                out.replies.extend(text(problem))
-                return mav.MAV_RESULT_DENIED
-            goto["airspeed_mps"] = spd
+        if not self._speed_into(v, spd, goto, out):
+            return mav.MAV_RESULT_DENIED
         default_r, default_ccw = self._radius(v)
         if math.isfinite(radius) and radius != 0:
             goto["loiter_radius_m"] = abs(radius)
@@ -473,8 +508,7 @@ class ArduPlane(Personality):
     def item_problem(self, ctx: Context, v: MavVehicle, item: MissionItem) -> str | None:
         """An item's altitude below the class minimum above the ground (the
         rule of ``Context.unsafe``), counted as unsafe."""
-        if item.command not in (mav.MAV_CMD_NAV_WAYPOINT, mav.MAV_CMD_NAV_LOITER_UNLIM,
-                                mav.MAV_CMD_NAV_TAKEOFF):
+        if item.command not in mi.NAV_COMMANDS or item.command not in mi.POSITION_COMMANDS:
             return None
         alt = ctx.alt(v, item.frame, item.z)
         if alt is None:
@@ -486,80 +520,97 @@ class ArduPlane(Personality):
         return (f"at {agl:.0f} m above the ground refused (at least "
                 f"{v.spec.min_alt_agl_m:g} m)")
 
-    def mission_route(self, ctx: Context, v: MavVehicle, start: int
-                      ) -> tuple[Command, list[RoutePoint]] | str:
-        """The ``waypoints`` command flying items ``start``.. and the route it flies.
+    def accept_radius_m(self, v: MavVehicle, row: list[float]) -> float:
+        bank = float(row[_S["bank_limit_deg"]])
+        if not 5.0 <= bank <= 75.0:
+            bank = DEFAULT_BANK_LIMIT_DEG
+        speed = float(row[_S["airspeed_mps"]])
+        return waypoint_accept_radius_m(max(speed if math.isfinite(speed) else 0.0, 1.0), bank)
 
-        NAV_WAYPOINT: a point; NAV_LOITER_UNLIM: the last point, loitered around
-        (its radius and direction); NAV_RETURN_TO_LAUNCH: home at the RTL
-        altitude, loitered around (RTL_RADIUS); items after those two are never
-        reached, as in ArduPlane. DO_CHANGE_SPEED sets the airspeed of the
-        following points (before one: AIRSPEED_CRUISE; none while disarmed).
-        NAV_TAKEOFF: skipped by a vehicle in the air (cosim's vehicles start
-        flying); on the ground, a point 1 km ahead on its heading at the
-        takeoff altitude. The loiter at the end of a mission without one is
-        around its last point (``waypoints`` always ends in a loiter).
+    def nav_vocab(self, ctx: Context, v: MavVehicle, item: MissionItem,
+                  prev: tuple[float, float]) -> dict[str, Any] | str:
+        """A navigation item as ArduPlane flies it.
+
+        NAV_WAYPOINT: a goto (its end loiters with WP_LOITER_RAD, so a last
+        waypoint is circled as in ArduPlane); the loiters: a loiter round the
+        point with param3's radius (LOITER_TO_ALT: param2; negative:
+        counter-clockwise; 0: WP_LOITER_RAD, else guidance's bank-limited
+        radius); NAV_RETURN_TO_LAUNCH: the RTL point, circled with
+        RTL_RADIUS; NAV_TAKEOFF: in the air, a climbing loiter where it is;
+        on the ground, a point 1 km ahead at the take-off altitude. Speed:
+        the mission's last DO_CHANGE_SPEED, else AIRSPEED_CRUISE; none while
+        disarmed.
         """
+        if not self.autopilot:
+            return "this vehicle has no autopilot"
+        c = item.command
         row = v.row_or_raise()
-        here = (float(row[_S["lat_deg"]]), float(row[_S["lon_deg"]]))
-        prev = here
-        speed = v.params["AIRSPEED_CRUISE"] if v.armed else None
-        radius, ccw = self._radius(v)
-        points: list[dict[str, Any]] = []
-        route: list[RoutePoint] = []
-        for it in v.mission.items[start - 1:]:
-            c = it.command
-            if c == mav.MAV_CMD_DO_CHANGE_SPEED:
-                if it.param2 > 0 and v.armed:
-                    problem = self._speed_problem(v, it.param2)
-                    if problem:
-                        return f"item {it.seq}: {problem}"
-                    speed = it.param2
-                continue
-            end = False
-            p: dict[str, Any]
-            if c == mav.MAV_CMD_NAV_RETURN_TO_LAUNCH:
-                p = self._rtl_point(v, row)
-                radius, ccw = self._radius(v, "RTL_RADIUS")
-                end = True
-            else:
-                a = ctx.alt(v, it.frame, it.z)
-                if a is None:
-                    return f"item {it.seq}: frame {it.frame} not supported"
-                if c == mav.MAV_CMD_NAV_TAKEOFF:
-                    if v.in_air():
-                        continue
-                    psi = math.radians(float(row[_S["yaw_deg"]]))
-                    lat, lon = LocalFrame(here[0], here[1], v.home[2]).place(
-                        1000.0 * math.cos(psi), 1000.0 * math.sin(psi), v.home[2])
-                    p = {"lat_deg": float(lat), "lon_deg": float(lon)}
-                elif it.x == 0 and it.y == 0:  # ArduPilot: "here" (the previous point)
-                    p = {"lat_deg": prev[0], "lon_deg": prev[1]}
-                else:
-                    p = {"lat_deg": it.lat_deg, "lon_deg": it.lon_deg}
-                p[a[0]] = a[1]
-                if c == mav.MAV_CMD_NAV_LOITER_UNLIM:
-                    if it.param3 != 0:  # negative: counter-clockwise
-                        radius, ccw = abs(it.param3), it.param3 < 0
-                    end = True
+        speed = (v.mission.speed_mps if v.mission.speed_mps is not None
+                 else v.params["AIRSPEED_CRUISE"]) if v.armed else None
+        if c == mav.MAV_CMD_NAV_RETURN_TO_LAUNCH:
+            goto = self._rtl_point(ctx, v, row)
+            radius, ccw = self._radius(v, "RTL_RADIUS")
+            goto["loiter_radius_m"] = radius or self.default_radius_m(v, speed)
             if speed is not None:
-                p["airspeed_mps"] = speed
-            points.append(p)
-            prev = (p["lat_deg"], p["lon_deg"])
-            route.append(RoutePoint(it.seq, p["lat_deg"], p["lon_deg"]))
-            if end:
-                break
-        if not points:
-            return "no navigation items left in the mission"
-        wp: dict[str, Any] = {"points": points}
-        if radius:
-            wp["loiter_radius_m"] = radius
-        cmd = vocab({"waypoints": wp})
-        if isinstance(cmd, str):
-            return cmd
-        last = route[-1]
-        route[-1] = RoutePoint(last.seq, last.lat_deg, last.lon_deg, True, radius)
-        return replace(cmd, loiter_cw=not ccw), route
+                goto["airspeed_mps"] = speed
+            return {"goto": goto, "cw": not ccw}
+        alt = ctx.alt(v, item.frame, item.z)
+        if alt is None:
+            return f"frame {item.frame} not supported"
+        lat, lon = mi.point_of(v, item, prev)
+        extra: dict[str, Any] = {}
+        if not (item.z == 0 and item.frame not in (mav.MAV_FRAME_GLOBAL,
+                                                   mav.MAV_FRAME_GLOBAL_INT)):
+            extra[alt[0]] = alt[1]
+        if speed is not None:
+            extra["airspeed_mps"] = speed
+        if c == mav.MAV_CMD_NAV_TAKEOFF:
+            if v.in_air():
+                lo = self._loiter_here(v)
+                lo.setdefault("radius_m", self.default_radius_m(v, speed))
+                lo[alt[0]] = alt[1]
+                return {"loiter": lo}
+            psi = math.radians(float(row[_S["yaw_deg"]]))
+            here = (float(row[_S["lat_deg"]]), float(row[_S["lon_deg"]]))
+            la, lo_ = LocalFrame(here[0], here[1], v.home[2]).place(
+                1000.0 * math.cos(psi), 1000.0 * math.sin(psi), v.home[2])
+            return {"goto": {"lat_deg": float(la), "lon_deg": float(lo_), alt[0]: alt[1]}}
+        default_r, default_ccw = self._radius(v)
+        if c == mav.MAV_CMD_NAV_WAYPOINT:
+            return {"goto": {"lat_deg": lat, "lon_deg": lon, **extra,
+                             "loiter_radius_m": default_r or self.default_radius_m(v, speed)},
+                    "cw": not default_ccw}
+        if c in mi.LOITERS:
+            r = item.param2 if c == mav.MAV_CMD_NAV_LOITER_TO_ALT else item.param3
+            radius = abs(r) if r else (default_r or self.default_radius_m(v, speed))
+            ccw = r < 0 if r else default_ccw
+            return {"loiter": {"center": {"lat_deg": lat, "lon_deg": lon}, "radius_m": radius,
+                               "direction": "ccw" if ccw else "cw", **extra}}
+        return f"{mav.command_name(c)} is not flown by ArduPlane in cosim"
+
+    def _orbit(self, ctx: Context, v: MavVehicle, req: CommandRequest, tick: int,
+               out: Outcome) -> int:
+        """DO_ORBIT: a loiter round the centre (x/y; none: where it is) at
+        radius param1 (negative: counter-clockwise), speed param2 when > 0."""
+        refused = self._no_autopilot("orbit", out)
+        if refused is not None:
+            return refused
+        radius, speed = req.p[0], req.p[1]
+        if not (math.isfinite(radius) and radius != 0 and abs(radius) <= 10_000.0):
+            out.replies.extend(text("orbit: radius must be non-zero, at most 10000 m (param1)"))
+            return mav.MAV_RESULT_DENIED
+        pos = self._position(ctx, v, replace(req, z=req.z if req.z else math.nan), out)
+        if pos is None:
+            return mav.MAV_RESULT_DENIED
+        point, alt_key = pos
+        lo: dict[str, Any] = {"radius_m": abs(radius), "direction": "ccw" if radius < 0 else "cw"}
+        if req.location() is not None:
+            lo["center"] = {"lat_deg": point["lat_deg"], "lon_deg": point["lon_deg"]}
+        if alt_key is not None:
+            lo[alt_key] = point[alt_key]
+        if not self._speed_into(v, speed, lo, out):
+            return mav.MAV_RESULT_DENIED
+        return ctx.switch_to(v, PlaneMode.LOITER, {"loiter": lo}, out, "orbit")
 
     def guided_item(self, ctx: Context, v: MavVehicle, m: mav.Message, item: MissionItem,
                     current: int) -> Outcome:

@@ -4,21 +4,26 @@ HEARTBEAT type GROUND_ROVER, autopilot ARDUPILOTMEGA; custom modes as
 ArduRover numbers them: MANUAL 0 (refused: no driver in the simulation),
 HOLD 4 (stop where it is), AUTO 10 (drive the mission), RTL 11 (drive home
 and stop), GUIDED 15 (stop, then go where DO_REPOSITION or a guided
-MISSION_ITEM says). Missions: NAV_WAYPOINT, DO_CHANGE_SPEED and
-NAV_RETURN_TO_LAUNCH (items after it are never reached).
+MISSION_ITEM says). Commands: COMPONENT_ARM_DISARM, NAV_RETURN_TO_LAUNCH,
+DO_REPOSITION, DO_CHANGE_SPEED.
+Missions: NAV_WAYPOINT (param1: hold seconds), NAV_LOITER_UNLIM and
+NAV_LOITER_TIME (drive to the point and wait there), NAV_RETURN_TO_LAUNCH
+(home, or the nearest rally point), and the DO/CONDITION items every
+ArduPilot-like class runs (``cosim.mavlink.mission``); NAV_LOITER_TURNS,
+NAV_TAKEOFF and NAV_LAND are not ArduRover's and are skipped.
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from cosim.guidance.commands import Command
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.ardupilot import ArduPilotLike, home_goto
+from cosim.mavlink.mission import COMMON_DO_ITEMS, LOITERS
 from cosim.mavlink.services.base import Context
 
 if TYPE_CHECKING:
-    from cosim.mavlink.mission import RoutePoint
+    from cosim.mavlink.mission import MissionItem
     from cosim.mavlink.vehicle import MavVehicle
 
 MANUAL, HOLD, AUTO, RTL, GUIDED = 0, 4, 10, 11, 15
@@ -36,39 +41,18 @@ class ArduRover(ArduPilotLike):
     mode_vocab = {HOLD: lambda v: {"loiter": {}}, GUIDED: lambda v: {"loiter": {}},
                   RTL: lambda v: {"goto": home_goto(v)}}
     refused = {MANUAL: "no driver in the simulation"}
-    mission_items = frozenset({mav.MAV_CMD_NAV_WAYPOINT, mav.MAV_CMD_DO_CHANGE_SPEED,
-                               mav.MAV_CMD_NAV_RETURN_TO_LAUNCH})
+    rtl_mode = RTL
+    command_modes = {"loiter": HOLD, "goto": GUIDED, "heading": GUIDED, "velocity": GUIDED}
+    mission_items = COMMON_DO_ITEMS | {
+        mav.MAV_CMD_NAV_WAYPOINT, mav.MAV_CMD_NAV_LOITER_UNLIM, mav.MAV_CMD_NAV_LOITER_TIME,
+        mav.MAV_CMD_NAV_RETURN_TO_LAUNCH}
 
-    def mission_route(self, ctx: Context, v: MavVehicle, start: int
-                      ) -> tuple[Command, list[RoutePoint]] | str:
-        from cosim.mavlink.mission import RoutePoint
-        from cosim.mavlink.services.base import vocab
-
-        points: list[dict[str, Any]] = []
-        route: list[RoutePoint] = []
-        speed: float | None = None
-        for it in v.mission.items[start - 1:]:
-            c = it.command
-            if c == mav.MAV_CMD_DO_CHANGE_SPEED:
-                if it.param2 > 0:
-                    speed = it.param2
-                continue
-            if c == mav.MAV_CMD_NAV_RETURN_TO_LAUNCH:
-                p = home_goto(v)
-            elif c == mav.MAV_CMD_NAV_WAYPOINT:
-                p = {"lat_deg": it.lat_deg, "lon_deg": it.lon_deg}
-            else:
-                continue
-            if speed is not None:
-                p["airspeed_mps"] = speed
-            points.append(p)
-            route.append(RoutePoint(it.seq, p["lat_deg"], p["lon_deg"]))
-            if c == mav.MAV_CMD_NAV_RETURN_TO_LAUNCH:
-                break
-        if not points:
-            return "the mission has no point to drive to"
-        route[-1] = RoutePoint(route[-1].seq, route[-1].lat_deg, route[-1].lon_deg, final=True)
-        cmd = vocab({"waypoints": points})
-        if isinstance(cmd, str):
-            return cmd
-        return cmd, route
+    def nav_vocab(self, ctx: Context, v: MavVehicle, item: MissionItem,
+                  prev: tuple[float, float]) -> dict[str, Any] | str:
+        """A loiter drives to its point and waits there (a car does not circle)."""
+        d = super().nav_vocab(ctx, v, item, prev)
+        if item.command in LOITERS and isinstance(d, dict):
+            lo = d["loiter"]
+            return {"goto": {**lo["center"], **{k: x for k, x in lo.items()
+                                                if k == "airspeed_mps"}}}
+        return d

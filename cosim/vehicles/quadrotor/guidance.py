@@ -10,7 +10,9 @@ part only chooses what it holds, once per exchange:
   within ``ARRIVE_M`` and slower than 0.3 m/s;
 - ``waypoints``: each point in turn (``waypoint_reached`` within
   ``PASS_M``), holding the last; with ``land: true``, landing on it;
-- ``loiter``: hold the centre (default: where it is); ``heading_deg``: turn
+- ``loiter``: hold the centre (default: where it is); with ``radius_m``,
+  orbit it (clockwise unless ``direction: ccw``) at the speed limit, holding
+  a point a little ahead on the circle each exchange; ``heading_deg``: turn
   to that heading where it is;
 - ``velocity``: fly that ground velocity (north, east);
 - altitudes (``alt_*``) and ``takeoff_agl_m``: climb or descend to it (3 m/s
@@ -60,6 +62,9 @@ class QuadGuidance:
         self.landing: set[int] = set()
         self.land_at_end: set[int] = set()
         self.goal: dict[int, tuple[float, float]] = {}
+        #: orbits: centre (north, east) in the frame, radius, clockwise
+        self.orbit: dict[int, tuple[float, float, float, bool]] = {}
+        self.speed: dict[int, float] = {}
         self.pending: list[GuidanceEvent] = []
 
     def _set(self, sp: np.ndarray, i: int, name: str, value: float) -> None:
@@ -93,6 +98,10 @@ class QuadGuidance:
             ground = float(states[i, _S["alt_msl_m"]] - states[i, _S["alt_agl_m"]])
             if cmd.airspeed_mps is not None:
                 self._set(sp, i, SPEED, cmd.airspeed_mps)
+                self.speed[i] = cmd.airspeed_mps
+            if cmd.nav is not None or cmd.velocity_ne is not None or cmd.land \
+                    or cmd.heading_deg is not None:
+                self.orbit.pop(i, None)
             alt = self._alt_of(cmd.alt_m, cmd.alt_agl, states, i)
             if cmd.takeoff_agl_m is not None:
                 alt = ground + cmd.takeoff_agl_m
@@ -118,6 +127,12 @@ class QuadGuidance:
                 where = self._latlon(cmd.points[0], i) if cmd.points else self._here(states, i)
                 self._hold(sp, i, *where)
                 self.labels[i] = "hold"
+                if cmd.loiter_radius_m:
+                    n, e, _ = self.frame.geodetic_to_ned([where[0]], [where[1]],
+                                                         [self.frame.alt_m])
+                    self.orbit[i] = (float(n[0]), float(e[0]), cmd.loiter_radius_m,
+                                     cmd.loiter_cw)
+                    self.labels[i] = f"orbit {cmd.loiter_radius_m:g} m"
             elif cmd.nav in ("goto", "waypoints"):
                 self.route[i] = [(*self._latlon(p, i), self._alt_of(p.alt_m, p.alt_agl, states, i))
                                  for p in cmd.points]
@@ -141,8 +156,23 @@ class QuadGuidance:
         self._set(sp, i, ALT, ground - LAND_BELOW_M)
         self.labels[i] = "land"
 
+    def _orbit(self, states: np.ndarray, sp: np.ndarray, i: int) -> None:
+        """Hold a point ahead on the circle: about two seconds of flight at the
+        speed limit, between 0.2 and 1 radian of arc."""
+        cn, ce, radius, cw = self.orbit[i]
+        n, e, _ = self.frame.geodetic_to_ned([states[i, _S["lat_deg"]]],
+                                             [states[i, _S["lon_deg"]]], [self.frame.alt_m])
+        angle = math.atan2(float(e[0]) - ce, float(n[0]) - cn)
+        lead = min(max(2.0 * self.speed.get(i, DEFAULT_SPEED_MPS) / radius, 0.2), 1.0)
+        angle += lead if cw else -lead
+        lat, lon = self.frame.place(cn + radius * math.cos(angle), ce + radius * math.sin(angle),
+                                    self.frame.alt_m)
+        self._hold(sp, i, float(lat), float(lon))
+
     def update(self, states: np.ndarray, sp: np.ndarray) -> list[GuidanceEvent]:
         events, self.pending = self.pending, []
+        for i in self.orbit:
+            self._orbit(states, sp, i)
         for i in self.rows:
             s = states[i]
             speed = math.hypot(s[_S["vn_mps"]], s[_S["ve_mps"]])
