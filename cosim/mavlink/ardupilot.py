@@ -41,6 +41,25 @@ class ArduPilotLike(Personality):
     reposition_alt: bool = True
     #: the mode DO_ORBIT flies in (None: DO_ORBIT unsupported)
     orbit_mode: int | None = None
+    #: (parameter, scale to m/s) of the default speed of mission items and
+    #: guided gotos (0: the class's own default)
+    speed_param: tuple[str, float] | None = None
+    #: (parameter, scale to m) of the waypoint acceptance radius
+    radius_param: tuple[str, float] | None = None
+
+    def default_speed_mps(self, v: MavVehicle) -> float | None:
+        """The speed missions fly without a DO_CHANGE_SPEED (None: the class's)."""
+        if self.speed_param is None:
+            return None
+        name, scale = self.speed_param
+        speed = v.params[name] * scale
+        return speed if speed > 0 else None
+
+    def accept_radius_m(self, v: MavVehicle, row: list[float]) -> float:
+        if self.radius_param is None:
+            return super().accept_radius_m(v, row)
+        name, scale = self.radius_param
+        return max(v.params[name] * scale, 0.1)
 
     def default_mode(self) -> int:
         return self.hold_mode if self.hold_mode is not None else super().default_mode()
@@ -131,6 +150,8 @@ class ArduPilotLike(Personality):
         if alt is not None and not keeps_alt:  # altitude 0 above home: hold it
             pt[alt[0]] = alt[1]
         speed = v.mission.speed_mps
+        if speed is None:
+            speed = self.default_speed_mps(v)
         if speed is not None:
             pt["airspeed_mps"] = speed
         if c == mav.MAV_CMD_NAV_WAYPOINT:

@@ -11,6 +11,9 @@ NAV_LOITER_TIME (drive to the point and wait there), NAV_RETURN_TO_LAUNCH
 (home, or the nearest rally point), and the DO/CONDITION items every
 ArduPilot-like class runs (``cosim.mavlink.mission``); NAV_LOITER_TURNS,
 NAV_TAKEOFF and NAV_LAND are not ArduRover's and are skipped.
+Parameters: WP_SPEED (m/s: the speed of mission items without a
+DO_CHANGE_SPEED; 0: the vehicle's cruise), WP_RADIUS (m: a waypoint's
+acceptance radius), SYSID_THISMAV (read-only).
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from typing import TYPE_CHECKING, Any
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.ardupilot import ArduPilotLike, home_goto
 from cosim.mavlink.mission import COMMON_DO_ITEMS, LOITERS
+from cosim.mavlink.params import SYSID_THISMAV, ParamDef
 from cosim.mavlink.services.base import Context
 
 if TYPE_CHECKING:
@@ -42,6 +46,12 @@ class ArduRover(ArduPilotLike):
                   RTL: lambda v: {"goto": home_goto(v)}}
     refused = {MANUAL: "no driver in the simulation"}
     rtl_mode = RTL
+    #: ArduRover's waypoint parameters (m/s, m), as it names them
+    param_defs = (SYSID_THISMAV,
+                  ParamDef("WP_RADIUS", mav.MAV_PARAM_TYPE_REAL32, 2.0, 0.1, 100.0),
+                  ParamDef("WP_SPEED", mav.MAV_PARAM_TYPE_REAL32, 0.0, 0.0, 100.0))
+    speed_param = ("WP_SPEED", 1.0)
+    radius_param = ("WP_RADIUS", 1.0)
     command_modes = {"loiter": HOLD, "goto": GUIDED, "heading": GUIDED, "velocity": GUIDED}
     mission_items = COMMON_DO_ITEMS | {
         mav.MAV_CMD_NAV_WAYPOINT, mav.MAV_CMD_NAV_LOITER_UNLIM, mav.MAV_CMD_NAV_LOITER_TIME,

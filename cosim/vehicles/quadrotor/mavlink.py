@@ -9,6 +9,9 @@ where it is, or DO_ORBIT's circle), LAND 9 (land where it is). Commands:
 COMPONENT_ARM_DISARM, NAV_TAKEOFF (param7: metres above the ground; armed
 first), NAV_LAND, NAV_RETURN_TO_LAUNCH, DO_REPOSITION, DO_ORBIT,
 DO_CHANGE_SPEED (param2, m/s).
+Parameters: WPNAV_SPEED (cm/s: the speed of mission items without a
+DO_CHANGE_SPEED), WPNAV_RADIUS (cm: a waypoint's acceptance radius),
+SYSID_THISMAV (read-only).
 Missions: NAV_TAKEOFF, NAV_WAYPOINT (param1: hold seconds), NAV_LOITER_UNLIM,
 NAV_LOITER_TURNS, NAV_LOITER_TIME, NAV_LAND, NAV_RETURN_TO_LAUNCH, and the
 DO/CONDITION items every ArduPilot-like class runs (``cosim.mavlink.mission``).
@@ -21,6 +24,7 @@ from typing import Any
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.ardupilot import ArduPilotLike, home_goto
 from cosim.mavlink.mission import COMMON_DO_ITEMS
+from cosim.mavlink.params import SYSID_THISMAV, ParamDef
 from cosim.mavlink.personality import CommandFn
 from cosim.mavlink.services.base import CommandRequest, Context, Outcome, text
 
@@ -48,6 +52,12 @@ class ArduCopter(ArduPilotLike):
     refused = {STABILIZE: "no pilot in the simulation"}
     command_modes = {"takeoff": GUIDED, "land": LAND, "loiter": LOITER, "goto": GUIDED,
                      "heading": GUIDED, "velocity": GUIDED}
+    #: ArduCopter's waypoint navigation parameters (cm/s, cm), as it names them
+    param_defs = (SYSID_THISMAV,
+                  ParamDef("WPNAV_RADIUS", mav.MAV_PARAM_TYPE_REAL32, 200.0, 5.0, 1000.0),
+                  ParamDef("WPNAV_SPEED", mav.MAV_PARAM_TYPE_REAL32, 500.0, 20.0, 2000.0))
+    speed_param = ("WPNAV_SPEED", 0.01)
+    radius_param = ("WPNAV_RADIUS", 0.01)
     mission_items = COMMON_DO_ITEMS | {
         mav.MAV_CMD_NAV_TAKEOFF, mav.MAV_CMD_NAV_WAYPOINT, mav.MAV_CMD_NAV_LOITER_UNLIM,
         mav.MAV_CMD_NAV_LOITER_TURNS, mav.MAV_CMD_NAV_LOITER_TIME, mav.MAV_CMD_NAV_LAND,
