@@ -100,8 +100,7 @@ def test_mavsdk_lists_flies_missions_reads_modes_and_sets_parameters(tmp_path: P
         _wait("three systems", lambda: drone.system_count() == 3, 60)
         systems = {s.get_system_id(): s for s in drone.get_systems()}
         assert sorted(systems) == [1, 2, 3]
-        for sid, s in systems.items():
-            assert s.has_autopilot() and s.is_connected()
+        assert all(s.has_autopilot() and s.is_connected() for s in systems.values())
         tel = {sid: Telemetry(s) for sid, s in systems.items()}
         for sid, t in tel.items():
             _wait(f"system {sid}'s position", lambda t=t: math.isfinite(
