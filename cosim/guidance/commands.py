@@ -26,6 +26,12 @@ now and by MAVLink and the swarm controller later:
 - ``gimbal``: point the vehicle's gimbal cameras: ``pitch_deg`` (-90 nadir
   .. 30) and/or ``yaw_deg`` (relative to the nose, -180..180). Not a flight
   command: a command of only ``gimbal`` leaves the flight as it is.
+- ``camera``: the vehicle's renderer cameras take stills (full frames with
+  their ground truth, into the run folder's ``stills/``): ``shoot: true``
+  one now; ``interval_s`` one every so many seconds (``count``: that many,
+  else until stopped); ``distance_m`` one every so many metres flown over
+  the ground; ``stop: true`` ends interval and distance triggering. Not a
+  flight command either.
 
 Parsing returns a ``Command`` of plain values; problems are reported through
 a callback with the key path, so the scenario loader can attach file lines.
@@ -47,7 +53,7 @@ Report = Callable[[P, str], None]
 
 COMMAND_KEYS = ("heading_deg", "alt_msl_m", "alt_agl_m", "airspeed_kt", "airspeed_mps",
                 "throttle", "bank_limit_deg", "stall_protection", "goto", "waypoints", "loiter",
-                "takeoff_agl_m", "land", "velocity", "gimbal")
+                "takeoff_agl_m", "land", "velocity", "gimbal", "camera")
 #: gimbal angle bounds: pitch (nadir -90, forward 0), yaw relative to the nose
 GIMBAL_PITCH_DEG = (-90.0, 30.0)
 GIMBAL_YAW_DEG = (-180.0, 180.0)
@@ -79,6 +85,23 @@ class Point:
 
 
 @dataclass(frozen=True)
+class CameraTrigger:
+    """A ``camera`` command: one still now (``shoot``), stills every
+    ``interval_s`` seconds (at most ``count``) or every ``distance_m`` metres,
+    or ``stop`` interval and distance triggering."""
+
+    shoot: bool = False
+    interval_s: float | None = None
+    distance_m: float | None = None
+    count: int | None = None
+    stop: bool = False
+
+
+#: the shortest still interval (s) and distance (m) a camera command may ask for
+MIN_STILL_INTERVAL_S, MIN_STILL_DISTANCE_M = 0.05, 1.0
+
+
+@dataclass(frozen=True)
 class Command:
     heading_deg: float | None = None
     alt_m: float | None = None
@@ -100,12 +123,14 @@ class Command:
     #: gimbal cameras' new angles (None: unchanged); not part of the flight
     gimbal_pitch_deg: float | None = None
     gimbal_yaw_deg: float | None = None
+    #: stills from the vehicle's cameras (None: none); not part of the flight
+    camera: CameraTrigger | None = None
     source: dict[str, Any] = field(default_factory=dict, compare=False)
 
     @property
     def flies(self) -> bool:
         """Whether the command says anything to the vehicle's guidance (a
-        command of only gimbal angles does not)."""
+        command of only gimbal angles or camera stills does not)."""
         return (self.heading_deg is not None or self.alt_m is not None
                 or self.airspeed_mps is not None or self.throttle is not None
                 or self.bank_limit_deg is not None or self.stall_protection is not None
@@ -244,6 +269,7 @@ def parse_command(d: Any, path: P, report: Report) -> Command | None:
         report(path + ("stall_protection",), f"expected true or false, got {stall!r}")
         stall = None
     gimbal = _gimbal(d["gimbal"], path + ("gimbal",), report) if "gimbal" in d else (None, None)
+    camera = _camera(d["camera"], path + ("camera",), report) if "camera" in d else None
     takeoff = _num(d, "takeoff_agl_m", path, report, 0.5, 3000) if "takeoff_agl_m" in d else None
     land = d.get("land", False)
     if not isinstance(land, bool):
@@ -324,7 +350,8 @@ def parse_command(d: Any, path: P, report: Report) -> Command | None:
                    stall_protection=stall, nav=nav, points=tuple(points),
                    loiter_radius_m=radius, loiter_cw=cw, loiter_here=here,
                    takeoff_agl_m=takeoff, land=land, velocity_ne=velocity,
-                   gimbal_pitch_deg=gimbal[0], gimbal_yaw_deg=gimbal[1], source=d)
+                   gimbal_pitch_deg=gimbal[0], gimbal_yaw_deg=gimbal[1], camera=camera,
+                   source=d)
 
 
 def _velocity(v: Any, path: P, report: Report) -> tuple[float, float] | None:
@@ -349,3 +376,40 @@ def _gimbal(g: Any, path: P, report: Report) -> tuple[float | None, float | None
     pitch = _num(g, "pitch_deg", path, report, *GIMBAL_PITCH_DEG) if "pitch_deg" in g else None
     yaw = _num(g, "yaw_deg", path, report, *GIMBAL_YAW_DEG) if "yaw_deg" in g else None
     return pitch, yaw
+
+
+def _camera(c: Any, path: P, report: Report) -> CameraTrigger | None:
+    keys = ("shoot", "interval_s", "distance_m", "count", "stop")
+    if not isinstance(c, dict) or not c:
+        report(path, f"expected a mapping with one of shoot, interval_s, distance_m, stop, "
+                     f"got {c!r}")
+        return None
+    for k in c:
+        if k not in keys:
+            report(path + (k,), f"unknown key {k!r}; expected one of: {', '.join(keys)}")
+    modes = [k for k in ("shoot", "interval_s", "distance_m", "stop") if k in c]
+    if len(modes) != 1:
+        report(path, f"give exactly one of shoot, interval_s, distance_m, stop; got "
+                     f"{', '.join(modes) or 'none'}")
+        return None
+    mode = modes[0]
+    if mode in ("shoot", "stop"):
+        if c[mode] is not True:
+            report(path + (mode,), f"expected true, got {c[mode]!r}")
+            return None
+        if "count" in c:
+            report(path + ("count",), "count goes with interval_s or distance_m")
+        return CameraTrigger(shoot=mode == "shoot", stop=mode == "stop")
+    lo = MIN_STILL_INTERVAL_S if mode == "interval_s" else MIN_STILL_DISTANCE_M
+    value = _num(c, mode, path, report, lo, 86_400.0 if mode == "interval_s" else 1e6)
+    count = None
+    if "count" in c:
+        n = c["count"]
+        if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= 100_000:
+            report(path + ("count",), f"expected a whole number 1..100000, got {n!r}")
+            return None
+        count = n
+    if value is None:
+        return None
+    return CameraTrigger(interval_s=value if mode == "interval_s" else None,
+                         distance_m=value if mode == "distance_m" else None, count=count)

@@ -15,6 +15,13 @@ started by ``cosim.workers.start``: Ctrl-C reaches the loop, which ends the
 run and then ``finish`` closes every video, rather than the workers dying
 mid-write.
 
+Stills (the ``camera`` command: one now, every so many seconds or metres):
+the still of a stream is its next video frame, written whole as
+``stills/<vehicle>_<camera>_<NNNN>.png`` by the worker that renders it, with
+one line per still in ``stills/stills.jsonl`` (time, tick, frame, pose,
+gimbal and the frame's ground truth, the same rows as the ``.gt.csv``) and a
+``still`` event; at most ``MAX_STILLS`` a run (more are counted, not taken).
+
 Failures end the run, naming what failed: a stream that cannot be opened or
 written (``RenderError``: camera, vehicle, tick, the worker's traceback) and
 a render worker that dies (``RenderWorkerDied``: worker, pid, signal or exit
@@ -28,7 +35,9 @@ from __future__ import annotations
 
 import csv
 import hashlib
+import json
 import logging
+import math
 import os
 import queue
 import time
@@ -57,6 +66,8 @@ log = logging.getLogger(__name__)
 _POSE_COLS = [STATE_INDEX[c] for c in ("lat_deg", "lon_deg", "alt_msl_m", "roll_deg",
                                        "pitch_deg", "yaw_deg")]
 _RESULT_TIMEOUT_S = 60.0
+#: the most stills a run takes (more are counted in the summary, not taken)
+MAX_STILLS = 10_000
 #: while waiting for frames, how often the render workers' liveness is checked
 _POLL_S = 0.2
 
@@ -112,6 +123,25 @@ class Stream:
     lift_m: float = 0.0
 
 
+@dataclass
+class _Trigger:
+    """One vehicle's still triggering (``camera`` commands)."""
+
+    shoot: bool = False
+    interval_ticks: int | None = None
+    next_tick: int | None = None
+    distance_m: float | None = None
+    flown_m: float = 0.0
+    last: tuple[float, float] | None = None
+    left: int | None = None  # stills still to take (None: until stopped)
+    source: str = ""
+
+
+def _plain(v: Any) -> Any:
+    """JSON for numpy scalars in ground-truth rows."""
+    return v.item() if isinstance(v, np.generic) else str(v)
+
+
 class StreamWriter:
     """One stream's video and ground-truth files."""
 
@@ -162,6 +192,7 @@ class RenderWorker:
     def __init__(self, world_spec: WorldSpec, streams: list[Stream], out_dir: Path, codec: str,
                  digest: bool) -> None:
         self.world = World(world_spec)
+        self.out_dir = out_dir
         self.streams = {s.index: s for s in streams}
         self.writers: dict[int, StreamWriter] = {}
         for s in streams:
@@ -175,9 +206,13 @@ class RenderWorker:
                        for s in streams}  # one reused (BGRA) frame buffer per stream
 
     def render(self, stream: int, frame_no: int, tick: int, pose6: tuple[float, ...],
-               gimbal: tuple[float, float] | None = None) -> np.ndarray | None:
+               gimbal: tuple[float, float] | None = None, still: str | None = None
+               ) -> tuple[np.ndarray | None, list[dict[str, Any]] | None]:
         """One frame of ``stream`` from the vehicle's pose (lat, lon, alt, roll,
-        pitch, yaw) and its gimbal's angles (None: the mount's)."""
+        pitch, yaw) and its gimbal's angles (None: the mount's); with ``still``
+        (a path in the run folder) the frame is also written there as a still.
+        Returns the operator view's thumbnail (if any) and, for a still, the
+        frame's ground truth (one dict per target, with its id)."""
         s = self.streams[stream]
         la, lo, alt, roll, pitch, yaw = pose6
         pose = camera_pose(s.camera, la, lo, alt, roll, pitch, yaw, self.world.spec.ground_alt_m,
@@ -185,11 +220,16 @@ class RenderWorker:
         img, rows = render_frame(self.world, s.camera, pose, tick, self.frames[stream], stream)
         self.writers[stream].write(frame_no, tick / self.world.spec.physics_hz, img, rows,
                                    self.target_ids)
+        truth = None
+        if still is not None:
+            if not cv2.imwrite(str(self.out_dir / still), cv2.cvtColor(img, cv2.COLOR_BGRA2BGR)):
+                raise OSError(f"could not write the still {still}")
+            truth = [{"target": tid, **r} for tid, r in zip(self.target_ids, rows)]
         if s.thumb_px is None:
-            return None
+            return None, truth
         thumb: np.ndarray = cv2.cvtColor(cv2.resize(img, s.thumb_px, interpolation=cv2.INTER_AREA),
                                          cv2.COLOR_BGRA2BGR)
-        return thumb
+        return thumb, truth
 
     def close(self) -> dict[int, dict[str, Any]]:
         return {i: w.close() for i, w in self.writers.items()}
@@ -227,13 +267,13 @@ def _worker_main(world_spec: WorldSpec, streams: list[Stream], out_dir: str, cod
                 continue
             if job is None:
                 break
-            stream, frame_no, tick, pose6, gimbal = job
+            stream, frame_no, tick, pose6, gimbal, still = job
             try:
-                thumb = w.render(stream, frame_no, tick, pose6, gimbal)
+                thumb, truth = w.render(stream, frame_no, tick, pose6, gimbal, still)
             except BaseException:
                 results.send(("error", stream, tick, worker_kit.remote_traceback()))
                 break
-            results.send(("frame", stream, frame_no, thumb))
+            results.send(("frame", stream, frame_no, thumb, (still, truth) if still else None))
     finally:
         results.send(("done", w.close()))
 
@@ -261,6 +301,15 @@ class CameraParticipant:
         #: each gimbal stream's current (pitch_deg, yaw_deg), set by commands
         self.gimbal: dict[int, tuple[float, float]] = {}
         self.gimbal_moves: list[tuple[Stream, str]] = []
+        #: still triggering per vehicle row (``camera`` commands) and the streams
+        #: whose next frame is a still (stream index -> the command's source)
+        self.triggers: dict[int, _Trigger] = {}
+        self.still_due: dict[int, str] = {}
+        self.stills_taken = 0
+        self.stills_refused = 0
+        #: what each still was taken at (its file -> the record without ground truth)
+        self.still_meta: dict[str, dict[str, Any]] = {}
+        self.stills_log: Any = None
 
     # --- lifecycle -------------------------------------------------------------------
     def start(self, ctx: RunContext) -> None:
@@ -283,6 +332,7 @@ class CameraParticipant:
                        if s.camera.mount == "gimbal"}
         if ctx.commander is not None:
             ctx.commander.observers.append(self.point_gimbal)
+            ctx.commander.observers.append(self.trigger_camera)
         scn = ctx.scenario
         ws = WorldSpec(scn.origin.lat_deg, scn.origin.lon_deg, scn.origin.ground_alt_m,
                        int(scn.seed), float(ctx.physics_hz),
@@ -339,8 +389,110 @@ class CameraParticipant:
             return
         self.gimbal_moves += [(s, source) for s in moved]  # events at this exchange's tick
 
+    def trigger_camera(self, row: int, cmd: Any, source: str) -> None:
+        """A ``camera`` command: stills of the vehicle's cameras from this
+        exchange on; ignored, with a warning, by a vehicle without a camera."""
+        trig = cmd.camera
+        if trig is None:
+            return
+        if not any(s.row == row for s in self.streams):
+            log.warning("vehicle %s has no camera: camera command (%s) ignored",
+                        self.ctx.ids[row], source)
+            return
+        if trig.stop:
+            t = self.triggers.get(row)
+            if t is not None:
+                t.interval_ticks = t.distance_m = None
+            return
+        t = self.triggers.setdefault(row, _Trigger())
+        t.source = source
+        if trig.shoot:
+            t.shoot = True
+            return
+        t.left = trig.count
+        if trig.interval_s is not None:
+            t.interval_ticks = max(1, round(trig.interval_s * self.ctx.physics_hz))
+            t.distance_m = None
+            t.next_tick = None  # the first at this exchange
+        else:
+            t.distance_m = trig.distance_m
+            t.interval_ticks = None
+            t.flown_m, t.last = 0.0, None
+            t.shoot = True  # the first where it starts, as ArduPilot's camera does
+
+    def _due_stills(self, tick: int, states: np.ndarray) -> None:
+        """Which vehicles take a still now: their streams' next frames are stills."""
+        for row, t in self.triggers.items():
+            due = t.shoot
+            t.shoot = False
+            if t.interval_ticks is not None:
+                if t.next_tick is None:
+                    t.next_tick = tick
+                if tick >= t.next_tick:
+                    due = True
+                    t.next_tick += t.interval_ticks * ((tick - t.next_tick) // t.interval_ticks
+                                                       + 1)
+            if t.distance_m is not None:
+                lat, lon = float(states[row, _POSE_COLS[0]]), float(states[row, _POSE_COLS[1]])
+                if t.last is not None:
+                    dn = math.radians(lat - t.last[0]) * 6_371_000.0
+                    de = math.radians(lon - t.last[1]) * 6_371_000.0 * math.cos(
+                        math.radians(lat))
+                    t.flown_m += math.hypot(dn, de)
+                t.last = (lat, lon)
+                if t.flown_m >= t.distance_m:
+                    due = True
+                    t.flown_m -= t.distance_m * (t.flown_m // t.distance_m)
+            if not due:
+                continue
+            if t.left is not None and (t.interval_ticks is not None or t.distance_m is not None):
+                t.left -= 1
+                if t.left <= 0:
+                    t.interval_ticks = t.distance_m = None
+            for s in self.streams:
+                if s.row == row:
+                    self.still_due.setdefault(s.index, t.source)
+
+    def _still_name(self, s: Stream, frame_no: int, tick: int, pose6: tuple[float, ...],
+                    gimbal: tuple[float, float] | None) -> str | None:
+        """The file of a still taken at this frame of ``s`` (None: the limit)."""
+        source = self.still_due.pop(s.index)
+        if self.stills_taken >= MAX_STILLS:
+            self.stills_refused += 1
+            if self.stills_refused == 1:
+                log.warning("cameras: %d stills taken, the most a run takes; more are counted "
+                            "(stills_refused in summary.json), not taken", MAX_STILLS)
+            return None
+        if self.stills_log is None:
+            (self.ctx.out_dir / "stills").mkdir(exist_ok=True)
+            self.stills_log = open(self.ctx.out_dir / "stills" / "stills.jsonl", "a")  # noqa: SIM115
+        self.stills_taken += 1
+        name = f"stills/{s.vehicle}_{s.camera.name}_{self.stills_taken:04d}.png"
+        time_s = tick / self.ctx.physics_hz
+        self.still_meta[name] = {
+            "file": name, "vehicle": s.vehicle, "camera": s.camera.name, "frame": frame_no,
+            "tick": tick, "time_s": time_s,
+            "pose": dict(zip(("lat_deg", "lon_deg", "alt_msl_m", "roll_deg", "pitch_deg",
+                              "yaw_deg"), pose6)),
+            "gimbal": None if gimbal is None else {"pitch_deg": gimbal[0], "yaw_deg": gimbal[1]}}
+        self.ctx.events.emit("still", tick, vehicle=s.vehicle, camera=s.camera.name,
+                             file=name, frame=frame_no, source=source)
+        return name
+
+    def _still_done(self, still: tuple[str, list[dict[str, Any]] | None] | None) -> None:
+        """A still's line in stills.jsonl, once its frame is rendered."""
+        if still is None:
+            return
+        name, truth = still
+        record = self.still_meta.pop(name)
+        record["targets"] = truth
+        self.stills_log.write(json.dumps(record, default=_plain) + "\n")
+        self.stills_log.flush()
+
     def on_exchange(self, tick: int, states: np.ndarray) -> None:
         self.tick = tick
+        if self.triggers:
+            self._due_stills(tick, states)
         for s, source in self.gimbal_moves:
             pitch, yaw = self.gimbal[s.index]
             self.ctx.events.emit("gimbal", tick, vehicle=s.vehicle, camera=s.camera.name,
@@ -357,18 +509,22 @@ class CameraParticipant:
                 pose6 = pose6[:2] + (pose6[2] + s.lift_m,) + pose6[3:]
             gimbal = self.gimbal.get(s.index)
             frame_no = tick // every
+            still = self._still_name(s, frame_no, tick, pose6, gimbal) \
+                if s.index in self.still_due else None
             if self.inline is not None:
                 try:
-                    thumb = self.inline.render(s.index, frame_no, tick, pose6, gimbal)
+                    thumb, truth = self.inline.render(s.index, frame_no, tick, pose6, gimbal,
+                                                      still)
                 except Exception:
                     self.failed = RenderError(s.vehicle, s.camera.name, tick,
                                               traceback.format_exc())
                     raise self.failed from None
+                self._still_done((still, truth) if still else None)
                 if self.operator is not None:
                     self.operator.thumb(s.index, frame_no, thumb)
             else:
                 k = s.index % len(self.procs)
-                self.jobs[k].put((s.index, frame_no, tick, pose6, gimbal))
+                self.jobs[k].put((s.index, frame_no, tick, pose6, gimbal, still))
                 self.in_flight[k] += 1
                 while self.in_flight[k] >= self.spec.max_in_flight:
                     self._collect(block=True)
@@ -415,8 +571,9 @@ class CameraParticipant:
     def _handle(self, k: int, msg: tuple[Any, ...]) -> None:
         kind = msg[0]
         if kind == "frame":
-            _, stream, frame_no, thumb = msg
+            _, stream, frame_no, thumb, still = msg
             self.in_flight[stream % len(self.procs)] -= 1
+            self._still_done(still)
             if self.operator is not None and thumb is not None:
                 self.operator.thumb(stream, frame_no, thumb)
         elif kind == "done":
@@ -488,6 +645,11 @@ class CameraParticipant:
                 **self.closed.get(s.index, {"frames": None})})
         if self.operator is not None:
             out["operator"] = self.operator.close()
+        if self.stills_log is not None:
+            self.stills_log.close()
+        if self.stills_taken or self.stills_refused:
+            out["stills"] = {"taken": self.stills_taken, "refused": self.stills_refused,
+                             "log": "stills/stills.jsonl"}
         if raised is not None:
             out["error"] = str(raised).splitlines()[0]
         elif error is not None:

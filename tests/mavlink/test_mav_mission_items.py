@@ -271,3 +271,20 @@ def test_home_item_zero_is_ignored_on_upload(rig) -> None:
     send_item(r, 1, 0, HOME_ITEM)
     send_item(r, 1, 1, A)
     assert [m.command for m in download(r)] == [WP, WP]
+
+
+def test_camera_items_become_camera_commands(rig) -> None:
+    r = rig(1)
+    M = ML.MAV_FRAME_MISSION
+    upload(r, [A, (M, ML.MAV_CMD_IMAGE_START_CAPTURE, 0, 2.5, 4, 0, 0, 0, 0),
+               (M, ML.MAV_CMD_DO_SET_CAM_TRIGG_DIST, 150, 0, 0, 0, 0, 0, 0),
+               B, (M, ML.MAV_CMD_IMAGE_STOP_CAPTURE, 0, 0, 0, 0, 0, 0, 0),
+               (M, ML.MAV_CMD_DO_DIGICAM_CONTROL, 0, 0, 0, 0, 1, 0, 0), C])
+    cmds, _ = set_mode(r, PlaneMode.AUTO)
+    cams = [vc.command.camera for vc in cmds if vc.command.camera is not None]
+    assert [(c.interval_s, c.count, c.distance_m) for c in cams] == [(2.5, 4, None),
+                                                                     (None, None, 150.0)]
+    assert all(not vc.command.flies for vc in cmds[1:])
+    cmds, _ = reach(r, *at(A))
+    cams = [vc.command.camera for vc in cmds if vc.command.camera is not None]
+    assert [(c.stop, c.shoot) for c in cams] == [(True, False), (False, True)]
