@@ -1,5 +1,5 @@
-"""The ``cosim`` command: run, validate, models, plot, bench, sweep, visibility,
-swarm, recover.
+"""The ``cosim`` command: run, validate, models, plot, export, bench, sweep,
+visibility, swarm, recover.
 
 ``main(argv) -> int``: exit 0 ok, 1 runtime failure, 2 usage or config
 error, 130 stopped by Ctrl-C (after a clean stop with everything flushed).
@@ -126,6 +126,19 @@ def _build_parser() -> _Parser:
     pl = sub.add_parser("plot", help="plot a run's ground track and altitude (PNG)")
     pl.add_argument("run", metavar="RUN_DIR", help="a cosim run output folder")
     pl.add_argument("--out", metavar="PNG", help="output file (default RUN_DIR/track.png)")
+
+    ex = sub.add_parser("export", help="write a run's tracks for Tacview (ACMI), Google Earth "
+                                       "(KML) or Cesium (CZML)")
+    ex.add_argument("run", metavar="RUN_DIR", help="a cosim run output folder")
+    ex.add_argument("--format", required=True, choices=("acmi", "kml", "czml"),
+                    help="acmi: Tacview 2.2 text; kml: one gx:Track per vehicle; czml: Cesium")
+    ex.add_argument("--out", metavar="FILE",
+                    help="output file (default RUN_DIR/track.<format>)")
+    ex.add_argument("--rate-hz", type=_positive_float, default=10.0, metavar="HZ",
+                    help="samples per second of simulation time (default 10)")
+    ex.add_argument("--epoch", metavar="ISO",
+                    help="the calendar time of simulation time 0, e.g. 2026-06-01T12:00:00Z "
+                         "(default 2000-01-01T00:00:00Z)")
 
     rc = sub.add_parser("recover", help="make what a killed or failed run left readable "
                                          "(journalled ticks into Parquet, a summary)")
@@ -405,6 +418,25 @@ def _cmd_plot(a: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _cmd_export(a: argparse.Namespace) -> int:
+    from datetime import datetime, timezone
+
+    from cosim.export import DEFAULT_EPOCH, export_run
+
+    epoch = DEFAULT_EPOCH
+    if a.epoch:
+        try:
+            epoch = datetime.fromisoformat(a.epoch.replace("Z", "+00:00"))
+        except ValueError:
+            raise ConfigError(f"--epoch: expected an ISO 8601 time such as "
+                              f"2026-06-01T12:00:00Z, got {a.epoch!r}") from None
+        if epoch.tzinfo is None:
+            epoch = epoch.replace(tzinfo=timezone.utc)
+        epoch = epoch.astimezone(timezone.utc)
+    print(export_run(Path(a.run), a.format, Path(a.out) if a.out else None, a.rate_hz, epoch))
+    return EXIT_OK
+
+
 def _cmd_recover(a: argparse.Namespace) -> int:
     from cosim.logs.recover import recover_run
 
@@ -527,7 +559,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     _setup_logging(a.verbose, a.quiet)
     handlers = {"run": _cmd_run, "validate": _cmd_validate, "models": _cmd_models,
                 "plot": _cmd_plot, "bench": _cmd_bench, "sweep": _cmd_sweep,
-                "recover": _cmd_recover,
+                "recover": _cmd_recover, "export": _cmd_export,
                 "swarm": _cmd_swarm,
                 "visibility": _cmd_visibility}
     try:

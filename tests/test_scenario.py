@@ -800,3 +800,18 @@ def test_mavlink_section_is_validated_with_lines() -> None:
     ok = parse(HEAD + ONE + "mavlink: true\n")
     assert ok.mavlink == {"url": "udpout:127.0.0.1:14550", "rates_hz": {}}
     assert parse(HEAD + ONE).mavlink is None
+
+
+@pytest.mark.parametrize("name", ["hetero/quad_guides_car.yaml", "quadrotor/hover_goto.yaml",
+                                  "ground/route_obstacles.yaml", "quickstart.yaml"])
+def test_resolved_round_trip_of_every_class(tmp_path: Path, name: str) -> None:
+    """A resolved scenario names each vehicle's class and only the keys its
+    class reads, and loads back to the same vehicles (quadrotors, cars and
+    fixed-wings alike)."""
+    scn = load_scenario(Path(__file__).resolve().parent.parent / "scenarios" / name)
+    p = tmp_path / "resolved.yaml"
+    p.write_text(yaml.safe_dump(scn.resolved_dict(), sort_keys=False))
+    back = load_scenario(p)
+    assert back.vehicles == scn.vehicles
+    assert [v["class"] for v in back.resolved_dict()["vehicles"]] == [
+        v.vehicle_class for v in scn.vehicles]

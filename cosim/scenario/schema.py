@@ -152,15 +152,18 @@ class Scenario:
         (loads back to the same vehicles, bit for bit)."""
         vehicles = []
         for v in self.vehicles:
-            d: dict[str, Any] = {
-                "id": v.id, "model": v.model,
-                "init": {"lat_deg": v.lat_deg, "lon_deg": v.lon_deg, "alt_msl_m": v.alt_msl_m,
-                         "heading_deg": v.heading_deg, "airspeed_mps": v.airspeed_mps},
-            }
-            if not v.trim:
+            cls = get_class(v.vehicle_class)
+            d: dict[str, Any] = {"id": v.id, "class": v.vehicle_class}
+            if cls.model_kind == "jsbsim":
+                d["model"] = v.model
+            d["init"] = {"lat_deg": v.lat_deg, "lon_deg": v.lon_deg, "alt_msl_m": v.alt_msl_m,
+                         "heading_deg": v.heading_deg, "airspeed_mps": v.airspeed_mps}
+            if not v.trim and "trim" in cls.vehicle_keys:
                 d["trim"] = False
-            if v.initial_props:
+            if v.initial_props and "set" in cls.vehicle_keys:
                 d["set"] = dict(v.initial_props)
+            d.update({k: v.class_params[k] for k in cls.vehicle_keys
+                      if k not in ("trim", "set") and v.class_params.get(k) is not None})
             d["random_seed"] = v.random_seed
             vehicles.append(d)
         ids = [v.id for v in self.vehicles]

@@ -124,6 +124,9 @@ class VehicleClass:
     default_camera_mount: str = "nadir"
     #: how far above the vehicle's position (its state's altitude) its cameras sit
     camera_height_m: float = 0.0
+    #: what replay tools call it (Tacview's object type: ``Air+FixedWing``,
+    #: ``Air+Rotorcraft``, ``Ground+Vehicle``, ...), for ``cosim export``
+    display_type: str = "Air"
     #: ground contact while airborne freezes the vehicle as a ground impact
     #: (aircraft); False: driving on the ground is normal (JSBSim kinds)
     contact_is_impact: bool = True

@@ -34,6 +34,7 @@ DEFAULT_MIN_ALT_AGL_M = 20.0
 
 class FixedWing(VehicleClass):
     name = "fixed_wing"
+    display_type = "Air+FixedWing"
     description = "JSBSim fixed-wing aircraft flown by cosim's autopilot (ArduPlane on MAVLink)"
     model_kind = "jsbsim"
     channels = AP_CHANNELS

@@ -55,6 +55,7 @@ KEYS: dict[str, tuple[float, float, float]] = {
 
 class Ground(VehicleClass):
     name = "ground"
+    display_type = "Ground+Vehicle"
     description = "a car or UGV: batched kinematic bicycle, keeps out of obstacles"
     model_kind = "batched"
     vehicle_keys = (*KEYS, "knows_obstacles", "scout")

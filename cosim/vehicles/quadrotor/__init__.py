@@ -44,6 +44,7 @@ MAX_SPEED_MPS = 15.0
 
 class Quadrotor(VehicleClass):
     name = "quadrotor"
+    display_type = "Air+Rotorcraft"
     description = "JSBSim quadrotor with its own position/velocity/attitude control " \
                   "(ArduCopter on MAVLink)"
     model_kind = "jsbsim"
@@ -67,8 +68,9 @@ class Quadrotor(VehicleClass):
                  (LAT, math.radians(spec.lat_deg)), (LON, math.radians(spec.lon_deg)),
                  (ALT, spec.alt_msl_m), (YAW, math.radians(spec.heading_deg)),
                  (SPEED, spec.airspeed_mps or 5.0))
-        return replace(spec, airspeed_mps=0.0,
-                       initial_props=start + tuple(spec.initial_props))
+        # a resolved scenario lists these already: the same pairs are not repeated
+        own = tuple(p for p in spec.initial_props if p not in start)
+        return replace(spec, airspeed_mps=0.0, initial_props=start + own)
 
     @property
     def commandable(self) -> bool:
