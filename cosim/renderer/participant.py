@@ -137,6 +137,16 @@ class _Trigger:
     source: str = ""
 
 
+#: the widest thumbnail a frame tap (the live view) gets
+TAP_WIDTH_PX = 320
+
+
+def _tap_size(cam: CameraSpec) -> tuple[int, int]:
+    """A frame's size for the taps: at most ``TAP_WIDTH_PX`` wide."""
+    w = min(cam.width_px, TAP_WIDTH_PX)
+    return w, max(1, round(cam.height_px * w / cam.width_px))
+
+
 def _plain(v: Any) -> Any:
     """JSON for numpy scalars in ground-truth rows."""
     return v.item() if isinstance(v, np.generic) else str(v)
@@ -322,12 +332,14 @@ class CameraParticipant:
         streams = [(cam, row) for cam in self.spec.views for row in cam.vehicles]
         tiles = OperatorView.tile_size(self.spec, len(streams)) if self.spec.operator_view \
             else None
+        self.taps = list(ctx.frame_taps or ())
         for i, (cam, row) in enumerate(streams):
             base = f"cameras/{ctx.ids[row]}_{cam.name}"
             show = tiles is not None and i < OperatorView.MAX_TILES
+            thumb = tiles if show else _tap_size(cam) if self.taps else None
             lift = get_class(ctx.scenario.vehicles[row].vehicle_class).camera_height_m
             self.streams.append(Stream(i, ctx.ids[row], row, cam, f"{base}.{ext}",
-                                       f"{base}.gt.csv", tiles if show else None, lift))
+                                       f"{base}.gt.csv", thumb, lift))
         self.gimbal = {s.index: (s.camera.pitch_deg, s.camera.yaw_deg) for s in self.streams
                        if s.camera.mount == "gimbal"}
         if ctx.commander is not None:
@@ -520,8 +532,7 @@ class CameraParticipant:
                                               traceback.format_exc())
                     raise self.failed from None
                 self._still_done((still, truth) if still else None)
-                if self.operator is not None:
-                    self.operator.thumb(s.index, frame_no, thumb)
+                self._thumb(s.index, frame_no, thumb)
             else:
                 k = s.index % len(self.procs)
                 self.jobs[k].put((s.index, frame_no, tick, pose6, gimbal, still))
@@ -532,6 +543,16 @@ class CameraParticipant:
             self.operator.at_exchange(tick, states)
         if self.procs:
             self._collect(block=False)
+
+    def _thumb(self, stream: int, frame_no: int, thumb: np.ndarray | None) -> None:
+        """A rendered frame's thumbnail: to the operator view and the taps."""
+        if self.operator is not None:
+            self.operator.thumb(stream, frame_no, thumb)
+        if thumb is not None and self.taps:
+            s = self.streams[stream]
+            t = frame_no * s.camera.frame_every / self.ctx.physics_hz
+            for tap in self.taps:
+                tap(s.vehicle, s.camera.name, t, thumb)
 
     def _cameras_of(self, k: int) -> list[str]:
         n = len(self.procs)
@@ -574,8 +595,8 @@ class CameraParticipant:
             _, stream, frame_no, thumb, still = msg
             self.in_flight[stream % len(self.procs)] -= 1
             self._still_done(still)
-            if self.operator is not None and thumb is not None:
-                self.operator.thumb(stream, frame_no, thumb)
+            if thumb is not None:
+                self._thumb(stream, frame_no, thumb)
         elif kind == "done":
             self.closed.update(msg[1])
             self.done.add(k)

@@ -80,6 +80,10 @@ class RunContext:
     #: the run's cosim.sync.commands.Commander: ``commander.observers`` hear
     #: every command, from every source (None: a context outside a run)
     commander: Any = None
+    #: who wants the camera frames the cameras render (the live view):
+    #: ``tap(vehicle, camera, time_s, bgr_thumbnail)``; filled before any
+    #: participant starts, so the cameras know at their start
+    frame_taps: list[Any] | None = None
 
 
 class Participant(Protocol):

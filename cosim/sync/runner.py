@@ -19,7 +19,7 @@ import os
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -90,8 +90,11 @@ class Run:
     def __init__(self, scenario: Scenario, out_dir: str | Path, backend: str = "process",
                  workers: int | None = None, realtime: float | None = None,
                  progress: ProgressFn | None = None, step_timeout_s: float = 60.0,
-                 mavlink: Any = None, external_controller: bool = False) -> None:
+                 mavlink: Any = None, external_controller: bool = False,
+                 extra_participants: Sequence[Any] = ()) -> None:
         self.scn = scenario
+        #: participants the caller adds (the live view), after the scenario's
+        self.extra_participants = list(extra_participants)
         self.out = Path(out_dir)
         self.backend = backend
         self.workers = workers
@@ -368,10 +371,14 @@ class Run:
         if commander.active:
             before.append(parts.Guidance(commander, events, ids).before_step)
         self.participants = build_participants(
-            scn, skip=("swarm",) if self.external_controller else ())
+            scn, skip=("swarm",) if self.external_controller else ()) + self.extra_participants
         ctx = RunContext(scn, self.out, ids, scn.origin.frame, start_ned, hz,
                          scn.rates.control_every, events, self.mavlink, pool.workers,
-                         commander)
+                         commander, frame_taps=[])
+        for part in self.extra_participants:  # the view taps frames before cameras start
+            pre = getattr(part, "prepare", None)
+            if pre is not None:
+                pre(ctx)
         for part in self.participants:
             part.start(ctx)
             during.append(part.on_exchange)
