@@ -21,6 +21,16 @@ from cosim.errors import (
 
 __version__ = "0.1.0"
 
+
+def __getattr__(name: str) -> object:
+    """``cosim.run`` (``cosim.api.run``), imported on first use."""
+    if name == "run":
+        from cosim.api import run
+
+        return run
+    raise AttributeError(f"module 'cosim' has no attribute {name!r}")
+
+
 __all__ = [
     "ConfigError",
     "CosimError",
@@ -32,4 +42,5 @@ __all__ = [
     "WorkerError",
     "WorkerTimeout",
     "__version__",
+    "run",
 ]

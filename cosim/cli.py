@@ -107,6 +107,14 @@ def _build_parser() -> _Parser:
     r.add_argument("--step-timeout-s", type=_positive_float, default=60.0, metavar="S",
                    help="a worker silent this long in one exchange fails the run (default 60)")
     r.add_argument("--no-progress", action="store_true", help="no progress bar or lines")
+    r.add_argument("--view", metavar="URL", nargs="?", const="spawn",
+                   help="watch the run in 3-D in Rerun's viewer (pip install 'cosim[view]'): "
+                        "alone, opens a viewer here; with URL, streams to a viewer running "
+                        "there (e.g. rerun+http://127.0.0.1:9876/proxy)")
+    r.add_argument("--record-view", metavar="FILE",
+                   help="write the same 3-D view to FILE (.rrd) to open later: rerun FILE")
+    r.add_argument("--view-rate-hz", type=_positive_float, default=10.0, metavar="HZ",
+                   help="vehicle poses per second of simulation time in the view (default 10)")
 
     v = sub.add_parser("validate", help="check scenario files and report every problem")
     v.add_argument("scenarios", nargs="+", metavar="SCENARIO")
@@ -205,33 +213,44 @@ def _setup_logging(verbose: int, quiet: bool) -> None:
 
 
 class Progress:
-    """A bar on a terminal; a log line every ``every_s`` seconds otherwise."""
+    """A bar on a terminal; a log line every ``every_s`` seconds otherwise.
+
+    The real-time factor shown is the run's one definition (README, "Running
+    scenarios"): simulated seconds over wall seconds of the tick loop, counted
+    from the loop's first report (the build and trim are not in it), as
+    ``summary.json``'s ``real_time_factor``; the final line of ``cosim run``
+    prints the summary's figure, so the last bar shows none."""
 
     def __init__(self, stream: TextIO, hz: float, every_s: float = 10.0) -> None:
         self.stream = stream
         self.tty = stream.isatty()
         self.hz = hz
         self.every_s = every_s if not self.tty else 0.1
-        self.t0 = time.monotonic()
-        self.last = self.t0 if not self.tty else 0.0
+        self.start: tuple[float, int] | None = None  # (wall, tick) of the first report
+        self.last = 0.0
 
     def __call__(self, tick: int, total: int) -> None:
         now = time.monotonic()
+        if self.start is None:
+            self.start = (now, tick)
+            self.last = now if not self.tty else 0.0
         if now - self.last < self.every_s and tick < total:
             return
         self.last = now
-        wall = now - self.t0
+        wall = now - self.start[0]
         sim = tick / self.hz
-        rtf = sim / wall if wall > 0 else 0.0
+        rtf = (tick - self.start[1]) / self.hz / wall if wall > 0 else 0.0
         frac = tick / total if total else 1.0
+        done = tick >= total
         if self.tty:
             width = 30
             bar = "#" * int(frac * width) + "-" * (width - int(frac * width))
-            self.stream.write(f"\r[{bar}] {frac:6.1%}  t={sim:8.1f} s  {rtf:6.2f}x real time ")
-            if tick >= total:
+            speed = "" if done else f"  {rtf:6.2f}x real time"
+            self.stream.write(f"\r[{bar}] {frac:6.1%}  t={sim:8.1f} s{speed} ")
+            if done:
                 self.stream.write("\n")
             self.stream.flush()
-        else:
+        elif not done:
             log.info("progress: %.1f%% (sim %.1f s of %.1f s, %.2fx real time)", frac * 100,
                      sim, total / self.hz, rtf)
 
@@ -296,9 +315,15 @@ def _cmd_run(a: argparse.Namespace) -> int:
                               "would wait for answers it drops; run without signing on a "
                               "loopback link")
         mav_cfg = dataclasses.replace(mav_cfg, lockstep_sysid=CONTROLLER_SYSID)
+    extra: list[Any] = []
+    if a.view is not None or a.record_view is not None:
+        from cosim.view import ViewParticipant
+
+        extra.append(ViewParticipant(Path(a.record_view) if a.record_view else None, a.view,
+                                     a.view_rate_hz))
     run = Run(scn, out, backend=a.backend, workers=a.workers, realtime=a.realtime,
               progress=progress, step_timeout_s=a.step_timeout_s, mavlink=mav_cfg,
-              external_controller=a.external_controller)
+              external_controller=a.external_controller, extra_participants=extra)
 
     interrupts = 0
 
@@ -319,8 +344,7 @@ def _cmd_run(a: argparse.Namespace) -> int:
     print(f"{res.stop_reason}: {sm['vehicles']} vehicles, {sm['sim_time_s']:.2f} s simulated "
           f"in {sm['wall_time_s']:.2f} s ({sm['real_time_factor'] or 0:.2f}x real time, "
           f"{sm['workers']} worker(s), {sm['backend']})")
-    print(f"outputs in {out}/: states.parquet, events.jsonl, summary.json, "
-          f"scenario.resolved.yaml")
+    print(f"outputs in {out}/: {_outputs(out)}")
     if res.error is not None:
         print(f"cosim run: {res.error}", file=sys.stderr)
     if res.stop_reason == "completed":
@@ -334,15 +358,33 @@ def _cmd_run(a: argparse.Namespace) -> int:
     return EXIT_FAIL
 
 
+def _outputs(out: Path) -> str:
+    """What the run folder holds (a folder with a slash and its file count;
+    more than three files of one kind as a count), read from the folder."""
+    if not out.is_dir():
+        return "(nothing)"
+    names: list[str] = []
+    kinds: dict[str, list[str]] = {}
+    for p in sorted(out.iterdir()):
+        if p.name.startswith((".", "_")):
+            continue
+        if p.is_dir() and not p.name.endswith(".parquet"):
+            n = sum(1 for q in p.rglob("*") if q.is_file())
+            names.append(f"{p.name}/ ({n} file{'s' if n != 1 else ''})")
+        else:
+            kinds.setdefault(p.suffix if p.is_file() else p.name, []).append(p.name)
+    for suffix, files in kinds.items():
+        names += files if len(files) <= 3 else [f"{len(files)} *{suffix} files"]
+    return ", ".join(sorted(names, key=lambda s: s.lower()))
+
+
 def _cmd_validate(a: argparse.Namespace) -> int:
     if a.workers is not None and a.workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {a.workers}")
     bad = 0
     for f in a.scenarios:
         try:
-            scn = _load_scenario(f)
-            if a.deep:
-                _build_all(scn, f, a.workers)
+            scn, combos, built = _validate_file(f, a.deep, a.workers)
         except ConfigError as e:
             bad += 1
             print(e, file=sys.stderr)
@@ -351,11 +393,52 @@ def _cmd_validate(a: argparse.Namespace) -> int:
             bad += 1
             print(f"{f}: {e}", file=sys.stderr)
             continue
-        deep = ", every vehicle built and trimmed" if a.deep else ""
+        deep = ""
+        if a.deep:
+            deep = ", every vehicle built and trimmed" if combos == 1 else \
+                f", the vehicles of {built} distinct combination(s) built and trimmed"
+        sweep = f"; all {combos} sweep combinations" if combos > 1 else ""
         print(f"{f}: ok ({len(scn.vehicles)} vehicles, {scn.duration_s:g} s, "
               f"{scn.rates.physics_hz:g}/{scn.rates.control_hz:g}/{scn.rates.log_hz:g} Hz"
-              f"{deep})")
+              f"{sweep}{deep})")
     return EXIT_USAGE if bad else EXIT_OK
+
+
+def _validate_file(f: str, deep: bool, workers: int | None) -> tuple[Scenario, int, int]:
+    """Check a scenario file, every combination of its sweep (values the first
+    combination does not have can fail: a speed beyond the model's envelope);
+    with ``deep``, build the vehicles of each distinct combination. Returns
+    the first combination's scenario, the combinations checked and built."""
+    from cosim.scenario import load_scenario
+    from cosim.sweep.spec import format_value, read_sweep
+
+    spec = read_sweep(f)
+    points = spec.points() if spec.values else [None]
+    problems: list[str] = []
+    first: Scenario | None = None
+    seen: set[tuple[Any, ...]] = set()
+    built = 0
+    for point in points:
+        label = "" if point is None or len(points) == 1 else "sweep combination " + ", ".join(
+            f"{n}={format_value(point[n])}" for n in spec.swept) + ": "
+        try:
+            scn = load_scenario(f, sweep_point=point)
+            if first is None:
+                first = scn
+            key = tuple((v.model, v.vehicle_class, v.alt_msl_m, v.airspeed_mps, v.trim,
+                         v.initial_props) for v in scn.vehicles)
+            if deep and key not in seen:
+                seen.add(key)
+                built += 1
+                _build_all(scn, f, workers)
+        except ConfigError as e:
+            problems += [f"{label}{m}" for m in e.problems]
+        except (CosimError, OSError) as e:
+            problems.append(f"{label}{f}: {e}")
+    if problems:
+        raise ConfigError(problems)
+    assert first is not None
+    return first, len(points), built
 
 
 def _build_all(scn: Scenario, fname: str, workers: int | None) -> None:

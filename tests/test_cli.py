@@ -280,3 +280,19 @@ def test_a_dead_ceiling_process_is_an_error_not_a_hang() -> None:
     assert len(errors) == 1 and isinstance(errors[0], CosimError), errors
     assert re.search(r"ceiling process 1 \(pid \d+\) ended with code -9", str(errors[0]))
     assert not any(p.is_alive() for p in c.procs)
+
+
+def test_validate_checks_every_sweep_combination(tmp_path: Path, capsys) -> None:
+    """A cell the first combination does not reach (400 kt, beyond the
+    uav700's envelope) fails validate as it would fail the sweep, named by
+    its combination; the bundled sweep passes with every combination."""
+    src = (Path(__file__).resolve().parent.parent / "scenarios" / "conspicuity" /
+           "altitude_speed.yaml")
+    bad = tmp_path / "fast.yaml"
+    bad.write_text(src.read_text().replace("speed_kt: [50, 100, 200]", "speed_kt: [50, 100, 400]"))
+    assert main(["validate", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "sweep combination speed_kt=400, alt_agl_m=30, target=truck" in err
+    assert "outside the envelope" in err and "speed_kt=100" not in err
+    assert main(["validate", str(src)]) == 0
+    assert "all 36 sweep combinations" in capsys.readouterr().out
