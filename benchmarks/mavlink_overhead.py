@@ -7,7 +7,7 @@ as fast as possible, default telemetry rates, tlogs on), alternating
 without and with MAVLink (sent to a closed loopback port) so machine noise
 hits both alike, and prints each pair's wall times (``wall_time_s`` from
 summary.json: the tick loop, not the build), the CPU time of all the run's
-processes (steadier on a shared machine) and the ratios. Issue 4's
+processes (steadier on a shared machine) and the ratios. The
 target: at most +10% wall time for 100 vehicles.
 """
 

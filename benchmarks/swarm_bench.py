@@ -1,4 +1,4 @@
-"""Swarm benchmark (issue 5 target: flocking with 256 uav700s at >= 1x real
+"""Swarm benchmark (target: flocking with 256 uav700s at >= 1x real
 time on the 2-core machine, controller and MAVLink included).
 
 Runs ``cosim run``'s loop (``cosim.sync.Run``) on a generated flocking

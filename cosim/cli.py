@@ -12,6 +12,7 @@ import argparse
 import dataclasses
 import logging
 import os
+import re
 import signal
 import sys
 import time
@@ -155,8 +156,9 @@ def _build_parser() -> _Parser:
     sw = sub.add_parser("sweep", help="run a scenario once per combination of its sweep: "
                                       "values, in parallel")
     sw.add_argument("scenario", help="scenario YAML file with a sweep: section")
-    sw.add_argument("--out", metavar="DIR", required=True,
-                    help="output folder: one subfolder per run, visibility.csv, manifest.csv")
+    sw.add_argument("--out", metavar="DIR",
+                    help="output folder: one subfolder per run, visibility.csv, manifest.csv "
+                         "(default runs/<file name>-sweep-<date>-<time>)")
     sw.add_argument("--jobs", type=int, metavar="N",
                     help="runs at a time (default: one per core); each run is one process")
     sw.add_argument("--overwrite", action="store_true",
@@ -546,6 +548,12 @@ def _cmd_sweep(a: argparse.Namespace) -> int:
         log.info("[%d/%d] %s: %s in %.1f s (elapsed %.0f s, about %.0f s left)", done, total,
                  o.name, how, o.wall_s, elapsed_s, left_s)
 
+    if a.out is None:
+        from cosim.sweep.spec import read_sweep
+
+        read_sweep(a.scenario)  # the file's problems first, with their lines
+        name = re.sub(r"[^A-Za-z0-9_.-]", "_", Path(a.scenario).stem) or "sweep"
+        a.out = str(Path("runs") / f"{name}-sweep-{time.strftime('%Y%m%d-%H%M%S')}")
     res = run_sweep(a.scenario, a.out, jobs=a.jobs, overwrite=a.overwrite,
                     duration_s=a.duration_s, on_done=on_done)
     ok = len(res.runs) - len(res.failed)

@@ -296,3 +296,33 @@ def test_validate_checks_every_sweep_combination(tmp_path: Path, capsys) -> None
     assert "outside the envelope" in err and "speed_kt=100" not in err
     assert main(["validate", str(src)]) == 0
     assert "all 36 sweep combinations" in capsys.readouterr().out
+
+
+def test_sweep_has_a_default_out_folder(tmp_path: Path, monkeypatch, capsys) -> None:
+    """Like cosim run, cosim sweep needs no --out: runs/<file>-sweep-<time>."""
+    src = Path(__file__).resolve().parent.parent / "scenarios" / "conspicuity" / \
+        "altitude_speed.yaml"
+    small = tmp_path / "tiny.yaml"
+    text = src.read_text().replace("speed_kt: [50, 100, 200]", "speed_kt: [100]")
+    text = text.replace("alt_agl_m: [30, 100, 200, 250, 300, 500]", "alt_agl_m: [100]")
+    small.write_text(text.replace("target: [truck, fire_truck]", "target: [truck]"))
+    monkeypatch.chdir(tmp_path)
+    assert main(["-q", "sweep", str(small), "--duration-s", "1"]) == 0
+    made = list((tmp_path / "runs").glob("tiny-sweep-*"))
+    assert len(made) == 1 and (made[0] / "visibility.csv").exists()
+    assert str(Path("runs") / made[0].name) in capsys.readouterr().out
+
+
+def test_user_facing_text_names_no_issues_and_no_internal_documents() -> None:
+    """README, docs, benchmarks' README and the scenario files are for users:
+    no issue numbers they cannot look up, no links to design notes outside
+    the repository."""
+    import re
+
+    root = Path(__file__).resolve().parent.parent
+    files = [root / "README.md", root / "benchmarks" / "README.md",
+             *(root / "docs").glob("*.md"), *(root / "scenarios").rglob("*.yaml")]
+    bad = re.compile(r"\b[Ii]ssues? #?\d+\b|DESIGN\.md|\.\./shared")
+    found = [f"{p.relative_to(root)}:{n}: {line.strip()}" for p in files
+             for n, line in enumerate(p.read_text().splitlines(), 1) if bad.search(line)]
+    assert not found, "\n".join(found)

@@ -39,7 +39,10 @@ log = logging.getLogger(__name__)
 #: measured columns of visibility.csv after the swept names
 VISIBILITY_COLUMNS = ("speed_kt", "alt_agl_m", "target", "visible_s", "first_visible_s",
                       "last_visible_s", "passes", "overhead_s", "screen_direction",
-                      "target_id", "vehicle", "camera", "run")
+                      "flown_speed_kt", "speed_off", "target_id", "vehicle", "camera", "run")
+#: how far (fraction) the flown ground speed may be from a swept speed_kt before
+#: the cell is flagged (``speed_off``): the visible time scales with 1 / speed
+SPEED_TOLERANCE = 0.01
 MANIFEST_COLUMNS = ("run", "vehicle", "camera", "video", "ground_truth", "frames", "rate_hz",
                     "width_px", "height_px", "hfov_deg", "vfov_deg")
 
@@ -219,27 +222,28 @@ def _states(run_dir: Path) -> dict[str, list[Any]] | None:
 
     try:
         return read_states(run_dir).select(
-            ["vehicle", "time_s", "airspeed_mps", "alt_agl_m"]).to_pydict()
+            ["vehicle", "time_s", "airspeed_mps", "alt_agl_m", "vn_mps", "ve_mps"]).to_pydict()
     except (OSError, CosimError, ValueError, KeyError):
         return None
 
 
 def _measured(t: dict[str, list[Any]] | None, vehicle: str, t0_s: float | None,
-              t1_s: float | None) -> tuple[float, float]:
-    """Mean airspeed (kt) and height above ground (m) of ``vehicle`` between
-    t0_s and t1_s (the whole run when None), from ``_states``."""
+              t1_s: float | None) -> tuple[float, float, float]:
+    """Mean airspeed (kt), height above ground (m) and ground speed (kt) of
+    ``vehicle`` between t0_s and t1_s (the whole run when None), from ``_states``."""
     from cosim.geo import KT_TO_MPS
 
     if t is None:
-        return math.nan, math.nan
+        return math.nan, math.nan, math.nan
     rows = [i for i, v in enumerate(t["vehicle"]) if v == vehicle
             and (t0_s is None or t0_s - 1e-9 <= t["time_s"][i])
             and (t1_s is None or t["time_s"][i] <= t1_s + 1e-9)]
     if not rows:
-        return math.nan, math.nan
+        return math.nan, math.nan, math.nan
     spd = sum(t["airspeed_mps"][i] for i in rows) / len(rows) / KT_TO_MPS
     agl = sum(t["alt_agl_m"][i] for i in rows) / len(rows)
-    return spd, agl
+    gs = sum(math.hypot(t["vn_mps"][i], t["ve_mps"][i]) for i in rows) / len(rows) / KT_TO_MPS
+    return spd, agl, gs
 
 
 def _f(x: float | None, nd: int = 6) -> str:
@@ -257,8 +261,13 @@ def visibility_rows(spec: SweepSpec, outcome: RunOutcome, run_dir: Path
     swept = {n: format_value(outcome.point[n]) for n in spec.swept}
     states = _states(run_dir)  # once per run, not per target
     for tv in run_visibility(run_dir):
-        spd, agl = _measured(states, tv.vehicle, tv.first_visible_s, tv.last_visible_s)
+        spd, agl, gs = _measured(states, tv.vehicle, tv.first_visible_s, tv.last_visible_s)
+        commanded = outcome.point.get("speed_kt") if "speed_kt" in spec.swept else None
+        off = ""
+        if isinstance(commanded, (int, float)) and commanded > 0 and math.isfinite(gs):
+            off = "true" if abs(gs - commanded) > SPEED_TOLERANCE * commanded else "false"
         row = {"speed_kt": _f(spd, 2), "alt_agl_m": _f(agl, 2), "target": tv.target,
+               "flown_speed_kt": _f(gs, 2), "speed_off": off,
                "visible_s": _f(tv.visible_s), "first_visible_s": _f(tv.first_visible_s),
                "last_visible_s": _f(tv.last_visible_s), "passes": str(len(tv.passes)),
                "overhead_s": _f(tv.passes[0].overhead_s) if tv.passes else "",
@@ -318,6 +327,12 @@ def write_tables(result: SweepResult, spec: SweepSpec) -> None:
             man.extend(manifest_rows(spec, o, out))
         except GroundTruthError as e:
             o.status, o.error = "failed", f"reading its ground truth: {e}"
+    off = sorted({r["run"] for r in vis if r.get("speed_off") == "true"})
+    if off:
+        log.warning("%d run(s) flew more than %g%% off their swept speed_kt (speed_off in "
+                    "visibility.csv; the visible time scales with 1/speed): %s", len(off),
+                    SPEED_TOLERANCE * 100, ", ".join(off[:10]) + (" ..." if len(off) > 10
+                                                                  else ""))
     swept = list(spec.swept)
     write_csv(out / "visibility.csv",
               swept + [c for c in VISIBILITY_COLUMNS if c not in swept], vis)

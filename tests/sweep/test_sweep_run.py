@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import shutil
 from pathlib import Path
 
@@ -82,6 +83,18 @@ def test_sweep_2x2_runs_every_combination(tmp_path: Path, capsys) -> None:
         ("60", "truck", "0.4", "0.1", "0.4"), ("60", "fire_truck", "0.4", "0.1", "0.4"),
         ("100", "truck", "0.2", "0.2", "0.3"), ("100", "fire_truck", "0.2", "0.2", "0.3")]
     assert float(vis[0]["alt_agl_m"]) == pytest.approx(80, abs=2)  # measured, not swept
+    # the ground speed flown while in view, beside the commanded (swept) one, and the
+    # flag when they differ by more than 1%, checked against the states themselves
+    from cosim.logs import read_states
+
+    for r in vis:
+        t = read_states(out / r["run"]).to_pydict()
+        win = [i for i, ts in enumerate(t["time_s"])
+               if float(r["first_visible_s"]) - 1e-9 <= ts <= float(r["last_visible_s"]) + 1e-9]
+        gs = sum(math.hypot(t["vn_mps"][i], t["ve_mps"][i]) for i in win) / len(win) / 0.514444
+        assert float(r["flown_speed_kt"]) == pytest.approx(gs, abs=0.01)
+        assert r["speed_off"] == ("true" if abs(gs - float(r["speed_kt"])) >
+                                  0.01 * float(r["speed_kt"]) else "false")
     assert vis[1]["target_id"] == "truck" and vis[1]["run"] == FOLDERS[1]
     man = _rows(out / "manifest.csv")
     assert [r["run"] for r in man] == FOLDERS
