@@ -114,6 +114,13 @@ def _build_parser() -> _Parser:
                         "there (e.g. rerun+http://127.0.0.1:9876/proxy)")
     r.add_argument("--record-view", metavar="FILE",
                    help="write the same 3-D view to FILE (.rrd) to open later: rerun FILE")
+    r.add_argument("--video", metavar="SYSID[:CAM]=udp://HOST:PORT", action="append",
+                   help="stream that vehicle's camera (its MAVLink system id; CAM: the "
+                        "camera's name, default its first) as H.264 over RTP to HOST:PORT "
+                        "(QGroundControl: UDP h.264 on 5600; add ?format=mpegts for MPEG-TS); "
+                        "repeatable; loopback only unless --video-allow-remote")
+    r.add_argument("--video-allow-remote", action="store_true",
+                   help="allow --video to send to addresses other than this machine")
     r.add_argument("--view-rate-hz", type=_positive_float, default=10.0, metavar="HZ",
                    help="vehicle poses per second of simulation time in the view (default 10)")
 
@@ -323,6 +330,11 @@ def _cmd_run(a: argparse.Namespace) -> int:
 
         extra.append(ViewParticipant(Path(a.record_view) if a.record_view else None, a.view,
                                      a.view_rate_hz))
+    if a.video:
+        from cosim.renderer.stream import VideoParticipant, parse_target
+
+        extra.append(VideoParticipant([parse_target(t, a.video_allow_remote)
+                                       for t in a.video], scn))
     run = Run(scn, out, backend=a.backend, workers=a.workers, realtime=a.realtime,
               progress=progress, step_timeout_s=a.step_timeout_s, mavlink=mav_cfg,
               external_controller=a.external_controller, extra_participants=extra)

@@ -32,6 +32,8 @@ log = logging.getLogger(__name__)
 DEFAULT_RATE_HZ = 10.0
 #: the most camera frames a second each camera sends to the view
 FRAME_HZ = 2.0
+#: the widest camera frame the view shows (px)
+FRAME_WIDTH_PX = 320
 #: points kept of each vehicle's track (one a second)
 TRACK_POINTS = 600
 #: the size of a vehicle's box (half lengths, m: along, across, up), by class
@@ -139,7 +141,7 @@ class ViewParticipant:
     def prepare(self, ctx: Any) -> None:
         """Before any participant starts: ask the cameras for their frames."""
         if ctx.frame_taps is not None:
-            ctx.frame_taps.append(self.camera_frame)
+            ctx.frame_taps.append((self.camera_frame, FRAME_WIDTH_PX))
 
     def _static_world(self, scn: Any) -> None:
         rr = self.rr

@@ -96,6 +96,12 @@ MAV_CMD_IMAGE_START_CAPTURE: Final[int] = int(_d.MAV_CMD_IMAGE_START_CAPTURE)
 MAV_CMD_IMAGE_STOP_CAPTURE: Final[int] = int(_d.MAV_CMD_IMAGE_STOP_CAPTURE)
 MAV_CMD_DO_DIGICAM_CONTROL: Final[int] = int(_d.MAV_CMD_DO_DIGICAM_CONTROL)
 MAV_CMD_MISSION_START: Final[int] = int(_d.MAV_CMD_MISSION_START)
+MAV_CMD_REQUEST_VIDEO_STREAM_INFORMATION: Final[int] = int(
+    _d.MAV_CMD_REQUEST_VIDEO_STREAM_INFORMATION)
+VIDEO_STREAM_TYPE_RTPUDP: Final[int] = int(_d.VIDEO_STREAM_TYPE_RTPUDP)
+VIDEO_STREAM_TYPE_MPEG_TS: Final[int] = int(_d.VIDEO_STREAM_TYPE_MPEG_TS)
+VIDEO_STREAM_STATUS_FLAGS_RUNNING: Final[int] = int(_d.VIDEO_STREAM_STATUS_FLAGS_RUNNING)
+VIDEO_STREAM_ENCODING_H264: Final[int] = int(_d.VIDEO_STREAM_ENCODING_H264)
 MAV_CMD_DO_ORBIT: Final[int] = int(_d.MAV_CMD_DO_ORBIT)
 MAV_CMD_NAV_FENCE_RETURN_POINT: Final[int] = int(_d.MAV_CMD_NAV_FENCE_RETURN_POINT)
 MAV_CMD_NAV_FENCE_POLYGON_VERTEX_INCLUSION: Final[int] = int(
@@ -387,23 +393,23 @@ class Packer:
         s = self._mav.signing
         s.timestamp = max(int(s.timestamp), int(timestamp))
 
-    def pack(self, name: str, **fields: Any) -> bytes:
+    def pack(self, message: str, /, **fields: Any) -> bytes:
         """Encode one message; ``str`` values of char fields are ASCII-encoded.
 
         A wrong field name or a value that does not fit its field raises
         ``ValueError`` naming the message (a bug in the caller, not bad input).
         """
-        _message_class(name)
-        chars = _CHAR_FIELDS[name]
+        _message_class(message)
+        chars = _CHAR_FIELDS[message]
         for k in chars & fields.keys():
             v = fields[k]
             if isinstance(v, str):
                 fields[k] = v.encode("ascii", errors="replace")
         try:
-            msg = getattr(self._mav, name.lower() + "_encode")(**fields)
+            msg = getattr(self._mav, message.lower() + "_encode")(**fields)
             buf = bytes(msg.pack(self._mav))
         except Exception as e:  # TypeError (fields), struct.error (ranges)
-            raise ValueError(f"cannot encode {name} from system {self.system_id} with "
+            raise ValueError(f"cannot encode {message} from system {self.system_id} with "
                              f"{fields!r}: {e}") from e
         self._mav.seq = (self._mav.seq + 1) % 256
         self.packets += 1

@@ -525,6 +525,15 @@ class MavlinkEndpoint:
         self.counts["commands_out"] += len(commands)
         return commands
 
+    def set_video(self, streams: Mapping[int, Sequence[Mapping[str, Any]]]) -> None:
+        """The video streams each vehicle (by system id) answers
+        VIDEO_STREAM_INFORMATION with (stream ids 1.., their count)."""
+        for sysid, infos in streams.items():
+            v = self._by_sysid.get(sysid)
+            if v is not None:
+                v.video = [{**i, "stream_id": k + 1, "count": len(infos)}
+                           for k, i in enumerate(infos)]
+
     def drain_events(self) -> list[tuple[int, str, dict[str, Any]]]:
         """Run events since the last call: (state row, kind, fields)."""
         events, self.events = self.events, []

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections import Counter
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -128,6 +128,10 @@ class MavlinkLinks:
     def send_telemetry(self, tick: int) -> None:
         for e in self.endpoints:
             e.send_telemetry(tick)
+
+    def set_video(self, streams: Mapping[int, Any]) -> None:
+        """See ``MavlinkEndpoint.set_video`` (system ids of the first link)."""
+        self.endpoints[0].set_video(streams)
 
     def drain_events(self) -> list[tuple[int, str, dict[str, Any]]]:
         """See ``MavlinkEndpoint.drain_events``."""

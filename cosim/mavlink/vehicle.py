@@ -234,6 +234,8 @@ class MavVehicle:
         #: called with (vehicle, message name) when a stream's period changes
         self.on_period_change: Callable[[MavVehicle, str], None] | None = None
         self.mission = Mission()
+        #: VIDEO_STREAM_INFORMATION fields of its streamed cameras (``cosim run --video``)
+        self.video: list[dict[str, Any]] = []
 
     # -- state -------------------------------------------------------------
     @property

@@ -137,13 +137,9 @@ class _Trigger:
     source: str = ""
 
 
-#: the widest thumbnail a frame tap (the live view) gets
-TAP_WIDTH_PX = 320
-
-
-def _tap_size(cam: CameraSpec) -> tuple[int, int]:
-    """A frame's size for the taps: at most ``TAP_WIDTH_PX`` wide."""
-    w = min(cam.width_px, TAP_WIDTH_PX)
+def _tap_size(cam: CameraSpec, widths: list[int | None]) -> tuple[int, int]:
+    """A frame's size for the taps: the widest any asks for (None: full size)."""
+    w = cam.width_px if None in widths else min(cam.width_px, max(w for w in widths if w))
     return w, max(1, round(cam.height_px * w / cam.width_px))
 
 
@@ -332,11 +328,12 @@ class CameraParticipant:
         streams = [(cam, row) for cam in self.spec.views for row in cam.vehicles]
         tiles = OperatorView.tile_size(self.spec, len(streams)) if self.spec.operator_view \
             else None
-        self.taps = list(ctx.frame_taps or ())
+        self.taps = [tap for tap, _ in ctx.frame_taps or ()]
+        widths = [w for _, w in ctx.frame_taps or ()]
         for i, (cam, row) in enumerate(streams):
             base = f"cameras/{ctx.ids[row]}_{cam.name}"
             show = tiles is not None and i < OperatorView.MAX_TILES
-            thumb = tiles if show else _tap_size(cam) if self.taps else None
+            thumb = tiles if show else _tap_size(cam, widths) if self.taps else None
             lift = get_class(ctx.scenario.vehicles[row].vehicle_class).camera_height_m
             self.streams.append(Stream(i, ctx.ids[row], row, cam, f"{base}.{ext}",
                                        f"{base}.gt.csv", thumb, lift))

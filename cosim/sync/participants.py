@@ -80,9 +80,10 @@ class RunContext:
     #: the run's cosim.sync.commands.Commander: ``commander.observers`` hear
     #: every command, from every source (None: a context outside a run)
     commander: Any = None
-    #: who wants the camera frames the cameras render (the live view):
-    #: ``tap(vehicle, camera, time_s, bgr_thumbnail)``; filled before any
-    #: participant starts, so the cameras know at their start
+    #: who wants the camera frames the cameras render (the live view, video
+    #: streams): ``(tap, width_px)`` pairs, ``tap(vehicle, camera, time_s, bgr)``
+    #: called with each frame scaled to at most ``width_px`` wide (None: full
+    #: size); filled before any participant starts, so the cameras know
     frame_taps: list[Any] | None = None
 
 

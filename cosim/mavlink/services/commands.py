@@ -63,6 +63,7 @@ class CommandService:
             mav.MAV_CMD_GET_MESSAGE_INTERVAL: self._get_interval,
             mav.MAV_CMD_DO_SET_MISSION_CURRENT: self._do_set_mission_current,
             mav.MAV_CMD_MISSION_START: self._mission_start,
+            mav.MAV_CMD_REQUEST_VIDEO_STREAM_INFORMATION: self._video_info,
         }
 
     def supported(self, personality: Personality) -> frozenset[int]:
@@ -117,9 +118,25 @@ class CommandService:
         out.replies.append((name, v.fields(name, tick)))
         return mav.MAV_RESULT_ACCEPTED
 
+    def _video_info(self, v: MavVehicle, req: CommandRequest, tick: int, out: Outcome,
+                    stream: float | None = None) -> int:
+        """VIDEO_STREAM_INFORMATION of stream param1 (0: every one) of a
+        vehicle whose camera is streamed (``cosim run --video``)."""
+        sid = as_int(req.p[0] if stream is None else stream)
+        infos = [i for i in v.video if sid in (0, None) or i["stream_id"] == sid]
+        if not infos:
+            out.replies.extend(text("no video stream" if not v.video else
+                                    f"no video stream {sid}"))
+            return mav.MAV_RESULT_FAILED if not v.video else mav.MAV_RESULT_DENIED
+        out.replies.extend(("VIDEO_STREAM_INFORMATION", {**i, "camera_device_id": 0})
+                           for i in infos)
+        return mav.MAV_RESULT_ACCEPTED
+
     def _request_message(self, v: MavVehicle, req: CommandRequest, tick: int, out: Outcome
                          ) -> int:
         mid = as_int(req.p[0])
+        if mid == mav.msg_id("VIDEO_STREAM_INFORMATION"):  # param2: the stream (0: all)
+            return self._video_info(v, req, tick, out, req.p[1])
         return self._send_message(v, None if mid is None else mav.msg_name(mid), tick, out)
 
     def _request_capabilities(self, v: MavVehicle, req: CommandRequest, tick: int,

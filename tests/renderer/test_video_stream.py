@@ -1,0 +1,105 @@
+"""Camera video to a ground station: what `cosim run --video` sends over RTP
+and MPEG-TS decodes (PyAV, as ffplay or QGroundControl would) to the
+camera's frames; the vehicle answers VIDEO_STREAM_INFORMATION with the
+stream; remote addresses, unknown vehicles and cameras are refused."""
+
+from __future__ import annotations
+
+import io
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import av
+import pytest
+
+from cosim.cli import main
+from cosim.errors import ConfigError
+from cosim.renderer.stream import VideoTarget, parse_target, sdp
+
+REPO = Path(__file__).resolve().parent.parent.parent
+FLYOVER = REPO / "scenarios" / "cameras" / "flyover.yaml"
+
+
+def _port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _sim(tmp_path: Path, video: str, seconds: float = 3.0) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "cosim", "-q", "run", str(FLYOVER), "--out",
+                           str(tmp_path / "run"), "--duration-s", str(seconds),
+                           "--no-progress", "--video", video],
+                          capture_output=True, text=True, timeout=120)
+
+
+def test_rtp_decodes_to_the_cameras_frames(tmp_path: Path) -> None:
+    port = _port()
+    (tmp_path / "rx.sdp").write_text(sdp(VideoTarget(1, None, "127.0.0.1", port, "rtp"), "rx"))
+    frames: list[tuple[int, int]] = []
+
+    def receive() -> None:
+        c = av.open(str(tmp_path / "rx.sdp"), format="sdp", options={
+            "protocol_whitelist": "file,udp,rtp", "timeout": "3000000"})
+        try:
+            frames.extend((f.width, f.height) for f in c.decode(video=0))
+        except av.error.FFmpegError:
+            pass  # no more packets: the stream ended
+    rx = threading.Thread(target=receive, daemon=True)
+    rx.start()
+    time.sleep(1.0)  # listening before the first packet
+    r = _sim(tmp_path, f"1=udp://127.0.0.1:{port}")
+    assert r.returncode == 0, r.stderr
+    rx.join(15)
+    assert 25 <= len(frames) <= 31 and set(frames) == {(640, 480)}  # 3 s at 10 Hz
+    assert (tmp_path / "run" / "video_1_belly.sdp").read_text() == \
+        sdp(VideoTarget(1, None, "127.0.0.1", port, "rtp"), "cosim uav1/belly")
+
+
+def test_mpegts_decodes_too(tmp_path: Path) -> None:
+    port = _port()
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    sock.bind(("127.0.0.1", port))
+    sock.settimeout(3.0)
+    data = bytearray()
+
+    def receive() -> None:
+        try:
+            while True:
+                data.extend(sock.recv(65535))
+        except OSError:
+            pass
+    rx = threading.Thread(target=receive, daemon=True)
+    rx.start()
+    r = _sim(tmp_path, f"1:belly=udp://127.0.0.1:{port}?format=mpegts", seconds=2.0)
+    assert r.returncode == 0, r.stderr
+    rx.join(10)
+    sock.close()
+    frames = [(f.width, f.height) for f in av.open(io.BytesIO(bytes(data)),
+                                                   format="mpegts").decode(video=0)]
+    assert 15 <= len(frames) <= 21 and set(frames) == {(640, 480)}
+
+
+@pytest.mark.parametrize("text, message", [
+    ("1=udp://192.0.2.7:5600", "not a loopback address"),
+    ("1=tcp://127.0.0.1:5600", "expected udp://HOST:PORT"),
+    ("1=udp://127.0.0.1:5600?format=webm", "format must be one of"),
+    ("uav1=udp://127.0.0.1:5600", "expected SYSID"),
+])
+def test_bad_video_options_are_refused(text: str, message: str) -> None:
+    with pytest.raises(ConfigError, match=message):
+        parse_target(text)
+    assert parse_target("1=udp://192.0.2.7:5600", allow_remote=True).host == "192.0.2.7"
+
+
+def test_unknown_vehicle_or_camera_is_a_usage_error(tmp_path: Path, capsys) -> None:
+    assert main(["run", str(FLYOVER), "--out", str(tmp_path / "a"),
+                 "--video", "7=udp://127.0.0.1:5600"]) == 2
+    assert "no vehicle has system id 7" in capsys.readouterr().err
+    assert main(["run", str(FLYOVER), "--out", str(tmp_path / "b"),
+                 "--video", "1:nose=udp://127.0.0.1:5600"]) == 2
+    assert "has no camera 'nose'; it has belly" in capsys.readouterr().err
