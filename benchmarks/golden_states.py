@@ -7,8 +7,14 @@ must not alter. ``tests/test_golden_states.py`` compares every run with
     python benchmarks/golden_states.py --record   # write the record anew
 
 Record anew only for a change meant to alter behaviour, and say so in its
-commit. The record names the jsbsim and numpy versions and the machine it
-was made with: floating point may differ elsewhere, and the test skips then.
+commit. A record names the jsbsim and numpy versions, the machine and the
+SIMD extensions numpy dispatches to on it (its vectorised sin, cos, hypot
+and arctan2 differ in the last bit between AVX2 and AVX-512): floating point
+differs elsewhere, so the file keeps one record per environment, and the
+test skips where none matches. To add the AVX2 record on an AVX-512 machine:
+
+    NPY_DISABLE_CPU_FEATURES="X86_V4 AVX512_ICL AVX512_SPR" \
+        python benchmarks/golden_states.py --record
 """
 
 from __future__ import annotations
@@ -33,12 +39,34 @@ def scenarios() -> list[Path]:
     return sorted((REPO / "scenarios").rglob("*.yaml"))
 
 
+#: what must match for a record to apply (python is informative only)
+MATCH = ("jsbsim", "numpy", "machine", "simd")
+
+
 def environment() -> dict[str, str]:
     import jsbsim
     import numpy
+    from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
 
+    simd = [f for f in __cpu_dispatch__ if __cpu_features__.get(f)]
     return {"jsbsim": jsbsim.__version__, "numpy": numpy.__version__,
-            "machine": platform.machine(), "python": platform.python_version()[:4]}
+            "machine": platform.machine(), "python": platform.python_version()[:4],
+            "simd": " ".join(simd)}
+
+
+def records() -> list[dict[str, Any]]:
+    """Every record in the file: ``{"environment": ..., "runs": ...}``."""
+    if not RECORD.exists():
+        return []
+    return list(json.loads(RECORD.read_text())["records"])
+
+
+def matching(env: dict[str, str]) -> dict[str, Any] | None:
+    """The record made in an environment like ``env`` (None: none was)."""
+    for r in records():
+        if all(r["environment"].get(k) == env[k] for k in MATCH):
+            return r
+    return None
 
 
 def run_one(path: Path, out: Path) -> dict[str, Any]:
@@ -69,13 +97,20 @@ def main(argv: list[str] | None = None) -> int:
             got[key(path)] = run_one(path, Path(tmp) / str(i))
             print(f"{key(path)}: {got[key(path)]['states'][:16]} "
                   f"({got[key(path)]['rows']} rows)", flush=True)
+    env = environment()
     if a.record:
+        others = [r for r in records()
+                  if any(r["environment"].get(k) != env[k] for k in MATCH)]
         RECORD.parent.mkdir(parents=True, exist_ok=True)
-        RECORD.write_text(json.dumps({"environment": environment(), "runs": got}, indent=1,
-                                     sort_keys=True) + "\n")
-        print(f"recorded {len(got)} scenarios in {RECORD}")
+        RECORD.write_text(json.dumps({"records": others + [{"environment": env, "runs": got}]},
+                                     indent=1, sort_keys=True) + "\n")
+        print(f"recorded {len(got)} scenarios in {RECORD} for {env}")
         return 0
-    want = json.loads(RECORD.read_text())["runs"]
+    rec = matching(env)
+    if rec is None:
+        print(f"no record for {env}: record one with --record", file=sys.stderr)
+        return 1
+    want = rec["runs"]
     bad = [k for k in sorted(set(want) | set(got)) if want.get(k) != got.get(k)]
     for k in bad:
         print(f"DIFFERENT: {k}", file=sys.stderr)

@@ -6,7 +6,6 @@ to alter behaviour, said so in its commit)."""
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
@@ -17,16 +16,27 @@ sys.path.insert(0, str(REPO / "benchmarks"))
 
 import golden_states as golden  # noqa: E402
 
-RECORD = json.loads(golden.RECORD.read_text())
+HERE = golden.environment()
+RECORD = golden.matching(HERE)
 
 
 @pytest.mark.parametrize("path", golden.scenarios(), ids=golden.key)
 def test_a_bundled_scenario_does_what_it_did(path: Path, tmp_path: Path) -> None:
-    here = golden.environment()
-    if {k: here[k] for k in ("jsbsim", "numpy", "machine")} != {
-            k: RECORD["environment"][k] for k in ("jsbsim", "numpy", "machine")}:
-        pytest.skip(f"the record was made with {RECORD['environment']}, this is {here}: "
-                    f"floating point may differ (python benchmarks/golden_states.py --record)")
+    if RECORD is None:
+        made = [r["environment"] for r in golden.records()]
+        pytest.skip(f"the records were made with {made}, this is {HERE}: floating point "
+                    f"may differ (python benchmarks/golden_states.py --record)")
     want = RECORD["runs"].get(golden.key(path))
     assert want is not None, f"{golden.key(path)} is not in the record: record it"
     assert golden.run_one(path, tmp_path / "run") == want
+
+
+def test_the_records_are_found_by_their_environment() -> None:
+    """A record applies only where jsbsim, numpy, the machine and numpy's
+    SIMD extensions all match."""
+    recs = golden.records()
+    assert recs, "no golden records"
+    for r in recs:
+        env = dict(r["environment"])
+        assert golden.matching(env) is r or golden.matching(env) == r
+        assert golden.matching({**env, "simd": env["simd"] + " X"}) is None
