@@ -429,6 +429,7 @@ def _validate_file(f: str, deep: bool, workers: int | None) -> tuple[Scenario, i
     spec = read_sweep(f)
     points = spec.points() if spec.values else [None]
     problems: list[str] = []
+    more = 0  # problems counted beyond those kept
     first: Scenario | None = None
     seen: set[tuple[Any, ...]] = set()
     built = 0
@@ -447,10 +448,11 @@ def _validate_file(f: str, deep: bool, workers: int | None) -> tuple[Scenario, i
                 _build_all(scn, f, workers)
         except ConfigError as e:
             problems += [f"{label}{m}" for m in e.problems]
+            more += e.more
         except (CosimError, OSError) as e:
             problems.append(f"{label}{f}: {e}")
     if problems:
-        raise ConfigError(problems)
+        raise ConfigError(problems, more)
     assert first is not None
     return first, len(points), built
 
