@@ -29,7 +29,7 @@ import numpy as np
 from cosim.errors import BuildError, CosimError, JSBSimError, VehicleError
 from cosim.vehicles.base import BatchedModel
 from cosim.vehicles.jsbsim_model import Vehicle
-from cosim.vehicles.registry import get_class
+from cosim.vehicles.registry import get_class, state_layout
 from cosim.vehicles.spec import (
     N_STATE,
     STATE_FIELDS,
@@ -63,13 +63,16 @@ class Shard:
     @classmethod
     def build(cls, specs: Sequence[VehicleSpec], dt_s: float, channels: Sequence[str],
               into: Shard | None = None, on_built: Callable[[int], None] | None = None,
-              layout_names: Sequence[str] = ()) -> Shard:
+              layout_names: Sequence[str] | None = None) -> Shard:
         """Build and trim every vehicle. A JSBSim vehicle that cannot be loaded
         or trimmed does not stop the others: all such failures are raised
         together as one ``BuildError``; on any other failure ``current`` names
         the culprit. ``on_built(k)`` is called after each vehicle with the
         count so far. ``layout_names``: the run's state columns (the pool's
-        ``state_layout``), for the columns classes add."""
+        ``state_layout``; by default these vehicles' own), for the columns
+        classes add."""
+        if layout_names is None:
+            layout_names = [f.name for f in state_layout(specs)]
         shard = into if into is not None else cls()
         shard.n_channels = len(channels)
         shard.dt_s = dt_s

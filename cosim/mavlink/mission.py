@@ -632,10 +632,10 @@ class MissionRunner:
         if c == M.MAV_CMD_NAV_TAKEOFF:
             return self._at_alt(v, nav, row, p.takeoff_tolerance_m)
         if c == M.MAV_CMD_NAV_LAND:
-            return _landed(row)
+            return p.landed(row)
         if c == M.MAV_CMD_NAV_RETURN_TO_LAUNCH:
             if p.rtl_lands:
-                return _landed(row)
+                return p.landed(row)
             return dist <= max(nav.radius_m, accept)
         if c == M.MAV_CMD_NAV_LOITER_UNLIM:
             return False
@@ -687,11 +687,6 @@ def _passed(nav: NavState, lat: float, lon: float) -> bool:
         return False
     pn, pe = flat_ne(a_lat, a_lon, lat, lon)
     return (pn * dn + pe * de) / length >= length
-
-
-def _landed(row: list[float]) -> bool:
-    return (float(row[_S["alt_agl_m"]]) < 0.5 and abs(float(row[_S["vd_mps"]])) < 0.3
-            and math.hypot(float(row[_S["vn_mps"]]), float(row[_S["ve_mps"]])) < 0.5)
 
 
 def camera_vocab(it: MissionItem) -> dict[str, Any] | None:

@@ -16,7 +16,7 @@ overrides what it supports.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 from cosim.guidance.commands import DEFAULT_BANK_LIMIT_DEG, Command
@@ -187,6 +187,12 @@ class Personality:
             return float(goto.get("loiter_radius_m", 0.0))
         return 0.0
 
+    def landed(self, row: Sequence[float]) -> bool:
+        """Whether a vehicle in this state row is at rest on the ground (a
+        mission's LAND, and an RTL that lands, end there): within 0.5 m of
+        it, not moving."""
+        return (float(row[STATE_INDEX["alt_agl_m"]]) < 0.5 and stopped(row))
+
     def accept_radius_m(self, v: MavVehicle, row: list[float]) -> float:
         """How close a waypoint counts as reached (ArduPilot's WP_RADIUS)."""
         return 2.0
@@ -201,6 +207,13 @@ class Personality:
         altitude), outside the mission protocol; answered with a MISSION_ACK."""
         ctx.counts["commands_refused"] += 1
         return Outcome(replies=[mission_ack(m, mav.MAV_MISSION_ERROR)])
+
+
+def stopped(row: Sequence[float]) -> bool:
+    """Not moving: under 0.5 m/s over the ground and 0.3 m/s vertically."""
+    return (abs(float(row[STATE_INDEX["vd_mps"]])) < 0.3
+            and math.hypot(float(row[STATE_INDEX["vn_mps"]]),
+                           float(row[STATE_INDEX["ve_mps"]])) < 0.5)
 
 
 def command_kind(cmd: Command) -> str | None:

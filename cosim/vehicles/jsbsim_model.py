@@ -48,10 +48,17 @@ def contact_radius_m(fdm: jsbsim.FGFDMExec) -> float:
     return r_in * _IN_TO_M
 
 
+#: the autopilot property that makes a gentle touchdown a landing
+LANDING_PROP = "cosim/ap/landing"
+#: the fastest sink (ft/s, 3 m/s) and the largest bank (rad, 20 deg) of a landing
+LANDING_SINK_FPS = 9.84
+LANDING_ROLL_RAD = 0.35
+
 class Vehicle:
     """A built, trimmed FDM with cached property nodes."""
 
-    __slots__ = ("spec", "fdm", "_read", "_channels", "_agl", "_gear", "status", "airborne",
+    __slots__ = ("spec", "fdm", "_read", "_channels", "_agl", "_gear", "_landing", "status",
+                 "airborne",
                  "contact_radius_m", "contact_is_impact", "_extra")
 
     def __init__(self, spec: VehicleSpec, dt_s: float, channels: Sequence[str]) -> None:
@@ -88,6 +95,9 @@ class Vehicle:
         agl, gear = pm.get_node("position/h-agl-ft"), pm.get_node("forces/fbz-gear-lbs")
         assert agl is not None and gear is not None
         self._agl, self._gear = agl, gear
+        #: a model whose autopilot can land (cosim/ap/landing): a gentle touchdown
+        #: while it is set is a landing, not an impact
+        self._landing = pm.get_node(LANDING_PROP) if has_property(fdm, LANDING_PROP) else None
         self.status = VehicleStatus.ACTIVE
         self.airborne = not self._touching()
 
@@ -129,6 +139,16 @@ class Vehicle:
         for name, value in s.initial_props:
             fdm[name] = value
 
+    def _landed(self) -> bool:
+        """A touchdown its autopilot asked for: landing set, sinking slower
+        than ``LANDING_SINK_FPS``, wings within ``LANDING_ROLL_RAD`` of level."""
+        node = self._landing
+        if node is None or node.get_double_value() < 0.5:
+            return False
+        fdm = self.fdm
+        return (fdm["velocities/v-down-fps"] < LANDING_SINK_FPS
+                and abs(fdm["attitude/phi-rad"]) < LANDING_ROLL_RAD)
+
     def _touching(self) -> bool:
         return self._gear.get_double_value() != 0.0 or self._agl.get_double_value() <= 0.0
 
@@ -153,7 +173,7 @@ class Vehicle:
                 self._run_failed()
             if self.airborne:
                 if self._touching():
-                    if not self.contact_is_impact:  # on the ground, as it should be
+                    if not self.contact_is_impact or self._landed():  # as it should be
                         self.airborne = False
                         continue
                     self.status = VehicleStatus.GROUND_IMPACT

@@ -163,7 +163,7 @@ def test_malformed_items_end_the_upload_and_keep_the_old_mission(
 
 def test_items_the_vehicle_cannot_fly_are_refused_alone_and_skipped(rig) -> None:
     r = rig(1)
-    items = [MISSION4[0], (REL, ML.MAV_CMD_NAV_LAND, 0, 0, 0, 0, LAT0, LON0, 0.0),
+    items = [MISSION4[0], (REL, ML.MAV_CMD_NAV_SPLINE_WAYPOINT, 0, 0, 0, 0, LAT0, LON0, 90.0),
              (REL, ML.MAV_CMD_DO_SET_SERVO, 5, 1500, 0, 0, 0, 0, 0.0), MISSION4[1]]
     seen, _, msgs = upload(r, items)
     assert seen[-1] == ("MISSION_ACK", ML.MAV_MISSION_ACCEPTED)
@@ -171,7 +171,8 @@ def test_items_the_vehicle_cannot_fly_are_refused_alone_and_skipped(rig) -> None
     assert "Mission item 2" in texts and "Mission item 3" in texts
     assert texts.count("MAV_MISSION_UNSUPPORTED") == 2
     got = download(r)
-    assert [m.command for m in got[1:]] == [WP, ML.MAV_CMD_NAV_LAND, ML.MAV_CMD_DO_SET_SERVO, WP]
+    assert [m.command for m in got[1:]] == [WP, ML.MAV_CMD_NAV_SPLINE_WAYPOINT,
+                                            ML.MAV_CMD_DO_SET_SERVO, WP]
     cmds, _ = set_mode(r, PlaneMode.AUTO)
     assert cmds[0].command.nav == "goto"
     r.states[0, S["lat_deg"]], r.states[0, S["lon_deg"]] = MISSION4[0][6], MISSION4[0][7]

@@ -4,7 +4,7 @@ synthetic state rows: DO_JUMP with its repeat count, the loiters with an end
 the DO items after them, DO_SET_HOME, DO_SET_ROI (the gimbal follows the
 point), fence and rally lists (a breach switches to RTL with an event; RTL
 goes to the nearest rally point), and what AUTOPILOT_VERSION and SYS_STATUS
-claim."""
+claim, and a fixed-wing's NAV_LAND (item and command)."""
 
 from __future__ import annotations
 
@@ -288,3 +288,50 @@ def test_camera_items_become_camera_commands(rig) -> None:
     cmds, _ = reach(r, *at(A))
     cams = [vc.command.camera for vc in cmds if vc.command.camera is not None]
     assert [(c.stop, c.shoot) for c in cams] == [(True, False), (False, True)]
+
+
+def test_a_fixed_wing_lands_at_the_land_item(rig) -> None:
+    """NAV_LAND in a plane's mission: the leg to its point is the approach
+    (a goto with ``land``, at 1.1 x AIRSPEED_MIN); the item is reached once
+    the aircraft is stopped on the ground, and it disarms as ArduPlane does."""
+    r = rig(1)
+    v = r.ep.vehicles[0]
+    land_at = (LAT0 + 0.03, LON0)
+    upload(r, [A, (REL, ML.MAV_CMD_NAV_LAND, 0, 0, 0, 0, *land_at, 0.0)])
+    cmds, _ = set_mode(r, PlaneMode.AUTO)
+    cmds, reached = reach(r, *at(A))
+    assert reached == [1]
+    c = cmds[0].command
+    assert c.land and c.nav == "goto"
+    assert (c.points[0].a, c.points[0].b) == land_at
+    approach = min(1.1 * v.params["AIRSPEED_MIN"], v.params["AIRSPEED_CRUISE"])
+    assert c.airspeed_mps == pytest.approx(approach, abs=0.01)
+    _, reached = reach(r, *land_at)  # over the point, still flying: not yet
+    assert reached == [] and v.armed
+    r.states[0, [S["alt_agl_m"], S["vd_mps"], S["vn_mps"], S["ve_mps"]]] = 0.1, 0.0, 0.0, 0.0
+    _, reached = reach(r, *land_at)
+    assert reached == [2] and not v.armed and v.mission.complete
+
+
+def test_a_fixed_wing_lands_on_command_in_guided(rig) -> None:
+    """NAV_LAND as a command: in GUIDED, at its position (none given:
+    straight ahead); in another mode it is refused with a reason."""
+    r = rig(1)
+    set_mode(r, PlaneMode.LOITER)
+    cmds, replies = r.request(lambda: r.gcs.mav.command_long_send(
+        1, 1, ML.MAV_CMD_NAV_LAND, 0, 0, 0, 0, 0, 0, 0, 0))
+    assert ack_result(replies) == ML.MAV_RESULT_FAILED and not cmds
+    assert any("GUIDED" in t.text for t in of_type(replies, "STATUSTEXT"))
+    set_mode(r, PlaneMode.GUIDED)
+    cmds, replies = r.request(lambda: r.gcs.mav.command_long_send(
+        1, 1, ML.MAV_CMD_NAV_LAND, 0, 0, 0, 0, 0, 0, 0, 0))
+    assert ack_result(replies) == ML.MAV_RESULT_ACCEPTED
+    c = cmds[0].command
+    assert c.land and c.nav is None  # straight ahead
+    cmds, replies = r.request(lambda: r.gcs.mav.command_int_send(
+        1, 1, ML.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, ML.MAV_CMD_NAV_LAND, 0, 0, 0, 0, 0, 0,
+        round((LAT0 + 0.01) * 1e7), round(LON0 * 1e7), 0.0))
+    assert ack_result(replies) == ML.MAV_RESULT_ACCEPTED
+    c = cmds[0].command
+    assert c.land and c.nav == "goto"
+    assert (c.points[0].a, c.points[0].b) == (pytest.approx(LAT0 + 0.01), pytest.approx(LON0))

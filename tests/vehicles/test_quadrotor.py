@@ -107,14 +107,14 @@ vehicles:
   - {id: uav, model: uav700, init: {north_m: 0, east_m: 0, alt_agl_m: 300, airspeed_kt: 100}}
   - {id: q, model: F450, init: {north_m: 0, east_m: 0, alt_agl_m: 30}}
 schedule:
-  - {at_s: 1, vehicles: uav, command: {land: true}}
+  - {at_s: 1, vehicles: uav, command: {takeoff_agl_m: 50}}
   - {at_s: 1, vehicles: q, command: {airspeed_mps: 40, goto: {north_m: 10, east_m: 0}}}
   - {at_s: 1, vehicles: q, command: {throttle: 0.5}}
 """
     with pytest.raises(ConfigError) as ei:
         parse_scenario(body, str(tmp_path / "bad.yaml"), check_properties=False)
     msgs = "\n".join(ei.value.problems)
-    assert "a fixed-wing cannot land" in msgs
+    assert "a fixed-wing cannot take off vertically" in msgs
     assert "a quadrotor flies at 0..15 m/s, not 40" in msgs
     assert "throttle, bank limits and stall protection are for fixed-wings" in msgs
 

@@ -25,11 +25,14 @@ from cosim.guidance.safety import Limits, floor_problems, radius_problems
 from cosim.vehicles.base import Guidance, SwarmLimits, VehicleClass
 from cosim.vehicles.fixed_wing.guidance import AP_CHANNELS, FixedWingGuidance
 from cosim.vehicles.fixed_wing.mavlink import ARDUPLANE
-from cosim.vehicles.spec import VehicleSpec
+from cosim.vehicles.registry import state_layout
+from cosim.vehicles.spec import StateField, VehicleSpec
 
 #: how low a fixed-wing may be commanded, above the ground (m); the study's
 #: lowest passes were 30 m above the ground
 DEFAULT_MIN_ALT_AGL_M = 20.0
+#: newtons in a pound-force
+LBF_TO_N = 4.4482216152605
 
 
 class FixedWing(VehicleClass):
@@ -40,6 +43,9 @@ class FixedWing(VehicleClass):
     channels = AP_CHANNELS
     default_camera_mount = "nadir"
     contact_is_impact = True
+    #: the ground's push on skids or wheels (N; 0 in the air): how guidance
+    #: knows a landing has touched down, and the landing's load in the log
+    state_columns = (StateField("contact_force_n", "forces/fbz-gear-lbs", -LBF_TO_N),)
     flag_events = {"stalled": ("stall", "onset", "recovery"),
                    "stall_protection_active": ("stall_protection", "active", "inactive")}
     mavlink = ARDUPLANE
@@ -51,7 +57,9 @@ class FixedWing(VehicleClass):
     def make_guidance(self, rows: Sequence[int], frame: LocalFrame, start_ne: np.ndarray,
                       channel_index: Mapping[str, int], specs: Sequence[VehicleSpec] = ()
                       ) -> Guidance:
-        return FixedWingGuidance(len(start_ne), frame, start_ne, dict(channel_index))
+        names = [f.name for f in state_layout(specs)] if specs else []
+        contact = names.index("contact_force_n") if "contact_force_n" in names else None
+        return FixedWingGuidance(len(start_ne), frame, start_ne, dict(channel_index), contact)
 
     def min_alt_agl_m(self, profile: Mapping[str, Any]) -> float:
         v = profile.get("min_alt_agl_m", DEFAULT_MIN_ALT_AGL_M)
@@ -75,7 +83,7 @@ class FixedWing(VehicleClass):
 
     def safety_problems(self, cmd: Command, limits: Limits, who: str) -> list[str]:
         lift = [f"{who}: a fixed-wing cannot {what}" for what, asked in (
-            ("take off vertically", cmd.takeoff_agl_m is not None), ("land", cmd.land),
+            ("take off vertically", cmd.takeoff_agl_m is not None),
             ("fly a velocity setpoint", cmd.velocity_ne is not None)) if asked]
         return lift + floor_problems(cmd, limits, who) + radius_problems(cmd, limits, who)
 

@@ -12,6 +12,19 @@ so the commanded heading changes no faster than a bank-limited turn can
 follow. Headings are bearings in each vehicle's own local frame.
 A fixed-wing cannot stop: a goto ends in a loiter around the target, and
 waypoints end in a loiter around the last one.
+
+``land`` (alone: straight ahead; with ``goto`` or ``waypoints``: at the last
+point, after the others): the last leg is flown on, over the point, on a
+glide path of ``GLIDE_DEG`` to the ground at the point (its altitude hold
+in AGL mode follows the along-track distance each exchange, at the speed
+commanded), with the autopilot's ``cosim/ap/landing`` set so that a gentle
+touchdown (skids or wheels in contact: the ``contact_force_n`` column) is a
+landing (``cosim.vehicles.jsbsim_model``); on the ground the engine idles,
+the autopilot holds the ground pitch (``cosim/ap/landing`` 2,
+``cosim/ap/ground-pitch-deg``: nose wheel or skids down, no lift to bounce
+on), brakes where it has them, and the aircraft rolls or slides to a stop
+(``touchdown`` and ``landed`` events). It does not take off again: a later
+command is ignored with a ``command_ignored`` event.
 """
 
 from __future__ import annotations
@@ -38,9 +51,20 @@ AP_CHANNELS: tuple[str, ...] = (
     "cosim/ap/engage", "cosim/ap/heading-hold", "cosim/ap/heading-cmd-deg",
     "cosim/ap/bank-limit-deg", "cosim/ap/alt-hold", "cosim/ap/alt-cmd-ft", "cosim/ap/alt-mode",
     "cosim/ap/speed-hold", "cosim/ap/speed-cmd-kt", "cosim/ap/throttle-bias",
-    "cosim/ap/stall-protect", "fcs/throttle-cmd-norm",
+    "cosim/ap/stall-protect", "fcs/throttle-cmd-norm", "cosim/ap/landing",
+    "fcs/left-brake-cmd-norm", "fcs/right-brake-cmd-norm",
 )
 _NONE, _LEG, _LOITER = 0, 1, 2
+#: the glide path of a landing (degrees below the horizon)
+GLIDE_DEG = 3.0
+#: how far (seconds of flight) before the landing point the commanded glide
+#: path meets the ground: the altitude hold lags the path it follows by about
+#: this much, so the touchdown falls near the point
+GLIDE_LEAD_S = 8.0
+#: the wheel brakes on the ground after a landing (0..1; skids have none)
+ROLLOUT_BRAKE = 0.5
+#: a landing's phases: none, on the glide path, on the ground sliding, stopped
+_NOT_LANDING, _APPROACH, _ROLLOUT, _LANDED = 0, 1, 2, 3
 _S = STATE_INDEX
 _M_TO_FT = 1.0 / FT_TO_M
 
@@ -50,8 +74,11 @@ class FixedWingGuidance:
     only its class's rows are ever commanded)."""
 
     def __init__(self, n: int, frame: LocalFrame, start_ne: np.ndarray,
-                 channel_index: dict[str, int]) -> None:
+                 channel_index: dict[str, int], contact_column: int | None = None) -> None:
         self.n = n
+        #: the state column of the ground's push on the airframe (N; > 0: in
+        #: contact); None: contact is judged from the height alone
+        self.contact_col = contact_column
         self.frame = frame
         self.ground_alt_m = frame.alt_m
         self.start_ne = np.asarray(start_ne, dtype=np.float64).reshape(n, 2)
@@ -70,6 +97,12 @@ class FixedWingGuidance:
         self.wp_total = np.zeros(n, dtype=np.int32)
         self.kind = [""] * n  # "goto" / "waypoints" / "loiter"
         self.labels = [""] * n
+        self.landing = np.zeros(n, dtype=np.int8)  # the phase (``_APPROACH``, ...)
+        self.land_at_end = np.zeros(n, dtype=bool)  # land at the route's last point
+        self.land_point = np.zeros((n, 2))
+        self.land_alt = np.zeros(n)  # the height (AGL) it flies until the glide path
+        #: events of commands refused, for the next ``update``
+        self.pending: list[GuidanceEvent] = []
 
     # -- commands --------------------------------------------------------
     def _set(self, sp: np.ndarray, rows: Any, name: str, value: Any) -> None:
@@ -104,6 +137,11 @@ class FixedWingGuidance:
         """Apply ``cmd`` to vehicles ``rows`` (indices) given the current states."""
         for i in rows:
             s = states[i]
+            if self.landing[i] in (_ROLLOUT, _LANDED):  # on the ground: it stays there
+                self.pending.append(GuidanceEvent("command_ignored", i, {
+                    "command": cmd.label(),
+                    "reason": "a fixed-wing does not take off again after a landing"}))
+                continue
             if not self.engaged[i]:  # engage, holding the current state on every axis
                 self.engaged[i] = True
                 self._set(sp, i, "cosim/ap/engage", 1.0)
@@ -125,14 +163,98 @@ class FixedWingGuidance:
             if cmd.heading_deg is not None:
                 self._stop_nav(i)
                 self._set(sp, i, "cosim/ap/heading-cmd-deg", cmd.heading_deg)
+            if cmd.nav is not None or cmd.heading_deg is not None:
+                self._cancel_landing(i, sp)
             if cmd.nav is not None:
+                self.land_at_end[i] = cmd.land
                 self._start_nav(i, cmd, states, sp)
+            elif cmd.land:
+                self._land_ahead(i, states, sp)
             self.labels[i] = self._label(i, cmd)
 
     def _label(self, i: int, cmd: Command) -> str:
         if cmd.nav is None and cmd.heading_deg is None and self.nav[i] != _NONE:
             return self.labels[i]  # settings only: the navigation goes on
         return cmd.label()
+
+    def _cancel_landing(self, i: int, sp: np.ndarray) -> None:
+        """A new route or heading during the approach: no landing."""
+        if self.landing[i] == _APPROACH:
+            self.landing[i] = _NOT_LANDING
+            self._set(sp, i, "cosim/ap/landing", 0.0)
+        self.land_at_end[i] = False
+
+    def _land_ahead(self, i: int, states: np.ndarray, sp: np.ndarray) -> None:
+        """``land`` alone: at the point where the glide path from here meets
+        the ground, straight ahead."""
+        here = self.position_ne(states, np.array([i]))[0]
+        psi = math.radians(float(states[i, _S["yaw_deg"]]))
+        dist = max(float(states[i, _S["alt_agl_m"]]), 0.0) / math.tan(math.radians(GLIDE_DEG))
+        point = here + dist * np.array([math.cos(psi), math.sin(psi)])
+        self.kind[i] = "land"
+        self._start_landing(i, here, point, sp, float(states[i, _S["alt_agl_m"]]))
+
+    def _start_landing(self, i: int, start: np.ndarray, point: np.ndarray,
+                       sp: np.ndarray, agl: float) -> None:
+        """Fly from ``start`` over ``point`` and on, at height ``agl`` until
+        the glide path, then down it."""
+        self.land_alt[i] = agl
+        d = point - start
+        u = d / max(float(np.hypot(*d)), 1e-6)
+        self.queue.pop(i, None)
+        self.nav[i] = _LEG
+        self.a[i] = start
+        self.b[i] = point + 5000.0 * u  # past the point: straight on after touchdown
+        self.land_point[i] = point
+        self.landing[i] = _APPROACH
+        self.land_at_end[i] = False
+        self._set(sp, i, "cosim/ap/landing", 1.0)
+        self._set(sp, i, "cosim/ap/alt-hold", 1.0)
+        self._set(sp, i, "cosim/ap/alt-mode", 1.0)
+        self.labels[i] = "land"
+
+    def _on_ground(self, states: np.ndarray, i: int) -> bool:
+        """Skids or wheels on the ground (the contact force; without that
+        column, the height: below 0.3 m)."""
+        if self.contact_col is not None:
+            return bool(states[i, self.contact_col] > 0.0)
+        return bool(states[i, _S["alt_agl_m"]] < 0.3)
+
+    def _landing_update(self, states: np.ndarray, sp: np.ndarray,
+                        events: list[GuidanceEvent]) -> None:
+        """The glide path of the vehicles landing; touchdown and stop."""
+        idx = np.flatnonzero(self.landing == _APPROACH)
+        if idx.size:
+            pos = self.position_ne(states, idx)
+            for k, i in enumerate(idx.tolist()):
+                u = self.b[i] - self.a[i]
+                u = u / max(float(np.hypot(*u)), 1e-6)
+                to_go = float(np.dot(self.land_point[i] - pos[k], u))
+                if self._on_ground(states, i):  # a landing
+                    self.landing[i] = _ROLLOUT
+                    self.nav[i] = _NONE
+                    self._set(sp, i, "cosim/ap/speed-hold", 0.0)
+                    self._set(sp, i, "cosim/ap/alt-hold", 0.0)
+                    self._set(sp, i, "cosim/ap/landing", 2.0)  # holds the ground pitch
+                    self._set(sp, i, "cosim/ap/heading-hold", 0.0)  # wings level
+                    self._set(sp, i, "fcs/throttle-cmd-norm", 0.0)
+                    for side in ("left", "right"):  # wheel brakes, where it has them
+                        self._set(sp, i, f"fcs/{side}-brake-cmd-norm", ROLLOUT_BRAKE)
+                    self.speed_cmd[i] = np.nan
+                    events.append(GuidanceEvent("touchdown", i, {
+                        "distance_m": -to_go,
+                        "sink_mps": float(states[i, _S["vd_mps"]])}))
+                    self.labels[i] = "touchdown"
+                    continue
+                lead = GLIDE_LEAD_S * float(states[i, _S["airspeed_mps"]])
+                glide = min(max(to_go - lead, -200.0) * math.tan(math.radians(GLIDE_DEG)),
+                            float(self.land_alt[i]))
+                self._set(sp, i, "cosim/ap/alt-cmd-ft", glide * _M_TO_FT)
+        for i in np.flatnonzero(self.landing == _ROLLOUT).tolist():
+            if math.hypot(states[i, _S["vn_mps"]], states[i, _S["ve_mps"]]) < 0.5:
+                self.landing[i] = _LANDED
+                self.labels[i] = "landed"
+                events.append(GuidanceEvent("landed", i, {}))
 
     def _stop_nav(self, i: int) -> None:
         self.nav[i] = _NONE
@@ -185,10 +307,12 @@ class FixedWingGuidance:
 
     def update(self, states: np.ndarray, sp: np.ndarray) -> list[GuidanceEvent]:
         """Advance navigation for every guided vehicle; write heading setpoints."""
+        events, self.pending = self.pending, []
+        if (self.landing != _NOT_LANDING).any():
+            self._landing_update(states, sp, events)
         idx = np.flatnonzero(self.nav != _NONE)
         if idx.size == 0:
-            return []
-        events: list[GuidanceEvent] = []
+            return events
         pos = self.position_ne(states, idx)
         v = np.maximum(states[idx, _S["airspeed_mps"]], 1.0)
         l1 = np.maximum(1.5 * self.turn_radius(idx, v), 150.0)
@@ -229,12 +353,17 @@ class FixedWingGuidance:
 
     def _leg_transition(self, i: int, p: np.ndarray, l1: float, v: float, states: np.ndarray,
                         sp: np.ndarray, events: list[GuidanceEvent]) -> None:
+        if self.landing[i] == _APPROACH:
+            return  # straight on, over the landing point
         a, b = self.a[i], self.b[i]
         dist = float(np.hypot(*(b - p)))
         d = b - a
         length = float(np.hypot(*d))
         along = float(np.dot(p - a, d / length)) if length > 1e-6 else length
         final = len(self.queue.get(i, ())) <= 1
+        if final and self.land_at_end[i]:
+            self._start_landing(i, a.copy(), b.copy(), sp, float(states[i, _S["alt_agl_m"]]))
+            return
         if final:
             radius = self.end_radius[i]
             if radius != radius:  # NaN: default

@@ -14,13 +14,16 @@ Commands: ARM_DISARM, NAV_RETURN_TO_LAUNCH, NAV_TAKEOFF, DO_CHANGE_SPEED,
 DO_REPOSITION, NAV_LOITER_UNLIM, DO_ORBIT (a loiter: radius param1,
 negative counter-clockwise; speed param2). Disarmed vehicles keep their
 engine off: arming restores the cruise airspeed, disarming sets throttle 0,
-and no other command carries a speed while disarmed. NAV_LAND is not
-supported: cosim's fixed-wings do not land.
+and no other command carries a speed while disarmed. NAV_LAND (in GUIDED):
+land at the point, or straight ahead, down a 3-degree glide path at 1.1 x
+AIRSPEED_MIN, sliding to a stop on the airframe's skids.
 
 Missions (flown in AUTO item by item, ``cosim.mavlink.mission``):
 NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_LOITER_TURNS, NAV_LOITER_TIME,
-NAV_LOITER_TO_ALT, NAV_TAKEOFF, NAV_RETURN_TO_LAUNCH and the DO/CONDITION
-items every ArduPilot-like class runs; NAV_LAND is skipped. MISSION_ITEM(_INT)
+NAV_LOITER_TO_ALT, NAV_TAKEOFF, NAV_RETURN_TO_LAUNCH, NAV_LAND (the leg to
+its point becomes the approach, then the glide path; reached once stopped
+on the ground, where the aircraft disarms) and the DO/CONDITION items every
+ArduPilot-like class runs. MISSION_ITEM(_INT)
 with current=2 is a guided goto (GUIDED only), current=3 an altitude change.
 
 Parameters (a small, real set: every one changes what the vehicle does):
@@ -48,6 +51,7 @@ SYSID_THISMAV      INT16    (sysid)   read-only here (ArduPilot needs a reboot t
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import replace
 from enum import IntEnum
 from typing import TYPE_CHECKING, Any
@@ -64,7 +68,7 @@ from cosim.mavlink import adapter as mav
 from cosim.mavlink import mission as mi
 from cosim.mavlink.mission import COMMON_DO_ITEMS, MissionItem
 from cosim.mavlink.params import SYSID_THISMAV, ParamDef
-from cosim.mavlink.personality import CommandFn, Personality
+from cosim.mavlink.personality import CommandFn, Personality, stopped
 from cosim.mavlink.services.base import (
     CommandRequest,
     Context,
@@ -143,7 +147,7 @@ class ArduPlane(Personality):
     mission_items = COMMON_DO_ITEMS | {
         mav.MAV_CMD_NAV_WAYPOINT, mav.MAV_CMD_NAV_LOITER_UNLIM, mav.MAV_CMD_NAV_LOITER_TURNS,
         mav.MAV_CMD_NAV_LOITER_TIME, mav.MAV_CMD_NAV_LOITER_TO_ALT, mav.MAV_CMD_NAV_TAKEOFF,
-        mav.MAV_CMD_NAV_RETURN_TO_LAUNCH}
+        mav.MAV_CMD_NAV_RETURN_TO_LAUNCH, mav.MAV_CMD_NAV_LAND}
     rtl_mode = int(PlaneMode.RTL)
     command_modes = {"loiter": int(PlaneMode.LOITER), "goto": int(PlaneMode.GUIDED),
                      "heading": int(PlaneMode.GUIDED), "velocity": int(PlaneMode.GUIDED),
@@ -169,6 +173,7 @@ class ArduPlane(Personality):
             mav.MAV_CMD_DO_REPOSITION: self._reposition,
             mav.MAV_CMD_NAV_LOITER_UNLIM: self._loiter_unlim,
             mav.MAV_CMD_DO_ORBIT: self._orbit,
+            mav.MAV_CMD_NAV_LAND: self._nav_land,
         }
 
     # -- heartbeat -----------------------------------------------------------------
@@ -505,10 +510,17 @@ class ArduPlane(Personality):
         return None
 
     # -- missions ------------------------------------------------------------------
+    def landed(self, row: Sequence[float]) -> bool:
+        """Stopped within 3 m of the ground: a fixed-wing cannot hover, and
+        on its wheels its position (the centre of gravity) is over a metre
+        up (1.3 m for the c172p)."""
+        return float(row[_S["alt_agl_m"]]) < 3.0 and stopped(row)
+
     def item_problem(self, ctx: Context, v: MavVehicle, item: MissionItem) -> str | None:
         """An item's altitude below the class minimum above the ground (the
         rule of ``Context.unsafe``), counted as unsafe."""
-        if item.command not in mi.NAV_COMMANDS or item.command not in mi.POSITION_COMMANDS:
+        if item.command not in mi.NAV_COMMANDS or item.command not in mi.POSITION_COMMANDS \
+                or item.command == mav.MAV_CMD_NAV_LAND:  # a landing goes to the ground
             return None
         alt = ctx.alt(v, item.frame, item.z)
         if alt is None:
@@ -547,6 +559,9 @@ class ArduPlane(Personality):
         row = v.row_or_raise()
         speed = (v.mission.speed_mps if v.mission.speed_mps is not None
                  else v.params["AIRSPEED_CRUISE"]) if v.armed else None
+        if c == mav.MAV_CMD_NAV_LAND:
+            return self._land_vocab(v, None if item.here else (item.lat_deg, item.lon_deg),
+                                    v.mission.speed_mps)
         if c == mav.MAV_CMD_NAV_RETURN_TO_LAUNCH:
             goto = self._rtl_point(ctx, v, row)
             radius, ccw = self._radius(v, "RTL_RADIUS")
@@ -587,6 +602,33 @@ class ArduPlane(Personality):
             return {"loiter": {"center": {"lat_deg": lat, "lon_deg": lon}, "radius_m": radius,
                                "direction": "ccw" if ccw else "cw", **extra}}
         return f"{mav.command_name(c)} is not flown by ArduPlane in cosim"
+
+    def _land_vocab(self, v: MavVehicle, point: tuple[float, float] | None,
+                    speed: float | None) -> dict[str, Any]:
+        """Land at ``point`` (None: straight ahead, where the glide path meets
+        the ground), at ``speed`` or the approach speed: 1.1 x AIRSPEED_MIN
+        (at most AIRSPEED_CRUISE)."""
+        if speed is None:
+            speed = min(1.1 * v.params["AIRSPEED_MIN"], v.params["AIRSPEED_CRUISE"])
+        d: dict[str, Any] = {"land": True}
+        if v.armed:
+            d["airspeed_mps"] = round(float(speed), 2)
+        if point is not None:
+            d["goto"] = {"lat_deg": point[0], "lon_deg": point[1]}
+        return d
+
+    def _nav_land(self, ctx: Context, v: MavVehicle, req: CommandRequest, tick: int,
+                  out: Outcome) -> int:
+        """NAV_LAND: land at the position (none: straight ahead), in GUIDED:
+        down a 3-degree glide path, sliding to a stop on its skids."""
+        refused = self._no_autopilot("land", out)
+        if refused is not None:
+            return refused
+        if v.mode != PlaneMode.GUIDED:
+            out.replies.extend(text("land: switch to GUIDED first"))
+            return mav.MAV_RESULT_FAILED
+        return ctx.switch_to(v, PlaneMode.GUIDED, self._land_vocab(v, req.location(), None),
+                             out, "land")
 
     def _orbit(self, ctx: Context, v: MavVehicle, req: CommandRequest, tick: int,
                out: Outcome) -> int:
