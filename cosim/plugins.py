@@ -40,7 +40,8 @@ BUILTIN: dict[str, dict[str, str]] = {
     VEHICLES: {"fixed_wing": "cosim.vehicles.fixed_wing:FIXED_WING",
                "jsbsim": "cosim.vehicles.plain:PLAIN",
                "ground": "cosim.vehicles.ground:GROUND",
-               "quadrotor": "cosim.vehicles.quadrotor:QUADROTOR"},
+               "quadrotor": "cosim.vehicles.quadrotor:QUADROTOR",
+               "fixed_wing_batched": "cosim.vehicles.fixed_wing_batched:FIXED_WING_BATCHED"},
 }
 
 

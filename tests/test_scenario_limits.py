@@ -383,6 +383,7 @@ def test_limits_are_documented_in_the_readme() -> None:
     section = readme.split("## Limits", 1)[1].split("\n## ", 1)[0]
     for value in (f"{limits.MAX_FILE_BYTES // 1024 // 1024} MiB", str(limits.MAX_DEPTH),
                   str(limits.MAX_ALIASES), f"{limits.MAX_VEHICLES:,}",
+                  f"{limits.MAX_ALL_VEHICLES:,}",
                   f"{limits.MIB_PER_VEHICLE} MiB", f"{limits.MAX_DISTANCE_M / 1000:,.0f} km"):
         assert value in section, value
     assert os.path.basename(limits.__file__) in section

@@ -33,11 +33,14 @@ MAX_PROBLEMS_SHOWN = 50
 #: problems collected for one file before validation stops looking
 MAX_PROBLEMS_KEPT = 1000
 
-#: vehicles in one scenario (about 0.45 MiB of memory each for the uav700,
-#: so 10,000 vehicles need about 4.5 GiB)
+#: JSBSim vehicles in one scenario (about 0.45 MiB of memory each for the
+#: uav700, so 10,000 vehicles need about 4.5 GiB)
 MAX_VEHICLES = 10_000
 #: memory one vehicle's flight model takes, measured for the uav700 (MiB)
 MIB_PER_VEHICLE = 0.45
+#: vehicles of every kind in one scenario: batched vehicles (a few hundred
+#: bytes of arrays each) may number up to this
+MAX_ALL_VEHICLES = 200_000
 #: simulated duration of one run (s): 30 days
 MAX_DURATION_S = 30 * 86_400.0
 #: physics rate (Hz): JSBSim needs small steps for stable dynamics

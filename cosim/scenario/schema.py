@@ -612,6 +612,7 @@ def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: i
     where_ned: list[np.ndarray] = []  # (count, 3) north, east, height of each entry's vehicles
     seen: dict[str, P] = {}
     planned = 0  # vehicles asked for so far (count included)
+    planned_jsbsim = 0  # of them, JSBSim vehicles
     dist = lim.MAX_DISTANCE_M
     for i, vd in enumerate(d):
         vp = path + (i,)
@@ -619,15 +620,23 @@ def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: i
         r = _Reader(ctx, vd, vp, _VEHICLE_KEYS + (vclass.vehicle_keys if vclass else ("trim",
                                                                                         "set")))
         vid = r.string("id", pattern=_ID)
-        count = r.integer("count", 1, lo=1, hi=lim.MAX_VEHICLES)
+        jsbsim = vclass is None or vclass.model_kind == "jsbsim"
+        count = r.integer("count", 1, lo=1,
+                          hi=lim.MAX_VEHICLES if jsbsim else lim.MAX_ALL_VEHICLES)
         if count is not None:
             planned += count
-            if planned > lim.MAX_VEHICLES:
+            planned_jsbsim += count if jsbsim else 0
+            if planned_jsbsim > lim.MAX_VEHICLES and jsbsim:
+                ctx.err(vp + (("count",) if r.has("count") else ()),
+                        f"the scenario would have {planned_jsbsim} or more JSBSim vehicles; "
+                        f"at most {lim.MAX_VEHICLES} (each takes about "
+                        f"{lim.MIB_PER_VEHICLE} MiB)")
+                count = None
+            elif planned > lim.MAX_ALL_VEHICLES:
                 ctx.err(vp + (("count",) if r.has("count") else ()),
                         f"the scenario would have {planned} or more vehicles; at most "
-                        f"{lim.MAX_VEHICLES} (each takes about {lim.MIB_PER_VEHICLE} MiB)")
+                        f"{lim.MAX_ALL_VEHICLES} of every kind")
                 count = None
-        jsbsim = vclass is None or vclass.model_kind == "jsbsim"
         trim = r.boolean("trim", True) if jsbsim and (vclass is None or vclass.trims) \
             else False
         props = _prop_values(ctx, r.d["set"], vp + ("set",)) if r.has("set") else []
@@ -693,7 +702,7 @@ def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: i
             kind = f.string("type", choices=FORMATIONS)
             spacing = f.num("spacing_m", None if f.has("radius_m") else _MISSING, lo=0, hi=dist)
             bearing = f.num("bearing_deg", None, lo=-360, hi=360)
-            columns = f.integer("columns", None, lo=1, hi=lim.MAX_VEHICLES)
+            columns = f.integer("columns", None, lo=1, hi=lim.MAX_ALL_VEHICLES)
             radius = f.num("radius_m", None, lo=0, hi=dist)
             alt_step = f.num("alt_step_m", 0.0, lo=-ALT_MAX_M, hi=ALT_MAX_M) or 0.0
             if kind is not None and (spacing is not None or radius is not None) and count:
@@ -964,8 +973,9 @@ def _check_properties(ctx: _Ctx, vehicles: list[tuple[VehicleSpec, P]],
 
     def check(where: P, specs: list[VehicleSpec], props: list[tuple[str, float]],
               report: Callable[[P, str], None]) -> None:
-        batched = [s for s in specs if get_class(s.vehicle_class).model_kind != "jsbsim"]
-        specs = [s for s in specs if s not in batched]
+        kinds = {c: get_class(c).model_kind for c in {s.vehicle_class for s in specs}}
+        batched = [s for s in specs if kinds[s.vehicle_class] != "jsbsim"]
+        specs = [s for s in specs if kinds[s.vehicle_class] == "jsbsim"]
         for name, _ in props:  # a batched class's inputs are its channels
             for bad in sorted({s.vehicle_class for s in batched
                                if name not in get_class(s.vehicle_class).channels}):

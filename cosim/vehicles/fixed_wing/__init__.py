@@ -45,7 +45,8 @@ class FixedWing(VehicleClass):
     contact_is_impact = True
     #: the ground's push on skids or wheels (N; 0 in the air): how guidance
     #: knows a landing has touched down, and the landing's load in the log
-    state_columns = (StateField("contact_force_n", "forces/fbz-gear-lbs", -LBF_TO_N),)
+    state_columns: tuple[StateField, ...] = (
+        StateField("contact_force_n", "forces/fbz-gear-lbs", -LBF_TO_N),)
     flag_events = {"stalled": ("stall", "onset", "recovery"),
                    "stall_protection_active": ("stall_protection", "active", "inactive")}
     mavlink = ARDUPLANE

@@ -74,8 +74,16 @@ class FixedWingGuidance:
     only its class's rows are ever commanded)."""
 
     def __init__(self, n: int, frame: LocalFrame, start_ne: np.ndarray,
-                 channel_index: dict[str, int], contact_column: int | None = None) -> None:
+                 channel_index: dict[str, int], contact_column: int | None = None,
+                 ne_columns: tuple[int, int] | None = None) -> None:
         self.n = n
+        #: state columns of north and east in the scenario frame, where the
+        #: model flies in that flat frame (the batched tier): positions are
+        #: read, not converted, and headings are bearings in the scenario frame
+        self.ne_cols = np.array(ne_columns, dtype=np.intp) if ne_columns is not None \
+            else None
+        #: positions of the rows a command is being applied to (``command``)
+        self._here: dict[int, np.ndarray] = {}
         #: the state column of the ground's push on the airframe (N; > 0: in
         #: contact); None: contact is judged from the height alone
         self.contact_col = contact_column
@@ -135,6 +143,16 @@ class FixedWingGuidance:
     def command(self, rows: list[int], cmd: Command, states: np.ndarray, sp: np.ndarray
                 ) -> None:
         """Apply ``cmd`` to vehicles ``rows`` (indices) given the current states."""
+        if cmd.nav is not None and len(rows) > 1:  # every position in one conversion
+            pos = self.position_ne(states, np.asarray(rows))
+            self._here = {i: pos[k] for k, i in enumerate(rows)}
+        try:
+            self._command(rows, cmd, states, sp)
+        finally:
+            self._here = {}
+
+    def _command(self, rows: list[int], cmd: Command, states: np.ndarray, sp: np.ndarray
+                 ) -> None:
         for i in rows:
             s = states[i]
             if self.landing[i] in (_ROLLOUT, _LANDED):  # on the ground: it stays there
@@ -270,7 +288,7 @@ class FixedWingGuidance:
         return max(1.5 * min_turn_radius_m(v, float(self.bank_limit[i])), 150.0)
 
     def _start_nav(self, i: int, cmd: Command, states: np.ndarray, sp: np.ndarray) -> None:
-        here = self.position_ne(states, np.array([i]))[0]
+        here = self._here[i] if i in self._here else self.position_ne(states, np.array([i]))[0]
         self.kind[i] = cmd.nav or ""
         self.cw[i] = cmd.loiter_cw
         if cmd.nav == "loiter":
@@ -301,6 +319,8 @@ class FixedWingGuidance:
 
     # -- every exchange --------------------------------------------------
     def position_ne(self, states: np.ndarray, idx: np.ndarray) -> np.ndarray:
+        if self.ne_cols is not None:
+            return states[np.ix_(np.atleast_1d(idx), self.ne_cols)]
         n, e, _ = self.frame.geodetic_to_ned(states[idx, _S["lat_deg"]], states[idx, _S["lon_deg"]],
                                              states[idx, _S["alt_msl_m"]])
         return np.stack([np.atleast_1d(n), np.atleast_1d(e)], axis=1)
@@ -317,8 +337,9 @@ class FixedWingGuidance:
         v = np.maximum(states[idx, _S["airspeed_mps"]], 1.0)
         l1 = np.maximum(1.5 * self.turn_radius(idx, v), 150.0)
         # transitions first (they may change modes), then carrots
-        for k, i in enumerate(idx.tolist()):
-            if self.nav[i] == _LEG:
+        for k in np.flatnonzero(self.nav[idx] == _LEG).tolist():
+            i = int(idx[k])
+            if self.nav[i] == _LEG:  # (an earlier transition may have changed it: no)
                 self._leg_transition(i, pos[k], float(l1[k]), float(v[k]), states, sp, events)
         carrot = np.empty_like(pos)
         leg = self.nav[idx] == _LEG
@@ -343,6 +364,11 @@ class FixedWingGuidance:
             step = np.minimum(l1[loi] / rad, math.pi / 2)
             ang = theta + sign * step
             carrot[loi] = c + rad[:, None] * np.stack([np.cos(ang), np.sin(ang)], axis=1)
+        if self.ne_cols is not None:  # the scenario frame's bearing
+            d = carrot - pos
+            sp[idx, self.ch["cosim/ap/heading-cmd-deg"]] = np.degrees(
+                np.arctan2(d[:, 1], d[:, 0])) % 360.0
+            return events
         alt = states[idx, _S["alt_msl_m"]]
         clat, clon, _ = self.frame.ned_to_geodetic(carrot[:, 0], carrot[:, 1],
                                                    -(alt - self.ground_alt_m))
