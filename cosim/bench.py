@@ -43,21 +43,34 @@ from cosim.geo import KT_TO_MPS, LocalFrame
 from cosim.jsb import find_model
 from cosim.scenario.formation import formation_offsets
 from cosim.vehicles import DEFAULT_CLASS
+from cosim.vehicles.registry import get_class
 from cosim.vehicles.spec import VehicleSpec
 
 log = logging.getLogger(__name__)
 
 
-def bench_specs(n: int, model: str = "c172p", spacing_m: float = 300.0) -> list[VehicleSpec]:
-    """N vehicles in a grid at 1000 m, 100 kt, heading north."""
+#: where the benchmark's fleets fly
+ORIGIN = (37.4, -122.0, 0.0)
+
+
+def bench_specs(n: int, model: str = "c172p", spacing_m: float = 300.0,
+                vehicle_class: str | None = None) -> list[VehicleSpec]:
+    """N vehicles in a grid at 1000 m, 100 kt, heading north, of the model's
+    own class or ``vehicle_class`` (a batched class gets what of the world it
+    needs, as a scenario would give it)."""
     m = find_model(model)
+    cls = vehicle_class or m.profile.get("class", DEFAULT_CLASS)
+    vc = get_class(cls)
+    if vc.model_kind == "batched":
+        vc.resolve_model(model, ())  # refuses a model the class cannot fly
     north, east = formation_offsets("grid", n, spacing_m, 0.0)
-    lat, lon, _ = LocalFrame(37.4, -122.0, 0.0).ned_to_geodetic(north, east, 0.0)
-    return [VehicleSpec(id=f"b{i:04d}", model=m.name, aircraft_dir=m.aircraft_dir,
-                        model_source=m.source, lat_deg=float(lat[i]), lon_deg=float(lon[i]),
-                        alt_msl_m=1000.0, heading_deg=0.0, airspeed_mps=100 * KT_TO_MPS,
-                        random_seed=i, profile=m.profile,
-                        vehicle_class=m.profile.get("class", DEFAULT_CLASS)) for i in range(n)]
+    lat, lon, _ = LocalFrame(*ORIGIN).ned_to_geodetic(north, east, 0.0)
+    specs = [VehicleSpec(id=f"b{i:04d}", model=m.name, aircraft_dir=m.aircraft_dir,
+                         model_source=m.source, lat_deg=float(lat[i]), lon_deg=float(lon[i]),
+                         alt_msl_m=1000.0, heading_deg=0.0, airspeed_mps=100 * KT_TO_MPS,
+                         random_seed=i, profile=m.profile, vehicle_class=cls)
+             for i in range(n)]
+    return [vc.with_world(v, {}, ORIGIN) for v in specs]
 
 
 def _serial_loop(shard: Shard, ticks: int, k: int) -> float:
@@ -179,7 +192,7 @@ def check_rates(physics_hz: float, control_hz: float) -> int:
 
 def bench_size(n: int, model: str, backend: str, workers: int | None, seconds: float,
                physics_hz: float, control_hz: float, baselines: bool = True,
-               repeat: int = 3) -> dict[str, Any]:
+               repeat: int = 3, vehicle_class: str | None = None) -> dict[str, Any]:
     """``repeat`` rounds; each round runs one segment of ``seconds`` simulated
     time on the pool, then on the serial loop, then on the ceiling processes,
     so the three are measured side by side under the same machine load.
@@ -188,7 +201,7 @@ def bench_size(n: int, model: str, backend: str, workers: int | None, seconds: f
     dt = 1.0 / physics_hz
     k = check_rates(physics_hz, control_hz)
     ticks = max(k, math.ceil(seconds * physics_hz / k) * k)
-    specs = bench_specs(n, model)
+    specs = bench_specs(n, model, vehicle_class=vehicle_class)
     steps = n * ticks
     res: dict[str, Any] = {"vehicles": n, "ticks": ticks, "sim_s": ticks * dt,
                            "exchange_every": k, "repeat": repeat}
@@ -248,12 +261,14 @@ def bench_size(n: int, model: str, backend: str, workers: int | None, seconds: f
 def run_bench(vehicles: list[int], model: str = "c172p", backend: str = "process",
               workers: int | None = None, seconds: float = 5.0, physics_hz: float = 120.0,
               control_hz: float = 30.0, baselines: bool = True, repeat: int = 3,
-              json_path: str | None = None) -> list[dict[str, Any]]:
+              json_path: str | None = None, vehicle_class: str | None = None,
+              plot_path: str | None = None) -> list[dict[str, Any]]:
     check_rates(physics_hz, control_hz)
     if workers is not None and workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
     w = workers if workers is not None else get_backend(backend).default_workers()
-    print(f"cosim bench: model {model}, backend {backend}, workers {w}, "
+    tier = vehicle_class or find_model(model).profile.get("class", DEFAULT_CLASS)
+    print(f"cosim bench: model {model} ({tier}), backend {backend}, workers {w}, "
           f"{physics_hz:g} Hz physics, {control_hz:g} Hz exchange, best of {repeat} x "
           f"{seconds:g} s simulated per size", flush=True)
     hdr = (f"{'N':>6} {'start s':>8} {'pool st/s':>11} {'RTF':>8} {'ovh us':>8} "
@@ -262,7 +277,7 @@ def run_bench(vehicles: list[int], model: str = "c172p", backend: str = "process
     results = []
     for n in vehicles:
         r = bench_size(n, model, backend, workers, seconds, physics_hz, control_hz, baselines,
-                       repeat)
+                       repeat, vehicle_class)
         results.append(r)
 
         def f(key: str, fmt: str, r: dict[str, Any] = r) -> str:
@@ -274,11 +289,50 @@ def run_bench(vehicles: list[int], model: str = "c172p", backend: str = "process
               f"{f('ceiling_steps_per_s', '11.0f')} {f('fraction_of_ceiling', '8.1%')}",
               flush=True)
     if json_path:
-        doc = {"model": model, "backend": backend, "workers": w, "physics_hz": physics_hz,
+        doc = {"model": model, "class": tier, "backend": backend, "workers": w,
+               "physics_hz": physics_hz,
                "control_hz": control_hz, "seconds": seconds, "repeat": repeat,
                "machine": {"python": sys.version.split()[0], "platform": platform.platform(),
                            "cores": default_workers()},
                "results": results}
         Path(json_path).write_text(json.dumps(doc, indent=2) + "\n")
         print(f"wrote {json_path}")
+    if plot_path:
+        plot_scaling({f"{model} ({tier}), {backend}, {w} workers": results}, plot_path,
+                     f"cosim bench, {physics_hz:g} Hz physics, {control_hz:g} Hz exchange")
+        print(f"wrote {plot_path}")
     return results
+
+
+def plot_scaling(series: dict[str, list[dict[str, Any]]], path: str | Path,
+                 title: str = "") -> None:
+    """Real-time factor (left) and the fraction of the no-communication
+    ceiling (right) against the number of aircraft, one line per series,
+    log axes, the 1x line drawn."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.2))
+    for label, rows in series.items():
+        n = [r["vehicles"] for r in rows]
+        ax1.plot(n, [r["pool_rtf"] for r in rows], "o-", label=label)
+        eff = [(r["vehicles"], r["fraction_of_ceiling"]) for r in rows
+               if "fraction_of_ceiling" in r]
+        if eff:
+            ax2.plot(*zip(*eff), "o-", label=label)
+    ax1.axhline(1.0, color="k", lw=1, ls="--", label="real time")
+    ax1.set(xscale="log", yscale="log", xlabel="aircraft", ylabel="real-time factor",
+            title="speed")
+    ax2.axhline(1.0, color="k", lw=1, ls="--")
+    ax2.set(xscale="log", xlabel="aircraft", ylabel="pool / no-communication ceiling",
+            title="efficiency", ylim=(0, 1.2))
+    ax1.legend(fontsize=8)
+    ax1.grid(True, which="both", alpha=0.3)
+    ax2.grid(True, which="both", alpha=0.3)
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)

@@ -206,6 +206,13 @@ def _build_parser() -> _Parser:
     b.add_argument("--no-baselines", action="store_true",
                    help="skip the serial and no-communication ceiling measurements")
     b.add_argument("--json", metavar="FILE", help="write the results as JSON")
+    b.add_argument("--class", dest="vehicle_class", metavar="CLASS",
+                   help="fly the model as this vehicle class (e.g. fixed_wing_batched); "
+                        "default: the model's own")
+    b.add_argument("--plot", metavar="FILE.png",
+                   help="draw the real-time factor and the efficiency against N")
+    b.add_argument("--quick", action="store_true",
+                   help="a look in under a minute: 1, 16 and 128 aircraft, 1 s, one round")
     return p
 
 
@@ -635,17 +642,26 @@ def _cmd_bench(a: argparse.Namespace) -> int:
         check_rates(a.physics_hz, a.control_hz)
     except ValueError as e:
         raise ConfigError(f"--physics-hz/--control-hz: {e}") from None
-    if a.json:
-        folder = Path(a.json).resolve().parent
+    for opt, path in (("--json", a.json), ("--plot", a.plot)):
+        if not path:
+            continue
+        folder = Path(path).resolve().parent
         if not folder.is_dir():
-            raise ConfigError(f"--json {a.json}: folder {folder} does not exist")
+            raise ConfigError(f"{opt} {path}: folder {folder} does not exist")
         if not os.access(folder, os.W_OK):
-            raise ConfigError(f"--json {a.json}: folder {folder} is not writable")
-        if Path(a.json).is_dir():
-            raise ConfigError(f"--json {a.json}: is a folder")
+            raise ConfigError(f"{opt} {path}: folder {folder} is not writable")
+        if Path(path).is_dir():
+            raise ConfigError(f"{opt} {path}: is a folder")
+    if a.vehicle_class is not None:
+        from cosim.vehicles.registry import get_class
+
+        get_class(a.vehicle_class)  # an unknown class: ConfigError naming the known ones
+    if a.quick:
+        a.vehicles, a.seconds, a.repeat = [1, 16, 128], 1.0, 1
     run_bench(vehicles=a.vehicles, model=a.model, backend=a.backend, workers=a.workers,
               seconds=a.seconds, physics_hz=a.physics_hz, control_hz=a.control_hz,
-              baselines=not a.no_baselines, repeat=max(1, a.repeat), json_path=a.json)
+              baselines=not a.no_baselines, repeat=max(1, a.repeat), json_path=a.json,
+              vehicle_class=a.vehicle_class, plot_path=a.plot)
     return EXIT_OK
 
 

@@ -113,6 +113,29 @@ def test_bench_reports_ratios_measured_in_the_same_run(tmp_path: Path, capsys) -
     assert r["vehicles"] == 4 and r["ticks"] == 60
 
 
+def test_bench_flies_the_batched_tier_and_draws_the_scaling_plot(tmp_path: Path,
+                                                                 capsys) -> None:
+    """--class fixed_wing_batched benches the point-mass tier (its baselines
+    step the same batched model); --plot draws real-time factor and
+    efficiency against N, one point per size."""
+    import matplotlib.image
+
+    out, png = tmp_path / "b.json", tmp_path / "scaling.png"
+    assert main(["bench", "--model", "uav700", "--class", "fixed_wing_batched", "--vehicles",
+                 "50,500", "--seconds", "0.5", "--workers", "2", "--repeat", "1",
+                 "--json", str(out), "--plot", str(png)]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["class"] == "fixed_wing_batched"
+    assert [r["vehicles"] for r in doc["results"]] == [50, 500]
+    for r in doc["results"]:
+        assert r["pool_rtf"] > 0 and r["fraction_of_ceiling"] > 0
+    img = matplotlib.image.imread(png)
+    assert img.shape[0] > 300 and img.shape[1] > 800
+    assert "(fixed_wing_batched)" in capsys.readouterr().out
+    assert main(["bench", "--class", "nope", "--vehicles", "2"]) == 2
+    assert "unknown vehicle class 'nope'" in capsys.readouterr().err
+
+
 def test_plot_writes_a_png_for_a_run(tmp_path: Path, capsys) -> None:
     scn = tmp_path / "p.yaml"
     scn.write_text((REPO / "scenarios/quickstart.yaml").read_text()
