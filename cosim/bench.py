@@ -74,13 +74,21 @@ def bench_specs(n: int, model: str = "c172p", spacing_m: float = 300.0,
 
 
 def _serial_loop(shard: Shard, ticks: int, k: int) -> float:
+    """The plain loop: every FDM's ``run()`` back to back, and each batched
+    model's step (and its state write, which its exchange cannot do without),
+    ``k`` ticks at a time."""
     fdms = [v.fdm for v in shard.vehicles]
+    batches = [(model, np.zeros((len(rows), shard.n_columns)))
+               for _, model, rows in shard.batches]
     t0 = time.perf_counter()
     for _ in range(ticks // k):
         for f in fdms:
             run = f.run
             for _ in range(k):
                 run()
+        for model, block in batches:
+            model.step(k)
+            model.write_states(block)
     return time.perf_counter() - t0
 
 

@@ -53,6 +53,7 @@ class Shard:
         self._rows = np.zeros(0, dtype=np.intp)  # each JSBSim vehicle's row in the shard
         #: the batched classes: (class name, model, its rows in the shard)
         self.batches: list[tuple[str, BatchedModel, np.ndarray]] = []
+        self.n_columns = N_STATE  # the state layout's width (``build``)
         self._extra: list[tuple[int, int]] = []  # (vehicle, first extra column) with extras
         self._active: list[int] = []  # JSBSim vehicles still stepped (indices)
         self._check: list[bool] = []  # per active vehicle: check ground every substep
@@ -75,6 +76,7 @@ class Shard:
             layout_names = [f.name for f in state_layout(specs)]
         shard = into if into is not None else cls()
         shard.n_channels = len(channels)
+        shard.n_columns = len(layout_names)
         shard.dt_s = dt_s
         column = {name: j for j, name in enumerate(layout_names)}
         failures: list[tuple[str, str]] = []
