@@ -300,8 +300,8 @@ def _cmd_run(a: argparse.Namespace) -> int:
         from cosim.mavlink.link import LinkUrl
 
         LinkUrl.parse(a.mavlink)  # a bad URL is a usage error before anything is built
-        mav_cfg = dataclasses.replace(MavlinkConfig.of_scenario(scn.mavlink) or MavlinkConfig(),
-                                      url=a.mavlink)
+        mav_cfg = dataclasses.replace(MavlinkConfig.of_scenario(
+            scn.mavlink, [v.id for v in scn.vehicles]) or MavlinkConfig(), url=a.mavlink)
     signing = a.mavlink_signing_key_file or a.mavlink_signing_key_env
     if signing:
         from cosim.mavlink import MavlinkConfig, load_signing_key

@@ -85,6 +85,7 @@ import time
 from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from fnmatch import fnmatchcase
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -173,6 +174,8 @@ class MavlinkConfig:
 
     url: str | None = DEFAULT_URL  # None: in-process only (no socket)
     rates_hz: Mapping[str, float] = field(default_factory=dict)
+    #: the state rows of the vehicles on MAVLink (None: every vehicle)
+    rows: tuple[int, ...] | None = None
     max_peers: int = 16
     max_datagrams_per_exchange: int = 1000
     signing_key_file: str | Path | None = None
@@ -186,11 +189,18 @@ class MavlinkConfig:
     lockstep_timeout_s: float = 30.0
 
     @classmethod
-    def of_scenario(cls, section: Mapping[str, Any] | None) -> MavlinkConfig | None:
-        """The config a scenario's ``mavlink:`` section asks for (None: no section)."""
+    def of_scenario(cls, section: Mapping[str, Any] | None,
+                    ids: Sequence[str] = ()) -> MavlinkConfig | None:
+        """The config a scenario's ``mavlink:`` section asks for (None: no
+        section); ``ids``: the scenario's vehicle ids, for its ``vehicles``
+        patterns."""
         if section is None:
             return None
-        return cls(url=section["url"], rates_hz=dict(section["rates_hz"]))
+        rows = None
+        pats = section.get("vehicles")
+        if pats is not None and pats != ["all"]:
+            rows = tuple(i for i, v in enumerate(ids) if any(fnmatchcase(v, p) for p in pats))
+        return cls(url=section["url"], rates_hz=dict(section["rates_hz"]), rows=rows)
 
     @property
     def signing(self) -> bool:

@@ -3,7 +3,8 @@
 System ids are 8 bits and ground stations keep 251..255 for themselves, so
 one link (``MavlinkEndpoint``) carries at most ``MAX_VEHICLES_PER_LINK``
 (240) vehicles. A run with more gets one link per 240 vehicles, in vehicle
-order, each with system ids 1..240 on its own port:
+order, each with system ids 1..240 on its own port (only the vehicles the
+scenario's ``mavlink.vehicles`` selects, when it does):
 
 - ``udpout:HOST:PORT``: link k sends to ``PORT + k`` (point one ground
   station, or one MAVProxy ``--master``, at each port);
@@ -40,12 +41,15 @@ from cosim.mavlink.vehicle import MavVehicleSpec, mav_specs
 from cosim.vehicles.spec import VehicleSpec
 
 
-def link_specs(vehicles: Sequence[VehicleSpec]) -> list[list[MavVehicleSpec]]:
-    """The MAVLink identities of a run's vehicles, one list per link: rows in
-    vehicle order, system ids 1..240 on each link."""
+def link_specs(vehicles: Sequence[VehicleSpec], rows: Sequence[int] | None = None
+               ) -> list[list[MavVehicleSpec]]:
+    """The MAVLink identities of a run's vehicles (those of ``rows``; None:
+    all), one list per link: in vehicle order, system ids 1..240 on each link."""
+    chosen = list(range(len(vehicles))) if rows is None else sorted(rows)
     out = []
-    for a in range(0, len(vehicles), MAX_VEHICLES_PER_LINK):
-        out.append(mav_specs(vehicles[a:a + MAX_VEHICLES_PER_LINK], first_sysid=1, first_row=a))
+    for a in range(0, len(chosen), MAX_VEHICLES_PER_LINK):
+        part = chosen[a:a + MAX_VEHICLES_PER_LINK]
+        out.append(mav_specs([vehicles[r] for r in part], first_sysid=1, rows=part))
     return out
 
 
@@ -67,7 +71,11 @@ class MavlinkLinks:
     def __init__(self, vehicles: Sequence[VehicleSpec], physics_hz: float,
                  config: MavlinkConfig, tlog_dir: str | Path | None = None,
                  clock_anchor_unix_us: int | None = None) -> None:
-        self.specs = link_specs(vehicles)
+        self.specs = link_specs(vehicles, config.rows)
+        if not self.specs:
+            raise ConfigError("mavlink: vehicles selects no vehicle")
+        #: the link of each vehicle on MAVLink, by state row
+        self.link_of_row = {v.row: k for k, specs in enumerate(self.specs) for v in specs}
         n = len(self.specs)
         if n > 1 and config.lockstep_sysid is not None:
             raise ConfigError(f"mavlink: an outside controller in lockstep drives one link "
@@ -106,8 +114,10 @@ class MavlinkLinks:
         self.endpoints[link].inject(message)
 
     def local_command(self, row: int, command: Command) -> Command:
-        """See ``MavlinkEndpoint.local_command``."""
-        return self.endpoints[row // MAX_VEHICLES_PER_LINK].local_command(row, command)
+        """See ``MavlinkEndpoint.local_command`` (a vehicle not on MAVLink:
+        the command unchanged)."""
+        k = self.link_of_row.get(row)
+        return command if k is None else self.endpoints[k].local_command(row, command)
 
     def subscribe(self, callback: Callable[[mav.Message, int], None]) -> None:
         """``callback(message, link)`` for every packet any vehicle sends."""

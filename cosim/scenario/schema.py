@@ -454,6 +454,8 @@ def parse_scenario(text: str, fname: str = "<scenario>", check_properties: bool 
     if duration is None:
         duration = 1.0
     schedule = _schedule(ctx, top.d.get("schedule", []), vehicles, rates, duration)
+    if mavlink is not None and "vehicles" in mavlink:
+        _mavlink_vehicles(ctx, mavlink, vehicles)
     if check_properties:
         _check_properties(ctx, vehicles, schedule)
     info = SectionInfo(ctx, origin, rates, duration, [v for v, _ in vehicles], Path(fname),
@@ -548,7 +550,8 @@ class SectionInfo:
 
 
 def _mavlink(ctx: _Ctx, d: Any) -> dict[str, Any] | None:
-    """``mavlink: true`` or ``mavlink: {url: udpout:HOST:PORT, rates_hz: {MSG: Hz}}``."""
+    """``mavlink: true`` or ``mavlink: {url: udpout:HOST:PORT, rates_hz: {MSG: Hz},
+    vehicles: PATTERNS}``."""
     from cosim.mavlink import DEFAULT_URL
     from cosim.mavlink.link import LinkUrl
     from cosim.mavlink.vehicle import check_rates
@@ -557,7 +560,7 @@ def _mavlink(ctx: _Ctx, d: Any) -> dict[str, Any] | None:
         return None
     if d is True:
         d = {}
-    r = _Reader(ctx, d, ("mavlink",), ("url", "rates_hz"))
+    r = _Reader(ctx, d, ("mavlink",), ("url", "rates_hz", "vehicles"))
     url = r.string("url", DEFAULT_URL)
     if url is not None:
         try:
@@ -571,7 +574,21 @@ def _mavlink(ctx: _Ctx, d: Any) -> dict[str, Any] | None:
         rates = {}
     for problem in check_rates(rates):
         ctx.err(("mavlink", "rates_hz"), problem)
-    return {"url": url or DEFAULT_URL, "rates_hz": {str(k): float(v) for k, v in rates.items()}}
+    out: dict[str, Any] = {"url": url or DEFAULT_URL,
+                           "rates_hz": {str(k): float(v) for k, v in rates.items()}}
+    if r.has("vehicles"):  # checked against the vehicles by _mavlink_vehicles
+        out["vehicles"] = r.d["vehicles"]
+    return out
+
+
+def _mavlink_vehicles(ctx: _Ctx, mavlink: dict[str, Any],
+                      vehicles: list[tuple[VehicleSpec, P]]) -> None:
+    """``mavlink.vehicles``: which vehicles are on MAVLink ('all', an id, a
+    pattern or a list of them; default all). Stored as patterns, resolved to
+    rows by ``MavlinkConfig.of_scenario``."""
+    sel = mavlink["vehicles"]
+    _select(ctx, sel, ("mavlink", "vehicles"), [v.id for v, _ in vehicles])
+    mavlink["vehicles"] = sel if isinstance(sel, list) else [sel]
 
 
 def _rates(ctx: _Ctx, d: Any) -> Rates:

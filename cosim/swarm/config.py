@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from fnmatch import fnmatchcase
 from typing import Any
 
 from cosim.scenario.schema import SectionInfo
@@ -234,6 +235,14 @@ def parse_swarm(info: SectionInfo, node: Any, path: P) -> SwarmSpec | None:
         if name is None or len(good) != len(phases) or len(rows) < 2:
             continue
         groups.append(SwarmGroup(name, tuple(rows), tuple(good), spacing))
+    pats = (info.mavlink or {}).get("vehicles")
+    if pats is not None and pats != ["all"]:  # the swarm commands through MAVLink
+        off = [info.vehicles[r].id for g in groups for r in g.rows
+               if not any(fnmatchcase(info.vehicles[r].id, p) for p in pats)]
+        if off:
+            info.err(path, f"vehicles {', '.join(off[:5])}{' ...' if len(off) > 5 else ''} "
+                           f"are not in mavlink.vehicles, and the swarm flies its vehicles "
+                           f"through MAVLink")
     if warn is None or margin is None:
         return None
     return SwarmSpec(tuple(groups), rate, every, warn, margin)

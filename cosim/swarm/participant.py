@@ -84,6 +84,10 @@ class SwarmParticipant:
                                "for a swarm: section)")
         self.ctx = ctx
         scn = self.scenario
+        on_mav = {v.row for specs in ctx.mavlink.specs for v in specs}
+        off = [scn.vehicles[r].id for r in self.spec.rows if r not in on_mav]
+        if off:  # (validation refuses such a scenario; a --mavlink override cannot add it)
+            raise RuntimeError(f"swarm: vehicles {', '.join(off[:5])} are not on MAVLink")
         # the run's cosim.mavlink.MavlinkLinks: subscribe callbacks get (message,
         # link), inject takes the link (one link per 240 vehicles)
         self.ctl = SwarmController(self.spec, scn.vehicles, ctx.frame, ctx.physics_hz,

@@ -111,7 +111,8 @@ class Run:
             from cosim.mavlink import MavlinkConfig
 
             # the scenario's link, else in-process only (no socket) for its controller
-            mavlink = MavlinkConfig.of_scenario(scenario.mavlink) or MavlinkConfig(url=None)
+            mavlink = MavlinkConfig.of_scenario(
+                scenario.mavlink, [v.id for v in scenario.vehicles]) or MavlinkConfig(url=None)
         self.mavlink_config = mavlink
         #: the scenario's controller runs in another process (``cosim swarm
         #: --connect``), kept in lockstep over ``mavlink`` (lockstep_sysid set)

@@ -77,3 +77,64 @@ def test_an_outside_controller_drives_one_link_only() -> None:
     with pytest.raises(ConfigError, match="at most 240"):
         MavlinkLinks(_vehicles(241), PHYSICS_HZ,
                      MavlinkConfig(url="udpin:127.0.0.1:0", lockstep_sysid=245))
+
+
+def test_only_the_vehicles_chosen_are_on_mavlink(tmp_path: Path) -> None:
+    """mavlink.vehicles: the chosen rows (here 250 of 1000) get the links and
+    system ids, in vehicle order; a command from elsewhere to a vehicle off
+    MAVLink passes through untouched; no tlog for the others."""
+    from cosim.guidance.commands import Command
+
+    n = 1000
+    rows = tuple(range(0, n, 4))
+    links = MavlinkLinks(_vehicles(n), PHYSICS_HZ,
+                         MavlinkConfig(url=None, rows=rows), tlog_dir=tmp_path,
+                         clock_anchor_unix_us=ANCHOR_US)
+    try:
+        assert [len(s) for s in links.specs] == [240, 10]
+        assert [v.row for s in links.specs for v in s] == list(rows)
+        assert (links.specs[1][0].sysid, links.specs[1][0].row) == (1, 960)
+        heard: list[tuple[int, int]] = []
+        links.subscribe(lambda m, link: heard.append((link, m.src_system)))
+        links.exchange(0, state_rows(n))
+        assert len(set(heard)) == 250
+        cmd = Command(heading_deg=90.0)
+        assert links.local_command(1, cmd) is cmd  # row 1: not on MAVLink
+        links.local_command(4, cmd)  # row 4: system 2 of link 0 follows it
+    finally:
+        links.close()
+    assert len(list(tmp_path.glob("*.tlog"))) == 250
+    with pytest.raises(ConfigError, match="selects no vehicle"):
+        MavlinkLinks(_vehicles(3), PHYSICS_HZ, MavlinkConfig(url=None, rows=()))
+
+
+def test_the_scenario_chooses_its_mavlink_vehicles(tmp_path: Path) -> None:
+    """mavlink: {vehicles: PATTERNS} resolves to rows; a pattern matching no
+    vehicle is an error with its line; a swarm vehicle left off is refused."""
+    from cosim.scenario import parse_scenario
+
+    head = """schema_version: 1
+origin: {lat_deg: 47.0, lon_deg: 8.0, ground_alt_m: 400}
+duration_s: 5
+vehicles:
+  - {id: lead, model: uav700, init: {north_m: 0, east_m: 0, alt_agl_m: 300, airspeed_kt: 100}}
+  - {id: fleet, class: fixed_wing_batched, model: uav700, count: 30,
+     formation: {type: grid, spacing_m: 300},
+     init: {north_m: 3000, east_m: 0, alt_agl_m: 300, airspeed_kt: 100}}
+"""
+    scn = parse_scenario(head + "mavlink: {url: 'udpin:127.0.0.1:0', vehicles: [lead, fleet01]}\n",
+                         str(tmp_path / "a.yaml"), check_properties=False)
+    cfg = MavlinkConfig.of_scenario(scn.mavlink, [v.id for v in scn.vehicles])
+    assert cfg is not None and cfg.rows == (0, 2)
+    with pytest.raises(ConfigError) as ei:
+        parse_scenario(head + "mavlink: {vehicles: nobody*}\n", str(tmp_path / "b.yaml"),
+                       check_properties=False)
+    assert "b.yaml:9: mavlink.vehicles: 'nobody*' matches no vehicle" in ei.value.problems[0]
+    swarm = """swarm:
+  groups:
+    - {name: g, vehicles: "fleet*", phases: [{behaviour: rendezvous, radius_m: 400}]}
+"""
+    with pytest.raises(ConfigError) as ei:
+        parse_scenario(head + "mavlink: {vehicles: lead}\n" + swarm, str(tmp_path / "c.yaml"),
+                       check_properties=False)
+    assert any("are not in mavlink.vehicles" in p for p in ei.value.problems)
