@@ -87,6 +87,31 @@ class _Outcome:
     complete: bool = True  # every output written and closed
     sections: dict[str, Any] = field(default_factory=dict)  # participants' summary parts
     summary: dict[str, Any] = field(default_factory=dict)
+    #: seconds of the tick loop spent in each part (``Timed``)
+    split: dict[str, float] = field(default_factory=dict)
+
+
+class Timed:
+    """A participant's step (or the pool's wait) that adds the time it takes
+    to ``split[name]``: where a run's time goes, in ``summary.json``."""
+
+    __slots__ = ("fn", "name", "split")
+
+    def __init__(self, fn: Callable[..., Any], split: dict[str, float],
+                 name: str | None = None) -> None:
+        self.fn = fn
+        self.split = split
+        owner = getattr(fn, "__self__", None)
+        self.name: str = name or (f"{type(owner).__name__}.{fn.__name__}" if owner is not None
+                                  else str(getattr(fn, "__qualname__", repr(fn))))
+        split.setdefault(self.name, 0.0)
+
+    def __call__(self, *args: Any) -> Any:
+        t0 = time.perf_counter()
+        try:
+            return self.fn(*args)
+        finally:
+            self.split[self.name] += time.perf_counter() - t0
 
 
 class Run:
@@ -222,6 +247,8 @@ class Run:
             o.loop0 = time.perf_counter()
             if self.pacer:
                 self.pacer.start()
+            before, during, after = ([Timed(f, o.split) for f in fs]
+                                     for fs in (before, during, after))
             states = self._loop(o, pool, states, before, during, after)
             logger.last(o.tick, states)
             o.loop_s = time.perf_counter() - o.loop0
@@ -231,6 +258,7 @@ class Run:
         """The lockstep tick loop: every participant's step, once per exchange."""
         k, total = self.scn.rates.control_every, self.scn.total_ticks
         copy_states = bool(self.participants)  # they keep the states at ``tick``
+        wait = Timed(pool.wait, o.split, "pool: stepping (waiting for the workers)")
         while o.tick < total:
             if self._stop.is_set():
                 o.reason = self._stop_reason
@@ -241,7 +269,7 @@ class Run:
             pool.send(k)
             for work in during:  # telemetry, controllers, cameras: while it steps
                 work(o.tick, at_tick)
-            states = pool.wait(self.step_timeout_s)
+            states = wait(self.step_timeout_s)
             o.tick += k
             for record in after:  # events, logs, pacing, progress
                 record(o.tick, states)
@@ -319,6 +347,9 @@ class Run:
             summary["mavlink"] = {"url": self.mavlink_config.url,
                                   "counters": self.mavlink.counters()}
         summary.update(o.sections)
+        if o.split:
+            summary["time_split_s"] = {k: round(v, 4) for k, v in
+                                       sorted(o.split.items(), key=lambda kv: -kv[1])}
         if events.dropped:
             summary["events_dropped"] = events.dropped
         summary["complete"] = o.complete and states_log.complete and events.complete

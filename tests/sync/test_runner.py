@@ -50,6 +50,11 @@ def test_run_writes_every_output(mixed_scenario: Path, tmp_path: Path) -> None:
     assert s["vehicles"] == 7 and s["ticks"] == 720 and s["sim_time_s"] == 6.0
     assert s["stop_reason"] == "completed" and s["backend"] == "inline"
     assert "realtime" not in s
+    split = s["time_split_s"]  # every part of the loop, timed; together within the loop
+    assert {"pool: stepping (waiting for the workers)", "Guidance.before_step",
+            "StateLogger.after_step", "Schedule.before_step"} <= set(split)
+    assert all(v >= 0 for v in split.values())
+    assert 0 < sum(split.values()) <= s["wall_time_s"] * 1.01
     resolved = yaml.safe_load((out / "scenario.resolved.yaml").read_text())
     assert len(resolved["vehicles"]) == 7
 
