@@ -14,7 +14,8 @@ The three are measured in interleaved rounds (pool, serial, ceiling, pool,
 median of the per-round ratios.
 
 and reports aircraft-steps per second, the real-time factor, the pool's
-start-up time (build + trim) and its per-exchange orchestration overhead
+start-up time (build + trim), its memory (the driver's growth and the workers'
+peak resident sizes, per aircraft) and its per-exchange orchestration overhead
 (exchange wall time minus the busiest shard's stepping time). Ratios are
 computed from figures measured side by side, never against constants.
 """
@@ -188,6 +189,18 @@ class _Ceiling:
             c.close()
 
 
+def _rss_kib(pid: int | str = "self", field: str = "VmRSS") -> int:
+    """A process's resident memory (KiB) from /proc (0 where there is none)."""
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            for line in f:
+                if line.startswith(field + ":"):
+                    return int(line.split()[1])
+    except OSError:
+        pass
+    return 0
+
+
 def check_rates(physics_hz: float, control_hz: float) -> int:
     """Physics ticks per exchange; ``ValueError`` quoting both rates unless
     ``control_hz`` divides ``physics_hz``."""
@@ -214,9 +227,14 @@ def bench_size(n: int, model: str, backend: str, workers: int | None, seconds: f
     res: dict[str, Any] = {"vehicles": n, "ticks": ticks, "sim_s": ticks * dt,
                            "exchange_every": k, "repeat": repeat}
 
+    rss0 = _rss_kib()
     t0 = time.perf_counter()
     pool = make_pool(specs, dt, (), backend, workers)
     res["startup_s"] = time.perf_counter() - t0
+    # the pool's memory: what the driver grew by, and its worker processes' peaks
+    mem_kib = max(_rss_kib() - rss0, 0) + sum(_rss_kib(p, "VmHWM") for p in pool.pids.values())
+    res["pool_mib"] = mem_kib / 1024
+    res["kib_per_aircraft"] = mem_kib / n
     w = pool.workers
     res["workers"] = w
     try:
@@ -279,7 +297,7 @@ def run_bench(vehicles: list[int], model: str = "c172p", backend: str = "process
     print(f"cosim bench: model {model} ({tier}), backend {backend}, workers {w}, "
           f"{physics_hz:g} Hz physics, {control_hz:g} Hz exchange, best of {repeat} x "
           f"{seconds:g} s simulated per size", flush=True)
-    hdr = (f"{'N':>6} {'start s':>8} {'pool st/s':>11} {'RTF':>8} {'ovh us':>8} "
+    hdr = (f"{'N':>6} {'start s':>8} {'KiB/ac':>8} {'pool st/s':>11} {'RTF':>8} {'ovh us':>8} "
            f"{'serial st/s':>12} {'x serial':>9} {'ceil st/s':>11} {'of ceil':>8}")
     print(hdr, flush=True)
     results = []
@@ -291,7 +309,8 @@ def run_bench(vehicles: list[int], model: str = "c172p", backend: str = "process
         def f(key: str, fmt: str, r: dict[str, Any] = r) -> str:
             return format(r[key], fmt) if key in r else "-"
 
-        print(f"{n:>6} {f('startup_s', '8.2f')} {f('pool_steps_per_s', '11.0f')} "
+        print(f"{n:>6} {f('startup_s', '8.2f')} {f('kib_per_aircraft', '8.0f')} "
+              f"{f('pool_steps_per_s', '11.0f')} "
               f"{f('pool_rtf', '8.2f')} {f('overhead_us_per_exchange', '8.0f')} "
               f"{f('serial_steps_per_s', '12.0f')} {f('speedup_vs_serial', '9.2f')} "
               f"{f('ceiling_steps_per_s', '11.0f')} {f('fraction_of_ceiling', '8.1%')}",

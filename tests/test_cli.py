@@ -104,8 +104,9 @@ def test_bench_reports_ratios_measured_in_the_same_run(tmp_path: Path, capsys) -
     r = doc["results"][0]
     for key in ("pool_steps_per_s", "pool_rtf", "serial_steps_per_s", "speedup_vs_serial",
                 "ceiling_steps_per_s", "fraction_of_ceiling", "overhead_us_per_exchange",
-                "startup_s"):
+                "startup_s", "pool_mib", "kib_per_aircraft"):
         assert r[key] > 0, key
+    assert r["kib_per_aircraft"] == pytest.approx(r["pool_mib"] * 1024 / 4)
     assert len(r["pool_s_all"]) == len(r["serial_s_all"]) == len(r["ceiling_s_all"]) == 2
     per_round = sorted(s / p for s, p in zip(r["serial_s_all"], r["pool_s_all"]))
     assert r["speedup_vs_serial"] == pytest.approx(sum(per_round) / 2)  # median of two
