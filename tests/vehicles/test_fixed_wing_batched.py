@@ -3,7 +3,8 @@ through the registry, refused with a reason for a model it cannot fly,
 turning on the coordinated-turn circle ``v^2 / (g tan(phi))``, following
 JSBSim's uav700 under the same commands, bit-identical whatever the backend
 and the number of workers, flying the fixed-wing guidance's landing, and
-allowed far beyond the JSBSim vehicle limit."""
+allowed far beyond the JSBSim vehicle limit, and flown by the swarm as JSBSim
+aircraft are."""
 
 from __future__ import annotations
 
@@ -177,3 +178,26 @@ vehicles:
         parse_scenario(HEAD + body.replace("class: fixed_wing_batched, ", ""),
                        str(tmp_path / "j.yaml"), check_properties=False)
     assert f"must be <= {limits.MAX_VEHICLES}" in "\n".join(ei.value.problems)
+
+
+def test_the_swarm_flies_it_as_it_flies_jsbsim(tmp_path) -> None:
+    """The bundled rendezvous (eight uav700s on a 4 km circle, converge within
+    300 m): as batched point masses it converges too, in a time within 15% of
+    the JSBSim aircraft's."""
+    from cosim.scenario import load_scenario
+
+    repo = Path(__file__).resolve().parent.parent.parent
+    src = (repo / "scenarios/swarm/rendezvous.yaml").read_text().replace(
+        "duration_s: 150", "duration_s: 90")
+    times = {}
+    for tier, text in (("jsbsim", src), ("batched", src.replace(
+            "    model: uav700\n", "    model: uav700\n    class: fixed_wing_batched\n"))):
+        path = tmp_path / f"{tier}.yaml"
+        path.write_text(text)
+        res = run_scenario(load_scenario(path), tmp_path / tier, backend="process")
+        assert res.stop_reason == "completed", res.error
+        ev = [json.loads(x) for x in (tmp_path / tier / "events.jsonl").read_text().splitlines()]
+        [end] = [e for e in ev if e["event"] == "swarm_phase" and e["state"] == "end"]
+        assert end["reason"] == "converged", (tier, end)
+        times[tier] = end["duration_s"]
+    assert times["batched"] == pytest.approx(times["jsbsim"], rel=0.15)
