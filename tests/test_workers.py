@@ -111,3 +111,36 @@ def test_a_remote_traceback_is_bounded_and_keeps_the_error() -> None:
         assert tb.startswith("Traceback (most recent call last)")
         assert "ValueError: xxx" in tb and ("(traceback cut" in tb) == cut
         assert len(tb) <= worker_kit.MAX_TRACEBACK_CHARS + 100
+
+
+def _maps(conn: Connection) -> None:
+    with open("/proc/self/maps") as f:
+        conn.send((f.read(), os.environ.get("LD_PRELOAD")))
+
+
+def test_the_allocator_is_chosen_and_preloaded_into_the_child_only(monkeypatch) -> None:
+    """COSIM_ALLOCATOR: 'system' preloads nothing, a missing path is an error
+    naming it, 'auto' takes the first library present; the child maps the
+    library it was given while the driver's LD_PRELOAD stays as it was."""
+    import pytest
+
+    from cosim.errors import CosimError
+
+    monkeypatch.setenv("COSIM_ALLOCATOR", "system")
+    assert worker_kit.allocator() is None
+    monkeypatch.setenv("COSIM_ALLOCATOR", "/no/such/lib.so")
+    with pytest.raises(CosimError, match="/no/such/lib.so: no such file"):
+        worker_kit.allocator()
+    monkeypatch.setenv("COSIM_ALLOCATOR", "auto")
+    lib = worker_kit.allocator()
+    present = [p for p in worker_kit.ALLOCATORS if os.path.isfile(p)]
+    assert lib == (present[0] if present else None)
+    if lib is None:
+        pytest.skip("no jemalloc or mimalloc here (apt-get install libjemalloc2)")
+    before = os.environ.get("LD_PRELOAD")
+    a, b = worker_kit.context().Pipe(duplex=False)
+    p = worker_kit.start(_maps, (b,), "cosim-test-maps", preload=lib)
+    maps, env = a.recv()
+    p.join(10)
+    assert os.path.basename(lib) in maps and env is not None and lib in env
+    assert os.environ.get("LD_PRELOAD") == before

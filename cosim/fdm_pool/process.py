@@ -179,6 +179,8 @@ class ProcessPool(Pool):
         # or half closed: close it first (atexit runs the last registered first;
         # multiprocessing registered its handler when the shared arrays were made)
         atexit.register(self.close)
+        #: the allocator preloaded into the workers (``cosim.workers.allocator``)
+        self.allocator = worker_kit.allocator()
         try:
             for i in range(first_child, w):
                 a, b = self.bounds[i]
@@ -186,7 +188,7 @@ class ProcessPool(Pool):
                 self._procs[i] = worker_kit.start(
                     _worker_main, (i, self.specs[a:b], a, b, self.dt_s, self.channels,
                                    self._raw, self.n, w, s, layout_names),
-                    name=f"cosim-worker-{i}")
+                    name=f"cosim-worker-{i}", preload=self.allocator)
                 self._errs[i] = r
                 s.close()
             self._build(start_timeout_s if start_timeout_s is not None
