@@ -187,6 +187,11 @@ class Personality:
             return float(goto.get("loiter_radius_m", 0.0))
         return 0.0
 
+    def in_air(self, row: Sequence[float]) -> bool:
+        """Whether a vehicle in this state row is flying (EXTENDED_SYS_STATE's
+        landed state): more than 1 m above the ground."""
+        return float(row[STATE_INDEX["alt_agl_m"]]) > 1.0
+
     def landed(self, row: Sequence[float]) -> bool:
         """Whether a vehicle in this state row is at rest on the ground (a
         mission's LAND, and an RTL that lands, end there): within 0.5 m of

@@ -260,7 +260,7 @@ class MavVehicle:
     def in_air(self) -> bool:
         row = self.row_values
         return (row is not None and self.status == VehicleStatus.ACTIVE
-                and row[_S["alt_agl_m"]] > 1.0)
+                and self.personality.in_air(row))
 
     def prearm_ok(self) -> bool:
         return self.status == VehicleStatus.ACTIVE

@@ -309,8 +309,11 @@ def test_a_fixed_wing_lands_at_the_land_item(rig) -> None:
     _, reached = reach(r, *land_at)  # over the point, still flying: not yet
     assert reached == [] and v.armed
     r.states[0, [S["alt_agl_m"], S["vd_mps"], S["vn_mps"], S["ve_mps"]]] = 0.1, 0.0, 0.0, 0.0
+    _, reached = reach(r, *land_at)  # no weight on its skids yet: still flying
+    assert reached == [] and v.armed and v.in_air()
+    r.states[0, S["gear_force_lbs"]] = -88.0  # the ground holds it up
     _, reached = reach(r, *land_at)
-    assert reached == [2] and not v.armed and v.mission.complete
+    assert reached == [2] and not v.armed and v.mission.complete and not v.in_air()
 
 
 def test_a_fixed_wing_lands_on_command_in_guided(rig) -> None:

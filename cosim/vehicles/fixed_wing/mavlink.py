@@ -510,11 +510,14 @@ class ArduPlane(Personality):
         return None
 
     # -- missions ------------------------------------------------------------------
+    def in_air(self, row: Sequence[float]) -> bool:
+        """Off the ground: no force on its wheels or skids (on its wheels a
+        c172p's position, its centre of gravity, is 1.3 m up)."""
+        return float(row[_S["gear_force_lbs"]]) == 0.0 and float(row[_S["alt_agl_m"]]) > 0.0
+
     def landed(self, row: Sequence[float]) -> bool:
-        """Stopped within 3 m of the ground: a fixed-wing cannot hover, and
-        on its wheels its position (the centre of gravity) is over a metre
-        up (1.3 m for the c172p)."""
-        return float(row[_S["alt_agl_m"]]) < 3.0 and stopped(row)
+        """Stopped on its wheels or skids (a fixed-wing cannot hover)."""
+        return not self.in_air(row) and stopped(row)
 
     def item_problem(self, ctx: Context, v: MavVehicle, item: MissionItem) -> str | None:
         """An item's altitude below the class minimum above the ground (the
