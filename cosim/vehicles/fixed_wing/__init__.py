@@ -25,7 +25,6 @@ from cosim.guidance.safety import Limits, floor_problems, radius_problems
 from cosim.vehicles.base import Guidance, SwarmLimits, VehicleClass
 from cosim.vehicles.fixed_wing.guidance import AP_CHANNELS, FixedWingGuidance
 from cosim.vehicles.fixed_wing.mavlink import ARDUPLANE
-from cosim.vehicles.registry import state_layout
 from cosim.vehicles.spec import StateField, VehicleSpec
 
 #: how low a fixed-wing may be commanded, above the ground (m); the study's
@@ -43,8 +42,8 @@ class FixedWing(VehicleClass):
     channels = AP_CHANNELS
     default_camera_mount = "nadir"
     contact_is_impact = True
-    #: the ground's push on skids or wheels (N; 0 in the air): how guidance
-    #: knows a landing has touched down, and the landing's load in the log
+    #: the ground's push on skids or wheels (N; 0 in the air): a landing's
+    #: load, in the log
     state_columns: tuple[StateField, ...] = (
         StateField("contact_force_n", "forces/fbz-gear-lbs", -LBF_TO_N),)
     flag_events = {"stalled": ("stall", "onset", "recovery"),
@@ -58,9 +57,7 @@ class FixedWing(VehicleClass):
     def make_guidance(self, rows: Sequence[int], frame: LocalFrame, start_ne: np.ndarray,
                       channel_index: Mapping[str, int], specs: Sequence[VehicleSpec] = ()
                       ) -> Guidance:
-        names = [f.name for f in state_layout(specs)] if specs else []
-        contact = names.index("contact_force_n") if "contact_force_n" in names else None
-        return FixedWingGuidance(len(start_ne), frame, start_ne, dict(channel_index), contact)
+        return FixedWingGuidance(len(start_ne), frame, start_ne, dict(channel_index))
 
     def min_alt_agl_m(self, profile: Mapping[str, Any]) -> float:
         v = profile.get("min_alt_agl_m", DEFAULT_MIN_ALT_AGL_M)

@@ -18,7 +18,7 @@ point, after the others): the last leg is flown on, over the point, on a
 glide path of ``GLIDE_DEG`` to the ground at the point (its altitude hold
 in AGL mode follows the along-track distance each exchange, at the speed
 commanded), with the autopilot's ``cosim/ap/landing`` set so that a gentle
-touchdown (skids or wheels in contact: the ``contact_force_n`` column) is a
+touchdown (skids or wheels in contact: ``gear_force_lbs``) is a
 landing (``cosim.vehicles.jsbsim_model``); on the ground the engine idles,
 the autopilot holds the ground pitch (``cosim/ap/landing`` 2,
 ``cosim/ap/ground-pitch-deg``: nose wheel or skids down, no lift to bounce
@@ -74,8 +74,8 @@ class FixedWingGuidance:
     only its class's rows are ever commanded)."""
 
     def __init__(self, n: int, frame: LocalFrame, start_ne: np.ndarray,
-                 channel_index: dict[str, int], contact_column: int | None = None,
-                 ne_columns: tuple[int, int] | None = None) -> None:
+                 channel_index: dict[str, int], ne_columns: tuple[int, int] | None = None
+                 ) -> None:
         self.n = n
         #: state columns of north and east in the scenario frame, where the
         #: model flies in that flat frame (the batched tier): positions are
@@ -84,9 +84,6 @@ class FixedWingGuidance:
             else None
         #: positions of the rows a command is being applied to (``command``)
         self._here: dict[int, np.ndarray] = {}
-        #: the state column of the ground's push on the airframe (N; > 0: in
-        #: contact); None: contact is judged from the height alone
-        self.contact_col = contact_column
         self.frame = frame
         self.ground_alt_m = frame.alt_m
         self.start_ne = np.asarray(start_ne, dtype=np.float64).reshape(n, 2)
@@ -231,13 +228,6 @@ class FixedWingGuidance:
         self._set(sp, i, "cosim/ap/alt-mode", 1.0)
         self.labels[i] = "land"
 
-    def _on_ground(self, states: np.ndarray, i: int) -> bool:
-        """Skids or wheels on the ground (the contact force; without that
-        column, the height: below 0.3 m)."""
-        if self.contact_col is not None:
-            return bool(states[i, self.contact_col] > 0.0)
-        return bool(states[i, _S["alt_agl_m"]] < 0.3)
-
     def _landing_update(self, states: np.ndarray, sp: np.ndarray,
                         events: list[GuidanceEvent]) -> None:
         """The glide path of the vehicles landing; touchdown and stop."""
@@ -248,7 +238,7 @@ class FixedWingGuidance:
                 u = self.b[i] - self.a[i]
                 u = u / max(float(np.hypot(*u)), 1e-6)
                 to_go = float(np.dot(self.land_point[i] - pos[k], u))
-                if self._on_ground(states, i):  # a landing
+                if states[i, _S["gear_force_lbs"]] != 0.0:  # skids or wheels down: landed
                     self.landing[i] = _ROLLOUT
                     self.nav[i] = _NONE
                     self._set(sp, i, "cosim/ap/speed-hold", 0.0)

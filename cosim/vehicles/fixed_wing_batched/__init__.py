@@ -118,7 +118,6 @@ class FixedWingBatched(FixedWing):
                       ) -> Guidance:
         names = [f.name for f in state_layout(specs)]
         return FixedWingGuidance(len(start_ne), frame, start_ne, dict(channel_index),
-                                 names.index("contact_force_n"),
                                  (names.index("frame_north_m"), names.index("frame_east_m")))
 
     def swarm_problem(self, spec: VehicleSpec) -> str | None:
