@@ -85,7 +85,6 @@ import time
 from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from fnmatch import fnmatchcase
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -120,7 +119,7 @@ log = logging.getLogger(__name__)
 
 #: vehicles one endpoint carries (system ids are 8 bits and ground stations
 #: use 255 and up); more need a second endpoint on its own URL, serving its
-#: own ground station: ``mav_specs(vehicles[240:], first_sysid=1, first_row=240)``
+#: own ground station: ``mav_specs(vehicles[240:], first_sysid=1, rows=range(240, n))``
 MAX_VEHICLES_PER_LINK = 240
 
 #: the system id of cosim's own controllers (the swarm controller) on MAVLink,
@@ -194,13 +193,12 @@ class MavlinkConfig:
         """The config a scenario's ``mavlink:`` section asks for (None: no
         section); ``ids``: the scenario's vehicle ids, for its ``vehicles``
         patterns."""
+        from cosim.scenario.schema import mavlink_rows
+
         if section is None:
             return None
-        rows = None
-        pats = section.get("vehicles")
-        if pats is not None and pats != ["all"]:
-            rows = tuple(i for i, v in enumerate(ids) if any(fnmatchcase(v, p) for p in pats))
-        return cls(url=section["url"], rates_hz=dict(section["rates_hz"]), rows=rows)
+        return cls(url=section["url"], rates_hz=dict(section["rates_hz"]),
+                   rows=mavlink_rows(section, ids))
 
     @property
     def signing(self) -> bool:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from fnmatch import fnmatchcase
 from pathlib import Path
@@ -581,11 +581,21 @@ def _mavlink(ctx: _Ctx, d: Any) -> dict[str, Any] | None:
     return out
 
 
+def mavlink_rows(section: Mapping[str, Any] | None, ids: Sequence[str]
+                 ) -> tuple[int, ...] | None:
+    """The state rows of the vehicles a scenario's ``mavlink:`` section puts
+    on MAVLink (its ``vehicles`` patterns); None: every vehicle."""
+    pats = (section or {}).get("vehicles")
+    if pats is None or pats == ["all"]:
+        return None
+    return tuple(i for i, v in enumerate(ids) if any(fnmatchcase(v, p) for p in pats))
+
+
 def _mavlink_vehicles(ctx: _Ctx, mavlink: dict[str, Any],
                       vehicles: list[tuple[VehicleSpec, P]]) -> None:
     """``mavlink.vehicles``: which vehicles are on MAVLink ('all', an id, a
     pattern or a list of them; default all). Stored as patterns, resolved to
-    rows by ``MavlinkConfig.of_scenario``."""
+    rows by ``mavlink_rows``."""
     sel = mavlink["vehicles"]
     _select(ctx, sel, ("mavlink", "vehicles"), [v.id for v, _ in vehicles])
     mavlink["vehicles"] = sel if isinstance(sel, list) else [sel]

@@ -42,10 +42,9 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from fnmatch import fnmatchcase
 from typing import Any
 
-from cosim.scenario.schema import SectionInfo
+from cosim.scenario.schema import SectionInfo, mavlink_rows
 from cosim.swarm import laws
 from cosim.vehicles import get_class
 
@@ -235,10 +234,10 @@ def parse_swarm(info: SectionInfo, node: Any, path: P) -> SwarmSpec | None:
         if name is None or len(good) != len(phases) or len(rows) < 2:
             continue
         groups.append(SwarmGroup(name, tuple(rows), tuple(good), spacing))
-    pats = (info.mavlink or {}).get("vehicles")
-    if pats is not None and pats != ["all"]:  # the swarm commands through MAVLink
-        off = [info.vehicles[r].id for g in groups for r in g.rows
-               if not any(fnmatchcase(info.vehicles[r].id, p) for p in pats)]
+    on_mav = mavlink_rows(info.mavlink, info.ids)
+    if on_mav is not None:  # the swarm commands through MAVLink
+        on = set(on_mav)
+        off = [info.vehicles[r].id for g in groups for r in g.rows if r not in on]
         if off:
             info.err(path, f"vehicles {', '.join(off[:5])}{' ...' if len(off) > 5 else ''} "
                            f"are not in mavlink.vehicles, and the swarm flies its vehicles "
