@@ -124,17 +124,16 @@ class LocalFrame:
         o = self._origin_ecef()
         return ecef_to_geodetic(dx + o[0], dy + o[1], dz + o[2])
 
-    def place(self, north_m: ArrayLike, east_m: ArrayLike, height_m: ArrayLike,
-              iterations: int = 4) -> tuple[Array, Array]:
+    def place(self, north_m: ArrayLike, east_m: ArrayLike, height_m: ArrayLike
+              ) -> tuple[Array, Array]:
         """Latitude and longitude (deg) of the point at ``height_m`` above the
         ellipsoid whose local north/east coordinates are exactly ``north_m``,
-        ``east_m`` (solves for the matching ``down``; exact to well below 1 um
-        with the default 4 iterations, to about 1e-8 m with 2 within 50 km)."""
+        ``east_m`` (solves for the matching ``down``; exact to well below 1 um)."""
         n = np.asarray(north_m, dtype=np.float64)
         e = np.asarray(east_m, dtype=np.float64)
         h = np.asarray(height_m, dtype=np.float64)
         d = -(h - self.alt_m) + 0.0 * n  # flat-earth first guess, broadcast
-        for _ in range(iterations):
+        for _ in range(4):
             lat, lon, hh = self.ned_to_geodetic(n, e, d)
             d = d + (hh - h)  # moving down by x lowers the height by ~x (cos < 1e-3 off)
         lat, lon, _ = self.ned_to_geodetic(n, e, d)

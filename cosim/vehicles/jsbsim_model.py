@@ -54,12 +54,12 @@ LANDING_PROP = "cosim/ap/landing"
 LANDING_SINK_FPS = 9.84
 LANDING_ROLL_RAD = 0.35
 
+
 class Vehicle:
     """A built, trimmed FDM with cached property nodes."""
 
     __slots__ = ("spec", "fdm", "_read", "_channels", "_agl", "_gear", "_landing", "status",
-                 "airborne",
-                 "contact_radius_m", "contact_is_impact", "_extra")
+                 "airborne", "contact_radius_m", "contact_is_impact", "_extra")
 
     def __init__(self, spec: VehicleSpec, dt_s: float, channels: Sequence[str]) -> None:
         from cosim.vehicles.registry import get_class
