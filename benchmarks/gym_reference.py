@@ -18,6 +18,7 @@ import argparse
 import statistics
 import sys
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -61,39 +62,35 @@ def _make(index: int) -> Any:
     return lambda: OneAircraft(index)
 
 
-def gym_rate(n: int, seconds: float, rounds: int) -> list[float]:
+def _steps_per_s(step: Callable[[], Any], n: int, seconds: float) -> float:
+    """Aircraft-steps per second of ``step`` (one exchange of ``n`` aircraft)
+    called for ``seconds`` of simulated time."""
+    exchanges = int(seconds * PHYSICS_HZ) // EVERY
+    t0 = time.perf_counter()
+    for _ in range(exchanges):
+        step()
+    return n * exchanges * EVERY / (time.perf_counter() - t0)
+
+
+def gym_rate(n: int, seconds: float) -> float:
     from gymnasium.vector import AsyncVectorEnv
 
     envs = AsyncVectorEnv([_make(i) for i in range(n)], shared_memory=True)
     try:
         envs.reset(seed=0)
         actions = np.zeros((n, 1))
-        exchanges = int(seconds * PHYSICS_HZ) // EVERY
-        out = []
-        for _ in range(rounds):
-            t0 = time.perf_counter()
-            for _ in range(exchanges):
-                envs.step(actions)
-            out.append(n * exchanges * EVERY / (time.perf_counter() - t0))
-        return out
+        return _steps_per_s(lambda: envs.step(actions), n, seconds)
     finally:
         envs.close()
 
 
-def pool_rate(n: int, seconds: float, rounds: int) -> list[float]:
+def pool_rate(n: int, seconds: float) -> float:
     from cosim.bench import bench_specs
     from cosim.fdm_pool import make_pool
 
-    exchanges = int(seconds * PHYSICS_HZ) // EVERY
-    out = []
     with make_pool(bench_specs(n, "uav700"), 1 / PHYSICS_HZ, (), "process", None) as pool:
         pool.step(EVERY)
-        for _ in range(rounds):
-            t0 = time.perf_counter()
-            for _ in range(exchanges):
-                pool.step(EVERY)
-            out.append(n * exchanges * EVERY / (time.perf_counter() - t0))
-    return out
+        return _steps_per_s(lambda: pool.step(EVERY), n, seconds)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -111,8 +108,8 @@ def main(argv: list[str] | None = None) -> int:
     for n in [int(x) for x in a.vehicles.split(",")]:
         g, p = [], []
         for _ in range(a.rounds):  # interleaved: the same machine load for both
-            g += gym_rate(n, a.seconds, 1)
-            p += pool_rate(n, a.seconds, 1)
+            g.append(gym_rate(n, a.seconds))
+            p.append(pool_rate(n, a.seconds))
         gm, pm = statistics.median(g), statistics.median(p)
         ratio = statistics.median([y / x for x, y in zip(g, p)])
         print(f"| {n} | {gm:,.0f} | {pm:,.0f} | {ratio:.1f}x |", flush=True)
