@@ -43,24 +43,20 @@ _FT2_TO_M2 = 0.09290304
 
 
 @functools.lru_cache(maxsize=32)
-def airframe(name: str, aircraft_dir: str, source: str) -> tuple[float, float]:
-    """(weight N, wing area m^2) of a JSBSim model, read once from a loaded FDM."""
+def class_params(model: str, aircraft_dir: str, source: str,
+                 origin: tuple[float, float, float]) -> dict[str, Any]:
+    """The point mass's figures for a JSBSim model with its cosim profile (its
+    weight and wing area read once from a loaded FDM) and the scenario origin:
+    one dict, shared by every vehicle of the model (a scenario may hold
+    100,000 of them)."""
     from cosim.jsb import find_model, new_fdm
 
-    info = find_model(name, (aircraft_dir,) if source == "user" else ())
+    info = find_model(model, (aircraft_dir,) if source == "user" else ())
     fdm = new_fdm(info, 1 / 120)
     fdm.run_ic()  # the fuel and payload load with the initial conditions
-    return (float(fdm["inertia/weight-lbs"]) * LBF_TO_N,
-            float(fdm["metrics/Sw-sqft"]) * _FT2_TO_M2)
-
-
-#: the class parameters of each (model, folder, source, origin)
-_PARAMS: dict[tuple[Any, ...], dict[str, Any]] = {}
-
-
-def _params(model: str, aircraft_dir: str, source: str, origin: tuple[float, float, float],
-            prof: Mapping[str, Any]) -> dict[str, Any]:
-    weight, area = airframe(model, aircraft_dir, source)
+    weight = float(fdm["inertia/weight-lbs"]) * LBF_TO_N
+    area = float(fdm["metrics/Sw-sqft"]) * _FT2_TO_M2
+    prof = info.profile
     return {"origin": origin, "weight_n": weight,
             "vs1g_sl_mps": float(np.sqrt(2.0 * weight / (RHO0 * area * prof["clmax"]))),
             "v_max_mps": float(prof["airspeed_max_kt"]) * KT_TO_MPS,
@@ -99,15 +95,9 @@ class FixedWingBatched(FixedWing):
 
     def with_world(self, spec: VehicleSpec, sections: Mapping[str, Any],
                    origin: tuple[float, float, float]) -> VehicleSpec:
-        """The airframe's figures and the scenario origin, in a dict shared by
-        every vehicle of the model (a scenario may hold 100,000 of them)."""
         o = (float(origin[0]), float(origin[1]), float(origin[2]))
-        key = (spec.model, spec.aircraft_dir, spec.model_source, o)
-        params = _PARAMS.get(key)
-        if params is None:
-            params = _PARAMS[key] = _params(spec.model, spec.aircraft_dir, spec.model_source,
-                                            o, spec.profile)
-        return replace(spec, class_params=params)
+        return replace(spec, class_params=class_params(spec.model, spec.aircraft_dir,
+                                                       spec.model_source, o))
 
     def make_batch(self, specs: Sequence[VehicleSpec], dt_s: float, channels: Sequence[str],
                    columns: Sequence[str]) -> PointMassModel:
@@ -126,4 +116,4 @@ class FixedWingBatched(FixedWing):
 
 FIXED_WING_BATCHED = FixedWingBatched()
 
-__all__ = ["FIXED_WING_BATCHED", "FixedWingBatched", "airframe"]
+__all__ = ["FIXED_WING_BATCHED", "FixedWingBatched", "class_params"]
