@@ -75,10 +75,14 @@ LANDING_SINK_MPS = 3.0
 ROLLOUT_DECEL = 2.0
 _S = STATE_INDEX
 
-CHANNELS = ("cosim/ap/engage", "cosim/ap/heading-hold", "cosim/ap/heading-cmd-deg",
-            "cosim/ap/bank-limit-deg", "cosim/ap/alt-hold", "cosim/ap/alt-cmd-ft",
-            "cosim/ap/alt-mode", "cosim/ap/speed-hold", "cosim/ap/speed-cmd-kt",
-            "cosim/ap/stall-protect", "fcs/throttle-cmd-norm", "cosim/ap/landing")
+#: the autopilot settings it takes (the setpoint channels the fixed-wing
+#: guidance writes) -> the attribute holding each, in the property's units
+INPUTS = {"cosim/ap/engage": "engaged", "cosim/ap/heading-hold": "hdg_hold",
+          "cosim/ap/heading-cmd-deg": "hdg_cmd", "cosim/ap/bank-limit-deg": "bank_lim",
+          "cosim/ap/alt-hold": "alt_hold", "cosim/ap/alt-cmd-ft": "alt_cmd_ft",
+          "cosim/ap/alt-mode": "alt_mode", "cosim/ap/speed-hold": "spd_hold",
+          "cosim/ap/speed-cmd-kt": "spd_cmd_kt", "cosim/ap/stall-protect": "protect",
+          "fcs/throttle-cmd-norm": "throttle", "cosim/ap/landing": "landing"}
 
 
 def isa_sigma(h_m: np.ndarray) -> np.ndarray:
@@ -98,7 +102,7 @@ class PointMassModel:
         self.c_contact = cols.index("contact_force_n")
         self.c_north, self.c_east = cols.index("frame_north_m"), cols.index("frame_east_m")
         ch = list(channels)
-        self.idx = {c: ch.index(c) for c in CHANNELS if c in ch}
+        self.idx = {c: ch.index(c) for c in INPUTS if c in ch}
         p = [s.class_params for s in specs]
         self.frame = LocalFrame(*(p[0]["origin"] if p else (0.0, 0.0, 0.0)))
         self.ground = np.array([s.terrain_alt_m for s in specs], dtype=np.float64)
@@ -139,19 +143,12 @@ class PointMassModel:
         """The throttle that holds speed ``v`` at climb rate ``hdot``."""
         return np.clip((v / self.v_max) ** 2 + G * hdot / np.maximum(v, 1.0) / self.a_t, 0.0, 1.0)
 
-    _FIELDS = {"cosim/ap/engage": "engaged", "cosim/ap/heading-hold": "hdg_hold",
-               "cosim/ap/heading-cmd-deg": "hdg_cmd", "cosim/ap/bank-limit-deg": "bank_lim",
-               "cosim/ap/alt-hold": "alt_hold", "cosim/ap/alt-cmd-ft": "alt_cmd_ft",
-               "cosim/ap/alt-mode": "alt_mode", "cosim/ap/speed-hold": "spd_hold",
-               "cosim/ap/speed-cmd-kt": "spd_cmd_kt", "cosim/ap/stall-protect": "protect",
-               "fcs/throttle-cmd-norm": "throttle", "cosim/ap/landing": "landing"}
-
     def apply(self, setpoints: np.ndarray) -> None:
         for name, j in self.idx.items():
             col = setpoints[:, j]
             if np.isnan(col).all():
                 continue
-            attr = self._FIELDS[name]
+            attr = INPUTS[name]
             setattr(self, attr, np.where(np.isnan(col), getattr(self, attr), col))
 
     def step(self, nsub: int) -> None:
