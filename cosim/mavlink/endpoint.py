@@ -119,7 +119,7 @@ log = logging.getLogger(__name__)
 
 #: vehicles one endpoint carries (system ids are 8 bits and ground stations
 #: use 255 and up); more need a second endpoint on its own URL, serving its
-#: own ground station: ``mav_specs(vehicles[240:], first_sysid=1, rows=range(240, n))``
+#: own ground station: ``mav_specs(vehicles[240:], first_sysid=1, first_row=240)``
 MAX_VEHICLES_PER_LINK = 240
 
 #: the system id of cosim's own controllers (the swarm controller) on MAVLink,

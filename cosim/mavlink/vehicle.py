@@ -121,11 +121,11 @@ class MavVehicleSpec:
 
 
 def mav_specs(vehicles: Sequence[VehicleSpec], first_sysid: int = 1,
-              rows: Sequence[int] | None = None) -> list[MavVehicleSpec]:
+              first_row: int = 0, rows: Sequence[int] | None = None) -> list[MavVehicleSpec]:
     """MAVLink identities for scenario vehicles: system ids ``first_sysid``
     upwards, each class's personality and command floor, the parameter
     values its personality derives from the vehicle (e.g. airspeed limits);
-    their state rows ``rows`` (None: 0 upwards)."""
+    their state rows ``first_row`` upwards, or ``rows``."""
     from cosim.vehicles import get_class
 
     out = []
@@ -133,7 +133,7 @@ def mav_specs(vehicles: Sequence[VehicleSpec], first_sysid: int = 1,
         cls = get_class(v.vehicle_class)
         personality = cls.mavlink or Personality()
         params = personality.spec_params(v)
-        out.append(MavVehicleSpec(row=k if rows is None else rows[k],
+        out.append(MavVehicleSpec(row=first_row + k if rows is None else rows[k],
                                   sysid=first_sysid + k, name=v.id,
                                   start_lat_deg=v.lat_deg, start_lon_deg=v.lon_deg,
                                   start_alt_msl_m=v.alt_msl_m, home_alt_msl_m=v.terrain_alt_m,
