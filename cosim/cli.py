@@ -86,6 +86,13 @@ def _build_parser() -> _Parser:
     r.add_argument("--workers", type=int, metavar="N",
                    help="worker count (default: the backend's own, for process one per "
                         "core)")
+    r.add_argument("--address", metavar="HOST:PORT",
+                   help="the cluster to run on, for a backend that runs on one (ray: the "
+                        "head's address from 'ray start --head'; default RAY_ADDRESS, else a "
+                        "local Ray)")
+    r.add_argument("--strict", action="store_true",
+                   help="stop with an error when a machine of the cluster is lost, rather "
+                        "than rebuild its vehicles elsewhere (which ends bit-exactness)")
     r.add_argument("--realtime", nargs="?", const=1.0, type=_positive_float, metavar="FACTOR",
                    help="pace to the wall clock (FACTOR x real time, default 1)")
     r.add_argument("--duration-s", type=_positive_float, metavar="S",
@@ -277,6 +284,30 @@ def _load_scenario(path: str) -> Scenario:
     return load_scenario(path)
 
 
+def _backend_options(a: argparse.Namespace) -> dict[str, Any]:
+    """``--address`` and ``--strict``, for the backend to take or refuse; a
+    refusal is a usage error before anything is built."""
+    from cosim.fdm_pool import get_backend
+
+    opts: dict[str, Any] = {}
+    if a.address:
+        opts["address"] = a.address
+    if a.strict:
+        opts["strict"] = True
+    unknown = sorted(set(opts) - set(get_backend(a.backend).options))
+    if unknown:
+        raise ConfigError(f"--{unknown[0]}: the {a.backend} backend does not take it; "
+                          f"backends that do: "
+                          + (", ".join(b.name for b in _backends_with(unknown[0])) or "none"))
+    return opts
+
+
+def _backends_with(option: str) -> list[Any]:
+    from cosim.fdm_pool import backends
+
+    return [b for b in backends().values() if option in b.options]
+
+
 def _cmd_run(a: argparse.Namespace) -> int:
     from cosim.sync import Run
 
@@ -344,7 +375,8 @@ def _cmd_run(a: argparse.Namespace) -> int:
                                        for t in a.video], scn))
     run = Run(scn, out, backend=a.backend, workers=a.workers, realtime=a.realtime,
               progress=progress, step_timeout_s=a.step_timeout_s, mavlink=mav_cfg,
-              external_controller=a.external_controller, extra_participants=extra)
+              external_controller=a.external_controller, extra_participants=extra,
+              backend_options=_backend_options(a))
 
     interrupts = 0
 

@@ -172,6 +172,29 @@ class WorkerDied(CosimError):
                 f"its vehicles: {_vehicle_list(self.vehicles)}")
 
 
+class AgentLost(WorkerDied):
+    """A machine's agent of a cluster backend is gone (its process killed, its
+    machine down or cut off): names the machine and what Ray said."""
+
+    def __init__(self, worker: int, machine: str, node_id: str, pid: int | None,
+                 vehicles: list[str], tick: int | None, reason: str) -> None:
+        CosimError.__init__(self, worker, machine, node_id, pid, vehicles, tick, reason)
+        self.worker = worker
+        self.machine = machine
+        self.node_id = node_id
+        self.pid = pid
+        self.exitcode = None
+        self.vehicles = list(vehicles)
+        self.tick = tick
+        self.reason = reason
+
+    def __str__(self) -> str:
+        at = f" at tick {self.tick}" if self.tick is not None else ""
+        return (f"agent {self.worker} on machine {self.machine} (node {self.node_id[:12]}, "
+                f"pid {self.pid}) was lost{at}: {self.reason}; its vehicles: "
+                f"{_vehicle_list(self.vehicles)}")
+
+
 class WorkerTimeout(WorkerDied):
     """A worker is alive but did not answer within the deadline (stuck, stopped)."""
 

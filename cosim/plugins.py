@@ -36,7 +36,8 @@ DEFAULT_BACKEND = "process"
 #: cosim's own entries, group -> name -> "module:attribute"
 BUILTIN: dict[str, dict[str, str]] = {
     BACKENDS: {"inline": "cosim.fdm_pool.inline:InlinePool",
-               "process": "cosim.fdm_pool.process:ProcessPool"},
+               "process": "cosim.fdm_pool.process:ProcessPool",
+               "ray": "cosim.fdm_pool.ray_cluster:RayPool"},
     VEHICLES: {"fixed_wing": "cosim.vehicles.fixed_wing:FIXED_WING",
                "jsbsim": "cosim.vehicles.plain:PLAIN",
                "ground": "cosim.vehicles.ground:GROUND",

@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import dataclasses
 import textwrap
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -84,3 +85,35 @@ schedule:
 @pytest.fixture
 def mixed_scenario(write_scenario: Callable[[str, str], Path]) -> Path:
     return write_scenario(MIXED, "mixed.yaml")
+
+
+@pytest.fixture(scope="session")
+def ray_cluster() -> Iterator[Any]:
+    """A two-node Ray cluster on this machine (``tests.ray_cluster``), joined
+    by this process: the ray backend runs on it. Skipped where Ray is not
+    installed (the test extras install it)."""
+    import importlib.util
+    import os
+
+    if importlib.util.find_spec("ray") is None:
+        pytest.skip("the ray backend needs Ray (pip install -e '.[test]')")
+    from tests.ray_cluster import LocalRayCluster
+
+    cluster = LocalRayCluster(nodes=2).start()
+    saved = {k: os.environ.get(k) for k in ("RAY_ADDRESS", "RAY_AUTH_MODE", "RAY_AUTH_TOKEN")}
+    # before Ray is imported here: it reads its token once
+    os.environ.update(RAY_ADDRESS=cluster.address, RAY_AUTH_MODE="token",
+                      RAY_AUTH_TOKEN=cluster.env["RAY_AUTH_TOKEN"])
+    import ray
+
+    try:
+        yield cluster
+    finally:
+        ray.shutdown()
+        cluster.stop()
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+

@@ -6,6 +6,7 @@ import subprocess
 import sys
 import textwrap
 from pathlib import Path
+from typing import Any
 
 
 def install_out_of_tree(folder: Path, name: str, modules: dict[str, str],
@@ -39,3 +40,10 @@ def install_out_of_tree(folder: Path, name: str, modules: dict[str, str],
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stdout + r.stderr
     return site
+
+
+def backend_ready(request: Any, name: str) -> None:
+    """Whatever backend ``name`` needs to run, started for the test (``ray``:
+    the session's cluster)."""
+    if name == "ray":
+        request.getfixturevalue("ray_cluster")

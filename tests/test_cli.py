@@ -66,6 +66,13 @@ def test_usage_errors_exit_2(tmp_path: Path, capsys) -> None:
     assert main(["run", str(tmp_path / "missing.yaml")]) == 2
     assert "cannot read scenario" in capsys.readouterr().err
     assert main([]) == 2
+    # an option the backend does not take: refused before anything is built
+    out = tmp_path / "r"
+    assert main(["run", str(REPO / "scenarios" / "quickstart.yaml"), "--address", "10.0.0.1:6379",
+                 "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "--address: the process backend does not take it; backends that do: ray" in err
+    assert not out.exists()
 
 
 def test_models_lists_bundled_aircraft(capsys) -> None:

@@ -12,6 +12,7 @@ This package never reads scenarios, schedules commands or writes logs.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 from cosim.fdm_pool.backends import Backend, backend_names, backends, get_backend
 from cosim.fdm_pool.base import Pool, PoolState
@@ -27,10 +28,11 @@ from cosim.vehicles.spec import (
 
 
 def make_pool(specs: Sequence[VehicleSpec], dt_s: float, channels: Sequence[str] = (),
-              backend: str = "process", workers: int | None = None) -> Pool:
+              backend: str = "process", workers: int | None = None, **options: Any) -> Pool:
     """Build and trim every vehicle on the backend called ``backend``
-    (``cosim.fdm_pool.backends``: built-in or registered by a package)."""
-    return get_backend(backend).make(specs, dt_s, channels, workers=workers)
+    (``cosim.fdm_pool.backends``: built-in or registered by a package);
+    ``options``: that backend's own (``Backend.options``)."""
+    return get_backend(backend).make(specs, dt_s, channels, workers=workers, **options)
 
 
 __all__ = ["Backend", "InlinePool", "N_STATE", "Pool", "PoolState", "ProcessPool",

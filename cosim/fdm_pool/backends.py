@@ -15,6 +15,13 @@ mybackend`` use it, and ``tests/fdm_pool/test_conformance.py`` can check it
 tests/fdm_pool/test_conformance.py``): bit-identical states against
 ``inline``, statuses, faults and misuse as the ``Pool`` contract says.
 
+A backend may take options beyond these, as keyword arguments of its
+factory (``ray``: ``address``, the cluster to join, and ``strict``, stop
+rather than recover when a machine is lost). ``cosim run --address`` and
+``--strict`` pass them on to whichever backend runs; one that does not take
+an option it is given refuses it with a ``ConfigError`` naming the ones it
+takes.
+
 Nothing outside a backend asks which backend runs: the CLI lists them from
 here, and each says how many workers it uses by default
 (``Pool.default_workers``).
@@ -22,11 +29,14 @@ here, and each says how many workers it uses by default
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 
 from cosim import plugins
+from cosim.errors import ConfigError
 from cosim.fdm_pool.base import Pool
 from cosim.plugins import load_plugins, plugin_names
 from cosim.vehicles.spec import VehicleSpec
@@ -53,9 +63,31 @@ class Backend:
         fn = getattr(self.factory, "default_workers", None)
         return int(fn()) if callable(fn) else 1
 
+    @property
+    def options(self) -> tuple[str, ...]:
+        """The keyword options its factory takes beyond the common arguments."""
+        try:
+            params = inspect.signature(self.factory).parameters
+        except (TypeError, ValueError):
+            return ()
+        return tuple(name for name, p in params.items()
+                     if name not in _COMMON and p.kind in (p.KEYWORD_ONLY,
+                                                           p.POSITIONAL_OR_KEYWORD))
+
     def make(self, specs: Sequence[VehicleSpec], dt_s: float, channels: Sequence[str] = (),
-             workers: int | None = None) -> Pool:
-        return self.factory(specs, dt_s, channels, workers=workers)
+             workers: int | None = None, **options: Any) -> Pool:
+        """Build the pool; ``options``: the backend's own (``options``), refused
+        with a ``ConfigError`` if it does not take them."""
+        unknown = sorted(set(options) - set(self.options))
+        if unknown:
+            takes = ", ".join(self.options) or "none"
+            raise ConfigError(f"the {self.name} backend takes no option "
+                              f"{', '.join(repr(u) for u in unknown)} (its options: {takes})")
+        return self.factory(specs, dt_s, channels, workers=workers, **options)
+
+
+#: the arguments every backend's factory takes
+_COMMON = ("self", "specs", "dt_s", "channels", "workers")
 
 
 @lru_cache(maxsize=1)

@@ -9,6 +9,10 @@ exchange of ``nsub`` physics substeps and ``wait(timeout_s)`` finishes it and
 returns ``states``. ``step(nsub)`` does both. After each exchange the pool
 resets ``setpoints`` to NaN. Pools are context managers; ``close()`` is
 idempotent.
+
+A backend may have things to report that are not failures (a lost machine
+replaced, and the run no longer bit-exact): it appends ``(kind, fields)``
+to ``notices``, and the run turns each into an event.
 """
 
 from __future__ import annotations
@@ -19,12 +23,13 @@ import time
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from types import TracebackType
+from typing import Any
 
 import numpy as np
 
 from cosim.errors import PoolStateError
 from cosim.vehicles.registry import state_layout
-from cosim.vehicles.spec import VehicleSpec
+from cosim.vehicles.spec import StateField, VehicleSpec
 
 log = logging.getLogger(__name__)
 
@@ -57,7 +62,8 @@ class Pool(ABC):
     backend: str = "?"
 
     def __init__(self, specs: Sequence[VehicleSpec], dt_s: float,
-                 channels: Sequence[str] = ()) -> None:
+                 channels: Sequence[str] = (),
+                 layout: Sequence[StateField] | None = None) -> None:
         if not specs:
             raise ValueError("a pool needs at least one vehicle")
         self.specs = list(specs)
@@ -68,7 +74,10 @@ class Pool(ABC):
         self.tick = 0  # physics ticks completed
         self._state = PoolState.READY
         #: the state array's columns: ``STATE_FIELDS``, then those the classes add
-        self.layout = state_layout(self.specs)
+        #: (``layout``: a whole run's, when this pool holds a part of its vehicles)
+        self.layout = tuple(layout) if layout is not None else state_layout(self.specs)
+        #: what the backend reports that is not a failure: ``(kind, fields)``
+        self.notices: list[tuple[str, dict[str, Any]]] = []
         self.states: np.ndarray = np.zeros((self.n, len(self.layout)))
         self.setpoints: np.ndarray = np.full((self.n, len(self.channels)), np.nan)
 

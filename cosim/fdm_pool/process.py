@@ -39,7 +39,7 @@ from cosim import workers as worker_kit
 from cosim.errors import BuildError, WorkerDied, WorkerError, WorkerTimeout
 from cosim.fdm_pool.base import BuildProgress, Pool
 from cosim.fdm_pool.shard import Shard
-from cosim.vehicles.spec import VehicleSpec
+from cosim.vehicles.spec import StateField, VehicleSpec
 
 log = logging.getLogger(__name__)
 
@@ -146,8 +146,9 @@ class ProcessPool(Pool):
 
     def __init__(self, specs: Sequence[VehicleSpec], dt_s: float, channels: Sequence[str] = (),
                  workers: int | None = None, driver_steps: bool | None = None,
-                 start_timeout_s: float | None = None) -> None:
-        super().__init__(specs, dt_s, channels)
+                 start_timeout_s: float | None = None,
+                 layout: Sequence[StateField] | None = None) -> None:
+        super().__init__(specs, dt_s, channels, layout)
         w = default_workers() if workers is None else int(workers)
         if w < 1:
             raise ValueError(f"workers must be >= 1, got {workers}")

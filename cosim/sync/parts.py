@@ -11,7 +11,8 @@ An exchange at tick T::
     during the step   MavlinkPart (telemetry at T), the scenario's section
                       participants (swarm, cameras: states at T)
     pool.wait()
-    after the step    StatusEvents (impacts, divergence, flags), StateLogger
+    after the step    PoolNotices (what the backend reports: a lost machine
+                      replaced), StatusEvents (impacts, divergence, flags), StateLogger
                       (states.parquet), pacing and progress
 
 Every command goes through the run's ``Commander`` (one command path).
@@ -29,6 +30,7 @@ from cosim.vehicles import get_class
 from cosim.vehicles.spec import STATE_INDEX, VehicleStatus
 
 if TYPE_CHECKING:
+    from cosim.fdm_pool import Pool
     from cosim.logs import EventLog, StateLog
     from cosim.scenario import Scenario, ScheduleItem
     from cosim.sync.commands import Commander
@@ -103,6 +105,19 @@ class Guidance:
     def before_step(self, tick: int, states: np.ndarray, setpoints: np.ndarray) -> None:
         for ge in self.commander.update(states, setpoints):
             self.events.emit(ge.kind, tick, vehicle=self.ids[ge.vehicle], **ge.fields)
+
+
+class PoolNotices:
+    """The pool's notices (``Pool.notices``: a lost machine replaced), as events."""
+
+    def __init__(self, pool: Pool, events: EventLog) -> None:
+        self.pool = pool
+        self.events = events
+
+    def after_step(self, tick: int, states: np.ndarray) -> None:
+        while self.pool.notices:
+            kind, fields = self.pool.notices.pop(0)
+            self.events.emit(kind, tick, **fields)
 
 
 class StatusEvents:

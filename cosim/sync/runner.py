@@ -121,13 +121,16 @@ class Run:
                  workers: int | None = None, realtime: float | None = None,
                  progress: ProgressFn | None = None, step_timeout_s: float = 60.0,
                  mavlink: Any = None, external_controller: bool = False,
-                 extra_participants: Sequence[Any] = ()) -> None:
+                 extra_participants: Sequence[Any] = (),
+                 backend_options: dict[str, Any] | None = None) -> None:
         self.scn = scenario
         #: participants the caller adds (the live view), after the scenario's
         self.extra_participants = list(extra_participants)
         self.out = Path(out_dir)
         self.backend = backend
         self.workers = workers
+        #: the backend's own options (``Backend.options``: a cluster's address)
+        self.backend_options = dict(backend_options or {})
         self.pacer = Pacer(realtime) if realtime else None
         self.progress = progress
         self.step_timeout_s = step_timeout_s  # a worker silent this long is a failure
@@ -230,7 +233,8 @@ class Run:
         self._building = True
         if self._stop.is_set():
             raise KeyboardInterrupt
-        pool = make_pool(scn.vehicles, scn.rates.dt_s, scn.channels, self.backend, self.workers)
+        pool = make_pool(scn.vehicles, scn.rates.dt_s, scn.channels, self.backend, self.workers,
+                         **self.backend_options)
         with pool:  # closed however the rest of the set-up ends
             self._building = False
             self.pool = pool
@@ -422,7 +426,8 @@ class Run:
         index = {f.name: j for j, f in enumerate(pool.layout)}
         status_events = parts.StatusEvents(scn, index, events, ids)
         logger = parts.StateLogger(states_log, scn.rates.log_every, commander)
-        after = [status_events.after_step, logger.after_step,
+        after = [parts.PoolNotices(pool, events).after_step, status_events.after_step,
+                 logger.after_step,
                  parts.Clock(self.pacer, self.progress, hz, total).after_step]
         return before, during, after, logger, status_events
 

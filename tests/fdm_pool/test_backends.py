@@ -27,7 +27,8 @@ def test_the_builtin_backends_are_found_by_name(specs) -> None:
     assert list(backends())[:2] == ["inline", "process"]
     assert get_backend("process").default_workers() >= 1
     assert get_backend("inline").default_workers() == 1
-    with pytest.raises(ConfigError, match=r"unknown backend 'gpu'; available: inline, process"):
+    with pytest.raises(ConfigError,
+                       match=r"unknown backend .gpu.; available: inline, process, ray"):
         make_pool(specs(1), 1 / 120, backend="gpu")
 
 
@@ -46,7 +47,7 @@ def test_an_out_of_tree_backend_registers_runs_and_passes_the_conformance_suite(
         return subprocess.run([sys.executable, "-m", "cosim", *args], capture_output=True,
                               text=True, env=env, timeout=300, cwd=tmp_path)
 
-    assert "{inline,process,traced}" in cosim("run", "--help").stdout
+    assert "{inline,process,ray,traced}" in cosim("run", "--help").stdout
     out = tmp_path / "run"
     r = cosim("run", str(REPO / "scenarios" / "quickstart.yaml"), "--backend", "traced",
               "--duration-s", "2", "--out", str(out), "--no-progress")

@@ -1,0 +1,485 @@
+"""The ``ray`` backend: the vehicles sharded over the machines of a Ray cluster.
+
+Hierarchical: one *agent* (a Ray actor) per machine runs an ordinary
+``process`` pool over that machine's share of the vehicles, in shared memory
+as on one machine; the driver makes one call per agent per exchange, carrying
+its setpoints out and its states back. A Ray call costs about a millisecond
+(1.4 ms with a 256-aircraft state block on the 2-core test machine), so never
+one actor per vehicle or per core. The driver's own machine, when it is a
+node of the cluster, needs no agent: its share is a process pool of the
+driver, stepped while the agents step theirs, as the process backend's
+driver steps its own shard (``local_share=False`` puts it behind an agent
+like the others, which is what ``benchmarks/ray_efficiency.py`` uses to
+measure what a remote machine costs).
+
+Layout: ``workers`` (default: every CPU of the cluster's live machines) are
+spread over the machines, the head first, then by node id, at most as many
+on a machine as it has CPUs while the cluster has room; the vehicles are
+split over the workers as the ``process`` backend splits them, and each
+machine's agent takes its workers' contiguous share. Each agent reserves
+its workers' CPUs on its machine (``num_cpus``), so two runs on one cluster
+do not share cores unknowingly. States do not depend on any of this.
+
+Connecting: ``address`` (``HOST:PORT`` of a cluster started with ``ray start
+--head``; else ``RAY_ADDRESS``; else a local Ray is started for this
+process and stopped with it). A cluster with token authentication
+(``RAY_AUTH_MODE=token``) needs the same token in this process's
+environment (``RAY_AUTH_TOKEN`` or ``RAY_AUTH_TOKEN_PATH``), as every Ray
+client does.
+
+Faults: a lost agent (its process killed, its machine gone) is replaced:
+a new agent, on the same machine if it is still there, else wherever Ray
+finds room, rebuilds its vehicles from the last states gathered (position,
+attitude and speed, trimmed there) and is given again the last value sent on
+every channel; its frozen vehicles stay frozen in their rows. The run is no
+longer bit-exact from that exchange on, and a ``pool_recovered`` notice says
+so (the run logs it as an event). ``strict=True`` stops instead, with an
+``AgentLost`` naming the machine. A worker process of the driver's own share
+lost is a ``WorkerDied``, as in the process backend (the driver's machine is
+the run's own). Closing the pool stops every agent's worker processes and
+then the agent: nothing is left running on any machine.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import os
+import socket
+import sys
+import time
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from cosim.errors import AgentLost, BuildError, ConfigError, CosimError, WorkerTimeout
+from cosim.fdm_pool.base import Pool
+from cosim.fdm_pool.process import ProcessPool, default_workers, shard_bounds
+from cosim.vehicles.spec import STATE_INDEX, StateField, VehicleSpec, VehicleStatus
+
+log = logging.getLogger(__name__)
+
+#: a local Ray started by this backend keeps its object store this small (the
+#: states and setpoints of an exchange are a few megabytes at most)
+_LOCAL_OBJECT_STORE_BYTES = 128 * 1024 * 1024
+_STOP_TIMEOUT_S = 10.0
+_PATIENCE_S = 30.0  # a build this long on an agent is logged
+#: a private local Ray's address: on the loopback net (on Linux Ray replaces
+#: 127.0.0.1 itself by the machine's routable address, but keeps 127.0.0.2)
+LOCAL_NODE_IP = "127.0.0.2" if sys.platform.startswith("linux") else "127.0.0.1"
+
+
+def _ray() -> Any:
+    try:
+        import ray
+    except ImportError:
+        raise ConfigError("the ray backend needs Ray: pip install 'cosim[ray]'") from None
+    return ray
+
+
+def connect(address: str | None = None) -> str:
+    """Join the Ray cluster at ``address`` (else ``RAY_ADDRESS``, else start a
+    local one), unless this process already has; returns where it is."""
+    ray = _ray()
+    if ray.is_initialized():
+        return str(ray.get_runtime_context().gcs_address)
+    target = address or os.environ.get("RAY_ADDRESS") or None
+    kw: dict[str, Any] = {"logging_level": logging.WARNING, "log_to_driver": True,
+                          "configure_logging": False}
+    if target is None:  # a private local Ray, as many CPUs as this machine has
+        kw.update(num_cpus=default_workers(), include_dashboard=False,
+                  _node_ip_address=LOCAL_NODE_IP,
+                  object_store_memory=_LOCAL_OBJECT_STORE_BYTES)
+    try:
+        ctx = ray.init(address=target, **kw)
+    except (ConnectionError, ValueError, RuntimeError) as e:
+        raise ConfigError(f"cannot join the Ray cluster at {target}: {e} (is it started with "
+                          f"'ray start --head', and is its token in RAY_AUTH_TOKEN?)") from e
+    where = target or "a local Ray"
+    log.info("ray backend: joined %s (%s)", where, ctx.address_info.get("gcs_address", "?"))
+    return str(ray.get_runtime_context().gcs_address)
+
+
+@dataclasses.dataclass(frozen=True)
+class Node:
+    """A live machine of the cluster."""
+
+    id: str
+    ip: str
+    cpus: int
+    head: bool
+
+
+def live_nodes() -> list[Node]:
+    """The cluster's live machines with CPUs: the head first, then by node id."""
+    ray = _ray()
+    out = [Node(n["NodeID"], n["NodeManagerAddress"], int(n["Resources"].get("CPU", 0)),
+                "node:__internal_head__" in n["Resources"])
+           for n in ray.nodes() if n["Alive"]]
+    out = [n for n in out if n.cpus > 0]
+    return sorted(out, key=lambda n: (not n.head, n.id))
+
+
+def plan(nodes: Sequence[Node], n: int, workers: int) -> list[tuple[Node, int, int, int]]:
+    """``(node, workers, first row, end row)`` per agent: each node given up
+    to its CPUs, in order, while workers last (more workers than CPUs: one
+    more each in turn), the rows split per worker as the process backend
+    does; nodes given no worker have no agent."""
+    if not nodes:
+        raise ConfigError("the Ray cluster has no live machine with a CPU")
+    count, left = [], workers
+    for node in nodes:  # each machine up to its CPUs, the head first
+        count.append(min(left, node.cpus))
+        left -= count[-1]
+    for k in range(left):  # more workers than CPUs: one more each, in turn
+        count[k % len(count)] += 1
+    bounds = shard_bounds(n, workers)
+    out, w0 = [], 0
+    for node, c in zip(nodes, count):
+        if c:
+            out.append((node, c, bounds[w0][0], bounds[w0 + c - 1][1]))
+            w0 += c
+    return out
+
+
+class Agent:
+    """One machine's share: a ``process`` pool in the agent's own process
+    (a Ray actor), stepped on the driver's call."""
+
+    def __init__(self) -> None:
+        self.pool: ProcessPool | None = None
+
+    def build(self, specs: list[VehicleSpec], dt_s: float, channels: tuple[str, ...],
+              workers: int, layout: tuple[StateField, ...], tick: int,
+              setpoints: np.ndarray | None) -> tuple[np.ndarray, int, str]:
+        """Build and trim ``specs``; ``setpoints`` (a rebuild): written before
+        the first exchange. Returns the states, this process's pid and host."""
+        self.pool = ProcessPool(specs, dt_s, channels, workers=workers, driver_steps=True,
+                                layout=layout)
+        self.pool.tick = tick
+        if setpoints is not None:
+            self.pool.setpoints[:] = setpoints
+        return self.pool.states.copy(), os.getpid(), socket.gethostname()
+
+    def step(self, setpoints: np.ndarray | None, nsub: int) -> tuple[np.ndarray, list[float]]:
+        assert self.pool is not None
+        if setpoints is not None:
+            keep = np.isnan(setpoints)  # NaN leaves a value written at a rebuild
+            self.pool.setpoints[~keep] = setpoints[~keep]
+        states = self.pool.step(nsub)
+        return states.copy(), self.pool.busy_s()
+
+    def worker_pids(self) -> list[int]:
+        assert self.pool is not None
+        return list(self.pool.pids.values())
+
+    def stop(self) -> None:
+        if self.pool is not None:
+            self.pool.close()  # its worker processes stopped and reaped
+            self.pool = None
+
+
+@dataclasses.dataclass
+class _Share:
+    """One agent and what it holds."""
+
+    handle: Any
+    node: Node
+    workers: int
+    rows: Any  # slice or index array of the run's rows
+    pid: int = 0
+    host: str = ""
+    busy: list[float] = dataclasses.field(default_factory=list)
+
+
+class RayPool(Pool):
+    """The vehicles sharded over the machines of a Ray cluster (one agent per
+    machine running a local process pool)."""
+
+    backend = "ray"
+
+    @classmethod
+    def default_workers(cls) -> int:
+        """Every CPU of the cluster once joined; before that, this machine's."""
+        try:
+            import ray
+        except ImportError:
+            return default_workers()
+        if ray.is_initialized():
+            return max(1, int(ray.cluster_resources().get("CPU", 1)))
+        return default_workers()
+
+    def __init__(self, specs: Sequence[VehicleSpec], dt_s: float, channels: Sequence[str] = (),
+                 workers: int | None = None, address: str | None = None,
+                 strict: bool = False, local_share: bool = True,
+                 start_timeout_s: float | None = None) -> None:
+        super().__init__(specs, dt_s, channels)
+        ray = _ray()
+        if workers is not None and int(workers) < 1:
+            raise ValueError(f"workers must be >= 1, got {workers}")
+        self.strict = bool(strict)
+        self.address = connect(address)
+        nodes = live_nodes()
+        w = (sum(n.cpus for n in nodes) if workers is None else int(workers))
+        w = max(1, min(w, self.n))
+        self._n_workers = w
+        self._timeout_s = start_timeout_s if start_timeout_s is not None else 120.0 + 0.05 * self.n
+        self._agent_cls = ray.remote(Agent)
+        self._shares: list[_Share] = []
+        #: the driver's own machine's share, stepped in this process (no agent)
+        self._local: ProcessPool | None = None
+        self._local_rows: Any = slice(0, 0)
+        self._local_node: Node | None = None
+        self._refs: list[Any] = []
+        #: the last value sent on each channel of each vehicle (for a rebuild)
+        self._latched = np.full((self.n, len(self.channels)), np.nan)
+        self._frozen = np.zeros(self.n, dtype=bool)  # rows kept as they are after a rebuild
+        self._frozen_rows: np.ndarray | None = None
+        self._frozen_states = np.zeros((0, len(self.layout)))
+        here = ray.get_runtime_context().get_node_id() if local_share else None
+        try:
+            local_job = None
+            for node, nw, a, b in plan(nodes, self.n, w):
+                if node.id == here:
+                    local_job = (node, nw, slice(a, b))
+                else:
+                    self._shares.append(_Share(self._spawn(node, nw, soft=False), node, nw,
+                                               slice(a, b)))
+            self._build([(s, self.specs[s.rows], None) for s in self._shares], local_job)
+        except BaseException:
+            self._close()
+            raise
+        where = [f"{s.node.ip} ({s.workers})" for s in self._shares]
+        if self._local is not None and self._local_node is not None:
+            where.insert(0, f"{self._local_node.ip} ({self._local.workers}, in this process)")
+        log.info("ray backend: %d vehicles on %d machine(s), %d worker(s): %s", self.n,
+                 len(where), w, ", ".join(where))
+
+    # -- the contract -------------------------------------------------------
+
+    @property
+    def workers(self) -> int:
+        return self._n_workers
+
+    @property
+    def machines(self) -> list[str]:
+        """The machines in use (node IPs): the driver's own first if it has a
+        share, then each agent's."""
+        own = [self._local_node.ip] if self._local_node is not None else []
+        return own + [s.node.ip for s in self._shares]
+
+    @property
+    def agents(self) -> dict[int, int]:
+        """Agent index -> pid of the agent's process (on its own machine)."""
+        return {i: s.pid for i, s in enumerate(self._shares)}
+
+    @property
+    def agent_vehicles(self) -> dict[int, list[str]]:
+        """Agent index -> the vehicles it steps."""
+        return {i: self._ids_of(s) for i, s in enumerate(self._shares)}
+
+    @property
+    def pids(self) -> dict[int, int]:
+        """Every process stepping vehicles that the driver answers for: the
+        worker processes of its own machine's share, then each agent."""
+        own = list(self._local.pids.values()) if self._local is not None else []
+        return dict(enumerate(own + [s.pid for s in self._shares]))
+
+    def busy_s(self) -> list[float]:
+        own = self._local.busy_s() if self._local is not None else []
+        return own + [b for s in self._shares for b in s.busy]
+
+    def _send(self, nsub: int) -> None:
+        self._nsub = nsub
+        sp = self.setpoints if self.channels else None
+        if sp is not None:
+            written = ~np.isnan(sp)
+            self._latched[written] = sp[written]
+        self._refs = [s.handle.step.remote(None if sp is None else sp[s.rows], nsub)
+                      for s in self._shares]
+        if self._local is not None:
+            if sp is not None:
+                self._local.setpoints[:] = sp[self._local_rows]
+            self._local.send(nsub)
+
+    def _wait(self, timeout_s: float | None) -> None:
+        ray = _ray()
+        if self._local is not None:  # the agents step theirs meanwhile
+            self.states[self._local_rows] = self._local.wait(timeout_s)
+        refs = self._refs
+        _, pending = ray.wait(refs, num_returns=len(refs), timeout=timeout_s)
+        if pending:
+            i = refs.index(pending[0])
+            s = self._shares[i]
+            assert timeout_s is not None
+            raise WorkerTimeout(i, s.pid, self._ids_of(s), self.tick, timeout_s,
+                                f"finish tick {self.tick + self._nsub} on {s.node.ip}")
+        for i, ref in enumerate(refs):
+            s = self._shares[i]
+            try:
+                block, s.busy = ray.get(ref)
+            except ray.exceptions.RayTaskError as e:
+                raise _cause(e) from None
+            except ray.exceptions.RayActorError as e:
+                block = self._replace(i, e)
+            self.states[s.rows] = block
+        if self._frozen_rows is not None:
+            self.states[self._frozen_rows] = self._frozen_states
+
+    def _close(self) -> None:
+        if self._local is not None:
+            self._local.close()
+            self._local = None
+        if not self._shares:
+            return
+        ray = _ray()
+        stops = [s.handle.stop.remote() for s in self._shares]
+        try:
+            ray.wait(stops, num_returns=len(stops), timeout=_STOP_TIMEOUT_S)
+        except Exception:  # an agent already gone: nothing of it to stop
+            pass
+        for s in self._shares:
+            try:
+                ray.kill(s.handle, no_restart=True)
+            except Exception:
+                pass
+        self._await_gone([s.pid for s in self._shares if s.host == socket.gethostname()])
+        self._shares.clear()
+        self._refs = []
+
+    # -- building and rebuilding ---------------------------------------------
+
+    def _spawn(self, node: Node, workers: int, soft: bool) -> Any:
+        from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
+
+        return self._agent_cls.options(
+            num_cpus=min(workers, node.cpus), max_restarts=0,
+            scheduling_strategy=NodeAffinitySchedulingStrategy(node.id, soft=soft)).remote()
+
+    def _build(self, jobs: list[tuple[_Share, list[VehicleSpec], np.ndarray | None]],
+               local: tuple[Node, int, slice] | None = None) -> None:
+        """Build every job's vehicles on its agent, and ``local``'s (node,
+        workers, rows) in this process meanwhile; every vehicle that cannot
+        be built, on any machine, is in one ``BuildError``."""
+        ray = _ray()
+        layout = tuple(self.layout)
+        refs = [s.handle.build.remote(list(specs), self.dt_s, self.channels, s.workers,
+                                      layout, self.tick, sp) for s, specs, sp in jobs]
+        failures: list[tuple[str, str]] = []
+        if local is not None:
+            node, nw, rows = local
+            self._local_node, self._local_rows = node, rows
+            try:
+                self._local = ProcessPool(self.specs[rows], self.dt_s, self.channels,
+                                          workers=nw, layout=layout,
+                                          start_timeout_s=self._timeout_s)
+                self.states[rows] = self._local.states
+            except BuildError as e:
+                failures += e.failures
+        deadline = time.monotonic() + self._timeout_s
+        for (s, specs, _), ref in zip(jobs, refs):
+            done, _ = ray.wait([ref], timeout=max(0.0, min(_PATIENCE_S,
+                                                           deadline - time.monotonic())))
+            if not done:  # not placed yet, or a long build: say which
+                log.warning("ray backend: still waiting for machine %s to build %d vehicles "
+                            "(its agent needs %d CPU(s) there; other Ray work may hold them)",
+                            s.node.ip, len(specs), min(s.workers, s.node.cpus))
+                done, _ = ray.wait([ref], timeout=max(0.0, deadline - time.monotonic()))
+            if not done:
+                raise WorkerTimeout(self._shares.index(s), None, [v.id for v in specs],
+                                    self.tick, self._timeout_s,
+                                    f"build and trim its vehicles on {s.node.ip}")
+            try:
+                block, s.pid, s.host = ray.get(ref)
+            except ray.exceptions.RayTaskError as e:
+                cause = _cause(e)
+                if not isinstance(cause, BuildError):
+                    raise cause from None
+                failures += cause.failures
+                continue
+            except ray.exceptions.RayActorError as e:
+                raise AgentLost(self._shares.index(s), s.node.ip, s.node.id, s.pid,
+                                [v.id for v in specs], self.tick, _reason(e)) from None
+            self.states[s.rows] = block
+        if failures:
+            order = {v: k for k, v in enumerate(self.ids)}
+            raise BuildError(sorted(failures, key=lambda f: order.get(f[0], 0)), self.n)
+
+    def _replace(self, i: int, e: Exception) -> np.ndarray:
+        """Agent ``i`` is lost: stop (``strict``) or rebuild its vehicles from
+        their last states on a new agent and run this exchange there."""
+        old = self._shares[i]
+        lost = AgentLost(i, old.node.ip, old.node.id, old.pid, self._ids_of(old), self.tick,
+                         _reason(e))
+        if self.strict:
+            raise lost
+        log.warning("%s; rebuilding them from their last states (the run is no longer "
+                    "bit-exact)", lost)
+        rows = np.arange(self.n)[old.rows]
+        status = self.states[rows, STATE_INDEX["status"]]
+        alive = rows[status == VehicleStatus.ACTIVE]
+        frozen = rows[status != VehicleStatus.ACTIVE]
+        if len(frozen):
+            self._frozen[frozen] = True
+            self._frozen_rows = np.flatnonzero(self._frozen)
+            self._frozen_states = self.states[self._frozen_rows].copy()
+        nodes = {n.id: n for n in live_nodes()}
+        node = nodes.get(old.node.id) or max(nodes.values(), key=lambda n: n.cpus)
+        share = _Share(self._spawn(node, old.workers, soft=True), node,
+                       min(old.workers, max(1, len(alive))), alive)
+        self._shares[i] = share
+        self.notices.append(("pool_recovered", {
+            "machine": old.node.ip, "replaced_on": node.ip, "vehicles": len(alive),
+            "frozen": len(frozen), "bit_exact": False, "reason": _reason(e)}))
+        if not len(alive):  # nothing left to fly there
+            return self.states[alive]
+        specs = [_resume_spec(self.specs[r], self.states[r]) for r in alive.tolist()]
+        latched = self._latched[alive] if self.channels else None
+        self._build([(share, specs, latched)])
+        ray = _ray()
+        block, share.busy = ray.get(share.handle.step.remote(None, self._nsub))
+        return np.asarray(block)
+
+    def _ids_of(self, s: _Share) -> list[str]:
+        return [self.ids[r] for r in np.arange(self.n)[s.rows].tolist()]
+
+    @staticmethod
+    def _await_gone(pids: list[int], timeout_s: float = 5.0) -> None:
+        """Wait until the agents on this machine have exited (``ray.kill``
+        returns before they have)."""
+        deadline = time.monotonic() + timeout_s
+        for pid in pids:
+            while time.monotonic() < deadline:
+                try:
+                    os.kill(pid, 0)
+                except (ProcessLookupError, PermissionError):
+                    break
+                time.sleep(0.02)
+
+
+def _resume_spec(spec: VehicleSpec, row: np.ndarray) -> VehicleSpec:
+    """``spec`` started from a state row: where it was, heading and speed."""
+    s = STATE_INDEX
+    return dataclasses.replace(spec, lat_deg=float(row[s["lat_deg"]]),
+                               lon_deg=float(row[s["lon_deg"]]),
+                               alt_msl_m=float(row[s["alt_msl_m"]]),
+                               heading_deg=float(row[s["yaw_deg"]]) % 360.0,
+                               airspeed_mps=float(row[s["airspeed_mps"]]))
+
+
+def _cause(e: Any) -> BaseException:
+    """The exception raised inside an agent (a ``CosimError`` as it was)."""
+    cause = getattr(e, "cause", None)
+    if isinstance(cause, CosimError):
+        return cause
+    return CosimError(f"the ray backend's agent failed: {e}")
+
+
+def _reason(e: Exception) -> str:
+    """Ray's word on why an actor is gone, in one line."""
+    text = str(e)
+    for key in ("Worker exit detail:", "The actor is dead because"):
+        if key in text:
+            return text.split(key, 1)[1].strip().split(". ")[0]
+    return text.strip().splitlines()[0] if text.strip() else type(e).__name__

@@ -1,0 +1,134 @@
+"""The ray backend beyond the conformance suite (which it passes on the same
+two-node cluster): a lost machine's vehicles rebuilt from their last states,
+``strict``, nothing left running after ``close``, and whole runs."""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from cosim.errors import AgentLost, ConfigError
+from cosim.fdm_pool import STATE_INDEX, VehicleStatus, make_pool
+from cosim.scenario import load_scenario
+from cosim.sync import Run
+
+pytestmark = pytest.mark.usefixtures("ray_cluster")
+
+DT = 1 / 120
+CH = ("fcs/throttle-cmd-norm", "position/h-sl-ft")
+ST = STATE_INDEX["status"]
+
+
+def _gone(pid: int, timeout_s: float = 10.0) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return True
+        time.sleep(0.05)
+    return False
+
+
+def test_a_lost_agent_is_replaced_from_the_last_states_and_the_run_goes_on(specs) -> None:
+    with make_pool(specs(4), DT, CH, "ray", 2) as pool:
+        # two machines (one host): this process steps its own machine's share,
+        # an agent the other's
+        assert len(pool.machines) == 2 and pool.machines[0] == pool.machines[1]
+        assert list(pool.agents) == [0]
+        held = pool.agent_vehicles[0]
+        assert held in (["b0000", "b0001"], ["b0002", "b0003"])
+        a, b = (0, 1) if held[0] == "b0000" else (2, 3)
+        pool.setpoints[a, 1] = 1e308  # the agent's first vehicle diverges and is frozen
+        pool.setpoints[b, 0] = 0.3  # its second one's throttle: must survive the rebuild
+        pool.step(4)
+        assert pool.states[a, ST] == VehicleStatus.DIVERGED
+        for _ in range(20):
+            before = pool.step(4).copy()
+        victim = pool.agents[0]
+        os.kill(victim, signal.SIGKILL)
+        assert _gone(victim)
+        after = pool.step(4).copy()  # no error: rebuilt on the same machine
+        assert pool.agents[0] != victim
+        kind, fields = pool.notices.pop()
+        assert kind == "pool_recovered" and fields["bit_exact"] is False
+        assert fields["vehicles"] == 1 and fields["frozen"] == 1
+        assert np.array_equal(after[a], before[a])  # the frozen one kept as it was
+        # the other goes on from where it was: within one exchange's flight
+        i = STATE_INDEX
+        moved = np.hypot(after[b, i["lat_deg"]] - before[b, i["lat_deg"]],
+                         (after[b, i["lon_deg"]] - before[b, i["lon_deg"]])
+                         * np.cos(np.radians(before[b, i["lat_deg"]]))) * 111_320.0
+        assert 0.0 < moved < 2 * before[b, i["airspeed_mps"]] * 4 * DT + 1.0
+        assert abs(after[b, i["alt_msl_m"]] - before[b, i["alt_msl_m"]]) < 2.0
+        assert after[b, i["throttle"]] == pytest.approx(0.3)  # its setpoint replayed
+        assert after[b, ST] == VehicleStatus.ACTIVE
+        for _ in range(10):
+            pool.step(4)
+        assert pool.states[b, ST] == VehicleStatus.ACTIVE and not pool.notices
+
+
+def test_strict_stops_with_an_error_naming_the_machine(specs) -> None:
+    pool = make_pool(specs(4), DT, (), "ray", 2, strict=True)
+    try:
+        pool.step(4)
+        os.kill(pool.agents[0], signal.SIGKILL)
+        with pytest.raises(AgentLost) as ei:
+            for _ in range(1000):
+                pool.step(4)
+        msg = str(ei.value)
+        assert "machine 127.0.0.2" in msg and ", ".join(pool.agent_vehicles[0]) in msg, msg
+        assert ei.value.worker == 0 and not pool.notices
+    finally:
+        pool.close()
+
+
+def test_close_leaves_nothing_running_on_any_machine(specs) -> None:
+    import ray
+
+    # four workers over two machines: the agent runs two, one of them in a child
+    pool = make_pool(specs(6), DT, CH, "ray", 4, local_share=False)
+    agents = list(pool.agents.values())
+    assert len(agents) == 2
+    workers = [pid for s in pool._shares for pid in ray.get(s.handle.worker_pids.remote())]
+    assert len(workers) == 2  # each agent steps one shard itself
+    pool.step(4)
+    pool.close()
+    for pid in agents + workers:
+        assert _gone(pid), f"pid {pid} still runs after close()"
+
+
+def test_options_reach_the_backend_that_takes_them(specs) -> None:
+    with pytest.raises(ConfigError, match=r"process backend takes no option 'address'"):
+        make_pool(specs(2), DT, (), "process", address="127.0.0.1:1")
+
+
+def test_a_run_on_the_cluster_logs_the_same_states_as_inline(mixed_scenario: Path,
+                                                              tmp_path: Path) -> None:
+    scn = load_scenario(mixed_scenario)
+    res = {b: Run(scn, tmp_path / b, backend=b).run() for b in ("inline", "ray")}
+    assert res["ray"].ok and res["ray"].summary["backend"] == "ray", res["ray"].error
+    assert res["ray"].summary["workers"] == 2
+    a, b = (pq.read_table(tmp_path / k / "states.parquet") for k in ("inline", "ray"))
+    assert a.num_rows > 0 and a.equals(b)
+
+
+def test_the_efficiency_benchmark_runs_on_the_cluster() -> None:
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+    import ray_efficiency
+
+    # one ray pool at a time here: each agent holds its machine's only CPU
+    r = ray_efficiency.measure(8, 30.0, 0.2, 2, 2, configs=["ray_agent"])
+    assert r["vehicles"] == 8 and r["workers"] == 2 and r["ray_call_ms"] > 0
+    assert "ray" not in r
+    for name in ("process", "ray_agent"):
+        assert r[name]["steps_per_s"] > 0 and len(r[name]["ratios"]) == 2
+    assert r["process"]["efficiency"] == 1.0
