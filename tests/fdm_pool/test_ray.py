@@ -132,3 +132,43 @@ def test_the_efficiency_benchmark_runs_on_the_cluster() -> None:
     for name in ("process", "ray_agent"):
         assert r[name]["steps_per_s"] > 0 and len(r[name]["ratios"]) == 2
     assert r["process"]["efficiency"] == 1.0
+
+
+def _running(pid: int) -> bool:
+    """Alive and not a zombie (one whose parent is gone may never be reaped here)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+def test_nothing_is_left_running_when_the_driver_is_killed(tmp_path: Path) -> None:
+    import subprocess
+    import sys
+    import textwrap
+
+    script = tmp_path / "driver.py"
+    script.write_text(textwrap.dedent("""
+        import os, signal
+        import ray
+        from cosim.bench import bench_specs
+        from cosim.fdm_pool import make_pool
+        if __name__ == "__main__":
+            pool = make_pool(bench_specs(6), 1 / 120, (), "ray", 4, local_share=False)
+            pool.step(4)
+            pids = list(pool.agents.values()) + [
+                p for s in pool._shares for p in ray.get(s.handle.worker_pids.remote())]
+            print(" ".join(map(str, pids)), flush=True)
+            os.kill(os.getpid(), signal.SIGKILL)
+    """))
+    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                          timeout=180)
+    pids = [int(p) for p in proc.stdout.split()]
+    assert len(pids) == 4, proc.stderr[-3000:]  # two agents, a worker each
+    deadline = time.monotonic() + 30.0
+    alive = pids
+    while alive and time.monotonic() < deadline:
+        time.sleep(0.1)
+        alive = [p for p in pids if _running(p)]
+    assert not alive, f"left running after the driver was killed: {alive}"
