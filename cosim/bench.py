@@ -18,6 +18,13 @@ start-up time (build + trim), its memory (the driver's growth and the workers'
 peak resident sizes, per aircraft) and its per-exchange orchestration overhead
 (exchange wall time minus the busiest shard's stepping time). Ratios are
 computed from figures measured side by side, never against constants.
+
+With ``whole_run`` it also flies each fleet as a whole ``cosim run`` (the
+fleet told to loiter, so guidance works at every exchange, and states logged
+at ``log_hz``) and reports that run's real-time factor and where its tick
+loop's time went (``summary.json``'s ``time_split_s``): stepping (waiting for
+the pool), commands and guidance, logging, and the rest (events, MAVLink,
+cameras where a scenario has them).
 """
 
 from __future__ import annotations
@@ -284,11 +291,63 @@ def bench_size(n: int, model: str, backend: str, workers: int | None, seconds: f
     return res
 
 
+#: the whole run's scenario: the bench's fleet, told to loiter after a second
+_RUN_SCENARIO = """\
+schema_version: 1
+name: bench-{n}
+origin: {{lat_deg: {lat}, lon_deg: {lon}, ground_alt_m: 0}}
+rates: {{physics_hz: {physics_hz}, control_hz: {control_hz}, log_hz: {log_hz}}}
+duration_s: {seconds}
+vehicles:
+  - {{id: b, class: {cls}, model: {model}, count: {n}, formation: {{type: grid, spacing_m: 300}},
+     init: {{north_m: 0, east_m: 0, alt_agl_m: 1000, airspeed_kt: 100}}}}
+schedule:
+  - {{at_s: 1, vehicles: "*", command: {{loiter: {{radius_m: 1500}}, alt_agl_m: 1000}}}}
+"""
+
+#: how the tick loop's participants group in the bench's split (label prefix -> group)
+_SPLIT_GROUPS = (("pool:", "stepping"), ("Guidance.", "guidance"), ("Schedule.", "guidance"),
+                 ("StateLogger.", "logging"))
+
+
+def whole_run(n: int, model: str, vehicle_class: str | None, backend: str,
+              workers: int | None, seconds: float, physics_hz: float, control_hz: float,
+              log_hz: float) -> dict[str, Any]:
+    """Fly ``n`` aircraft as a whole ``cosim run`` (in a temporary folder);
+    its real-time factor, start-up and tick-loop time split (fractions)."""
+    import tempfile
+
+    from cosim.scenario import load_scenario
+    from cosim.sync import Run
+
+    cls = vehicle_class or find_model(model).profile.get("class", DEFAULT_CLASS)
+    with tempfile.TemporaryDirectory(prefix="cosim-bench-") as tmp:
+        path = Path(tmp) / "bench.yaml"
+        path.write_text(_RUN_SCENARIO.format(
+            n=n, lat=ORIGIN[0], lon=ORIGIN[1], physics_hz=physics_hz, control_hz=control_hz,
+            log_hz=min(log_hz, control_hz), seconds=max(seconds, 2.0), cls=cls, model=model))
+        res = Run(load_scenario(path), Path(tmp) / "run", backend=backend,
+                  workers=workers).run()
+        if not res.ok:
+            raise CosimError(f"cosim bench: the whole run of {n} aircraft failed: {res.error}")
+    sm = res.summary
+    loop = max(sm["wall_time_s"], 1e-9)
+    split = dict.fromkeys(("stepping", "guidance", "logging", "other"), 0.0)
+    for label, secs in sm.get("time_split_s", {}).items():
+        group = next((g for prefix, g in _SPLIT_GROUPS if label.startswith(prefix)), "other")
+        split[group] += secs / loop
+    split["other"] += max(0.0, 1.0 - sum(split.values()))  # the loop's own time
+    return {"run_rtf": sm["real_time_factor"], "run_startup_s": sm["startup_s"],
+            "run_split": split, "run_time_split_s": sm.get("time_split_s", {}),
+            "log_hz": min(log_hz, control_hz)}
+
+
 def run_bench(vehicles: list[int], model: str = "c172p", backend: str = "process",
               workers: int | None = None, seconds: float = 5.0, physics_hz: float = 120.0,
               control_hz: float = 30.0, baselines: bool = True, repeat: int = 3,
               json_path: str | None = None, vehicle_class: str | None = None,
-              plot_path: str | None = None) -> list[dict[str, Any]]:
+              plot_path: str | None = None, whole: bool = False,
+              log_hz: float = 10.0) -> list[dict[str, Any]]:
     check_rates(physics_hz, control_hz)
     if workers is not None and workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
@@ -298,12 +357,17 @@ def run_bench(vehicles: list[int], model: str = "c172p", backend: str = "process
           f"{physics_hz:g} Hz physics, {control_hz:g} Hz exchange, best of {repeat} x "
           f"{seconds:g} s simulated per size", flush=True)
     hdr = (f"{'N':>6} {'start s':>8} {'KiB/ac':>8} {'pool st/s':>11} {'RTF':>8} {'ovh us':>8} "
-           f"{'serial st/s':>12} {'x serial':>9} {'ceil st/s':>11} {'of ceil':>8}")
+           f"{'serial st/s':>12} {'x serial':>9} {'ceil st/s':>11} {'of ceil':>8}"
+           + (f" | {'run RTF':>7} {'step':>5} {'guid':>5} {'log':>5} {'other':>5}"
+              if whole else ""))
     print(hdr, flush=True)
     results = []
     for n in vehicles:
         r = bench_size(n, model, backend, workers, seconds, physics_hz, control_hz, baselines,
                        repeat, vehicle_class)
+        if whole:
+            r.update(whole_run(n, model, vehicle_class, backend, workers, seconds, physics_hz,
+                               control_hz, log_hz))
         results.append(r)
 
         def f(key: str, fmt: str, r: dict[str, Any] = r) -> str:
@@ -313,11 +377,14 @@ def run_bench(vehicles: list[int], model: str = "c172p", backend: str = "process
               f"{f('pool_steps_per_s', '11.0f')} "
               f"{f('pool_rtf', '8.2f')} {f('overhead_us_per_exchange', '8.0f')} "
               f"{f('serial_steps_per_s', '12.0f')} {f('speedup_vs_serial', '9.2f')} "
-              f"{f('ceiling_steps_per_s', '11.0f')} {f('fraction_of_ceiling', '8.1%')}",
+              f"{f('ceiling_steps_per_s', '11.0f')} {f('fraction_of_ceiling', '8.1%')}"
+              + (f" | {r['run_rtf']:>7.2f} " + " ".join(
+                  f"{r['run_split'][g]:>5.0%}" for g in ("stepping", "guidance", "logging",
+                                                          "other")) if whole else ""),
               flush=True)
     if json_path:
         doc = {"model": model, "class": tier, "backend": backend, "workers": w,
-               "physics_hz": physics_hz,
+               "physics_hz": physics_hz, "whole_run": whole, "log_hz": log_hz,
                "control_hz": control_hz, "seconds": seconds, "repeat": repeat,
                "machine": {"python": sys.version.split()[0], "platform": platform.platform(),
                            "cores": default_workers()},

@@ -218,6 +218,11 @@ def _build_parser() -> _Parser:
                         "default: the model's own")
     b.add_argument("--plot", metavar="FILE.png",
                    help="draw the real-time factor and the efficiency against N")
+    b.add_argument("--whole-run", action="store_true",
+                   help="also fly each fleet as a whole run (guidance, logging) and report "
+                        "its real-time factor and where its tick loop's time goes")
+    b.add_argument("--log-hz", type=_positive_float, default=10.0, metavar="HZ",
+                   help="the whole run's logging rate (default 10)")
     b.add_argument("--quick", action="store_true",
                    help="a look in under a minute: 1, 16 and 128 aircraft, 1 s, one round")
     return p
@@ -693,7 +698,8 @@ def _cmd_bench(a: argparse.Namespace) -> int:
     run_bench(vehicles=a.vehicles, model=a.model, backend=a.backend, workers=a.workers,
               seconds=a.seconds, physics_hz=a.physics_hz, control_hz=a.control_hz,
               baselines=not a.no_baselines, repeat=max(1, a.repeat), json_path=a.json,
-              vehicle_class=a.vehicle_class, plot_path=a.plot)
+              vehicle_class=a.vehicle_class, plot_path=a.plot, whole=a.whole_run,
+              log_hz=a.log_hz)
     return EXIT_OK
 
 

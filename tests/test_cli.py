@@ -103,6 +103,24 @@ def test_every_bundled_scenario_validates_and_runs(path: Path, tmp_path: Path) -
     assert s["stop_reason"] == "completed" and s["sim_time_s"] == 1.0
 
 
+def test_bench_whole_run_says_where_the_tick_loop_time_goes(tmp_path: Path, capsys) -> None:
+    out = tmp_path / "b.json"
+    assert main(["bench", "--model", "uav700", "--vehicles", "6", "--seconds", "0.5",
+                 "--repeat", "1", "--no-baselines", "--whole-run", "--control-hz", "10",
+                 "--log-hz", "5", "--json", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    assert doc["whole_run"] and doc["log_hz"] == 5
+    r = doc["results"][0]
+    assert r["run_rtf"] > 0 and r["run_startup_s"] > 0 and r["log_hz"] == 5
+    split = r["run_split"]
+    assert set(split) == {"stepping", "guidance", "logging", "other"}
+    assert sum(split.values()) == pytest.approx(1.0, abs=0.02)
+    # the loiter command reached guidance, the states were logged, the pool stepped
+    assert split["stepping"] > 0 and split["guidance"] > 0 and split["logging"] > 0
+    assert "Guidance.before_step" in r["run_time_split_s"]
+    assert "run RTF" in capsys.readouterr().out
+
+
 def test_bench_reports_ratios_measured_in_the_same_run(tmp_path: Path, capsys) -> None:
     out = tmp_path / "b.json"
     assert main(["bench", "--vehicles", "4", "--seconds", "0.5", "--workers", "2", "--repeat", "2",
