@@ -10,6 +10,13 @@ returns ``states``. ``step(nsub)`` does both. After each exchange the pool
 resets ``setpoints`` to NaN. Pools are context managers; ``close()`` is
 idempotent.
 
+A pool built with a ``Watch`` also gathers a few rows' states inside each
+exchange, every ``watch.every`` ticks (a camera's aircraft at its frame
+rate, while everyone else is exchanged at the control rate): after
+``wait``, ``watched[:watched_count]`` holds them, ``(chunk, watched row,
+column)``, the last chunk equal to those rows of ``states``. The states
+themselves are the same with or without a watch.
+
 A backend may have things to report that are not failures (a lost machine
 replaced, and the run no longer bit-exact): it appends ``(kind, fields)``
 to ``notices``, and the run turns each into an event.
@@ -22,6 +29,7 @@ import logging
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
+from dataclasses import dataclass
 from types import TracebackType
 from typing import Any
 
@@ -51,6 +59,40 @@ class BuildProgress:
                      self.total, now - self.t0)
 
 
+@dataclass(frozen=True)
+class Watch:
+    """Rows (of the pool) whose states are also gathered every ``every``
+    ticks inside an exchange of at most ``max_nsub`` ticks (a multiple of
+    ``every``)."""
+
+    rows: tuple[int, ...]
+    every: int
+    max_nsub: int
+
+    def check(self, n: int) -> None:
+        if not self.rows:
+            raise ValueError("a watch needs at least one row")
+        if len(set(self.rows)) != len(self.rows) or list(self.rows) != sorted(self.rows):
+            raise ValueError(f"watch rows must be increasing, got {list(self.rows)[:10]}")
+        if self.rows[0] < 0 or self.rows[-1] >= n:
+            raise ValueError(f"watch rows must be in 0..{n - 1}, got {list(self.rows)[:10]}")
+        if self.every < 1 or self.max_nsub < self.every or self.max_nsub % self.every:
+            raise ValueError(f"a watch every {self.every} ticks needs exchanges of a multiple "
+                             f"of it, got at most {self.max_nsub}")
+
+    @property
+    def chunks(self) -> int:
+        return self.max_nsub // self.every
+
+    def part(self, start: int, stop: int) -> tuple[Watch | None, list[int]]:
+        """This watch for the pool's rows ``start:stop`` (its rows renumbered
+        from 0), and the positions of those rows in ``rows``."""
+        js = [j for j, r in enumerate(self.rows) if start <= r < stop]
+        if not js:
+            return None, []
+        return Watch(tuple(self.rows[j] - start for j in js), self.every, self.max_nsub), js
+
+
 class PoolState(enum.Enum):
     READY = "ready"
     WAITING = "waiting"  # send() called, wait() not yet
@@ -63,7 +105,8 @@ class Pool(ABC):
 
     def __init__(self, specs: Sequence[VehicleSpec], dt_s: float,
                  channels: Sequence[str] = (),
-                 layout: Sequence[StateField] | None = None) -> None:
+                 layout: Sequence[StateField] | None = None,
+                 watch: Watch | None = None) -> None:
         if not specs:
             raise ValueError("a pool needs at least one vehicle")
         self.specs = list(specs)
@@ -78,6 +121,13 @@ class Pool(ABC):
         self.layout = tuple(layout) if layout is not None else state_layout(self.specs)
         #: what the backend reports that is not a failure: ``(kind, fields)``
         self.notices: list[tuple[str, dict[str, Any]]] = []
+        if watch is not None:
+            watch.check(self.n)
+        self.watch = watch
+        #: the watched rows' states inside the last exchange (``Watch``)
+        self.watched: np.ndarray = np.zeros(
+            (watch.chunks if watch else 0, len(watch.rows) if watch else 0, len(self.layout)))
+        self.watched_count = 0
         self.states: np.ndarray = np.zeros((self.n, len(self.layout)))
         self.setpoints: np.ndarray = np.full((self.n, len(self.channels)), np.nan)
 
@@ -111,6 +161,10 @@ class Pool(ABC):
         self._require(PoolState.READY, action="send()")
         if nsub < 1:
             raise ValueError(f"nsub must be >= 1, got {nsub}")
+        w = self.watch
+        if w is not None and (nsub % w.every or nsub > w.max_nsub):
+            raise ValueError(f"this pool watches rows every {w.every} ticks in exchanges of at "
+                             f"most {w.max_nsub}: nsub {nsub} does not fit")
         self._state = PoolState.WAITING
         try:
             self._send(int(nsub))
@@ -127,6 +181,7 @@ class Pool(ABC):
             self._state = PoolState.FAILED
             raise
         self.tick += self._nsub
+        self.watched_count = self._nsub // self.watch.every if self.watch else 0
         self.setpoints.fill(np.nan)
         self._state = PoolState.READY
         return self.states

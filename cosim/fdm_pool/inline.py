@@ -8,7 +8,7 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 
-from cosim.fdm_pool.base import BuildProgress, Pool
+from cosim.fdm_pool.base import BuildProgress, Pool, Watch
 from cosim.fdm_pool.shard import Shard
 from cosim.vehicles.spec import VehicleSpec
 
@@ -19,13 +19,15 @@ class InlinePool(Pool):
     backend = "inline"
 
     def __init__(self, specs: Sequence[VehicleSpec], dt_s: float,
-                 channels: Sequence[str] = (), workers: int | None = None) -> None:
+                 channels: Sequence[str] = (), workers: int | None = None,
+                 watch: Watch | None = None) -> None:
         if workers not in (None, 1):
             raise ValueError(f"the inline backend runs in one process; workers={workers}")
-        super().__init__(specs, dt_s, channels)
+        super().__init__(specs, dt_s, channels, watch=watch)
         self._shard = Shard.build(self.specs, self.dt_s, self.channels,
                                   on_built=BuildProgress(self.n),
-                                  layout_names=[f.name for f in self.layout])
+                                  layout_names=[f.name for f in self.layout],
+                                  watch=(watch.rows, watch.every) if watch else None)
         self._shard.write_states(self.states)
 
     def _send(self, nsub: int) -> None:
@@ -38,7 +40,8 @@ class InlinePool(Pool):
 
     def _wait(self, timeout_s: float | None) -> None:
         t0 = time.perf_counter()
-        self._shard.exchange(self.setpoints, self._nsub, self.states)  # VehicleError on failure
+        self._shard.exchange(self.setpoints, self._nsub, self.states,  # VehicleError on failure
+                             self.watched if self.watch else None)
         self._busy = time.perf_counter() - t0
 
     def _close(self) -> None:

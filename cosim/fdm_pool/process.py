@@ -37,7 +37,7 @@ import numpy as np
 
 from cosim import workers as worker_kit
 from cosim.errors import BuildError, WorkerDied, WorkerError, WorkerTimeout
-from cosim.fdm_pool.base import BuildProgress, Pool
+from cosim.fdm_pool.base import BuildProgress, Pool, Watch
 from cosim.fdm_pool.shard import Shard
 from cosim.vehicles.spec import StateField, VehicleSpec
 
@@ -73,8 +73,12 @@ def shard_bounds(n: int, workers: int) -> list[tuple[int, int]]:
 class _Shared:
     """Views of the shared arrays (rebuilt in each process from the raw arrays)."""
 
-    def __init__(self, raw: dict[str, Any], n: int, c: int, w: int, width: int) -> None:
+    def __init__(self, raw: dict[str, Any], n: int, c: int, w: int, width: int,
+                 watch_shape: tuple[int, int] = (0, 0)) -> None:
         self.states = np.frombuffer(raw["states"], dtype=np.float64).reshape(n, width)
+        chunks, rows = watch_shape
+        self.watched = np.frombuffer(raw["watched"], dtype=np.float64)[
+            : chunks * rows * width].reshape(chunks, rows, width)
         self.setpoints = np.frombuffer(raw["setpoints"], dtype=np.float64)[: n * c].reshape(n, c)
         self.ctrl = np.frombuffer(raw["ctrl"], dtype=np.int64).reshape(w, _CTRL_W)
         self.busy_s = np.frombuffer(raw["busy"], dtype=np.float64).reshape(w, _CTRL_W)
@@ -82,10 +86,11 @@ class _Shared:
 
 def _worker_main(w: int, specs: list[VehicleSpec], start: int, stop: int, dt_s: float,
                  channels: tuple[str, ...], raw: dict[str, Any], n: int, n_workers: int,
-                 err: Connection, layout_names: list[str]) -> None:
+                 err: Connection, layout_names: list[str], watch: Watch | None,
+                 watch_shape: tuple[int, int]) -> None:
     # started by cosim.workers.start: shielded from the stop signals, logging
     # as the driver does
-    sh = _Shared(raw, n, len(channels), n_workers, len(layout_names))
+    sh = _Shared(raw, n, len(channels), n_workers, len(layout_names), watch_shape)
     ctrl = sh.ctrl[w]
     shard = Shard()
     try:
@@ -94,8 +99,11 @@ def _worker_main(w: int, specs: list[VehicleSpec], start: int, stop: int, dt_s: 
         def built(k: int) -> None:
             ctrl[_BUILT] = k
 
+        part, js = watch.part(start, stop) if watch is not None else (None, [])
         Shard.build(specs, dt_s, channels, into=shard, on_built=built,
-                    layout_names=layout_names)
+                    layout_names=layout_names,
+                    watch=(part.rows, part.every) if part is not None else None)
+        mine = _Watched(part, js, len(layout_names))
         log.debug("worker %d (pid %d): %d vehicles built and trimmed in %.2f s", w,
                   os.getpid(), len(specs), time.perf_counter() - t0)
         shard.write_states(sh.states[start:stop])
@@ -120,7 +128,8 @@ def _worker_main(w: int, specs: list[VehicleSpec], start: int, stop: int, dt_s: 
                 return
             nsub = int(ctrl[_NSUB])
             t0 = time.perf_counter()
-            shard.exchange(sp, nsub, out)
+            shard.exchange(sp, nsub, out, mine.buf)
+            mine.publish(sh.watched, nsub)
             busy[0] = time.perf_counter() - t0
             ctrl[_DONE] = last
     except BaseException as e:
@@ -135,6 +144,22 @@ def _worker_main(w: int, specs: list[VehicleSpec], start: int, stop: int, dt_s: 
             ctrl[_DONE] = -2
 
 
+class _Watched:
+    """A shard's part of a watch: its own buffer, copied into the pool's
+    shared one at its rows' positions after each exchange."""
+
+    def __init__(self, part: Watch | None, positions: list[int], width: int) -> None:
+        self.part = part
+        self.js = np.asarray(positions, dtype=np.intp)
+        self.buf = (np.zeros((part.chunks, len(part.rows), width)) if part is not None
+                    else None)
+
+    def publish(self, shared: np.ndarray, nsub: int) -> None:
+        if self.part is not None and self.buf is not None:
+            m = nsub // self.part.every
+            shared[:m, self.js] = self.buf[:m]
+
+
 class ProcessPool(Pool):
     """Vehicles sharded over worker processes (shared memory, one round trip per exchange)."""
 
@@ -147,8 +172,9 @@ class ProcessPool(Pool):
     def __init__(self, specs: Sequence[VehicleSpec], dt_s: float, channels: Sequence[str] = (),
                  workers: int | None = None, driver_steps: bool | None = None,
                  start_timeout_s: float | None = None,
-                 layout: Sequence[StateField] | None = None) -> None:
-        super().__init__(specs, dt_s, channels, layout)
+                 layout: Sequence[StateField] | None = None,
+                 watch: Watch | None = None) -> None:
+        super().__init__(specs, dt_s, channels, layout, watch)
         w = default_workers() if workers is None else int(workers)
         if w < 1:
             raise ValueError(f"workers must be >= 1, got {workers}")
@@ -163,8 +189,11 @@ class ProcessPool(Pool):
             "setpoints": ctx.RawArray("d", max(1, self.n * c)),
             "ctrl": ctx.RawArray("q", w * _CTRL_W),
             "busy": ctx.RawArray("d", w * _CTRL_W),
+            "watched": ctx.RawArray("d", max(1, self.watched.size)),
         }
-        self._sh = _Shared(self._raw, self.n, c, w, len(self.layout))
+        watch_shape = self.watched.shape[:2]
+        self._sh = _Shared(self._raw, self.n, c, w, len(self.layout), watch_shape)
+        self.watched = self._sh.watched
         layout_names = [f.name for f in self.layout]
         self.states = self._sh.states
         self.setpoints = self._sh.setpoints
@@ -174,6 +203,7 @@ class ProcessPool(Pool):
         self._procs: dict[int, Any] = {}
         self._errs: dict[int, Connection] = {}
         self._own: Shard | None = None
+        self._own_watched = _Watched(None, [], len(self.layout))
         first_child = 1 if self._driver_steps else 0
         # children ignore SIGTERM, so multiprocessing's own exit handler (terminate,
         # then join every daemonic child) would wait forever for a pool left open
@@ -188,7 +218,8 @@ class ProcessPool(Pool):
                 r, s = ctx.Pipe(duplex=False)
                 self._procs[i] = worker_kit.start(
                     _worker_main, (i, self.specs[a:b], a, b, self.dt_s, self.channels,
-                                   self._raw, self.n, w, s, layout_names),
+                                   self._raw, self.n, w, s, layout_names, watch,
+                                   watch_shape),
                     name=f"cosim-worker-{i}", preload=self.allocator)
                 self._errs[i] = r
                 s.close()
@@ -233,7 +264,8 @@ class ProcessPool(Pool):
             a, b = self.bounds[0]
             t0 = time.perf_counter()
             self._own.exchange(self.setpoints[a:b] if self.channels else None,  # VehicleError
-                               self._nsub, self.states[a:b])
+                               self._nsub, self.states[a:b], self._own_watched.buf)
+            self._own_watched.publish(self.watched, self._nsub)
             self._own_busy = time.perf_counter() - t0
         self._await(self._seq, timeout_s, what=f"finish tick {self.tick + self._nsub}")
 
@@ -278,10 +310,13 @@ class ProcessPool(Pool):
 
         if self._driver_steps:
             a, b = self.bounds[0]
+            part, js = self.watch.part(a, b) if self.watch is not None else (None, [])
+            self._own_watched = _Watched(part, js, len(self.layout))
             try:
                 self._own = Shard.build(self.specs[a:b], self.dt_s, self.channels,
                                         on_built=built,
-                                        layout_names=[f.name for f in self.layout])
+                                        layout_names=[f.name for f in self.layout],
+                                        watch=(part.rows, part.every) if part else None)
                 self._own.write_states(self.states[a:b])
             except BuildError as e:
                 failures += e.failures

@@ -54,7 +54,7 @@ from typing import Any
 import numpy as np
 
 from cosim.errors import AgentLost, BuildError, ConfigError, CosimError, WorkerTimeout
-from cosim.fdm_pool.base import Pool
+from cosim.fdm_pool.base import Pool, Watch
 from cosim.fdm_pool.process import ProcessPool, default_workers, shard_bounds
 from cosim.vehicles.spec import STATE_INDEX, StateField, VehicleSpec, VehicleStatus
 
@@ -152,23 +152,28 @@ class Agent:
 
     def build(self, specs: list[VehicleSpec], dt_s: float, channels: tuple[str, ...],
               workers: int, layout: tuple[StateField, ...], tick: int,
-              setpoints: np.ndarray | None) -> tuple[np.ndarray, int, str]:
+              setpoints: np.ndarray | None,
+              watch: Watch | None = None) -> tuple[np.ndarray, int, str]:
         """Build and trim ``specs``; ``setpoints`` (a rebuild): written before
         the first exchange. Returns the states, this process's pid and host."""
         self.pool = ProcessPool(specs, dt_s, channels, workers=workers, driver_steps=True,
-                                layout=layout)
+                                layout=layout, watch=watch)
         self.pool.tick = tick
         if setpoints is not None:
             self.pool.setpoints[:] = setpoints
         return self.pool.states.copy(), os.getpid(), socket.gethostname()
 
-    def step(self, setpoints: np.ndarray | None, nsub: int) -> tuple[np.ndarray, list[float]]:
+    def step(self, setpoints: np.ndarray | None, nsub: int
+             ) -> tuple[np.ndarray, list[float], np.ndarray | None]:
+        """One exchange: the states, each worker's busy time, the watched rows."""
         assert self.pool is not None
         if setpoints is not None:
             keep = np.isnan(setpoints)  # NaN leaves a value written at a rebuild
             self.pool.setpoints[~keep] = setpoints[~keep]
         states = self.pool.step(nsub)
-        return states.copy(), self.pool.busy_s()
+        watched = (self.pool.watched[:self.pool.watched_count].copy()
+                   if self.pool.watch is not None else None)
+        return states.copy(), self.pool.busy_s(), watched
 
     def worker_pids(self) -> list[int]:
         assert self.pool is not None
@@ -188,6 +193,8 @@ class _Share:
     node: Node
     workers: int
     rows: Any  # slice or index array of the run's rows
+    watch: Watch | None = None  # the pool's watch, for these rows
+    watch_js: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0, np.intp))
     pid: int = 0
     host: str = ""
     busy: list[float] = dataclasses.field(default_factory=list)
@@ -213,8 +220,8 @@ class RayPool(Pool):
     def __init__(self, specs: Sequence[VehicleSpec], dt_s: float, channels: Sequence[str] = (),
                  workers: int | None = None, address: str | None = None,
                  strict: bool = False, local_share: bool = True,
-                 start_timeout_s: float | None = None) -> None:
-        super().__init__(specs, dt_s, channels)
+                 start_timeout_s: float | None = None, watch: Watch | None = None) -> None:
+        super().__init__(specs, dt_s, channels, watch=watch)
         ray = _ray()
         if workers is not None and int(workers) < 1:
             raise ValueError(f"workers must be >= 1, got {workers}")
@@ -231,6 +238,7 @@ class RayPool(Pool):
         self._local: ProcessPool | None = None
         self._local_rows: Any = slice(0, 0)
         self._local_node: Node | None = None
+        self._local_js = np.zeros(0, dtype=np.intp)
         self._refs: list[Any] = []
         #: the last value sent on each channel of each vehicle (for a rebuild)
         self._latched = np.full((self.n, len(self.channels)), np.nan)
@@ -244,8 +252,9 @@ class RayPool(Pool):
                 if node.id == here:
                     local_job = (node, nw, slice(a, b))
                 else:
-                    self._shares.append(_Share(self._spawn(node, nw, soft=False), node, nw,
-                                               slice(a, b)))
+                    share = _Share(self._spawn(node, nw, soft=False), node, nw, slice(a, b))
+                    share.watch, share.watch_js = self._watch_part(np.arange(a, b))
+                    self._shares.append(share)
             self._build([(s, self.specs[s.rows], None) for s in self._shares], local_job)
         except BaseException:
             self._close()
@@ -305,8 +314,11 @@ class RayPool(Pool):
 
     def _wait(self, timeout_s: float | None) -> None:
         ray = _ray()
+        m = self._nsub // self.watch.every if self.watch is not None else 0
         if self._local is not None:  # the agents step theirs meanwhile
             self.states[self._local_rows] = self._local.wait(timeout_s)
+            if len(self._local_js):
+                self.watched[:m, self._local_js] = self._local.watched[:m]
         refs = self._refs
         _, pending = ray.wait(refs, num_returns=len(refs), timeout=timeout_s)
         if pending:
@@ -318,14 +330,32 @@ class RayPool(Pool):
         for i, ref in enumerate(refs):
             s = self._shares[i]
             try:
-                block, s.busy = ray.get(ref)
+                block, s.busy, watched = ray.get(ref)
             except ray.exceptions.RayTaskError as e:
                 raise _cause(e) from None
             except ray.exceptions.RayActorError as e:
-                block = self._replace(i, e)
+                block, watched = self._replace(i, e)
             self.states[s.rows] = block
+            if watched is not None:
+                self.watched[:m, s.watch_js] = watched
         if self._frozen_rows is not None:
             self.states[self._frozen_rows] = self._frozen_states
+            if self.watch is not None:  # the frozen ones among the watched stay as they are
+                frozen = self._frozen[list(self.watch.rows)]
+                self.watched[:m, frozen] = self.states[np.asarray(self.watch.rows)[frozen]]
+
+    def _watch_part(self, rows: np.ndarray) -> tuple[Watch | None, np.ndarray]:
+        """The watch for a share holding ``rows`` (renumbered from 0 in that
+        order), and the positions of those watched rows in ``watch.rows``."""
+        if self.watch is None:
+            return None, np.zeros(0, dtype=np.intp)
+        where = {int(r): k for k, r in enumerate(rows.tolist())}
+        js = [j for j, r in enumerate(self.watch.rows) if r in where]
+        if not js:
+            return None, np.zeros(0, dtype=np.intp)
+        local = tuple(where[self.watch.rows[j]] for j in js)
+        return (Watch(local, self.watch.every, self.watch.max_nsub),
+                np.asarray(js, dtype=np.intp))
 
     def _close(self) -> None:
         if self._local is not None:
@@ -365,14 +395,16 @@ class RayPool(Pool):
         ray = _ray()
         layout = tuple(self.layout)
         refs = [s.handle.build.remote(list(specs), self.dt_s, self.channels, s.workers,
-                                      layout, self.tick, sp) for s, specs, sp in jobs]
+                                      layout, self.tick, sp, s.watch)
+                for s, specs, sp in jobs]
         failures: list[tuple[str, str]] = []
         if local is not None:
             node, nw, rows = local
             self._local_node, self._local_rows = node, rows
+            part, self._local_js = self._watch_part(np.arange(self.n)[rows])
             try:
                 self._local = ProcessPool(self.specs[rows], self.dt_s, self.channels,
-                                          workers=nw, layout=layout,
+                                          workers=nw, layout=layout, watch=part,
                                           start_timeout_s=self._timeout_s)
                 self.states[rows] = self._local.states
             except BuildError as e:
@@ -406,7 +438,7 @@ class RayPool(Pool):
             order = {v: k for k, v in enumerate(self.ids)}
             raise BuildError(sorted(failures, key=lambda f: order.get(f[0], 0)), self.n)
 
-    def _replace(self, i: int, e: Exception) -> np.ndarray:
+    def _replace(self, i: int, e: Exception) -> tuple[np.ndarray, np.ndarray | None]:
         """Agent ``i`` is lost: stop (``strict``) or rebuild its vehicles from
         their last states on a new agent and run this exchange there."""
         old = self._shares[i]
@@ -428,18 +460,19 @@ class RayPool(Pool):
         node = nodes.get(old.node.id) or max(nodes.values(), key=lambda n: n.cpus)
         share = _Share(self._spawn(node, old.workers, soft=True), node,
                        min(old.workers, max(1, len(alive))), alive)
+        share.watch, share.watch_js = self._watch_part(alive)
         self._shares[i] = share
         self.notices.append(("pool_recovered", {
             "machine": old.node.ip, "replaced_on": node.ip, "vehicles": len(alive),
             "frozen": len(frozen), "bit_exact": False, "reason": _reason(e)}))
         if not len(alive):  # nothing left to fly there
-            return self.states[alive]
+            return self.states[alive], None
         specs = [_resume_spec(self.specs[r], self.states[r]) for r in alive.tolist()]
         latched = self._latched[alive] if self.channels else None
         self._build([(share, specs, latched)])
         ray = _ray()
-        block, share.busy = ray.get(share.handle.step.remote(None, self._nsub))
-        return np.asarray(block)
+        block, share.busy, watched = ray.get(share.handle.step.remote(None, self._nsub))
+        return np.asarray(block), watched
 
     def _ids_of(self, s: _Share) -> list[str]:
         return [self.ids[r] for r in np.arange(self.n)[s.rows].tolist()]

@@ -18,6 +18,12 @@ within the exchange (height of its CG above ground greater than ``(|vd| +
 largest distance from the CG to any of the model's gear or structural
 contact points, so that any attitude is covered), which leaves the results
 unchanged and saves most of its cost.
+
+Watched rows (``watch``: a camera's aircraft, gathered every ``every``
+ticks inside an exchange) are stepped ``every`` substeps at a time with
+their state row recorded after each run, which gives the same states as
+stepping them in one go. Batched classes integrate a whole exchange at
+once, so their vehicles cannot be watched.
 """
 
 from __future__ import annotations
@@ -26,7 +32,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from cosim.errors import BuildError, CosimError, JSBSimError, VehicleError
+from cosim.errors import BuildError, ConfigError, CosimError, JSBSimError, VehicleError
 from cosim.vehicles.base import BatchedModel
 from cosim.vehicles.jsbsim_model import Vehicle
 from cosim.vehicles.registry import get_class, state_layout
@@ -60,18 +66,25 @@ class Shard:
         self._radius_m = np.zeros(0)  # per vehicle: contact radius (m)
         self._nsub = 1
         self.tick = 0  # physics ticks completed (the same in every shard of a pool)
+        #: watched rows: (JSBSim vehicle index -> position in the watch), every
+        self._watch_of: dict[int, int] = {}
+        self._watch_rows = np.zeros(0, dtype=np.intp)
+        self._watch_every = 0
+        self._bad: list[tuple[int, int]] = []  # (watched position, first non-finite chunk)
 
     @classmethod
     def build(cls, specs: Sequence[VehicleSpec], dt_s: float, channels: Sequence[str],
               into: Shard | None = None, on_built: Callable[[int], None] | None = None,
-              layout_names: Sequence[str] | None = None) -> Shard:
+              layout_names: Sequence[str] | None = None,
+              watch: tuple[Sequence[int], int] | None = None) -> Shard:
         """Build and trim every vehicle. A JSBSim vehicle that cannot be loaded
         or trimmed does not stop the others: all such failures are raised
         together as one ``BuildError``; on any other failure ``current`` names
         the culprit. ``on_built(k)`` is called after each vehicle with the
         count so far. ``layout_names``: the run's state columns (the pool's
         ``state_layout``; by default these vehicles' own), for the columns
-        classes add."""
+        classes add. ``watch``: (rows of ``specs``, every) gathered inside
+        each exchange (``exchange``'s ``watched``)."""
         if layout_names is None:
             layout_names = [f.name for f in state_layout(specs)]
         shard = into if into is not None else cls()
@@ -109,10 +122,26 @@ class Shard:
         if failures:
             raise BuildError(failures, len(specs))
         shard._rows = np.asarray(rows, dtype=np.intp)
+        if watch is not None:
+            shard._set_watch(specs, watch[0], watch[1])
         shard._radius_m = np.array([v.contact_radius_m for v in shard.vehicles])
         shard._active = list(range(len(shard.vehicles)))
         shard._check = [True] * len(shard._active)
         return shard
+
+    def _set_watch(self, specs: Sequence[VehicleSpec], rows: Sequence[int], every: int) -> None:
+        index = {int(r): i for i, r in enumerate(self._rows.tolist())}
+        for j, r in enumerate(rows):
+            if r not in index:
+                spec = specs[r]
+                raise ConfigError(
+                    f"vehicle {spec.id!r} (class {spec.vehicle_class}) is stepped with its "
+                    f"class's other vehicles a whole exchange at a time: its states exist "
+                    f"only at exchanges, so nothing (a camera) can be watched on it more "
+                    f"often; use a rate that falls on exchanges")
+            self._watch_of[index[r]] = j
+        self._watch_rows = np.asarray(rows, dtype=np.intp)
+        self._watch_every = int(every)
 
     def write_states(self, out: np.ndarray) -> None:
         """Read every active vehicle into ``out`` (SI units, status column)."""
@@ -155,9 +184,12 @@ class Shard:
                 values = self.vehicles[i].extra_state()
                 out[self._rows[i], first:first + len(values)] = values
 
-    def exchange(self, setpoints: np.ndarray | None, nsub: int, out: np.ndarray) -> None:
+    def exchange(self, setpoints: np.ndarray | None, nsub: int, out: np.ndarray,
+                 watched: np.ndarray | None = None) -> None:
         """Apply setpoints (NaN = leave as is), run ``nsub`` substeps per
-        vehicle, write the new states into ``out``.
+        vehicle, write the new states into ``out``; ``watched`` (a shard
+        built with a watch): ``(chunks, watched rows, columns)``, its first
+        ``nsub // every`` chunks filled.
 
         Any failure (a JSBSim call returning False or raising, or anything
         else) becomes one ``VehicleError`` naming the vehicle and the tick the
@@ -165,7 +197,7 @@ class Shard:
         """
         tick = self.tick
         try:
-            self._exchange(setpoints, nsub, out)
+            self._exchange(setpoints, nsub, out, watched)
         except JSBSimError as e:
             raise VehicleError(self.current, tick, str(e)) from e
         except CosimError:
@@ -174,7 +206,8 @@ class Shard:
             raise VehicleError(self.current, tick, f"{type(e).__name__}: {e}") from e
         self.tick += nsub
 
-    def _exchange(self, setpoints: np.ndarray | None, nsub: int, out: np.ndarray) -> None:
+    def _exchange(self, setpoints: np.ndarray | None, nsub: int, out: np.ndarray,
+                  watched: np.ndarray | None) -> None:
         vs = self.vehicles
         if setpoints is not None and self.n_channels:
             mine = setpoints[self._rows]
@@ -190,10 +223,21 @@ class Shard:
         if nsub > self._nsub:  # the margin was computed for a shorter exchange
             self._check = [True] * len(self._active)
         self._nsub = nsub
+        watching = watched is not None and self._watch_every > 0
+        if watching:
+            assert watched is not None
+            m = nsub // self._watch_every
+            watched[:m] = out[self._watch_rows]  # frozen ones stay as they are
+            self._bad.clear()
         i = -1
         try:
             for i, check in zip(self._active, self._check):
-                vs[i].step(nsub, check)
+                at = self._watch_of.get(i) if watching else None
+                if at is None:
+                    vs[i].step(nsub, check)
+                else:
+                    assert watched is not None
+                    self._step_watched(i, check, nsub, watched[:, at])
         except BaseException:
             self.current = vs[i].spec.id if i >= 0 else None
             raise
@@ -202,3 +246,28 @@ class Shard:
             model.step(nsub)
         self.current = None
         self.write_states(out)
+        if watching:
+            assert watched is not None
+            watched[m - 1] = out[self._watch_rows]  # the last one is the exchange's
+            for at, c in self._bad:
+                watched[c:m, at] = out[self._watch_rows[at]]
+
+    def _step_watched(self, i: int, check: bool, nsub: int, rows: np.ndarray) -> None:
+        """Step vehicle ``i`` ``every`` substeps at a time, its row after each
+        in ``rows``; once non-finite, it stops (``_bad``: the exchange's
+        frozen row fills the rest)."""
+        every = self._watch_every
+        v = self.vehicles[i]
+        first = dict(self._extra).get(i)
+        for c in range(nsub // every):
+            if v.status == VehicleStatus.ACTIVE:
+                v.step(every, check)
+            row = np.asarray(v.raw_state(), dtype=np.float64) * _SCALES
+            if not np.isfinite(row).all():  # diverged: from here on its frozen row,
+                self._bad.append((self._watch_of[i], c))  # known once write_states ran
+                return
+            rows[c, :STATUS_COL] = row
+            rows[c, STATUS_COL] = v.status
+            if first is not None:
+                values = v.extra_state()
+                rows[c, first:first + len(values)] = values

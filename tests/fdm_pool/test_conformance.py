@@ -15,7 +15,10 @@ separated), which must be registered:
 - a vehicle failing mid-exchange is a ``CosimError`` naming it and the tick;
 - vehicles that cannot be built are reported together (``BuildError``);
 - a worker process killed by the OS is a ``WorkerDied`` naming it, within
-  seconds (backends with worker processes: ``Pool.pids``).
+  seconds (backends with worker processes: ``Pool.pids``);
+- watched rows (backends that take a ``watch``): their states inside each
+  exchange equal ``inline``'s stepped at the watch's rate, and the states
+  are the same as without a watch.
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ import pytest
 
 from cosim.errors import BuildError, CosimError, PoolStateError, WorkerDied
 from cosim.fdm_pool import STATE_FIELDS, STATE_INDEX, VehicleStatus, backends, make_pool
+from cosim.fdm_pool.base import Watch
 from tests.helpers import backend_ready
 
 CH = ("fcs/throttle-cmd-norm", "fcs/aileron-cmd-norm", "fcs/elevator-cmd-norm")
@@ -202,3 +206,50 @@ def test_a_killed_worker_is_workerdied_within_seconds(specs, backend: str) -> No
         assert ei.value.pid == victim and f"pid {victim}" in str(ei.value), str(ei.value)
     finally:
         pool.close()
+
+
+def test_watched_rows_match_inline_stepped_at_the_watch_rate(specs, backend: str) -> None:
+    if "watch" not in backends()[backend].options:
+        pytest.skip(f"backend {backend!r} takes no watch")
+    vs = specs(7)
+    # b0004 dives into the ground: an impact inside an exchange, watched
+    vs[4] = dataclasses.replace(vs[4], alt_msl_m=40.0, initial_props=(
+        ("fcs/throttle-cmd-norm", 0.0), ("fcs/elevator-cmd-norm", 0.6)))
+    watch = Watch((1, 4, 6), every=2, max_nsub=6)
+    rows = list(watch.rows)
+
+    def drive(pool, nsub: int, steps: int) -> list[np.ndarray]:
+        out = []
+        for _ in range(steps):
+            tick = pool.tick
+            if tick == 12:
+                pool.setpoints[1, 0] = 0.3
+            if tick == 24:
+                pool.setpoints[[0, 6], 1] = 0.25
+            if tick == 36:
+                pool.setpoints[5, 2] = 1e6  # an unwatched vehicle goes wild
+            out.append(pool.step(nsub).copy())
+        return out
+
+    with make_pool(vs, DT, CH, "inline") as ref:
+        fine = drive(ref, 2, 180)  # every 2 ticks
+    with make_pool(vs, DT, CH, "inline") as ref:
+        coarse = drive(ref, 6, 60)  # what the watched pool must give as its states
+    st = STATE_INDEX["status"]
+    assert fine[-1][4, st] == VehicleStatus.GROUND_IMPACT  # the dive ended inside
+    for workers in worker_counts(backend):
+        with make_pool(vs, DT, CH, backend, workers, watch=watch) as pool:
+            for e in range(60):
+                states = drive(pool, 6, 1)[0]
+                bad = _mismatches(coarse[e], states, pool.ids)
+                assert not bad, f"{backend}, workers={workers}: states changed: {bad}"
+                assert pool.watched_count == 3
+                for c in range(3):
+                    want = fine[3 * e + c][rows]
+                    got = pool.watched[c]
+                    bad = _mismatches(want, got, [pool.ids[r] for r in rows])
+                    assert not bad, (f"{backend}, workers={workers}, exchange {e}, "
+                                     f"chunk {c}: {bad}")
+            for nsub in (3, 8):  # not a multiple of the watch's rate; too long
+                with pytest.raises(ValueError, match=f"nsub {nsub} does not fit"):
+                    pool.send(nsub)
