@@ -222,20 +222,25 @@ def parse_targets(info: SectionInfo, node: Any, path: P) -> tuple[TargetSpec, ..
 
 
 def _frame_every(info: SectionInfo, rate_hz: float, p: P) -> int:
-    """Physics ticks per frame; reports a rate whose period is not a whole
-    number of exchanges (frames are rendered from the states of an exchange)."""
+    """Physics ticks per frame; reports a rate whose period is neither a whole
+    number of exchanges (frames rendered from an exchange's states) nor a
+    whole fraction of one (the camera's aircraft gathered inside each
+    exchange at the frame rate)."""
     hz, k = info.rates.physics_hz, info.rates.control_every
-    ok = ", ".join(f"{hz / (k * m):g}" for m in range(1, 7))
+    fits = sorted({hz / (k * m) for m in range(1, 5)} | {hz * m / k for m in range(2, 5)
+                                                         if k % m == 0}, reverse=True)
+    ok = ", ".join(f"{r:g}" for r in fits)
     every = hz / rate_hz
     if abs(every - round(every)) > 1e-9:
-        info.err(p, f"rate_hz {rate_hz:g} must divide physics_hz {hz:g}, and a frame must "
-                    f"fall on an exchange (every {k} ticks); rates that fit: {ok}, ...")
+        info.err(p, f"rate_hz {rate_hz:g} must divide physics_hz {hz:g}, and frames must fall "
+                    f"on exchanges or evenly between them (every {k} ticks); rates that fit: "
+                    f"{ok}, ...")
         return 0
     n = round(every)
-    if n % k:
-        info.err(p, f"rate_hz {rate_hz:g}: a frame every {n} ticks is not a whole number of "
-                    f"exchanges (control_hz {info.rates.control_hz:g} = every {k} ticks); "
-                    f"use control_hz / m ({ok}, ...) or change rates.control_hz")
+    if n % k and k % n:
+        info.err(p, f"rate_hz {rate_hz:g}: a frame every {n} ticks neither falls on exchanges "
+                    f"nor divides one (control_hz {info.rates.control_hz:g} = every {k} "
+                    f"ticks); use one of {ok}, ... or change rates.control_hz")
         return 0
     return n
 

@@ -44,7 +44,8 @@ class OperatorView:
         n = len(self.shown) + 1
         self.cols = math.ceil(math.sqrt(n))
         self.rows = math.ceil(n / self.cols)
-        self.every = max(s.camera.frame_every for s in self.shown)
+        # one composite per exchange at most: frames between exchanges are not shown
+        self.every = max(max(s.camera.frame_every for s in self.shown), ctx.control_every)
         self.rate_hz = ctx.physics_hz / self.every
         self.path = f"cameras/operator.{ext}"
         self.size = (self.cols * self.tw, self.rows * self.th)

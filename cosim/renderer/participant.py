@@ -509,37 +509,66 @@ class CameraParticipant:
         self.gimbal_moves.clear()
         if self.procs:
             self._check_workers()
+        self._between(tick)
         for s in self.streams:
             every = s.camera.frame_every
             if tick % every:
                 continue
-            pose6 = tuple(float(x) for x in states[s.row, _POSE_COLS])
-            if s.lift_m:
-                pose6 = pose6[:2] + (pose6[2] + s.lift_m,) + pose6[3:]
-            gimbal = self.gimbal.get(s.index)
-            frame_no = tick // every
-            still = self._still_name(s, frame_no, tick, pose6, gimbal) \
-                if s.index in self.still_due else None
-            if self.inline is not None:
-                try:
-                    thumb, truth = self.inline.render(s.index, frame_no, tick, pose6, gimbal,
-                                                      still)
-                except Exception:
-                    self.failed = RenderError(s.vehicle, s.camera.name, tick,
-                                              traceback.format_exc())
-                    raise self.failed from None
-                self._still_done((still, truth) if still else None)
-                self._thumb(s.index, frame_no, thumb)
-            else:
-                k = s.index % len(self.procs)
-                self.jobs[k].put((s.index, frame_no, tick, pose6, gimbal, still))
-                self.in_flight[k] += 1
-                while self.in_flight[k] >= self.spec.max_in_flight:
-                    self._collect(block=True)
+            self._frame(s, tick, states[s.row], stills=True)
         if self.operator is not None:
             self.operator.at_exchange(tick, states)
         if self.procs:
             self._collect(block=False)
+
+    def watch_requests(self) -> list[tuple[int, int]]:
+        """(vehicle row, ticks per frame) of the cameras whose frames fall
+        between exchanges: the run gathers those vehicles' states that often
+        (``RunContext.watched``)."""
+        k = self.scn.rates.control_every
+        return [(row, cam.frame_every) for cam in self.spec.views for row in cam.vehicles
+                if 0 < cam.frame_every < k]
+
+    def _between(self, tick: int) -> None:
+        """The frames due between the last exchange and ``tick``, from the
+        states the run gathered in between."""
+        w = self.ctx.watched
+        if w is None or not w.ticks:
+            return
+        pos = {r: j for j, r in enumerate(w.rows)}
+        for c, t in enumerate(w.ticks):
+            if t >= tick:
+                break
+            for s in self.streams:
+                if s.row in pos and t % s.camera.frame_every == 0:
+                    self._frame(s, t, w.states[c, pos[s.row]], stills=False)
+
+    def _frame(self, s: Stream, tick: int, row: np.ndarray, stills: bool) -> None:
+        """Render stream ``s``'s frame at ``tick`` from its vehicle's state
+        ``row`` (and a still with it when one is due and ``stills``)."""
+        every = s.camera.frame_every
+        pose6 = tuple(float(x) for x in row[_POSE_COLS])
+        if s.lift_m:
+            pose6 = pose6[:2] + (pose6[2] + s.lift_m,) + pose6[3:]
+        gimbal = self.gimbal.get(s.index)
+        frame_no = tick // every
+        still = self._still_name(s, frame_no, tick, pose6, gimbal) \
+            if stills and s.index in self.still_due else None
+        if self.inline is not None:
+            try:
+                thumb, truth = self.inline.render(s.index, frame_no, tick, pose6, gimbal,
+                                                  still)
+            except Exception:
+                self.failed = RenderError(s.vehicle, s.camera.name, tick,
+                                          traceback.format_exc())
+                raise self.failed from None
+            self._still_done((still, truth) if still else None)
+            self._thumb(s.index, frame_no, thumb)
+        else:
+            k = s.index % len(self.procs)
+            self.jobs[k].put((s.index, frame_no, tick, pose6, gimbal, still))
+            self.in_flight[k] += 1
+            while self.in_flight[k] >= self.spec.max_in_flight:
+                self._collect(block=True)
 
     def _thumb(self, stream: int, frame_no: int, thumb: np.ndarray | None) -> None:
         """A rendered frame's thumbnail: to the operator view and the taps."""
@@ -624,6 +653,11 @@ class CameraParticipant:
         self.tick = tick
         raised = self.failed  # an error the loop has ended on already: said once
         error: BaseException | None = None
+        if raised is None and reason == "completed" and hasattr(self, "ctx"):
+            try:  # the frames due after the last exchange, gathered in its step
+                self._between(tick)
+            except Exception as e:
+                error = e
         if self.inline is not None:
             self.closed = self.inline.close()
         elif self.procs:

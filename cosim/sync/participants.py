@@ -23,6 +23,12 @@ part's participant with ``make_participant(scenario)``. Per run:
 - ``after_run(out_dir)`` after ``summary.json`` is written (plots); errors
   there are logged, never lose the run.
 
+A participant that needs some vehicles' states more often than the
+exchanges (a camera's aircraft at its frame rate) says so before the
+vehicles are built with ``watch_requests()`` -> ``[(row, every ticks)]``;
+the pool then gathers those rows inside each exchange and
+``ctx.watched`` holds them after it (only those few vehicles pay for it).
+
 Participants must not touch the pool, the logs' files or each other; results
 must not depend on the backend or the worker count.
 """
@@ -85,6 +91,40 @@ class RunContext:
     #: called with each frame scaled to at most ``width_px`` wide (None: full
     #: size); filled before any participant starts, so the cameras know
     frame_taps: list[Any] | None = None
+    #: the states gathered inside the last exchange for the rows participants
+    #: asked for (``watch_requests``); None: nobody asked
+    watched: WatchedStates | None = None
+
+
+@dataclass
+class WatchedStates:
+    """The rows a participant asked to see more often than the exchanges
+    (``watch_requests``): their states at ``ticks`` inside the last
+    exchange, ``states[chunk, position of the row in rows]``; the last
+    chunk is the exchange's own tick. Refreshed after every exchange."""
+
+    rows: tuple[int, ...]
+    ticks: list[int]
+    states: np.ndarray
+
+
+def watch_for(participants: list[Any], control_every: int) -> tuple[tuple[int, ...], int] | None:
+    """What the participants ask to be gathered between exchanges: the rows,
+    and every how many ticks (the greatest common divisor of their rates, a
+    divisor of ``control_every``), or None. A participant asks with an
+    optional ``watch_requests()`` -> ``[(row, every), ...]``."""
+    import math
+
+    reqs = [r for p in participants for r in getattr(p, "watch_requests", list)()]
+    if not reqs:
+        return None
+    every = 0
+    for _, e in reqs:
+        every = math.gcd(every, int(e))
+    if control_every % every:
+        raise CosimError(f"rows asked for every {every} ticks cannot be gathered inside "
+                         f"exchanges of {control_every} ticks")
+    return tuple(sorted({int(r) for r, _ in reqs})), every
 
 
 class Participant(Protocol):

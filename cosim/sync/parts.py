@@ -12,7 +12,9 @@ An exchange at tick T::
                       participants (swarm, cameras: states at T)
     pool.wait()
     after the step    PoolNotices (what the backend reports: a lost machine
-                      replaced), StatusEvents (impacts, divergence, flags), StateLogger
+                      replaced), Gathered (rows watched inside the exchange,
+                      for the cameras between exchanges), StatusEvents
+                      (impacts, divergence, flags), StateLogger
                       (states.parquet), pacing and progress
 
 Every command goes through the run's ``Commander`` (one command path).
@@ -34,6 +36,7 @@ if TYPE_CHECKING:
     from cosim.logs import EventLog, StateLog
     from cosim.scenario import Scenario, ScheduleItem
     from cosim.sync.commands import Commander
+    from cosim.sync.participants import WatchedStates
 
 log = logging.getLogger(__name__)
 
@@ -118,6 +121,23 @@ class PoolNotices:
         while self.pool.notices:
             kind, fields = self.pool.notices.pop(0)
             self.events.emit(kind, tick, **fields)
+
+
+class Gathered:
+    """The rows gathered inside the exchange (``Pool.watch``), copied for the
+    participants that asked (``RunContext.watched``) before the next step
+    overwrites them."""
+
+    def __init__(self, pool: Pool, watched: WatchedStates) -> None:
+        self.pool = pool
+        self.watched = watched
+
+    def after_step(self, tick: int, states: np.ndarray) -> None:
+        w, m = self.pool.watch, self.pool.watched_count
+        assert w is not None
+        start = tick - m * w.every
+        self.watched.ticks = [start + (c + 1) * w.every for c in range(m)]
+        self.watched.states = self.pool.watched[:m].copy()
 
 
 class StatusEvents:

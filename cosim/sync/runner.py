@@ -29,7 +29,7 @@ import yaml
 
 from cosim.errors import VehicleError, WorkerDied, WorkerError
 from cosim.fdm_pool import make_pool
-from cosim.fdm_pool.base import Pool
+from cosim.fdm_pool.base import Pool, Watch
 from cosim.logs import DiskReserve, EventLog, StateLog, clear_outputs, write_json_atomic
 from cosim.scenario import Scenario
 from cosim.sync import parts
@@ -39,8 +39,10 @@ from cosim.sync.participants import (
     Participant,
     ParticipantFailed,
     RunContext,
+    WatchedStates,
     build_participants,
     needs_mavlink,
+    watch_for,
 )
 from cosim.sync.parts import StateLogger, StatusEvents
 from cosim.vehicles.registry import state_layout
@@ -233,8 +235,15 @@ class Run:
         self._building = True
         if self._stop.is_set():
             raise KeyboardInterrupt
+        # the participants first: some ask for rows gathered inside exchanges
+        self.participants = build_participants(
+            scn, skip=("swarm",) if self.external_controller else ()) + self.extra_participants
+        options = dict(self.backend_options)
+        watch = watch_for(self.participants, scn.rates.control_every)
+        if watch is not None:
+            options["watch"] = Watch(watch[0], watch[1], scn.rates.control_every)
         pool = make_pool(scn.vehicles, scn.rates.dt_s, scn.channels, self.backend, self.workers,
-                         **self.backend_options)
+                         **options)
         with pool:  # closed however the rest of the set-up ends
             self._building = False
             self.pool = pool
@@ -411,11 +420,11 @@ class Run:
             during.append(mav_part.on_exchange)
         if commander.active:
             before.append(parts.Guidance(commander, events, ids).before_step)
-        self.participants = build_participants(
-            scn, skip=("swarm",) if self.external_controller else ()) + self.extra_participants
+        watched = (WatchedStates(pool.watch.rows, [], pool.watched[:0].copy())
+                   if pool.watch is not None else None)
         ctx = RunContext(scn, self.out, ids, scn.origin.frame, start_ned, hz,
                          scn.rates.control_every, events, self.mavlink, pool.workers,
-                         commander, frame_taps=[])
+                         commander, frame_taps=[], watched=watched)
         for part in self.extra_participants:  # the view taps frames before cameras start
             pre = getattr(part, "prepare", None)
             if pre is not None:
@@ -428,6 +437,7 @@ class Run:
         logger = parts.StateLogger(states_log, scn.rates.log_every, commander)
         after = [parts.PoolNotices(pool, events).after_step, status_events.after_step,
                  logger.after_step,
+                 *([parts.Gathered(pool, watched).after_step] if watched is not None else []),
                  parts.Clock(self.pacer, self.progress, hz, total).after_step]
         return before, during, after, logger, status_events
 

@@ -400,7 +400,7 @@ def test_config_errors_carry_file_and_line(tmp_path: Path) -> None:
           views:
             - {name: a, mount: sideways, rate_hz: 10}
             - {name: b, rate_hz: 7}
-            - {name: c, rate_hz: 60}
+            - {name: c, rate_hz: 40}
             - {name: d, vehicles: nobody}
             - {name: e, mount: {pitch_deg: -90, yaw_deg: 200}}
         schedule:
@@ -416,8 +416,8 @@ def test_config_errors_carry_file_and_line(tmp_path: Path) -> None:
     assert any(m.startswith(f"{f}:13: cameras.views[0].mount: expected nadir") for m in msgs)
     assert any(m.startswith(f"{f}:14: cameras.views[1].rate_hz: rate_hz 7 must divide "
                             "physics_hz 120") for m in msgs)
-    assert any(m.startswith(f"{f}:15: cameras.views[2].rate_hz: rate_hz 60: a frame every 2 "
-                            "ticks is not a whole number of exchanges") for m in msgs)
+    assert any(m.startswith(f"{f}:15: cameras.views[2].rate_hz: rate_hz 40: a frame every 3 "
+                            "ticks neither falls on exchanges nor divides one") for m in msgs)
     assert any(m.startswith(f"{f}:16: cameras.views[3].vehicles") for m in msgs)
     assert f"{f}:17: cameras.views[4].mount.yaw_deg: must be <= 180, got 200" in msgs
     assert f"{f}:19: schedule[0].command.gimbal.pitch_deg: must be -90..30, got 45" in msgs

@@ -1,0 +1,76 @@
+"""A camera faster than the exchange: its aircraft's states are gathered at
+the frame rate inside each exchange, and the frames are exactly those of a
+run exchanging at the frame rate (nothing else in these scenarios depends
+on the exchange rate: no commands, no guidance)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pyarrow.parquet as pq
+import pytest
+
+from cosim.errors import ConfigError
+from cosim.scenario import load_scenario
+from cosim.sync import Run
+
+SCENARIO = """\
+schema_version: 1
+origin: {{lat_deg: 37.4, lon_deg: -122.0, ground_alt_m: 20}}
+rates: {{physics_hz: 120, control_hz: {control}, log_hz: 10}}
+duration_s: 2
+seed: 5
+vehicles:
+  - {{id: cam, model: uav700, init: {{north_m: -60, east_m: 0, alt_agl_m: 120,
+     heading_deg: 10, airspeed_kt: 100}}}}
+  - {{id: other, {other}model: uav700, init: {{north_m: 0, east_m: 900, alt_agl_m: 300,
+     heading_deg: 200, airspeed_kt: 90}}}}
+targets:
+  - {{id: truck1, kind: truck, north_m: 0, east_m: 0}}
+cameras:
+  render_workers: 0
+  digest: true
+  views:
+    - {{name: belly, vehicles: {vehicles}, mount: nadir, vfov_deg: 40, width_px: 96,
+       height_px: 72, rate_hz: 30}}
+"""
+
+
+def _run(tmp_path: Path, name: str, control: int, backend: str = "inline",
+         vehicles: str = "cam", other: str = "") -> Path:
+    f = tmp_path / f"{name}.yaml"
+    f.write_text(SCENARIO.format(control=control, vehicles=vehicles, other=other))
+    res = Run(load_scenario(f), tmp_path / name, backend=backend).run()
+    assert res.ok, res.error
+    return tmp_path / name
+
+
+def test_frames_between_exchanges_are_those_of_a_run_at_the_frame_rate(tmp_path: Path) -> None:
+    at30 = _run(tmp_path, "at30", 30)
+    at10 = _run(tmp_path, "at10", 10, backend="process")  # two of every three in between
+    s30, s10 = (json.loads((d / "summary.json").read_text())["cameras"] for d in (at30, at10))
+    (a,), (b,) = s30["streams"], s10["streams"]
+    assert a["frames"] == b["frames"] == 60
+    assert a["frames_sha256"] == b["frames_sha256"]
+    gt = "cameras/cam_belly.gt.csv"
+    lines = (at30 / gt).read_text().splitlines()
+    assert len(lines) > 60 and lines == (at10 / gt).read_text().splitlines()
+    assert pq.read_table(at30 / "states.parquet").equals(pq.read_table(at10 / "states.parquet"))
+
+
+def test_a_batched_aircraft_cannot_have_frames_between_exchanges(tmp_path: Path) -> None:
+    with pytest.raises(AssertionError, match="stepped with its class's other vehicles"):
+        _run(tmp_path, "batched", 10, vehicles="other", other="class: fixed_wing_batched, ")
+    # on exchanges it can
+    _run(tmp_path, "batched30", 30, vehicles="other", other="class: fixed_wing_batched, ")
+
+
+def test_the_config_error_names_the_rates_that_fit(tmp_path: Path) -> None:
+    f = tmp_path / "bad.yaml"
+    f.write_text(SCENARIO.format(control=10, vehicles="cam", other="").replace(
+        "rate_hz: 30", "rate_hz: 24"))
+    with pytest.raises(ConfigError, match=r"rate_hz 24: a frame every 5 ticks neither falls on "
+                                          r"exchanges nor divides one .* use one of 40, 30, 20, "
+                                          r"10, 5"):
+        load_scenario(f)
