@@ -42,3 +42,12 @@ def test_floor_bench_runs() -> None:
     assert "encoder mpeg4 q4 (mp4v, the default)" in out and "(4 frames decoded)" in out
     assert "warp bilinear BGRA perspective (the renderer's)" in out
     assert "floor of a frame with these libraries" in out
+
+
+def test_camera_rate_renders_the_same_frames_either_way() -> None:
+    """Exit 1 if the two ways of making a 30 Hz camera's frames differ."""
+    proc = subprocess.run([sys.executable, str(REPO / "benchmarks/camera_rate.py"),
+                           "--vehicles", "3", "--seconds", "1", "--rounds", "1"], cwd=REPO,
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "frames identical: True" in proc.stdout and "30 frames" in proc.stdout
