@@ -347,7 +347,7 @@ def run_bench(vehicles: list[int], model: str = "c172p", backend: str = "process
               control_hz: float = 30.0, baselines: bool = True, repeat: int = 3,
               json_path: str | None = None, vehicle_class: str | None = None,
               plot_path: str | None = None, whole: bool = False,
-              log_hz: float = 10.0) -> list[dict[str, Any]]:
+              log_hz: float = 10.0, gym: bool = False) -> list[dict[str, Any]]:
     check_rates(physics_hz, control_hz)
     if workers is not None and workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
@@ -382,13 +382,15 @@ def run_bench(vehicles: list[int], model: str = "c172p", backend: str = "process
                   f"{r['run_split'][g]:>5.0%}" for g in ("stepping", "guidance", "logging",
                                                           "other")) if whole else ""),
               flush=True)
+    gym_rows = _gym_reference(seconds, repeat, physics_hz, control_hz, backend,
+                              workers) if gym else []
     if json_path:
         doc = {"model": model, "class": tier, "backend": backend, "workers": w,
                "physics_hz": physics_hz, "whole_run": whole, "log_hz": log_hz,
                "control_hz": control_hz, "seconds": seconds, "repeat": repeat,
                "machine": {"python": sys.version.split()[0], "platform": platform.platform(),
                            "cores": default_workers()},
-               "results": results}
+               "results": results, **({"gym_reference": gym_rows} if gym else {})}
         Path(json_path).write_text(json.dumps(doc, indent=2) + "\n")
         print(f"wrote {json_path}")
     if plot_path:
@@ -396,6 +398,29 @@ def run_bench(vehicles: list[int], model: str = "c172p", backend: str = "process
                      f"cosim bench, {physics_hz:g} Hz physics, {control_hz:g} Hz exchange")
         print(f"wrote {plot_path}")
     return results
+
+
+#: the fleet sizes of the gymnasium reference
+GYM_SIZES = (16, 64)
+
+
+def _gym_reference(seconds: float, repeat: int, physics_hz: float, control_hz: float,
+                   backend: str, workers: int | None) -> list[dict[str, Any]]:
+    """gymnasium's AsyncVectorEnv (one uav700 per environment) against the
+    pool at ``GYM_SIZES``, interleaved (``cosim.bench_gym``)."""
+    from cosim.bench_gym import compare
+
+    every = check_rates(physics_hz, control_hz)
+    print(f"reference: gymnasium AsyncVectorEnv, one uav700 per environment, "
+          f"{control_hz:g} Hz env.step, against the {backend} pool", flush=True)
+    print(f"{'N':>6} {'gym st/s':>11} {'pool st/s':>11} {'pool/gym':>9}", flush=True)
+    rows = []
+    for n in GYM_SIZES:
+        r = compare(n, seconds, repeat, physics_hz, every, backend, workers)
+        rows.append(r)
+        print(f"{n:>6} {r['gym_steps_per_s']:>11.0f} {r['pool_steps_per_s']:>11.0f} "
+              f"{r['pool_over_gym']:>8.1f}x", flush=True)
+    return rows
 
 
 def plot_scaling(series: dict[str, list[dict[str, Any]]], path: str | Path,

@@ -223,6 +223,10 @@ def _build_parser() -> _Parser:
                         "its real-time factor and where its tick loop's time goes")
     b.add_argument("--log-hz", type=_positive_float, default=10.0, metavar="HZ",
                    help="the whole run's logging rate (default 10)")
+    b.add_argument("--gym", action="store_true",
+                   help="also measure what an RL user would otherwise write: gymnasium's "
+                        "AsyncVectorEnv, one aircraft per environment, at 16 and 64 aircraft "
+                        "(needs the rl extra)")
     b.add_argument("--quick", action="store_true",
                    help="a look in under a minute: 1, 16 and 128 aircraft, 1 s, one round")
     return p
@@ -693,13 +697,17 @@ def _cmd_bench(a: argparse.Namespace) -> int:
         from cosim.vehicles.registry import get_class
 
         get_class(a.vehicle_class)  # an unknown class: ConfigError naming the known ones
+    if a.gym:
+        from cosim.bench_gym import require_gymnasium
+
+        require_gymnasium()  # not installed: a usage error before anything runs
     if a.quick:
         a.vehicles, a.seconds, a.repeat = [1, 16, 128], 1.0, 1
     run_bench(vehicles=a.vehicles, model=a.model, backend=a.backend, workers=a.workers,
               seconds=a.seconds, physics_hz=a.physics_hz, control_hz=a.control_hz,
               baselines=not a.no_baselines, repeat=max(1, a.repeat), json_path=a.json,
               vehicle_class=a.vehicle_class, plot_path=a.plot, whole=a.whole_run,
-              log_hz=a.log_hz)
+              log_hz=a.log_hz, gym=a.gym)
     return EXIT_OK
 
 

@@ -7,6 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 REPO = Path(__file__).resolve().parent.parent
@@ -51,3 +52,29 @@ def test_camera_rate_renders_the_same_frames_either_way() -> None:
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "frames identical: True" in proc.stdout and "30 frames" in proc.stdout
+
+
+def test_the_gymnasium_reference_steps_the_same_aircraft_as_the_pool() -> None:
+    """The reference is like for like: after the same exchanges, gymnasium's
+    observations are the pool's state rows, bit for bit."""
+    pytest.importorskip("gymnasium")
+    from gymnasium.vector import AsyncVectorEnv
+
+    from cosim.bench import bench_specs
+    from cosim.bench_gym import _make, compare
+    from cosim.fdm_pool import make_pool
+
+    n, dt = 3, 1 / 120
+    envs = AsyncVectorEnv([_make(i, n, dt, 4) for i in range(n)], shared_memory=True)
+    try:
+        envs.reset(seed=0)
+        for _ in range(5):
+            obs = envs.step(np.zeros((n, 1)))[0]
+    finally:
+        envs.close()
+    with make_pool(bench_specs(n, "uav700"), dt, (), "process", 2) as pool:
+        for _ in range(5):
+            states = pool.step(4)
+        assert np.array_equal(obs, states)
+    r = compare(n, 0.2, 1)
+    assert r["gym_steps_per_s"] > 0 and r["pool_over_gym"] > 0
