@@ -295,9 +295,11 @@ def _load_scenario(path: str) -> Scenario:
 
 def _backend_options(a: argparse.Namespace) -> dict[str, Any]:
     """``--address`` and ``--strict``, for the backend to take or refuse; a
-    refusal is a usage error before anything is built."""
+    refusal, or a backend that cannot run here, is a usage error before
+    anything is built."""
     from cosim.fdm_pool import get_backend
 
+    get_backend(a.backend).check()  # a library it needs, missing: said before anything runs
     opts: dict[str, Any] = {}
     if a.address:
         opts["address"] = a.address

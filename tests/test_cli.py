@@ -75,6 +75,18 @@ def test_usage_errors_exit_2(tmp_path: Path, capsys) -> None:
     assert not out.exists()
 
 
+def test_a_backend_missing_its_library_is_a_usage_error(tmp_path: Path, capsys,
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    import sys
+
+    monkeypatch.setitem(sys.modules, "ray", None)  # as if Ray were not installed
+    out = tmp_path / "r"
+    assert main(["run", str(REPO / "scenarios" / "quickstart.yaml"), "--backend", "ray",
+                 "--out", str(out)]) == 2
+    assert "the ray backend needs Ray: pip install 'cosim[ray]'" in capsys.readouterr().err
+    assert not out.exists()
+
+
 def test_models_lists_bundled_aircraft(capsys) -> None:
     assert main(["models"]) == 0
     out = capsys.readouterr().out

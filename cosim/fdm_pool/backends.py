@@ -63,6 +63,12 @@ class Backend:
         fn = getattr(self.factory, "default_workers", None)
         return int(fn()) if callable(fn) else 1
 
+    def check(self) -> None:
+        """``ConfigError`` if it cannot run here (``Pool.available``)."""
+        fn = getattr(self.factory, "available", None)
+        if callable(fn):
+            fn()
+
     @property
     def options(self) -> tuple[str, ...]:
         """The keyword options its factory takes beyond the common arguments."""

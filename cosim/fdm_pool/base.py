@@ -140,6 +140,12 @@ class Pool(ABC):
         """The workers this backend uses when none are asked for."""
         return 1
 
+    @classmethod
+    def available(cls) -> None:
+        """Raise ``ConfigError`` saying what is missing if this backend cannot
+        run here (a library not installed); checked before a run starts."""
+        return None
+
     @property
     def pids(self) -> dict[int, int]:
         """Worker index -> pid of each worker process (none: every shard runs

@@ -217,6 +217,10 @@ class RayPool(Pool):
             return max(1, int(ray.cluster_resources().get("CPU", 1)))
         return default_workers()
 
+    @classmethod
+    def available(cls) -> None:
+        _ray()
+
     def __init__(self, specs: Sequence[VehicleSpec], dt_s: float, channels: Sequence[str] = (),
                  workers: int | None = None, address: str | None = None,
                  strict: bool = False, local_share: bool = True,
