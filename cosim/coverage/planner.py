@@ -1,0 +1,264 @@
+"""Coverage plans for a fixed-wing fleet over a search area.
+
+The area (a polygon in the scenario's local frame, metres north and east of
+the origin) is split across the sweep direction into one strip per aircraft,
+each of the same area (cut positions found by bisection on the clipped
+area). Each strip is flown as a lawnmower (boustrophedon): parallel lanes
+along the sweep direction, spaced no wider than the camera's swath less the
+overlap, each lane as long as the strip's band around it so that the swaths
+cover the strip to its edges; consecutive lanes are joined by the shortest
+turns a fixed-wing can fly (``dubins``, radius ``v^2 / (g tan(bank))``),
+and the aircraft's transit from the base to its first lane is counted.
+
+Everything here is geometry: no simulation, no MAVLink. Geometry is done in
+a right-handed plane (x east, y north); the public values carry
+``north_m``/``east_m``.
+
+Not planned yet: no-fly zones inside the area (a polygon with holes is
+refused with a clear message).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from shapely import affinity
+from shapely.geometry import MultiPolygon, Polygon, box
+from shapely.geometry.base import BaseGeometry
+
+from cosim.coverage.dubins import DubinsPath, shortest
+
+G_MPS2 = 9.80665
+_BISECT_TOL = 1e-9  # relative area error of a cut
+
+
+def turn_radius_m(airspeed_mps: float, bank_deg: float) -> float:
+    """The tightest level turn: ``v^2 / (g tan(bank))``."""
+    if not 0 < bank_deg < 90:
+        raise ValueError(f"bank_deg must be in (0, 90), got {bank_deg}")
+    return airspeed_mps ** 2 / (G_MPS2 * math.tan(math.radians(bank_deg)))
+
+
+def swath_m(alt_agl_m: float, hfov_deg: float) -> float:
+    """The ground width a nadir camera sees across track from ``alt_agl_m``."""
+    return 2.0 * alt_agl_m * math.tan(math.radians(hfov_deg) / 2.0)
+
+
+def max_alt_for_detection_m(target_size_m: float, min_px: float, width_px: int,
+                            hfov_deg: float) -> float:
+    """The highest altitude at which a target ``target_size_m`` across still
+    spans ``min_px`` pixels of a ``width_px`` nadir image (``hfov_deg``)."""
+    return target_size_m * width_px / (min_px * 2.0 * math.tan(math.radians(hfov_deg) / 2.0))
+
+
+@dataclass
+class AircraftPlan:
+    """One aircraft's share: its strip, its lanes in flying order, the path."""
+
+    index: int
+    strip: Polygon  # in (east, north) metres
+    #: lanes in flying order: ((east, north) start, (east, north) end)
+    lanes: list[tuple[tuple[float, float], tuple[float, float]]]
+    transit: DubinsPath | None  # base to the first lane
+    turns: list[DubinsPath] = field(default_factory=list)
+
+    @property
+    def area_m2(self) -> float:
+        return float(self.strip.area)
+
+    @property
+    def survey_m(self) -> float:
+        return float(sum(math.dist(a, b) for a, b in self.lanes))
+
+    @property
+    def turns_m(self) -> float:
+        return float(sum(t.length_m for t in self.turns))
+
+    @property
+    def transit_m(self) -> float:
+        return self.transit.length_m if self.transit is not None else 0.0
+
+    @property
+    def length_m(self) -> float:
+        return self.transit_m + self.survey_m + self.turns_m
+
+    def path(self, step_m: float = 10.0) -> np.ndarray:
+        """The whole flight, transit first, as ``(k, 3)`` points ``east_m,
+        north_m, heading_rad`` (heading counter-clockwise from east) at most
+        ``step_m`` apart."""
+        parts: list[np.ndarray] = []
+        if self.transit is not None:
+            parts.append(self.transit.sample(step_m))
+        for i, (a, b) in enumerate(self.lanes):
+            h = math.atan2(b[1] - a[1], b[0] - a[0])
+            n = max(1, math.ceil(math.dist(a, b) / step_m))
+            s = np.linspace(0.0, 1.0, n + 1)[:, None]
+            lane = np.hstack([np.array(a) + s * (np.array(b) - np.array(a)),
+                              np.full((n + 1, 1), h)])
+            parts.append(lane)
+            if i < len(self.turns):
+                parts.append(self.turns[i].sample(step_m))
+        return np.vstack(parts) if parts else np.zeros((0, 3))
+
+
+@dataclass
+class CoveragePlan:
+    area: Polygon
+    sweep_deg: float  # lanes' direction, degrees clockwise from north (a course)
+    lane_spacing_m: float
+    turn_radius_m: float
+    aircraft: list[AircraftPlan]
+
+
+def area_polygon(points_ne: Sequence[tuple[float, float]]) -> Polygon:
+    """A search area from its corners, ``(north_m, east_m)`` in order."""
+    poly = Polygon([(e, n) for n, e in points_ne])
+    if not poly.is_valid or poly.area <= 0:
+        raise ValueError("the search area must be a simple polygon of positive area "
+                         "(its edges must not cross)")
+    return poly
+
+
+def plan_coverage(area: Polygon, n_aircraft: int, swath_width_m: float, turn_radius: float,
+                  base_ne: tuple[float, float] = (0.0, 0.0), overlap: float = 0.1,
+                  sweep_deg: float | None = None) -> CoveragePlan:
+    """Split ``area`` (east, north metres) among ``n_aircraft`` and plan each
+    one's lanes; ``sweep_deg`` (a course, clockwise from north) defaults to
+    the area's longest axis, so that strips are long and turns few."""
+    if n_aircraft < 1:
+        raise ValueError(f"n_aircraft must be >= 1, got {n_aircraft}")
+    if not swath_width_m > 0 or not turn_radius > 0:
+        raise ValueError("swath_width_m and turn_radius must be > 0")
+    if not 0 <= overlap < 1:
+        raise ValueError(f"overlap must be in [0, 1), got {overlap}")
+    if list(area.interiors):
+        raise ValueError("no-fly zones inside the search area are not planned yet: give the "
+                         "area without holes")
+    course = _longest_axis_course(area) if sweep_deg is None else float(sweep_deg)
+    theta = math.radians(90.0 - course)  # the lanes' direction, counter-clockwise from east
+    # rotate so that the lanes run along +u; v across them
+    rot = affinity.rotate(area, -theta, origin=(0, 0), use_radians=True)
+    cuts = _equal_area_cuts(rot, n_aircraft)
+    spacing = swath_width_m * (1.0 - overlap)
+    base = (base_ne[1], base_ne[0])
+    out = []
+    for k in range(n_aircraft):
+        strip_r = _clip_v(rot, cuts[k], cuts[k + 1])
+        lanes_r = _lanes(strip_r, cuts[k], cuts[k + 1], spacing)
+        lanes = [(_unrot(a, theta), _unrot(b, theta)) for a, b in _order(lanes_r, base, theta)]
+        strip = affinity.rotate(strip_r, theta, origin=(0, 0), use_radians=True)
+        plan = AircraftPlan(k, strip if isinstance(strip, Polygon) else _largest(strip),
+                            lanes, None)
+        if lanes:
+            (x0, y0), (x1, y1) = lanes[0]
+            plan.transit = shortest((base[0], base[1], math.atan2(y0 - base[1], x0 - base[0])),
+                                    (x0, y0, math.atan2(y1 - y0, x1 - x0)), turn_radius)
+            for a, b in zip(lanes, lanes[1:]):
+                plan.turns.append(shortest((a[1][0], a[1][1], _heading(a)),
+                                           (b[0][0], b[0][1], _heading(b)), turn_radius))
+        out.append(plan)
+    return CoveragePlan(area, course % 360.0, spacing, turn_radius, out)
+
+
+def _heading(lane: tuple[tuple[float, float], tuple[float, float]]) -> float:
+    (x0, y0), (x1, y1) = lane
+    return math.atan2(y1 - y0, x1 - x0)
+
+
+def _largest(g: BaseGeometry) -> Polygon:
+    if isinstance(g, MultiPolygon):
+        return max(g.geoms, key=lambda p: p.area)
+    return Polygon() if g.is_empty else g
+
+
+def _longest_axis_course(area: Polygon) -> float:
+    """The course (clockwise from north) of the long side of the area's
+    smallest enclosing rectangle."""
+    rect = area.minimum_rotated_rectangle
+    xs, ys = rect.exterior.coords.xy
+    sides = [((xs[i + 1] - xs[i]), (ys[i + 1] - ys[i])) for i in range(2)]
+    dx, dy = max(sides, key=lambda s: math.hypot(*s))
+    return math.degrees(math.atan2(dx, dy)) % 180.0
+
+
+def _clip_v(poly: Polygon, v0: float, v1: float) -> BaseGeometry:
+    minx, _, maxx, _ = poly.bounds
+    return poly.intersection(box(minx - 1.0, v0, maxx + 1.0, v1))
+
+
+def _equal_area_cuts(poly: Polygon, n: int) -> list[float]:
+    """v positions splitting ``poly`` into ``n`` bands of equal area."""
+    _, miny, _, maxy = poly.bounds
+    total = poly.area
+    cuts = [miny]
+    for k in range(1, n):
+        want = total * k / n
+        lo, hi = cuts[-1], maxy
+        for _ in range(200):
+            mid = (lo + hi) / 2.0
+            if _clip_v(poly, miny, mid).area < want:
+                lo = mid
+            else:
+                hi = mid
+            if hi - lo <= _BISECT_TOL * max(1.0, maxy - miny):
+                break
+        cuts.append((lo + hi) / 2.0)
+    cuts.append(maxy)
+    return cuts
+
+
+def _lanes(strip: BaseGeometry, v0: float, v1: float, spacing: float
+           ) -> list[list[tuple[float, float, float]]]:
+    """Per lane row (v ascending), the lane pieces ``(u_start, u_end, v)``:
+    rows centred in equal sub-bands no wider than ``spacing``; each piece
+    spans its sub-band's part of the strip, so the swaths reach its edges."""
+    if strip.is_empty or v1 <= v0:
+        return []
+    m = max(1, math.ceil((v1 - v0) / spacing - 1e-9))
+    width = (v1 - v0) / m
+    minx, _, maxx, _ = strip.bounds
+    rows = []
+    for i in range(m):
+        a, b = v0 + i * width, v0 + (i + 1) * width
+        band = strip.intersection(box(minx - 1.0, a, maxx + 1.0, b))
+        parts = list(band.geoms) if hasattr(band, "geoms") else [band]
+        pieces = sorted((p.bounds[0], p.bounds[2]) for p in parts
+                        if not p.is_empty and p.area > 0)
+        if pieces:
+            rows.append([(u0, u1, (a + b) / 2.0) for u0, u1 in pieces])
+    return rows
+
+
+def _order(rows: list[list[tuple[float, float, float]]], base: tuple[float, float],
+           theta: float) -> list[tuple[tuple[float, float], tuple[float, float]]]:
+    """Boustrophedon: row after row, alternating direction; of the four ways
+    (from the first or the last row, starting eastward or westward in u) the
+    one whose first lane starts nearest the base."""
+    best: list[tuple[tuple[float, float], tuple[float, float]]] = []
+    best_d = math.inf
+    bu = _rot(base, -theta)
+    for rs in (rows, rows[::-1]):
+        for forward in (True, False):
+            lanes = []
+            fwd = forward
+            for row in rs:
+                pieces = row if fwd else [(u1, u0, v) for u0, u1, v in reversed(row)]
+                lanes += [((u0, v), (u1, v)) for u0, u1, v in pieces]
+                fwd = not fwd
+            if lanes:
+                d = math.dist(bu, lanes[0][0])
+                if d < best_d:
+                    best, best_d = lanes, d
+    return best
+
+
+def _rot(p: tuple[float, float], a: float) -> tuple[float, float]:
+    c, s = math.cos(a), math.sin(a)
+    return (c * p[0] - s * p[1], s * p[0] + c * p[1])
+
+
+def _unrot(p: tuple[float, float], theta: float) -> tuple[float, float]:
+    return _rot(p, theta)

@@ -1,0 +1,126 @@
+"""The coverage planner against independent computations: areas (shapely's),
+curvature measured on the flown path, the camera's geometry."""
+
+from __future__ import annotations
+
+import math
+import random
+
+import numpy as np
+import pytest
+from shapely.geometry import LineString, Polygon
+from shapely.ops import unary_union
+
+from cosim.coverage import (
+    area_polygon,
+    max_alt_for_detection_m,
+    plan_coverage,
+    shortest,
+    swath_m,
+    turn_radius_m,
+)
+
+SQUARE = [(0, 0), (0, 32_000), (32_000, 32_000), (32_000, 0)]  # 1024 km2, (north, east)
+L_SHAPE = [(0, 0), (0, 9_000), (3_000, 9_000), (3_000, 3_000), (8_000, 3_000), (8_000, 0)]
+SLANTED = [(0, 0), (1_500, 7_000), (6_500, 8_000), (9_000, 2_500), (4_000, -1_000)]
+
+
+def test_turn_radius_swath_and_detection_altitude_from_their_equations() -> None:
+    assert turn_radius_m(100.0, 45.0) == pytest.approx(100.0 ** 2 / 9.80665)
+    assert turn_radius_m(60.0, 30.0) == pytest.approx(3600.0 / (9.80665 * math.tan(math.pi / 6)))
+    assert swath_m(300.0, 90.0) == pytest.approx(600.0)
+    alt = max_alt_for_detection_m(10.0, 8.0, 1920, 60.0)
+    gsd = swath_m(alt, 60.0) / 1920  # metres per pixel at that altitude
+    assert 10.0 / gsd == pytest.approx(8.0)
+    with pytest.raises(ValueError, match="bank_deg"):
+        turn_radius_m(50.0, 90.0)
+
+
+def _curvatures(path: np.ndarray) -> np.ndarray:
+    """1 / the radius of the circle through consecutive points of a path with
+    their headings (a chord c turning the heading by d: 2 sin(d / 2) / c)."""
+    ds = np.hypot(np.diff(path[:, 0]), np.diff(path[:, 1]))
+    dh = np.abs(np.remainder(np.diff(path[:, 2]) + np.pi, 2 * np.pi) - np.pi)
+    keep = ds > 1e-9
+    return 2 * np.sin(dh[keep] / 2) / ds[keep]
+
+
+def test_dubins_paths_end_at_the_goal_and_turn_no_tighter_than_the_radius() -> None:
+    rng = random.Random(4)
+    for _ in range(300):
+        r = rng.uniform(50, 1500)
+        s = (rng.uniform(-5e3, 5e3), rng.uniform(-5e3, 5e3), rng.uniform(-4, 4))
+        g = (rng.uniform(-5e3, 5e3), rng.uniform(-5e3, 5e3), rng.uniform(-4, 4))
+        p = shortest(s, g, r)
+        pts = p.sample(5.0)
+        assert np.allclose(pts[0], s)
+        assert math.dist(pts[-1][:2], g[:2]) < 1e-3
+        assert abs(math.remainder(pts[-1][2] - g[2], 2 * math.pi)) < 1e-6
+        assert p.length_m >= math.dist(s[:2], g[:2]) - 1e-6
+        assert _curvatures(pts).max() <= 1.0 / r * (1 + 1e-6)
+        steps = np.hypot(np.diff(pts[:, 0]), np.diff(pts[:, 1]))
+        assert steps.max() <= 5.0 + 1e-6
+    # known cases: straight ahead; a U-turn onto the lane 2R away
+    assert shortest((0, 0, 0), (1000, 0, 0), 100).length_m == pytest.approx(1000)
+    assert shortest((0, 0, 0), (0, 200, math.pi), 100).length_m == pytest.approx(math.pi * 100)
+
+
+@pytest.mark.parametrize("corners", [SQUARE, L_SHAPE, SLANTED], ids=["square", "L", "slanted"])
+@pytest.mark.parametrize("n", [1, 3, 7])
+def test_strips_cover_the_area_exactly_once_in_equal_shares(corners, n: int) -> None:
+    area = area_polygon(corners)
+    plan = plan_coverage(area, n, swath_width_m=400.0, turn_radius=600.0,
+                         base_ne=(-1_000.0, -1_000.0))
+    strips = [a.strip for a in plan.aircraft]
+    assert len(strips) == n
+    for s in strips:
+        assert s.area == pytest.approx(area.area / n, rel=1e-6)
+    assert sum(s.area for s in strips) == pytest.approx(area.area, rel=1e-9)
+    assert unary_union(strips).symmetric_difference(area).area < 1e-6 * area.area
+    for i in range(n):
+        for j in range(i + 1, n):
+            assert strips[i].intersection(strips[j]).area < 1e-6 * area.area
+
+
+@pytest.mark.parametrize("corners", [SQUARE, L_SHAPE, SLANTED], ids=["square", "L", "slanted"])
+def test_the_swaths_cover_every_strip_and_every_turn_is_flyable(corners) -> None:
+    area = area_polygon(corners)
+    swath, radius = 350.0, turn_radius_m(102.9, 45.0)  # 200 kt at 45 degrees: 1080 m
+    plan = plan_coverage(area, 4, swath_width_m=swath, turn_radius=radius,
+                         base_ne=(-2_000.0, 500.0))
+    assert plan.lane_spacing_m <= swath
+    for a in plan.aircraft:
+        seen = unary_union([LineString(lane).buffer(swath / 2, cap_style="flat")
+                            for lane in a.lanes])
+        missed = a.strip.difference(seen).area
+        assert missed < 1e-6 * a.strip.area, (a.index, missed)
+        path = a.path(step_m=10.0)
+        assert _curvatures(path).max() <= 1.0 / radius * (1 + 1e-6)
+        steps = np.hypot(np.diff(path[:, 0]), np.diff(path[:, 1]))
+        assert steps.max() <= 10.0 + 1e-6  # one continuous flight
+        # the transit is part of it: from the base to the first lane
+        assert np.allclose(path[0, :2], (500.0, -2_000.0))
+        assert a.transit_m >= math.dist((500.0, -2_000.0), a.lanes[0][0]) - 1e-6
+        assert a.length_m == pytest.approx(a.transit_m + a.survey_m + a.turns_m)
+        assert len(a.turns) == len(a.lanes) - 1
+
+
+def test_the_sweep_follows_the_long_axis_unless_told() -> None:
+    long_east = area_polygon([(0, 0), (0, 20_000), (2_000, 20_000), (2_000, 0)])
+    assert plan_coverage(long_east, 1, 300.0, 500.0).sweep_deg == pytest.approx(90.0)
+    long_north = area_polygon([(0, 0), (0, 2_000), (20_000, 2_000), (20_000, 0)])
+    assert plan_coverage(long_north, 1, 300.0, 500.0).sweep_deg % 180 == pytest.approx(0.0)
+    assert plan_coverage(long_north, 1, 300.0, 500.0, sweep_deg=45.0).sweep_deg == 45.0
+
+
+def test_bad_input_is_refused_with_what_was_expected() -> None:
+    with pytest.raises(ValueError, match="simple polygon"):
+        area_polygon([(0, 0), (10, 10), (0, 10), (10, 0)])  # edges cross
+    square = area_polygon(SQUARE)
+    with pytest.raises(ValueError, match="n_aircraft must be >= 1"):
+        plan_coverage(square, 0, 300.0, 500.0)
+    with pytest.raises(ValueError, match="overlap"):
+        plan_coverage(square, 1, 300.0, 500.0, overlap=1.0)
+    holed = Polygon(square.exterior.coords, [[(100, 100), (100, 200), (200, 200), (200, 100)]])
+    with pytest.raises(ValueError, match="no-fly zones"):
+        plan_coverage(holed, 1, 300.0, 500.0)
