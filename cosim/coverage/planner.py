@@ -9,6 +9,9 @@ overlap, each lane as long as the strip's band around it so that the swaths
 cover the strip to its edges; consecutive lanes are joined by the shortest
 turns a fixed-wing can fly (``dubins``, radius ``v^2 / (g tan(bank))``),
 and the aircraft's transit from the base to its first lane is counted.
+Lanes closer together than a U-turn (twice the radius) are flown
+interleaved (0, k, 1, k + 1, ...) when that makes the flight shorter, so
+the turns need not loop.
 
 Everything here is geometry: no simulation, no MAVLink. Geometry is done in
 a right-handed plane (x east, y north); the public values carry
@@ -124,10 +127,11 @@ def area_polygon(points_ne: Sequence[tuple[float, float]]) -> Polygon:
 
 def plan_coverage(area: Polygon, n_aircraft: int, swath_width_m: float, turn_radius: float,
                   base_ne: tuple[float, float] = (0.0, 0.0), overlap: float = 0.1,
-                  sweep_deg: float | None = None) -> CoveragePlan:
+                  sweep_deg: float | None = None, interleave: bool = True) -> CoveragePlan:
     """Split ``area`` (east, north metres) among ``n_aircraft`` and plan each
     one's lanes; ``sweep_deg`` (a course, clockwise from north) defaults to
-    the area's longest axis, so that strips are long and turns few."""
+    the area's longest axis, so that strips are long and turns few;
+    ``interleave=False`` flies the lanes strictly one after another."""
     if n_aircraft < 1:
         raise ValueError(f"n_aircraft must be >= 1, got {n_aircraft}")
     if not swath_width_m > 0 or not turn_radius > 0:
@@ -148,19 +152,52 @@ def plan_coverage(area: Polygon, n_aircraft: int, swath_width_m: float, turn_rad
     for k in range(n_aircraft):
         strip_r = _clip_v(rot, cuts[k], cuts[k + 1])
         lanes_r = _lanes(strip_r, cuts[k], cuts[k + 1], spacing)
-        lanes = [(_unrot(a, theta), _unrot(b, theta)) for a, b in _order(lanes_r, base, theta)]
         strip = affinity.rotate(strip_r, theta, origin=(0, 0), use_radians=True)
-        plan = AircraftPlan(k, strip if isinstance(strip, Polygon) else _largest(strip),
-                            lanes, None)
-        if lanes:
-            (x0, y0), (x1, y1) = lanes[0]
-            plan.transit = shortest((base[0], base[1], math.atan2(y0 - base[1], x0 - base[0])),
-                                    (x0, y0, math.atan2(y1 - y0, x1 - x0)), turn_radius)
-            for a, b in zip(lanes, lanes[1:]):
-                plan.turns.append(shortest((a[1][0], a[1][1], _heading(a)),
-                                           (b[0][0], b[0][1], _heading(b)), turn_radius))
-        out.append(plan)
+        strip = strip if isinstance(strip, Polygon) else _largest(strip)
+        # lanes row after row, or interleaved so that turns need no loops: the shorter
+        jump = math.ceil(2.0 * turn_radius / spacing) + 1  # rows apart for a plain U-turn
+        options = [_flown(k, strip, [(_unrot(a, theta), _unrot(b, theta))
+                                     for a, b in _order(lanes_r, base, theta, seq)],
+                          base, turn_radius)
+                   for seq in _sequences(lanes_r, jump if interleave else 1)]
+        out.append(min(options, key=lambda p: p.length_m))
     return CoveragePlan(area, course % 360.0, spacing, turn_radius, out)
+
+
+def _flown(index: int, strip: Polygon,
+           lanes: list[tuple[tuple[float, float], tuple[float, float]]],
+           base: tuple[float, float], radius: float) -> AircraftPlan:
+    """The plan flying ``lanes`` in order: the transit to the first, turns between."""
+    plan = AircraftPlan(index, strip, lanes, None)
+    if lanes:
+        (x0, y0), (x1, y1) = lanes[0]
+        plan.transit = shortest((base[0], base[1], math.atan2(y0 - base[1], x0 - base[0])),
+                                (x0, y0, math.atan2(y1 - y0, x1 - x0)), radius)
+        for a, b in zip(lanes, lanes[1:]):
+            plan.turns.append(shortest((a[1][0], a[1][1], _heading(a)),
+                                       (b[0][0], b[0][1], _heading(b)), radius))
+    return plan
+
+
+def _sequences(rows: list[list[tuple[float, float, float]]], jump: int) -> list[list[int]]:
+    """Orders of the rows to try: one after another; and, where every row is
+    one piece and lanes are closer than a U-turn, interleaved in blocks of
+    ``2 * jump`` rows (0, jump, 1, jump + 1, ...: every turn but one a block
+    spans ``jump`` or ``jump - 1`` rows, wide enough not to loop)."""
+    m = len(rows)
+    out = [list(range(m))]
+    if jump > 1 and m > 2 and all(len(r) == 1 for r in rows):
+        seq: list[int] = []
+        for b in range(0, m, 2 * jump):
+            size = min(2 * jump, m - b)
+            h = (size + 1) // 2
+            low, high = range(b, b + h), range(b + h, b + size)
+            for i in range(h):
+                seq.append(low[i])
+                if i < len(high):
+                    seq.append(high[i])
+        out.append(seq)
+    return out
 
 
 def _heading(lane: tuple[tuple[float, float], tuple[float, float]]) -> float:
@@ -233,18 +270,19 @@ def _lanes(strip: BaseGeometry, v0: float, v1: float, spacing: float
 
 
 def _order(rows: list[list[tuple[float, float, float]]], base: tuple[float, float],
-           theta: float) -> list[tuple[tuple[float, float], tuple[float, float]]]:
-    """Boustrophedon: row after row, alternating direction; of the four ways
-    (from the first or the last row, starting eastward or westward in u) the
-    one whose first lane starts nearest the base."""
+           theta: float, seq: list[int]) -> list[tuple[tuple[float, float], tuple[float, float]]]:
+    """The rows in the order ``seq`` (or its reverse), alternating direction;
+    of the four ways (either end of ``seq``, starting either way along the
+    lanes) the one whose first lane starts nearest the base."""
     best: list[tuple[tuple[float, float], tuple[float, float]]] = []
     best_d = math.inf
     bu = _rot(base, -theta)
-    for rs in (rows, rows[::-1]):
+    for order in (seq, seq[::-1]):
         for forward in (True, False):
             lanes = []
             fwd = forward
-            for row in rs:
+            for r in order:
+                row = rows[r]
                 pieces = row if fwd else [(u1, u0, v) for u0, u1, v in reversed(row)]
                 lanes += [((u0, v), (u1, v)) for u0, u1, v in pieces]
                 fwd = not fwd

@@ -105,6 +105,22 @@ def test_the_swaths_cover_every_strip_and_every_turn_is_flyable(corners) -> None
         assert len(a.turns) == len(a.lanes) - 1
 
 
+def test_interleaved_lanes_shorten_the_flight_when_lanes_are_closer_than_a_u_turn() -> None:
+    area = area_polygon(SQUARE)
+    radius = turn_radius_m(102.9, 45.0)  # 1080 m: lanes 312 m apart cannot be turned plainly
+    kw = dict(swath_width_m=swath_m(300.0, 60.0), turn_radius=radius, base_ne=(-2e3, -2e3))
+    plain = plan_coverage(area, 8, interleave=False, **kw)
+    best = plan_coverage(area, 8, **kw)
+    for p, b in zip(plain.aircraft, best.aircraft):
+        def key(lanes):  # each lane whichever way it is flown, to the millimetre
+            return sorted(tuple(sorted((round(x, 3), round(y, 3)) for x, y in lane))
+                          for lane in lanes)
+
+        assert key(p.lanes) == key(b.lanes)  # the same lanes, another order
+        assert b.survey_m == pytest.approx(p.survey_m)
+        assert b.turns_m < 0.7 * p.turns_m, (b.turns_m, p.turns_m)
+
+
 def test_the_sweep_follows_the_long_axis_unless_told() -> None:
     long_east = area_polygon([(0, 0), (0, 20_000), (2_000, 20_000), (2_000, 0)])
     assert plan_coverage(long_east, 1, 300.0, 500.0).sweep_deg == pytest.approx(90.0)
