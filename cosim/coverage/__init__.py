@@ -11,11 +11,14 @@ from cosim.coverage.planner import (
     AircraftPlan,
     CoveragePlan,
     area_polygon,
+    completion_s,
     max_alt_for_detection_m,
+    min_fleet,
     plan_coverage,
     swath_m,
     turn_radius_m,
 )
 
-__all__ = ["AircraftPlan", "CoveragePlan", "DubinsPath", "area_polygon",
-           "max_alt_for_detection_m", "plan_coverage", "shortest", "swath_m", "turn_radius_m"]
+__all__ = ["AircraftPlan", "CoveragePlan", "DubinsPath", "area_polygon", "completion_s",
+           "max_alt_for_detection_m", "min_fleet", "plan_coverage", "shortest", "swath_m",
+           "turn_radius_m"]

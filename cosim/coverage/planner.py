@@ -164,6 +164,51 @@ def plan_coverage(area: Polygon, n_aircraft: int, swath_width_m: float, turn_rad
     return CoveragePlan(area, course % 360.0, spacing, turn_radius, out)
 
 
+def completion_s(plan: CoveragePlan, airspeed_mps: float) -> float:
+    """When the last aircraft finishes its plan (transit, lanes and turns) at
+    ``airspeed_mps``, taking off together."""
+    return max(a.length_m for a in plan.aircraft) / airspeed_mps
+
+
+def min_fleet(area: Polygon, airspeed_mps: float, bank_deg: float, swath_width_m: float,
+              deadline_s: float, base_ne: tuple[float, float] = (0.0, 0.0),
+              overlap: float = 0.1, max_aircraft: int = 10_000) -> CoveragePlan:
+    """The plan of the smallest fleet that covers ``area`` before
+    ``deadline_s``: fewer aircraft than the lanes' length needs at that speed
+    cannot, so the search starts there, doubles until a fleet is fast enough,
+    then bisects (completion time falls with every aircraft added, up to the
+    transit, which a larger fleet does not shorten). ``ValueError`` if even
+    ``max_aircraft`` cannot (the transit alone may be too long)."""
+    radius = turn_radius_m(airspeed_mps, bank_deg)
+
+    def plan(n: int) -> CoveragePlan:
+        return plan_coverage(area, n, swath_width_m, radius, base_ne, overlap)
+
+    def fast(n: int) -> bool:
+        return completion_s(plan(n), airspeed_mps) <= deadline_s
+
+    survey = area.area / (swath_width_m * (1.0 - overlap))  # the lanes' length, about
+    lo = max(1, math.floor(survey / (airspeed_mps * deadline_s)))
+    if fast(lo):
+        hi = lo
+        lo = 0
+    else:
+        hi = lo * 2
+        while not fast(hi):
+            if hi >= max_aircraft:
+                raise ValueError(f"even {max_aircraft} aircraft cannot cover the area within "
+                                 f"{deadline_s:g} s at {airspeed_mps:g} m/s (the transit "
+                                 f"from the base may be too long)")
+            lo, hi = hi, min(hi * 2, max_aircraft)
+    while hi - lo > 1:  # fast(hi), not fast(lo) (or lo = 0)
+        mid = (lo + hi) // 2
+        if fast(mid):
+            hi = mid
+        else:
+            lo = mid
+    return plan(hi)
+
+
 def _flown(index: int, strip: Polygon,
            lanes: list[tuple[tuple[float, float], tuple[float, float]]],
            base: tuple[float, float], radius: float) -> AircraftPlan:

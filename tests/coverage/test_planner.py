@@ -140,3 +140,18 @@ def test_bad_input_is_refused_with_what_was_expected() -> None:
     holed = Polygon(square.exterior.coords, [[(100, 100), (100, 200), (200, 200), (200, 100)]])
     with pytest.raises(ValueError, match="no-fly zones"):
         plan_coverage(holed, 1, 300.0, 500.0)
+
+
+def test_min_fleet_is_the_smallest_that_finishes_before_the_deadline() -> None:
+    from cosim.coverage import completion_s, min_fleet
+
+    area = area_polygon([(0, 0), (0, 12_000), (8_000, 12_000), (8_000, 0)])  # 96 km2
+    v, bank, swath, deadline = 60.0, 45.0, 400.0, 600.0
+    plan = min_fleet(area, v, bank, swath, deadline, base_ne=(4_000.0, 6_000.0))
+    n = len(plan.aircraft)
+    assert completion_s(plan, v) <= deadline
+    fewer = plan_coverage(area, n - 1, swath, turn_radius_m(v, bank), (4_000.0, 6_000.0))
+    assert completion_s(fewer, v) > deadline
+    # a deadline shorter than the transit to the farthest corner: no fleet will do
+    with pytest.raises(ValueError, match="cannot cover the area"):
+        min_fleet(area, v, bank, swath, 60.0, base_ne=(4_000.0, 6_000.0), max_aircraft=64)
