@@ -88,6 +88,23 @@ class AircraftPlan:
     def length_m(self) -> float:
         return self.transit_m + self.survey_m + self.turns_m
 
+    def waypoints_ne(self, turn_step_m: float) -> list[tuple[float, float]]:
+        """The flight as waypoints ``(north_m, east_m)`` for path following:
+        the transit and the turns sampled every ``turn_step_m`` at most, each
+        lane its two ends (the base itself left out)."""
+        out: list[tuple[float, float]] = []
+
+        def add(points: np.ndarray) -> None:
+            out.extend((float(y), float(x)) for x, y in points[:, :2])
+
+        if self.transit is not None:
+            add(self.transit.sample(turn_step_m)[1:-1])
+        for i, (a, b) in enumerate(self.lanes):
+            out += [(a[1], a[0]), (b[1], b[0])]
+            if i < len(self.turns):
+                add(self.turns[i].sample(turn_step_m)[1:-1])
+        return out
+
     def path(self, step_m: float = 10.0) -> np.ndarray:
         """The whole flight, transit first, as ``(k, 3)`` points ``east_m,
         north_m, heading_rad`` (heading counter-clockwise from east) at most
