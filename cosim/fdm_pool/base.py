@@ -15,7 +15,11 @@ exchange, every ``watch.every`` ticks (a camera's aircraft at its frame
 rate, while everyone else is exchanged at the control rate): after
 ``wait``, ``watched[:watched_count]`` holds them, ``(chunk, watched row,
 column)``, the last chunk equal to those rows of ``states``. The states
-themselves are the same with or without a watch.
+themselves are the same with or without a watch. A watched vehicle whose
+state becomes non-finite inside an exchange is no longer stepped, and its
+chunks from there on are its frozen row, the exchange's (an unwatched one
+runs on to the end of the exchange first: a JSBSim failure in that rest
+would be an error for it, not for the watched one).
 
 A backend may have things to report that are not failures (a lost machine
 replaced, and the run no longer bit-exact): it appends ``(kind, fields)``

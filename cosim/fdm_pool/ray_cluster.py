@@ -17,8 +17,10 @@ spread over the machines, the head first, then by node id, at most as many
 on a machine as it has CPUs while the cluster has room; the vehicles are
 split over the workers as the ``process`` backend splits them, and each
 machine's agent takes its workers' contiguous share. Each agent reserves
-its workers' CPUs on its machine (``num_cpus``), so two runs on one cluster
-do not share cores unknowingly. States do not depend on any of this.
+its workers' CPUs on its machine (``num_cpus``), so two runs' agents do not
+share cores unknowingly; the driver's own share reserves none (it runs in
+the driver's process, outside Ray's accounting). States do not depend on
+any of this.
 
 Connecting: ``address`` (``HOST:PORT`` of a cluster started with ``ray start
 --head``; else ``RAY_ADDRESS``; else a local Ray is started for this
@@ -27,11 +29,13 @@ process and stopped with it). A cluster with token authentication
 environment (``RAY_AUTH_TOKEN`` or ``RAY_AUTH_TOKEN_PATH``), as every Ray
 client does.
 
-Faults: a lost agent (its process killed, its machine gone) is replaced:
-a new agent, on the same machine if it is still there, else wherever Ray
-finds room, rebuilds its vehicles from the last states gathered (position,
-attitude and speed, trimmed there) and is given again the last value sent on
-every channel; its frozen vehicles stay frozen in their rows. The run is no
+Faults: a lost agent (its process killed, its machine gone) is killed for
+good (it may only be unreachable) and replaced: a new agent, on the same
+machine if Ray still lists it, else on the live machine with the most CPUs,
+rebuilds its vehicles from the last states gathered (position, heading and
+speed, trimmed there) and is given again the last value sent on every
+channel; its frozen vehicles stay frozen in their rows (an agent left with
+none is not replaced). A replacement lost too stops the run. The run is no
 longer bit-exact from that exchange on, and a ``pool_recovered`` notice says
 so (the run logs it as an event). ``strict=True`` stops instead, with an
 ``AgentLost`` naming the machine. A worker process of the driver's own share
@@ -285,19 +289,19 @@ class RayPool(Pool):
     @property
     def agents(self) -> dict[int, int]:
         """Agent index -> pid of the agent's process (on its own machine)."""
-        return {i: s.pid for i, s in enumerate(self._shares)}
+        return {i: s.pid for i, s in enumerate(self._shares) if s.handle is not None}
 
     @property
     def agent_vehicles(self) -> dict[int, list[str]]:
         """Agent index -> the vehicles it steps."""
-        return {i: self._ids_of(s) for i, s in enumerate(self._shares)}
+        return {i: self._ids_of(s) for i, s in enumerate(self._shares) if s.handle is not None}
 
     @property
     def pids(self) -> dict[int, int]:
         """Every process stepping vehicles that the driver answers for: the
         worker processes of its own machine's share, then each agent."""
         own = list(self._local.pids.values()) if self._local is not None else []
-        return dict(enumerate(own + [s.pid for s in self._shares]))
+        return dict(enumerate(own + [s.pid for s in self._shares if s.handle is not None]))
 
     def busy_s(self) -> list[float]:
         own = self._local.busy_s() if self._local is not None else []
@@ -310,7 +314,7 @@ class RayPool(Pool):
             written = ~np.isnan(sp)
             self._latched[written] = sp[written]
         self._refs = [s.handle.step.remote(None if sp is None else sp[s.rows], nsub)
-                      for s in self._shares]
+                      if s.handle is not None else None for s in self._shares]
         if self._local is not None:
             if sp is not None:
                 self._local.setpoints[:] = sp[self._local_rows]
@@ -324,7 +328,8 @@ class RayPool(Pool):
             if len(self._local_js):
                 self.watched[:m, self._local_js] = self._local.watched[:m]
         refs = self._refs
-        _, pending = ray.wait(refs, num_returns=len(refs), timeout=timeout_s)
+        live = [r for r in refs if r is not None]
+        _, pending = ray.wait(live, num_returns=len(live), timeout=timeout_s)
         if pending:
             i = refs.index(pending[0])
             s = self._shares[i]
@@ -332,6 +337,8 @@ class RayPool(Pool):
             raise WorkerTimeout(i, s.pid, self._ids_of(s), self.tick, timeout_s,
                                 f"finish tick {self.tick + self._nsub} on {s.node.ip}")
         for i, ref in enumerate(refs):
+            if ref is None:  # an agent whose vehicles are all frozen: nothing to step
+                continue
             s = self._shares[i]
             try:
                 block, s.busy, watched = ray.get(ref)
@@ -339,6 +346,7 @@ class RayPool(Pool):
                 raise _cause(e) from None
             except ray.exceptions.RayActorError as e:
                 block, watched = self._replace(i, e)
+                s = self._shares[i]  # its replacement, holding the survivors' rows
             self.states[s.rows] = block
             if watched is not None:
                 self.watched[:m, s.watch_js] = watched
@@ -368,12 +376,14 @@ class RayPool(Pool):
         if not self._shares:
             return
         ray = _ray()
-        stops = [s.handle.stop.remote() for s in self._shares]
+        stops = [s.handle.stop.remote() for s in self._shares if s.handle is not None]
         try:
             ray.wait(stops, num_returns=len(stops), timeout=_STOP_TIMEOUT_S)
         except Exception:  # an agent already gone: nothing of it to stop
             pass
         for s in self._shares:
+            if s.handle is None:
+                continue
             try:
                 ray.kill(s.handle, no_restart=True)
             except Exception:
@@ -460,22 +470,42 @@ class RayPool(Pool):
             self._frozen[frozen] = True
             self._frozen_rows = np.flatnonzero(self._frozen)
             self._frozen_states = self.states[self._frozen_rows].copy()
+        ray = _ray()
+        try:  # it may only be unreachable: it must not go on holding CPUs and workers
+            ray.kill(old.handle, no_restart=True)
+        except Exception:
+            pass
+        self.notices.append(("pool_recovered", {
+            "machine": old.node.ip, "vehicles": len(alive), "frozen": len(frozen),
+            "bit_exact": False, "reason": _reason(e)}))
+        if not len(alive):  # nothing left to fly there: no agent
+            self._shares[i] = _Share(None, old.node, 0, alive)
+            return self.states[alive], None
         nodes = {n.id: n for n in live_nodes()}
+        if not nodes:
+            raise AgentLost(i, old.node.ip, old.node.id, old.pid, self._ids_of(old), self.tick,
+                            f"{_reason(e)}; no live machine is left to rebuild its vehicles on")
         node = nodes.get(old.node.id) or max(nodes.values(), key=lambda n: n.cpus)
-        share = _Share(self._spawn(node, old.workers, soft=True), node,
-                       min(old.workers, max(1, len(alive))), alive)
+        self.notices[-1][1]["replaced_on"] = node.ip
+        workers = min(old.workers, len(alive))
+        share = _Share(self._spawn(node, workers, soft=True), node, workers, alive)
         share.watch, share.watch_js = self._watch_part(alive)
         self._shares[i] = share
-        self.notices.append(("pool_recovered", {
-            "machine": old.node.ip, "replaced_on": node.ip, "vehicles": len(alive),
-            "frozen": len(frozen), "bit_exact": False, "reason": _reason(e)}))
-        if not len(alive):  # nothing left to fly there
-            return self.states[alive], None
         specs = [_resume_spec(self.specs[r], self.states[r]) for r in alive.tolist()]
         latched = self._latched[alive] if self.channels else None
         self._build([(share, specs, latched)])
-        ray = _ray()
-        block, share.busy, watched = ray.get(share.handle.step.remote(None, self._nsub))
+        try:  # one chance: a replacement lost too stops the run
+            block, share.busy, watched = ray.get(share.handle.step.remote(None, self._nsub),
+                                                 timeout=self._timeout_s)
+        except ray.exceptions.RayTaskError as err:
+            raise _cause(err) from None
+        except ray.exceptions.RayActorError as err:
+            raise AgentLost(i, node.ip, node.id, share.pid, self._ids_of(share), self.tick,
+                            f"its replacement was lost too: {_reason(err)}") from None
+        except ray.exceptions.GetTimeoutError:
+            raise WorkerTimeout(i, share.pid, self._ids_of(share), self.tick, self._timeout_s,
+                                f"finish tick {self.tick + self._nsub} on {node.ip} after "
+                                f"a rebuild") from None
         return np.asarray(block), watched
 
     def _ids_of(self, s: _Share) -> list[str]:

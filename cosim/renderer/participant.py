@@ -306,6 +306,7 @@ class CameraParticipant:
         self.done: set[int] = set()  # render workers that have closed their files
         #: each gimbal stream's current (pitch_deg, yaw_deg), set by commands
         self.gimbal: dict[int, tuple[float, float]] = {}
+        self.gimbal_before: dict[int, tuple[float, float]] = {}  # as of the last exchange
         self.gimbal_moves: list[tuple[Stream, str]] = []
         #: still triggering per vehicle row (``camera`` commands) and the streams
         #: whose next frame is a still (stream index -> the command's source)
@@ -514,7 +515,10 @@ class CameraParticipant:
             every = s.camera.frame_every
             if tick % every:
                 continue
-            self._frame(s, tick, states[s.row], stills=True)
+            self._frame(s, tick, states[s.row], self.gimbal.get(s.index), stills=True)
+        # the angles the frames until the next exchange were taken with (a
+        # command at that exchange moves the gimbal only from its own tick)
+        self.gimbal_before = dict(self.gimbal)
         if self.operator is not None:
             self.operator.at_exchange(tick, states)
         if self.procs:
@@ -540,16 +544,18 @@ class CameraParticipant:
                 break
             for s in self.streams:
                 if s.row in pos and t % s.camera.frame_every == 0:
-                    self._frame(s, t, w.states[c, pos[s.row]], stills=False)
+                    self._frame(s, t, w.states[c, pos[s.row]], self.gimbal_before.get(s.index),
+                                stills=False)
 
-    def _frame(self, s: Stream, tick: int, row: np.ndarray, stills: bool) -> None:
+    def _frame(self, s: Stream, tick: int, row: np.ndarray,
+               gimbal: tuple[float, float] | None, stills: bool) -> None:
         """Render stream ``s``'s frame at ``tick`` from its vehicle's state
-        ``row`` (and a still with it when one is due and ``stills``)."""
+        ``row`` with the gimbal at ``gimbal`` (and a still with it when one is
+        due and ``stills``)."""
         every = s.camera.frame_every
         pose6 = tuple(float(x) for x in row[_POSE_COLS])
         if s.lift_m:
             pose6 = pose6[:2] + (pose6[2] + s.lift_m,) + pose6[3:]
-        gimbal = self.gimbal.get(s.index)
         frame_no = tick // every
         still = self._still_name(s, frame_no, tick, pose6, gimbal) \
             if stills and s.index in self.still_due else None

@@ -235,11 +235,12 @@ class Run:
         self._building = True
         if self._stop.is_set():
             raise KeyboardInterrupt
-        # the participants first: some ask for rows gathered inside exchanges
-        self.participants = build_participants(
+        # the participants are made first (some ask for rows gathered inside
+        # exchanges), but are the run's (finished at its end) only once the pool is
+        wanted = build_participants(
             scn, skip=("swarm",) if self.external_controller else ()) + self.extra_participants
         options = dict(self.backend_options)
-        watch = watch_for(self.participants, scn.rates.control_every)
+        watch = watch_for(wanted, scn.rates.control_every)
         if watch is not None:
             options["watch"] = Watch(watch[0], watch[1], scn.rates.control_every)
         pool = make_pool(scn.vehicles, scn.rates.dt_s, scn.channels, self.backend, self.workers,
@@ -253,7 +254,7 @@ class Run:
                      o.startup_s, o.workers)
             ids = [v.id for v in scn.vehicles]
             before, during, after, logger, status_events = self._parts(
-                pool, events, states_log, ids, scn.total_ticks)
+                pool, events, states_log, ids, scn.total_ticks, wanted)
             states = pool.states
             status_events.start(states)
             logger.record(0, states)
@@ -391,8 +392,8 @@ class Run:
                 log.warning("could not write track.png: %s", e)
 
     def _parts(self, pool: Pool, events: EventLog, states_log: StateLog, ids: list[str],
-               total: int) -> tuple[list[Any], list[Any], list[Any], StateLogger,
-                                    StatusEvents]:
+               total: int, wanted: list[Any]) -> tuple[list[Any], list[Any], list[Any],
+                                                       StateLogger, StatusEvents]:
         """The run's participants, started: the steps the loop calls before,
         during and after each pool step (``cosim.sync.parts``)."""
         scn = self.scn
@@ -420,6 +421,7 @@ class Run:
             during.append(mav_part.on_exchange)
         if commander.active:
             before.append(parts.Guidance(commander, events, ids).before_step)
+        self.participants = wanted
         watched = (WatchedStates(pool.watch.rows, [], pool.watched[:0].copy())
                    if pool.watch is not None else None)
         ctx = RunContext(scn, self.out, ids, scn.origin.frame, start_ned, hz,

@@ -15,6 +15,7 @@ import pytest
 
 from cosim.errors import AgentLost, ConfigError
 from cosim.fdm_pool import STATE_INDEX, VehicleStatus, make_pool
+from cosim.fdm_pool.base import Watch
 from cosim.scenario import load_scenario
 from cosim.sync import Run
 
@@ -37,14 +38,16 @@ def _gone(pid: int, timeout_s: float = 10.0) -> bool:
 
 
 def test_a_lost_agent_is_replaced_from_the_last_states_and_the_run_goes_on(specs) -> None:
-    with make_pool(specs(4), DT, CH, "ray", 2) as pool:
+    # every vehicle watched at 2 ticks: the gathered rows follow the rebuild too
+    watch = Watch(tuple(range(6)), every=2, max_nsub=4)
+    with make_pool(specs(6), DT, CH, "ray", 2, watch=watch) as pool:
         # two machines (one host): this process steps its own machine's share,
         # an agent the other's
         assert len(pool.machines) == 2 and pool.machines[0] == pool.machines[1]
         assert list(pool.agents) == [0]
         held = pool.agent_vehicles[0]
-        assert held in (["b0000", "b0001"], ["b0002", "b0003"])
-        a, b = (0, 1) if held[0] == "b0000" else (2, 3)
+        assert held in (["b0000", "b0001", "b0002"], ["b0003", "b0004", "b0005"])
+        a, b, c = (0, 1, 2) if held[0] == "b0000" else (3, 4, 5)
         pool.setpoints[a, 1] = 1e308  # the agent's first vehicle diverges and is frozen
         pool.setpoints[b, 0] = 0.3  # its second one's throttle: must survive the rebuild
         pool.step(4)
@@ -58,20 +61,38 @@ def test_a_lost_agent_is_replaced_from_the_last_states_and_the_run_goes_on(specs
         assert pool.agents[0] != victim
         kind, fields = pool.notices.pop()
         assert kind == "pool_recovered" and fields["bit_exact"] is False
-        assert fields["vehicles"] == 1 and fields["frozen"] == 1
+        assert fields["vehicles"] == 2 and fields["frozen"] == 1
         assert np.array_equal(after[a], before[a])  # the frozen one kept as it was
-        # the other goes on from where it was: within one exchange's flight
+        assert np.array_equal(pool.watched[1, a], before[a])
+        assert np.array_equal(pool.watched[1], after)  # the last chunk is the exchange's
+        # the others go on from where they were: within one exchange's flight
         i = STATE_INDEX
-        moved = np.hypot(after[b, i["lat_deg"]] - before[b, i["lat_deg"]],
-                         (after[b, i["lon_deg"]] - before[b, i["lon_deg"]])
-                         * np.cos(np.radians(before[b, i["lat_deg"]]))) * 111_320.0
-        assert 0.0 < moved < 2 * before[b, i["airspeed_mps"]] * 4 * DT + 1.0
-        assert abs(after[b, i["alt_msl_m"]] - before[b, i["alt_msl_m"]]) < 2.0
+        for r in (b, c):
+            moved = np.hypot(after[r, i["lat_deg"]] - before[r, i["lat_deg"]],
+                             (after[r, i["lon_deg"]] - before[r, i["lon_deg"]])
+                             * np.cos(np.radians(before[r, i["lat_deg"]]))) * 111_320.0
+            assert 0.0 < moved < 2 * before[r, i["airspeed_mps"]] * 4 * DT + 1.0
+            assert abs(after[r, i["alt_msl_m"]] - before[r, i["alt_msl_m"]]) < 2.0
+            assert after[r, ST] == VehicleStatus.ACTIVE
         assert after[b, i["throttle"]] == pytest.approx(0.3)  # its setpoint replayed
-        assert after[b, ST] == VehicleStatus.ACTIVE
         for _ in range(10):
             pool.step(4)
-        assert pool.states[b, ST] == VehicleStatus.ACTIVE and not pool.notices
+        assert (pool.states[[b, c], ST] == VehicleStatus.ACTIVE).all() and not pool.notices
+
+
+def test_an_agent_whose_vehicles_are_all_frozen_is_not_replaced(specs) -> None:
+    with make_pool(specs(4), DT, CH, "ray", 2) as pool:
+        held = pool.agent_vehicles[0]
+        rows = [int(v[1:]) for v in held]
+        pool.setpoints[rows, 1] = 1e308  # both diverge
+        pool.step(4)
+        frozen = pool.states[rows].copy()
+        os.kill(pool.agents[0], signal.SIGKILL)
+        for _ in range(5):
+            pool.step(4)
+        kind, fields = pool.notices.pop()
+        assert kind == "pool_recovered" and fields["vehicles"] == 0 and fields["frozen"] == 2
+        assert not pool.agents and np.array_equal(pool.states[rows], frozen)
 
 
 def test_strict_stops_with_an_error_naming_the_machine(specs) -> None:

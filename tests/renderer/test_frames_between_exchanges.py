@@ -34,13 +34,13 @@ cameras:
   views:
     - {{name: belly, vehicles: {vehicles}, mount: nadir, vfov_deg: 40, width_px: 96,
        height_px: 72, rate_hz: 30}}
-"""
+{more}"""
 
 
 def _run(tmp_path: Path, name: str, control: int, backend: str = "inline",
-         vehicles: str = "cam", other: str = "") -> Path:
+         vehicles: str = "cam", other: str = "", more: str = "") -> Path:
     f = tmp_path / f"{name}.yaml"
-    f.write_text(SCENARIO.format(control=control, vehicles=vehicles, other=other))
+    f.write_text(SCENARIO.format(control=control, vehicles=vehicles, other=other, more=more))
     res = Run(load_scenario(f), tmp_path / name, backend=backend).run()
     assert res.ok, res.error
     return tmp_path / name
@@ -59,6 +59,25 @@ def test_frames_between_exchanges_are_those_of_a_run_at_the_frame_rate(tmp_path:
     assert pq.read_table(at30 / "states.parquet").equals(pq.read_table(at10 / "states.parquet"))
 
 
+GIMBAL = """\
+    - {name: turret, vehicles: cam, mount: {pitch_deg: -60, yaw_deg: 0}, hfov_deg: 50,
+       width_px: 96, height_px: 72, rate_hz: 30}
+schedule:
+  - {at_s: 1, vehicles: [cam], command: {gimbal: {pitch_deg: -90, yaw_deg: 45}}}
+"""
+
+
+def test_a_gimbal_moved_at_an_exchange_moves_from_that_tick_on(tmp_path: Path) -> None:
+    at30 = _run(tmp_path, "g30", 30, more=GIMBAL)
+    at10 = _run(tmp_path, "g10", 10, more=GIMBAL)
+    gt = "cameras/cam_turret.gt.csv"
+    lines = (at30 / gt).read_text().splitlines()
+    assert len(lines) > 60 and lines == (at10 / gt).read_text().splitlines()
+    s30, s10 = (json.loads((d / "summary.json").read_text())["cameras"]["streams"]
+                for d in (at30, at10))
+    assert [x["frames_sha256"] for x in s30] == [x["frames_sha256"] for x in s10]
+
+
 def test_a_batched_aircraft_cannot_have_frames_between_exchanges(tmp_path: Path) -> None:
     with pytest.raises(AssertionError, match="stepped with its class's other vehicles"):
         _run(tmp_path, "batched", 10, vehicles="other", other="class: fixed_wing_batched, ")
@@ -68,9 +87,23 @@ def test_a_batched_aircraft_cannot_have_frames_between_exchanges(tmp_path: Path)
 
 def test_the_config_error_names_the_rates_that_fit(tmp_path: Path) -> None:
     f = tmp_path / "bad.yaml"
-    f.write_text(SCENARIO.format(control=10, vehicles="cam", other="").replace(
+    f.write_text(SCENARIO.format(control=10, vehicles="cam", other="", more="").replace(
         "rate_hz: 30", "rate_hz: 24"))
     with pytest.raises(ConfigError, match=r"rate_hz 24: a frame every 5 ticks neither falls on "
                                           r"exchanges nor divides one .* use one of 40, 30, 20, "
                                           r"10, 5"):
         load_scenario(f)
+
+
+def test_a_failed_build_finishes_no_participant_that_never_started(tmp_path: Path) -> None:
+    """The cameras are made before the pool (they ask for their watch), but a
+    pool that cannot be built leaves them out of the run: one error, its own."""
+    f = tmp_path / "stall.yaml"
+    f.write_text(SCENARIO.format(control=10, vehicles="cam", other="", more="").replace(
+        "airspeed_kt: 100}}", "airspeed_kt: 4}}"))  # cannot be trimmed
+    res = Run(load_scenario(f), tmp_path / "run", backend="inline").run()
+    assert not res.ok and "could not trim" in str(res.error)
+    events = [json.loads(x) for x in (tmp_path / "run" / "events.jsonl").read_text().splitlines()]
+    errors = [e for e in events if e["event"] == "error"]
+    assert len(errors) == 1 and "could not trim" in errors[0]["message"], errors
+    assert "cameras" not in res.summary
