@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from shapely import affinity
-from shapely.geometry import MultiPolygon, Polygon, box
+from shapely.geometry import Polygon, box
 from shapely.geometry.base import BaseGeometry
 
 from cosim.coverage.dubins import DubinsPath, shortest
@@ -62,7 +62,8 @@ class AircraftPlan:
     """One aircraft's share: its strip, its lanes in flying order, the path."""
 
     index: int
-    strip: Polygon  # in (east, north) metres
+    strip: BaseGeometry  # in (east, north) metres: a polygon, or several pieces
+
     #: lanes in flying order: ((east, north) start, (east, north) end)
     lanes: list[tuple[tuple[float, float], tuple[float, float]]]
     transit: DubinsPath | None  # base to the first lane
@@ -170,7 +171,6 @@ def plan_coverage(area: Polygon, n_aircraft: int, swath_width_m: float, turn_rad
         strip_r = _clip_v(rot, cuts[k], cuts[k + 1])
         lanes_r = _lanes(strip_r, cuts[k], cuts[k + 1], spacing)
         strip = affinity.rotate(strip_r, theta, origin=(0, 0), use_radians=True)
-        strip = strip if isinstance(strip, Polygon) else _largest(strip)
         # lanes row after row, or interleaved so that turns need no loops: the shorter
         jump = math.ceil(2.0 * turn_radius / spacing) + 1  # rows apart for a plain U-turn
         options = [_flown(k, strip, [(_unrot(a, theta), _unrot(b, theta))
@@ -210,7 +210,7 @@ def min_fleet(area: Polygon, airspeed_mps: float, bank_deg: float, swath_width_m
         hi = lo
         lo = 0
     else:
-        hi = lo * 2
+        hi = min(lo * 2, max_aircraft)
         while not fast(hi):
             if hi >= max_aircraft:
                 raise ValueError(f"even {max_aircraft} aircraft cannot cover the area within "
@@ -226,7 +226,7 @@ def min_fleet(area: Polygon, airspeed_mps: float, bank_deg: float, swath_width_m
     return plan(hi)
 
 
-def _flown(index: int, strip: Polygon,
+def _flown(index: int, strip: BaseGeometry,
            lanes: list[tuple[tuple[float, float], tuple[float, float]]],
            base: tuple[float, float], radius: float) -> AircraftPlan:
     """The plan flying ``lanes`` in order: the transit to the first, turns between."""
@@ -265,12 +265,6 @@ def _sequences(rows: list[list[tuple[float, float, float]]], jump: int) -> list[
 def _heading(lane: tuple[tuple[float, float], tuple[float, float]]) -> float:
     (x0, y0), (x1, y1) = lane
     return math.atan2(y1 - y0, x1 - x0)
-
-
-def _largest(g: BaseGeometry) -> Polygon:
-    if isinstance(g, MultiPolygon):
-        return max(g.geoms, key=lambda p: p.area)
-    return Polygon() if g.is_empty else g
 
 
 def _longest_axis_course(area: Polygon) -> float:

@@ -87,7 +87,11 @@ def connect(address: str | None = None) -> str:
     local one), unless this process already has; returns where it is."""
     ray = _ray()
     if ray.is_initialized():
-        return str(ray.get_runtime_context().gcs_address)
+        here = str(ray.get_runtime_context().gcs_address)
+        if address and address.split("://")[-1] != here:
+            raise ConfigError(f"this process has already joined the Ray cluster at {here}; "
+                              f"it cannot also join {address}")
+        return here
     target = address or os.environ.get("RAY_ADDRESS") or None
     kw: dict[str, Any] = {"logging_level": logging.WARNING, "log_to_driver": True,
                           "configure_logging": False}

@@ -71,6 +71,7 @@ class Shard:
         self._watch_rows = np.zeros(0, dtype=np.intp)
         self._watch_every = 0
         self._bad: list[tuple[int, int]] = []  # (watched position, first non-finite chunk)
+        self._extra_of: dict[int, int] = {}  # JSBSim vehicle index -> its first extra column
 
     @classmethod
     def build(cls, specs: Sequence[VehicleSpec], dt_s: float, channels: Sequence[str],
@@ -142,6 +143,7 @@ class Shard:
             self._watch_of[index[r]] = j
         self._watch_rows = np.asarray(rows, dtype=np.intp)
         self._watch_every = int(every)
+        self._extra_of = dict(self._extra)
 
     def write_states(self, out: np.ndarray) -> None:
         """Read every active vehicle into ``out`` (SI units, status column)."""
@@ -258,7 +260,7 @@ class Shard:
         frozen row fills the rest)."""
         every = self._watch_every
         v = self.vehicles[i]
-        first = dict(self._extra).get(i)
+        first = self._extra_of.get(i)
         for c in range(nsub // every):
             if v.status == VehicleStatus.ACTIVE:
                 v.step(every, check)

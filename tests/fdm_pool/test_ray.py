@@ -128,6 +128,12 @@ def test_close_leaves_nothing_running_on_any_machine(specs) -> None:
 def test_options_reach_the_backend_that_takes_them(specs) -> None:
     with pytest.raises(ConfigError, match=r"process backend takes no option 'address'"):
         make_pool(specs(2), DT, (), "process", address="127.0.0.1:1")
+    from cosim.fdm_pool.ray_cluster import connect
+
+    connect()  # the session's cluster (RAY_ADDRESS)
+    with pytest.raises(ConfigError, match=r"already joined the Ray cluster at .*cannot also "
+                                          r"join 127.0.0.9:1"):
+        make_pool(specs(2), DT, (), "ray", address="127.0.0.9:1")
 
 
 def test_a_run_on_the_cluster_logs_the_same_states_as_inline(mixed_scenario: Path,
