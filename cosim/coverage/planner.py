@@ -173,7 +173,7 @@ def plan_coverage(area: Polygon, n_aircraft: int, swath_width_m: float, turn_rad
         strip = affinity.rotate(strip_r, theta, origin=(0, 0), use_radians=True)
         # lanes row after row, or interleaved so that turns need no loops: the shorter
         jump = math.ceil(2.0 * turn_radius / spacing) + 1  # rows apart for a plain U-turn
-        options = [_flown(k, strip, [(_unrot(a, theta), _unrot(b, theta))
+        options = [_flown(k, strip, [(_rot(a, theta), _rot(b, theta))
                                      for a, b in _order(lanes_r, base, theta, seq)],
                           base, turn_radius)
                    for seq in _sequences(lanes_r, jump if interleave else 1)]
@@ -352,7 +352,3 @@ def _order(rows: list[list[tuple[float, float, float]]], base: tuple[float, floa
 def _rot(p: tuple[float, float], a: float) -> tuple[float, float]:
     c, s = math.cos(a), math.sin(a)
     return (c * p[0] - s * p[1], s * p[0] + c * p[1])
-
-
-def _unrot(p: tuple[float, float], theta: float) -> tuple[float, float]:
-    return _rot(p, theta)

@@ -88,13 +88,16 @@ class Watch:
     def chunks(self) -> int:
         return self.max_nsub // self.every
 
-    def part(self, start: int, stop: int) -> tuple[Watch | None, list[int]]:
-        """This watch for the pool's rows ``start:stop`` (its rows renumbered
-        from 0), and the positions of those rows in ``rows``."""
-        js = [j for j, r in enumerate(self.rows) if start <= r < stop]
+    def part(self, rows: Sequence[int]) -> tuple[Watch | None, np.ndarray]:
+        """This watch for a share holding the pool's ``rows`` (in that order,
+        renumbered from 0), and the positions of its watched rows in
+        ``self.rows``; (None, empty) if it holds none of them."""
+        where = {int(r): k for k, r in enumerate(rows)}
+        js = [j for j, r in enumerate(self.rows) if r in where]
         if not js:
-            return None, []
-        return Watch(tuple(self.rows[j] - start for j in js), self.every, self.max_nsub), js
+            return None, np.zeros(0, dtype=np.intp)
+        return (Watch(tuple(where[self.rows[j]] for j in js), self.every, self.max_nsub),
+                np.asarray(js, dtype=np.intp))
 
 
 class PoolState(enum.Enum):

@@ -99,7 +99,8 @@ def _worker_main(w: int, specs: list[VehicleSpec], start: int, stop: int, dt_s: 
         def built(k: int) -> None:
             ctrl[_BUILT] = k
 
-        part, js = watch.part(start, stop) if watch is not None else (None, [])
+        part, js = (watch.part(range(start, stop)) if watch is not None
+                    else (None, np.zeros(0, dtype=np.intp)))
         Shard.build(specs, dt_s, channels, into=shard, on_built=built,
                     layout_names=layout_names,
                     watch=(part.rows, part.every) if part is not None else None)
@@ -148,14 +149,16 @@ class _Watched:
     """A shard's part of a watch: its own buffer, copied into the pool's
     shared one at its rows' positions after each exchange."""
 
-    def __init__(self, part: Watch | None, positions: list[int], width: int) -> None:
+    def __init__(self, part: Watch | None, positions: Sequence[int] | np.ndarray,
+                 width: int) -> None:
         self.part = part
         self.js = np.asarray(positions, dtype=np.intp)
         self.buf = (np.zeros((part.chunks, len(part.rows), width)) if part is not None
                     else None)
 
     def publish(self, shared: np.ndarray, nsub: int) -> None:
-        if self.part is not None and self.buf is not None:
+        if self.part is not None:
+            assert self.buf is not None
             m = nsub // self.part.every
             shared[:m, self.js] = self.buf[:m]
 
@@ -310,7 +313,8 @@ class ProcessPool(Pool):
 
         if self._driver_steps:
             a, b = self.bounds[0]
-            part, js = self.watch.part(a, b) if self.watch is not None else (None, [])
+            part, js = (self.watch.part(range(a, b)) if self.watch is not None
+                        else (None, np.zeros(0, dtype=np.intp)))
             self._own_watched = _Watched(part, js, len(self.layout))
             try:
                 self._own = Shard.build(self.specs[a:b], self.dt_s, self.channels,

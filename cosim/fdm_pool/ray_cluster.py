@@ -265,7 +265,7 @@ class RayPool(Pool):
                     local_job = (node, nw, slice(a, b))
                 else:
                     share = _Share(self._spawn(node, nw, soft=False), node, nw, slice(a, b))
-                    share.watch, share.watch_js = self._watch_part(np.arange(a, b))
+                    share.watch, share.watch_js = self._part(np.arange(a, b))
                     self._shares.append(share)
             self._build([(s, self.specs[s.rows], None) for s in self._shares], local_job)
         except BaseException:
@@ -360,19 +360,6 @@ class RayPool(Pool):
                 frozen = self._frozen[list(self.watch.rows)]
                 self.watched[:m, frozen] = self.states[np.asarray(self.watch.rows)[frozen]]
 
-    def _watch_part(self, rows: np.ndarray) -> tuple[Watch | None, np.ndarray]:
-        """The watch for a share holding ``rows`` (renumbered from 0 in that
-        order), and the positions of those watched rows in ``watch.rows``."""
-        if self.watch is None:
-            return None, np.zeros(0, dtype=np.intp)
-        where = {int(r): k for k, r in enumerate(rows.tolist())}
-        js = [j for j, r in enumerate(self.watch.rows) if r in where]
-        if not js:
-            return None, np.zeros(0, dtype=np.intp)
-        local = tuple(where[self.watch.rows[j]] for j in js)
-        return (Watch(local, self.watch.every, self.watch.max_nsub),
-                np.asarray(js, dtype=np.intp))
-
     def _close(self) -> None:
         if self._local is not None:
             self._local.close()
@@ -419,7 +406,7 @@ class RayPool(Pool):
         if local is not None:
             node, nw, rows = local
             self._local_node, self._local_rows = node, rows
-            part, self._local_js = self._watch_part(np.arange(self.n)[rows])
+            part, self._local_js = self._part(np.arange(self.n)[rows])
             try:
                 self._local = ProcessPool(self.specs[rows], self.dt_s, self.channels,
                                           workers=nw, layout=layout, watch=part,
@@ -493,7 +480,7 @@ class RayPool(Pool):
         self.notices[-1][1]["replaced_on"] = node.ip
         workers = min(old.workers, len(alive))
         share = _Share(self._spawn(node, workers, soft=True), node, workers, alive)
-        share.watch, share.watch_js = self._watch_part(alive)
+        share.watch, share.watch_js = self._part(alive)
         self._shares[i] = share
         specs = [_resume_spec(self.specs[r], self.states[r]) for r in alive.tolist()]
         latched = self._latched[alive] if self.channels else None
@@ -511,6 +498,12 @@ class RayPool(Pool):
                                 f"finish tick {self.tick + self._nsub} on {node.ip} after "
                                 f"a rebuild") from None
         return np.asarray(block), watched
+
+    def _part(self, rows: np.ndarray) -> tuple[Watch | None, np.ndarray]:
+        """The watch for a share holding ``rows`` (``Watch.part``)."""
+        if self.watch is None:
+            return None, np.zeros(0, dtype=np.intp)
+        return self.watch.part(rows.tolist())
 
     def _ids_of(self, s: _Share) -> list[str]:
         return [self.ids[r] for r in np.arange(self.n)[s.rows].tolist()]

@@ -233,13 +233,17 @@ class Shard:
             self._bad.clear()
         i = -1
         try:
-            for i, check in zip(self._active, self._check):
-                at = self._watch_of.get(i) if watching else None
-                if at is None:
+            if not watching:  # the hot path: nothing but the steps
+                for i, check in zip(self._active, self._check):
                     vs[i].step(nsub, check)
-                else:
-                    assert watched is not None
-                    self._step_watched(i, check, nsub, watched[:, at])
+            else:
+                assert watched is not None
+                for i, check in zip(self._active, self._check):
+                    at = self._watch_of.get(i)
+                    if at is None:
+                        vs[i].step(nsub, check)
+                    else:
+                        self._step_watched(i, check, nsub, watched[:, at])
         except BaseException:
             self.current = vs[i].spec.id if i >= 0 else None
             raise
