@@ -61,6 +61,31 @@ class DubinsPath:
         return p
 
 
+@dataclass(frozen=True)
+class DubinsChain:
+    """Dubins paths flown one after another, each from the pose where the
+    last one ends: a detour through waypoint poses. Same interface as a
+    ``DubinsPath`` (``start``, ``length_m``, ``sample``, ``end``)."""
+
+    paths: tuple[DubinsPath, ...]
+
+    @property
+    def start(self) -> tuple[float, float, float]:
+        return self.paths[0].start
+
+    @property
+    def length_m(self) -> float:
+        return sum(p.length_m for p in self.paths)
+
+    def sample(self, step_m: float) -> np.ndarray:
+        """As ``DubinsPath.sample``, the joints once each."""
+        parts = [self.paths[0].sample(step_m)] + [p.sample(step_m)[1:] for p in self.paths[1:]]
+        return np.vstack(parts)
+
+    def end(self) -> tuple[float, float, float]:
+        return self.paths[-1].end()
+
+
 def _advance(p: tuple[float, float, float], kind: str, seg: float, r: float
              ) -> tuple[float, float, float]:
     """Fly ``seg`` (radians of arc, or radius-lengths of straight) of ``kind``."""
@@ -114,13 +139,21 @@ def shortest(start: tuple[float, float, float], goal: tuple[float, float, float]
              radius_m: float) -> DubinsPath:
     """The shortest path from ``start`` to ``goal`` turning no tighter than
     ``radius_m``."""
+    return candidates(start, goal, radius_m)[0]
+
+
+def candidates(start: tuple[float, float, float], goal: tuple[float, float, float],
+               radius_m: float) -> list[DubinsPath]:
+    """Every word's path from ``start`` to ``goal`` turning no tighter than
+    ``radius_m``, shortest first (ties in the order LSL, RSR, LSR, RSL, RLR,
+    LRL): the others are for when the shortest runs where it must not."""
     if not radius_m > 0:
         raise ValueError(f"radius_m must be > 0, got {radius_m}")
     dx, dy = goal[0] - start[0], goal[1] - start[1]
     d = math.hypot(dx, dy) / radius_m
     phi = math.atan2(dy, dx) if d > 0 else 0.0
     a, b = _mod(start[2] - phi), _mod(goal[2] - phi)
-    best: DubinsPath | None = None
+    out: list[DubinsPath] = []
     for word, lengths in _words(a, b, d).items():
         if lengths is None:
             continue
@@ -129,8 +162,11 @@ def shortest(start: tuple[float, float, float], goal: tuple[float, float, float]
         dh = abs(math.remainder(eh - goal[2], _TWO_PI))
         if math.hypot(ex - goal[0], ey - goal[1]) > _END_TOL_M * max(1.0, radius_m) or dh > 1e-6:
             continue  # a degenerate closed form: not a path to the goal
-        if best is None or path.length_m < best.length_m:
-            best = path
-    if best is None:  # cannot happen for a positive radius; say so if it does
+        out.append(path)
+    if not out:  # cannot happen for a positive radius; say so if it does
         raise ValueError(f"no Dubins path from {start} to {goal} with radius {radius_m} m")
-    return best
+    out.sort(key=lambda p: p.length_m)  # stable: ties keep the words' order
+    return out
+
+#: a join between lanes, a transit: one Dubins path or a chain of them (a detour)
+Flight = DubinsPath | DubinsChain
