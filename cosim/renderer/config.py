@@ -140,8 +140,8 @@ def parse_ground(info: SectionInfo, node: Any, path: P) -> GroundSpec:
             p = (info.path.resolve().parent / raw).resolve()
             if not p.is_file():
                 info.err(path + ("image",), f"no such image file: {p}")
-            elif p.suffix.lower() in (".tif", ".tiff"):
-                # a TIFF without origin and m_per_px must place itself (GeoTIFF)
+            elif p.suffix.lower() in (".tif", ".tiff", ".vrt"):
+                # a TIFF or VRT without origin and m_per_px must place itself (GeoTIFF)
                 geotiff = not (r.has("origin") or r.has("m_per_px"))
                 _check_geotiff(info, str(p), geotiff, path)
             image = str(p)
@@ -167,8 +167,9 @@ def parse_ground(info: SectionInfo, node: Any, path: P) -> GroundSpec:
 
 
 def _check_geotiff(info: SectionInfo, image: str, geotiff: bool, path: P) -> None:
-    """Report what stops the TIFF ``image`` from being used: as a GeoTIFF (placed by
-    its own tags: ``geotiff``) or as a picture placed by origin and m_per_px."""
+    """Report what stops the TIFF or VRT ``image`` from being used: as a
+    georeferenced file (placed by its own georeference: ``geotiff``; only its
+    metadata is read here) or as a picture placed by origin and m_per_px."""
     from cosim.renderer import geotiff as gt
 
     try:
@@ -176,12 +177,15 @@ def _check_geotiff(info: SectionInfo, image: str, geotiff: bool, path: P) -> Non
     except gt.GeoTiffError as e:
         if geotiff:  # neither georeferenced nor placed by hand
             info.err(path + ("image",), str(e))
+        elif image.lower().endswith(".vrt"):
+            info.err(path + ("image",), f"{e} (a VRT is read by GDAL, placed by its own "
+                                        "georeference; a picture must be PNG, JPG or TIFF)")
         return
     if not geotiff:
         info.err(path, f"{image} is a GeoTIFF and carries its own georeference: leave out "
                        "origin and m_per_px")
         return
-    why = gt.check_crs(ref.epsg)
+    why = gt.check_crs(ref) or gt.probe(image)
     if why is not None:
         info.err(path + ("image",), f"{image}: {why}")
 

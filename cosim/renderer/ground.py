@@ -18,10 +18,11 @@ costs about 1 to 2 ms to make, so tiles are also kept on disk (``ground_cache_di
 one raw BGR file of 192 kB per 256 px tile, keyed by everything its pixels
 depend on; no more written once a seed's folder holds ``CACHE_MB``): the
 first run over a piece of ground pays for it, later runs and the other runs
-of a sweep read it (0.05 ms a tile). A user image (PNG/JPG/TIFF, north up,
-``m_per_px``, top-left corner ``origin``; or a GeoTIFF, resampled onto the
-scenario's grid by its own georeference) gets its own pyramid; outside it the
-procedural ground shows.
+of a sweep read it (0.05 ms a tile). A user picture (PNG/JPG/TIFF, north up,
+``m_per_px``, top-left corner ``origin``) gets its own pyramid; a georeferenced
+file (GeoTIFF, COG, VRT) is read a tile at a time, only under the ground being
+drawn, from its overviews (cosim/renderer/geotiff.py). Where neither covers the
+ground, the procedural ground shows.
 """
 
 from __future__ import annotations
@@ -49,6 +50,8 @@ MACRO_STEP_M = 0.5  # macro features (fields, roads, trees) sampled at least thi
 DETAIL_PX = 512  # the tileable detail texture's size at the base level
 MAX_TILES = 384  # LRU size per process (256 px BGRA tiles: ~100 MB)
 PATCH_MB = 256  # assembled patches kept per process (GroundTexture.patch)
+MAX_WINDOW_PX = 4096  # a georeferenced file's window a band draws, at most (a side)
+WINDOW_MB = 96  # a georeferenced file's assembled windows kept per process
 MACRO_OVERSAMPLE = 2.0  # macro features sampled at most every this many pixels, then upsampled
 #: bump whenever a tile's pixels change for the same seed and ground parameters
 #: (old cache folders are then ignored; delete ~/.cache/cosim/ground to reclaim the space)
@@ -531,61 +534,46 @@ def _fresh_memory(nbytes: int) -> np.ndarray:
 
 
 class _ImageLayer:
-    """A user's north-up image with its pyramid (BGRA uint8, opaque, like the frames):
-    a picture placed by ``origin`` and ``m_per_px``, or a GeoTIFF resampled onto the
-    scenario's grid (cosim/renderer/geotiff.py), with a mask of where it has data."""
+    """A user's north-up picture placed by ``origin`` and ``m_per_px``, with its
+    pyramid (BGRA uint8, opaque, like the frames). A georeferenced file is a
+    ``_GeoRasterLayer`` instead (the same four calls: ``level_for``, ``levels[k]``,
+    ``ne_to_px(k)``, ``coverage(k)``)."""
 
     def __init__(self, spec: GroundSpec, frame: LocalFrame) -> None:
         from cosim.errors import ConfigError
 
         assert spec.image is not None
-        mask: np.ndarray | None = None
-        if spec.geotiff:
-            from cosim.renderer import geotiff
-
-            try:
-                img, mask, self.n0, self.e0, self.mpp = geotiff.resample(
-                    spec.image, geotiff.read_georef(spec.image), frame)
-            except geotiff.GeoTiffError as err:
-                raise ConfigError(f"ground.image: {err}") from err
+        bgr = cv2.imread(spec.image, cv2.IMREAD_COLOR)
+        if bgr is None:
+            raise ConfigError(f"ground.image: cannot read {spec.image} as an image")
+        img = cv2.cvtColor(bgr, cv2.COLOR_BGR2BGRA)
+        if spec.origin_latlon_deg is not None:
+            la, lo = spec.origin_latlon_deg
+            n, e, _ = frame.geodetic_to_ned(la, lo, frame.alt_m)
+            self.n0, self.e0 = float(n), float(e)
         else:
-            bgr = cv2.imread(spec.image, cv2.IMREAD_COLOR)
-            if bgr is None:
-                raise ConfigError(f"ground.image: cannot read {spec.image} as an image")
-            img = cv2.cvtColor(bgr, cv2.COLOR_BGR2BGRA)
-            if spec.origin_latlon_deg is not None:
-                la, lo = spec.origin_latlon_deg
-                n, e, _ = frame.geodetic_to_ned(la, lo, frame.alt_m)
-                self.n0, self.e0 = float(n), float(e)
-            else:
-                self.n0, self.e0 = spec.origin_ne_m or (0.0, 0.0)
-            self.mpp = spec.m_per_px
+            self.n0, self.e0 = spec.origin_ne_m or (0.0, 0.0)
+        self.mpp = spec.m_per_px
         self.levels = [img]
-        self._masks = None if mask is None else [mask]
         while min(self.levels[-1].shape[:2]) >= 8:
             self.levels.append(cv2.resize(self.levels[-1], None, fx=0.5, fy=0.5,
                                           interpolation=cv2.INTER_AREA))
-            if self._masks is not None:
-                self._masks.append(cv2.resize(self._masks[-1], None, fx=0.5, fy=0.5,
-                                              interpolation=cv2.INTER_AREA))
         h, w = img.shape[:2]
         self.bounds_ne = (self.n0 - h * self.mpp, self.n0, self.e0, self.e0 + w * self.mpp)
         self._coverage: dict[int, np.ndarray] = {}
+
+    def focus(self, n_lo: float, n_hi: float, e_lo: float, e_hi: float,
+              slot: Hashable = None) -> None:
+        """The ground about to be drawn (nothing to do: the picture is all in memory)."""
 
     def level_for(self, gsd_m: float) -> int:
         k = math.floor(math.log2(max(gsd_m, 1e-9) / self.mpp) + 0.3)
         return min(max(k, 0), len(self.levels) - 1)
 
     def coverage(self, level: int) -> np.ndarray:
-        """255 where ``level`` has data, else 0: all of it, or for a GeoTIFF where
-        at least half of a pixel is the file's (warped like the image, it marks the
-        frame pixels the image covers); made once per level."""
+        """255 where ``level`` has data, else 0: all of it; made once per level."""
         if level not in self._coverage:
-            if self._masks is None:
-                self._coverage[level] = np.full(self.levels[level].shape[:2], 255, np.uint8)
-            else:
-                self._coverage[level] = cv2.threshold(self._masks[level], 127, 255,
-                                                      cv2.THRESH_BINARY)[1]
+            self._coverage[level] = np.full(self.levels[level].shape[:2], 255, np.uint8)
         return self._coverage[level]
 
     def ne_to_px(self, level: int) -> np.ndarray:
@@ -593,6 +581,129 @@ class _ImageLayer:
         m = self.mpp * 2 ** level
         return np.array([[0.0, 1.0 / m, -self.e0 / m - 0.5],
                          [-1.0 / m, 0.0, self.n0 / m - 0.5],
+                         [0.0, 0.0, 1.0]])
+
+
+class _FocusedLevels:
+    """``levels[k]`` of a ``_GeoRasterLayer``: level ``k``'s pixels over the ground in
+    focus (BGRA uint8)."""
+
+    def __init__(self, layer: _GeoRasterLayer) -> None:
+        self._layer = layer
+
+    def __len__(self) -> int:
+        return self._layer.src.n_levels
+
+    def __getitem__(self, level: int) -> np.ndarray:
+        return self._layer.held(level)[1]
+
+
+class _GeoRasterLayer:
+    """A georeferenced file (GeoTIFF, COG, VRT, ...; cosim/renderer/geotiff.py's
+    ``GeoRaster``) read a tile at a time, with ``_ImageLayer``'s four calls. The
+    renderer asks for a band's ground patch (``GroundTexture.patch``) before its
+    image, and the patch focuses this layer on that ground (``focus``): then
+    ``levels[k]``, ``ne_to_px(k)`` and ``coverage(k)`` are of a window of level ``k``
+    over just that ground (its whole tiles, within the file), at most
+    ``MAX_WINDOW_PX`` a side: ``level_for`` goes coarser where the window would be
+    larger. Windows are kept per slot (a camera stream) and level, at most
+    ``WINDOW_MB`` of them; tiles in the raster's own LRU."""
+
+    def __init__(self, spec: GroundSpec, frame: LocalFrame) -> None:
+        from cosim.errors import ConfigError
+        from cosim.renderer import geotiff
+
+        assert spec.image is not None
+        try:
+            self.src = geotiff.GeoRaster(spec.image, frame)
+        except geotiff.GeoTiffError as err:
+            raise ConfigError(f"ground.image: {err}") from err
+        self.mpp, self.n0, self.e0 = self.src.m_per_px, self.src.n0, self.src.e0
+        self.bounds_ne = self.src.bounds_ne
+        self.levels = _FocusedLevels(self)
+        self._focus: tuple[float, float, float, float] | None = None
+        self._slot: Hashable = None
+        # (slot, level) -> (tiles, bgra, mask, and the buffers these are views of)
+        self._held: OrderedDict[tuple[Hashable, int], tuple[tuple[int, int, int, int],
+                                                            np.ndarray, np.ndarray,
+                                                            np.ndarray, np.ndarray]] = \
+            OrderedDict()
+
+    def focus(self, n_lo: float, n_hi: float, e_lo: float, e_hi: float,
+              slot: Hashable = None) -> None:
+        """The ground about to be drawn: north ``n_lo .. n_hi``, east ``e_lo .. e_hi``
+        (scenario metres), for ``slot``."""
+        self._focus, self._slot = (n_lo, n_hi, e_lo, e_hi), slot
+
+    def _tiles(self, level: int) -> tuple[int, int, int, int]:
+        """The tiles (rows ta .. tb - 1, cols tc .. td - 1) of ``level`` under the
+        focus (with a pixel more each side), within the file; empty if none."""
+        T, m = self.src.tile_px, self.src.mpp(level)
+        rows, cols = self.src.shape(level)
+        if self._focus is None:
+            r0, r1, c0, c1 = 0, rows, 0, cols
+        else:
+            n_lo, n_hi, e_lo, e_hi = self._focus
+            r0, r1 = math.floor((self.n0 - n_hi) / m) - 1, math.ceil((self.n0 - n_lo) / m) + 1
+            c0, c1 = math.floor((e_lo - self.e0) / m) - 1, math.ceil((e_hi - self.e0) / m) + 1
+            r0, r1, c0, c1 = max(r0, 0), min(r1, rows), max(c0, 0), min(c1, cols)
+        if r0 >= r1 or c0 >= c1:
+            return (0, 0, 0, 0)
+        return r0 // T, (r1 - 1) // T + 1, c0 // T, (c1 - 1) // T + 1
+
+    def level_for(self, gsd_m: float) -> int:
+        k = self.src.level_for(gsd_m)
+        T = self.src.tile_px
+        while k < self.src.n_levels - 1:
+            ta, tb, tc, td = self._tiles(k)
+            if max(tb - ta, td - tc) * T <= MAX_WINDOW_PX:
+                break
+            k += 1
+        return k
+
+    def held(self, level: int) -> tuple[tuple[int, int, int, int], np.ndarray, np.ndarray]:
+        """``(tiles, bgra, mask)``: the window of ``level`` under the focus, assembled
+        when its tiles change (into the slot's buffers for the level, grown as needed)."""
+        key = self._tiles(level)
+        got = self._held.get((self._slot, level))
+        if got is not None and got[0] == key:
+            self._held.move_to_end((self._slot, level))
+            return got[:3]
+        ta, tb, tc, td = key
+        T = self.src.tile_px
+        h, w = max(1, (tb - ta) * T), max(1, (td - tc) * T)
+        if max(h, w) > MAX_WINDOW_PX and self._focus is None:
+            raise ValueError(f"{self.src.path}: level {level} is {w} x {h} px: focus on the "
+                             "ground to draw first (GroundTexture.patch)")
+        buf, bmask = (got[3], got[4]) if got is not None else \
+            (np.empty((0, 0, 4), np.uint8), np.empty((0, 0), np.uint8))
+        if buf.shape[0] < h or buf.shape[1] < w:
+            buf = np.empty((max(h, buf.shape[0]), max(w, buf.shape[1]), 4), np.uint8)
+            bmask = np.empty(buf.shape[:2], np.uint8)
+        img, mask = buf[:h, :w], bmask[:h, :w]
+        if tb > ta and td > tc:
+            self.src.window(level, ta * T, tb * T, tc * T, td * T, (img, mask))
+        else:  # nothing of the file here
+            mask[:] = 0
+        self._held[(self._slot, level)] = (key, img, mask, buf, bmask)
+        self._held.move_to_end((self._slot, level))  # never the one dropped below
+        total = sum(v[3].nbytes + v[4].nbytes for v in self._held.values())
+        while total > WINDOW_MB * 2**20 and len(self._held) > 1:
+            _, old = self._held.popitem(last=False)
+            total -= old[3].nbytes + old[4].nbytes
+        return key, img, mask
+
+    def coverage(self, level: int) -> np.ndarray:
+        """255 where ``levels[level]`` (the window in focus) has data, else 0."""
+        return self.held(level)[2]
+
+    def ne_to_px(self, level: int) -> np.ndarray:
+        """3x3: scenario (north, east, 1) -> pixel (col, row, 1) of ``levels[level]``
+        (the window in focus)."""
+        (ta, _, tc, _), _, _ = self.held(level)
+        m, T = self.src.mpp(level), self.src.tile_px
+        return np.array([[0.0, 1.0 / m, -self.e0 / m - 0.5 - tc * T],
+                         [-1.0 / m, 0.0, self.n0 / m - 0.5 - ta * T],
                          [0.0, 0.0, 1.0]])
 
 
@@ -606,7 +717,10 @@ class GroundTexture:
         self.tile_px = spec.tile_px
         self.detail = _detail_pyramid(self.seed)
         self._tiles: OrderedDict[tuple[int, int, int], np.ndarray] = OrderedDict()
-        self.image = _ImageLayer(spec, frame) if spec.kind == "image" else None
+        self.image: _ImageLayer | _GeoRasterLayer | None = None
+        if spec.kind == "image":
+            self.image = _GeoRasterLayer(spec, frame) if spec.geotiff else \
+                _ImageLayer(spec, frame)
         self.tiles_made = 0
         self.tiles_loaded = 0
         self._slabs: dict[tuple[int, int, int], np.ndarray] = {}
@@ -828,6 +942,9 @@ class GroundTexture:
         reassembling one buffer every frame. At most ``PATCH_MB`` of buffers are
         kept (least recently used dropped)."""
         T = self.tile_px
+        if self.image is not None:  # the user's image is drawn over this ground next
+            m = self.mpp(level)
+            self.image.focus(-r1 * m, -r0 * m, c0 * m, c1 * m, slot)
         key = (r0 // T, (r1 - 1) // T + 1, c0 // T, (c1 - 1) // T + 1)
         held = self._patches.get((slot, level))
         if held is None or held[0] != key:

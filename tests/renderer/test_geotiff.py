@@ -205,13 +205,14 @@ def test_config_accepts_a_geotiff_and_says_what_is_wrong(tmp_path: Path,
     by_hand = "ground: {image: plain.tif, m_per_px: 0.5, origin: {north_m: 0, east_m: 0}}\n"
     scn = parse_scenario(SCENARIO + by_hand, str(tmp_path / "s.yaml"))
     assert not scn.sections["ground"].geotiff
-    # a projected system without pyproj: the message says what to install or do
+    # a projected system needs no pyproj: rasterio brings its own PROJ
     _write(tmp_path / "utm.tif", [1024, 1, 1025, 1, 3072, 32610], (0, 0, 0, 5e5, 4e6, 0),
            (5.0, 5.0, 0))
     monkeypatch.setitem(sys.modules, "pyproj", None)  # import fails
-    msg = _errors(tmp_path, "ground: {image: utm.tif}\n")
-    assert "EPSG:32610 needs pyproj" in msg and "gdalwarp -t_srs EPSG:4326" in msg
-    # a user-defined system
+    scn = parse_scenario(SCENARIO + "ground: {image: utm.tif}\n", str(tmp_path / "s.yaml"))
+    assert scn.sections["ground"].geotiff
+    # a user-defined system (a local one: not on the Earth)
     _write(tmp_path / "user.tif", [1024, 1, 1025, 1, 3072, 32767], (0, 0, 0, 0, 0, 0),
            (1.0, 1.0, 0))
-    assert "no EPSG code" in _errors(tmp_path, "ground: {image: user.tif}\n")
+    msg = _errors(tmp_path, "ground: {image: user.tif}\n")
+    assert "user.tif" in msg and "no EPSG code" in msg and "gdalwarp -t_srs EPSG:4326" in msg
