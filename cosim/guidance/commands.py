@@ -12,7 +12,11 @@ now and by MAVLink and the swarm controller later:
 - ``goto``: a point (``lat_deg``/``lon_deg``, or ``north_m``/``east_m`` in the
   scenario frame, or with ``frame: start`` metres relative to the vehicle's
   own start position), optional ``alt_*``, ``airspeed_*``, ``loiter_radius_m``;
-  the vehicle flies there and loiters around it
+  the vehicle flies there and loiters around it; ``from`` (a point): follow
+  the track from that point rather than from where the vehicle is (a
+  mission's leg from its previous waypoint); ``continue: true``: fly on
+  along the leg past the point until the next command rather than loiter
+  there (a mission waypoint with more to come)
 - ``waypoints``: a list of such points flown in order (each may carry its
   own ``alt_*``/``airspeed_*``), then a loiter around the last
 - ``loiter``: ``center`` (a point; default: where the vehicle is),
@@ -116,6 +120,12 @@ class Command:
     loiter_radius_m: float | None = None
     loiter_cw: bool = True
     loiter_here: bool = False  # loiter around the current position
+    #: a goto's leg starts here rather than where the vehicle is (a mission's
+    #: previous waypoint: the track between the two is followed)
+    leg_from: Point | None = None
+    #: a goto flies on along its leg past the point until the next command
+    #: (a mission waypoint with more to come) instead of loitering there
+    leg_continue: bool = False
     #: vertical-lift vehicles: take off to this height, land, fly this (north, east) m/s
     takeoff_agl_m: float | None = None
     land: bool = False
@@ -286,13 +296,24 @@ def parse_command(d: Any, path: P, report: Report) -> Command | None:
     radius = None
     cw = True
     here = False
+    leg_from: Point | None = None
+    leg_continue = False
     if nav == "goto":
         g = d["goto"]
-        p = _point(g, path + ("goto",), report, _TARGET_EXTRA + ("loiter_radius_m",))
+        p = _point({k: v for k, v in g.items() if k not in ("from", "continue")}
+                   if isinstance(g, dict) else g,
+                   path + ("goto",), report, _TARGET_EXTRA + ("loiter_radius_m",))
         if p is not None:
             points.append(p)
         if isinstance(g, dict) and "loiter_radius_m" in g:
             radius = _num(g, "loiter_radius_m", path + ("goto",), report, lo=1)
+        if isinstance(g, dict) and "from" in g:
+            leg_from = _point(g["from"], path + ("goto", "from"), report, ())
+        if isinstance(g, dict) and "continue" in g:
+            if not isinstance(g["continue"], bool):
+                report(path + ("goto", "continue"), f"expected true or false, got "
+                                                    f"{g['continue']!r}")
+            leg_continue = g["continue"] is True
     elif nav == "waypoints":
         w = d["waypoints"]
         if isinstance(w, dict):
@@ -348,7 +369,8 @@ def parse_command(d: Any, path: P, report: Report) -> Command | None:
     return Command(heading_deg=None if heading is None else heading % 360.0, alt_m=alt,
                    alt_agl=agl, airspeed_mps=spd, throttle=throttle, bank_limit_deg=bank,
                    stall_protection=stall, nav=nav, points=tuple(points),
-                   loiter_radius_m=radius, loiter_cw=cw, loiter_here=here,
+                   loiter_radius_m=radius, loiter_cw=cw, loiter_here=here, leg_from=leg_from,
+                   leg_continue=leg_continue,
                    takeoff_agl_m=takeoff, land=land, velocity_ne=velocity,
                    gimbal_pitch_deg=gimbal[0], gimbal_yaw_deg=gimbal[1], camera=camera,
                    source=d)

@@ -353,6 +353,7 @@ class MavlinkEndpoint:
         self.decoder = mav.Decoder()
         self.handler = Handler(self.counts, self.clock.physics_hz)
         self._injected: list[mav.Message] = []
+        self._loads: list[tuple[int, list[Any], bool]] = []  # load_mission, not yet done
         self._last_tick: int | None = None
         self._rows = np.array([v.row for v in self.vehicles], dtype=np.intp)
         self._rows_needed = int(self._rows.max(initial=-1)) + 1  # state rows receive() reads
@@ -459,6 +460,18 @@ class MavlinkEndpoint:
             raise EndpointClosed("mavlink endpoint: inject() after close()")
         self._injected.append(message)
 
+    def load_mission(self, row: int, items: Sequence[Any], fly: bool = True) -> None:
+        """Put a mission (``cosim.mavlink.mission.MissionItem``, seq 1..n) on
+        board the vehicle at state row ``row`` as a completed upload would,
+        at the next exchange, and with ``fly`` switch it to its mission mode
+        (a plan loaded before take-off, as an autopilot loads one from its
+        storage): a ground station downloads it and watches it flown."""
+        if self.closed:
+            raise EndpointClosed("mavlink endpoint: load_mission() after close()")
+        if row not in self._by_row:
+            raise KeyError(f"no vehicle at state row {row} on this link")
+        self._loads.append((row, list(items), fly))
+
     def local_command(self, row: int, command: Command) -> Command:
         """A command from inside cosim (the schedule) for the vehicle at state
         row ``row``: its MAVLink state follows (``Handler.local_command``), so
@@ -514,6 +527,13 @@ class MavlinkEndpoint:
                         self._send(v, *self.handler.param_value(v, f.name), tick)
                 f.last = np.where(changed, values, f.last)
         commands: list[VehicleCommand] = []
+        loads, self._loads = self._loads, []
+        for row, items, fly in loads:
+            v = self._by_row[row]
+            out = self.handler.load_mission(v, items, fly, tick)
+            for name, fields in out.replies:
+                self._send(v, name, fields, tick)
+            commands.extend(VehicleCommand(v.row, c, "mission") for c in out.commands)
         injected, self._injected = self._injected, []
         for m in injected:
             self.counts["injected"] += 1

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from collections import Counter
 from collections.abc import Callable
+from typing import Any
 
 from cosim.guidance.commands import Command
 from cosim.mavlink import adapter as mav
@@ -52,6 +53,12 @@ class Handler:
         state follows as for a ground station's command (its personality's
         rule); the command for guidance, unchanged."""
         return v.personality.local_command(v, cmd)
+
+    def load_mission(self, v: MavVehicle, items: list[Any], fly: bool, tick: int) -> Outcome:
+        """A mission put on board from inside cosim (``load_mission``):
+        checked and stored as an upload would be, flown with ``fly``."""
+        self.ctx.tick = tick
+        return self.missions.load(v, items, fly)
 
     def param_value(self, v: MavVehicle, name: str) -> Reply:
         """The PARAM_VALUE of one parameter (to announce a change)."""

@@ -119,6 +119,15 @@ class MavlinkLinks:
         k = self.link_of_row.get(row)
         return command if k is None else self.endpoints[k].local_command(row, command)
 
+    def load_mission(self, row: int, items: Sequence[Any], fly: bool = True) -> bool:
+        """See ``MavlinkEndpoint.load_mission``; False: the vehicle at ``row``
+        is not on MAVLink."""
+        k = self.link_of_row.get(row)
+        if k is None:
+            return False
+        self.endpoints[k].load_mission(row, items, fly)
+        return True
+
     def subscribe(self, callback: Callable[[mav.Message, int], None]) -> None:
         """``callback(message, link)`` for every packet any vehicle sends."""
         for k, e in enumerate(self.endpoints):

@@ -368,3 +368,42 @@ def test_guided_goto_by_mission_item_int_current_2(rig) -> None:
     assert not cmds and protocol(replies) == [("MISSION_ACK", ML.MAV_MISSION_ERROR)]
 
 
+
+
+# -- a mission put on board from inside cosim ----------------------------------
+def _items(points: list[tuple[float, float]], alt_m: float = 120.0) -> list[Any]:
+    from cosim.mavlink.mission import MissionItem
+
+    return [MissionItem(k + 1, ML.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, ML.MAV_CMD_NAV_WAYPOINT,
+                        x=round(la * 1e7), y=round(lo * 1e7), z=alt_m)
+            for k, (la, lo) in enumerate(points)]
+
+
+def test_a_loaded_mission_is_downloaded_by_a_ground_station_and_flown_in_auto(rig) -> None:
+    r = rig(2)
+    pts = [(LAT0 + 0.01, LON0), (LAT0 + 0.01, LON0 + 0.01), (LAT0, LON0 + 0.01)]
+    r.ep.load_mission(1, _items(pts), fly=True)  # the second vehicle (system id 2)
+    cmds = r.step()
+    c, = cmds
+    assert c.row == 1 and c.command.nav == "goto"  # its first item, flown at once
+    got = download(r, target=2)
+    assert [(i.seq, i.x, i.y) for i in got[1:]] == [
+        (k + 1, round(la * 1e7), round(lo * 1e7)) for k, (la, lo) in enumerate(pts)]
+    assert len(download(r, target=1)) == 1  # the other vehicle's: home only
+    r.step(120)
+    hb = [m for m in r.gcs.drain(wait_s=1.0) if m.get_type() == "HEARTBEAT"
+          and m.get_srcSystem() == 2]
+    assert hb and hb[-1].custom_mode == PlaneMode.AUTO
+
+
+def test_a_malformed_loaded_mission_is_the_callers_error(rig) -> None:
+    from cosim.mavlink.mission import MissionItem
+
+    r = rig(1)
+    r.ep.load_mission(0, [MissionItem(1, ML.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT,
+                                      ML.MAV_CMD_NAV_WAYPOINT, x=2_000_000_000, y=0)])
+    with pytest.raises(ValueError, match="mission item 1"):
+        r.step()
+    with pytest.raises(KeyError, match="no vehicle at state row 5"):
+        r.ep.load_mission(5, [])
+

@@ -25,6 +25,7 @@ from cosim.mavlink import adapter as mav
 from cosim.mavlink import fence
 from cosim.mavlink.mission import (
     LIST_RULES,
+    MAX_ITEMS,
     UPLOAD_RETRY_S,
     UPLOAD_TIMEOUT_S,
     MissionItem,
@@ -170,6 +171,35 @@ class MissionService:
         if self.ctx.fly_mission(v, 1, out) != mav.MAV_RESULT_ACCEPTED \
                 and p.hold_mode is not None:
             p.enter_mode(self.ctx, v, p.hold_mode, 0, out)
+
+    def load(self, v: MavVehicle, items: list[MissionItem], fly: bool) -> Outcome:
+        """A mission put on board from inside cosim (a plan loaded before the
+        flight): each item checked as an upload checks it (a malformed one is
+        the caller's error: ``ValueError``), stored, and with ``fly`` flown
+        from item 1 in the vehicle's mission mode."""
+        out = Outcome()
+        if not self._lists(v):
+            out.replies.extend(text("Mission: this vehicle flies no missions"))
+            return out
+        if len(items) > MAX_ITEMS:
+            raise ValueError(f"a mission of {len(items)} items; a vehicle holds at most "
+                             f"{MAX_ITEMS}")
+        up = Upload((0, 0), len(items) + 1)
+        for k, item in enumerate(items, start=1):
+            if item.seq != k:
+                raise ValueError(f"mission item {k} has seq {item.seq}")
+            result = item.check(up.count)
+            if result != mav.MAV_MISSION_ACCEPTED:
+                raise ValueError(f"mission item {k}: {mav.command_name(item.command)}: "
+                                 f"{result_name(result)}")
+            self._flyable(v, item, up, out)
+        self.counts["missions_loaded"] += 1
+        self._replaced(v, list(items), dict(up.refused), _MISSION, out)
+        p = v.personality
+        if fly and v.mode != p.auto_mode \
+                and self.ctx.fly_mission(v, 1, out) != mav.MAV_RESULT_ACCEPTED:
+            self.counts["missions_not_started"] += 1
+        return out
 
     # -- download, clear, acknowledgements ---------------------------------------------
     def _request_list(self, v: MavVehicle, m: mav.Message, tick: int) -> Outcome:

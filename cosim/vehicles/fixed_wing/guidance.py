@@ -104,6 +104,7 @@ class FixedWingGuidance:
         self.labels = [""] * n
         self.landing = np.zeros(n, dtype=np.int8)  # the phase (``_APPROACH``, ...)
         self.land_at_end = np.zeros(n, dtype=bool)  # land at the route's last point
+        self.fly_on = np.zeros(n, dtype=bool)  # a goto flown on past its point (no loiter)
         self.land_point = np.zeros((n, 2))
         self.land_alt = np.zeros(n)  # the height (AGL) it flies until the glide path
         #: events of commands refused, for the next ``update``
@@ -292,6 +293,9 @@ class FixedWingGuidance:
         self.wp_total[i] = len(pts)
         self.wp_index[i] = 0
         self.queue[i] = pts
+        if cmd.leg_from is not None:  # the track from there (a mission's previous waypoint)
+            here = np.array(self.resolve(cmd.leg_from, i))
+        self.fly_on[i] = cmd.leg_continue and cmd.nav == "goto"
         self._begin_leg(i, here, states, sp)
 
     def _begin_leg(self, i: int, start: np.ndarray, states: np.ndarray, sp: np.ndarray) -> None:
@@ -380,6 +384,8 @@ class FixedWingGuidance:
         if final and self.land_at_end[i]:
             self._start_landing(i, a.copy(), b.copy(), sp, float(states[i, _S["alt_agl_m"]]))
             return
+        if final and self.fly_on[i]:
+            return  # on along the leg until the next command (a mission's next waypoint)
         if final:
             radius = self.end_radius[i]
             if radius != radius:  # NaN: default

@@ -594,7 +594,12 @@ class ArduPlane(Personality):
                 1000.0 * math.cos(psi), 1000.0 * math.sin(psi), v.home[2])
             return {"goto": {"lat_deg": float(la), "lon_deg": float(lo_), alt[0]: alt[1]}}
         default_r, default_ccw = self._radius(v)
-        if c == mav.MAV_CMD_NAV_WAYPOINT:
+        if c == mav.MAV_CMD_NAV_WAYPOINT:  # ArduPlane tracks the leg from the last one
+            last = v.mission.nav
+            if last is not None and last.item.command == mav.MAV_CMD_NAV_WAYPOINT:
+                extra["from"] = {"lat_deg": prev[0], "lon_deg": prev[1]}
+            if any(it.command in mi.NAV_COMMANDS for it in v.mission.items[item.seq:]):
+                extra["continue"] = True  # on past it until the next is flown
             return {"goto": {"lat_deg": lat, "lon_deg": lon, **extra,
                              "loiter_radius_m": default_r or self.default_radius_m(v, speed)},
                     "cw": not default_ccw}
