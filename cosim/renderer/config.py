@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from cosim.geo import MAX_DISTANCE_M
@@ -78,6 +78,16 @@ class TargetSpec:
     width_m: float
     height_m: float
     color_rgb: tuple[int, int, int]
+    #: a fire's burning patch grows this fast in length and width (m/s)
+    growth_m_per_s: float = 0.0
+
+    def at(self, time_s: float) -> TargetSpec:
+        """The target as it is at ``time_s`` (a growing fire's patch larger)."""
+        if not self.growth_m_per_s:
+            return self
+        grow = self.growth_m_per_s * max(0.0, time_s)
+        return replace(self, length_m=self.length_m + grow, width_m=self.width_m + grow,
+                       growth_m_per_s=0.0)
 
 
 @dataclass(frozen=True)
@@ -199,7 +209,8 @@ def parse_targets(info: SectionInfo, node: Any, path: P) -> tuple[TargetSpec, ..
     for i, d in enumerate(node):
         p = path + (i,)
         r = info.reader(d, p, ("id", "kind", "north_m", "east_m", "lat_deg", "lon_deg",
-                               "heading_deg", "length_m", "width_m", "height_m", "color"))
+                               "heading_deg", "length_m", "width_m", "height_m", "color",
+                               "growth_m_per_min"))
         kind = r.string("kind", choices=TARGET_KINDS)
         tid = r.string("id", f"{kind or 'target'}{i}", pattern=_NAME)
         if tid is not None and tid in seen:
@@ -221,7 +232,10 @@ def parse_targets(info: SectionInfo, node: Any, path: P) -> tuple[TargetSpec, ..
             length_m=r.num("length_m", dl, lo=0.0, lo_open=True, hi=MAX_TARGET_M) or dl,
             width_m=r.num("width_m", dw, lo=0.0, lo_open=True, hi=MAX_TARGET_M) or dw,
             height_m=r.num("height_m", dh, lo=0.0, lo_open=True, hi=MAX_TARGET_M) or dh,
-            color_rgb=color or dc))
+            color_rgb=color or dc,
+            growth_m_per_s=(r.num("growth_m_per_min", 0.0, lo=0.0, hi=100.0) or 0.0) / 60.0))
+        if out[-1].growth_m_per_s and out[-1].kind != "fire":
+            info.err(p + ("growth_m_per_min",), "only a fire grows")
     return tuple(out)
 
 

@@ -24,7 +24,7 @@ that do not exist (a target behind the camera, no visible pixels) are empty.
 from __future__ import annotations
 
 import math
-from collections.abc import Hashable
+from collections.abc import Hashable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -84,6 +84,20 @@ class WorldSpec:
 OBSTACLE_RGB = (150, 148, 140)
 
 
+def probe_offsets(targets: Sequence[TargetSpec]) -> np.ndarray:
+    """(T, 9, 3) per target, in L axes from its ground point: the 8 corners of
+    its ground-truth box and a ninth probe point for culling (a fire's smoke
+    top, else a corner again)."""
+    out = np.zeros((len(targets), 9, 3))
+    for k, t in enumerate(targets):
+        lo, hi = bounding_part(t)
+        out[k, :8] = box_corners(lo, hi) @ heading_rotation(t).T
+        top = np.array([[0.0, 0.0, -(t.height_m + 20.0)]]) @ heading_rotation(t).T \
+            if t.kind == "fire" else out[k, :1]
+        out[k, 8] = top[0]
+    return out
+
+
 class World:
     def __init__(self, spec: WorldSpec) -> None:
         self.spec = spec
@@ -92,13 +106,9 @@ class World:
         self.targets = TargetSet(spec.targets, self.frame, spec.ground_alt_m)
         # per target, in L axes from its ground point: the 8 ground-truth box corners
         # and a ninth probe point for culling (a fire's smoke top, else a corner again)
-        self.probe_offsets = np.zeros((len(spec.targets), 9, 3))
-        for k, t in enumerate(spec.targets):
-            lo, hi = bounding_part(t)
-            self.probe_offsets[k, :8] = box_corners(lo, hi) @ heading_rotation(t).T
-            top = np.array([[0.0, 0.0, -(t.height_m + 20.0)]]) @ heading_rotation(t).T \
-                if t.kind == "fire" else self.probe_offsets[k, :1]
-            self.probe_offsets[k, 8] = top[0]
+        self.probe_offsets = probe_offsets(spec.targets)
+        #: the targets that change size (growing fires): their boxes per frame
+        self.growing = [k for k, t in enumerate(spec.targets) if t.growth_m_per_s]
         self.sky: dict[tuple[int, int], np.ndarray] = {}
         self.ecef_to_ned = _ecef_to_ned(self.frame)
         self.origin_ecef = np.array(geodetic_to_ecef(spec.origin_lat_deg, spec.origin_lon_deg,
@@ -508,11 +518,16 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
     targets = world.targets
     origins = targets.origins_in(pose.local, pose.local_ecef_m)
     faces: list[tuple[float, np.ndarray, tuple[int, int, int, int], int]] = []
-    probe_c = (origins[:, None, :] + world.probe_offsets - pose.c_l) @ pose.R_cl.T  # (T, 9, 3)
+    specs, offsets = targets.specs, world.probe_offsets
+    if world.growing:  # growing fires: their size at this frame
+        specs = tuple(t.at(time_s) for t in specs)
+        offsets = offsets.copy()
+        offsets[world.growing] = probe_offsets([specs[k] for k in world.growing])
+    probe_c = (origins[:, None, :] + offsets - pose.c_l) @ pose.R_cl.T  # (T, 9, 3)
     box_c = probe_c[:, :8]
     visible = ~_culled(view.planes, probe_c)
     for k in np.flatnonzero(visible).tolist():
-        faces.extend(_target_faces(pose, targets.specs[k], origins[k], time_s, seed + k, k + 1))
+        faces.extend(_target_faces(pose, specs[k], origins[k], time_s, seed + k, k + 1))
     faces.extend(_obstacle_faces(world, pose))
     faces.sort(key=lambda f: -f[0])  # painter's order: far to near
     for _, v_c, bgra, tid in faces:
@@ -527,7 +542,7 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
         dirty[:] = [max(0, min(dirty[0], int(lo_px[0]))), max(0, min(dirty[1], int(lo_px[1]))),
                     min(w_img, max(dirty[2], int(hi_px[0]))),
                     min(h_img, max(dirty[3], int(hi_px[1])))]
-    for k, t in enumerate(targets.specs):
+    for k, t in enumerate(specs):
         if visible[k] and t.kind == "fire":
             _draw_smoke(K, pose, t, origins[k], time_s, seed + k, img)
     rows = _ground_truth(view, cam, box_c, img, ids, visible)
