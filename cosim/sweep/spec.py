@@ -26,6 +26,9 @@ comparisons, ``and or not``, ``A if COND else B`` and the functions
 ``tan sin cos atan asin acos radians degrees sqrt abs min max round``,
 e.g. ``north_m: ${-(alt_agl_m * tan(radians(vfov_deg / 2)) + 40)}``.
 
+``only: EXPRESSION`` (over the names, no ``${}``) runs only the
+combinations where it is true, e.g. ``only: "tier == 'batched' or fleet <= 32"``.
+
 Rules (each breach is a config error with file and line): names are
 identifiers; a list holds at least one value, each a number, a string or a
 boolean, without repeats; every placeholder is known and evaluates; a name
@@ -243,6 +246,8 @@ def sweep_values(node: Any, err: Report, path: P = ("sweep",)) -> dict[str, tupl
     out: dict[str, tuple[Scalar, ...]] = {}
     for name, vals in node.items():
         p = path + (name,)
+        if name == ONLY:  # which combinations run (``read_sweep``), not a name
+            continue
         if not isinstance(name, str) or not _NAME.match(name):
             err(p, f"sweep name {name!r} must be an identifier (letters, digits, _)")
             continue
@@ -272,7 +277,7 @@ def swept_names(node: Any) -> list[str]:
     """Names given as a list in the ``sweep:`` node (the swept ones, not constants)."""
     if not isinstance(node, dict):
         return []
-    return [k for k, v in node.items() if isinstance(v, list)]
+    return [k for k, v in node.items() if isinstance(v, list) and k != ONLY]
 
 
 def protect_placeholders(text: str) -> tuple[str, dict[str, str]]:
@@ -384,17 +389,27 @@ MAX_SWEEP_RUNS = 10_000
 MAX_FOLDER_CHARS = 120
 
 
+#: the ``sweep:`` key that says which combinations run (an expression)
+ONLY = "only"
+
+
 @dataclass(frozen=True)
 class SweepSpec:
     path: str
     values: dict[str, tuple[Scalar, ...]]
     swept: tuple[str, ...]  # the names given as lists (columns of visibility.csv)
+    #: an expression over the names: only the combinations where it is true run
+    only: str | None = None
 
     def points(self) -> list[dict[str, Scalar]]:
-        """Every combination, the first name varying slowest (file order)."""
+        """Every combination (those ``only`` allows), the first name varying
+        slowest (file order)."""
         names = list(self.values)
-        return [dict(zip(names, combo))
-                for combo in itertools.product(*(self.values[n] for n in names))]
+        combos = [dict(zip(names, combo))
+                  for combo in itertools.product(*(self.values[n] for n in names))]
+        if self.only is None:
+            return combos
+        return [c for c in combos if evaluate(self.only, c)]
 
     def folder(self, point: Mapping[str, Scalar]) -> str:
         """The run's folder name: ``speed_kt=50,alt_agl_m=30,target=truck``
@@ -438,6 +453,38 @@ def read_sweep(path: str | Path) -> SweepSpec:
     runs = math.prod(len(v) for v in values.values())
     if runs > MAX_SWEEP_RUNS:
         err(("sweep",), f"{runs} combinations; a sweep may have at most {MAX_SWEEP_RUNS} runs")
+    only = raw.get(ONLY) if isinstance(raw, dict) else None
+    if only is not None and not problems:
+        only = _check_only(only, values, err)
     if problems:
         raise ConfigError([f"{p}:{ln}: {m}" for ln, m in sorted(problems, key=lambda x: x[0])])
-    return SweepSpec(path=str(p), values=values, swept=tuple(swept_names(raw)))
+    return SweepSpec(path=str(p), values=values, swept=tuple(swept_names(raw)), only=only)
+
+
+def _check_only(only: Any, values: Mapping[str, tuple[Scalar, ...]], err: Report
+                ) -> str | None:
+    """``only:``, an expression over the sweep's names (e.g. ``tier == 'batched'
+    or fleet <= 32``): it must evaluate to true or false for every
+    combination and leave at least one."""
+    if not isinstance(only, str) or not only.strip():
+        err(("sweep", ONLY), f"expected an expression over the sweep names, e.g. "
+                             f"\"fleet <= 32 or tier == 'batched'\", got {only!r}")
+        return None
+    names = list(values)
+    kept = 0
+    for combo in itertools.product(*(values[n] for n in names)):
+        env = dict(zip(names, combo))
+        try:
+            v = evaluate(only, env)
+        except _ExprError as e:
+            err(("sweep", ONLY), f"cannot evaluate {only!r}: {e}")
+            return None
+        if not isinstance(v, bool):
+            err(("sweep", ONLY), f"{only!r} must be true or false, got {format_value(v)} at "
+                                 + ", ".join(f"{k}={format_value(x)}" for k, x in env.items()))
+            return None
+        kept += v
+    if not kept:
+        err(("sweep", ONLY), f"{only!r} leaves no combination to run")
+        return None
+    return only

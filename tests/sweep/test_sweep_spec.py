@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+import re
 from collections.abc import Callable
 from pathlib import Path
 
@@ -159,3 +160,28 @@ def test_a_name_only_in_the_branch_not_taken_still_counts_as_used(write_scenario
         "  vfov_deg: 40\n", "  vfov_deg: 40\n  mode: short\n  long_s: [60, 90]\n")
     scn = load_scenario(write_scenario(text), check_properties=False)
     assert scn.duration_s == 30
+
+
+def test_only_runs_the_combinations_its_expression_allows(write_scenario: Write) -> None:
+    text = BASE.replace("  vfov_deg: 40\n",
+                        "  vfov_deg: 40\n  only: \"target == 'truck' or speed_kt > 50\"\n")
+    spec = read_sweep(write_scenario(text))
+    pts = spec.points()
+    assert len(pts) == 6  # the two fire-truck runs at 50 kt left out
+    assert all(p["target"] == "truck" or p["speed_kt"] == 100 for p in pts)
+    assert "only" not in spec.swept and "only" not in spec.values
+    assert load_scenario(write_scenario(text), check_properties=False).sections["sweep"] == \
+        pts[0]
+
+
+@pytest.mark.parametrize("only,message", [
+    ("speed_kt + 1", "must be true or false, got 51 at speed_kt=50"),
+    ("speed > 50", "cannot evaluate"),
+    ("speed_kt > 500", "leaves no combination to run"),
+    ("[1]", "expected an expression"),
+])
+def test_a_bad_only_is_refused_with_its_line(write_scenario: Write, only: str,
+                                             message: str) -> None:
+    p = write_scenario(BASE.replace("  vfov_deg: 40\n", f"  vfov_deg: 40\n  only: {only}\n"))
+    with pytest.raises(ConfigError, match=f"{p}:10: sweep.only: .*{re.escape(message)}"):
+        read_sweep(p)
