@@ -458,9 +458,9 @@ def parse_scenario(text: str, fname: str = "<scenario>", check_properties: bool 
         _mavlink_vehicles(ctx, mavlink, vehicles)
     if check_properties:
         _check_properties(ctx, vehicles, schedule)
-    info = SectionInfo(ctx, origin, rates, duration, [v for v, _ in vehicles], Path(fname),
-                       mavlink)
     sections: dict[str, Any] = {}
+    info = SectionInfo(ctx, origin, rates, duration, [v for v, _ in vehicles], Path(fname),
+                       mavlink, seed or 0, sections)
     for key in SECTIONS:
         if key in top.d:
             sections[key] = _section_parser(key)(info, top.d[key], (key,))
@@ -472,7 +472,7 @@ def parse_scenario(text: str, fname: str = "<scenario>", check_properties: bool 
                     seed=seed, vehicles=tuple(v for v, _ in vehicles), schedule=tuple(schedule),
                     description=description, aircraft_path=tuple(apath), plot=plot,
                     mavlink=mavlink, sections=sections,
-                    section_sources={k: top.d[k] for k in sections},
+                    section_sources={k: top.d[k] for k in sections if k in top.d},
                     extra={"vehicle_paths": [pp for _, pp in vehicles],
                            "vehicle_lines": [ctx.line(pp) for _, pp in vehicles]})
 
@@ -503,6 +503,7 @@ SECTIONS: dict[str, str] = {
     "cameras": "cosim.renderer.config:parse_cameras",
     "sweep": "cosim.sweep.spec:parse_sweep",
     "obstacles": "cosim.obstacles:parse_obstacles",
+    "search": "cosim.search.spec:parse_search",  # after targets: its fires join them
 }
 
 
@@ -526,6 +527,10 @@ class SectionInfo:
     path: Path  # the scenario file (relative file names in sections resolve against it)
     #: the scenario's ``mavlink:`` section as resolved ({"url", "rates_hz"}), or None
     mavlink: dict[str, Any] | None = None
+    seed: int = 0  # the scenario's random seed
+    #: the sections parsed so far (in ``SECTIONS`` order): a section may add to
+    #: an earlier one's (the search's fires join the targets)
+    sections: dict[str, Any] = field(default_factory=dict)
 
     @property
     def ids(self) -> list[str]:

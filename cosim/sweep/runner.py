@@ -19,6 +19,7 @@ camera and target), ``manifest.csv`` (one row per clip) and ``sweep.json``
 
 from __future__ import annotations
 
+import importlib
 import json
 import logging
 import math
@@ -43,6 +44,9 @@ VISIBILITY_COLUMNS = ("speed_kt", "alt_agl_m", "target", "visible_s", "first_vis
 #: how far (fraction) the flown ground speed may be from a swept speed_kt before
 #: the cell is flagged (``speed_off``): the visible time scales with 1 / speed
 SPEED_TOLERANCE = 0.01
+#: tables other parts write from a finished sweep's runs ("module:function",
+#: called with the SweepResult and the SweepSpec; nothing written if not theirs)
+SWEEP_TABLES = ("cosim.search.sweep:write_table",)
 MANIFEST_COLUMNS = ("run", "vehicle", "camera", "video", "ground_truth", "frames", "rate_hz",
                     "width_px", "height_px", "hfov_deg", "vfov_deg")
 
@@ -338,6 +342,12 @@ def write_tables(result: SweepResult, spec: SweepSpec) -> None:
               swept + [c for c in VISIBILITY_COLUMNS if c not in swept], vis)
     write_csv(out / "manifest.csv", swept + [c for c in MANIFEST_COLUMNS if c not in swept],
               man)
+    for target in SWEEP_TABLES:  # the tables other parts make of the runs
+        module, func = target.split(":")
+        try:
+            getattr(importlib.import_module(module), func)(result, spec)
+        except Exception as e:  # a table never loses the sweep
+            log.warning("%s: %s: %s", target, type(e).__name__, e)
     summary = {"scenario": spec.path, "runs": len(result.runs),
                "completed": sum(o.status == "completed" for o in result.runs),
                "wall_time_s": result.wall_s, "swept": {k: list(spec.values[k]) for k in swept},

@@ -66,7 +66,10 @@ class ParticipantFailed(CosimError):
 PARTICIPANTS: dict[str, str] = {
     "swarm": "cosim.swarm:make_participant",
     "cameras": "cosim.renderer:make_participant",
+    "search": "cosim.search:make_participant",
 }
+#: the sections whose participants talk MAVLink (in process, as a ground station)
+TALKS_MAVLINK = ("swarm", "search")
 
 
 @dataclass
@@ -140,8 +143,9 @@ class Participant(Protocol):
 
 
 def needs_mavlink(scenario: Scenario) -> bool:
-    """True if a participant of the scenario talks MAVLink (the swarm controller)."""
-    return "swarm" in scenario.sections
+    """True if a participant of the scenario talks MAVLink (the swarm
+    controller, the search's missions)."""
+    return any(key in scenario.sections for key in TALKS_MAVLINK)
 
 
 def build_participants(scenario: Scenario, skip: tuple[str, ...] = ()) -> list[Participant]:
