@@ -52,6 +52,14 @@ def _positive_int_list(text: str) -> list[int]:
     return vals
 
 
+def _altitudes(text: str) -> list[float]:
+    vals = [_positive_float(x) for x in text.split(",") if x.strip()]
+    if not vals or len(vals) > 50 or any(not 10.0 <= v <= 10_000.0 for v in vals):
+        raise argparse.ArgumentTypeError(f"expected 1 to 50 comma-separated altitudes of 10 to "
+                                         f"10000 m, got {text!r}")
+    return vals
+
+
 def _positive_float(text: str) -> float:
     try:
         v = float(text)
@@ -184,6 +192,16 @@ def _build_parser() -> _Parser:
                                            "(a run or a sweep folder)")
     vi.add_argument("run", metavar="RUN_DIR", help="a run folder (writes RUN_DIR/visibility.csv)"
                                                   " or a sweep folder (rewrites its tables)")
+
+    sp = sub.add_parser("search-plan", help="a scenario's search: its plan, the smallest "
+                                            "fleet for a deadline, and how it changes with "
+                                            "altitude")
+    sp.add_argument("scenario", help="scenario YAML file with a search: section")
+    sp.add_argument("--deadline-s", type=_positive_float, default=600.0, metavar="S",
+                    help="the whole area covered within S (default 600: 10 minutes)")
+    sp.add_argument("--altitudes", type=_altitudes, metavar="M,M,...",
+                    help="altitudes (m AGL) to compare (default: a quarter to twice the "
+                         "scenario's)")
 
     sw = sub.add_parser("swarm", help="run a scenario's swarm controller in this process, "
                                       "connected to `cosim run --external-controller`")
@@ -359,9 +377,7 @@ def _cmd_run(a: argparse.Namespace) -> int:
         load_signing_key(mav_cfg)  # a missing or bad key is a usage error before the build
     if a.external_controller:
         from cosim.mavlink import CONTROLLER_SYSID
-        from cosim.sync.participants import needs_mavlink
-
-        if not needs_mavlink(scn):
+        if "swarm" not in scn.sections:  # the part an outside controller runs
             raise ConfigError(f"--external-controller: {a.scenario} has no controller section "
                               "(swarm:) for an outside controller to run")
         if mav_cfg is None:
@@ -629,6 +645,18 @@ def _cmd_sweep(a: argparse.Namespace) -> int:
     return EXIT_FAIL if res.failed else EXIT_OK
 
 
+def _cmd_search_plan(a: argparse.Namespace) -> int:
+    from cosim.search.report import default_altitudes, fleet_table, format_report
+
+    scn = _load_scenario(a.scenario)
+    spec = scn.sections.get("search")
+    if spec is None:
+        raise ConfigError(f"{a.scenario}: no search: section")
+    alts = a.altitudes or default_altitudes(spec)
+    print(format_report(spec, scn, fleet_table(spec, a.deadline_s, alts), a.deadline_s))
+    return EXIT_OK
+
+
 def _cmd_visibility(a: argparse.Namespace) -> int:
     from cosim.conspicuity.visibility import PASS_COLUMNS, physics_hz_of, write_csv
     from cosim.sweep.runner import rewrite_tables
@@ -729,7 +757,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     handlers = {"run": _cmd_run, "validate": _cmd_validate, "models": _cmd_models,
                 "plot": _cmd_plot, "bench": _cmd_bench, "sweep": _cmd_sweep,
                 "recover": _cmd_recover, "export": _cmd_export,
-                "swarm": _cmd_swarm,
+                "swarm": _cmd_swarm, "search-plan": _cmd_search_plan,
                 "visibility": _cmd_visibility}
     try:
         return handlers[a.cmd](a)

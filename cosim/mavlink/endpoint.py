@@ -468,8 +468,11 @@ class MavlinkEndpoint:
         storage): a ground station downloads it and watches it flown."""
         if self.closed:
             raise EndpointClosed("mavlink endpoint: load_mission() after close()")
-        if row not in self._by_row:
+        v = self._by_row.get(row)
+        if v is None:
             raise KeyError(f"no vehicle at state row {row} on this link")
+        if v.personality.auto_mode is None or not v.personality.autopilot:
+            raise ValueError(f"vehicle {v.spec.name} flies no missions")
         self._loads.append((row, list(items), fly))
 
     def local_command(self, row: int, command: Command) -> Command:

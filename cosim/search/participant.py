@@ -6,9 +6,10 @@ MAVLink mission flown in its mission mode (``MavlinkLinks.load_mission``),
 so a ground station connected to the run downloads the plans and watches
 them flown, and the aircraft fly them through the same command path as
 every other mission. At each frame of the search camera (a whole number of
-exchanges) it takes every aircraft's camera footprint into the coverage map
-(``coverage_map``) and each fire near a footprint through the ground-truth
-geometry (``sensing``): a fire counts as detected by an aircraft once it has
+exchanges) it takes each fire near a footprint through the ground-truth
+geometry (``sensing``), and at each step of the coverage map (``coverage_hz``)
+every camera's footprint and the ground swept since the last step into the
+map (``coverage_map``): a fire counts as detected by an aircraft once it has
 been in that aircraft's view with at least ``min_pixels`` for ``dwell_s``
 (consecutive frames). A detection is reported as an aircraft would report
 it: the position from the camera geometry, its error against the truth,
@@ -28,6 +29,7 @@ import csv
 import json
 import logging
 import math
+import shutil
 from pathlib import Path
 from typing import Any
 
@@ -43,44 +45,12 @@ from cosim.vehicles.spec import STATE_INDEX
 
 log = logging.getLogger(__name__)
 
-#: mission waypoints are reached within this (m), as ArduPlane's WP_RADIUS, or
-#: once their leg is passed; the aircraft flies on along the leg until then
-ACCEPT_M = 90.0
 #: coverage fractions whose first time is reported
 MILESTONES = (0.5, 0.9, 0.95, 0.99, 0.999)
 
 
 #: the search's own MAVLink identity (a ground station's system id range)
 SEARCH_SYSID, SEARCH_COMPID = 254, 191
-
-
-def flight_waypoints(a: Any, step_m: float, overrun_m: float
-                     ) -> tuple[list[tuple[float, float]], float]:
-    """An aircraft's plan (``AircraftPlan``) as waypoints ``(north_m, east_m)``:
-    the transit and turns sampled every ``step_m``, each lane by its ends, run
-    ``overrun_m`` past them where the next lane is flown back the other way
-    (the turn between them moved out with them); and the length that adds."""
-    out: list[tuple[float, float]] = []
-    added = 0.0
-
-    def add(points: np.ndarray, shift: np.ndarray) -> None:
-        out.extend((float(y + shift[1]), float(x + shift[0])) for x, y in points[:, :2])
-
-    zero = np.zeros(2)
-    if a.transit is not None:
-        add(a.transit.sample(step_m)[1:-1], zero)
-    lanes = [(np.array(p, dtype=float), np.array(q, dtype=float)) for p, q in a.lanes]
-    units = [(q - p) / max(float(np.linalg.norm(q - p)), 1e-9) for p, q in lanes]
-    back = [i + 1 < len(lanes) and float(units[i] @ units[i + 1]) < -0.999
-            for i in range(len(lanes))]
-    for i, (p, q) in enumerate(lanes):
-        start = p - overrun_m * units[i] if i and back[i - 1] else p
-        end = q + overrun_m * units[i] if back[i] else q
-        added += float(np.linalg.norm(start - p) + np.linalg.norm(end - q))
-        out += [(float(start[1]), float(start[0])), (float(end[1]), float(end[0]))]
-        if i < len(a.turns):
-            add(a.turns[i].sample(step_m)[1:-1], overrun_m * units[i] if back[i] else zero)
-    return out, added
 
 
 class SearchParticipant:
@@ -97,30 +67,41 @@ class SearchParticipant:
         self.first: dict[str, dict[str, Any]] = {}  # fire id -> its first detection
         self.frames = 0
         self.error: BaseException | None = None
+        self.image: Any = None  # the image detector on board (``onboard``), if asked
+
+    def prepare(self, ctx: RunContext) -> None:
+        """With ``detection.image``: a tap on the cameras' frames (before they start)."""
+        from cosim.search.onboard import ImageSearch, cameras_for
+
+        if self.spec.detection.image and ctx.frame_taps is not None:
+            views = cameras_for(self.scn, self.spec.rows)
+            if views:
+                self.image = ImageSearch(self, views)
+                ctx.frame_taps.append((self.image.tap, None))
 
     # --- start: the plan, on board --------------------------------------------------
     def start(self, ctx: RunContext) -> None:
-        from cosim.coverage import area_polygon, plan_coverage, swath_m, turn_radius_m
+        from cosim.coverage import swath_m, turn_radius_m
+        from cosim.search.mission import ACCEPT_M, plan_search
 
         s, scn = self.spec, self.scn
         self.ctx = ctx
         self.out = ctx.out_dir / "search"
+        if self.out.is_symlink():  # never written through: it may point anywhere
+            self.out.unlink()
+        elif self.out.is_dir():  # a previous run's: never mixed with this one's
+            shutil.rmtree(self.out)
         self.out.mkdir(parents=True, exist_ok=True)
         self.ground = scn.origin.ground_alt_m
         self.swath = swath_m(s.alt_agl_m, s.camera.hfov_deg)
         self.radius = turn_radius_m(s.airspeed_mps, s.bank_deg)
-        area = area_polygon(s.area_ne)
-        kw: dict[str, Any] = {}
-        if s.no_fly_ne:
-            kw["no_fly"] = [area_polygon(z) for z in s.no_fly_ne]
-        try:
-            self.plan = plan_coverage(area, len(s.rows), self.swath, self.radius,
-                                      base_ne=s.base_ne, overlap=s.overlap,
-                                      sweep_deg=s.sweep_deg, **kw)
-        except (ValueError, TypeError) as e:
+        starts = [(float(ctx.start_ned_m[r, 0]), float(ctx.start_ned_m[r, 1]),
+                   scn.vehicles[r].heading_deg) for r in s.rows]
+        try:  # (checked when the scenario was read: this is the same plan)
+            self.plan = plan_search(s, starts)
+        except ValueError as e:
             raise ParticipantFailed(ValueError(f"search: cannot plan the area: {e}"),
                                     {"error": str(e)}) from None
-        self._transit_from_start(ctx)
         #: lanes flown this far past their ends (the aircraft turns early into
         #: the next lane: the lane's end would not come under the camera)
         self.accept_m = ACCEPT_M
@@ -147,40 +128,22 @@ class SearchParticipant:
         self.prev_ne: np.ndarray | None = None
         self.flown = np.zeros(len(self.rows))
         self.rng = np.random.default_rng([int(scn.seed), 0x5EA2C4, 2])
+        from cosim.vehicles import get_class
+
+        #: each search aircraft's camera height above its reference point
+        self.lift_m = {ctx.ids[int(r)]: float(get_class(
+            scn.vehicles[int(r)].vehicle_class).camera_height_m) for r in self.rows}
+        if self.image is not None:
+            self.image.start(ctx.ids)
         log.info("search: %d aircraft, %.0f km2, %.0f m AGL (swath %.0f m, turns %.0f m), "
                  "plan done at %.0f s; %d fire(s)", len(self.rows), self.cmap.cells
                  * s.cell_m ** 2 / 1e6, s.alt_agl_m, self.swath, self.radius, self.planned_s,
                  len(specs))
 
-    def _transit_from_start(self, ctx: RunContext) -> None:
-        """Each aircraft's transit from where it starts, as it heads, rather
-        than from the base (a fleet in formation starts beside it); the
-        planned one stays where the new one would cross a no-fly zone."""
-        from dataclasses import replace
-
-        from shapely.geometry import LineString, Polygon
-
-        from cosim.coverage.dubins import shortest
-
-        zones = [Polygon([(e, n) for n, e in z]) for z in self.spec.no_fly_ne]
-        for k, a in enumerate(self.plan.aircraft):
-            if not a.lanes:
-                continue
-            row = int(self.rows[k])
-            n0, e0 = (float(x) for x in ctx.start_ned_m[row, :2])
-            psi = math.radians(self.scn.vehicles[row].heading_deg)
-            (x1, y1), (x2, y2) = a.lanes[0]
-            goal = (x1, y1, math.atan2(y2 - y1, x2 - x1))
-            path = shortest((e0, n0, math.pi / 2 - psi), goal, self.radius)
-            if zones:
-                line = LineString(path.sample(20.0)[:, :2])
-                if any(line.intersects(z) for z in zones):
-                    continue
-            self.plan.aircraft[k] = replace(a, transit=path)
-
     def _load_missions(self, ctx: RunContext) -> None:
         from cosim.mavlink import adapter as mav
         from cosim.mavlink.mission import MAX_ITEMS, MissionItem
+        from cosim.search.mission import mission_waypoints
 
         s = self.spec
         if ctx.mavlink is None:
@@ -199,11 +162,11 @@ class SearchParticipant:
                     param_type=mav.MAV_PARAM_TYPE_REAL32), link)
         for k, a in enumerate(self.plan.aircraft):
             row = int(self.rows[k])
-            step = s.turn_step_m
-            wps, extra = flight_waypoints(a, step, self.overrun)
-            while len(wps) + 1 > MAX_ITEMS:  # turns sampled more coarsely to fit
-                step *= 1.5
-                wps, extra = flight_waypoints(a, step, self.overrun)
+            try:  # (checked when the scenario was read)
+                wps, extra = mission_waypoints(a, s.turn_step_m, self.overrun, MAX_ITEMS)
+            except ValueError as e:
+                raise ParticipantFailed(ValueError(f"search: {ctx.ids[row]}: {e}"),
+                                        {"error": str(e)}) from None
             self.extra_m[k] = extra
             lat, lon = ctx.frame.place(np.array([w[0] for w in wps]),
                                        np.array([w[1] for w in wps]), self.ground)
@@ -214,7 +177,11 @@ class SearchParticipant:
                                   x=round(float(la) * 1e7), y=round(float(lo) * 1e7),
                                   z=s.alt_agl_m)
                       for i, (la, lo) in enumerate(zip(lat, lon))]
-            if not ctx.mavlink.load_mission(row, items, fly=True):
+            try:
+                on = ctx.mavlink.load_mission(row, items, fly=True)
+            except ValueError as e:  # a vehicle that flies no missions
+                raise ParticipantFailed(ValueError(f"search: {e}")) from None
+            if not on:
                 raise ParticipantFailed(RuntimeError(
                     f"search: vehicle {ctx.ids[row]} is not on MAVLink (the scenario's "
                     f"mavlink.vehicles leaves it out); its plan is flown as a mission"))
@@ -228,14 +195,17 @@ class SearchParticipant:
                "aircraft": [{"vehicle": self.ctx.ids[int(self.rows[k])],
                              "area_km2": a.area_m2 / 1e6, "lanes": len(a.lanes),
                              "transit_m": a.transit_m, "survey_m": a.survey_m,
-                             "turns_m": a.turns_m, "length_m": a.length_m,
-                             "done_s": a.length_m / s.airspeed_mps,
+                             "turns_m": a.turns_m, "overrun_m": self.extra_m[k],
+                             "length_m": a.length_m + self.extra_m[k],
+                             "done_s": (a.length_m + self.extra_m[k]) / s.airspeed_mps,
                              "lanes_ne": [[[q[1], q[0]] for q in lane] for lane in a.lanes]}
                             for k, a in enumerate(p.aircraft)]}
         (self.out / "plan.json").write_text(json.dumps(doc, indent=1))
 
     # --- every exchange ---------------------------------------------------------------
     def on_exchange(self, tick: int, states: np.ndarray) -> None:
+        if self.image is not None:
+            self.image.remember(tick, states[self.rows])
         cover = tick % self.cov_every == 0
         look = tick % self.spec.camera.frame_every == 0
         if not (cover or look):
@@ -247,19 +217,30 @@ class SearchParticipant:
         ne = np.column_stack([n, e])
         height = alt - self.ground
         t = tick / self.ctx.physics_hz
-        if cover:
-            self._cover(t, st, ne, height)
-        if look and len(self.fire_specs):
-            self._look(tick, t, st, ne, height)
-
-    def _cover(self, t: float, st: np.ndarray, ne: np.ndarray, height: np.ndarray) -> None:
-        """The ground swept by every camera since the last step, into the map."""
-        idx = STATE_INDEX
-        assert self.cmap is not None
         fp = sensing.footprints(self.spec.camera, height, st[:, idx["roll_deg"]],
-                                st[:, idx["pitch_deg"]], st[:, idx["yaw_deg"]]) + ne[:, None, :]
-        polys = [np.vstack([self.prev_fp[i], fp[i]]) for i in range(len(fp))] \
-            if self.prev_fp is not None else list(fp)
+                                st[:, idx["pitch_deg"]], st[:, idx["yaw_deg"]])
+        if cover:
+            self._cover(t, fp + ne[:, None, :], ne)
+        if look and len(self.fire_specs):
+            reach = np.sqrt((fp ** 2).sum(axis=2)).max(axis=1)
+            self._look(tick, t, st, ne, reach)
+
+    def _cover(self, t: float, fp: np.ndarray, ne: np.ndarray) -> None:
+        """The ground under every camera (footprints ``fp``), with what it
+        swept since the last step where the two footprints overlap, into the
+        map."""
+        import cv2
+
+        assert self.cmap is not None
+        polys = []
+        for i in range(len(fp)):
+            if self.prev_fp is not None:
+                a, b = self.prev_fp[i].astype(np.float32), fp[i].astype(np.float32)
+                area, _ = cv2.intersectConvexConvex(cv2.convexHull(a), cv2.convexHull(b))
+                if area > 0:  # contiguous: the hull of both is what was swept
+                    polys.append(np.vstack([self.prev_fp[i], fp[i]]))
+                    continue
+            polys.append(fp[i])  # apart (a slow camera, a fast turn): gaps stay gaps
         self.cmap.add(self.frames, polys)
         if self.prev_ne is not None:
             self.flown += np.hypot(*(ne - self.prev_ne).T)
@@ -267,7 +248,7 @@ class SearchParticipant:
         self.curve.append((t, self.cmap.fraction))
         self.frames += 1
 
-    def _look(self, tick: int, t: float, st: np.ndarray, ne: np.ndarray, height: np.ndarray
+    def _look(self, tick: int, t: float, st: np.ndarray, ne: np.ndarray, reach: np.ndarray
               ) -> None:
         s, cam = self.spec, self.spec.camera
         now = [f.at(t) for f in self.fire_specs]
@@ -275,7 +256,7 @@ class SearchParticipant:
         offsets = probe_offsets(now)
         hits = np.zeros_like(self.seen, dtype=bool)
         sightings: dict[tuple[int, int], sensing.Sighting] = {}
-        for i, j in sensing.candidates(ne, height, self.fire_ne, sizes, cam).tolist():
+        for i, j in sensing.candidates(ne, reach, self.fire_ne, sizes).tolist():
             pose = sensing.pose_of(cam, st[i], STATE_INDEX, self.ground)
             origin = self.targets.origins_in(pose.local, pose.local_ecef_m)[j]
             seen = sensing.fire_truth(cam, pose, origin + offsets[j, :8])
@@ -356,6 +337,7 @@ class SearchParticipant:
             "distance_flown_km": {"total": round(float(self.flown.sum()) / 1000, 3),
                                   "per_aircraft_max": round(float(self.flown.max(initial=0))
                                                             / 1000, 3)},
+            **({"image_detector": self.image.summary()} if self.image is not None else {}),
             "outputs": {k: f"search/{v}" for k, v in
                         (("plan", "plan.json"), ("coverage", "coverage.csv"),
                          ("detections", "detections.csv"), ("map", "coverage_map.png"),

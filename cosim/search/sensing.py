@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
 
 import cv2
 import numpy as np
@@ -168,8 +167,8 @@ def report(cam: CameraSpec, row: np.ndarray, idx: dict[str, int], ground_alt_m: 
     ray = r_lc @ (np.linalg.inv(intrinsics(cam)) @ np.array([centroid_px[0], centroid_px[1],
                                                                1.0]))
     h = alt + dh - ground_alt_m
-    if ray[2] <= 1e-9 or h <= 0:
-        return lat, lon, math.nan
+    if ray[2] <= 1e-9 or h <= 0:  # (a frame that saw the fire looks down at it)
+        return lat, lon, 0.0
     t = h / ray[2]
     n, e = dn + t * ray[0], de + t * ray[1]
     la, lo = local.place(n, e, ground_alt_m)
@@ -178,30 +177,16 @@ def report(cam: CameraSpec, row: np.ndarray, idx: dict[str, int], ground_alt_m: 
     return float(la), float(lo), size
 
 
-def candidates(ne_air: np.ndarray, height_m: np.ndarray, ne_fire: np.ndarray,
-               fire_size_m: np.ndarray, cam: CameraSpec) -> np.ndarray:
+def candidates(ne_air: np.ndarray, reach_m: np.ndarray, ne_fire: np.ndarray,
+               fire_size_m: np.ndarray) -> np.ndarray:
     """(k, 2) (aircraft, fire) index pairs close enough that the fire may be in
-    view: within the camera's widest ground reach plus the fire's size (a
-    cheap cut before the exact ``fire_truth``)."""
+    view: within each camera's reach on the ground (its footprint's farthest
+    corner) plus the fire's size and a margin for its flames (a cheap cut
+    before the exact ``fire_truth``)."""
     if not len(ne_fire) or not len(ne_air):
         return np.zeros((0, 2), dtype=np.int64)
-    half = math.radians(max(cam.hfov_deg, cam.vfov_deg)) / 2.0
-    diag = math.hypot(math.tan(math.radians(cam.hfov_deg) / 2),
-                      math.tan(math.radians(cam.vfov_deg) / 2))
-    reach = np.minimum(height_m * max(diag, math.tan(half)) * 1.5 + 30.0, MAX_RANGE_M)
     d = np.hypot(ne_air[:, None, 0] - ne_fire[None, :, 0],
                  ne_air[:, None, 1] - ne_fire[None, :, 1])
-    near = d <= reach[:, None] + fire_size_m[None, :]
+    near = d <= reach_m[:, None] + fire_size_m[None, :] + 50.0
     out: np.ndarray = np.argwhere(near)
     return out
-
-
-def corners_in(pose: Pose, origin_l: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-    """A target's 8 box corners in L (``offsets``: its probe offsets' first 8)."""
-    out: np.ndarray = origin_l + offsets[:8]
-    return out
-
-
-def as_list(s: Sighting) -> dict[str, Any]:
-    return {"in_view": int(s.in_view), "fully_in_view": int(s.fully_in_view),
-            "pixels": round(s.pixels, 2), "range_m": round(s.range_m, 2)}

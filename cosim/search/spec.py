@@ -22,7 +22,8 @@
         height_m: 3                  # flame height
         growth_m_per_min: 1          # patch side growth
       detection: {min_pixels: 16, dwell_s: 1.0, position_sigma_m: 0,
-                  attitude_sigma_deg: 0}
+                  attitude_sigma_deg: 0, image: false}   # image: also run the image
+                                     # detector on the aircraft's rendered frames
       coverage_cell_m: auto          # the coverage map's cell
       coverage_hz: 1                 # steps of the coverage map (each the ground
                                      # swept since the last)
@@ -53,8 +54,8 @@ MAX_ZONES = 100
 MAX_FIRES = 100
 #: cells of the coverage map at most (4096 x 4096)
 MAX_CELLS = 1 << 24
-#: the coverage cell when ``auto``: fine enough for the footprints, at most
-#: about 2,000 x 2,000 cells over the area's bounding box
+#: the coverage cell when ``auto``: about 2,000 a side over the area's bounding
+#: box, finer where a quarter of the swath is finer, never more than 4096 a side
 AUTO_CELLS_SIDE = 2000
 MIN_CELL_M = 2.0
 
@@ -79,6 +80,9 @@ class DetectionSpec:
     dwell_s: float = 1.0  # that long in view (consecutive frames of one camera)
     position_sigma_m: float = 0.0  # navigation error of the reporting aircraft
     attitude_sigma_deg: float = 0.0  # and of its camera's pointing
+    #: also search the rendered frames of the search aircraft's cameras
+    #: (``cameras:``) with the image detector (``image_detect``)
+    image: bool = False
 
 
 @dataclass(frozen=True)
@@ -329,11 +333,13 @@ def parse_search(info: Any, node: Any, path: P) -> SearchSpec | None:
                  f"whole number")
         camera = None
     dr = info.reader(r.d.get("detection", {}), path + ("detection",),
-                     ("min_pixels", "dwell_s", "position_sigma_m", "attitude_sigma_deg"))
+                     ("min_pixels", "dwell_s", "position_sigma_m", "attitude_sigma_deg",
+                      "image"))
     det = DetectionSpec(dr.num("min_pixels", 16.0, lo=1.0, hi=1e7) or 16.0,
                         dr.num("dwell_s", 1.0, lo=0.0, hi=600.0) or 0.0,
                         dr.num("position_sigma_m", 0.0, lo=0.0, hi=1000.0) or 0.0,
-                        dr.num("attitude_sigma_deg", 0.0, lo=0.0, hi=30.0) or 0.0)
+                        dr.num("attitude_sigma_deg", 0.0, lo=0.0, hi=30.0) or 0.0,
+                        dr.boolean("image", False))
     fires = _fires(info, r.d.get("fires", {}), path + ("fires",), frame, area, zones,
                    info.seed) if area is not None else ()
     if len(fires) > MAX_FIRES:
@@ -351,13 +357,25 @@ def parse_search(info: Any, node: Any, path: P) -> SearchSpec | None:
             alt = min(max(alt, 30.0), 3000.0)
     else:
         alt = r.num("alt_agl_m", lo=10.0, hi=10_000.0) or alt
+    if camera is not None:  # the footprint's corners must be drawn whole (not cut back)
+        from cosim.search.sensing import MAX_RANGE_M
+
+        corner = alt * math.hypot(math.tan(math.radians(camera.hfov_deg) / 2),
+                                  math.tan(math.radians(camera.vfov_deg) / 2))
+        if corner > MAX_RANGE_M:
+            info.err(path + ("alt_agl_m",), f"at {alt:.0f} m the camera's footprint reaches "
+                                            f"{corner:.0f} m away; at most {MAX_RANGE_M:.0f} m: "
+                                            f"fly lower or narrow the camera")
     cell = 0.0
     raw_cell = r.d.get("coverage_cell_m", "auto")
     if area is not None:
         x0, y0, x1, y1 = area.bounds
         side = max(x1 - x0, y1 - y0)
-        if raw_cell == "auto":
-            cell = max(MIN_CELL_M, side / AUTO_CELLS_SIDE)
+        if raw_cell == "auto":  # a quarter of the swath, at most 4096 cells a side
+            from cosim.coverage import swath_m
+
+            sw = swath_m(alt, camera.hfov_deg) if camera is not None else side
+            cell = max(MIN_CELL_M, min(side / AUTO_CELLS_SIDE, sw / 4.0), side / 4096.0)
         else:
             cell = r.num("coverage_cell_m", lo=MIN_CELL_M, hi=10_000.0) or 0.0
             if cell and ((x1 - x0) / cell + 1) * ((y1 - y0) / cell + 1) > MAX_CELLS:
@@ -377,14 +395,76 @@ def parse_search(info: Any, node: Any, path: P) -> SearchSpec | None:
     if None in (v_kt, bank, flown, overlap, step) or not cov_every or camera is None \
             or area is None or not rows:
         return None
+    if det.image:
+        from cosim.search.onboard import cameras_for
+
+        class _Scn:  # what cameras_for reads, before the Scenario exists
+            sections = info.sections
+            rates = info.rates
+
+        if not cameras_for(_Scn, tuple(rows)):
+            info.err(path + ("detection", "image"),
+                     "the image detector needs a camera (cameras:) on a search aircraft, "
+                     "not on a gimbal, with frames on exchanges (rate_hz: control_hz divided "
+                     "by a whole number)")
+    _check_aircraft(info, rows, path)
     _add_targets(info, fires, path, TargetSpec)
-    return SearchSpec(area_ne=area_pts or (), no_fly_ne=zone_pts, base_ne=base,
+    spec = SearchSpec(area_ne=area_pts or (), no_fly_ne=zone_pts, base_ne=base,
                       rows=tuple(rows), airspeed_kt=v_kt, bank_deg=bank,
                       flown_bank_deg=flown or bank, alt_agl_m=alt,
                       alt_auto=alt_auto, overlap=overlap, sweep_deg=sweep, camera=camera,
                       fires=fires, detection=det, cell_m=cell, coverage_every=cov_every,
                       turn_step_m=step,
                       lane_overrun_m=overrun)
+    if not info.problems:  # the plan, made once here: what cannot be flown is said now
+        _check_plan(info, spec, path)
+    return spec
+
+
+def _check_aircraft(info: Any, rows: list[int], path: P) -> None:
+    """Every search aircraft must fly missions and be on MAVLink."""
+    from cosim.scenario.schema import mavlink_rows
+    from cosim.vehicles import get_class
+
+    for r in rows:
+        p = get_class(info.vehicles[r].vehicle_class).mavlink
+        if p is None or p.auto_mode is None or not p.autopilot:
+            info.err(path + ("aircraft",), f"vehicle {info.ids[r]} (class "
+                                           f"{info.vehicles[r].vehicle_class}) flies no "
+                                           f"missions: it cannot fly a search plan")
+            return
+    on = mavlink_rows(info.mavlink, info.ids)
+    off = [info.ids[r] for r in rows if on is not None and r not in on]
+    if off:
+        info.err(path + ("aircraft",), f"{', '.join(off[:5])}{' ...' if len(off) > 5 else ''}"
+                                       f" not on MAVLink (mavlink.vehicles leaves them out): "
+                                       f"search plans are flown as MAVLink missions")
+
+
+def _check_plan(info: Any, spec: SearchSpec, path: P) -> None:
+    """Make the plan (``cosim.search.mission``) and each aircraft's mission;
+    report what stops either."""
+    from cosim.mavlink.mission import MAX_ITEMS
+    from cosim.search.mission import ACCEPT_M, mission_waypoints, plan_search
+
+    frame = info.origin.frame
+    starts = []
+    for r in spec.rows:
+        v = info.vehicles[r]
+        n, e, _ = frame.geodetic_to_ned(v.lat_deg, v.lon_deg, frame.alt_m)
+        starts.append((float(n), float(e), v.heading_deg))
+    try:
+        plan = plan_search(spec, starts)
+    except ValueError as e:
+        info.err(path, f"cannot plan the search: {e}")
+        return
+    overrun = spec.lane_overrun_m if spec.lane_overrun_m is not None else ACCEPT_M
+    for k, a in enumerate(plan.aircraft):
+        try:
+            mission_waypoints(a, spec.turn_step_m, overrun, MAX_ITEMS)
+        except ValueError as e:
+            info.err(path, f"{info.ids[spec.rows[k]]}'s plan: {e}")
+            return
 
 
 def _add_targets(info: Any, fires: tuple[FireSpec, ...], path: P, target_spec: Any) -> None:

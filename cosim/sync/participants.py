@@ -4,6 +4,8 @@
 A scenario section listed in ``PARTICIPANTS`` makes the runner build that
 part's participant with ``make_participant(scenario)``. Per run:
 
+- ``prepare(ctx)`` (optional) once, before any participant starts: e.g. to
+  add a tap on the camera frames (``ctx.frame_taps``);
 - ``start(ctx)`` once, after the vehicles are built, before the first tick;
 - ``on_exchange(tick, states)`` at every exchange, after the schedule,
   MAVLink commands and guidance, once the pool's step from ``tick`` has
@@ -66,6 +68,7 @@ class ParticipantFailed(CosimError):
 PARTICIPANTS: dict[str, str] = {
     "swarm": "cosim.swarm:make_participant",
     "cameras": "cosim.renderer:make_participant",
+    # after the cameras: it finishes once their last frames have reached it
     "search": "cosim.search:make_participant",
 }
 #: the sections whose participants talk MAVLink (in process, as a ground station)

@@ -427,7 +427,7 @@ class Run:
         ctx = RunContext(scn, self.out, ids, scn.origin.frame, start_ned, hz,
                          scn.rates.control_every, events, self.mavlink, pool.workers,
                          commander, frame_taps=[], watched=watched)
-        for part in self.extra_participants:  # the view taps frames before cameras start
+        for part in self.participants:  # taps on the frames, before the cameras start
             pre = getattr(part, "prepare", None)
             if pre is not None:
                 pre(ctx)

@@ -74,7 +74,8 @@ def test_fire_ground_truth_equals_the_rendered_frames(offset: tuple[float, float
     seen = sensing.fire_truth(cam, pose, origin + probe_offsets([fire])[0, :8])
     assert seen.in_view == bool(truth["in_view"])
     assert seen.fully_in_view == bool(truth["fully_in_view"])
-    if truth["bbox_x0_px"] is not None and seen.bbox is not None:
+    assert (truth["bbox_x0_px"] is None) == (seen.bbox is None)
+    if seen.bbox is not None:
         np.testing.assert_allclose(seen.bbox, [truth[k] for k in (
             "bbox_x0_px", "bbox_y0_px", "bbox_x1_px", "bbox_y1_px")], atol=1e-6)
     if seen.in_view:
@@ -186,12 +187,15 @@ def test_a_fire_on_the_track_is_detected_when_predicted_and_one_beside_it_never(
     res = Run(scn, tmp_path / "run", backend="inline").run()
     assert res.ok, res.error
     s = res.summary["search"]
-    cam = scn.sections["search"].camera
+    spec = scn.sections["search"]
+    cam = spec.camera
+    dwell = math.ceil(spec.detection.dwell_s * cam.rate_hz)  # frames of 1 / rate_hz s each
     want = _predicted_detection_s(tmp_path / "run", (2500.0, 0.0), 6.0, growth / 60.0, 3.0,
-                                  cam, 60.0, dwell=2)
-    assert want is not None
+                                  cam, 60.0, dwell=dwell)
+    assert want is not None and dwell == 2
     assert s["target"]["detected"]
     assert abs(s["target"]["time_to_detect_s"] - want) <= 1.0 / cam.rate_hz + 1e-9
+    assert s["target"]["time_to_detect_s"] == pytest.approx(want)  # (in fact the same frame)
     # the decoy 1.2 km beside the track never comes under the 346 m swath
     assert s["decoys_detected"] == 0
     first = s["first_detections"][0]
@@ -312,3 +316,138 @@ search:
     # 8 pixels across 10 m: h = 10 m * f / 8 with f = 640 / tan(30 deg)
     assert s.alt_auto and s.alt_agl_m == pytest.approx(10.0 * 640 / math.tan(math.radians(30))
                                                        / 8.0)
+
+
+def test_search_plan_reports_the_minimum_fleet_and_its_change_with_altitude(capsys) -> None:
+    from cosim.cli import main
+
+    code = main(["-q", "search-plan", str(Path(__file__).parents[2] / "scenarios" / "xprize"
+                                           / "search.yaml"), "--altitudes", "300,2770"])
+    assert code == 0
+    out = capsys.readouterr().out
+    rows = {ln.split()[0]: ln.replace("(this)", "").split() for ln in out.splitlines()
+            if ln.strip() and ln.split()[0].isdigit()}
+    assert rows["1386"][3] == "23"  # the scenario's own altitude: its 23 aircraft
+    assert rows["300"][3] == "103" and int(rows["300"][4]) <= 600
+    assert "below the 64 px detection needs" in out.splitlines()[-1]  # 2770 m: 16 px
+
+
+@pytest.mark.parametrize("render_workers", [None, 0])
+def test_the_image_detector_finds_the_fire_in_the_raw_frames_and_a_decoy_like_it(
+        tmp_path: Path, render_workers: int | None) -> None:
+    """A rendered nadir camera on the aircraft, its raw frames searched by the
+    image detector: the fire found when the geometry finds it (within a
+    frame), the decoy on the track found too (it looks like a fire: the
+    detector's false alarm on a decoy), the one beside never, no blob on
+    the ground."""
+    fires = ("{target: {north_m: 1500, east_m: 0}, size_m: 8, decoys: "
+             "[{north_m: 2400, east_m: 30}, {north_m: 1800, east_m: 1500}]}")
+    workers = "" if render_workers is None else f"  render_workers: {render_workers}\n"
+    extra = f"""cameras:
+{workers}  views:
+    - {{name: belly, vehicles: a, mount: nadir, hfov_deg: 60, width_px: 640, height_px: 480,
+       rate_hz: 2, stabilised: true}}
+"""
+    f = _strip_scenario(tmp_path, fires, extra, duration=85.0)
+    f.write_text(f.read_text().replace("dwell_s: 1.0}", "dwell_s: 1.0, image: true}")
+                 .replace("seed: 4", "seed: 5"))  # a wind that blows the smoke aside
+    res = Run(load_scenario(f), tmp_path / "run", backend="inline").run()
+    assert res.ok, res.error
+    s = res.summary["search"]
+    img = s["image_detector"]
+    assert img["frames"] == 170 and img["frames_without_pose"] == 0
+    assert img["target"]["detected"]
+    assert abs(img["target"]["time_to_detect_s"] - s["target"]["time_to_detect_s"]) <= 0.5
+    assert [d["fire"] for d in img["first_detections"]] == ["fire_target", "decoy1"]
+    assert img["decoys_detected"] == 1 and s["decoys_detected"] == 1
+    assert img["frames_with_false_alarms"] == 0
+
+
+def test_the_image_detector_needs_a_camera_on_a_search_aircraft() -> None:
+    with pytest.raises(ConfigError, match="the image detector needs a camera"):
+        _parse("  area: [[0, 0], [0, 1000], [1000, 1000], [1000, 0]]\n"
+               "  detection: {image: true}\n")
+
+
+def test_two_aircraft_search_an_area_round_a_no_fly_zone_to_its_end(tmp_path: Path) -> None:
+    """The whole chain on a small area: two JSBSim aircraft from a formation
+    beside the base, a zone cut out of the area, their plans flown as
+    missions: the area is covered (as the map counts it and, independently,
+    as shapely counts the logged tracks' swaths), and no track enters the
+    zone."""
+    from shapely.geometry import LineString
+    from shapely.ops import unary_union
+
+    text = f"""\
+schema_version: 1
+origin: {{lat_deg: {LAT0}, lon_deg: {LON0}, ground_alt_m: 0}}
+rates: {{physics_hz: 120, control_hz: 10, log_hz: 2}}
+duration_s: 1700
+seed: 3
+vehicles:
+  - {{id: s, count: 2, model: uav700, formation: {{type: line, spacing_m: 150}},
+     init: {{north_m: -600, east_m: -600, alt_agl_m: 300, airspeed_kt: 120, heading_deg: 45}}}}
+search:
+  area: [[0, 0], [0, 4000], [2500, 4000], [2500, 0]]
+  no_fly: [[[900, 1500], [900, 2300], [1600, 2300], [1600, 1500]]]
+  base: {{north_m: -600, east_m: -600}}
+  airspeed_kt: 120
+  bank_deg: 25
+  alt_agl_m: 300
+  fires: {{target: random, decoys: 0}}
+"""
+    f = tmp_path / "zone.yaml"
+    f.write_text(text)
+    res = Run(load_scenario(f), tmp_path / "run", backend="inline").run()
+    assert res.ok, res.error
+    s = res.summary["search"]
+    # (the band the plan keeps clear round the zone is the most of what stays unseen)
+    assert s["coverage"]["final"] > 0.95, s["coverage"]
+    assert s["coverage"]["time_to_fraction_s"]["0.95"] <= s["plan_completion_s"] * 1.1
+    t = pq.read_table(tmp_path / "run" / "states.parquet")
+    who = np.array(t.column("vehicle").to_pylist())
+    n, e = t.column("north_m").to_numpy(), t.column("east_m").to_numpy()
+    zone = box(1500, 900, 2300, 1600)
+    area = box(0, 0, 4000, 2500).difference(zone)
+    swaths = []
+    for vid in ("s0", "s1"):
+        track = LineString(np.column_stack([e[who == vid], n[who == vid]]))
+        assert track.intersection(zone).length < 1.0  # never over the zone
+        swaths.append(track.buffer(s["swath_m"] / 2, cap_style="flat"))
+    seen = unary_union(swaths).intersection(area).area / area.area
+    assert seen > 0.95
+    assert abs(seen - s["coverage"]["final"]) < 0.03  # the map agrees with shapely's count
+
+
+@pytest.mark.parametrize("top,body,message", [
+    ("", "  area: [[0, 0], [0, 24000], [24000, 24000], [24000, 0]]\n  alt_agl_m: 100\n",
+     "a mission holds at most 699"),
+    ("", "  area: [[0, 0], [0, 1000], [1000, 1000], [1000, 0]]\n  alt_agl_m: 9000\n",
+     "the camera's footprint reaches"),
+    ("", "  area: [[0, 0], [0, 3000], [3000, 3000], [3000, 0]]\n"
+         "  base: {north_m: 1500, east_m: 1500}\n"
+         "  no_fly: [[[1000, 1000], [1000, 2000], [2000, 2000], [2000, 1000]]]\n",
+     "cannot plan the search"),
+    ("mavlink: {vehicles: b}\n", "  area: [[0, 0], [0, 1000], [1000, 1000], [1000, 0]]\n",
+     "a not on MAVLink"),
+    ("", "  area: [[0, 0], [0, 1000], [1000, 1000], [1000, 0]]\n  aircraft: c\n",
+     "flies no missions"),
+])
+def test_a_search_that_cannot_be_flown_is_refused_when_read(top: str, body: str,
+                                                           message: str) -> None:
+    with pytest.raises(ConfigError) as e:
+        parse_scenario(f"""\
+schema_version: 1
+origin: {{lat_deg: {LAT0}, lon_deg: {LON0}}}
+rates: {{physics_hz: 120, control_hz: 10}}
+duration_s: 10
+{top}vehicles:
+  - {{id: a, model: uav700, init: {{alt_agl_m: 300, airspeed_kt: 100}}}}
+  - {{id: b, model: uav700, init: {{north_m: 500, alt_agl_m: 300, airspeed_kt: 100}}}}
+  - {{id: c, model: c172p, class: jsbsim, init: {{north_m: 900, alt_agl_m: 300,
+                                                 airspeed_kt: 100}}}}
+search:
+{body if "aircraft:" in body else "  aircraft: a" + chr(10) + body}""", "s.yaml",
+                       check_properties=False)
+    assert message in str(e.value), str(e.value)
+    assert "s.yaml:" in str(e.value)
