@@ -305,4 +305,7 @@ def test_fuzzing_a_live_run_leaves_the_vehicles_flying_and_answering(tmp_path: P
     assert "ground_impact" not in events and "divergence" not in events  # no vehicle lost
     if attempts > 1:  # a command went unanswered: only because the kernel dropped datagrams
         assert c["kernel_dropped"] > 0, c
-    assert acks and acks[0].result == ML.MAV_RESULT_ACCEPTED, (acks, c)
+    # ours among them (the fuzzer's random messages may come from system 255 too, and
+    # its own REQUEST_MESSAGEs of odd ids are answered to 255 as DENIED)
+    assert any(a.result == ML.MAV_RESULT_ACCEPTED for a in acks), (
+        [a.result for a in acks], c)
