@@ -231,15 +231,14 @@ def plan_coverage(area: Polygon, n_aircraft: int, swath_width_m: float, turn_rad
     theta = math.radians(90.0 - course)  # the lanes' direction, counter-clockwise from east
     # rotate so that the lanes run along +u; v across them
     rot = affinity.rotate(searchable, -theta, origin=(0, 0), use_radians=True)
-    cuts = _equal_area_cuts(rot, n_aircraft)
     spacing = swath_width_m * (1.0 - overlap)
+    shares = _shares(rot, n_aircraft, spacing, tiles=air is None)
     # rows apart for a plain U-turn; with interleave=False, one after another
     jump = math.ceil(2.0 * turn_radius / spacing) + 1 if interleave else 1
     out = []
-    for k in range(n_aircraft):
-        strip_r = _clip_v(rot, cuts[k], cuts[k + 1])
+    for k, (strip_r, v0, v1) in enumerate(shares):
         strip = affinity.rotate(strip_r, theta, origin=(0, 0), use_radians=True)
-        rows = _lanes(strip_r, cuts[k], cuts[k + 1], spacing)
+        rows = _lanes(strip_r, v0, v1, spacing)
         if air is None:
             cells = [_unrotate(c, theta) for c in _cells(rows)]
         else:
@@ -701,13 +700,43 @@ def _clip_v(poly: BaseGeometry, v0: float, v1: float) -> BaseGeometry:
     return poly.intersection(box(minx - 1.0, v0, maxx + 1.0, v1))
 
 
-def _equal_area_cuts(poly: BaseGeometry, n: int) -> list[float]:
-    """v positions splitting ``poly`` into ``n`` bands of equal area."""
+def _shares(rot: BaseGeometry, n: int, spacing: float, tiles: bool
+            ) -> list[tuple[BaseGeometry, float, float]]:
+    """Each aircraft's share of ``rot`` (lanes along u) as (polygon, v0, v1)
+    of equal area: strips across v, or, when there are more aircraft than
+    lanes across the area (and ``tiles``), a strip per lane row cut along the
+    lanes into as many pieces as aircraft share it, so that a large fleet
+    flies shorter lanes rather than narrower strips (which only overlap)."""
+    _, vmin, _, vmax = rot.bounds
+    rows = max(1, math.ceil((vmax - vmin) / spacing - 1e-9))
+    if not tiles or n <= rows:
+        cuts = _equal_area_cuts(rot, n)
+        return [(_clip_v(rot, cuts[k], cuts[k + 1]), cuts[k], cuts[k + 1]) for k in range(n)]
+    per = [n // rows + (1 if s < n % rows else 0) for s in range(rows)]
+    cuts = _equal_area_cuts(rot, rows, weights=per)
+    out = []
+    for s, k in enumerate(per):
+        strip = _clip_v(rot, cuts[s], cuts[s + 1])
+        # cut along u: the same bisection on the strip turned a quarter turn
+        turned = affinity.rotate(strip, 90.0, origin=(0, 0))  # (u, v) -> (-v, u)
+        ucuts = _equal_area_cuts(turned, k)
+        for j in range(k):
+            piece = affinity.rotate(_clip_v(turned, ucuts[j], ucuts[j + 1]), -90.0,
+                                    origin=(0, 0))
+            out.append((piece, cuts[s], cuts[s + 1]))
+    return out
+
+
+def _equal_area_cuts(poly: BaseGeometry, n: int, weights: Sequence[int] | None = None
+                     ) -> list[float]:
+    """v positions splitting ``poly`` into ``n`` bands of equal area (or of
+    areas in proportion to ``weights``)."""
     _, miny, _, maxy = poly.bounds
     total = poly.area
+    share = [1] * n if weights is None else list(weights)
     cuts = [miny]
     for k in range(1, n):
-        want = total * k / n
+        want = total * sum(share[:k]) / sum(share)
         lo, hi = cuts[-1], maxy
         for _ in range(200):
             mid = (lo + hi) / 2.0

@@ -281,3 +281,31 @@ def test_min_fleet_is_the_smallest_that_finishes_before_the_deadline() -> None:
     zone = no_fly_polygon([(3_000, 2_000), (3_000, 4_000), (5_000, 4_000), (5_000, 2_000)])
     zoned = min_fleet(area, v, bank, swath, deadline, base_ne=(4_000.0, 6_000.0), no_fly=[zone])
     assert zoned.no_fly and completion_s(zoned, v) <= deadline
+
+
+def test_more_aircraft_than_lanes_across_share_the_lanes_along_their_length() -> None:
+    """Past one lane per aircraft, strips would only get narrower than a lane
+    (their swaths overlapping): each lane row is cut along its length
+    instead, into equal areas, and the search ends sooner the more aircraft
+    fly it."""
+    from cosim.coverage import completion_s
+
+    area = area_polygon([(0, 0), (0, 16_000), (4_000, 16_000), (4_000, 0)])  # 4 rows of lanes
+    v, swath = 102.9, 1_120.0  # lanes 1,008 m apart: 4 across
+    radius = turn_radius_m(v, 45.0)
+    done = []
+    for n in (4, 8, 16):
+        plan = plan_coverage(area, n, swath_width_m=swath, turn_radius=radius,
+                             base_ne=(2_000.0, 8_000.0))
+        shares = [a.strip for a in plan.aircraft]
+        assert len(shares) == n
+        for s in shares:
+            assert s.area == pytest.approx(area.area / n, rel=1e-6)
+        assert unary_union(shares).symmetric_difference(area).area < 1e-6 * area.area
+        for a in plan.aircraft:
+            seen = unary_union([LineString(lane).buffer(swath / 2, cap_style="flat")
+                                for lane in a.lanes])
+            assert a.strip.difference(seen).area < 1e-6 * a.strip.area
+            assert a.survey_m <= 16_000.0 * 4 / n * 1.001  # its share of the lanes only
+        done.append(completion_s(plan, v))
+    assert done[0] > done[1] > done[2], done
