@@ -203,6 +203,30 @@ def _build_parser() -> _Parser:
                     help="altitudes (m AGL) to compare (default: a quarter to twice the "
                          "scenario's)")
 
+    tr = sub.add_parser("trials", help="conspicuity trials with people: a browser trial "
+                                       "runner, its responses, their analysis")
+    trs = tr.add_subparsers(dest="trials_cmd", metavar="ACTION", parser_class=_Parser)
+    ts = trs.add_parser("serve", help="serve a study: the experimenter's and the "
+                                      "participant's pages")
+    ts.add_argument("study", metavar="STUDY.yaml")
+    ts.add_argument("--host", default="127.0.0.1",
+                    help="address to listen on (default 127.0.0.1: this machine only)")
+    ts.add_argument("--port", type=int, default=8000, help="port (default 8000)")
+    ts.add_argument("--db", metavar="URL_OR_FILE",
+                    help="responses database: a SQLite file or a SQLAlchemy URL (default "
+                         "STUDY.sqlite beside the study)")
+    ts.add_argument("--public", action="store_true",
+                    help="allow listening on an address other machines reach")
+    te = trs.add_parser("export", help="the responses as CSV")
+    te.add_argument("db", metavar="DB", help="the study's database (file or URL)")
+    te.add_argument("--out", metavar="CSV", required=True)
+    ta = trs.add_parser("analyse", help="conspicuity angles and distances, the critical gap, "
+                                        "recognition against altitude, speed and conspicuity")
+    ta.add_argument("responses", metavar="DB_OR_CSV",
+                    help="the study's database, or a responses CSV (cosim trials export)")
+    ta.add_argument("--out", metavar="DIR", required=True, help="folder for the CSVs and PNGs")
+    ta.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
+
     sw = sub.add_parser("swarm", help="run a scenario's swarm controller in this process, "
                                       "connected to `cosim run --external-controller`")
     sw.add_argument("scenario", help="scenario YAML file (the one the simulation runs)")
@@ -657,6 +681,45 @@ def _cmd_search_plan(a: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _cmd_trials(a: argparse.Namespace) -> int:
+    if a.trials_cmd == "serve":
+        from cosim.trials.server import serve
+
+        if not 0 < a.port < 65536:
+            raise ConfigError(f"--port must be 1..65535, got {a.port}")
+        serve(a.study, host=a.host, port=a.port, db_url=a.db, public=a.public)
+        return EXIT_OK
+    if a.trials_cmd == "export":
+        from cosim.trials.store import export_csv
+
+        print(export_csv(a.db, a.out))
+        return EXIT_OK
+    if a.trials_cmd == "analyse":
+        import tempfile
+
+        from cosim.trials.analysis import analyse
+        from cosim.trials.store import export_csv
+
+        src = Path(a.responses)
+        with tempfile.TemporaryDirectory() as tmp:
+            if src.suffix.lower() != ".csv":  # a database: its responses first
+                src = export_csv(a.responses, Path(tmp) / "responses.csv")
+            summary = analyse(src, a.out, seed=a.seed)
+        for target, fit in sorted(summary.get("critical_gap", {}).items()):
+            print(f"critical gap, {target}: {fit.get('status')}"
+                  + (f": CG {fit['cg_mm']:.1f} mm (95% CI {fit['cg_ci_mm'][0]:.1f}-"
+                     f"{fit['cg_ci_mm'][1]:.1f}), from d0 = {fit['d0_mm']:.0f} mm"
+                     if fit.get("cg_mm") is not None else f" ({fit.get('detail')})"))
+        model = (summary.get("recognise") or {}).get("logistic") or {}
+        for name, c in (model.get("coefficients") or {}).items():
+            if name != "intercept":
+                print(f"recognition, {name}: {c['estimate']:+.2f} (95% CI {c['ci'][0]:+.2f} "
+                      f"to {c['ci'][1]:+.2f}) on the log-odds")
+        print(f"outputs in {a.out}/: " + ", ".join(Path(f).name for f in summary.get("files", [])))
+        return EXIT_OK
+    raise ConfigError("cosim trials: give serve, export or analyse (cosim trials --help)")
+
+
 def _cmd_visibility(a: argparse.Namespace) -> int:
     from cosim.conspicuity.visibility import PASS_COLUMNS, physics_hz_of, write_csv
     from cosim.sweep.runner import rewrite_tables
@@ -757,7 +820,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     handlers = {"run": _cmd_run, "validate": _cmd_validate, "models": _cmd_models,
                 "plot": _cmd_plot, "bench": _cmd_bench, "sweep": _cmd_sweep,
                 "recover": _cmd_recover, "export": _cmd_export,
-                "swarm": _cmd_swarm, "search-plan": _cmd_search_plan,
+                "swarm": _cmd_swarm, "search-plan": _cmd_search_plan, "trials": _cmd_trials,
                 "visibility": _cmd_visibility}
     try:
         return handlers[a.cmd](a)

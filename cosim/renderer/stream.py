@@ -17,7 +17,6 @@ vehicle answers on MAVLink.
 
 from __future__ import annotations
 
-import ipaddress
 import logging
 import queue
 import re
@@ -31,6 +30,7 @@ from urllib.parse import parse_qs, urlsplit
 import numpy as np
 
 from cosim.errors import ConfigError
+from cosim.netaddr import is_loopback
 
 log = logging.getLogger(__name__)
 
@@ -75,19 +75,12 @@ def parse_target(text: str, allow_remote: bool = False) -> VideoTarget:
     if not 1 <= u.port <= 65535:
         raise ConfigError(f"--video {text!r}: port must be 1..65535")
     host = u.hostname
-    if not allow_remote and not _loopback(host):
+    if not allow_remote and not is_loopback(host):
         raise ConfigError(f"--video {text!r}: {host} is not a loopback address; pass "
                           f"--video-allow-remote to send camera video off this machine")
     return VideoTarget(sysid, m["cam"], host, u.port, fmt)
 
 
-def _loopback(host: str) -> bool:
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
 
 
 def sdp(target: VideoTarget, name: str) -> str:

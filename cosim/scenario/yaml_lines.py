@@ -54,32 +54,39 @@ def read_scenario_text(path: str | Path) -> str:
     """The text of a scenario file: a regular file of at most
     ``MAX_FILE_BYTES`` bytes of UTF-8; ``ConfigError`` saying what is wrong
     otherwise (a device such as ``/dev/zero`` is never read)."""
+    return read_text_bounded(path, MAX_FILE_BYTES, "scenario", "a scenario file")
+
+
+def read_text_bounded(path: str | Path, limit: int, what: str, one: str) -> str:
+    """The UTF-8 text of a regular file of at most ``limit`` bytes (``what``
+    it is, e.g. "scenario", and ``one`` of them, e.g. "a scenario file",
+    in the messages); ``ConfigError`` saying what is wrong otherwise."""
     p = Path(path)
     try:
         fd = os.open(p, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
     except OSError as e:
-        raise ConfigError(f"{p}: cannot read scenario: {e.strerror or e}") from None
+        raise ConfigError(f"{p}: cannot read {what}: {e.strerror or e}") from None
     try:
         st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode):
-            what = "a folder" if stat.S_ISDIR(st.st_mode) else "not a regular file"
-            raise ConfigError(f"{p}: cannot read scenario: {what}")
-        if st.st_size > MAX_FILE_BYTES:
-            raise ConfigError(f"{p}: {st.st_size} bytes; a scenario file may have at most "
-                              f"{MAX_FILE_BYTES} ({MAX_FILE_BYTES // 1024 // 1024} MiB)")
+            kind = "a folder" if stat.S_ISDIR(st.st_mode) else "not a regular file"
+            raise ConfigError(f"{p}: cannot read {what}: {kind}")
+        if st.st_size > limit:
+            raise ConfigError(f"{p}: {st.st_size} bytes; {one} may have at most "
+                              f"{limit} ({limit / 1024 / 1024:g} MiB)")
         with os.fdopen(fd, "rb", closefd=False) as f:
-            data = f.read(MAX_FILE_BYTES + 1)
+            data = f.read(limit + 1)
     except OSError as e:
-        raise ConfigError(f"{p}: cannot read scenario: {e.strerror or e}") from None
+        raise ConfigError(f"{p}: cannot read {what}: {e.strerror or e}") from None
     finally:
         os.close(fd)
-    if len(data) > MAX_FILE_BYTES:  # grew while we looked
-        raise ConfigError(f"{p}: a scenario file may have at most {MAX_FILE_BYTES} bytes")
+    if len(data) > limit:  # grew while we looked
+        raise ConfigError(f"{p}: {one} may have at most {limit} bytes")
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as e:
         line = data.count(b"\n", 0, e.start) + 1
-        raise ConfigError(f"{p}:{line}: cannot read scenario: not UTF-8 text (byte "
+        raise ConfigError(f"{p}:{line}: cannot read {what}: not UTF-8 text (byte "
                           f"{data[e.start]:#04x} at offset {e.start})") from None
 
 

@@ -1,0 +1,1 @@
+"""Conspicuity trials with people: the study file, the web app participants use, their responses."""

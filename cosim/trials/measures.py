@@ -1,0 +1,133 @@
+"""Conspicuity measures of a trial response, from the clip's ground truth.
+
+Owns the geometry from a camera pixel to the participant's eye: the video is
+drawn as large as fits the screen with its aspect ratio kept, centred
+(letterboxed), so one camera pixel is ``scale = min(W / w, H / h)`` screen
+pixels and the image centre is the screen centre, where the fixation mark
+is. Camera pixel coordinates put pixel centres at integers (the image spans
+``[-0.5, w - 0.5]``, ``cosim.renderer.camera``), so the image centre is
+``((w - 1) / 2, (h - 1) / 2)``. Screen pixels become millimetres through the
+display profile's physical size (``screen_width_mm / screen_width_px``
+across, ``screen_height_mm / screen_height_px`` down).
+
+- ``onscreen_distance_mm``: from the screen centre to the target centre.
+- ``eccentricity_deg = atan(onscreen_distance_mm / viewing_distance_mm)``
+  (the eye on the perpendicular through the screen centre).
+- ``target_angular_size_deg``: the visual angle of the target's on-screen
+  bounding box (clipped to the image), the larger of the angles its two
+  diagonals subtend at the eye (exact off axis too).
+
+Everything here is computed on the server from the stored ground truth and
+the session's display profile, never taken from the browser. Nothing here
+reads files or knows about the web app.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from cosim.errors import ConfigError
+from cosim.trials.study import Clip
+
+#: what a display profile may hold (a phone to a projection wall; 0.1 to 20 m away)
+SCREEN_PX_RANGE = (100, 20_000)
+SCREEN_MM_RANGE = (20.0, 20_000.0)
+VIEWING_DISTANCE_MM_RANGE = (100.0, 20_000.0)
+
+
+@dataclass(frozen=True)
+class Display:
+    """The participant's screen and where their eyes are."""
+
+    screen_width_px: int
+    screen_height_px: int
+    screen_width_mm: float
+    screen_height_mm: float
+    viewing_distance_mm: float
+
+    def __post_init__(self) -> None:
+        problems = []
+        for name in ("screen_width_px", "screen_height_px"):
+            v = getattr(self, name)
+            lo, hi = SCREEN_PX_RANGE
+            if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
+                problems.append(f"{name} must be a whole number in [{lo}, {hi}], got {v!r}")
+        for name, (lo_f, hi_f) in (("screen_width_mm", SCREEN_MM_RANGE),
+                                   ("screen_height_mm", SCREEN_MM_RANGE),
+                                   ("viewing_distance_mm", VIEWING_DISTANCE_MM_RANGE)):
+            v = getattr(self, name)
+            if (isinstance(v, bool) or not isinstance(v, (int, float))
+                    or not math.isfinite(v) or not lo_f <= v <= hi_f):
+                problems.append(f"{name} must be a number in [{lo_f:g}, {hi_f:g}], got {v!r}")
+        if problems:
+            raise ConfigError([f"display profile: {p}" for p in problems])
+
+    @property
+    def mm_per_px(self) -> tuple[float, float]:
+        return (self.screen_width_mm / self.screen_width_px,
+                self.screen_height_mm / self.screen_height_px)
+
+
+@dataclass(frozen=True)
+class Measures:
+    frame: int  # the ground truth's frame number
+    time_s: float
+    target_in_view: bool
+    screen_x_mm: float | None  # target centre from the screen centre, right
+    screen_y_mm: float | None  # ... and down
+    onscreen_distance_mm: float | None
+    eccentricity_deg: float | None
+    target_angular_size_deg: float | None
+
+
+def video_scale(display: Display, width_px: int, height_px: int) -> float:
+    """Screen pixels per camera pixel when the video is drawn as large as fits."""
+    return min(display.screen_width_px / width_px, display.screen_height_px / height_px)
+
+
+def camera_to_screen_mm(display: Display, width_px: int, height_px: int, u_px: float,
+                        v_px: float) -> tuple[float, float]:
+    """Camera pixel (u, v) -> millimetres right of and below the screen centre."""
+    s = video_scale(display, width_px, height_px)
+    mx, my = display.mm_per_px
+    return ((u_px - (width_px - 1) / 2) * s * mx, (v_px - (height_px - 1) / 2) * s * my)
+
+
+def angle_between_deg(a_mm: tuple[float, float], b_mm: tuple[float, float],
+                      viewing_distance_mm: float) -> float:
+    """Visual angle between two points on the screen (mm from its centre)."""
+    d = viewing_distance_mm
+    ax, ay = a_mm
+    bx, by = b_mm
+    dot = ax * bx + ay * by + d * d
+    cross = math.sqrt((ay * d - d * by) ** 2 + (d * bx - ax * d) ** 2 + (ax * by - ay * bx) ** 2)
+    return math.degrees(math.atan2(cross, dot))
+
+
+def measures_at(clip: Clip, frame_index: int, display: Display) -> Measures:
+    """The measures at video frame ``frame_index`` of ``clip`` on ``display``."""
+    if not 0 <= frame_index < len(clip.frames):
+        raise ValueError(f"clip {clip.id}: frame index {frame_index} outside 0.."
+                         f"{len(clip.frames) - 1}")
+    g = clip.frames[frame_index]
+    w, h = clip.width_px, clip.height_px
+    x_mm = y_mm = dist = ecc = size = None
+    if g.center_px is not None:
+        x_mm, y_mm = camera_to_screen_mm(display, w, h, *g.center_px)
+        dist = math.hypot(x_mm, y_mm)
+        ecc = math.degrees(math.atan(dist / display.viewing_distance_mm))
+    if g.bbox_px is not None and g.in_view:
+        x0, y0, x1, y1 = g.bbox_px
+        x0, x1 = max(x0, -0.5), min(x1, w - 0.5)
+        y0, y1 = max(y0, -0.5), min(y1, h - 0.5)
+        if x1 >= x0 and y1 >= y0:
+            c00 = camera_to_screen_mm(display, w, h, x0, y0)
+            c11 = camera_to_screen_mm(display, w, h, x1, y1)
+            c01 = camera_to_screen_mm(display, w, h, x0, y1)
+            c10 = camera_to_screen_mm(display, w, h, x1, y0)
+            d = display.viewing_distance_mm
+            size = max(angle_between_deg(c00, c11, d), angle_between_deg(c01, c10, d))
+    return Measures(frame=g.frame, time_s=g.time_s, target_in_view=g.in_view,
+                    screen_x_mm=x_mm, screen_y_mm=y_mm, onscreen_distance_mm=dist,
+                    eccentricity_deg=ecc, target_angular_size_deg=size)

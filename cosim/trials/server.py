@@ -1,0 +1,313 @@
+"""The web app of a conspicuity trial (``cosim trials serve STUDY.yaml``).
+
+Owns HTTP: the experimenter page (``/``: create a session with a
+pseudonymous participant id and a display profile, start and pause it, watch
+its progress), the participant page (``/participant?session=ID``: the
+session's clips full screen in order; ``static/participant.js``), the JSON
+API both use, and the clips' videos (``/video/N``: only the files the study
+resolved inside its folders, by number; nothing a request names is ever
+opened). It does not parse the study (``study``), store (``store``) or
+compute measures (``measures``): the browser posts which key it saw and the
+``mediaTime`` of the frame on screen at that moment; the server turns that
+into the frame number (``round(mediaTime * rate_hz)``) and computes every
+measure from the stored ground truth and the session's display profile.
+
+A local app: it binds 127.0.0.1 unless told ``public=True``, and refuses
+requests whose ``Host`` is not this machine's (a web page elsewhere cannot
+drive it through the browser: DNS rebinding). Request bodies are bounded.
+The frequent database calls (a participant's page fetching its session, a
+response stored) run in the thread pool, off the event loop.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import logging
+import math
+import re
+from pathlib import Path
+from typing import Any
+
+from starlette.applications import Starlette
+from starlette.concurrency import run_in_threadpool
+from starlette.middleware import Middleware
+from starlette.middleware.trustedhost import TrustedHostMiddleware
+from starlette.requests import Request
+from starlette.responses import FileResponse, JSONResponse, Response
+from starlette.routing import Mount, Route
+from starlette.staticfiles import StaticFiles
+
+from cosim.errors import ConfigError
+from cosim.netaddr import is_loopback
+from cosim.trials.measures import Display, measures_at
+from cosim.trials.store import Store, write_csv
+from cosim.trials.study import Clip, Study, load_study
+
+log = logging.getLogger(__name__)
+
+STATIC = Path(__file__).resolve().parent / "static"
+MAX_BODY_BYTES = 16 * 1024
+PARTICIPANT_ID = re.compile(r"^[A-Za-z0-9_.\-]{1,64}$")
+KEY_NAME = re.compile(r"^[A-Za-z0-9_ ]{1,32}$")
+LOCAL_HOSTS = ["127.0.0.1", "localhost", "[::1]", "::1"]
+#: the condition names the export has columns of (the rest stay in ``conditions``)
+CONDITION_COLUMNS = ("speed_kt", "alt_agl_m", "target")
+DISPLAY_FIELDS = ("screen_width_px", "screen_height_px", "screen_width_mm", "screen_height_mm",
+                  "viewing_distance_mm")
+
+
+class BadRequest(Exception):
+    def __init__(self, message: str, status: int = 400) -> None:
+        super().__init__(message, status)
+        self.message, self.status = message, status
+
+
+async def _json_body(request: Request) -> dict[str, Any]:
+    body = b""
+    async for chunk in request.stream():
+        body += chunk
+        if len(body) > MAX_BODY_BYTES:
+            raise BadRequest(f"request body over {MAX_BODY_BYTES} bytes", 413)
+    try:
+        data = json.loads(body or b"{}")
+    except ValueError as e:
+        raise BadRequest(f"not JSON: {e}") from None
+    if not isinstance(data, dict):
+        raise BadRequest("expected a JSON object")
+    return data
+
+
+def _number(d: dict[str, Any], key: str, *, optional: bool = False) -> float | None:
+    v = d.get(key)
+    if v is None and optional:
+        return None
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise BadRequest(f"{key}: expected a number, got {v!r}"[:200])
+    return float(v)
+
+
+class TrialApp:
+    """The study and the store behind the routes (one per app)."""
+
+    def __init__(self, study: Study, store: Store) -> None:
+        self.study, self.store = study, store
+
+    # --- helpers ---
+    def _session(self, sid: str) -> dict[str, Any]:
+        s = self.store.session(sid) if len(sid) <= 32 else None
+        if s is None:
+            raise BadRequest(f"no session {sid[:40]!r}", 404)
+        return s
+
+    def _clip(self, t: dict[str, Any]) -> tuple[int, Clip]:
+        """A session trial's clip (number, clip), found by its id if the study
+        file was edited since the session was created."""
+        n, clips = t["clip"], self.study.clips
+        if not (0 <= n < len(clips) and clips[n].id == t["clip_id"]):
+            n = next((i for i, c in enumerate(clips) if c.id == t["clip_id"]), -1)
+            if n < 0:
+                raise BadRequest(f"clip {t['clip_id']!r} of this session is no longer in the "
+                                 f"study {self.study.path}", 409)
+        return n, clips[n]
+
+    def _view(self, s: dict[str, Any]) -> dict[str, Any]:
+        answered = {r["trial_index"] for r in self.store.responses(s["id"])}
+        trials = []
+        for t in s["trial_order"]:
+            n, c = self._clip(t)
+            trials.append({**t, "clip": n, "video": f"/video/{n}",
+                           "rate_hz": c.rate_hz, "frames": len(c.frames),
+                           "answered": t["index"] in answered})
+        nxt = next((t["index"] for t in trials if not t["answered"]), None)
+        if nxt is None and s["state"] != "finished":
+            self.store.set_state(s["id"], "finished")
+            s["state"] = "finished"
+        display = {k: s[k] for k in DISPLAY_FIELDS}
+        return {"id": s["id"], "participant": s["participant"], "protocol": s["protocol"],
+                "state": s["state"], "display": display, "trials": trials, "next_trial": nxt,
+                "answered": len(answered), "order_method": s["order_method"],
+                "seed": s["seed"], "session_number": s["session_number"]}
+
+    # --- routes ---
+    async def study_info(self, request: Request) -> Response:
+        st = self.study
+        return JSONResponse({"name": st.name, "protocol": st.protocol, "clips": len(st.clips),
+                             "practice": st.practice, "break_every": st.break_every,
+                             "repeats": st.repeats, "order": st.order, "seed": st.seed})
+
+    async def list_sessions(self, request: Request) -> Response:
+        return JSONResponse(self.store.sessions())
+
+    async def create_session(self, request: Request) -> Response:
+        d = await _json_body(request)
+        participant = d.get("participant")
+        if not isinstance(participant, str) or not PARTICIPANT_ID.match(participant):
+            raise BadRequest("participant: a pseudonym of 1-64 letters, digits, '_', '.', '-' "
+                             "(never a name)")
+        try:
+            fields: dict[str, Any] = {k: _whole(d.get(k)) if k.endswith("_px") else d.get(k)
+                                      for k in DISPLAY_FIELDS}
+            display = Display(**fields)
+        except ConfigError as e:
+            raise BadRequest("; ".join(e.problems)) from None
+        st = self.study
+        number = self.store.session_count(st.name)
+        order = [{"index": t.index, "practice": t.practice, "clip": t.clip,
+                  "clip_id": st.clips[t.clip].id, "break_before": t.break_before}
+                 for t in st.trial_order(number)]
+        s = self.store.create_session(
+            participant=participant, study=st.name, protocol=st.protocol,
+            display={k: float(getattr(display, k)) if k.endswith("_mm")
+                     else int(getattr(display, k)) for k in DISPLAY_FIELDS},
+            order_method=st.order, seed=st.seed, session_number=number, trial_order=order)
+        log.info("session %s for participant %s: %d trials", s["id"], participant, len(order))
+        return JSONResponse(self._view(s), status_code=201)
+
+    async def get_session(self, request: Request) -> Response:
+        sid = request.path_params["sid"]
+        return JSONResponse(await run_in_threadpool(lambda: self._view(self._session(sid))))
+
+    async def set_state(self, request: Request) -> Response:
+        s = self._session(request.path_params["sid"])
+        state = (await _json_body(request)).get("state")
+        if state not in ("running", "paused"):
+            raise BadRequest("state: expected 'running' or 'paused'")
+        if s["state"] != "finished":
+            self.store.set_state(s["id"], state)
+        return JSONResponse(self._view(self._session(s["id"])))
+
+    async def post_response(self, request: Request) -> Response:
+        s = self._session(request.path_params["sid"])
+        d = await _json_body(request)
+        ti = d.get("trial_index")
+        if isinstance(ti, bool) or not isinstance(ti, int) or not 0 <= ti < len(s["trial_order"]):
+            raise BadRequest(f"trial_index: expected 0..{len(s['trial_order']) - 1}, "
+                             f"got {ti!r}"[:200])
+        kind = d.get("kind", s["protocol"])
+        if kind != s["protocol"]:
+            raise BadRequest(f"kind: this session's protocol is {s['protocol']}, got {kind!r}"
+                             [:200])
+        key = d.get("key")
+        if not isinstance(key, str) or not KEY_NAME.match(key):
+            raise BadRequest("key: expected a key name (letters, digits, '_', ' ')")
+        t = s["trial_order"][ti]
+        _, clip = self._clip(t)
+        media = _number(d, "media_time_s", optional=True)
+        rt = _number(d, "reaction_time_ms", optional=True)
+        recognised = d.get("recognised")
+        if recognised is not None and not isinstance(recognised, bool):
+            raise BadRequest("recognised: expected true, false or null")
+        if s["protocol"] == "recognise" and recognised is None:
+            raise BadRequest("recognised: a recognise trial's answer must say true or false")
+        if media is not None and not -1.0 <= media <= len(clip.frames) / clip.rate_hz + 1.0:
+            raise BadRequest(f"media_time_s {media} is outside clip {clip.id}")
+        display = Display(**{k: s[k] for k in DISPLAY_FIELDS})
+        row: dict[str, Any] = {
+            "session": s["id"], "participant": s["participant"], "trial_index": ti,
+            "kind": kind, "practice": bool(t["practice"]), "protocol": s["protocol"],
+            "clip": clip.id, "run": clip.run, "conditions": json.dumps(clip.condition_map),
+            "key": key, "reaction_time_ms": rt, "recognised": recognised,
+            **{f"condition_{c}": clip.condition_map.get(c) for c in CONDITION_COLUMNS},
+            **display.__dict__}
+        if media is not None:
+            m = measures_at(clip, clip.frame_at(media), display)
+            row.update(frame=m.frame, video_time_s=media, target_in_view=m.target_in_view,
+                       eccentricity_deg=m.eccentricity_deg,
+                       onscreen_distance_mm=m.onscreen_distance_mm,
+                       target_angular_size_deg=m.target_angular_size_deg)
+        stored, created = await run_in_threadpool(self.store.record_response, row)
+        if not created:
+            log.info("session %s trial %d: response posted again; kept the first",
+                     s["id"], ti)
+        out = {k: None if isinstance(v, float) and not math.isfinite(v) else v
+               for k, v in stored.items()}
+        return JSONResponse({"response": out, "created": created},
+                            status_code=201 if created else 200)
+
+    async def export(self, request: Request) -> Response:
+        buf = io.StringIO()
+        write_csv(self.store.responses(), buf)
+        return Response(buf.getvalue(), media_type="text/csv",
+                        headers={"Content-Disposition": "attachment; filename=responses.csv"})
+
+    async def video(self, request: Request) -> Response:
+        n = request.path_params["n"]
+        if not 0 <= n < len(self.study.clips):
+            raise BadRequest(f"no clip {n}", 404)
+        p = self.study.clips[n].video
+        if not any(p.is_relative_to(r) for r in self.study.roots):  # checked at load; again
+            raise BadRequest("not a study file", 403)
+        return FileResponse(p, media_type=_video_type(p))
+
+
+def _whole(v: Any) -> Any:
+    """A JSON number that is whole (``1920.0``) as an int; anything else unchanged."""
+    if isinstance(v, float) and v.is_integer():
+        return int(v)
+    return v
+
+
+def _video_type(p: Path) -> str:
+    return {".mp4": "video/mp4", ".webm": "video/webm", ".ogv": "video/ogg",
+            ".mkv": "video/x-matroska"}.get(p.suffix.lower(), "application/octet-stream")
+
+
+def _page(name: str) -> Any:
+    async def page(request: Request) -> Response:
+        return FileResponse(STATIC / name, media_type="text/html",
+                            headers={"Cache-Control": "no-store"})
+    return page
+
+
+async def _bad_request(request: Request, exc: Exception) -> Response:
+    assert isinstance(exc, BadRequest)
+    return JSONResponse({"error": exc.message}, status_code=exc.status)
+
+
+def make_app(study: Study | str | Path, db: Store | str | Path,
+             allowed_hosts: list[str] | None = None) -> Starlette:
+    """The app for ``study`` with responses in ``db`` (a Store, a SQLite
+    path or a database URL). ``allowed_hosts``: the Host names accepted
+    (default: this machine's loopback names)."""
+    st = study if isinstance(study, Study) else load_study(study)
+    store = db if isinstance(db, Store) else Store(db)
+    a = TrialApp(st, store)
+    routes = [
+        Route("/", _page("experimenter.html")),
+        Route("/participant", _page("participant.html")),
+        Route("/api/study", a.study_info),
+        Route("/api/sessions", a.list_sessions, methods=["GET"]),
+        Route("/api/sessions", a.create_session, methods=["POST"]),
+        Route("/api/sessions/{sid}", a.get_session),
+        Route("/api/sessions/{sid}/state", a.set_state, methods=["POST"]),
+        Route("/api/sessions/{sid}/responses", a.post_response, methods=["POST"]),
+        Route("/api/export.csv", a.export),
+        Route("/video/{n:int}", a.video),
+        Mount("/static", StaticFiles(directory=STATIC), name="static"),
+    ]
+    app = Starlette(routes=routes, exception_handlers={BadRequest: _bad_request},
+                    middleware=[Middleware(TrustedHostMiddleware,
+                                           allowed_hosts=allowed_hosts or LOCAL_HOSTS)])
+    app.state.trials = a
+    return app
+
+
+
+
+def serve(study_path: str | Path, host: str = "127.0.0.1", port: int = 8000,
+          db_url: str | None = None, public: bool = False) -> None:
+    """Run the app until Ctrl-C. ``db_url`` default: ``<study>.sqlite`` beside
+    the study file. A host other than a loopback address needs ``public``."""
+    import uvicorn
+
+    if not is_loopback(host) and not public:
+        raise ConfigError(f"refusing to listen on {host}: participants' responses would be "
+                          f"reachable from other machines; pass --public to mean it")
+    st = load_study(study_path)
+    db = db_url or str(Path(study_path).with_suffix(".sqlite"))
+    hosts = ["*"] if public else LOCAL_HOSTS
+    app = make_app(st, db, allowed_hosts=hosts)
+    log.info("study %s: %d clips; responses in %s; experimenter page http://%s:%d/",
+             st.name, len(st.clips), db, host, port)
+    uvicorn.run(app, host=host, port=port, log_level="info")

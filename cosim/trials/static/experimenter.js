@@ -1,0 +1,69 @@
+// The experimenter page: create sessions, start or pause them, watch progress.
+"use strict";
+(() => {
+  const form = document.getElementById("new");
+  const tbody = document.getElementById("sessions");
+  const err = document.getElementById("form-error");
+  const dpr = window.devicePixelRatio || 1;
+  form.screen_width_px.value = Math.round(screen.width * dpr);
+  form.screen_height_px.value = Math.round(screen.height * dpr);
+
+  async function post(path, body) {
+    const r = await fetch(path, { method: "POST", headers: { "Content-Type": "application/json" },
+                                  body: JSON.stringify(body) });
+    const j = await r.json().catch(() => ({}));
+    if (!r.ok) throw new Error(j.error || r.statusText);
+    return j;
+  }
+
+  function cell(row, content) {
+    const td = document.createElement("td");
+    if (content instanceof Node) td.appendChild(content); else td.textContent = content;
+    row.appendChild(td);
+  }
+
+  async function refresh() {
+    const r = await fetch("/api/sessions", { cache: "no-store" });
+    const list = await r.json();
+    tbody.replaceChildren();
+    for (const s of list) {
+      const tr = document.createElement("tr");
+      cell(tr, s.participant);
+      cell(tr, s.created.replace("T", " ").slice(0, 19));
+      cell(tr, `${s.answered} / ${s.trials}`);
+      cell(tr, s.state);
+      const a = document.createElement("a");
+      a.href = `/participant?session=${encodeURIComponent(s.id)}`;
+      a.textContent = "open";
+      a.target = "_blank";
+      cell(tr, a);
+      const b = document.createElement("button");
+      const next = s.state === "running" ? "paused" : "running";
+      b.textContent = s.state === "running" ? "Pause" : "Start";
+      b.disabled = s.state === "finished";
+      b.onclick = () => post(`/api/sessions/${encodeURIComponent(s.id)}/state`, { state: next })
+        .then(refresh).catch((e) => alert(e.message));
+      cell(tr, b);
+      tbody.appendChild(tr);
+    }
+  }
+
+  form.addEventListener("submit", async (ev) => {
+    ev.preventDefault();
+    err.textContent = "";
+    const body = { participant: form.participant.value };
+    for (const k of ["screen_width_px", "screen_height_px", "screen_width_mm",
+                     "screen_height_mm", "viewing_distance_mm"]) body[k] = Number(form[k].value);
+    try { await post("/api/sessions", body); form.participant.value = ""; await refresh(); }
+    catch (e) { err.textContent = e.message; }
+  });
+
+  fetch("/api/study").then((r) => r.json()).then((s) => {
+    document.getElementById("study").textContent =
+      `Study ${s.name}: protocol ${s.protocol}, ${s.clips} clips x ${s.repeats}, ` +
+      `${s.practice} practice, break every ${s.break_every || "-"}, order ${s.order} ` +
+      `(seed ${s.seed})`;
+  });
+  refresh();
+  setInterval(refresh, 2000);
+})();

@@ -1,0 +1,216 @@
+// The participant page: plays the session's clips in order and posts one
+// response per trial. Dependency-free. The server computes every measure; this
+// page only reports which key was pressed and the mediaTime of the video frame
+// that was on screen at that moment (requestVideoFrameCallback metadata).
+// Resumes after a reload at the first trial without a response: the server
+// keeps the first response of a trial, so posting again never duplicates one.
+"use strict";
+(() => {
+  const READY_MS = 1000; // fixation before each clip starts
+  const sid = new URLSearchParams(location.search).get("session");
+  const video = document.getElementById("clip");
+  const fixation = document.getElementById("fixation");
+  const arrow = document.getElementById("arrow");
+  const message = document.getElementById("message");
+  const status = document.getElementById("status");
+  const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
+  const phase = (p) => { document.body.dataset.phase = p; };
+
+  function show(html) { message.innerHTML = html; message.hidden = false; }
+  function hide() { message.hidden = true; }
+
+  // GET (body undefined) or POST JSON. Network errors and 5xx are retried until
+  // they succeed (a response must never be lost); a 4xx is an error to show.
+  async function api(path, body) {
+    for (let attempt = 0; ; attempt++) {
+      let r = null;
+      try {
+        r = await fetch(path, body === undefined ? { cache: "no-store" } : {
+          method: "POST", headers: { "Content-Type": "application/json" },
+          body: JSON.stringify(body),
+        });
+      } catch (e) { r = null; }
+      if (r && r.ok) { status.textContent = ""; return r.json(); }
+      if (r && r.status >= 400 && r.status < 500) {
+        const j = await r.json().catch(() => ({}));
+        throw new Error(j.error || r.statusText);
+      }
+      status.textContent = "connection lost; retrying\u2026";
+      await sleep(Math.min(5000, 250 * 2 ** attempt));
+    }
+  }
+
+  function waitKey(codes) {
+    return new Promise((resolve) => {
+      const h = (e) => {
+        if (e.repeat || !codes.includes(e.code)) return;
+        e.preventDefault();
+        removeEventListener("keydown", h, true);
+        resolve(e);
+      };
+      addEventListener("keydown", h, true);
+    });
+  }
+
+  function load(trial) {
+    return new Promise((resolve, reject) => {
+      video.oncanplay = () => { video.oncanplay = video.onerror = null; resolve(); };
+      video.onerror = () => { video.oncanplay = video.onerror = null;
+        reject(new Error(`cannot load ${trial.video}`)); };
+      video.src = trial.video;
+      video.load();
+    });
+  }
+
+  // Plays the loaded clip. Resolves at the first key in `codes` with the
+  // mediaTime of the frame on screen then, or with mediaTime null at its end.
+  function playClip(trial, codes) {
+    return new Promise((resolve, reject) => {
+      const shown = []; // recently presented frames: {mediaTime, t (display time, ms)}
+      let onset = null; // when media time 0 was (or would have been) on screen
+      let done = false;
+      let handle = null;
+      const onFrame = (now, meta) => {
+        if (done) return;
+        const t = meta.expectedDisplayTime ?? now;
+        if (onset === null) onset = t - meta.mediaTime * 1000;
+        shown.push({ mediaTime: meta.mediaTime, t });
+        if (shown.length > 32) shown.shift();
+        document.body.dataset.frame = String(Math.round(meta.mediaTime * trial.rate_hz));
+        handle = video.requestVideoFrameCallback(onFrame);
+      };
+      const onKey = (e) => {
+        if (done || e.repeat || !codes.includes(e.code)) return;
+        e.preventDefault();
+        if (!shown.length) return; // no frame on screen yet
+        let f = shown[0]; // the last frame whose display time is not after the key press
+        for (const s of shown) if (s.t <= e.timeStamp) f = s;
+        finish({ code: e.code, mediaTime: f.mediaTime, rtMs: e.timeStamp - onset });
+      };
+      const onEnded = () => finish({ code: null, mediaTime: null, rtMs: null });
+      const onError = () => { cleanup(); reject(new Error(`cannot play ${trial.video}`)); };
+      function cleanup() {
+        done = true;
+        removeEventListener("keydown", onKey, true);
+        video.removeEventListener("ended", onEnded);
+        video.removeEventListener("error", onError);
+        if (handle !== null) video.cancelVideoFrameCallback(handle);
+        video.pause();
+        video.classList.remove("playing");
+      }
+      function finish(r) { cleanup(); resolve(r); }
+      addEventListener("keydown", onKey, true);
+      video.addEventListener("ended", onEnded);
+      video.addEventListener("error", onError);
+      handle = video.requestVideoFrameCallback(onFrame);
+      video.classList.add("playing");
+      phase("playing");
+      video.play().catch(onError);
+    });
+  }
+
+  async function runTrial(t, protocol) {
+    document.body.dataset.trial = String(t.index);
+    delete document.body.dataset.frame;
+    await load(t);
+    if (protocol === "recognise") {
+      phase("start");
+      show(`<p>${t.practice ? "Practice trial. " : ""}Follow the arrow.<br>` +
+           "Press the space bar to start; press it again when you recognise the target.</p>");
+      await waitKey(["Space"]);
+      hide();
+      arrow.hidden = false;
+      const r = await playClip(t, ["Space"]);
+      arrow.hidden = true;
+      phase("answer");
+      show("<p>Did you recognise the target?<br><b>Y</b> yes &nbsp; <b>N</b> no</p>");
+      const e = await waitKey(["KeyY", "KeyN"]);
+      return { trial_index: t.index, kind: "recognise", key: e.code === "KeyY" ? "y" : "n",
+               recognised: e.code === "KeyY", media_time_s: r.mediaTime,
+               reaction_time_ms: r.rtMs };
+    }
+    phase("fixation");
+    hide();
+    fixation.hidden = false;
+    await sleep(READY_MS);
+    const r = await playClip(t, ["Space"]);
+    fixation.hidden = true;
+    return { trial_index: t.index, kind: "disappear", key: r.code ? "space" : "none",
+             media_time_s: r.mediaTime, reaction_time_ms: r.rtMs, recognised: null };
+  }
+
+  function checkDisplay(d) {
+    const dpr = window.devicePixelRatio || 1;
+    const w = Math.round(innerWidth * dpr);
+    const h = Math.round(innerHeight * dpr);
+    if (w !== d.screen_width_px || h !== d.screen_height_px) {
+      status.textContent = `display ${w}x${h} px is not the profile's ` +
+        `${d.screen_width_px}x${d.screen_height_px} (full screen?)`;
+    }
+  }
+
+  async function main() {
+    if (!sid) { show("<p>No session: open this page from the experimenter page.</p>"); return; }
+    if (!("requestVideoFrameCallback" in HTMLVideoElement.prototype)) {
+      show("<p>This browser cannot time video frames (no requestVideoFrameCallback).<br>" +
+           "Use a current Chromium, Chrome, Edge or Safari.</p>");
+      return;
+    }
+    let s = await api(`/api/sessions/${encodeURIComponent(sid)}`);
+    const base = `/api/sessions/${encodeURIComponent(s.id)}`;
+    const instruction = s.protocol === "disappear"
+      ? "Look at the red cross in the centre. Press the space bar as soon as the target disappears."
+      : "Follow the arrow. Answer whether you recognised the target.";
+    phase("begin");
+    show(`<p>${instruction}</p><p>Press the space bar to begin.</p>`);
+    await waitKey(["Space"]);
+    if (document.documentElement.requestFullscreen) {
+      document.documentElement.requestFullscreen().catch(() => {});
+    }
+    let last = null; // the previous trial run in this page
+    let breakShown = null;
+    for (;;) {
+      s = await api(base);
+      checkDisplay(s.display);
+      if (s.next_trial === null) {
+        phase("finished");
+        show("<p>Finished. Thank you!</p>");
+        return;
+      }
+      if (s.state !== "running") {
+        phase("waiting");
+        show(s.state === "paused" ? "<p>Paused by the experimenter.</p>"
+                                  : "<p>Waiting for the experimenter to start.</p>");
+        await sleep(500);
+        continue;
+      }
+      const t = s.trials[s.next_trial];
+      if (t.break_before && breakShown !== t.index) {
+        breakShown = t.index;
+        phase("break");
+        show("<p>Break. Press the space bar when you are ready to go on.</p>");
+        await waitKey(["Space"]);
+        continue;
+      }
+      if (t.practice && last === null) {
+        phase("practice");
+        show("<p>First some practice trials. Press the space bar.</p>");
+        await waitKey(["Space"]);
+      } else if (!t.practice && last !== null && last.practice) {
+        phase("practice-over");
+        show("<p>Practice over: the experiment starts now. Press the space bar.</p>");
+        await waitKey(["Space"]);
+      }
+      last = t;
+      const body = await runTrial(t, s.protocol);
+      phase("saving");
+      show("<p>\u2026</p>");
+      await api(`${base}/responses`, body);
+    }
+  }
+
+  main().catch((e) => {
+    phase("error");
+    show(`<p class="error">${String(e.message || e).replace(/[<&]/g, "")}</p>`);
+  });
+})();

@@ -1,0 +1,246 @@
+"""Sessions and responses of conspicuity trials, in a database.
+
+Owns the two tables and their CSV export. An embedded SQLite file by default
+(``Store("trials.sqlite")``); any SQLAlchemy database URL otherwise
+(``Store("postgresql+psycopg://...")``, the driver installed separately).
+
+- ``sessions``: one row per participant session: the pseudonymous participant
+  id, the display profile (screen size in pixels and millimetres, viewing
+  distance), the trial order with the method, seed and session number it was
+  drawn with, its state (``ready``, ``running``, ``paused``, ``finished``)
+  and when it was created.
+- ``responses``: one row per response. ``(session, trial_index, kind)`` is
+  unique: posting the same response again (a reload, a retry) returns the
+  stored row and adds nothing, so a response is never duplicated, and the
+  first one posted wins.
+
+``export_csv(db, path)`` writes ``EXPORT_COLUMNS`` in that order (the
+analysis reads them): booleans as 0/1, a missing value as an empty field.
+Nothing here knows about HTTP or the study file.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import secrets
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, TextIO
+
+import sqlalchemy as sa
+from sqlalchemy.exc import IntegrityError
+
+from cosim.errors import ConfigError
+
+EXPORT_COLUMNS = ("session", "participant", "trial_index", "practice", "protocol", "clip", "run",
+                  "condition_speed_kt", "condition_alt_agl_m", "condition_target", "frame",
+                  "video_time_s", "reaction_time_ms", "key", "target_in_view",
+                  "eccentricity_deg", "onscreen_distance_mm", "target_angular_size_deg",
+                  "viewing_distance_mm", "screen_width_mm", "screen_height_mm",
+                  "screen_width_px", "screen_height_px", "recognised")
+STATES = ("ready", "running", "paused", "finished")
+
+metadata = sa.MetaData()
+sessions = sa.Table(
+    "sessions", metadata,
+    sa.Column("id", sa.String(32), primary_key=True),
+    sa.Column("participant", sa.String(64), nullable=False),
+    sa.Column("study", sa.String(200), nullable=False),
+    sa.Column("protocol", sa.String(16), nullable=False),
+    sa.Column("screen_width_px", sa.Integer, nullable=False),
+    sa.Column("screen_height_px", sa.Integer, nullable=False),
+    sa.Column("screen_width_mm", sa.Float, nullable=False),
+    sa.Column("screen_height_mm", sa.Float, nullable=False),
+    sa.Column("viewing_distance_mm", sa.Float, nullable=False),
+    sa.Column("order_method", sa.String(16), nullable=False),
+    sa.Column("seed", sa.BigInteger, nullable=False),
+    sa.Column("session_number", sa.Integer, nullable=False),
+    sa.Column("trial_order", sa.Text, nullable=False),  # JSON: [{index, practice, clip, ...}]
+    sa.Column("state", sa.String(16), nullable=False),
+    sa.Column("created", sa.String(32), nullable=False),  # ISO 8601, UTC
+)
+responses = sa.Table(
+    "responses", metadata,
+    sa.Column("id", sa.Integer, primary_key=True, autoincrement=True),
+    sa.Column("session", sa.String(32), sa.ForeignKey("sessions.id"), nullable=False),
+    sa.Column("participant", sa.String(64), nullable=False),
+    sa.Column("trial_index", sa.Integer, nullable=False),
+    sa.Column("kind", sa.String(16), nullable=False),
+    sa.Column("practice", sa.Boolean, nullable=False),
+    sa.Column("protocol", sa.String(16), nullable=False),
+    sa.Column("clip", sa.String(400), nullable=False),
+    sa.Column("run", sa.String(200), nullable=False),
+    sa.Column("conditions", sa.Text, nullable=False),  # JSON {name: value} (all of them)
+    sa.Column("condition_speed_kt", sa.String(64)),
+    sa.Column("condition_alt_agl_m", sa.String(64)),
+    sa.Column("condition_target", sa.String(64)),
+    sa.Column("key", sa.String(32), nullable=False),
+    sa.Column("frame", sa.Integer),
+    sa.Column("video_time_s", sa.Float),
+    sa.Column("reaction_time_ms", sa.Float),
+    sa.Column("target_in_view", sa.Boolean),
+    sa.Column("eccentricity_deg", sa.Float),
+    sa.Column("onscreen_distance_mm", sa.Float),
+    sa.Column("target_angular_size_deg", sa.Float),
+    sa.Column("viewing_distance_mm", sa.Float, nullable=False),
+    sa.Column("screen_width_mm", sa.Float, nullable=False),
+    sa.Column("screen_height_mm", sa.Float, nullable=False),
+    sa.Column("screen_width_px", sa.Integer, nullable=False),
+    sa.Column("screen_height_px", sa.Integer, nullable=False),
+    sa.Column("recognised", sa.Boolean),
+    sa.Column("created", sa.String(32), nullable=False),
+    sa.UniqueConstraint("session", "trial_index", "kind", name="one_response_per_trial"),
+)
+_RESPONSE_FIELDS = tuple(c.name for c in responses.columns if c.name not in ("id", "created"))
+
+
+def _now() -> str:
+    return datetime.now(timezone.utc).isoformat(timespec="milliseconds")
+
+
+def database_url(db: str | Path) -> str:
+    """A SQLAlchemy URL: ``db`` itself if it has a scheme, else a SQLite file path."""
+    s = str(db)
+    if "://" in s:
+        return s
+    return f"sqlite:///{Path(s).expanduser().resolve()}"
+
+
+class Store:
+    """The trial database (a context manager; ``close`` may be called twice)."""
+
+    def __init__(self, db: str | Path) -> None:
+        url = database_url(db)
+        try:
+            self.engine = sa.create_engine(url)
+            if self.engine.dialect.name == "sqlite":
+                sa.event.listen(self.engine, "connect", _sqlite_pragmas)
+            metadata.create_all(self.engine)
+        except Exception as e:  # noqa: BLE001 - a bad URL, a missing driver, a locked file
+            raise ConfigError(f"cannot open the trial database {db}: {e}") from None
+
+    def __enter__(self) -> Store:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self.engine.dispose()
+
+    # --- sessions ---
+    def session_count(self, study: str) -> int:
+        with self.engine.connect() as c:
+            return int(c.execute(sa.select(sa.func.count()).select_from(sessions)
+                                 .where(sessions.c.study == study)).scalar_one())
+
+    def create_session(self, *, participant: str, study: str, protocol: str,
+                       display: dict[str, Any], order_method: str, seed: int,
+                       session_number: int, trial_order: list[dict[str, Any]]) -> dict[str, Any]:
+        row = {"id": secrets.token_urlsafe(9), "participant": participant, "study": study,
+               "protocol": protocol, **display, "order_method": order_method, "seed": seed,
+               "session_number": session_number, "trial_order": json.dumps(trial_order),
+               "state": "ready", "created": _now()}
+        with self.engine.begin() as c:
+            c.execute(sessions.insert().values(**row))
+        return self.session(row["id"]) or row
+
+    def session(self, session_id: str) -> dict[str, Any] | None:
+        with self.engine.connect() as c:
+            r = c.execute(sessions.select().where(sessions.c.id == session_id)).mappings().first()
+        if r is None:
+            return None
+        out = dict(r)
+        out["trial_order"] = json.loads(out["trial_order"])
+        return out
+
+    def sessions(self) -> list[dict[str, Any]]:
+        """Every session (newest first) with ``answered``: its trials with a response."""
+        counts = (sa.select(responses.c.session, sa.func.count().label("n"))
+                  .group_by(responses.c.session).subquery())
+        q = (sa.select(sessions, sa.func.coalesce(counts.c.n, 0).label("answered"))
+             .select_from(sessions.outerjoin(counts, counts.c.session == sessions.c.id))
+             .order_by(sessions.c.created.desc()))
+        with self.engine.connect() as c:
+            rows = [dict(r) for r in c.execute(q).mappings()]
+        for r in rows:
+            r["trials"] = len(json.loads(r.pop("trial_order")))
+        return rows
+
+    def set_state(self, session_id: str, state: str) -> None:
+        if state not in STATES:
+            raise ValueError(f"state must be one of {', '.join(STATES)}, got {state!r}")
+        with self.engine.begin() as c:
+            c.execute(sessions.update().where(sessions.c.id == session_id).values(state=state))
+
+    # --- responses ---
+    def record_response(self, row: dict[str, Any]) -> tuple[dict[str, Any], bool]:
+        """Store one response; (the stored row, True) or, when this session's
+        trial already has a response of this kind, (that row, False)."""
+        values = {k: row.get(k) for k in _RESPONSE_FIELDS}
+        values["created"] = _now()
+        try:
+            with self.engine.begin() as c:
+                c.execute(responses.insert().values(**values))
+            created = True
+        except IntegrityError:
+            created = False
+        q = responses.select().where(responses.c.session == row["session"],
+                                     responses.c.trial_index == row["trial_index"],
+                                     responses.c.kind == row["kind"])
+        with self.engine.connect() as c:
+            stored = c.execute(q).mappings().first()
+        if stored is None:  # the IntegrityError was something else (e.g. no such session)
+            raise ConfigError(f"response to trial {row.get('trial_index')} of session "
+                              f"{row.get('session')} was refused by the database")
+        return dict(stored), created
+
+    def responses(self, session_id: str | None = None) -> list[dict[str, Any]]:
+        q = (sa.select(responses).select_from(responses.join(sessions))
+             .order_by(sessions.c.created, responses.c.session, responses.c.trial_index,
+                       responses.c.kind))
+        if session_id is not None:
+            q = q.where(responses.c.session == session_id)
+        with self.engine.connect() as c:
+            return [dict(r) for r in c.execute(q).mappings()]
+
+
+def _sqlite_pragmas(dbapi_conn: Any, _record: Any) -> None:
+    cur = dbapi_conn.cursor()
+    cur.execute("PRAGMA foreign_keys=ON")
+    cur.execute("PRAGMA journal_mode=WAL")  # the experimenter reads while a participant writes
+    cur.close()
+
+
+def _cell(v: Any) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, bool):
+        return "1" if v else "0"
+    if isinstance(v, float):
+        return "" if not math.isfinite(v) else repr(v)
+    return str(v)
+
+
+def export_csv(db: Store | str | Path, path: str | Path) -> Path:
+    """Every response as CSV with ``EXPORT_COLUMNS``; returns ``path``."""
+    store = db if isinstance(db, Store) else Store(db)
+    try:
+        rows = store.responses()
+    finally:
+        if store is not db:
+            store.close()
+    out = Path(path)
+    with out.open("w", newline="") as f:
+        write_csv(rows, f)
+    return out
+
+
+def write_csv(rows: list[dict[str, Any]], f: TextIO) -> None:
+    """Responses (``Store.responses()`` rows) as CSV with ``EXPORT_COLUMNS``."""
+    w = csv.writer(f)
+    w.writerow(EXPORT_COLUMNS)
+    for r in rows:
+        w.writerow([_cell(r[c]) for c in EXPORT_COLUMNS])

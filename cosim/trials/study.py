@@ -1,0 +1,505 @@
+"""The study file (``STUDY.yaml``) of a conspicuity trial with people.
+
+Owns reading and checking the study: its clips (a ``cosim sweep`` folder
+through its ``manifest.csv``, or an explicit list of video + ground truth),
+each clip's per-frame ground truth for its target, the protocol, practice
+trials, breaks and the order of the trials in each session. It does not
+serve, store or measure anything (``server``, ``store``, ``measures``).
+
+The file and everything it names are untrusted: the YAML goes through the
+scenario loader's limits (``cosim.scenario.yaml_lines``), every problem is
+reported as ``file:line: path: message`` (all at once, one ``ConfigError``),
+the manifest and ground-truth files are bounded in size and read row by row
+with their own ``file:line`` errors, and every video and ground-truth path
+must resolve (symlinks followed) to a regular file inside the study's
+folders: the study file's folder and the sweep folder. Only those resolved
+paths are ever served, by clip number, never a path from a request. Each
+video is opened with PyAV: its size must match the manifest's and its codec
+must play in browsers (H.264, VP8/9, AV1; cosim renders ``mp4v`` unless a
+scenario says ``cameras: {codec: h264, ...}``).
+
+Example::
+
+    schema_version: 1
+    name: exp2
+    protocol: disappear        # or recognise
+    sweep: runs/exp2           # or {folder: runs/exp2, where: {target: truck}}
+    # clips:                   # instead of sweep:
+    #   - {video: clips/a.mp4, ground_truth: clips/a.gt.csv, target: truck,
+    #      conditions: {speed_kt: 50, alt_agl_m: 100}}
+    practice: 2                # practice trials first (clips drawn with the seed)
+    break_every: 12            # a break after every 12 trials (0: none)
+    repeats: 1                 # every clip shown this many times
+    order: latin_square        # or shuffle
+    seed: 1
+
+Trial order (``Study.trial_order(session_number)``): ``latin_square`` takes
+row ``session_number`` of a balanced (Williams) Latin square over the clips,
+so each clip appears at each position and after each other clip equally often
+over the sessions (for an odd number of clips over twice as many sessions);
+``shuffle`` a permutation drawn by ``numpy.random.default_rng([seed,
+session_number, repeat])``. Practice clips are drawn by
+``default_rng([seed, session_number, PRACTICE_STREAM])``. The session records
+the method, the seed, its number and the resulting order.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cosim.errors import ConfigError
+from cosim.scenario.schema import _Ctx, _describe, _Reader
+from cosim.scenario.yaml_lines import (
+    YamlProblem,
+    load_with_lines,
+    read_scenario_text,
+    read_text_bounded,
+)
+
+#: clips in one study (after ``repeats``: trials in one session)
+MAX_CLIPS = 5000
+MAX_TRIALS = 20_000
+#: bytes of a manifest.csv / a ground-truth file read for a study
+MAX_MANIFEST_BYTES = 16 * 1024 * 1024
+MAX_GT_BYTES = 64 * 1024 * 1024
+#: a CSV field (the csv module's own default is 128 KiB)
+MAX_FIELD_CHARS = 4096
+MAX_PRACTICE = 100
+MAX_REPEATS = 100
+PROTOCOLS = ("disappear", "recognise")
+#: video codecs (PyAV's names) that current browsers play
+BROWSER_CODECS = ("h264", "vp8", "vp9", "av1", "libdav1d", "libvpx", "libvpx-vp9")
+ORDERS = ("latin_square", "shuffle")
+PRACTICE_STREAM = 1_000_003
+#: the manifest columns that describe the clip, not the condition (cosim.sweep.runner)
+MANIFEST_COLUMNS = ("run", "vehicle", "camera", "video", "ground_truth", "frames", "rate_hz",
+                    "width_px", "height_px", "hfov_deg", "vfov_deg")
+GT_REQUIRED = ("frame", "time_s", "target", "in_view", "bbox_x0_px", "bbox_y0_px",
+               "bbox_x1_px", "bbox_y1_px", "center_x_px", "center_y_px")
+TOP_KEYS = ("schema_version", "name", "description", "protocol", "sweep", "clips", "practice",
+            "break_every", "repeats", "order", "seed")
+CLIP_KEYS = ("id", "video", "ground_truth", "target", "rate_hz", "width_px", "height_px",
+             "conditions", "run")
+
+
+@dataclass(frozen=True)
+class GtFrame:
+    """The clip's target in one video frame (camera pixels, centres at integers)."""
+
+    frame: int
+    time_s: float
+    in_view: bool
+    bbox_px: tuple[float, float, float, float] | None  # x0, y0, x1, y1
+    center_px: tuple[float, float] | None
+
+
+@dataclass(frozen=True)
+class Clip:
+    """One video and the ground truth of the target a trial is about.
+    ``frames[k]`` is the ground truth of video frame ``k`` (presentation time
+    ``k / rate_hz``)."""
+
+    id: str
+    video: Path
+    ground_truth: Path
+    target: str
+    run: str
+    rate_hz: float
+    width_px: int
+    height_px: int
+    conditions: tuple[tuple[str, str], ...]
+    frames: tuple[GtFrame, ...] = field(repr=False)
+
+    @property
+    def condition_map(self) -> dict[str, str]:
+        return dict(self.conditions)
+
+    def frame_at(self, media_time_s: float) -> int:
+        """The video frame index shown at ``media_time_s`` (the
+        requestVideoFrameCallback ``mediaTime`` of the presented frame),
+        clamped to the clip."""
+        k = round(media_time_s * self.rate_hz)
+        return min(max(k, 0), max(len(self.frames) - 1, 0))
+
+
+@dataclass(frozen=True)
+class Trial:
+    index: int
+    practice: bool
+    clip: int  # index into Study.clips
+    break_before: bool
+
+
+@dataclass(frozen=True)
+class Study:
+    path: Path
+    name: str
+    protocol: str
+    clips: tuple[Clip, ...]
+    practice: int
+    break_every: int
+    repeats: int
+    order: str
+    seed: int
+    roots: tuple[Path, ...]
+
+    def trial_order(self, session_number: int) -> list[Trial]:
+        """The trials of the ``session_number``-th session (0-based): practice
+        first, then every clip ``repeats`` times (see the module docstring)."""
+        n = len(self.clips)
+        trials: list[Trial] = []
+        if self.practice:
+            rng = np.random.default_rng([self.seed, session_number, PRACTICE_STREAM])
+            picks = rng.choice(n, size=self.practice, replace=self.practice > n)
+            trials += [Trial(i, True, int(c), False) for i, c in enumerate(picks)]
+        main: list[int] = []
+        for rep in range(self.repeats):
+            if self.order == "latin_square":
+                main += williams_row(n, session_number + rep)
+            else:
+                perm = np.random.default_rng([self.seed, session_number, rep]).permutation(n)
+                main += [int(c) for c in perm]
+        for j, c in enumerate(main):
+            brk = bool(self.break_every) and j > 0 and j % self.break_every == 0
+            trials.append(Trial(len(trials), False, c, brk))
+        return trials
+
+
+def williams_row(n: int, row: int) -> list[int]:
+    """Row ``row`` of a balanced Latin square of order ``n`` (Williams design;
+    for odd ``n`` rows ``n..2n-1`` are the reverses of rows ``0..n-1``)."""
+    if n < 1:
+        return []
+    base, lo, hi = [0], 1, n - 1
+    while len(base) < n:
+        base.append(lo)
+        lo += 1
+        if len(base) < n:
+            base.append(hi)
+            hi -= 1
+    period = n if n % 2 == 0 else 2 * n
+    r = row % period
+    seq = [(b + r) % n for b in base]
+    return seq[::-1] if r >= n else seq
+
+
+# --- reading ---------------------------------------------------------------
+
+def _read_bounded(p: Path, limit: int, what: str) -> str:
+    """The UTF-8 text of a regular file of at most ``limit`` bytes."""
+    return read_text_bounded(p, limit, what, f"a {what}")
+
+
+def _csv_rows(text: str, p: Path, what: str, required: tuple[str, ...]
+              ) -> list[tuple[int, dict[str, str]]]:
+    """(line, row) of a CSV text with a header holding ``required``."""
+    reader = csv.DictReader(io.StringIO(text, newline=""))
+    old = csv.field_size_limit(MAX_FIELD_CHARS)
+    try:
+        header = reader.fieldnames or []
+        missing = [c for c in required if c not in header]
+        if missing:
+            raise ConfigError(f"{p}:1: not a {what}: missing column(s) {', '.join(missing)}")
+        out = []
+        for row in reader:
+            if None in row or any(v is None for v in row.values()):
+                raise ConfigError(f"{p}:{reader.line_num}: {what}: wrong number of fields")
+            out.append((reader.line_num, row))
+        return out
+    except csv.Error as e:
+        raise ConfigError(f"{p}:{reader.line_num}: {what}: {e}") from None
+    finally:
+        csv.field_size_limit(old)
+
+
+def _inside(p: Path, roots: tuple[Path, ...]) -> Path | None:
+    """``p`` resolved (symlinks followed) if it is a regular file inside one of ``roots``."""
+    try:
+        r = p.resolve(strict=True)
+    except (OSError, RuntimeError):
+        return None
+    if not any(r.is_relative_to(root) for root in roots) or not r.is_file():
+        return None
+    return r
+
+
+def _num(text: str, p: Path, line: int, col: str) -> float:
+    if text == "":
+        return math.nan
+    try:
+        v = float(text)
+    except ValueError:
+        raise ConfigError(f"{p}:{line}: {col}: expected a number, got {text[:40]!r}") from None
+    return v
+
+
+def read_clip_truth(p: Path, target: str | None) -> tuple[str, tuple[GtFrame, ...]]:
+    """The rows of one target of a ground-truth CSV, in frame order;
+    ``target`` None: the file's only target."""
+    rows = _csv_rows(_read_bounded(p, MAX_GT_BYTES, "ground-truth file"), p,
+                     "ground-truth file", GT_REQUIRED)
+    targets = sorted({r["target"] for _, r in rows})
+    if target is None:
+        if len(targets) != 1:
+            raise ConfigError(f"{p}: ground truth has {len(targets)} targets "
+                              f"({', '.join(targets[:10])}); name one with `target:`")
+        target = targets[0]
+    elif target not in targets:
+        raise ConfigError(f"{p}: no target {target!r} in the ground truth (it has: "
+                          f"{', '.join(targets[:10]) or 'none'})")
+    frames: dict[int, GtFrame] = {}
+    for line, r in rows:
+        if r["target"] != target:
+            continue
+        try:
+            fno = int(r["frame"])
+        except ValueError:
+            raise ConfigError(f"{p}:{line}: frame: expected a whole number, "
+                              f"got {r['frame'][:40]!r}") from None
+        if fno in frames:
+            raise ConfigError(f"{p}:{line}: frame {fno} of target {target!r} given twice")
+        vals = [_num(r[c], p, line, c) for c in GT_REQUIRED[4:]]
+        in_view = _num(r["in_view"], p, line, "in_view")
+        bbox = tuple(vals[:4]) if all(math.isfinite(v) for v in vals[:4]) else None
+        centre = tuple(vals[4:]) if all(math.isfinite(v) for v in vals[4:]) else None
+        frames[fno] = GtFrame(frame=fno, time_s=_num(r["time_s"], p, line, "time_s"),
+                              in_view=in_view == 1.0, bbox_px=bbox,  # type: ignore[arg-type]
+                              center_px=centre)  # type: ignore[arg-type]
+    return target, tuple(frames[k] for k in sorted(frames))
+
+
+def _probe_video(p: Path) -> tuple[float, int, int, str]:
+    """(rate_hz, width_px, height_px, codec) of a video file, read by PyAV."""
+    try:
+        import av
+
+        with av.open(str(p)) as c:
+            s = c.streams.video[0]
+            rate = s.average_rate or s.guessed_rate
+            if not rate:
+                raise ValueError("no frame rate")
+            cc = s.codec_context
+            return float(rate), int(cc.width), int(cc.height), str(cc.name)
+    except Exception as e:  # noqa: BLE001 - any failure is "cannot read this video"
+        raise ConfigError(f"{p}: cannot read it as a video ({e})") from None
+
+
+def load_study(path: str | Path) -> Study:
+    """Read and check a study file; ``ConfigError`` lists every problem found."""
+    p = Path(path)
+    text = read_scenario_text(p)
+    return parse_study(text, p)
+
+
+def parse_study(text: str, path: Path) -> Study:
+    fname = str(path)
+    try:
+        data, lines, dups = load_with_lines(text)
+    except YamlProblem as e:
+        raise ConfigError([f"{fname}:{ln}: {m}" for ln, m in e.problems]) from None
+    ctx = _Ctx(fname, lines)
+    for ln, m in dups:
+        ctx.problems.append((ln, m))
+    top = _Reader(ctx, data, (), TOP_KEYS)
+    version = top.integer("schema_version", 1)
+    if version is not None and version != 1:
+        ctx.err(("schema_version",), f"unsupported schema_version {version}; this cosim reads 1")
+    name = top.string("name", path.stem)
+    protocol = top.string("protocol", choices=PROTOCOLS)
+    practice = top.integer("practice", 0, lo=0, hi=MAX_PRACTICE)
+    break_every = top.integer("break_every", 0, lo=0, hi=MAX_TRIALS)
+    repeats = top.integer("repeats", 1, lo=1, hi=MAX_REPEATS)
+    order = top.string("order", "shuffle", choices=ORDERS)
+    seed = top.integer("seed", 0, lo=0, hi=2**32 - 1)
+    if isinstance(top.d.get("description", ""), (dict, list)):
+        ctx.err(("description",), "expected text")
+    base = path.resolve().parent
+    roots: list[Path] = [base]
+    clips: list[Clip] = []
+    which = top.one_of("sweep", "clips")
+    if which is None and not ctx.problems:
+        ctx.err((), "missing the clips: give `sweep:` (a cosim sweep folder) or `clips:` "
+                    "(a list of video + ground_truth)")
+    elif which == "sweep":
+        clips = _sweep_clips(ctx, top.d["sweep"], base, roots)
+    elif which == "clips":
+        clips = _listed_clips(ctx, top.d["clips"], base, tuple(roots))
+    if len(clips) * (repeats or 1) > MAX_TRIALS:
+        ctx.err(("clips",), f"{len(clips)} clips x {repeats} repeats is more than "
+                            f"{MAX_TRIALS} trials")
+    ids = [c.id for c in clips]
+    if len(set(ids)) != len(ids):
+        dup = sorted({i for i in ids if ids.count(i) > 1})
+        ctx.err(("clips",), f"clip ids given twice: {', '.join(dup[:10])}")
+    if ctx.problems or ctx.more:
+        raise ctx.error()
+    return Study(path=path, name=name, protocol=protocol, clips=tuple(clips), practice=practice,
+                 break_every=break_every, repeats=repeats, order=order, seed=seed,
+                 roots=tuple(roots))
+
+
+def _file(ctx: _Ctx, at: tuple[Any, ...], value: Any, base: Path, roots: tuple[Path, ...],
+          what: str) -> Path | None:
+    if not isinstance(value, str) or not value or "\x00" in value:
+        ctx.err(at, f"expected the path of the {what}, got {_describe(value)}")
+        return None
+    p = _inside(base / value, roots)
+    if p is None:
+        ctx.err(at, f"{value[:200]!r}: the {what} must be an existing file inside the study's "
+                    f"folders ({', '.join(str(r) for r in roots)})")
+    return p
+
+
+def _clip_from(ctx: _Ctx, at: tuple[Any, ...], cid: str, video: Path, gt: Path,
+               target: str | None, run: str, rate: float | None, width: int | None,
+               height: int | None, conditions: dict[str, str]) -> Clip | None:
+    try:
+        target, frames = read_clip_truth(gt, target)
+        r2, w2, h2, codec = _probe_video(video)
+        if codec not in BROWSER_CODECS:
+            raise ConfigError(f"{video}: codec {codec} does not play in browsers; render the "
+                              f"clips with `cameras: {{codec: h264, views: [...]}}`")
+        if (width or w2, height or h2) != (w2, h2):
+            raise ConfigError(f"{video}: the video is {w2} x {h2} px, not {width} x {height}")
+        rate, width, height = rate or r2, w2, h2
+    except ConfigError as e:
+        for msg in e.problems:
+            ctx.err(at, msg)
+        return None
+    if not frames:
+        ctx.err(at, f"{gt}: no rows for target {target!r}")
+        return None
+    return Clip(id=cid, video=video, ground_truth=gt, target=target, run=run,
+                rate_hz=float(rate), width_px=int(width), height_px=int(height),
+                conditions=tuple(conditions.items()), frames=frames)
+
+
+def _listed_clips(ctx: _Ctx, items: Any, base: Path, roots: tuple[Path, ...]) -> list[Clip]:
+    if not isinstance(items, list) or not items:
+        ctx.err(("clips",), f"expected a non-empty list of clips, got {_describe(items)}")
+        return []
+    if len(items) > MAX_CLIPS:
+        ctx.err(("clips",), f"{len(items)} clips; a study may have at most {MAX_CLIPS}")
+        return []
+    out = []
+    for i, item in enumerate(items):
+        at = ("clips", i)
+        r = _Reader(ctx, item, at, CLIP_KEYS)
+        before = len(ctx.problems)
+        video = _file(ctx, at + ("video",), r.d.get("video"), base, roots, "video")
+        gt = _file(ctx, at + ("ground_truth",), r.d.get("ground_truth"), base, roots,
+                   "ground truth")
+        target = r.string("target", None)
+        rate = r.num("rate_hz", None, lo=0, hi=1000, lo_open=True)
+        width = r.integer("width_px", None, lo=1, hi=100_000)
+        height = r.integer("height_px", None, lo=1, hi=100_000)
+        cid = r.string("id", f"clip{i}")
+        run = r.string("run", "")
+        conds: dict[str, str] = {}
+        cd = r.d.get("conditions", {})
+        if not isinstance(cd, dict):
+            ctx.err(at + ("conditions",), f"expected a mapping, got {_describe(cd)}")
+        else:
+            for k, v in list(cd.items())[:100]:
+                if isinstance(v, (dict, list)) or v is None or not isinstance(k, str):
+                    ctx.err(at + ("conditions", k), f"expected a name: value, got "
+                                                    f"{_describe(v)}")
+                else:
+                    conds[k] = _fmt_value(v)
+        if len(ctx.problems) != before or video is None or gt is None:
+            continue
+        c = _clip_from(ctx, at, cid, video, gt, target, run, rate, width, height, conds)
+        if c is not None:
+            out.append(c)
+    return out
+
+
+def _fmt_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float) and v.is_integer():
+        return str(int(v))
+    return str(v)
+
+
+def _sweep_clips(ctx: _Ctx, spec: Any, base: Path, roots: list[Path]) -> list[Clip]:
+    at: tuple[Any, ...] = ("sweep",)
+    where: Mapping[str, Any] = {}
+    if isinstance(spec, dict):
+        r = _Reader(ctx, spec, at, ("folder", "where"))
+        folder = r.string("folder")
+        w = spec.get("where", {})
+        if not isinstance(w, dict):
+            ctx.err(at + ("where",), f"expected a mapping of manifest column: value, got "
+                                     f"{_describe(w)}")
+        else:
+            where = w
+        at = at + ("folder",)
+    else:
+        folder = spec
+    if not isinstance(folder, str) or not folder:
+        ctx.err(at, f"expected the path of a cosim sweep folder, got {_describe(folder)}")
+        return []
+    try:
+        sweep = (base / folder).resolve(strict=True)
+    except (OSError, RuntimeError) as e:
+        ctx.err(at, f"{folder[:200]!r}: cannot open the sweep folder: {e}")
+        return []
+    manifest = sweep / "manifest.csv"
+    if not sweep.is_dir() or not manifest.is_file():
+        ctx.err(at, f"{folder[:200]!r}: not a sweep folder (no manifest.csv; run `cosim sweep "
+                    f"... --out {folder[:200]}` first)")
+        return []
+    roots.append(sweep)
+    try:
+        rows = _csv_rows(_read_bounded(manifest, MAX_MANIFEST_BYTES, "manifest"), manifest,
+                         "sweep manifest", MANIFEST_COLUMNS)
+    except ConfigError as e:
+        for m in e.problems:
+            ctx.err(at, m)
+        return []
+    if len(rows) > MAX_CLIPS:
+        ctx.err(at, f"{manifest}: {len(rows)} clips; a study may have at most {MAX_CLIPS}")
+        return []
+    for k in where:
+        if not rows or k not in rows[0][1]:
+            ctx.err(("sweep", "where", k), f"no column {k!r} in {manifest}")
+    out = []
+    for line, row in rows:
+        if any(row.get(k) != _fmt_value(v) for k, v in where.items()):
+            continue
+        where_at = f"{manifest}:{line}"
+        sroots = (sweep,)
+        video = _inside(sweep / row["video"], sroots) if row["video"] else None
+        gt = _inside(sweep / row["ground_truth"], sroots) if row["ground_truth"] else None
+        if video is None or gt is None:
+            bad = "video" if video is None else "ground_truth"
+            ctx.err(at, f"{where_at}: {bad} {row[bad][:200]!r} must be an existing file inside "
+                        f"the sweep folder")
+            continue
+        try:
+            rate = float(row["rate_hz"])
+            width, height = int(row["width_px"]), int(row["height_px"])
+            if not (0 < rate <= 1000 and 0 < width <= 100_000 and 0 < height <= 100_000):
+                raise ValueError
+        except ValueError:
+            ctx.err(at, f"{where_at}: rate_hz, width_px, height_px: expected a rate in "
+                        f"(0, 1000] and sizes >= 1")
+            continue
+        conds = {k: v for k, v in row.items() if k not in MANIFEST_COLUMNS}
+        cid = f"{row['run']}/{row['vehicle']}_{row['camera']}"
+        target = row.get("target") or None
+        c = _clip_from(ctx, at, cid, video, gt, target, row["run"], rate, width, height, conds)
+        if c is not None:
+            out.append(c)
+    if rows and not out and not ctx.problems:
+        ctx.err(at, f"{manifest}: no clip matches `where:`")
+    return out

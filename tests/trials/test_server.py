@@ -1,0 +1,413 @@
+"""The trial web app, live: uvicorn on 127.0.0.1 (an ephemeral port) in a
+thread, driven over HTTP and by a scripted participant in headless Debian
+Chromium (/usr/bin/chromium through Playwright; nothing is downloaded)."""
+
+from __future__ import annotations
+
+import contextlib
+import http.client
+import json
+import math
+import os
+import socket
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import pytest
+import uvicorn
+
+from cosim.renderer.video import open_video
+from cosim.trials.server import make_app, serve
+from cosim.trials.store import Store
+
+CHROMIUM = "/usr/bin/chromium"
+W, H, RATE_HZ, FRAMES = 320, 240, 10.0, 20  # each clip: 2 s of 320 x 240 at 10 Hz
+HALF_X, HALF_Y = 10, 6  # the target's half size (camera px)
+# the participant's display: an 800 x 500 px window, 400 x 250 mm, eye 600 mm away
+PROFILE = {"screen_width_px": 800, "screen_height_px": 500, "screen_width_mm": 400.0,
+           "screen_height_mm": 250.0, "viewing_distance_mm": 600.0}
+SPEEDS = {"c0": 50, "c1": 100, "c2": 200}
+
+
+def centre(clip: str, k: int) -> tuple[float, float]:
+    """Where clip ``clip``'s target is in frame ``k`` (camera px)."""
+    step = {"c0": 18.0, "c1": 14.0, "c2": 10.0}[clip]
+    return 30.0 + step * k, 80.0
+
+
+def make_clip(folder: Path, name: str) -> None:
+    """An H.264 clip (cosim's own video writer) of a white box crossing a grey
+    ground, and its ground truth in the renderer's columns."""
+    sink = open_video(str(folder / f"{name}.mp4"), "h264", RATE_HZ, W, H)
+    rows = ["frame,time_s,vehicle,camera,target,in_view,fully_in_view,bbox_x0_px,bbox_y0_px,"
+            "bbox_x1_px,bbox_y1_px,center_x_px,center_y_px,eccentricity_px,eccentricity_deg,"
+            "angular_size_deg,pixels_on_target,range_m,contrast"]
+    for k in range(FRAMES):
+        cx, cy = centre(name, k)
+        img = np.full((H, W, 3), 90, np.uint8)
+        x0, y0, x1, y1 = cx - HALF_X, cy - HALF_Y, cx + HALF_X, cy + HALF_Y
+        cv2.rectangle(img, (round(x0), round(y0)), (round(x1), round(y1)), (255, 255, 255), -1)
+        sink.write(img)
+        iv = int(x0 <= W - 0.5)
+        rows.append(f"{k},{k / RATE_HZ:.6f},uav,nadir,truck,{iv},{int(x1 <= W - 0.5)},{x0},{y0},"
+                    f"{x1},{y1},{cx},{cy},,,,,,")
+    sink.release()
+    (folder / f"{name}.gt.csv").write_text("\n".join(rows) + "\n")
+
+
+@pytest.fixture(scope="module")
+def study_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("study")
+    for name in SPEEDS:
+        make_clip(folder, name)
+    (folder / "secret.txt").write_text("not for the browser")
+    clips = "".join(f"  - {{id: {n}, video: {n}.mp4, ground_truth: {n}.gt.csv, run: run_{n}, "
+                    f"conditions: {{speed_kt: {v}, alt_agl_m: 30, target: truck}}}}\n"
+                    for n, v in SPEEDS.items())
+    p = folder / "study.yaml"
+    p.write_text("name: tiny\nprotocol: disappear\npractice: 1\nbreak_every: 2\norder: shuffle\n"
+                 "seed: 7\nclips:\n" + clips)
+    return p
+
+
+class LiveServer:
+    def __init__(self, url: str, store: Store) -> None:
+        self.url, self.store = url, store
+        self.host, self.port = url.removeprefix("http://").split(":")
+
+    def request(self, method: str, path: str, body: Any = None,
+                headers: dict[str, str] | None = None) -> tuple[int, Any]:
+        """One request with ``path`` sent exactly as given (no normalisation)."""
+        c = http.client.HTTPConnection(self.host, int(self.port), timeout=10)
+        try:
+            data = None if body is None else json.dumps(body).encode()
+            c.request(method, path, body=data, headers={"Content-Type": "application/json",
+                                                        **(headers or {})})
+            r = c.getresponse()
+            raw = r.read()
+        finally:
+            c.close()
+        try:
+            return r.status, json.loads(raw)
+        except ValueError:
+            return r.status, raw
+
+
+@contextlib.contextmanager
+def live_server(study_path: Path) -> Iterator[LiveServer]:
+    """The app for ``study_path`` served by uvicorn in a thread on 127.0.0.1:<ephemeral>."""
+    store = Store(study_path.with_suffix(".sqlite"))
+    app = make_app(study_path, store)
+    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    sock.bind(("127.0.0.1", 0))
+    port = sock.getsockname()[1]
+    srv = uvicorn.Server(uvicorn.Config(app, log_level="warning", lifespan="off"))
+    th = threading.Thread(target=srv.run, kwargs={"sockets": [sock]}, daemon=True)
+    th.start()
+    deadline = time.monotonic() + 10
+    while not srv.started:
+        assert time.monotonic() < deadline and th.is_alive(), "uvicorn did not start"
+        time.sleep(0.02)
+    try:
+        yield LiveServer(f"http://127.0.0.1:{port}", store)
+    finally:
+        srv.should_exit = True
+        th.join(10)
+        sock.close()
+        store.close()
+    assert not th.is_alive(), "uvicorn did not stop"
+
+
+@pytest.fixture(scope="module")
+def server(study_file: Path) -> Iterator[LiveServer]:
+    with live_server(study_file) as s:
+        yield s
+
+
+def needs_chromium() -> None:
+    if not os.path.exists(CHROMIUM):
+        pytest.skip(f"{CHROMIUM} is absent (apt-get install chromium); the browser tests need it")
+
+
+def expected(clip: str, frame: int) -> dict[str, float]:
+    """The measures at ``frame`` of ``clip`` on PROFILE, from the clip's own geometry."""
+    scale = min(PROFILE["screen_width_px"] / W, PROFILE["screen_height_px"] / H)
+    cx, cy = centre(clip, frame)
+    # the image centre (pixel centres at integers) is the screen centre
+    x_mm = (cx - (W - 1) / 2) * scale * PROFILE["screen_width_mm"] / PROFILE["screen_width_px"]
+    y_mm = (cy - (H - 1) / 2) * scale * PROFILE["screen_height_mm"] / PROFILE["screen_height_px"]
+    d = math.hypot(x_mm, y_mm)
+    return {"onscreen_distance_mm": d,
+            "eccentricity_deg": math.degrees(math.atan(d / PROFILE["viewing_distance_mm"]))}
+
+
+# --- the HTTP side -------------------------------------------------------
+
+def _session(server: LiveServer, participant: str) -> dict[str, Any]:
+    status, s = server.request("POST", "/api/sessions", {"participant": participant, **PROFILE})
+    assert status == 201, s
+    return s
+
+
+def test_videos_only_by_number_from_the_study(server: LiveServer) -> None:
+    status, body = server.request("GET", "/video/0", headers={"Range": "bytes=0-9"})
+    assert status == 206 and len(body) == 10  # seekable
+    for path in ("/video/3", "/video/-1", "/video/..%2fsecret.txt", "/video/../secret.txt",
+                 "/static/../secret.txt", "/static/..%2f..%2fserver.py",
+                 "/static/%2e%2e/server.py", "/secret.txt", "/study.yaml"):
+        status, body = server.request("GET", path)
+        assert status == 404, (path, status)
+        assert b"not for the browser" not in (body if isinstance(body, bytes) else b"")
+
+
+def test_foreign_host_refused(server: LiveServer) -> None:
+    status, _ = server.request("GET", "/api/study", headers={"Host": "evil.example:80"})
+    assert status == 400
+    assert server.request("GET", "/api/study")[0] == 200
+
+
+def test_bad_requests(server: LiveServer) -> None:
+    status, body = server.request("POST", "/api/sessions", {"participant": "Jane Doe",
+                                                            **PROFILE})
+    assert status == 400 and "pseudonym" in body["error"]
+    status, body = server.request("POST", "/api/sessions", {**PROFILE, "participant": "p9",
+                                                            "viewing_distance_mm": "far"})
+    assert status == 400 and "viewing_distance_mm must be a number" in body["error"]
+    s = _session(server, "p-bad")
+    base = f"/api/sessions/{s['id']}/responses"
+    for bad, msg in (({"trial_index": 99, "key": "space"}, "trial_index"),
+                     ({"trial_index": 0, "key": "<script>"}, "key"),
+                     ({"trial_index": 0, "key": "space", "kind": "recognise"}, "protocol"),
+                     ({"trial_index": 0, "key": "space", "media_time_s": 1e9}, "outside"),
+                     ({"trial_index": 0, "key": "space", "media_time_s": "NaN"}, "number")):
+        status, body = server.request("POST", base, bad)
+        assert status == 400 and msg in body["error"], (bad, body)
+    assert server.request("GET", "/api/sessions/nope")[0] == 404
+    status, body = server.request("POST", base, {"trial_index": 0, "key": "x" * 100000})
+    assert status == 413
+
+
+def test_response_posted_twice_is_stored_once(server: LiveServer) -> None:
+    s = _session(server, "p-twice")
+    base = f"/api/sessions/{s['id']}/responses"
+    body = {"trial_index": 1, "kind": "disappear", "key": "space", "media_time_s": 0.5,
+            "reaction_time_ms": 500.0}
+    status, first = server.request("POST", base, body)
+    assert status == 201 and first["created"] and first["response"]["frame"] == 5
+    status, again = server.request("POST", base, {**body, "media_time_s": 0.9})  # a retry
+    assert status == 200 and not again["created"] and again["response"] == first["response"]
+    assert len(server.store.responses(s["id"])) == 1
+    clip = s["trials"][1]["clip_id"]
+    assert first["response"]["eccentricity_deg"] == pytest.approx(
+        expected(clip, 5)["eccentricity_deg"], rel=1e-12)
+
+
+def test_serve_refuses_public_address_without_flag(study_file: Path) -> None:
+    from cosim.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=r"refusing to listen on 0\.0\.0\.0.*--public"):
+        serve(study_file, host="0.0.0.0", port=1)
+
+
+# --- a scripted participant in Chromium -------------------------------------
+
+#: trial index -> the frame to press at (trial 3: the clip runs out without a press)
+PRESSES: dict[int, int] = {0: 5, 1: 8, 2: 10}
+RELOAD_AT = (2, 3)  # reload the page while trial 2 shows frame 3
+
+
+@pytest.fixture(scope="module")
+def browser_run(server: LiveServer) -> dict[str, Any]:
+    needs_chromium()
+    from playwright.sync_api import sync_playwright
+
+    s = _session(server, "p01")
+    assert [t["practice"] for t in s["trials"]] == [True, False, False, False]
+    assert [t["break_before"] for t in s["trials"]] == [False, False, False, True]
+    run: dict[str, Any] = {"session": s, "phases": [], "console": []}
+    with sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=CHROMIUM,
+                                     args=["--autoplay-policy=no-user-gesture-required"])
+        try:
+            page = browser.new_page(viewport={"width": 800, "height": 500},
+                                    device_scale_factor=1)
+            page.on("console", lambda m: run["console"].append(m.text))
+            page.on("pageerror", lambda e: run["console"].append(str(e)))
+            page.set_default_timeout(15_000)
+
+            def wait_phase(p: str) -> None:
+                page.wait_for_function(f"document.body.dataset.phase === '{p}'")
+                run["phases"].append(p)
+
+            def wait_frame(trial: int, frame: int) -> None:
+                page.wait_for_function(
+                    f"document.body.dataset.trial === '{trial}' && document.body.dataset.phase"
+                    f" === 'playing' && Number(document.body.dataset.frame) >= {frame}",
+                    polling=5)
+                # rVFC runs as a frame goes to the compositor, shortly before it is on
+                # screen: press a moment (well within the 100 ms frame) after that
+                page.wait_for_timeout(30)
+
+            page.goto(f"{server.url}/participant?session={s['id']}")
+            wait_phase("begin")
+            page.keyboard.press("Space")
+            wait_phase("waiting")  # not started yet
+            assert server.request("POST", f"/api/sessions/{s['id']}/state",
+                                  {"state": "running"})[0] == 200
+            wait_phase("practice")
+            page.keyboard.press("Space")
+            wait_frame(0, PRESSES[0])
+            page.keyboard.press("Space")
+            wait_phase("practice-over")
+            page.keyboard.press("Space")
+            wait_frame(1, PRESSES[1])
+            page.keyboard.press("Space")
+            wait_frame(*RELOAD_AT)
+            # the picture on the screen where the geometry says (letterboxed, centred)
+            run["shot"] = (page.screenshot(), int(page.evaluate("document.body.dataset.frame")))
+            run["before_reload"] = len(server.store.responses(s["id"]))
+            page.reload()
+            wait_phase("begin")
+            page.keyboard.press("Space")
+            page.wait_for_function("document.body.dataset.phase === 'fixation'")
+            run["resumed_at"] = page.evaluate("document.body.dataset.trial")
+            wait_frame(2, PRESSES[2])
+            page.keyboard.press("Space")
+            wait_phase("break")
+            page.keyboard.press("Space")
+            wait_phase("finished")
+        finally:
+            browser.close()
+    run["responses"] = server.store.responses(s["id"])
+    return run
+
+
+def test_key_presses_give_the_ground_truth_frame(browser_run: dict[str, Any]) -> None:
+    rs = browser_run["responses"]
+    assert [r["trial_index"] for r in rs] == [0, 1, 2, 3], browser_run["console"]
+    trials = browser_run["session"]["trials"]
+    for r in rs:
+        t = trials[r["trial_index"]]
+        assert (r["clip"], bool(r["practice"]), r["participant"]) == (
+            t["clip_id"], t["practice"], "p01")
+        assert r["condition_speed_kt"] == str(SPEEDS[t["clip_id"]])
+        want = PRESSES.get(r["trial_index"])
+        if want is None:  # the clip ran out without a press
+            assert (r["key"], r["frame"], r["eccentricity_deg"]) == ("none", None, None)
+            continue
+        assert r["key"] == "space"
+        # the frame on screen at the key press: the one waited for, or the next
+        # if the key arrived one frame period (100 ms) later
+        assert want <= r["frame"] <= want + 1, r
+        assert r["frame"] == round(r["video_time_s"] * RATE_HZ)
+        exp = expected(t["clip_id"], r["frame"])
+        assert r["eccentricity_deg"] == pytest.approx(exp["eccentricity_deg"], rel=1e-9)
+        assert r["onscreen_distance_mm"] == pytest.approx(exp["onscreen_distance_mm"], rel=1e-9)
+        assert r["target_in_view"] is True
+        assert 0 < r["reaction_time_ms"] - 1000 * r["video_time_s"] < 150
+        for k, v in PROFILE.items():
+            assert r[k] == v
+
+
+def test_reload_resumes_at_the_first_trial_without_a_response(
+        browser_run: dict[str, Any], server: LiveServer) -> None:
+    assert browser_run["before_reload"] == 2  # trials 0 and 1 answered, 2 on screen
+    assert browser_run["resumed_at"] == "2"
+    rs = browser_run["responses"]
+    assert len({(r["trial_index"], r["kind"]) for r in rs}) == len(rs) == 4
+    assert "break" in browser_run["phases"] and browser_run["phases"][-1] == "finished"
+    status, s = server.request("GET", f"/api/sessions/{browser_run['session']['id']}")
+    assert (s["state"], s["next_trial"], s["answered"]) == ("finished", None, 4)
+
+
+def test_video_drawn_where_the_measures_assume(browser_run: dict[str, Any]) -> None:
+    png, frame = browser_run["shot"]
+    img = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_GRAYSCALE)
+    assert img is not None
+    assert img.shape == (PROFILE["screen_height_px"], PROFILE["screen_width_px"])
+    ys, xs = np.nonzero(img > 200)  # the white target (the red fixation cross is darker)
+    assert len(xs) > 50
+    clip = browser_run["session"]["trials"][RELOAD_AT[0]]["clip_id"]
+    scale = min(800 / W, 500 / H)
+    sx = [400 + (centre(clip, k)[0] - (W - 1) / 2) * scale for k in (frame - 1, frame, frame + 1)]
+    sy = 250 + (centre(clip, frame)[1] - (H - 1) / 2) * scale
+    assert abs(ys.mean() - sy) < 3
+    assert min(sx) - 3 < xs.mean() < max(sx) + 3, (xs.mean(), sx)
+
+
+def test_recognise_protocol(study_file: Path, tmp_path: Path) -> None:
+    """Press to start the sub-trial, press on recognising, answer yes."""
+    needs_chromium()
+    from playwright.sync_api import sync_playwright
+
+    study = study_file.parent / "recognise.yaml"
+    study.write_text("protocol: recognise\norder: latin_square\nclips:\n"
+                     "  - {video: c1.mp4, ground_truth: c1.gt.csv, conditions: {speed_kt: 100}}\n")
+    with live_server(study) as server:
+        s = _session(server, "p02")
+        server.request("POST", f"/api/sessions/{s['id']}/state", {"state": "running"})
+        with sync_playwright() as pw:
+            browser = pw.chromium.launch(executable_path=CHROMIUM,
+                                         args=["--autoplay-policy=no-user-gesture-required"])
+            try:
+                page = browser.new_page(viewport={"width": 800, "height": 500})
+                page.set_default_timeout(15_000)
+                page.goto(f"{server.url}/participant?session={s['id']}")
+                for phase in ("begin", "start"):
+                    page.wait_for_function(f"document.body.dataset.phase === '{phase}'")
+                    page.keyboard.press("Space")
+                page.wait_for_function("document.body.dataset.phase === 'playing' && "
+                                       "Number(document.body.dataset.frame) >= 6", polling=5)
+                assert page.is_visible("#arrow") and not page.is_visible("#fixation")
+                page.wait_for_timeout(30)
+                page.keyboard.press("Space")
+                page.wait_for_function("document.body.dataset.phase === 'answer'")
+                page.keyboard.press("y")
+                page.wait_for_function("document.body.dataset.phase === 'finished'")
+            finally:
+                browser.close()
+        (r,) = server.store.responses(s["id"])
+    assert (r["protocol"], r["key"], r["recognised"], r["practice"]) == (
+        "recognise", "y", True, False)
+    assert 6 <= r["frame"] <= 7
+    assert r["eccentricity_deg"] == pytest.approx(
+        expected("c1", r["frame"])["eccentricity_deg"], rel=1e-9)
+
+
+def test_experimenter_page(server: LiveServer) -> None:
+    """Create a session from the form, start it, pause it; no script errors."""
+    needs_chromium()
+    from playwright.sync_api import sync_playwright
+
+    errors: list[str] = []
+    with sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=CHROMIUM)
+        try:
+            page = browser.new_page()
+            page.set_default_timeout(10_000)
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.goto(server.url + "/")
+            page.wait_for_selector("#study:has-text('protocol disappear, 3 clips')")
+            page.fill("input[name=participant]", "p-form")
+            for k, v in PROFILE.items():
+                page.fill(f"input[name={k}]", str(v))
+            page.click("button:has-text('Create session')")
+            row = page.locator("#sessions tr", has_text="p-form")
+            row.locator("button:has-text('Start')").click()
+            row.locator("td:has-text('running')").wait_for()
+            row.locator("button:has-text('Pause')").click()
+            row.locator("td:has-text('paused')").wait_for()
+            link = row.locator("a").get_attribute("href")
+        finally:
+            browser.close()
+    (s,) = [s for s in server.store.sessions() if s["participant"] == "p-form"]
+    assert (s["state"], s["trials"], s["answered"]) == ("paused", 4, 0)
+    assert link == f"/participant?session={s['id']}"
+    assert {k: s[k] for k in PROFILE} == PROFILE
+    assert not errors

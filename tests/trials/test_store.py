@@ -1,0 +1,308 @@
+"""Trials without a browser: the study file, the measures, the response store."""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cosim.errors import ConfigError
+from cosim.renderer.video import open_video
+from cosim.trials.measures import Display, camera_to_screen_mm, measures_at, video_scale
+from cosim.trials.store import EXPORT_COLUMNS, Store, export_csv
+from cosim.trials.study import load_study, williams_row
+
+GT_HEADER = ("frame,time_s,vehicle,camera,target,in_view,fully_in_view,bbox_x0_px,bbox_y0_px,"
+             "bbox_x1_px,bbox_y1_px,center_x_px,center_y_px,eccentricity_px,eccentricity_deg,"
+             "angular_size_deg,pixels_on_target,range_m,contrast")
+
+
+def write_gt(path: Path, rows: list[tuple[int, float, float, int]], target: str = "truck",
+             half: tuple[float, float] = (10.0, 5.0)) -> Path:
+    """A ground truth: (frame, centre x, centre y, in_view) with a bbox of ``half`` sizes."""
+    lines = [GT_HEADER]
+    hx, hy = half
+    for f, cx, cy, iv in rows:
+        lines.append(f"{f},{f / 10:.6f},uav,nadir,{target},{iv},{iv},{cx - hx},{cy - hy},"
+                     f"{cx + hx},{cy + hy},{cx},{cy},,,,,,")
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+_VIDEOS: dict[str, bytes] = {}
+
+
+def write_video(path: Path, codec: str = "h264") -> Path:
+    """A 320 x 240, 5-frame, 10 Hz video (encoded once per codec)."""
+    if codec not in _VIDEOS:
+        tmp = path.with_name(f"_{codec}.mp4")
+        sink = open_video(str(tmp), codec, 10.0, 320, 240)
+        for k in range(5):
+            sink.write(np.full((240, 320, 3), 40 * k, np.uint8))
+        sink.release()
+        _VIDEOS[codec] = tmp.read_bytes()
+        tmp.unlink()
+    path.write_bytes(_VIDEOS[codec])
+    return path
+
+
+def write_study(folder: Path, body: str, clips: int = 2) -> Path:
+    for i in range(clips):
+        write_video(folder / f"c{i}.mp4")
+        write_gt(folder / f"c{i}.gt.csv", [(f, 159.5 + 10 * f, 119.5, 1) for f in range(5)])
+    p = folder / "study.yaml"
+    p.write_text(body)
+    return p
+
+
+CLIPS = """\
+clips:
+  - {video: c0.mp4, ground_truth: c0.gt.csv, rate_hz: 10, width_px: 320, height_px: 240,
+     conditions: {speed_kt: 50, alt_agl_m: 100, target: truck}}
+  - {video: c1.mp4, ground_truth: c1.gt.csv, rate_hz: 10, width_px: 320, height_px: 240,
+     conditions: {speed_kt: 100, alt_agl_m: 30.0, target: truck}}
+"""
+
+
+# --- study ---
+
+def test_study_reads_clips_and_orders_trials(tmp_path: Path) -> None:
+    p = write_study(tmp_path, "name: s\nprotocol: disappear\npractice: 1\nbreak_every: 2\n"
+                              "repeats: 2\norder: shuffle\nseed: 7\n" + CLIPS)
+    st = load_study(p)
+    assert [c.id for c in st.clips] == ["clip0", "clip1"]
+    assert st.clips[1].condition_map == {"speed_kt": "100", "alt_agl_m": "30", "target": "truck"}
+    assert st.clips[0].target == "truck" and len(st.clips[0].frames) == 5
+    trials = st.trial_order(0)
+    assert [t.practice for t in trials] == [True, False, False, False, False]
+    assert [t.break_before for t in trials] == [False, False, False, True, False]
+    assert sorted(t.clip for t in trials[1:]) == [0, 0, 1, 1]
+    assert trials == st.trial_order(0)  # the seed decides
+
+
+def test_williams_square_is_balanced() -> None:
+    for n in (4, 5):
+        rows = [williams_row(n, r) for r in range(n if n % 2 == 0 else 2 * n)]
+        for pos in range(n):  # every clip at every position equally often
+            counts = [sum(r[pos] == c for r in rows) for c in range(n)]
+            assert len(set(counts)) == 1, (n, pos, counts)
+        pairs: dict[tuple[int, int], int] = {}
+        for r in rows:  # every clip after every other equally often
+            for a, b in zip(r, r[1:]):
+                pairs[(a, b)] = pairs.get((a, b), 0) + 1
+        assert len(pairs) == n * (n - 1) and len(set(pairs.values())) == 1, (n, pairs)
+
+
+@pytest.mark.parametrize("body, match", [
+    ("protocol: disappear\nspeed: 3\n" + CLIPS, r"study\.yaml:2: speed: unknown key"),
+    ("protocol: blink\n" + CLIPS, r"study\.yaml:1: protocol: expected one of: disappear, "
+                                  r"recognise; got 'blink'"),
+    ("protocol: disappear\n", r"study\.yaml:1: \(top level\): missing the clips"),
+    ("protocol: disappear\npractice: -1\n" + CLIPS, r"study\.yaml:2: practice: must be >= 0"),
+    ("protocol: disappear\nclips:\n  - {video: c0.mp4, ground_truth: c0.gt.csv, fps: 3}\n",
+     r"study\.yaml:3: clips\[0\]\.fps: unknown key"),
+    ("protocol: disappear\nprotocol: recognise\n" + CLIPS, r"study\.yaml:2: protocol: duplicate"),
+    ("protocol: [disappear\n", r"study\.yaml:\d+: YAML syntax error"),
+])
+def test_study_errors_name_file_and_line(tmp_path: Path, body: str, match: str) -> None:
+    p = write_study(tmp_path, body)
+    with pytest.raises(ConfigError, match=match):
+        load_study(p)
+
+
+def test_study_reports_every_problem_at_once(tmp_path: Path) -> None:
+    p = write_study(tmp_path, "protocol: blink\norder: random\nseed: x\n" + CLIPS)
+    with pytest.raises(ConfigError) as e:
+        load_study(p)
+    assert [m.split(":")[1] for m in e.value.problems] == ["1", "2", "3"]
+
+
+def test_ground_truth_errors_name_their_line(tmp_path: Path) -> None:
+    p = write_study(tmp_path, "protocol: disappear\n" + CLIPS)
+    gt = tmp_path / "c1.gt.csv"
+    lines = gt.read_text().splitlines()
+    fields = lines[3].split(",")
+    fields[7] = "abc"  # bbox_x0_px of file line 4
+    lines[3] = ",".join(fields)
+    gt.write_text("\n".join(lines) + "\n")
+    with pytest.raises(ConfigError, match=r"study\.yaml:\d+: clips\[1\]: .*c1\.gt\.csv:4: "
+                                          r"bbox_x0_px: expected a number, got 'abc"):
+        load_study(p)
+
+
+def test_ground_truth_target_must_exist(tmp_path: Path) -> None:
+    p = write_study(tmp_path, "protocol: disappear\nclips:\n  - {video: c0.mp4, ground_truth: "
+                              "c0.gt.csv, target: bus, rate_hz: 10, width_px: 8, height_px: 8}\n")
+    with pytest.raises(ConfigError, match=r"no target 'bus' in the ground truth \(it has: truck"):
+        load_study(p)
+
+
+@pytest.mark.parametrize("video", ["../outside.mp4", "/etc/passwd", "link.mp4", "sub"])
+def test_clip_files_must_be_inside_the_study_folder(tmp_path: Path, video: str) -> None:
+    study_dir = tmp_path / "study"
+    study_dir.mkdir()
+    (tmp_path / "outside.mp4").write_bytes(b"x")
+    os.symlink(tmp_path / "outside.mp4", study_dir / "link.mp4")
+    (study_dir / "sub").mkdir()
+    p = write_study(study_dir, f"protocol: disappear\nclips:\n  - {{video: {video}, ground_truth: "
+                               f"c0.gt.csv, rate_hz: 10, width_px: 8, height_px: 8}}\n")
+    with pytest.raises(ConfigError, match=r"study\.yaml:3: clips\[0\]\.video: .* must be an "
+                                          r"existing file inside the study's folders"):
+        load_study(p)
+
+
+def _sweep(folder: Path, video: str) -> None:
+    (folder / "run_0000" / "cameras").mkdir(parents=True)
+    write_video(folder / "run_0000" / "cameras" / "uav_nadir.mp4")
+    write_gt(folder / "run_0000" / "cameras" / "uav_nadir.gt.csv",
+             [(f, 100.0, 100.0, 1) for f in range(3)], target="fire_truck")
+    (folder / "manifest.csv").write_text(
+        "speed_kt,alt_agl_m,target,run,vehicle,camera,video,ground_truth,frames,rate_hz,"
+        "width_px,height_px,hfov_deg,vfov_deg\n"
+        f"50,30,fire_truck,run_0000,uav,nadir,{video},run_0000/cameras/uav_nadir.gt.csv,3,30,"
+        "320,240,48.7,37.6\n")
+
+
+def test_sweep_folder_clips(tmp_path: Path) -> None:
+    _sweep(tmp_path / "exp2", "run_0000/cameras/uav_nadir.mp4")
+    p = tmp_path / "study.yaml"
+    p.write_text("protocol: recognise\nsweep: {folder: exp2, where: {speed_kt: 50}}\n")
+    st = load_study(p)
+    (c,) = st.clips
+    assert (c.id, c.run, c.target, c.rate_hz, c.width_px) == (
+        "run_0000/uav_nadir", "run_0000", "fire_truck", 30.0, 320)
+    assert c.condition_map == {"speed_kt": "50", "alt_agl_m": "30", "target": "fire_truck"}
+    assert (tmp_path / "exp2").resolve() in st.roots
+
+
+def test_sweep_manifest_cannot_point_outside(tmp_path: Path) -> None:
+    _sweep(tmp_path / "exp2", "../../../etc/passwd")
+    p = tmp_path / "study.yaml"
+    p.write_text("protocol: disappear\nsweep: exp2\n")
+    with pytest.raises(ConfigError, match=r"study\.yaml:2: sweep: .*manifest\.csv:2: video "
+                                          r"'\.\./\.\./\.\./etc/passwd' must be an existing file "
+                                          r"inside the sweep folder"):
+        load_study(p)
+
+
+def test_videos_must_play_in_browsers_and_match_their_size(tmp_path: Path) -> None:
+    p = write_study(tmp_path, "protocol: disappear\n" + CLIPS)
+    write_video(tmp_path / "c1.mp4", codec="mp4v")
+    with pytest.raises(ConfigError, match=r"study\.yaml:\d+: clips\[1\]: .*c1\.mp4: codec "
+                                          r"mpeg4 does not play in browsers; .*codec: h264"):
+        load_study(p)
+    p.write_text(p.read_text().replace("width_px: 320", "width_px: 640", 1))
+    write_video(tmp_path / "c1.mp4")
+    with pytest.raises(ConfigError, match=r"clips\[0\]: .*c0\.mp4: the video is 320 x 240 px, "
+                                          r"not 640 x 240"):
+        load_study(p)
+    (tmp_path / "c0.mp4").write_bytes(b"not a video")
+    with pytest.raises(ConfigError, match=r"clips\[0\]: .*c0\.mp4: cannot read it as a video"):
+        load_study(p)
+
+
+# --- measures ---
+
+def test_measures_by_hand(tmp_path: Path) -> None:
+    # a 320 x 240 video on a 1600 x 900 px, 400 x 225 mm screen: drawn 3.75x (900 / 240),
+    # 1200 px wide with 200 px bars left and right; 0.25 mm a screen pixel; eye 500 mm away
+    p = write_study(tmp_path, "protocol: disappear\n" + CLIPS)
+    write_gt(tmp_path / "c0.gt.csv", [(0, 159.5, 119.5, 1), (1, 199.5, 99.5, 1),
+                                      (2, 400.0, 99.5, 0)])
+    clip = load_study(p).clips[0]
+    d = Display(screen_width_px=1600, screen_height_px=900, screen_width_mm=400,
+                screen_height_mm=225, viewing_distance_mm=500)
+    assert video_scale(d, 320, 240) == 3.75
+    assert camera_to_screen_mm(d, 320, 240, -0.5, -0.5) == (-150.0, -112.5)  # image corner
+    m0 = measures_at(clip, 0, d)  # the target at the image centre = the fixation mark
+    assert (m0.frame, m0.onscreen_distance_mm, m0.eccentricity_deg) == (0, 0.0, 0.0)
+    # its bbox 20 x 10 camera px = 18.75 x 9.375 mm, centred: 2 atan(half diagonal / 500)
+    assert m0.target_angular_size_deg == pytest.approx(
+        2 * math.degrees(math.atan(math.hypot(9.375, 4.6875) / 500)), rel=1e-12)
+    m1 = measures_at(clip, 1, d)  # 40 px right, 20 px up: 150 x 75 screen px = 37.5, 18.75 mm
+    assert (m1.screen_x_mm, m1.screen_y_mm) == (37.5, -18.75)
+    assert m1.onscreen_distance_mm == pytest.approx(18.75 * math.sqrt(5), rel=1e-12)
+    assert m1.eccentricity_deg == pytest.approx(
+        math.degrees(math.atan(18.75 * math.sqrt(5) / 500)), rel=1e-12)
+    m2 = measures_at(clip, 2, d)  # out of view: a position, no size
+    assert m2.target_in_view is False and m2.target_angular_size_deg is None
+    assert clip.frame_at(0.149) == 1 and clip.frame_at(0.151) == 2
+    assert clip.frame_at(9.0) == 2 and clip.frame_at(-0.2) == 0  # clamped to the clip
+
+
+def test_display_profile_is_checked() -> None:
+    with pytest.raises(ConfigError, match=r"viewing_distance_mm must be a number in"):
+        Display(screen_width_px=1920, screen_height_px=1080, screen_width_mm=500,
+                screen_height_mm=280, viewing_distance_mm=0)
+
+
+# --- store ---
+
+DISPLAY = {"screen_width_px": 1920, "screen_height_px": 1080, "screen_width_mm": 531.0,
+           "screen_height_mm": 299.0, "viewing_distance_mm": 600.0}
+
+
+def _response(session: str, trial: int, **kw: object) -> dict[str, object]:
+    return {"session": session, "participant": "p01", "trial_index": trial, "kind": "disappear",
+            "practice": trial == 0, "protocol": "disappear", "clip": "run_0000/uav_nadir",
+            "run": "run_0000", "conditions": "{}", "condition_speed_kt": "50",
+            "condition_alt_agl_m": "30", "condition_target": "truck", "key": "space",
+            "frame": 12, "video_time_s": 0.4, "reaction_time_ms": 412.5,
+            "target_in_view": True, "eccentricity_deg": 3.25, "onscreen_distance_mm": 34.1,
+            "target_angular_size_deg": 0.5, "recognised": None, **DISPLAY, **kw}
+
+
+def test_responses_are_stored_once_and_exported(tmp_path: Path) -> None:
+    db = tmp_path / "trials.sqlite"
+    with Store(db) as store:
+        s = store.create_session(participant="p01", study="s", protocol="disappear",
+                                 display=DISPLAY, order_method="shuffle", seed=7,
+                                 session_number=0, trial_order=[{"index": 0}, {"index": 1}])
+        sid = s["id"]
+        assert s["trial_order"] == [{"index": 0}, {"index": 1}] and s["state"] == "ready"
+        row, created = store.record_response(_response(sid, 0))
+        assert created and row["frame"] == 12
+        again, created = store.record_response(_response(sid, 0, frame=99, key="x"))
+        assert not created and again["frame"] == 12 and again["id"] == row["id"]  # first wins
+        store.record_response(_response(sid, 1, key="none", frame=None, video_time_s=None,
+                                        reaction_time_ms=None, target_in_view=None,
+                                        eccentricity_deg=None, onscreen_distance_mm=None,
+                                        target_angular_size_deg=None))
+        assert len(store.responses(sid)) == 2
+        assert store.sessions()[0]["answered"] == 2
+    out = export_csv(db, tmp_path / "responses.csv")  # a path: opens its own store
+    with out.open(newline="") as f:
+        rows = list(csv.reader(f))
+    assert tuple(rows[0]) == EXPORT_COLUMNS
+    assert EXPORT_COLUMNS == (
+        "session", "participant", "trial_index", "practice", "protocol", "clip", "run",
+        "condition_speed_kt", "condition_alt_agl_m", "condition_target", "frame",
+        "video_time_s", "reaction_time_ms", "key", "target_in_view", "eccentricity_deg",
+        "onscreen_distance_mm", "target_angular_size_deg", "viewing_distance_mm",
+        "screen_width_mm", "screen_height_mm", "screen_width_px", "screen_height_px",
+        "recognised")
+    first = dict(zip(rows[0], rows[1]))
+    assert first == {
+        "session": sid, "participant": "p01", "trial_index": "0", "practice": "1",
+        "protocol": "disappear", "clip": "run_0000/uav_nadir", "run": "run_0000",
+        "condition_speed_kt": "50", "condition_alt_agl_m": "30", "condition_target": "truck",
+        "frame": "12", "video_time_s": "0.4", "reaction_time_ms": "412.5", "key": "space",
+        "target_in_view": "1", "eccentricity_deg": "3.25", "onscreen_distance_mm": "34.1",
+        "target_angular_size_deg": "0.5", "viewing_distance_mm": "600.0",
+        "screen_width_mm": "531.0", "screen_height_mm": "299.0", "screen_width_px": "1920",
+        "screen_height_px": "1080", "recognised": ""}
+    second = dict(zip(rows[0], rows[2]))
+    assert (second["practice"], second["frame"], second["target_in_view"], second["key"]) == (
+        "0", "", "", "none")
+    assert len(rows) == 3
+
+
+def test_store_url_and_bad_url(tmp_path: Path) -> None:
+    with Store(f"sqlite:///{tmp_path / 'u.sqlite'}") as store:
+        assert store.sessions() == []
+    with pytest.raises(ConfigError, match=r"cannot open the trial database nosuch://x"):
+        Store("nosuch://x")

@@ -1,0 +1,39 @@
+"""`cosim trials` from the command line: analyse a synthetic responses file
+made from known critical gaps (examples/trials_synthetic.py) and find them;
+refuse to listen beyond this machine without --public."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+from cosim.cli import main
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def test_analyse_finds_the_critical_gaps_the_responses_were_made_with(tmp_path: Path,
+                                                                    capsys) -> None:
+    csv_path = tmp_path / "responses.csv"
+    subprocess.run([sys.executable, str(REPO / "examples" / "trials_synthetic.py"), "--out",
+                    str(csv_path)], check=True, capture_output=True)
+    assert main(["-q", "trials", "analyse", str(csv_path), "--out", str(tmp_path / "a")]) == 0
+    out = capsys.readouterr().out
+    got = {m[0]: (float(m[1]), float(m[2])) for m in
+           re.findall(r"critical gap, (\w+): plateau: CG ([\d.]+) mm .*?d0 = (\d+) mm", out)}
+    assert set(got) == {"truck", "fire_truck"}
+    assert abs(got["truck"][0] - 40.0) < 1.5 and abs(got["fire_truck"][0] - 60.0) < 2.0
+    assert all(abs(d0 - 600.0) <= 20.0 for _, d0 in got.values())
+    alt = re.search(r"alt_per_100m: ([+-][\d.]+)", out)
+    assert alt is not None and -1.6 < float(alt.group(1)) < -0.9  # made with -1.2
+    for name in ("conspicuity.csv", "critical_gap.png", "recognition.png", "analysis.json"):
+        assert (tmp_path / "a" / name).stat().st_size > 0
+
+
+def test_serve_refuses_other_machines_without_public(tmp_path: Path, capsys) -> None:
+    study = tmp_path / "s.yaml"
+    study.write_text("schema_version: 1\nname: s\nprotocol: disappear\nclips: []\n")
+    assert main(["-q", "trials", "serve", str(study), "--host", "0.0.0.0"]) == 2
+    assert "--public" in capsys.readouterr().err
