@@ -681,6 +681,13 @@ def _cmd_search_plan(a: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _existing_db(db: str) -> None:
+    """A database file to read must be there (opening a mistyped path would
+    make an empty one)."""
+    if "://" not in db and not Path(db).is_file():
+        raise ConfigError(f"{db}: no such trial database")
+
+
 def _cmd_trials(a: argparse.Namespace) -> int:
     if a.trials_cmd == "serve":
         from cosim.trials.server import serve
@@ -692,6 +699,7 @@ def _cmd_trials(a: argparse.Namespace) -> int:
     if a.trials_cmd == "export":
         from cosim.trials.store import export_csv
 
+        _existing_db(a.db)
         print(export_csv(a.db, a.out))
         return EXIT_OK
     if a.trials_cmd == "analyse":
@@ -703,6 +711,7 @@ def _cmd_trials(a: argparse.Namespace) -> int:
         src = Path(a.responses)
         with tempfile.TemporaryDirectory() as tmp:
             if src.suffix.lower() != ".csv":  # a database: its responses first
+                _existing_db(a.responses)
                 src = export_csv(a.responses, Path(tmp) / "responses.csv")
             summary = analyse(src, a.out, seed=a.seed)
         for target, fit in sorted(summary.get("critical_gap", {}).items()):

@@ -234,6 +234,9 @@ def read_responses(csv_path: str | Path, *, max_bytes: int = MAX_BYTES,
                 values[c] = v
         fl: dict[str, bool] = {}
         for c in _FLAGS:
+            if c == "target_in_view" and cells[c] == "":  # no key press: no frame shown
+                fl[c] = False
+                continue
             if cells[c] not in ("0", "1"):
                 problems.add(start, f"{c}: expected 0 or 1, got {cells[c]!r}")
                 ok = False

@@ -41,7 +41,7 @@ from starlette.staticfiles import StaticFiles
 from cosim.errors import ConfigError
 from cosim.netaddr import is_loopback
 from cosim.trials.measures import Display, measures_at
-from cosim.trials.store import Store, write_csv
+from cosim.trials.store import Store, shown_url, write_csv
 from cosim.trials.study import Clip, Study, load_study
 
 log = logging.getLogger(__name__)
@@ -63,7 +63,33 @@ class BadRequest(Exception):
         self.message, self.status = message, status
 
 
+def _same_origin(request: Request) -> None:
+    """A state-changing request must be JSON (which a page elsewhere cannot
+    send without asking first) and, when the browser says where it comes
+    from, come from this server's own pages."""
+    ctype = request.headers.get("content-type", "").split(";")[0].strip().lower()
+    if ctype != "application/json":
+        raise BadRequest("expected Content-Type: application/json", 415)
+    origin = request.headers.get("origin")
+    if origin is not None and origin.split("://", 1)[-1] != request.headers.get("host", ""):
+        raise BadRequest("refused: a request from another site's page", 403)
+
+
+def _experimenter(fn: Any) -> Any:
+    """The experimenter's routes (sessions, their states, the export) answer
+    this machine only, also when the server is ``--public`` for the
+    participants' screens."""
+    async def guarded(request: Request) -> Response:
+        client = request.client.host if request.client is not None else ""
+        if not is_loopback(client):
+            raise BadRequest("the experimenter's pages answer this machine only", 403)
+        out: Response = await fn(request)
+        return out
+    return guarded
+
+
 async def _json_body(request: Request) -> dict[str, Any]:
+    _same_origin(request)
     body = b""
     async for chunk in request.stream():
         body += chunk
@@ -210,6 +236,8 @@ class TrialApp:
             "key": key, "reaction_time_ms": rt, "recognised": recognised,
             **{f"condition_{c}": clip.condition_map.get(c) for c in CONDITION_COLUMNS},
             **display.__dict__}
+        if not row.get("condition_target"):  # a study that does not vary the target
+            row["condition_target"] = clip.target
         if media is not None:
             m = measures_at(clip, clip.frame_at(media), display)
             row.update(frame=m.frame, video_time_s=media, target_in_view=m.target_in_view,
@@ -274,15 +302,15 @@ def make_app(study: Study | str | Path, db: Store | str | Path,
     store = db if isinstance(db, Store) else Store(db)
     a = TrialApp(st, store)
     routes = [
-        Route("/", _page("experimenter.html")),
+        Route("/", _experimenter(_page("experimenter.html"))),
         Route("/participant", _page("participant.html")),
-        Route("/api/study", a.study_info),
-        Route("/api/sessions", a.list_sessions, methods=["GET"]),
-        Route("/api/sessions", a.create_session, methods=["POST"]),
+        Route("/api/study", _experimenter(a.study_info)),
+        Route("/api/sessions", _experimenter(a.list_sessions), methods=["GET"]),
+        Route("/api/sessions", _experimenter(a.create_session), methods=["POST"]),
         Route("/api/sessions/{sid}", a.get_session),
-        Route("/api/sessions/{sid}/state", a.set_state, methods=["POST"]),
+        Route("/api/sessions/{sid}/state", _experimenter(a.set_state), methods=["POST"]),
         Route("/api/sessions/{sid}/responses", a.post_response, methods=["POST"]),
-        Route("/api/export.csv", a.export),
+        Route("/api/export.csv", _experimenter(a.export)),
         Route("/video/{n:int}", a.video),
         Mount("/static", StaticFiles(directory=STATIC), name="static"),
     ]
@@ -309,5 +337,5 @@ def serve(study_path: str | Path, host: str = "127.0.0.1", port: int = 8000,
     hosts = ["*"] if public else LOCAL_HOSTS
     app = make_app(st, db, allowed_hosts=hosts)
     log.info("study %s: %d clips; responses in %s; experimenter page http://%s:%d/",
-             st.name, len(st.clips), db, host, port)
+             st.name, len(st.clips), shown_url(db), host, port)
     uvicorn.run(app, host=host, port=port, log_level="info")

@@ -100,6 +100,16 @@ def _now() -> str:
     return datetime.now(timezone.utc).isoformat(timespec="milliseconds")
 
 
+def shown_url(db: str) -> str:
+    """A database URL fit for logs and messages: its password hidden."""
+    if "://" not in db:
+        return db
+    try:
+        return str(sa.engine.make_url(db).render_as_string(hide_password=True))
+    except Exception:  # noqa: BLE001 - not a URL SQLAlchemy reads: say only its scheme
+        return db.split("://", 1)[0] + "://..."
+
+
 def database_url(db: str | Path) -> str:
     """A SQLAlchemy URL: ``db`` itself if it has a scheme, else a SQLite file path."""
     s = str(db)
@@ -119,7 +129,8 @@ class Store:
                 sa.event.listen(self.engine, "connect", _sqlite_pragmas)
             metadata.create_all(self.engine)
         except Exception as e:  # noqa: BLE001 - a bad URL, a missing driver, a locked file
-            raise ConfigError(f"cannot open the trial database {db}: {e}") from None
+            raise ConfigError(f"cannot open the trial database {shown_url(str(db))}: {e}"
+                              ) from None
 
     def __enter__(self) -> Store:
         return self

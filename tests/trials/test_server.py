@@ -411,3 +411,50 @@ def test_experimenter_page(server: LiveServer) -> None:
     assert link == f"/participant?session={s['id']}"
     assert {k: s[k] for k in PROFILE} == PROFILE
     assert not errors
+
+
+def test_pages_elsewhere_cannot_post_and_other_machines_cannot_run_sessions(
+        server: LiveServer) -> None:
+    import asyncio
+
+    from starlette.requests import Request
+
+    from cosim.trials.server import BadRequest, _experimenter
+
+    body = json.dumps({"participant": "x", **PROFILE})
+    c = http.client.HTTPConnection(server.host, int(server.port), timeout=10)
+    try:  # a form post from another site's page: text/plain, no preflight
+        c.request("POST", "/api/sessions", body=body, headers={"Content-Type": "text/plain"})
+        assert c.getresponse().status == 415
+    finally:
+        c.close()
+    status, _ = server.request("POST", "/api/sessions", {"participant": "x", **PROFILE},
+                               headers={"Origin": "http://evil.example"})
+    assert status == 403
+    # the experimenter's routes answer this machine only, --public or not
+    calls: list[str] = []
+
+    async def page(request: Request) -> Any:
+        calls.append(request.url.path)
+
+    guarded = _experimenter(page)
+    scope = {"type": "http", "method": "GET", "path": "/", "headers": [], "query_string": b""}
+    with pytest.raises(BadRequest) as e:
+        asyncio.run(guarded(Request({**scope, "client": ("192.0.2.7", 50000)})))
+    assert e.value.status == 403 and not calls
+    asyncio.run(guarded(Request({**scope, "client": ("127.0.0.1", 50000)})))
+    assert calls == ["/"]
+
+
+def test_a_live_sessions_export_is_analysed(server: LiveServer, browser_run: dict[str, Any],
+                                            tmp_path: Path) -> None:
+    """Live responses (a trial without a press among them, clips whose target
+    is not a swept condition) export and analyse without a problem."""
+    from cosim.trials.analysis import analyse
+    from cosim.trials.store import export_csv
+
+    path = export_csv(server.store, tmp_path / "responses.csv")
+    rows = path.read_text().splitlines()
+    assert len(rows) > 2 and any(",none," in r for r in rows)  # a trial run out unpressed
+    summary = analyse(path, tmp_path / "a", plots=False)
+    assert summary["rows"] >= len(browser_run["responses"])
