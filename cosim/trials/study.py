@@ -276,8 +276,9 @@ def read_clip_truth(p: Path, target: str | None) -> tuple[str, tuple[GtFrame, ..
     return target, tuple(frames[k] for k in sorted(frames))
 
 
-def _probe_video(p: Path) -> tuple[float, int, int, str]:
-    """(rate_hz, width_px, height_px, codec) of a video file, read by PyAV."""
+def _probe_video(p: Path) -> tuple[float, int, int, str, int]:
+    """(rate_hz, width_px, height_px, codec, frames: 0 if the file does not
+    say) of a video file, read by PyAV."""
     try:
         import av
 
@@ -287,7 +288,7 @@ def _probe_video(p: Path) -> tuple[float, int, int, str]:
             if not rate:
                 raise ValueError("no frame rate")
             cc = s.codec_context
-            return float(rate), int(cc.width), int(cc.height), str(cc.name)
+            return float(rate), int(cc.width), int(cc.height), str(cc.name), int(s.frames or 0)
     except Exception as e:  # noqa: BLE001 - any failure is "cannot read this video"
         raise ConfigError(f"{p}: cannot read it as a video ({e})") from None
 
@@ -363,12 +364,18 @@ def _clip_from(ctx: _Ctx, at: tuple[Any, ...], cid: str, video: Path, gt: Path,
                height: int | None, conditions: dict[str, str]) -> Clip | None:
     try:
         target, frames = read_clip_truth(gt, target)
-        r2, w2, h2, codec = _probe_video(video)
+        r2, w2, h2, codec, n2 = _probe_video(video)
         if codec not in BROWSER_CODECS:
             raise ConfigError(f"{video}: codec {codec} does not play in browsers; render the "
                               f"clips with `cameras: {{codec: h264, views: [...]}}`")
         if (width or w2, height or h2) != (w2, h2):
             raise ConfigError(f"{video}: the video is {w2} x {h2} px, not {width} x {height}")
+        # a key press's frame is found from the rate: a wrong one measures the wrong frame
+        if rate is not None and abs(rate - r2) > 1e-3 * r2:
+            raise ConfigError(f"{video}: the video runs at {r2:g} frames/s, not {rate:g}")
+        if n2 and frames and abs(n2 - len(frames)) > 1:
+            raise ConfigError(f"{video}: {n2} frames, but {gt} has {len(frames)} for "
+                              f"target {target!r}")
         rate, width, height = rate or r2, w2, h2
     except ConfigError as e:
         for msg in e.problems:

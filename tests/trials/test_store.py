@@ -159,11 +159,11 @@ def _sweep(folder: Path, video: str) -> None:
     (folder / "run_0000" / "cameras").mkdir(parents=True)
     write_video(folder / "run_0000" / "cameras" / "uav_nadir.mp4")
     write_gt(folder / "run_0000" / "cameras" / "uav_nadir.gt.csv",
-             [(f, 100.0, 100.0, 1) for f in range(3)], target="fire_truck")
+             [(f, 100.0, 100.0, 1) for f in range(5)], target="fire_truck")
     (folder / "manifest.csv").write_text(
         "speed_kt,alt_agl_m,target,run,vehicle,camera,video,ground_truth,frames,rate_hz,"
         "width_px,height_px,hfov_deg,vfov_deg\n"
-        f"50,30,fire_truck,run_0000,uav,nadir,{video},run_0000/cameras/uav_nadir.gt.csv,3,30,"
+        f"50,30,fire_truck,run_0000,uav,nadir,{video},run_0000/cameras/uav_nadir.gt.csv,5,10,"
         "320,240,48.7,37.6\n")
 
 
@@ -174,7 +174,7 @@ def test_sweep_folder_clips(tmp_path: Path) -> None:
     st = load_study(p)
     (c,) = st.clips
     assert (c.id, c.run, c.target, c.rate_hz, c.width_px) == (
-        "run_0000/uav_nadir", "run_0000", "fire_truck", 30.0, 320)
+        "run_0000/uav_nadir", "run_0000", "fire_truck", 10.0, 320)
     assert c.condition_map == {"speed_kt": "50", "alt_agl_m": "30", "target": "fire_truck"}
     assert (tmp_path / "exp2").resolve() in st.roots
 
@@ -200,6 +200,17 @@ def test_videos_must_play_in_browsers_and_match_their_size(tmp_path: Path) -> No
     with pytest.raises(ConfigError, match=r"clips\[0\]: .*c0\.mp4: the video is 320 x 240 px, "
                                           r"not 640 x 240"):
         load_study(p)
+    # the rate maps a key press to a frame: a wrong one is refused, as a short ground truth
+    p.write_text(p.read_text().replace("width_px: 640", "width_px: 320", 1)
+                 .replace("rate_hz: 10", "rate_hz: 12", 1))
+    with pytest.raises(ConfigError, match=r"clips\[0\]: .*c0\.mp4: the video runs at 10 "
+                                          r"frames/s, not 12"):
+        load_study(p)
+    p.write_text(p.read_text().replace("rate_hz: 12", "rate_hz: 10", 1))
+    write_gt(tmp_path / "c0.gt.csv", [(f, 159.5, 119.5, 1) for f in range(2)])
+    with pytest.raises(ConfigError, match=r"c0\.mp4: 5 frames, but .*c0\.gt\.csv has 2"):
+        load_study(p)
+    write_gt(tmp_path / "c0.gt.csv", [(f, 159.5, 119.5, 1) for f in range(5)])
     (tmp_path / "c0.mp4").write_bytes(b"not a video")
     with pytest.raises(ConfigError, match=r"clips\[0\]: .*c0\.mp4: cannot read it as a video"):
         load_study(p)
@@ -212,7 +223,8 @@ def test_measures_by_hand(tmp_path: Path) -> None:
     # 1200 px wide with 200 px bars left and right; 0.25 mm a screen pixel; eye 500 mm away
     p = write_study(tmp_path, "protocol: disappear\n" + CLIPS)
     write_gt(tmp_path / "c0.gt.csv", [(0, 159.5, 119.5, 1), (1, 199.5, 99.5, 1),
-                                      (2, 400.0, 99.5, 0)])
+                                      (2, 400.0, 99.5, 0), (3, 400.0, 99.5, 0),
+                                      (4, 400.0, 99.5, 0)])
     clip = load_study(p).clips[0]
     d = Display(screen_width_px=1600, screen_height_px=900, screen_width_mm=400,
                 screen_height_mm=225, viewing_distance_mm=500)
@@ -231,7 +243,7 @@ def test_measures_by_hand(tmp_path: Path) -> None:
     m2 = measures_at(clip, 2, d)  # out of view: a position, no size
     assert m2.target_in_view is False and m2.target_angular_size_deg is None
     assert clip.frame_at(0.149) == 1 and clip.frame_at(0.151) == 2
-    assert clip.frame_at(9.0) == 2 and clip.frame_at(-0.2) == 0  # clamped to the clip
+    assert clip.frame_at(9.0) == 4 and clip.frame_at(-0.2) == 0  # clamped to the clip
 
 
 def test_display_profile_is_checked() -> None:
