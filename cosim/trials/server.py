@@ -229,6 +229,8 @@ class TrialApp:
         if media is not None and not -1.0 <= media <= len(clip.frames) / clip.rate_hz + 1.0:
             raise BadRequest(f"media_time_s {media} is outside clip {clip.id}")
         display = Display(**{k: s[k] for k in DISPLAY_FIELDS})
+        drawn = _drawn_on(display, _number(d, "window_width_px", optional=True),
+                          _number(d, "window_height_px", optional=True))
         row: dict[str, Any] = {
             "session": s["id"], "participant": s["participant"], "trial_index": ti,
             "kind": kind, "practice": bool(t["practice"]), "protocol": s["protocol"],
@@ -239,7 +241,7 @@ class TrialApp:
         if not row.get("condition_target"):  # a study that does not vary the target
             row["condition_target"] = clip.target
         if media is not None:
-            m = measures_at(clip, clip.frame_at(media), display)
+            m = measures_at(clip, clip.frame_at(media), drawn)
             row.update(frame=m.frame, video_time_s=media, target_in_view=m.target_in_view,
                        eccentricity_deg=m.eccentricity_deg,
                        onscreen_distance_mm=m.onscreen_distance_mm,
@@ -267,6 +269,27 @@ class TrialApp:
         if not any(p.is_relative_to(r) for r in self.study.roots):  # checked at load; again
             raise BadRequest("not a study file", 403)
         return FileResponse(p, media_type=_video_type(p))
+
+
+def _drawn_on(display: Display, w: float | None, h: float | None) -> Display:
+    """Where the clip was drawn: the page's size (device px) as the browser
+    reported it, at the profile's millimetres per pixel, with the fixation
+    mark at its centre; the profile's screen if the page did not say (or said
+    the same)."""
+    if w is None or h is None:
+        return display
+    if not (w == int(w) and h == int(h) and 16 <= w <= 16384 and 16 <= h <= 16384):
+        raise BadRequest("window_width_px/window_height_px: whole numbers 16..16384")
+    wi, hi = int(w), int(h)
+    if (wi, hi) == (display.screen_width_px, display.screen_height_px):
+        return display
+    mx, my = display.mm_per_px
+    log.warning("the participant's page is %d x %d px, not the profile's %d x %d: measured "
+                "as drawn", wi, hi, display.screen_width_px, display.screen_height_px)
+    try:
+        return Display(wi, hi, wi * mx, hi * my, display.viewing_distance_mm)
+    except ConfigError as e:
+        raise BadRequest(f"the page's size {wi} x {hi} px: {e}") from None
 
 
 def _whole(v: Any) -> Any:

@@ -135,11 +135,15 @@ def needs_chromium() -> None:
         pytest.skip(f"{CHROMIUM} is absent (apt-get install chromium); the browser tests need it")
 
 
-def expected(clip: str, frame: int) -> dict[str, float]:
-    """The measures at ``frame`` of ``clip`` on PROFILE, from the clip's own geometry."""
-    scale = min(PROFILE["screen_width_px"] / W, PROFILE["screen_height_px"] / H)
+def expected(clip: str, frame: int, page_px: tuple[int, int] | None = None
+             ) -> dict[str, float]:
+    """The measures at ``frame`` of ``clip`` on PROFILE (or drawn on a page of
+    ``page_px`` device pixels at PROFILE's pixel size), from the clip's own
+    geometry."""
+    pw, ph = page_px or (PROFILE["screen_width_px"], PROFILE["screen_height_px"])
+    scale = min(pw / W, ph / H)
     cx, cy = centre(clip, frame)
-    # the image centre (pixel centres at integers) is the screen centre
+    # the image centre (pixel centres at integers) is the page's centre: the fixation mark
     x_mm = (cx - (W - 1) / 2) * scale * PROFILE["screen_width_mm"] / PROFILE["screen_width_px"]
     y_mm = (cy - (H - 1) / 2) * scale * PROFILE["screen_height_mm"] / PROFILE["screen_height_px"]
     d = math.hypot(x_mm, y_mm)
@@ -458,3 +462,24 @@ def test_a_live_sessions_export_is_analysed(server: LiveServer, browser_run: dic
     assert len(rows) > 2 and any(",none," in r for r in rows)  # a trial run out unpressed
     summary = analyse(path, tmp_path / "a", plots=False)
     assert summary["rows"] >= len(browser_run["responses"])
+
+
+def test_a_page_smaller_than_the_profile_is_measured_as_drawn(server: LiveServer) -> None:
+    """The browser says how large the page was: the clip fitted that, so the
+    target's place on the screen (and its eccentricity) follow it."""
+    s = _session(server, "p-window")
+    page = (PROFILE["screen_width_px"] // 2, PROFILE["screen_height_px"])
+    status, r = server.request("POST", f"/api/sessions/{s['id']}/responses", {
+        "trial_index": 1, "kind": "disappear", "key": "space", "media_time_s": 0.5,
+        "reaction_time_ms": 500.0, "window_width_px": page[0], "window_height_px": page[1]})
+    assert status == 201, r
+    clip = s["trials"][1]["clip_id"]
+    want = expected(clip, 5, page)
+    assert r["response"]["eccentricity_deg"] == pytest.approx(want["eccentricity_deg"],
+                                                               rel=1e-12)
+    assert want["eccentricity_deg"] != pytest.approx(expected(clip, 5)["eccentricity_deg"],
+                                                     rel=1e-3)  # the profile's would differ
+    status, r = server.request("POST", f"/api/sessions/{s['id']}/responses", {
+        "trial_index": 2, "kind": "disappear", "key": "space", "media_time_s": 0.5,
+        "window_width_px": 3.5, "window_height_px": 400})
+    assert status == 400 and "window_width_px" in r["error"]

@@ -127,7 +127,7 @@
       const e = await waitKey(["KeyY", "KeyN"]);
       return { trial_index: t.index, kind: "recognise", key: e.code === "KeyY" ? "y" : "n",
                recognised: e.code === "KeyY", media_time_s: r.mediaTime,
-               reaction_time_ms: r.rtMs };
+               reaction_time_ms: r.rtMs, ...windowPx() };
     }
     phase("fixation");
     hide();
@@ -136,7 +136,16 @@
     const r = await playClip(t, ["Space"]);
     fixation.hidden = true;
     return { trial_index: t.index, kind: "disappear", key: r.code ? "space" : "none",
-             media_time_s: r.mediaTime, reaction_time_ms: r.rtMs, recognised: null };
+             media_time_s: r.mediaTime, reaction_time_ms: r.rtMs, recognised: null,
+             ...windowPx() };
+  }
+
+  // the page's size in device pixels as the clip was drawn: the server measures
+  // with it (the video fits this, not the profile's screen, if they differ)
+  function windowPx() {
+    const dpr = window.devicePixelRatio || 1;
+    return { window_width_px: Math.round(innerWidth * dpr),
+             window_height_px: Math.round(innerHeight * dpr) };
   }
 
   function checkDisplay(d) {
