@@ -3,7 +3,7 @@
 Reads the responses CSV the trial server exports (one row per response,
 columns ``COLUMNS``), drops practice rows and writes into ``out_dir``:
 
-- ``conspicuity.csv``: experiment 1 ("disappear" protocol) per condition
+- ``conspicuity.csv``: experiment 1 ("disappear" and "track" protocols) per condition
   (target, viewing distance, altitude and speed where given): n, mean and
   median conspicuity angle alpha (deg) and conspicuity distance (mm on the
   screen), means with a 95 % t interval, medians with a 95 % percentile
@@ -57,7 +57,10 @@ COLUMNS: tuple[str, ...] = (
     "screen_width_mm", "screen_height_mm", "screen_width_px", "screen_height_px",
     "recognised",
 )
-PROTOCOLS = ("disappear", "recognise")
+PROTOCOLS = ("disappear", "recognise", "track")
+#: the protocols whose responses are conspicuity angles (the target's eccentricity
+#: from where the eyes are: the fixation mark, or the tracked dot)
+CONSPICUITY = ("disappear", "track")
 #: input limits: larger files are refused, not truncated
 MAX_BYTES = 50 * 1024 * 1024
 MAX_ROWS = 1_000_000
@@ -257,7 +260,7 @@ def read_responses(csv_path: str | Path, *, max_bytes: int = MAX_BYTES,
         if not cells["condition_target"]:
             problems.add(start, "condition_target: required, got an empty cell")
             ok = False
-        if ok and protocol == "disappear" and fl["target_in_view"]:
+        if ok and protocol in CONSPICUITY and fl["target_in_view"]:
             for c in ("eccentricity_deg", "onscreen_distance_mm"):
                 if math.isnan(values[c]):
                     problems.add(start, f"{c}: required on a 'disappear' response with "
@@ -708,7 +711,7 @@ def analyse(csv_path: str | Path, out_dir: str | Path, *, seed: int = 0,
     allr = read_responses(csv_path, max_bytes=max_bytes, max_rows=max_rows)
     r = allr.subset(~allr.practice)
     protocol = np.asarray(r.text["protocol"], dtype=object)
-    dis = r.subset(protocol == "disappear")
+    dis = r.subset(np.isin(protocol, CONSPICUITY))
     rec = r.subset(protocol == "recognise")
 
     # ---- experiment 1: conspicuity per condition

@@ -131,3 +131,32 @@ def measures_at(clip: Clip, frame_index: int, display: Display) -> Measures:
     return Measures(frame=g.frame, time_s=g.time_s, target_in_view=g.in_view,
                     screen_x_mm=x_mm, screen_y_mm=y_mm, onscreen_distance_mm=dist,
                     eccentricity_deg=ecc, target_angular_size_deg=size)
+
+
+def arrow_offset_mm(speed_deg_s: float, elapsed_ms: float, viewing_distance_mm: float) -> float:
+    """How far (mm on the screen) a ``track`` arrow has gone from the target
+    after ``elapsed_ms``: its angle from the target grows at ``speed_deg_s``
+    as seen from the eye in front of the target, ``D tan(speed t)`` (capped
+    short of 90 degrees)."""
+    a = min(math.radians(speed_deg_s * max(elapsed_ms, 0.0) / 1000.0), math.radians(89.0))
+    return viewing_distance_mm * math.tan(a)
+
+
+def track_measures(clip: Clip, display: Display, direction: tuple[float, float],
+                   speed_deg_s: float, elapsed_ms: float) -> Measures:
+    """A ``track`` sub-trial's measures at the key press: the clip still at its
+    ``still_frame``, the participant's eyes on the arrow that left the target
+    ``elapsed_ms`` before in ``direction``; the eccentricity is the target's
+    angle from the arrow, the on-screen distance the arrow's from the target."""
+    m = measures_at(clip, clip.still_frame, display)
+    if m.screen_x_mm is None or m.screen_y_mm is None:
+        return m
+    r = arrow_offset_mm(speed_deg_s, elapsed_ms, display.viewing_distance_mm)
+    target = (m.screen_x_mm, m.screen_y_mm)
+    arrow = (target[0] + r * direction[0], target[1] + r * direction[1])
+    return Measures(frame=m.frame, time_s=m.time_s, target_in_view=m.target_in_view,
+                    screen_x_mm=m.screen_x_mm, screen_y_mm=m.screen_y_mm,
+                    onscreen_distance_mm=r,
+                    eccentricity_deg=angle_between_deg(arrow, target,
+                                                       display.viewing_distance_mm),
+                    target_angular_size_deg=m.target_angular_size_deg)

@@ -40,9 +40,9 @@ from starlette.staticfiles import StaticFiles
 
 from cosim.errors import ConfigError
 from cosim.netaddr import is_loopback
-from cosim.trials.measures import Display, measures_at
+from cosim.trials.measures import Display, measures_at, track_measures
 from cosim.trials.store import Store, shown_url, write_csv
-from cosim.trials.study import Clip, Study, load_study
+from cosim.trials.study import TRACK_DIRECTIONS, Clip, Study, load_study
 
 log = logging.getLogger(__name__)
 
@@ -138,13 +138,26 @@ class TrialApp:
         return n, clips[n]
 
     def _view(self, s: dict[str, Any]) -> dict[str, Any]:
-        answered = {r["trial_index"] for r in self.store.responses(s["id"])}
+        done: dict[int, list[str]] = {}
+        for r in self.store.responses(s["id"]):
+            done.setdefault(r["trial_index"], []).append(r["kind"])
+        need = len(TRACK_DIRECTIONS) if s["protocol"] == "track" else 1
+        answered = {i for i, ks in done.items() if len(ks) >= need}
         trials = []
         for t in s["trial_order"]:
             n, c = self._clip(t)
-            trials.append({**t, "clip": n, "video": f"/video/{n}",
-                           "rate_hz": c.rate_hz, "frames": len(c.frames),
-                           "answered": t["index"] in answered})
+            view = {**t, "clip": n, "video": f"/video/{n}", "rate_hz": c.rate_hz,
+                    "frames": len(c.frames), "answered": t["index"] in answered,
+                    "done": sorted(done.get(t["index"], []))}
+            if s["protocol"] == "track":  # the still frame and the target on it
+                g = c.frames[c.still_frame]
+                view.update(still_time_s=c.still_frame / c.rate_hz,
+                            still_center_px=list(g.center_px) if g.center_px else None,
+                            width_px=c.width_px, height_px=c.height_px,
+                            arrow_speed_deg_s=self.study.arrow_speed_deg_s,
+                            directions=_directions(self.study.seed, s["session_number"],
+                                                   t["index"]))
+            trials.append(view)
         nxt = next((t["index"] for t in trials if not t["answered"]), None)
         if nxt is None and s["state"] != "finished":
             self.store.set_state(s["id"], "finished")
@@ -211,9 +224,11 @@ class TrialApp:
             raise BadRequest(f"trial_index: expected 0..{len(s['trial_order']) - 1}, "
                              f"got {ti!r}"[:200])
         kind = d.get("kind", s["protocol"])
-        if kind != s["protocol"]:
-            raise BadRequest(f"kind: this session's protocol is {s['protocol']}, got {kind!r}"
-                             [:200])
+        kinds = [f"track-{k}" for k in TRACK_DIRECTIONS] if s["protocol"] == "track" \
+            else [s["protocol"]]
+        if kind not in kinds:
+            raise BadRequest(f"kind: this session's protocol is {s['protocol']}: expected "
+                             f"{' or '.join(kinds)}, got {kind!r}"[:200])
         key = d.get("key")
         if not isinstance(key, str) or not KEY_NAME.match(key):
             raise BadRequest("key: expected a key name (letters, digits, '_', ' ')")
@@ -240,7 +255,17 @@ class TrialApp:
             **display.__dict__}
         if not row.get("condition_target"):  # a study that does not vary the target
             row["condition_target"] = clip.target
-        if media is not None:
+        if s["protocol"] == "track":  # the arrow's way from the target, at the press
+            if rt is None or not 0.0 <= rt <= 600_000.0:
+                raise BadRequest("reaction_time_ms: a track sub-trial needs the time from its "
+                                 "start to the press (0..600000 ms)")
+            m = track_measures(clip, drawn, TRACK_DIRECTIONS[kind.split("-", 1)[1]],
+                               self.study.arrow_speed_deg_s, rt)
+            row.update(frame=m.frame, video_time_s=m.frame / clip.rate_hz,
+                       target_in_view=m.target_in_view, eccentricity_deg=m.eccentricity_deg,
+                       onscreen_distance_mm=m.onscreen_distance_mm,
+                       target_angular_size_deg=m.target_angular_size_deg)
+        elif media is not None:
             m = measures_at(clip, clip.frame_at(media), drawn)
             row.update(frame=m.frame, video_time_s=media, target_in_view=m.target_in_view,
                        eccentricity_deg=m.eccentricity_deg,
@@ -269,6 +294,16 @@ class TrialApp:
         if not any(p.is_relative_to(r) for r in self.study.roots):  # checked at load; again
             raise BadRequest("not a study file", 403)
         return FileResponse(p, media_type=_video_type(p))
+
+
+def _directions(seed: int, session_number: int, trial: int) -> list[str]:
+    """A ``track`` trial's sub-trial directions, in an order drawn from the
+    study's seed (recorded by being derived: the same session, the same order)."""
+    import numpy as np
+
+    names = list(TRACK_DIRECTIONS)
+    order = np.random.default_rng([seed, session_number, trial, 0x7AC]).permutation(len(names))
+    return [names[i] for i in order]
 
 
 def _drawn_on(display: Display, w: float | None, h: float | None) -> Display:

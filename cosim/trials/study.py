@@ -22,7 +22,8 @@ Example::
 
     schema_version: 1
     name: exp2
-    protocol: disappear        # or recognise
+    protocol: disappear        # or recognise, or track
+    arrow_speed_deg_s: 2       # track: how fast the arrow leaves the target
     sweep: runs/exp2           # or {folder: runs/exp2, where: {target: truck}}
     # clips:                   # instead of sweep:
     #   - {video: clips/a.mp4, ground_truth: clips/a.gt.csv, target: truck,
@@ -74,7 +75,10 @@ MAX_GT_BYTES = 64 * 1024 * 1024
 MAX_FIELD_CHARS = 4096
 MAX_PRACTICE = 100
 MAX_REPEATS = 100
-PROTOCOLS = ("disappear", "recognise")
+PROTOCOLS = ("disappear", "recognise", "track")
+#: a "track" trial's sub-trials: the arrow leaves the target this way (screen axes)
+TRACK_DIRECTIONS = {"right": (1.0, 0.0), "left": (-1.0, 0.0), "up": (0.0, -1.0),
+                    "down": (0.0, 1.0)}
 #: video codecs (PyAV's names) that current browsers play
 BROWSER_CODECS = ("h264", "vp8", "vp9", "av1", "libdav1d", "libvpx", "libvpx-vp9")
 ORDERS = ("latin_square", "shuffle")
@@ -84,7 +88,8 @@ MANIFEST_COLUMNS = ("run", "vehicle", "camera", "video", "ground_truth", "frames
                     "width_px", "height_px", "hfov_deg", "vfov_deg")
 GT_REQUIRED = ("frame", "time_s", "target", "in_view", "bbox_x0_px", "bbox_y0_px",
                "bbox_x1_px", "bbox_y1_px", "center_x_px", "center_y_px")
-TOP_KEYS = ("schema_version", "name", "description", "protocol", "sweep", "clips", "practice",
+TOP_KEYS = ("schema_version", "name", "description", "protocol", "arrow_speed_deg_s", "sweep",
+            "clips", "practice",
             "break_every", "repeats", "order", "seed")
 CLIP_KEYS = ("id", "video", "ground_truth", "target", "rate_hz", "width_px", "height_px",
              "conditions", "run")
@@ -122,6 +127,19 @@ class Clip:
     def condition_map(self) -> dict[str, str]:
         return dict(self.conditions)
 
+    @property
+    def still_frame(self) -> int:
+        """The frame a ``track`` trial shows still: the target in view nearest
+        the image centre (the first such, else frame 0)."""
+        cx, cy = (self.width_px - 1) / 2, (self.height_px - 1) / 2
+        best, best_d = 0, math.inf
+        for k, g in enumerate(self.frames):
+            if g.in_view and g.center_px is not None:
+                d = math.hypot(g.center_px[0] - cx, g.center_px[1] - cy)
+                if d < best_d:
+                    best, best_d = k, d
+        return best
+
     def frame_at(self, media_time_s: float) -> int:
         """The video frame index shown at ``media_time_s`` (the
         requestVideoFrameCallback ``mediaTime`` of the presented frame),
@@ -150,6 +168,8 @@ class Study:
     order: str
     seed: int
     roots: tuple[Path, ...]
+    #: ``track``: the arrow's speed away from the target (degrees of visual angle a second)
+    arrow_speed_deg_s: float = 2.0
 
     def trial_order(self, session_number: int) -> list[Trial]:
         """The trials of the ``session_number``-th session (0-based): practice
@@ -315,6 +335,7 @@ def parse_study(text: str, path: Path) -> Study:
         ctx.err(("schema_version",), f"unsupported schema_version {version}; this cosim reads 1")
     name = top.string("name", path.stem)
     protocol = top.string("protocol", choices=PROTOCOLS)
+    arrow = top.num("arrow_speed_deg_s", 2.0, lo=0.05, hi=60.0)
     practice = top.integer("practice", 0, lo=0, hi=MAX_PRACTICE)
     break_every = top.integer("break_every", 0, lo=0, hi=MAX_TRIALS)
     repeats = top.integer("repeats", 1, lo=1, hi=MAX_REPEATS)
@@ -344,7 +365,7 @@ def parse_study(text: str, path: Path) -> Study:
         raise ctx.error()
     return Study(path=path, name=name, protocol=protocol, clips=tuple(clips), practice=practice,
                  break_every=break_every, repeats=repeats, order=order, seed=seed,
-                 roots=tuple(roots))
+                 roots=tuple(roots), arrow_speed_deg_s=float(arrow or 2.0))
 
 
 def _file(ctx: _Ctx, at: tuple[Any, ...], value: Any, base: Path, roots: tuple[Path, ...],

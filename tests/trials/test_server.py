@@ -483,3 +483,78 @@ def test_a_page_smaller_than_the_profile_is_measured_as_drawn(server: LiveServer
         "trial_index": 2, "kind": "disappear", "key": "space", "media_time_s": 0.5,
         "window_width_px": 3.5, "window_height_px": 400})
     assert status == 400 and "window_width_px" in r["error"]
+
+
+def test_track_protocol(study_file: Path) -> None:
+    """The clip still at the frame where its target is nearest the centre; per
+    direction a press starts the dot leaving the target, a press later stops
+    it: the stored conspicuity angle is the target's from where the dot was
+    then (computed here from the geometry and the stored time), the dot was
+    drawn there, and a reload mid-trial resumes at the next direction."""
+    needs_chromium()
+    from playwright.sync_api import sync_playwright
+
+    from cosim.trials.measures import angle_between_deg
+
+    study = study_file.parent / "track.yaml"
+    study.write_text("protocol: track\narrow_speed_deg_s: 4\nseed: 3\nclips:\n"
+                     "  - {video: c1.mp4, ground_truth: c1.gt.csv, conditions: {speed_kt: 100}}\n")
+    with live_server(study) as server:
+        s = _session(server, "p03")
+        t0 = s["trials"][0]
+        server.request("POST", f"/api/sessions/{s['id']}/state", {"state": "running"})
+        # the still frame: the target nearest the image centre (c1 moves 14 px a frame)
+        still = min(range(FRAMES), key=lambda k: abs(centre("c1", k)[0] - (W - 1) / 2))
+        assert t0["still_time_s"] == pytest.approx(still / RATE_HZ)
+        assert sorted(t0["directions"]) == ["down", "left", "right", "up"]
+        drawn: list[tuple[float, float]] = []
+        with sync_playwright() as pw:
+            browser = pw.chromium.launch(executable_path=CHROMIUM)
+            try:
+                page = browser.new_page(viewport={"width": 800, "height": 500},
+                                        device_scale_factor=1)
+                page.set_default_timeout(15_000)
+                page.goto(f"{server.url}/participant?session={s['id']}")
+                page.wait_for_function("document.body.dataset.phase === 'begin'")
+                page.keyboard.press("Space")
+                for k in range(4):
+                    if k == 2:  # a reload after two directions: the third comes next
+                        page.reload()
+                        page.wait_for_function("document.body.dataset.phase === 'begin'")
+                        page.keyboard.press("Space")
+                    page.wait_for_function("document.body.dataset.phase === 'track-start'")
+                    assert page.evaluate("document.body.dataset.direction") == \
+                        t0["directions"][k]
+                    page.keyboard.press("Space")
+                    page.wait_for_timeout(400 + 100 * k)
+                    box = page.locator("#tracker").bounding_box()
+                    assert box is not None
+                    drawn.append((box["x"] + box["width"] / 2, box["y"] + box["height"] / 2))
+                    page.keyboard.press("Space")
+                page.wait_for_function("document.body.dataset.phase === 'finished'")
+            finally:
+                browser.close()
+        rs = {r["kind"]: r for r in server.store.responses(s["id"])}
+    assert sorted(rs) == ["track-down", "track-left", "track-right", "up"[:0] + "track-up"]
+    dirs = {"right": (1, 0), "left": (-1, 0), "up": (0, -1), "down": (0, 1)}
+    mm = PROFILE["screen_width_mm"] / PROFILE["screen_width_px"]
+    scale = min(PROFILE["screen_width_px"] / W, PROFILE["screen_height_px"] / H)
+    cx, cy = centre("c1", still)
+    tx, ty = (cx - (W - 1) / 2) * scale * mm, (cy - (H - 1) / 2) * scale * mm  # target, mm
+    dist = PROFILE["viewing_distance_mm"]
+    for k, name in enumerate(t0["directions"]):
+        r = rs[f"track-{name}"]
+        waited = (400 + 100 * k)
+        assert waited - 50 <= r["reaction_time_ms"] <= waited + 400  # the press came then
+        off = dist * math.tan(math.radians(4.0 * r["reaction_time_ms"] / 1000))
+        dx, dy = dirs[name]
+        assert r["onscreen_distance_mm"] == pytest.approx(off, rel=1e-9)
+        assert r["eccentricity_deg"] == pytest.approx(
+            angle_between_deg((tx + dx * off, ty + dy * off), (tx, ty), dist), rel=1e-9)
+        assert r["frame"] == still
+        # the dot on the page a little before the press: on its way out along the direction
+        px, py = drawn[k]
+        ox, oy = PROFILE["screen_width_px"] / 2 + tx / mm, PROFILE["screen_height_px"] / 2 + ty / mm
+        along = (px - ox) * dx + (py - oy) * dy
+        across = abs((px - ox) * dy - (py - oy) * dx)
+        assert 0 < along <= off / mm + 2 and across < 1.5

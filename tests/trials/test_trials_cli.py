@@ -37,3 +37,17 @@ def test_serve_refuses_other_machines_without_public(tmp_path: Path, capsys) -> 
     study.write_text("schema_version: 1\nname: s\nprotocol: disappear\nclips: []\n")
     assert main(["-q", "trials", "serve", str(study), "--host", "0.0.0.0"]) == 2
     assert "--public" in capsys.readouterr().err
+
+
+def test_tracked_dot_responses_are_conspicuity_angles_too(tmp_path: Path, capsys) -> None:
+    """The "track" protocol's angles (from the dot the eyes follow) are
+    analysed as the fixation protocol's: the same gaps come out."""
+    src = tmp_path / "responses.csv"
+    subprocess.run([sys.executable, str(REPO / "examples" / "trials_synthetic.py"), "--out",
+                    str(src)], check=True, capture_output=True)
+    tracked = tmp_path / "tracked.csv"
+    tracked.write_text(src.read_text().replace(",disappear,", ",track,"))
+    assert ",track," in tracked.read_text()
+    assert main(["-q", "trials", "analyse", str(tracked), "--out", str(tmp_path / "a")]) == 0
+    out = capsys.readouterr().out
+    assert re.search(r"critical gap, truck: plateau: CG 39\.\d mm", out), out

@@ -11,6 +11,7 @@
   const video = document.getElementById("clip");
   const fixation = document.getElementById("fixation");
   const arrow = document.getElementById("arrow");
+  const tracker = document.getElementById("tracker");
   const message = document.getElementById("message");
   const status = document.getElementById("status");
   const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
@@ -109,6 +110,61 @@
     });
   }
 
+  // A "track" trial: the clip still at its frame; per direction, a key starts a
+  // dot that leaves the target at the study's angular speed, the eyes on it; a
+  // key when the target is gone posts the time since that start (the server
+  // works out where the dot was). Sub-trials already stored are skipped.
+  async function trackTrial(t, display, post) {
+    hide();
+    await new Promise((resolve) => {
+      video.onseeked = () => { video.onseeked = null; resolve(); };
+      video.currentTime = t.still_time_s;
+    });
+    video.classList.add("still");
+    const dpr = window.devicePixelRatio || 1;
+    const mmX = display.screen_width_mm / display.screen_width_px; // mm a device pixel
+    const mmY = display.screen_height_mm / display.screen_height_px;
+    const W = innerWidth * dpr, H = innerHeight * dpr; // the page, device px
+    const s = Math.min(W / t.width_px, H / t.height_px);
+    const [cx, cy] = t.still_center_px || [(t.width_px - 1) / 2, (t.height_px - 1) / 2];
+    const x0 = W / 2 + (cx - (t.width_px - 1) / 2) * s; // the target, device px
+    const y0 = H / 2 + (cy - (t.height_px - 1) / 2) * s;
+    const dirs = { right: [1, 0], left: [-1, 0], up: [0, -1], down: [0, 1] };
+    try {
+      for (const d of t.directions) {
+        const kind = `track-${d}`;
+        if (t.done.includes(kind)) continue;
+        phase("track-start");
+        document.body.dataset.direction = d;
+        tracker.style.left = `${x0 / dpr}px`;
+        tracker.style.top = `${y0 / dpr}px`;
+        tracker.hidden = false;
+        const go = await waitKey(["Space"]);
+        const start = go.timeStamp;
+        phase("tracking");
+        let raf = null;
+        const move = (now) => {
+          const a = Math.min(t.arrow_speed_deg_s * (now - start) / 1000, 89) * Math.PI / 180;
+          const r = display.viewing_distance_mm * Math.tan(Math.max(a, 0)); // mm
+          tracker.style.left = `${(x0 + dirs[d][0] * r / mmX) / dpr}px`;
+          tracker.style.top = `${(y0 + dirs[d][1] * r / mmY) / dpr}px`;
+          raf = requestAnimationFrame(move);
+        };
+        raf = requestAnimationFrame(move);
+        const e = await waitKey(["Space"]);
+        cancelAnimationFrame(raf);
+        tracker.hidden = true;
+        phase("saving");
+        await post({ trial_index: t.index, kind, key: "space",
+                     reaction_time_ms: e.timeStamp - start, ...windowPx() });
+      }
+    } finally {
+      tracker.hidden = true;
+      video.classList.remove("still");
+      delete document.body.dataset.direction;
+    }
+  }
+
   async function runTrial(t, protocol) {
     document.body.dataset.trial = String(t.index);
     delete document.body.dataset.frame;
@@ -169,7 +225,10 @@
     const base = `/api/sessions/${encodeURIComponent(s.id)}`;
     const instruction = s.protocol === "disappear"
       ? "Look at the red cross in the centre. Press the space bar as soon as the target disappears."
-      : "Follow the arrow. Answer whether you recognised the target.";
+      : s.protocol === "track"
+        ? "Press the space bar to start the red dot, follow it with your eyes, and press " +
+          "again as soon as the target disappears."
+        : "Follow the arrow. Answer whether you recognised the target.";
     phase("begin");
     show(`<p>${instruction}</p><p>Press the space bar to begin.</p>`);
     await waitKey(["Space"]);
@@ -211,6 +270,12 @@
         await waitKey(["Space"]);
       }
       last = t;
+      if (s.protocol === "track") {
+        await load(t);
+        document.body.dataset.trial = String(t.index);
+        await trackTrial(t, s.display, (b) => api(`${base}/responses`, b));
+        continue;
+      }
       const body = await runTrial(t, s.protocol);
       phase("saving");
       show("<p>\u2026</p>");
