@@ -345,17 +345,27 @@ def test_video_drawn_where_the_measures_assume(browser_run: dict[str, Any]) -> N
     assert min(sx) - 3 < xs.mean() < max(sx) + 3, (xs.mean(), sx)
 
 
+@contextlib.contextmanager
+def one_clip_study(study_file: Path, name: str, head: str) -> Iterator[
+        tuple[LiveServer, dict[str, Any]]]:
+    """A study of clip c1 alone beside ``study_file`` (``head``: its first
+    lines), served, with one running session."""
+    study = study_file.parent / f"{name}.yaml"
+    study.write_text(head + "clips:\n"
+                     "  - {video: c1.mp4, ground_truth: c1.gt.csv, conditions: {speed_kt: 100}}\n")
+    with live_server(study) as server:
+        s = _session(server, name)
+        server.request("POST", f"/api/sessions/{s['id']}/state", {"state": "running"})
+        yield server, s
+
+
 def test_recognise_protocol(study_file: Path, tmp_path: Path) -> None:
     """Press to start the sub-trial, press on recognising, answer yes."""
     needs_chromium()
     from playwright.sync_api import sync_playwright
 
-    study = study_file.parent / "recognise.yaml"
-    study.write_text("protocol: recognise\norder: latin_square\nclips:\n"
-                     "  - {video: c1.mp4, ground_truth: c1.gt.csv, conditions: {speed_kt: 100}}\n")
-    with live_server(study) as server:
-        s = _session(server, "p02")
-        server.request("POST", f"/api/sessions/{s['id']}/state", {"state": "running"})
+    with one_clip_study(study_file, "recognise", "protocol: recognise\norder: latin_square\n"
+                        ) as (server, s):
         with sync_playwright() as pw:
             browser = pw.chromium.launch(executable_path=CHROMIUM,
                                          args=["--autoplay-policy=no-user-gesture-required"])
@@ -496,13 +506,9 @@ def test_track_protocol(study_file: Path) -> None:
 
     from cosim.trials.measures import angle_between_deg
 
-    study = study_file.parent / "track.yaml"
-    study.write_text("protocol: track\narrow_speed_deg_s: 4\nseed: 3\nclips:\n"
-                     "  - {video: c1.mp4, ground_truth: c1.gt.csv, conditions: {speed_kt: 100}}\n")
-    with live_server(study) as server:
-        s = _session(server, "p03")
+    with one_clip_study(study_file, "track", "protocol: track\narrow_speed_deg_s: 4\nseed: 3\n"
+                        ) as (server, s):
         t0 = s["trials"][0]
-        server.request("POST", f"/api/sessions/{s['id']}/state", {"state": "running"})
         # the still frame: the target nearest the image centre (c1 moves 14 px a frame)
         still = min(range(FRAMES), key=lambda k: abs(centre("c1", k)[0] - (W - 1) / 2))
         assert t0["still_time_s"] == pytest.approx(still / RATE_HZ)
