@@ -24,6 +24,7 @@ import numpy as np
 from cosim.renderer.frame import probe_offsets
 from cosim.search import sensing
 from cosim.search.image_detect import detect_fires, match_blobs
+from cosim.search.spec import dwell_frames
 from cosim.vehicles.spec import STATE_INDEX
 
 log = logging.getLogger(__name__)
@@ -32,13 +33,14 @@ log = logging.getLogger(__name__)
 MAX_DIST_PX = 3.0
 
 
-def cameras_for(scenario: Any, rows: tuple[int, ...]) -> list[Any]:
+def cameras_for(sections: dict[str, Any], control_every: int, rows: tuple[int, ...]
+                ) -> list[Any]:
     """The ``cameras:`` views the image detector can use: on search aircraft,
-    frames on exchanges, not on a gimbal."""
-    cams = scenario.sections.get("cameras")
-    k = scenario.rates.control_every
+    frames on exchanges (every ``control_every`` ticks), not on a gimbal."""
+    cams = sections.get("cameras")
     return [c for c in (cams.views if cams is not None else ())
-            if set(c.vehicles) & set(rows) and c.frame_every % k == 0 and c.mount != "gimbal"]
+            if set(c.vehicles) & set(rows) and c.frame_every % control_every == 0
+            and c.mount != "gimbal"]
 
 
 class ImageSearch:
@@ -52,7 +54,7 @@ class ImageSearch:
         cams = part.scn.sections["cameras"]
         self.keep = (cams.max_in_flight + 2) * max(c.frame_every for c in views)
         #: frames in a row a fire must be hit in, per view (its rate's share of dwell_s)
-        self.dwell = {c.name: max(1, math.ceil(part.spec.detection.dwell_s * c.rate_hz - 1e-9))
+        self.dwell = {c.name: dwell_frames(part.spec.detection.dwell_s, c.rate_hz)
                       for c in views}
         self.rows: dict[int, np.ndarray] = {}  # tick -> the search rows' states
         self.row_of: dict[str, int] = {}  # vehicle id -> position in the search rows

@@ -66,7 +66,6 @@ class SearchParticipant:
         self.detections: list[dict[str, Any]] = []  # each aircraft's first of each fire
         self.first: dict[str, dict[str, Any]] = {}  # fire id -> its first detection
         self.frames = 0
-        self.error: BaseException | None = None
         self.image: Any = None  # the image detector on board (``onboard``), if asked
 
     def prepare(self, ctx: RunContext) -> None:
@@ -74,7 +73,8 @@ class SearchParticipant:
         from cosim.search.onboard import ImageSearch, cameras_for
 
         if self.spec.detection.image and ctx.frame_taps is not None:
-            views = cameras_for(self.scn, self.spec.rows)
+            views = cameras_for(self.scn.sections, self.scn.rates.control_every,
+                                self.spec.rows)
             if views:
                 self.image = ImageSearch(self, views)
                 ctx.frame_taps.append((self.image.tap, None))
@@ -204,13 +204,15 @@ class SearchParticipant:
 
     # --- every exchange ---------------------------------------------------------------
     def on_exchange(self, tick: int, states: np.ndarray) -> None:
-        if self.image is not None:
-            self.image.remember(tick, states[self.rows])
         cover = tick % self.cov_every == 0
         look = tick % self.spec.camera.frame_every == 0
-        if not (cover or look):
+        if self.image is None and not (cover or look):
             return
         st = states[self.rows]
+        if self.image is not None:
+            self.image.remember(tick, st)
+        if not (cover or look):
+            return
         idx = STATE_INDEX
         lat, lon, alt = (st[:, idx[k]] for k in ("lat_deg", "lon_deg", "alt_msl_m"))
         n, e, _ = self.ctx.frame.geodetic_to_ned(lat, lon, alt)

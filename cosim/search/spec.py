@@ -113,7 +113,13 @@ class SearchSpec:
 
     @property
     def dwell_frames(self) -> int:
-        return max(1, math.ceil(self.detection.dwell_s * self.camera.rate_hz - 1e-9))
+        return dwell_frames(self.detection.dwell_s, self.camera.rate_hz)
+
+
+def dwell_frames(dwell_s: float, rate_hz: float) -> int:
+    """Frames in a row that a fire must be seen in: each frame stands for
+    ``1 / rate_hz`` s of the camera's, at least one."""
+    return max(1, math.ceil(dwell_s * rate_hz - 1e-9))
 
 
 def _points(info: Any, raw: Any, p: P, what: str, latlon: bool, frame: Any
@@ -183,20 +189,27 @@ def _zones(info: Any, r: Any, p: P, frame: Any) -> tuple[tuple[tuple[float, floa
     return tuple(out)
 
 
-def _position(info: Any, d: Any, p: P, frame: Any) -> tuple[float, float] | None:
-    r = info.reader(d, p, ("north_m", "east_m", "lat_deg", "lon_deg", "size_m"))
+def _position(info: Any, d: Any, p: P, frame: Any, size: float | None = None
+              ) -> tuple[tuple[float, float] | None, float]:
+    """A point (north_m/east_m or lat_deg/lon_deg) as (north, east), or None
+    if it is wrong (reported); with ``size`` (a fire's default), the point
+    may also give its ``size_m``, returned beside it."""
+    keys = ("north_m", "east_m", "lat_deg", "lon_deg") + (("size_m",) if size is not None
+                                                          else ())
+    r = info.reader(d, p, keys)
+    own = (r.num("size_m", size, lo=0.5, hi=500.0) or size) if size is not None else 0.0
     if r.has("lat_deg") or r.has("lon_deg"):
         if r.has("north_m") or r.has("east_m"):
             info.err(p, "give north_m/east_m or lat_deg/lon_deg, not both")
-            return None
+            return None, own
         la, lo = r.num("lat_deg", lo=-90, hi=90), r.num("lon_deg", lo=-180, hi=180)
         if la is None or lo is None:
-            return None
+            return None, own
         n, e, _ = frame.geodetic_to_ned(la, lo, frame.alt_m)
-        return float(n), float(e)
+        return (float(n), float(e)), own
     n = r.num("north_m", lo=-MAX_DISTANCE_M, hi=MAX_DISTANCE_M)
     e = r.num("east_m", lo=-MAX_DISTANCE_M, hi=MAX_DISTANCE_M)
-    return None if n is None or e is None else (n, e)
+    return (None if n is None or e is None else (n, e)), own
 
 
 def _random_points(area: Any, zones: list[Any], n: int, seed: int, salt: int
@@ -236,11 +249,8 @@ def _fires(info: Any, d: Any, p: P, frame: Any, area: Any, zones: list[Any], see
     elif raw_t is None or raw_t is False:
         pass  # no target: an exercise with decoys only
     else:
-        pos = _position(info, raw_t, p + ("target",), frame)
+        pos, sz = _position(info, raw_t, p + ("target",), frame, size)
         if pos is not None:
-            sz = info.reader(raw_t, p + ("target",), ("north_m", "east_m", "lat_deg",
-                                                      "lon_deg", "size_m")).num(
-                "size_m", size, lo=0.5, hi=500.0) or size
             wanted.append((TARGET_ID, pos, sz, False))
     raw_d = r.d.get("decoys", 0)
     if isinstance(raw_d, int) and not isinstance(raw_d, bool):
@@ -251,9 +261,7 @@ def _fires(info: Any, d: Any, p: P, frame: Any, area: Any, zones: list[Any], see
     elif isinstance(raw_d, list) and len(raw_d) < MAX_FIRES:
         for i, dd in enumerate(raw_d):
             q = p + ("decoys", i)
-            pos = _position(info, dd, q, frame)
-            sz = info.reader(dd, q, ("north_m", "east_m", "lat_deg", "lon_deg",
-                                     "size_m")).num("size_m", size, lo=0.5, hi=500.0) or size
+            pos, sz = _position(info, dd, q, frame, size)
             if pos is not None:
                 wanted.append((f"{DECOY_PREFIX}{i + 1}", pos, sz, True))
     else:
@@ -278,7 +286,7 @@ def parse_search(info: Any, node: Any, path: P) -> SearchSpec | None:
     Its fires are added to the scenario's targets."""
     from shapely.geometry import Polygon
 
-    from cosim.renderer.config import TargetSpec, _camera
+    from cosim.renderer.config import _camera
 
     frame = info.origin.frame
     r = info.reader(node, path, ("area", "area_latlon", "no_fly", "no_fly_latlon", "base",
@@ -300,7 +308,7 @@ def parse_search(info: Any, node: Any, path: P) -> SearchSpec | None:
     zones = [Polygon([(e, n) for n, e in z]) for z in zone_pts]
     base = (0.0, 0.0)
     if r.has("base"):
-        base = _position(info, r.d["base"], path + ("base",), frame) or base
+        base = _position(info, r.d["base"], path + ("base",), frame)[0] or base
     rows = info.select(r.d.get("aircraft", "all"), path + ("aircraft",))
     if not rows:
         info.err(path + ("aircraft",), "no vehicle to search with")
@@ -398,17 +406,13 @@ def parse_search(info: Any, node: Any, path: P) -> SearchSpec | None:
     if det.image:
         from cosim.search.onboard import cameras_for
 
-        class _Scn:  # what cameras_for reads, before the Scenario exists
-            sections = info.sections
-            rates = info.rates
-
-        if not cameras_for(_Scn, tuple(rows)):
+        if not cameras_for(info.sections, info.rates.control_every, tuple(rows)):
             info.err(path + ("detection", "image"),
                      "the image detector needs a camera (cameras:) on a search aircraft, "
                      "not on a gimbal, with frames on exchanges (rate_hz: control_hz divided "
                      "by a whole number)")
     _check_aircraft(info, rows, path)
-    _add_targets(info, fires, path, TargetSpec)
+    _add_targets(info, fires, path)
     spec = SearchSpec(area_ne=area_pts or (), no_fly_ne=zone_pts, base_ne=base,
                       rows=tuple(rows), airspeed_kt=v_kt, bank_deg=bank,
                       flown_bank_deg=flown or bank, alt_agl_m=alt,
@@ -467,9 +471,9 @@ def _check_plan(info: Any, spec: SearchSpec, path: P) -> None:
             return
 
 
-def _add_targets(info: Any, fires: tuple[FireSpec, ...], path: P, target_spec: Any) -> None:
+def _add_targets(info: Any, fires: tuple[FireSpec, ...], path: P) -> None:
     """The fires join the scenario's targets (so cameras draw them)."""
-    from cosim.renderer.config import TARGET_DEFAULTS
+    from cosim.renderer.config import TARGET_DEFAULTS, TargetSpec
 
     have = tuple(info.sections.get("targets") or ())
     ids = {t.id for t in have}
@@ -480,7 +484,7 @@ def _add_targets(info: Any, fires: tuple[FireSpec, ...], path: P, target_spec: A
             info.err(path + ("fires",), f"a target is already called {f.id!r}; search fires "
                                         f"are named {TARGET_ID} and {DECOY_PREFIX}1, ...")
             continue
-        extra.append(target_spec(id=f.id, kind="fire", north_m=f.north_m, east_m=f.east_m,
+        extra.append(TargetSpec(id=f.id, kind="fire", north_m=f.north_m, east_m=f.east_m,
                                  lat_deg=None, lon_deg=None, heading_deg=0.0, length_m=f.size_m,
                                  width_m=f.size_m, height_m=f.height_m, color_rgb=color,
                                  growth_m_per_s=f.growth_m_per_s))

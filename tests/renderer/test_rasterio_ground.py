@@ -306,27 +306,11 @@ def test_32km_raster_is_read_by_windows(tmp_path: Path, big: Big,
     assert got["rss_growth_mb"] < 300, f"peak RSS grew {got['rss_growth_mb']:.0f} MB"
 
 
-SCENARIO = textwrap.dedent("""\
-    schema_version: 1
-    name: g
-    origin: {lat_deg: 37.0, lon_deg: -122.0, ground_alt_m: 10}
-    duration_s: 1
-    vehicles:
-      - id: uav1
-        model: uav700
-        init: {north_m: 0, east_m: 0, alt_agl_m: 100, heading_deg: 0, airspeed_kt: 100}
-    cameras:
-      views: [{name: belly, vehicles: uav1, mount: nadir, rate_hz: 10}]
-    """)
-
-
-def _error(tmp_path: Path, ground: str) -> str:
-    with pytest.raises(ConfigError) as e:
-        parse_scenario(SCENARIO + ground, str(tmp_path / "s.yaml"))
-    return str(e.value)
-
-
 def test_bad_rasters_are_refused_with_why(tmp_path: Path, big: Big) -> None:
+    # the scenario a ground section is checked in (here: this module also runs alone, in
+    # a subprocess, where test_geotiff is not importable)
+    from test_geotiff import SCENARIO, _errors
+
     site = _cog(tmp_path / "site.tif", "EPSG:32610", 0.5, _map_xy("EPSG:32610", LAT0, LON0))
     scn = parse_scenario(SCENARIO + "ground: {image: site.tif}\n", str(tmp_path / "s.yaml"))
     assert scn.sections["ground"].geotiff
@@ -335,7 +319,7 @@ def test_bad_rasters_are_refused_with_why(tmp_path: Path, big: Big) -> None:
     assert scn.sections["ground"].geotiff  # a VRT places itself too
 
     def refused(name: str, *why: str, ground: str | None = None) -> None:
-        msg = _error(tmp_path, ground or f"ground: {{image: {name}}}\n")
+        msg = _errors(tmp_path, ground or f"ground: {{image: {name}}}\n")
         assert "s.yaml:" in msg and "ground" in msg and name in msg, msg
         for w in why:
             assert w in msg, msg

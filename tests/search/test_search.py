@@ -19,7 +19,7 @@ from cosim.renderer.camera import camera_pose, footprint
 from cosim.renderer.config import CameraSpec, GroundSpec, TargetSpec
 from cosim.renderer.frame import World, WorldSpec, probe_offsets, render_frame
 from cosim.renderer.targets import TargetSet
-from cosim.scenario import load_scenario, parse_scenario
+from cosim.scenario import Scenario, load_scenario, parse_scenario
 from cosim.search import sensing
 from cosim.search.coverage_map import CoverageMap
 from cosim.sync import Run
@@ -224,13 +224,14 @@ def test_navigation_errors_move_the_reported_position_by_their_size(tmp_path: Pa
     assert 1.0 < err < 100.0  # a 20 m (1 sigma, each axis) navigation error
 
 
-def _parse(body: str, vehicles: str = "") -> None:
-    parse_scenario(f"""\
+def _parse(body: str, vehicles: str = "", top: str = "") -> Scenario:
+    """A scenario of uav700 ``a`` (and ``vehicles``) with the search section ``body``."""
+    return parse_scenario(f"""\
 schema_version: 1
 origin: {{lat_deg: {LAT0}, lon_deg: {LON0}}}
 rates: {{physics_hz: 120, control_hz: 10}}
 duration_s: 10
-vehicles:
+{top}vehicles:
   - {{id: a, model: uav700, init: {{alt_agl_m: 300, airspeed_kt: 100}}}}
 {vehicles}search:
 {body}""", "search.yaml", check_properties=False)
@@ -303,16 +304,7 @@ def test_the_altitude_follows_the_detection_requirement() -> None:
     body = ("  area: [[0, 0], [0, 1000], [1000, 1000], [1000, 0]]\n"
             "  camera: {hfov_deg: 60, width_px: 1280, height_px: 720}\n"
             "  fires: {size_m: 10}\n  detection: {min_pixels: 64}\n")
-    scn = parse_scenario(f"""\
-schema_version: 1
-origin: {{lat_deg: {LAT0}, lon_deg: {LON0}}}
-rates: {{physics_hz: 120, control_hz: 10}}
-duration_s: 10
-vehicles:
-  - {{id: a, model: uav700, init: {{alt_agl_m: 300, airspeed_kt: 100}}}}
-search:
-{body}""", "s.yaml", check_properties=False)
-    s = scn.sections["search"]
+    s = _parse(body).sections["search"]
     # 8 pixels across 10 m: h = 10 m * f / 8 with f = 640 / tan(30 deg)
     assert s.alt_auto and s.alt_agl_m == pytest.approx(10.0 * 640 / math.tan(math.radians(30))
                                                        / 8.0)
@@ -436,18 +428,10 @@ search:
 def test_a_search_that_cannot_be_flown_is_refused_when_read(top: str, body: str,
                                                            message: str) -> None:
     with pytest.raises(ConfigError) as e:
-        parse_scenario(f"""\
-schema_version: 1
-origin: {{lat_deg: {LAT0}, lon_deg: {LON0}}}
-rates: {{physics_hz: 120, control_hz: 10}}
-duration_s: 10
-{top}vehicles:
-  - {{id: a, model: uav700, init: {{alt_agl_m: 300, airspeed_kt: 100}}}}
-  - {{id: b, model: uav700, init: {{north_m: 500, alt_agl_m: 300, airspeed_kt: 100}}}}
-  - {{id: c, model: c172p, class: jsbsim, init: {{north_m: 900, alt_agl_m: 300,
-                                                 airspeed_kt: 100}}}}
-search:
-{body if "aircraft:" in body else "  aircraft: a" + chr(10) + body}""", "s.yaml",
-                       check_properties=False)
+        _parse(body if "aircraft:" in body else "  aircraft: a\n" + body, vehicles="""\
+  - {id: b, model: uav700, init: {north_m: 500, alt_agl_m: 300, airspeed_kt: 100}}
+  - {id: c, model: c172p, class: jsbsim, init: {north_m: 900, alt_agl_m: 300,
+                                               airspeed_kt: 100}}
+""", top=top)
     assert message in str(e.value), str(e.value)
-    assert "s.yaml:" in str(e.value)
+    assert "search.yaml:" in str(e.value)
