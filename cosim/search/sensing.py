@@ -27,16 +27,12 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from cosim.geo import LocalFrame
 from cosim.renderer.camera import (
     NEAR_M,
     Pose,
     camera_pose,
     intrinsics,
     mount_rotation,
-    rot_x,
-    rot_y,
-    rot_z,
 )
 from cosim.renderer.config import CameraSpec
 
@@ -158,22 +154,17 @@ def report(cam: CameraSpec, row: np.ndarray, idx: dict[str, int], ground_alt_m: 
     if attitude_sigma_deg > 0:
         roll, pitch, yaw = (a + float(e) for a, e in
                             zip((roll, pitch, yaw), rng.normal(0.0, attitude_sigma_deg, 3)))
-    local = LocalFrame(lat, lon, ground_alt_m)
-    if cam.stabilised:
-        r_nb = rot_z(math.radians(yaw))
-    else:
-        r_nb = rot_z(math.radians(yaw)) @ rot_y(math.radians(pitch)) @ rot_x(math.radians(roll))
-    r_lc = r_nb @ mount_rotation(cam)
-    ray = r_lc @ (np.linalg.inv(intrinsics(cam)) @ np.array([centroid_px[0], centroid_px[1],
-                                                               1.0]))
-    h = alt + dh - ground_alt_m
+    pose = camera_pose(cam, lat, lon, alt + dh, roll, pitch, yaw, ground_alt_m)  # as it thinks
+    k = intrinsics(cam)
+    ray = pose.R_cl.T @ (np.linalg.inv(k) @ np.array([centroid_px[0], centroid_px[1], 1.0]))
+    h = pose.height_m
     if ray[2] <= 1e-9 or h <= 0:  # (a frame that saw the fire looks down at it)
         return lat, lon, 0.0
     t = h / ray[2]
     n, e = dn + t * ray[0], de + t * ray[1]
-    la, lo = local.place(n, e, ground_alt_m)
+    la, lo = pose.local.place(n, e, ground_alt_m)
     rng_m = t * float(np.linalg.norm(ray))
-    size = math.sqrt(max(pixels, 0.0)) * rng_m / intrinsics(cam)[0, 0]
+    size = math.sqrt(max(pixels, 0.0)) * rng_m / k[0, 0]
     return float(la), float(lo), size
 
 
