@@ -13,6 +13,16 @@ across, ``screen_height_mm / screen_height_px`` down).
 - ``onscreen_distance_mm``: from the screen centre to the target centre.
 - ``eccentricity_deg = atan(onscreen_distance_mm / viewing_distance_mm)``
   (the eye on the perpendicular through the screen centre).
+- ``camera_gap_deg``: the same gap seen from the camera instead of the eye:
+  ``atan(gap_px / f_px)``, the camera-pixel distance between where the eyes
+  are (the image centre under the fixation mark, or the tracked arrow) and
+  the target centre over the camera's focal length (``Clip.focal_px``; None
+  when the clip's field of view is not known). With the eyes on the
+  centre it is the target's angle off the optical axis (the ground truth's
+  own ``eccentricity_deg``); for a nadir camera at height ``h`` over flat
+  ground ``h * tan(camera_gap)`` is the distance on the ground between the
+  point looked at and the target: the ``tan(beta) * h`` of the critical-gap
+  relation (DESIGN: the conspicuity angle at altitude ``h``).
 - ``target_angular_size_deg``: the visual angle of the target's on-screen
   bounding box (clipped to the image), the larger of the angles its two
   diagonals subtend at the eye (exact off axis too).
@@ -79,6 +89,7 @@ class Measures:
     onscreen_distance_mm: float | None
     eccentricity_deg: float | None
     target_angular_size_deg: float | None
+    camera_gap_deg: float | None = None
 
 
 def video_scale(display: Display, width_px: int, height_px: int) -> float:
@@ -112,11 +123,15 @@ def measures_at(clip: Clip, frame_index: int, display: Display) -> Measures:
                          f"{len(clip.frames) - 1}")
     g = clip.frames[frame_index]
     w, h = clip.width_px, clip.height_px
-    x_mm = y_mm = dist = ecc = size = None
+    x_mm = y_mm = dist = ecc = size = gap = None
     if g.center_px is not None:
         x_mm, y_mm = camera_to_screen_mm(display, w, h, *g.center_px)
         dist = math.hypot(x_mm, y_mm)
         ecc = math.degrees(math.atan(dist / display.viewing_distance_mm))
+        f = clip.focal_px
+        if f is not None:
+            off = math.hypot(g.center_px[0] - (w - 1) / 2, g.center_px[1] - (h - 1) / 2)
+            gap = math.degrees(math.atan(off / f))
     if g.bbox_px is not None and g.in_view:
         x0, y0, x1, y1 = g.bbox_px
         x0, x1 = max(x0, -0.5), min(x1, w - 0.5)
@@ -130,7 +145,7 @@ def measures_at(clip: Clip, frame_index: int, display: Display) -> Measures:
             size = max(angle_between_deg(c00, c11, d), angle_between_deg(c01, c10, d))
     return Measures(frame=g.frame, time_s=g.time_s, target_in_view=g.in_view,
                     screen_x_mm=x_mm, screen_y_mm=y_mm, onscreen_distance_mm=dist,
-                    eccentricity_deg=ecc, target_angular_size_deg=size)
+                    eccentricity_deg=ecc, target_angular_size_deg=size, camera_gap_deg=gap)
 
 
 def arrow_offset_mm(speed_deg_s: float, elapsed_ms: float, viewing_distance_mm: float) -> float:
@@ -154,9 +169,16 @@ def track_measures(clip: Clip, display: Display, direction: tuple[float, float],
     r = arrow_offset_mm(speed_deg_s, elapsed_ms, display.viewing_distance_mm)
     target = (m.screen_x_mm, m.screen_y_mm)
     arrow = (target[0] + r * direction[0], target[1] + r * direction[1])
+    gap = None
+    f = clip.focal_px
+    if f is not None:  # the arrow's way back in camera pixels
+        s = video_scale(display, clip.width_px, clip.height_px)
+        mx, my = display.mm_per_px
+        gap = math.degrees(math.atan(
+            math.hypot(r * direction[0] / (s * mx), r * direction[1] / (s * my)) / f))
     return Measures(frame=m.frame, time_s=m.time_s, target_in_view=m.target_in_view,
                     screen_x_mm=m.screen_x_mm, screen_y_mm=m.screen_y_mm,
                     onscreen_distance_mm=r,
                     eccentricity_deg=angle_between_deg(arrow, target,
                                                        display.viewing_distance_mm),
-                    target_angular_size_deg=m.target_angular_size_deg)
+                    target_angular_size_deg=m.target_angular_size_deg, camera_gap_deg=gap)

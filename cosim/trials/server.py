@@ -264,13 +264,15 @@ class TrialApp:
             row.update(frame=m.frame, video_time_s=m.frame / clip.rate_hz,
                        target_in_view=m.target_in_view, eccentricity_deg=m.eccentricity_deg,
                        onscreen_distance_mm=m.onscreen_distance_mm,
-                       target_angular_size_deg=m.target_angular_size_deg)
+                       target_angular_size_deg=m.target_angular_size_deg,
+                       camera_gap_deg=m.camera_gap_deg)
         elif media is not None:
             m = measures_at(clip, clip.frame_at(media), drawn)
             row.update(frame=m.frame, video_time_s=media, target_in_view=m.target_in_view,
                        eccentricity_deg=m.eccentricity_deg,
                        onscreen_distance_mm=m.onscreen_distance_mm,
-                       target_angular_size_deg=m.target_angular_size_deg)
+                       target_angular_size_deg=m.target_angular_size_deg,
+                       camera_gap_deg=m.camera_gap_deg)
         stored, created = await run_in_threadpool(self.store.record_response, row)
         if not created:
             log.info("session %s trial %d: response posted again; kept the first",

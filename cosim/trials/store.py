@@ -38,8 +38,9 @@ EXPORT_COLUMNS = ("session", "participant", "trial_index", "practice", "protocol
                   "condition_speed_kt", "condition_alt_agl_m", "condition_target", "frame",
                   "video_time_s", "reaction_time_ms", "key", "target_in_view",
                   "eccentricity_deg", "onscreen_distance_mm", "target_angular_size_deg",
-                  "viewing_distance_mm", "screen_width_mm", "screen_height_mm",
-                  "screen_width_px", "screen_height_px", "recognised")
+                  "camera_gap_deg", "viewing_distance_mm", "screen_width_mm",
+                  "screen_height_mm", "screen_width_px", "screen_height_px", "recognised",
+                  "reshown")
 STATES = ("ready", "running", "paused", "finished")
 
 metadata = sa.MetaData()
@@ -84,12 +85,15 @@ responses = sa.Table(
     sa.Column("eccentricity_deg", sa.Float),
     sa.Column("onscreen_distance_mm", sa.Float),
     sa.Column("target_angular_size_deg", sa.Float),
+    sa.Column("camera_gap_deg", sa.Float),  # see cosim.trials.measures
     sa.Column("viewing_distance_mm", sa.Float, nullable=False),
     sa.Column("screen_width_mm", sa.Float, nullable=False),
     sa.Column("screen_height_mm", sa.Float, nullable=False),
     sa.Column("screen_width_px", sa.Integer, nullable=False),
     sa.Column("screen_height_px", sa.Integer, nullable=False),
     sa.Column("recognised", sa.Boolean),
+    # the trial had been shown before (the page was reloaded while it played)
+    sa.Column("reshown", sa.Boolean),
     sa.Column("created", sa.String(32), nullable=False),
     sa.UniqueConstraint("session", "trial_index", "kind", name="one_response_per_trial"),
 )
@@ -128,6 +132,7 @@ class Store:
             if self.engine.dialect.name == "sqlite":
                 sa.event.listen(self.engine, "connect", _sqlite_pragmas)
             metadata.create_all(self.engine)
+            _add_missing_columns(self.engine)
         except Exception as e:  # noqa: BLE001 - a bad URL, a missing driver, a locked file
             raise ConfigError(f"cannot open the trial database {shown_url(str(db))}: {e}"
                               ) from None
@@ -216,6 +221,25 @@ class Store:
             q = q.where(responses.c.session == session_id)
         with self.engine.connect() as c:
             return [dict(r) for r in c.execute(q).mappings()]
+
+
+def _add_missing_columns(engine: sa.Engine) -> None:
+    """Bring a database made by an older cosim up to date: the nullable
+    columns it lacks are added (empty for its rows); nothing is dropped."""
+    have = sa.inspect(engine)
+    prep = engine.dialect.identifier_preparer
+    for table in metadata.sorted_tables:
+        present = {c["name"] for c in have.get_columns(table.name)}
+        for column in table.columns:
+            if column.name in present:
+                continue
+            if not column.nullable:
+                raise ConfigError(f"the {table.name} table lacks column {column.name!r}, which "
+                                  "cannot be added to existing rows: not a cosim trial database?")
+            kind = column.type.compile(dialect=engine.dialect)
+            with engine.begin() as c:
+                c.execute(sa.text(f"ALTER TABLE {prep.quote(table.name)} ADD COLUMN "
+                                  f"{prep.quote(column.name)} {kind}"))
 
 
 def _sqlite_pragmas(dbapi_conn: Any, _record: Any) -> None:

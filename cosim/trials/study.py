@@ -92,7 +92,7 @@ TOP_KEYS = ("schema_version", "name", "description", "protocol", "arrow_speed_de
             "clips", "practice",
             "break_every", "repeats", "order", "seed")
 CLIP_KEYS = ("id", "video", "ground_truth", "target", "rate_hz", "width_px", "height_px",
-             "conditions", "run")
+             "hfov_deg", "conditions", "run")
 
 
 @dataclass(frozen=True)
@@ -122,6 +122,16 @@ class Clip:
     height_px: int
     conditions: tuple[tuple[str, str], ...]
     frames: tuple[GtFrame, ...] = field(repr=False)
+    #: the camera's horizontal field of view (the renderer's pinhole: square
+    #: pixels, focal length ``width_px / 2 / tan(hfov / 2)``); None: not known
+    hfov_deg: float | None = None
+
+    @property
+    def focal_px(self) -> float | None:
+        """The camera's focal length in its pixels, if its field of view is known."""
+        if self.hfov_deg is None:
+            return None
+        return self.width_px / 2.0 / math.tan(math.radians(self.hfov_deg) / 2.0)
 
     @property
     def condition_map(self) -> dict[str, str]:
@@ -382,7 +392,8 @@ def _file(ctx: _Ctx, at: tuple[Any, ...], value: Any, base: Path, roots: tuple[P
 
 def _clip_from(ctx: _Ctx, at: tuple[Any, ...], cid: str, video: Path, gt: Path,
                target: str | None, run: str, rate: float | None, width: int | None,
-               height: int | None, conditions: dict[str, str]) -> Clip | None:
+               height: int | None, conditions: dict[str, str],
+               hfov: float | None = None) -> Clip | None:
     try:
         target, frames = read_clip_truth(gt, target)
         r2, w2, h2, codec, n2 = _probe_video(video)
@@ -407,7 +418,7 @@ def _clip_from(ctx: _Ctx, at: tuple[Any, ...], cid: str, video: Path, gt: Path,
         return None
     return Clip(id=cid, video=video, ground_truth=gt, target=target, run=run,
                 rate_hz=float(rate), width_px=int(width), height_px=int(height),
-                conditions=tuple(conditions.items()), frames=frames)
+                conditions=tuple(conditions.items()), frames=frames, hfov_deg=hfov)
 
 
 def _listed_clips(ctx: _Ctx, items: Any, base: Path, roots: tuple[Path, ...]) -> list[Clip]:
@@ -429,6 +440,7 @@ def _listed_clips(ctx: _Ctx, items: Any, base: Path, roots: tuple[Path, ...]) ->
         rate = r.num("rate_hz", None, lo=0, hi=1000, lo_open=True)
         width = r.integer("width_px", None, lo=1, hi=100_000)
         height = r.integer("height_px", None, lo=1, hi=100_000)
+        hfov = r.num("hfov_deg", None, lo=0, hi=179, lo_open=True)
         cid = r.string("id", f"clip{i}")
         run = r.string("run", "")
         conds: dict[str, str] = {}
@@ -444,7 +456,8 @@ def _listed_clips(ctx: _Ctx, items: Any, base: Path, roots: tuple[Path, ...]) ->
                     conds[k] = _fmt_value(v)
         if len(ctx.problems) != before or video is None or gt is None:
             continue
-        c = _clip_from(ctx, at, cid, video, gt, target, run, rate, width, height, conds)
+        c = _clip_from(ctx, at, cid, video, gt, target, run, rate, width, height, conds,
+                       hfov)
         if c is not None:
             out.append(c)
     return out
@@ -525,7 +538,14 @@ def _sweep_clips(ctx: _Ctx, spec: Any, base: Path, roots: list[Path]) -> list[Cl
         conds = {k: v for k, v in row.items() if k not in MANIFEST_COLUMNS}
         cid = f"{row['run']}/{row['vehicle']}_{row['camera']}"
         target = row.get("target") or None
-        c = _clip_from(ctx, at, cid, video, gt, target, row["run"], rate, width, height, conds)
+        try:  # the field of view: empty or unreadable means "not known" (no camera gap)
+            hfov: float | None = float(row["hfov_deg"])
+            if not 0 < hfov < 180:  # type: ignore[operator]
+                hfov = None
+        except ValueError:
+            hfov = None
+        c = _clip_from(ctx, at, cid, video, gt, target, row["run"], rate, width, height, conds,
+                       hfov)
         if c is not None:
             out.append(c)
     if rows and not out and not ctx.problems:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import math
 import os
+import sqlite3
 from pathlib import Path
 
 import numpy as np
@@ -294,9 +295,9 @@ def test_responses_are_stored_once_and_exported(tmp_path: Path) -> None:
         "session", "participant", "trial_index", "practice", "protocol", "clip", "run",
         "condition_speed_kt", "condition_alt_agl_m", "condition_target", "frame",
         "video_time_s", "reaction_time_ms", "key", "target_in_view", "eccentricity_deg",
-        "onscreen_distance_mm", "target_angular_size_deg", "viewing_distance_mm",
-        "screen_width_mm", "screen_height_mm", "screen_width_px", "screen_height_px",
-        "recognised")
+        "onscreen_distance_mm", "target_angular_size_deg", "camera_gap_deg",
+        "viewing_distance_mm", "screen_width_mm", "screen_height_mm", "screen_width_px",
+        "screen_height_px", "recognised", "reshown")
     first = dict(zip(rows[0], rows[1]))
     assert first == {
         "session": sid, "participant": "p01", "trial_index": "0", "practice": "1",
@@ -306,7 +307,7 @@ def test_responses_are_stored_once_and_exported(tmp_path: Path) -> None:
         "target_in_view": "1", "eccentricity_deg": "3.25", "onscreen_distance_mm": "34.1",
         "target_angular_size_deg": "0.5", "viewing_distance_mm": "600.0",
         "screen_width_mm": "531.0", "screen_height_mm": "299.0", "screen_width_px": "1920",
-        "screen_height_px": "1080", "recognised": ""}
+        "screen_height_px": "1080", "recognised": "", "camera_gap_deg": "", "reshown": ""}
     second = dict(zip(rows[0], rows[2]))
     assert (second["practice"], second["frame"], second["target_in_view"], second["key"]) == (
         "0", "", "", "none")
@@ -318,3 +319,25 @@ def test_store_url_and_bad_url(tmp_path: Path) -> None:
         assert store.sessions() == []
     with pytest.raises(ConfigError, match=r"cannot open the trial database nosuch://x"):
         Store("nosuch://x")
+
+
+def test_a_database_from_an_older_cosim_gains_the_new_columns(tmp_path: Path) -> None:
+    """A database made before camera_gap_deg and reshown existed opens, keeps
+    its rows (the new cells empty) and takes new responses with them."""
+    db = tmp_path / "old.sqlite"
+    with Store(db) as store:
+        s = store.create_session(participant="p01", study="s", protocol="disappear",
+                                 display=DISPLAY, order_method="shuffle", seed=7,
+                                 session_number=0, trial_order=[{"index": 0}, {"index": 1}])
+        store.record_response(_response(s["id"], 0))
+    con = sqlite3.connect(db)  # make it old: SQLite >= 3.35 drops columns
+    con.execute("ALTER TABLE responses DROP COLUMN camera_gap_deg")
+    con.execute("ALTER TABLE responses DROP COLUMN reshown")
+    con.commit()
+    con.close()
+    with Store(db) as store:
+        old = store.responses(s["id"])
+        assert len(old) == 1 and old[0]["camera_gap_deg"] is None and old[0]["reshown"] is None
+        row, created = store.record_response(_response(s["id"], 1, camera_gap_deg=12.5,
+                                                       reshown=True))
+        assert created and row["camera_gap_deg"] == 12.5 and row["reshown"] is True
