@@ -226,6 +226,8 @@ def _build_parser() -> _Parser:
                     help="the study's database, or a responses CSV (cosim trials export)")
     ta.add_argument("--out", metavar="DIR", required=True, help="folder for the CSVs and PNGs")
     ta.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
+    ta.add_argument("--exclude-reshown", action="store_true",
+                    help="leave out trials shown a second time after the page was reloaded")
 
     sw = sub.add_parser("swarm", help="run a scenario's swarm controller in this process, "
                                       "connected to `cosim run --external-controller`")
@@ -713,12 +715,19 @@ def _cmd_trials(a: argparse.Namespace) -> int:
             if src.suffix.lower() != ".csv":  # a database: its responses first
                 _existing_db(a.responses)
                 src = export_csv(a.responses, Path(tmp) / "responses.csv")
-            summary = analyse(src, a.out, seed=a.seed)
-        for target, fit in sorted(summary.get("critical_gap", {}).items()):
-            print(f"critical gap, {target}: {fit.get('status')}"
-                  + (f": CG {fit['cg_mm']:.1f} mm (95% CI {fit['cg_ci_mm'][0]:.1f}-"
-                     f"{fit['cg_ci_mm'][1]:.1f}), from d0 = {fit['d0_mm']:.0f} mm"
-                     if fit.get("cg_mm") is not None else f" ({fit.get('detail')})"))
+            summary = analyse(src, a.out, seed=a.seed, exclude_reshown=a.exclude_reshown)
+        checks: dict[str, list[bool]] = {}
+        for c in summary.get("critical_gap_check", []):
+            if c.get("holds") is not None:
+                checks.setdefault(c["fit"], []).append(c["holds"])
+        for label, fit in summary.get("critical_gap", {}).items():
+            u, sym = fit.get("unit"), "d" if fit.get("unit") == "mm" else "h"
+            held = checks.get(label, [])
+            print(f"critical gap, {label}: {fit.get('status')}"
+                  + (f": CG {fit['cg']:.3g} {u} (95% CI {fit['cg_ci'][0]:.3g}-"
+                     f"{fit['cg_ci'][1]:.3g}), from {sym}0 = {fit['threshold']:.0f} {u}; "
+                     f"the relation holds at {sum(held)} of {len(held)} plateau levels"
+                     if fit.get("cg") is not None else f" ({fit.get('detail')})"))
         model = (summary.get("recognise") or {}).get("logistic") or {}
         for name, c in (model.get("coefficients") or {}).items():
             if name != "intercept":

@@ -8,11 +8,21 @@ columns ``COLUMNS``), drops practice rows and writes into ``out_dir``:
   median conspicuity angle alpha (deg) and conspicuity distance (mm on the
   screen), means with a 95 % t interval, medians with a 95 % percentile
   bootstrap interval.
-- ``critical_gap.csv``, ``critical_gap_predictions.csv``, ``critical_gap.png``:
-  per target the critical gap ``CG = tan(alpha) * d`` (mm) and the threshold
-  viewing distance ``d0`` above which it is constant, with the check that it
-  is, and the angle ``beta = atan(CG / h)`` it predicts at each altitude
-  present in the data (see ``fit_critical_gap`` for the method).
+- ``critical_gap.csv``, ``critical_gap_check.csv``, ``critical_gap.png``: the
+  critical-gap relation ``CG = tan(alpha) * d = tan(beta) * h`` (DESIGN 3.5)
+  in its two planes. On the screen: per target (and altitude, when several)
+  ``tan(alpha) * d`` (mm) against the viewing distance, its critical gap and
+  the threshold viewing distance ``d0``. On the ground: per target (and
+  viewing distance, when several) ``tan(beta) * h`` (m) against the
+  altitude, ``beta`` being the conspicuity angle seen from the camera
+  (``camera_gap_deg``: for a nadir camera ``h * tan(beta)`` is the distance on
+  the ground between the point looked at and the target), its critical gap
+  and the threshold altitude ``h0``. Each is checked: from the other levels
+  on the plateau the gap predicts the angle at each level
+  (``tan(beta) = CG / h``), compared with the angle measured there
+  (``check_across_levels``). The two planes are not mixed: the screen's mm
+  and the ground's metres are related only through a clip's camera and the
+  display, which differ between studies. See ``fit_gap`` for the method.
 - ``recognition.csv``, ``recognition.png``: experiment 2 ("recognise"
   protocol) accuracy against altitude, speed, target, target angular size
   bins and eccentricity bins, with 95 % Wilson intervals, and a logistic
@@ -57,6 +67,9 @@ COLUMNS: tuple[str, ...] = (
     "screen_width_mm", "screen_height_mm", "screen_width_px", "screen_height_px",
     "recognised",
 )
+#: columns read when present (exports of older versions lack them): the
+#: camera-side gap (the altitude analysis needs it) and the re-shown flag
+OPTIONAL_COLUMNS: tuple[str, ...] = ("camera_gap_deg", "reshown")
 PROTOCOLS = ("disappear", "recognise", "track")
 #: the protocols whose responses are conspicuity angles (the target's eccentricity
 #: from where the eyes are: the fixation mark, or the tracked dot)
@@ -69,6 +82,9 @@ MAX_PROBLEMS = 200
 #: eccentricity_deg and atan(onscreen_distance_mm / viewing_distance_mm) further apart
 #: than this are counted (and logged) as inconsistent
 ECCENTRICITY_TOLERANCE_DEG = 0.5
+#: participants needed to resample whole participants in a bootstrap (fewer:
+#: trials are resampled, as if independent)
+MIN_BOOT_PARTICIPANTS = 5
 #: groups with more values than this are not bootstrapped value by value
 #: (memory n_boot x values): a median gets the order-statistic interval, a
 #: distance level's resampled sum is drawn from its normal distribution (exact
@@ -87,6 +103,7 @@ _NUMERIC: dict[str, tuple[bool, float, bool, float]] = {
     "eccentricity_deg": (False, 0.0, True, 90.0),
     "onscreen_distance_mm": (False, 0.0, True, math.inf),
     "target_angular_size_deg": (False, 0.0, False, 180.0),
+    "camera_gap_deg": (False, 0.0, True, 90.0),
     "viewing_distance_mm": (True, 0.0, False, math.inf),
     "screen_width_mm": (True, 0.0, False, math.inf),
     "screen_height_mm": (True, 0.0, False, math.inf),
@@ -94,7 +111,7 @@ _NUMERIC: dict[str, tuple[bool, float, bool, float]] = {
     "screen_height_px": (True, 0.0, False, math.inf),
 }
 _INTEGER = {"trial_index", "frame", "screen_width_px", "screen_height_px"}
-_FLAGS = ("practice", "target_in_view")
+_FLAGS = ("practice", "target_in_view", "reshown")
 
 
 # ---------------------------------------------------------------- reading
@@ -115,6 +132,7 @@ class Responses:
     practice: np.ndarray  # bool
     target_in_view: np.ndarray  # bool
     recognised: np.ndarray  # float: NaN (empty), 0 or 1
+    reshown: np.ndarray  # bool: the trial had been shown before (a reload)
     extra_columns: list[str] = field(default_factory=list)
 
     def __len__(self) -> int:
@@ -127,7 +145,8 @@ class Responses:
             text={k: [v[i] for i in idx] for k, v in self.text.items()},
             num={k: v[idx] for k, v in self.num.items()},
             practice=self.practice[idx], target_in_view=self.target_in_view[idx],
-            recognised=self.recognised[idx], extra_columns=self.extra_columns)
+            recognised=self.recognised[idx], reshown=self.reshown[idx],
+            extra_columns=self.extra_columns)
 
 
 class _Problems:
@@ -151,8 +170,9 @@ def read_responses(csv_path: str | Path, *, max_bytes: int = MAX_BYTES,
                    max_rows: int = MAX_ROWS) -> Responses:
     """Read and check a responses CSV; raise ``ConfigError`` listing every bad row.
 
-    The header must hold every column of ``COLUMNS`` (in any order; extra
-    columns are ignored with a warning). Files over ``max_bytes`` or with
+    The header must hold every column of ``COLUMNS`` and may hold those of
+    ``OPTIONAL_COLUMNS`` (in any order; other columns are ignored with a
+    warning). Files over ``max_bytes`` or with
     more than ``max_rows`` data rows are refused. Each cell is checked:
     numbers finite and in range, flags 0/1, ``protocol`` one of
     ``PROTOCOLS``, ``recognised`` empty/0/1 (0/1 on "recognise" rows),
@@ -193,10 +213,11 @@ def read_responses(csv_path: str | Path, *, max_bytes: int = MAX_BYTES,
         if dupes:
             msgs.append(f"duplicate column{'s' if len(dupes) > 1 else ''}: {', '.join(dupes)}")
         raise ConfigError(f"{name}:1: {'; '.join(msgs)}")
-    extra = [h for h in header if h not in COLUMNS]
+    extra = [h for h in header if h not in COLUMNS + OPTIONAL_COLUMNS]
     if extra:
         log.warning("%s: ignoring unknown columns: %s", name, ", ".join(extra))
-    col = {c: header.index(c) for c in COLUMNS}
+    col = {c: header.index(c) for c in COLUMNS + OPTIONAL_COLUMNS if c in header}
+    absent = {c: "" for c in OPTIONAL_COLUMNS if c not in header}
 
     text: dict[str, list[str]] = {c: [] for c in ("session", "participant", "protocol", "clip",
                                                   "run", "condition_target", "key")}
@@ -225,7 +246,7 @@ def read_responses(csv_path: str | Path, *, max_bytes: int = MAX_BYTES,
         if len(row) != len(header):
             problems.add(start, f"expected {len(header)} fields, got {len(row)}")
             continue
-        cells = {c: row[i].strip() for c, i in col.items()}
+        cells = {c: row[i].strip() for c, i in col.items()} | absent
         ok = True
         values: dict[str, float] = {}
         for c, (required, lo, lo_incl, hi) in _NUMERIC.items():
@@ -237,7 +258,7 @@ def read_responses(csv_path: str | Path, *, max_bytes: int = MAX_BYTES,
                 values[c] = v
         fl: dict[str, bool] = {}
         for c in _FLAGS:
-            if c == "target_in_view" and cells[c] == "":  # no key press: no frame shown
+            if c in ("target_in_view", "reshown") and cells[c] == "":  # no press, or unknown
                 fl[c] = False
                 continue
             if cells[c] not in ("0", "1"):
@@ -282,7 +303,8 @@ def read_responses(csv_path: str | Path, *, max_bytes: int = MAX_BYTES,
         num={c: np.asarray(v, dtype=float) for c, v in num.items()},
         practice=np.asarray(flags["practice"], dtype=bool),
         target_in_view=np.asarray(flags["target_in_view"], dtype=bool),
-        recognised=np.asarray(recognised, dtype=float), extra_columns=extra)
+        recognised=np.asarray(recognised, dtype=float),
+        reshown=np.asarray(flags["reshown"], dtype=bool), extra_columns=extra)
 
 
 def _number(cell: str, column: str, required: bool, lo: float, lo_incl: bool, hi: float,
@@ -400,48 +422,61 @@ def slope_ci(x: np.ndarray, y: np.ndarray, level: float = 0.95) -> tuple[float, 
 
 
 @dataclass(frozen=True)
-class CriticalGapFit:
-    """The critical gap of one target (``fit_critical_gap``).
+class GapFit:
+    """The critical gap of one target against one variable (``fit_gap``).
 
-    ``status``: "plateau" (tan(alpha)*d rises up to ``d0_mm`` and is
-    constant above it), "plateau_from_start" (constant over every distance
-    tested: the threshold is at or below the shortest, ``d0_mm``),
+    ``variable`` is what the levels are: the viewing distance ``d`` (the gap
+    ``tan(alpha) * d`` on the screen, in mm) or the altitude ``h`` (the gap
+    ``tan(beta) * h`` on the ground, in m); ``unit`` is the unit of the
+    levels, the gap and the threshold alike.
+
+    ``status``: "plateau" (the gap rises up to ``threshold`` and is
+    constant above it), "plateau_from_start" (constant over every level
+    tested: the threshold is at or below the lowest, ``threshold``),
     "no_plateau" (still changing above the best breakpoint: no critical
-    gap established within the distances tested; ``cg_mm`` and ``d0_mm``
-    are None; ``detail`` says why) or
-    "insufficient_data" (fewer than ``min_plateau_levels + 1`` viewing
-    distances, or fewer than two trials a distance on average).
+    gap established within the levels tested; ``cg`` and ``threshold``
+    are None; ``detail`` says why) or "insufficient_data" (fewer than
+    ``min_plateau_levels + 1`` levels, or fewer than two trials a level on
+    average). ``bootstrap`` says what the intervals resampled:
+    "participants" (whole participants, with all their trials) or "trials"
+    (within each level: fewer than ``MIN_BOOT_PARTICIPANTS`` participants).
     """
 
     status: str
     detail: str
     n: int
-    distances_mm: list[float]
-    cg_mm: float | None = None
-    cg_ci_mm: tuple[float, float] | None = None
-    d0_mm: float | None = None
-    d0_ci_mm: tuple[float, float] | None = None
+    variable: str
+    unit: str
+    levels: list[float]
+    #: the levels are the trials' values rounded to this
+    round_to: float = 1.0
+    participants: int = 0
+    bootstrap: str = ""
+    cg: float | None = None
+    cg_ci: tuple[float, float] | None = None
+    threshold: float | None = None
+    threshold_ci: tuple[float, float] | None = None
     #: the two-segment fit at the chosen breakpoint: plateau level and slope below it
-    fit_level_mm: float | None = None
+    fit_level: float | None = None
     rising_slope: float | None = None
     rising_slope_ci: tuple[float, float] | None = None
-    breakpoint_mm: float | None = None
-    #: residual check: slope of tan(alpha)*d against d at and above the breakpoint (mm/mm)
+    breakpoint: float | None = None
+    #: residual check: slope of the gap against the level at and above the breakpoint
     plateau_slope: float | None = None
     plateau_slope_ci: tuple[float, float] | None = None
     plateau_n: int = 0
     plateau_levels: int = 0
-    rmse_mm: float | None = None
+    rmse: float | None = None
 
     def as_dict(self) -> dict[str, Any]:
         return {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.__dict__.items()}
 
 
 def _candidates(levels: np.ndarray, steps: int, min_plateau_levels: int) -> np.ndarray:
-    """Breakpoints tried: the shortest distance (no rising part), then a fine
-    grid from the second distance up to the one that leaves
-    ``min_plateau_levels`` distances on the plateau for the check (with one
-    distance below the breakpoint any breakpoint between the first two fits
+    """Breakpoints tried: the lowest level (no rising part), then a fine
+    grid from the second level up to the one that leaves
+    ``min_plateau_levels`` levels on the plateau for the check (with one
+    level below the breakpoint any breakpoint between the first two fits
     alike, so the second stands for them)."""
     last = levels.size - min_plateau_levels  # index of the highest breakpoint
     grid = [levels[:1]]
@@ -454,161 +489,271 @@ def _candidates(levels: np.ndarray, steps: int, min_plateau_levels: int) -> np.n
 
 def _hinge(levels: np.ndarray, counts: np.ndarray, sums: np.ndarray, cand: np.ndarray
            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Least-squares ``y = a + s * min(d - c, 0)``, ``s >= 0``, for every
+    """Least-squares ``y = a + s * min(x - c, 0)``, ``s >= 0``, for every
     candidate ``c`` at once, from per-level counts and sums of y (the fit
     needs no more: every trial at a level has the same regressor).
 
-    ``sums`` is (L,) or (B, L) (B bootstrap replicates). Returns
+    ``sums`` is (L,) or (B, L) (B bootstrap replicates), ``counts`` (L,) or,
+    when whole participants are resampled, (B, L). Returns
     ``(sse_part, a, s, det)``, each (C,) or (B, C); ``sse_part`` is the
     squared error less the sum of y**2 (the same for every candidate).
     """
     x = np.minimum(levels[None, :] - cand[:, None], 0.0)  # (C, L)
-    n = float(counts.sum())
-    sx = x @ counts
-    sxx = (x * x) @ counts
+    if counts.ndim == 2:
+        n: Any = counts.sum(axis=-1, keepdims=True)
+    else:
+        n = float(counts.sum())
+    sx = counts @ x.T
+    sxx = counts @ (x * x).T
     sxy = sums @ x.T
     sy = sums.sum(axis=-1, keepdims=True) if sums.ndim == 2 else float(sums.sum())
     det = n * sxx - sx * sx
     good = det > 1e-9 * np.maximum(n * sxx, 1e-300)
     slope = np.where(good, (n * sxy - sx * sy) / np.where(good, det, 1.0), 0.0)
-    slope = np.maximum(slope, 0.0)  # below the threshold tan(alpha)*d rises (or is flat)
-    a = (sy - slope * sx) / n
+    slope = np.maximum(slope, 0.0)  # below the threshold the gap rises (or is flat)
+    a = (sy - slope * sx) / np.maximum(n, 1e-300)
     part = -2 * a * sy - 2 * slope * sxy + n * a * a + 2 * a * slope * sx + slope * slope * sxx
     return part, a, slope, det
 
 
-def _boot_level_sums(g_by_level: list[np.ndarray], rng: np.random.Generator,
-                     n_boot: int) -> np.ndarray:
-    """(n_boot, L) sums of y over trials resampled with replacement within each level."""
-    out = np.empty((n_boot, len(g_by_level)))
-    for j, g in enumerate(g_by_level):
-        if g.size <= _EXACT_BOOT_MAX:
-            out[:, j] = g[rng.integers(0, g.size, size=(n_boot, g.size))].sum(axis=1)
+def _boot_sums(g: np.ndarray, level_of: np.ndarray, n_levels: int,
+               clusters: np.ndarray | None, rng: np.random.Generator, n_boot: int
+               ) -> tuple[np.ndarray, np.ndarray | None, str]:
+    """Bootstrap replicates of the per-level sums of ``g``: ``(sums (B, L),
+    counts (B, L) or None (the counts of the data), what was resampled)``.
+
+    With ``MIN_BOOT_PARTICIPANTS`` or more participants (``clusters``) whole
+    participants are drawn with replacement, all their trials with them:
+    trials of one person are not independent, and the interval must say how
+    another group of people would answer. Otherwise trials are drawn with
+    replacement within each level."""
+    if clusters is not None:
+        ids, who = np.unique(clusters, return_inverse=True)
+        if ids.size >= MIN_BOOT_PARTICIPANTS:
+            s = np.zeros((ids.size, n_levels))
+            c = np.zeros((ids.size, n_levels))
+            np.add.at(s, (who, level_of), g)
+            np.add.at(c, (who, level_of), 1.0)
+            w = rng.multinomial(ids.size, np.full(ids.size, 1.0 / ids.size), size=n_boot)
+            return w @ s, w @ c, "participants"
+    out = np.empty((n_boot, n_levels))
+    for j in range(n_levels):
+        gj = g[level_of == j]
+        if gj.size <= _EXACT_BOOT_MAX:
+            out[:, j] = gj[rng.integers(0, gj.size, size=(n_boot, gj.size))].sum(axis=1)
         else:
-            out[:, j] = rng.normal(g.sum(), math.sqrt(g.size * float(g.var())), n_boot)
-    return out
+            out[:, j] = rng.normal(gj.sum(), math.sqrt(gj.size * float(gj.var())), n_boot)
+    return out, None, "trials"
 
 
-def fit_critical_gap(d_mm: np.ndarray, alpha_deg: np.ndarray, *, rng: np.random.Generator,
-                     distance_round_mm: float = 10.0, steps: int = 10, n_boot: int = 1000,
-                     min_plateau_levels: int = 3, level: float = 0.95) -> CriticalGapFit:
-    """Estimate the critical gap and threshold distance of one target.
+def fit_gap(x: np.ndarray, angle_deg: np.ndarray, *, rng: np.random.Generator,
+            variable: str, unit: str, gap: str, round_to: float,
+            clusters: Sequence[str] | np.ndarray | None = None, steps: int = 10,
+            n_boot: int = 1000, min_plateau_levels: int = 3,
+            level: float = 0.95) -> GapFit:
+    """Estimate a target's critical gap and the threshold above which it holds.
 
-    Method: ``g = tan(alpha) * d`` (the conspicuity distance in mm implied by
-    the angle) against the viewing distance ``d`` (rounded to
-    ``distance_round_mm`` to form the distance levels) is fitted by a
-    continuous two-segment ("hinge") model ``g = CG + s * min(d - d0, 0)``
-    with ``s >= 0``: rising linearly below ``d0``, constant above. For each
-    candidate ``d0`` (``_candidates``: the distance levels and ``steps``
-    subdivisions between them) the model is linear in (CG, s) and solved by
-    least squares; ``d0`` is the candidate of least squared error. At least
-    ``min_plateau_levels`` distances must lie at or above ``d0`` (with two,
-    a plateau is wrongly found in 1-2 % of data sets that rise everywhere;
-    so a threshold within the last two distances tested cannot be found).
+    ``x``: each trial's level of the variable (the viewing distance, or the
+    altitude), grouped to the nearest ``round_to``; ``angle_deg``: its
+    conspicuity angle there. ``gap`` names ``tan(angle) * x`` in messages.
+    ``clusters``: each trial's participant (see ``_boot_sums``).
+
+    Method: the gap ``g = tan(angle) * x`` against ``x`` is fitted by a
+    continuous two-segment ("hinge") model ``g = CG + s * min(x - x0, 0)``
+    with ``s >= 0``: rising linearly below ``x0``, constant above. For each
+    candidate ``x0`` (``_candidates``: the levels and ``steps`` subdivisions
+    between them) the model is linear in (CG, s) and solved by least
+    squares; ``x0`` is the candidate of least squared error. At least
+    ``min_plateau_levels`` levels must lie at or above ``x0`` (with two, a
+    plateau is wrongly found in 1-2 % of data sets that rise everywhere; so
+    a threshold within the last two levels tested cannot be found).
 
     Then, in order:
 
-    1. rising part: if ``d0`` is above the shortest distance but the 95 %
-       t interval of ``s`` (given ``d0``) includes 0, the rise is not
-       resolved and the constant model (``d0`` = shortest distance) is used;
-    2. residual check: the OLS slope of ``g`` against ``d`` over the trials
-       at and above ``d0`` (``min_plateau_levels`` distances) must have a 95 %
+    1. rising part: if ``x0`` is above the lowest level but the 95 % t
+       interval of ``s`` (given ``x0``) includes 0, the rise is not resolved
+       and the constant model (``x0`` = the lowest level) is used;
+    2. residual check: the OLS slope of ``g`` against ``x`` over the trials
+       at and above ``x0`` (``min_plateau_levels`` levels) must have a 95 %
        t interval (HC3 standard error) that contains 0 and, when there is a
        rising part, lies below its slope ``s`` (the bend is real, not a lack
-       of data above ``d0``); otherwise no plateau is established within the
-       distances tested ("no_plateau", no CG reported);
+       of data above ``x0``); otherwise no plateau is established within the
+       levels tested ("no_plateau", no CG reported);
     3. CG is the mean of ``g`` over the plateau; the intervals of CG and
-       ``d0`` are percentile bootstrap intervals (trials resampled within
-       each distance level, the breakpoint chosen anew each time).
+       ``x0`` are percentile bootstrap intervals (``_boot_sums``; the
+       breakpoint chosen anew each time).
 
-    Trials are treated as independent (participants are not modelled).
+    The t intervals of steps 1 and 2 treat trials as independent.
     """
-    d_mm = np.asarray(d_mm, dtype=float)
-    g = np.tan(np.radians(np.asarray(alpha_deg, dtype=float))) * d_mm
-    dr = np.round(d_mm / distance_round_mm) * distance_round_mm
-    levels = np.unique(dr)
+    x = np.asarray(x, dtype=float)
+    g = np.tan(np.radians(np.asarray(angle_deg, dtype=float))) * x
+    xr = np.round(x / round_to) * round_to
+    levels, level_of = np.unique(xr, return_inverse=True)
     n = int(g.size)
-    base: dict[str, Any] = {"n": n, "distances_mm": [float(v) for v in levels]}
+    people = np.asarray(clusters, dtype=object) if clusters is not None else None
+    base: dict[str, Any] = {"n": n, "variable": variable, "unit": unit,
+                            "levels": [float(v) for v in levels], "round_to": round_to,
+                            "participants": int(np.unique(people).size) if people is not None
+                            else 0}
     if min_plateau_levels < 2:
         raise ValueError(f"min_plateau_levels must be >= 2, got {min_plateau_levels}")
     need = min_plateau_levels + 1
     if levels.size < need or n < 2 * need:
-        return CriticalGapFit(status="insufficient_data",
-                              detail=f"{n} trials at {levels.size} viewing distances: need at "
-                                     f"least {2 * need} trials at {need} distances", **base)
+        return GapFit(status="insufficient_data",
+                      detail=f"{n} trials at {levels.size} levels of the {variable}: need at "
+                             f"least {2 * need} trials at {need} levels", **base)
     cand = _candidates(levels, steps, min_plateau_levels)
-    g_by_level = [g[dr == v] for v in levels]
-    counts = np.array([x.size for x in g_by_level], dtype=float)
-    part, a, s, det = _hinge(levels, counts, np.array([x.sum() for x in g_by_level]), cand)
+    counts = np.bincount(level_of, minlength=levels.size).astype(float)
+    sums = np.bincount(level_of, weights=g, minlength=levels.size)
+    part, a, s, det = _hinge(levels, counts, sums, cand)
     sse = np.maximum(part + float(g @ g), 0.0)
     best = int(np.argmin(sse))
-    d0 = float(cand[best])
+    x0 = float(cand[best])
     zq = t_quantile(0.5 + level / 2, max(n - 2, 1))
     s_ci: tuple[float, float] | None = None
-    if d0 > levels[0] and det[best] > 0:
+    if x0 > levels[0] and det[best] > 0:
         sigma2 = float(sse[best]) / (n - 2)
         half = zq * math.sqrt(sigma2 * n / float(det[best]))
         s_ci = (float(s[best]) - half, float(s[best]) + half)
     rising_resolved = s_ci is not None and s_ci[0] > 0
     if not rising_resolved:
-        best = 0  # the first candidate is the shortest distance: no rising part
-        d0 = float(cand[0])
+        best = 0  # the first candidate is the lowest level: no rising part
+        x0 = float(cand[0])
     fit_level = float(a[best])
     rmse = math.sqrt(float(sse[best]) / n)
-    above = dr >= d0 - 1e-9
-    pb, plo, phi = slope_ci(dr[above], g[above], level)
+    above = xr >= x0 - 1e-9
+    pb, plo, phi = slope_ci(xr[above], g[above], level)
+    span = f"{levels[0]:g}-{levels[-1]:g} {unit}"
     common: dict[str, Any] = dict(
-        base, breakpoint_mm=d0, fit_level_mm=fit_level,
+        base, breakpoint=x0, fit_level=fit_level,
         rising_slope=float(s[best]) if rising_resolved else 0.0,
         rising_slope_ci=s_ci if rising_resolved else None,
         plateau_slope=pb, plateau_slope_ci=(plo, phi), plateau_n=int(above.sum()),
-        plateau_levels=int(np.unique(dr[above]).size), rmse_mm=rmse)
+        plateau_levels=int(np.unique(xr[above]).size), rmse=rmse)
     if not plo <= 0.0 <= phi:
-        return CriticalGapFit(
+        return GapFit(
             status="no_plateau",
-            detail=(f"tan(alpha)*d still changes above the best breakpoint {d0:g} mm: slope "
-                    f"{pb:.4g} mm/mm, {level:.0%} CI [{plo:.4g}, {phi:.4g}] excludes 0; no "
-                    f"critical gap within {levels[0]:g}-{levels[-1]:g} mm"),
+            detail=(f"{gap} still changes above the best breakpoint {x0:g} {unit}: slope "
+                    f"{pb:.4g} {unit}/{unit}, {level:.0%} CI [{plo:.4g}, {phi:.4g}] excludes 0;"
+                    f" no critical gap within {span}"),
             **common)
     if rising_resolved and phi >= float(s[best]):
-        return CriticalGapFit(
+        return GapFit(
             status="no_plateau",
-            detail=(f"above the best breakpoint {d0:g} mm the slope of tan(alpha)*d "
-                    f"({pb:.4g} mm/mm, {level:.0%} CI [{plo:.4g}, {phi:.4g}]) cannot be told "
-                    f"from the slope below it ({float(s[best]):.4g}): no plateau established "
-                    f"within {levels[0]:g}-{levels[-1]:g} mm (too few trials above it?)"),
+            detail=(f"above the best breakpoint {x0:g} {unit} the slope of {gap} "
+                    f"({pb:.4g} {unit}/{unit}, {level:.0%} CI [{plo:.4g}, {phi:.4g}]) cannot be "
+                    f"told from the slope below it ({float(s[best]):.4g}): no plateau "
+                    f"established within {span} (too few trials above it?)"),
             **common)
 
-    # bootstrap: resample within distance levels, choose the breakpoint anew
-    boot = _boot_level_sums(g_by_level, rng, n_boot)  # (B, L)
+    boot, bcounts, how = _boot_sums(g, level_of, levels.size, people, rng, n_boot)
+    use_counts = counts if bcounts is None else bcounts
     if rising_resolved:
-        bpart, _, _, _ = _hinge(levels, counts, boot, cand)
-        d0s = cand[np.argmin(bpart, axis=1)]
+        bpart, _, _, _ = _hinge(levels, use_counts, boot, cand)
+        x0s = cand[np.argmin(bpart, axis=1)]
     else:
-        d0s = np.full(n_boot, cand[0])
-    on = levels[None, :] >= d0s[:, None] - 1e-9  # (B, L): levels on the plateau
-    cgs = (boot * on).sum(axis=1) / (on * counts).sum(axis=1)
+        x0s = np.full(n_boot, cand[0])
+    on = levels[None, :] >= x0s[:, None] - 1e-9  # (B, L): levels on the plateau
+    with np.errstate(invalid="ignore", divide="ignore"):  # a draw with no one on the plateau
+        cgs = (boot * on).sum(axis=1) / (on * use_counts).sum(axis=1)
     q = [(1 - level) / 2, (1 + level) / 2]
-    cg_lo, cg_hi = (float(v) for v in np.quantile(cgs, q))
-    d0_lo, d0_hi = (float(v) for v in np.quantile(d0s, q))
+    cg_lo, cg_hi = (float(v) for v in np.nanquantile(cgs, q))
+    x0_lo, x0_hi = (float(v) for v in np.quantile(x0s, q))
     cg = float(g[above].mean())
     if rising_resolved:
         status = "plateau"
-        detail = (f"tan(alpha)*d rises up to d0 = {d0:g} mm and is constant above it "
-                  f"(slope {pb:.3g} mm/mm, {level:.0%} CI [{plo:.3g}, {phi:.3g}] contains 0)")
+        detail = (f"{gap} rises up to {x0:g} {unit} and is constant above it "
+                  f"(slope {pb:.3g} {unit}/{unit}, {level:.0%} CI [{plo:.3g}, {phi:.3g}] "
+                  f"contains 0)")
     else:
         status = "plateau_from_start"
-        detail = (f"tan(alpha)*d is constant over every distance tested ({levels[0]:g}-"
-                  f"{levels[-1]:g} mm): the threshold is at or below {levels[0]:g} mm")
-    return CriticalGapFit(status=status, detail=detail, cg_mm=cg, cg_ci_mm=(cg_lo, cg_hi),
-                          d0_mm=d0, d0_ci_mm=(d0_lo, d0_hi), **common)
+        detail = (f"{gap} is constant over every level tested ({span}): the threshold is at "
+                  f"or below {levels[0]:g} {unit}")
+    return GapFit(status=status, detail=detail, bootstrap=how, cg=cg, cg_ci=(cg_lo, cg_hi),
+                  threshold=x0, threshold_ci=(x0_lo, x0_hi), **common)
 
 
-def predict_beta_deg(cg_mm: float, alt_agl_m: float) -> float:
-    """The angle under which the critical gap is seen from altitude h:
-    ``tan(beta) = CG / h`` (CG and h in one unit; the relation of
-    ``cosim.conspicuity.angles.angle_for_gap_deg``)."""
-    return math.degrees(math.atan(cg_mm / (alt_agl_m * 1000.0)))
+def fit_critical_gap(d_mm: np.ndarray, alpha_deg: np.ndarray, *, rng: np.random.Generator,
+                     distance_round_mm: float = 10.0, **kw: Any) -> GapFit:
+    """The critical gap on the screen, ``CG = tan(alpha) * d`` (mm), and the
+    threshold viewing distance ``d0`` (mm) above which it is constant
+    (``fit_gap``; ``kw`` as there)."""
+    return fit_gap(d_mm, alpha_deg, rng=rng, variable="viewing distance d", unit="mm",
+                   gap="tan(alpha)*d", round_to=distance_round_mm, **kw)
+
+
+def fit_ground_gap(h_m: np.ndarray, beta_deg: np.ndarray, *, rng: np.random.Generator,
+                   altitude_round_m: float = 1.0, **kw: Any) -> GapFit:
+    """The critical gap on the ground, ``CG = tan(beta) * h`` (m), and the
+    threshold altitude ``h0`` (m) above which it is constant: ``beta`` is
+    the conspicuity angle at the camera (``camera_gap_deg``) and ``h`` its
+    height above the ground (``fit_gap``; ``kw`` as there)."""
+    return fit_gap(h_m, beta_deg, rng=rng, variable="altitude h", unit="m",
+                   gap="tan(beta)*h", round_to=altitude_round_m, **kw)
+
+
+def check_across_levels(fit: GapFit, x: np.ndarray, angle_deg: np.ndarray,
+                        level: float = 0.95) -> list[dict[str, Any]]:
+    """Whether one measurement predicts the others: per level of ``fit``'s
+    variable, the angle measured there against the angle the critical gap
+    predicts there (``tan(angle) = CG / x``), CG taken from the *other*
+    plateau levels only (leave one level out).
+
+    Every level gets a row: n, the measured mean gap with its t interval and
+    the angle ``atan(mean gap / x)``. On the plateau (``x >= threshold``)
+    also the predicted angle and ``holds``: the Welch 95 % interval of
+    (mean gap here - mean gap of the other plateau levels) contains 0;
+    below the threshold the relation is not expected to hold and the
+    prediction (from the whole plateau) is shown without a verdict. No
+    plateau: measured values only. The difference intervals are
+    Bonferroni-widened to ``1 - (1 - level) / k`` for the ``k`` plateau
+    levels checked (``confidence``), so that a fit whose relation holds
+    everywhere fails somewhere in at most ``1 - level`` of data sets."""
+    x = np.asarray(x, dtype=float)
+    g = np.tan(np.radians(np.asarray(angle_deg, dtype=float))) * x
+    xr = np.round(x / fit.round_to) * fit.round_to
+    out = []
+    on_plateau = (xr >= fit.threshold - 1e-9) if fit.threshold is not None else None
+    k = len(np.unique(xr[on_plateau])) if on_plateau is not None else 0
+    confidence = 1.0 - (1.0 - level) / max(k, 1)
+    for v in np.unique(xr):
+        here = xr == v
+        m, lo, hi = mean_ci(g[here], level)
+        row: dict[str, Any] = {
+            "level": float(v), "n": int(here.sum()), "gap_mean": m, "gap_ci_lo": lo,
+            "gap_ci_hi": hi, "angle_measured_deg": math.degrees(math.atan(m / v)),
+            "angle_predicted_deg": None, "cg_from_others": None, "difference": None,
+            "difference_ci_lo": None, "difference_ci_hi": None, "confidence": None,
+            "role": "no_plateau", "holds": None}
+        out.append(row)
+        if fit.cg is None or on_plateau is None:
+            continue
+        if not on_plateau[here][0]:
+            row.update(role="below_threshold", cg_from_others=fit.cg,
+                       angle_predicted_deg=math.degrees(math.atan(fit.cg / v)))
+            continue
+        others = g[on_plateau & ~here]
+        row["role"] = "plateau"
+        if others.size < 2 or here.sum() < 2:
+            continue
+        cg_o = float(others.mean())
+        diff, dlo, dhi = _welch_ci(g[here], others, confidence)
+        row.update(cg_from_others=cg_o, angle_predicted_deg=math.degrees(math.atan(cg_o / v)),
+                   difference=diff, difference_ci_lo=dlo, difference_ci_hi=dhi,
+                   confidence=confidence, holds=bool(dlo <= 0.0 <= dhi))
+    return out
+
+
+def _welch_ci(a: np.ndarray, b: np.ndarray, level: float) -> tuple[float, float, float]:
+    """mean(a) - mean(b) and its Welch t interval."""
+    va, vb = float(a.var(ddof=1)) / a.size, float(b.var(ddof=1)) / b.size
+    diff = float(a.mean() - b.mean())
+    se = math.sqrt(va + vb)
+    if se == 0.0:
+        return diff, diff, diff
+    df = (va + vb) ** 2 / (va * va / (a.size - 1) + vb * vb / (b.size - 1))
+    half = t_quantile(0.5 + level / 2, df) * se
+    return diff, diff - half, diff + half
 
 
 # ---------------------------------------------------------------- recognition
@@ -674,42 +819,127 @@ CONSPICUITY_FIELDS = (
     "gap_mean_mm",
 )
 CRITICAL_GAP_FIELDS = (
-    "target", "status", "n", "distances_mm", "cg_mm", "cg_ci_lo_mm", "cg_ci_hi_mm",
-    "d0_mm", "d0_ci_lo_mm", "d0_ci_hi_mm", "breakpoint_mm", "rising_slope",
-    "plateau_slope", "plateau_slope_ci_lo", "plateau_slope_ci_hi", "plateau_n",
-    "plateau_levels", "rmse_mm", "detail",
+    "fit", "target", "variable", "unit", "held", "status", "n", "participants", "levels",
+    "cg", "cg_ci_lo", "cg_ci_hi", "threshold", "threshold_ci_lo", "threshold_ci_hi",
+    "breakpoint", "rising_slope", "plateau_slope", "plateau_slope_ci_lo",
+    "plateau_slope_ci_hi", "plateau_n", "plateau_levels", "rmse", "bootstrap",
+    "relation_holds", "relation_checked", "detail",
 )
-PREDICTION_FIELDS = ("target", "alt_agl_m", "cg_mm", "tan_beta", "beta_deg",
-                     "beta_ci_lo_deg", "beta_ci_hi_deg")
+CHECK_FIELDS = (
+    "fit", "target", "variable", "unit", "level", "n", "role", "gap_mean", "gap_ci_lo",
+    "gap_ci_hi", "angle_measured_deg", "angle_predicted_deg", "cg_from_others", "difference",
+    "difference_ci_lo", "difference_ci_hi", "confidence", "holds",
+)
 RECOGNITION_FIELDS = ("factor", "level", "bin_lo", "bin_hi", "n", "recognised", "accuracy",
                       "ci_lo", "ci_hi", "reaction_time_mean_ms")
 
 
+@dataclass(frozen=True)
+class _GapData:
+    """One critical-gap fit and the trials it was made from."""
+
+    label: str
+    target: str
+    held: str  # what is the same for every trial of the fit ("" when nothing else varies)
+    x: np.ndarray
+    angle_deg: np.ndarray
+    fit: GapFit
+
+
+def _gap_fits(used: Responses, rng: np.random.Generator, *, n_boot: int,
+              distance_round_mm: float, altitude_round_m: float,
+              min_plateau_levels: int) -> list[_GapData]:
+    """The critical-gap fits the conspicuity responses allow.
+
+    On the screen: ``tan(alpha) * d`` against the viewing distance, one fit per
+    target and altitude with at least two viewing distances. On the ground:
+    ``tan(beta) * h`` against the altitude (``beta`` = ``camera_gap_deg``),
+    one fit per target and viewing distance with at least two altitudes. A
+    label names the target, and the held altitude / viewing distance when
+    the data have more than one."""
+    t_all = np.asarray(used.text["condition_target"], dtype=object)
+    vd = used.num["viewing_distance_mm"]
+    vd_r = np.round(vd / distance_round_mm) * distance_round_mm
+    alt = used.num["condition_alt_agl_m"]
+    alt_r = np.where(np.isnan(alt), np.nan, np.round(alt / altitude_round_m) * altitude_round_m)
+    beta = used.num["camera_gap_deg"]
+    people = np.asarray(used.text["participant"], dtype=object)
+    out: list[_GapData] = []
+    specs = (  # (levels, held, angle, unit of held, fit function)
+        ("screen", vd, alt_r, used.num["eccentricity_deg"], "m", "alt_agl_m"),
+        ("ground", alt, vd_r, beta, "mm", "viewing_distance_mm"))
+    for which, x, held, angle, held_unit, held_name in specs:
+        for target in sorted(set(t_all)):
+            ok = (t_all == target) & np.isfinite(x) & np.isfinite(angle)
+            groups = [float(v) for v in np.unique(held[ok & ~np.isnan(held)])]
+            if (ok & np.isnan(held)).any():
+                groups.append(math.nan)  # the trials that do not say
+            for h in groups:
+                m = ok & ((held == h) if not math.isnan(h) else np.isnan(held))
+                step = distance_round_mm if which == "screen" else altitude_round_m
+                if np.unique(np.round(x[m] / step)).size < 2:
+                    continue  # the variable does not vary: nothing to fit
+                kw = dict(rng=rng, clusters=people[m], n_boot=n_boot,
+                          min_plateau_levels=min_plateau_levels)
+                fit = (fit_critical_gap(x[m], angle[m], distance_round_mm=distance_round_mm,
+                                        **kw) if which == "screen" else
+                       fit_ground_gap(x[m], angle[m], altitude_round_m=altitude_round_m, **kw))
+                held_text = "" if math.isnan(h) else f"{held_name}={h:g}"
+                label = (target if len(groups) <= 1 or math.isnan(h)
+                         else f"{target}, {h:g} {held_unit}")
+                if which == "ground":
+                    label = f"{label} (ground)"
+                out.append(_GapData(label, target, held_text, x[m], angle[m], fit))
+    return out
+
+
+def _gap_row(gf: _GapData, verdicts: list[bool]) -> dict[str, Any]:
+    f = gf.fit
+    return {
+        "fit": gf.label, "target": gf.target, "variable": f.variable, "unit": f.unit,
+        "held": gf.held, "status": f.status, "n": f.n, "participants": f.participants,
+        "levels": " ".join(f"{v:g}" for v in f.levels), "cg": f.cg,
+        "cg_ci_lo": f.cg_ci[0] if f.cg_ci else None,
+        "cg_ci_hi": f.cg_ci[1] if f.cg_ci else None, "threshold": f.threshold,
+        "threshold_ci_lo": f.threshold_ci[0] if f.threshold_ci else None,
+        "threshold_ci_hi": f.threshold_ci[1] if f.threshold_ci else None,
+        "breakpoint": f.breakpoint, "rising_slope": f.rising_slope,
+        "plateau_slope": f.plateau_slope,
+        "plateau_slope_ci_lo": f.plateau_slope_ci[0] if f.plateau_slope_ci else None,
+        "plateau_slope_ci_hi": f.plateau_slope_ci[1] if f.plateau_slope_ci else None,
+        "plateau_n": f.plateau_n, "plateau_levels": f.plateau_levels, "rmse": f.rmse,
+        "bootstrap": f.bootstrap, "relation_holds": sum(verdicts),
+        "relation_checked": len(verdicts), "detail": f.detail}
+
+
 def analyse(csv_path: str | Path, out_dir: str | Path, *, seed: int = 0,
             n_boot: int = 1000, distance_round_mm: float = 10.0, n_bins: int = 4,
-            min_plateau_levels: int = 3, plots: bool = True, max_bytes: int = MAX_BYTES,
+            altitude_round_m: float = 1.0, min_plateau_levels: int = 3, plots: bool = True,
+            exclude_reshown: bool = False, max_bytes: int = MAX_BYTES,
             max_rows: int = MAX_ROWS) -> dict[str, Any]:
     """Analyse a responses CSV into ``out_dir`` and return the summary.
 
     ``csv_path``: the trial server's export (``COLUMNS``); refused with a
     ``ConfigError`` naming file:line of every bad row, or when larger than
-    ``max_bytes`` / ``max_rows``. Practice rows are excluded from everything.
+    ``max_bytes`` / ``max_rows``. Practice rows are excluded from everything;
+    with ``exclude_reshown`` also trials shown a second time after a reload
+    (they are counted either way).
 
-    Writes ``conspicuity.csv``, ``critical_gap.csv``,
-    ``critical_gap_predictions.csv``, ``recognition.csv``, ``analysis.json``
-    and (with ``plots``) ``critical_gap.png`` and ``recognition.png``;
-    every file is written even when its protocol has no rows (header only,
-    a "no data" figure).
+    Writes ``conspicuity.csv``, ``critical_gap.csv``, ``critical_gap_check.csv``,
+    ``recognition.csv``, ``analysis.json`` and (with ``plots``)
+    ``critical_gap.png`` and ``recognition.png``; every file is written even
+    when its protocol has no rows (header only, a "no data" figure).
 
     ``seed`` fixes the bootstraps (``n_boot`` resamples); viewing distances
-    are grouped to the nearest ``distance_round_mm``; angular size and
-    eccentricity are cut into ``n_bins`` quantile bins.
+    are grouped to the nearest ``distance_round_mm``, altitudes to the
+    nearest ``altitude_round_m``; angular size and eccentricity are cut
+    into ``n_bins`` quantile bins.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
     allr = read_responses(csv_path, max_bytes=max_bytes, max_rows=max_rows)
-    r = allr.subset(~allr.practice)
+    r = allr.subset(~allr.practice & ~(allr.reshown & exclude_reshown))
     protocol = np.asarray(r.text["protocol"], dtype=object)
     dis = r.subset(np.isin(protocol, CONSPICUITY))
     rec = r.subset(protocol == "recognise")
@@ -748,51 +978,30 @@ def analyse(csv_path: str | Path, out_dir: str | Path, *, seed: int = 0,
             a_mhi, s_m, s_lo, s_hi, s_md, s_mlo, s_mhi, gap))))
     _write_csv(out / "conspicuity.csv", CONSPICUITY_FIELDS, cons_rows)
 
-    # ---- critical gap per target, predictions at every altitude present
-    altitudes = sorted({float(v) for v in r.num["condition_alt_agl_m"] if not math.isnan(v)})
-    fits: dict[str, CriticalGapFit] = {}
-    tarr = np.asarray(targets, dtype=object)
-    for t in sorted(set(targets)):
-        m = tarr == t
-        fits[t] = fit_critical_gap(vd[m], alpha[m], rng=rng, n_boot=n_boot,
-                                   distance_round_mm=distance_round_mm,
-                                   min_plateau_levels=min_plateau_levels)
-    cg_rows = []
-    pred_rows = []
-    for t, f in fits.items():
-        cg_rows.append({
-            "target": t, "status": f.status, "n": f.n,
-            "distances_mm": " ".join(f"{v:g}" for v in f.distances_mm),
-            "cg_mm": f.cg_mm, "cg_ci_lo_mm": f.cg_ci_mm[0] if f.cg_ci_mm else None,
-            "cg_ci_hi_mm": f.cg_ci_mm[1] if f.cg_ci_mm else None, "d0_mm": f.d0_mm,
-            "d0_ci_lo_mm": f.d0_ci_mm[0] if f.d0_ci_mm else None,
-            "d0_ci_hi_mm": f.d0_ci_mm[1] if f.d0_ci_mm else None,
-            "breakpoint_mm": f.breakpoint_mm, "rising_slope": f.rising_slope,
-            "plateau_slope": f.plateau_slope,
-            "plateau_slope_ci_lo": f.plateau_slope_ci[0] if f.plateau_slope_ci else None,
-            "plateau_slope_ci_hi": f.plateau_slope_ci[1] if f.plateau_slope_ci else None,
-            "plateau_n": f.plateau_n, "plateau_levels": f.plateau_levels,
-            "rmse_mm": f.rmse_mm, "detail": f.detail})
-        if f.cg_mm is None:
-            continue
-        for h in altitudes:
-            lo, hi = f.cg_ci_mm if f.cg_ci_mm else (math.nan, math.nan)
-            pred_rows.append({
-                "target": t, "alt_agl_m": h, "cg_mm": f.cg_mm,
-                "tan_beta": f.cg_mm / (h * 1000.0), "beta_deg": predict_beta_deg(f.cg_mm, h),
-                "beta_ci_lo_deg": predict_beta_deg(max(lo, 0.0), h),
-                "beta_ci_hi_deg": predict_beta_deg(max(hi, 0.0), h)})
+    # ---- critical gap: on the screen across viewing distances (one fit per
+    # target and altitude), on the ground across altitudes (per target and
+    # viewing distance), and whether one level predicts the others
+    gap_fits = _gap_fits(used, rng, n_boot=n_boot, distance_round_mm=distance_round_mm,
+                         altitude_round_m=altitude_round_m,
+                         min_plateau_levels=min_plateau_levels)
+    cg_rows, check_rows = [], []
+    for gf in gap_fits:
+        checks = check_across_levels(gf.fit, gf.x, gf.angle_deg)
+        verdicts = [c["holds"] for c in checks if c["holds"] is not None]
+        cg_rows.append(_gap_row(gf, verdicts))
+        check_rows += [{"fit": gf.label, "target": gf.target, "variable": gf.fit.variable,
+                        "unit": gf.fit.unit, **c} for c in checks]
     _write_csv(out / "critical_gap.csv", CRITICAL_GAP_FIELDS, cg_rows)
-    _write_csv(out / "critical_gap_predictions.csv", PREDICTION_FIELDS, pred_rows)
+    _write_csv(out / "critical_gap_check.csv", CHECK_FIELDS, check_rows)
 
     # ---- experiment 2: recognition
     rec_rows, logistic = _recognition(rec, n_bins)
     _write_csv(out / "recognition.csv", RECOGNITION_FIELDS, rec_rows)
 
-    files = ["conspicuity.csv", "critical_gap.csv", "critical_gap_predictions.csv",
+    files = ["conspicuity.csv", "critical_gap.csv", "critical_gap_check.csv",
              "recognition.csv", "analysis.json"]
     if plots:
-        _plot_critical_gap(out / "critical_gap.png", used, fits, distance_round_mm)
+        _plot_critical_gap(out / "critical_gap.png", gap_fits)
         _plot_recognition(out / "recognition.png", rec_rows)
         files += ["critical_gap.png", "recognition.png"]
 
@@ -802,6 +1011,8 @@ def analyse(csv_path: str | Path, out_dir: str | Path, *, seed: int = 0,
         "input": allr.path,
         "rows": len(allr),
         "practice_rows_excluded": int(allr.practice.sum()),
+        "reshown_rows": int((allr.reshown & ~allr.practice).sum()),
+        "reshown_rows_excluded": bool(exclude_reshown),
         "ignored_columns": allr.extra_columns,
         "disappear": {
             "responses": len(dis), "used": len(used),
@@ -809,8 +1020,8 @@ def analyse(csv_path: str | Path, out_dir: str | Path, *, seed: int = 0,
             "eccentricity_inconsistent_rows": int(bad_ecc.sum()),
             "conditions": len(cons_rows),
         },
-        "critical_gap": {t: f.as_dict() for t, f in fits.items()},
-        "predictions": pred_rows,
+        "critical_gap": {gf.label: gf.fit.as_dict() for gf in gap_fits},
+        "critical_gap_check": check_rows,
         "recognise": {
             "responses": n_rec, "recognised": k_rec,
             "accuracy": k_rec / n_rec if n_rec else None,
@@ -819,6 +1030,7 @@ def analyse(csv_path: str | Path, out_dir: str | Path, *, seed: int = 0,
             "logistic": logistic,
         },
         "settings": {"seed": seed, "n_boot": n_boot, "distance_round_mm": distance_round_mm,
+                     "altitude_round_m": altitude_round_m,
                      "n_bins": n_bins, "min_plateau_levels": min_plateau_levels},
         "out_dir": str(out),
         "files": files,
@@ -910,6 +1122,8 @@ def _sort_key(key: tuple[Any, ...]) -> tuple[Any, ...]:
 def _fmt(v: Any) -> str:
     if v is None:
         return ""
+    if isinstance(v, bool):  # as in the responses export
+        return "1" if v else "0"
     if isinstance(v, float):
         return "" if math.isnan(v) else f"{v:.6g}"
     return str(v)
@@ -948,40 +1162,46 @@ def _pyplot() -> Any:
     return plt
 
 
-def _plot_critical_gap(path: Path, used: Responses, fits: dict[str, CriticalGapFit],
-                       distance_round_mm: float) -> None:
+def _plot_critical_gap(path: Path, fits: list[_GapData]) -> None:
+    """One panel a fit: the trials' gaps, level means with 95 % intervals and
+    the two-segment fit (dotted when it was rejected)."""
     plt = _pyplot()
     n = max(len(fits), 1)
-    fig, axes = plt.subplots(1, n, figsize=(4.5 * n, 3.8), squeeze=False)
+    cols = min(n, 2 if n <= 4 else 3)
+    rows = math.ceil(n / cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(4.5 * cols, 3.8 * rows), squeeze=False)
+    flat = list(axes.ravel())
     if not fits:
-        axes[0, 0].text(0.5, 0.5, "no 'disappear' responses", ha="center", va="center")
-        axes[0, 0].set_axis_off()
-    tarr = np.asarray(used.text["condition_target"], dtype=object)
-    for ax, (t, f) in zip(axes[0], fits.items()):
-        m = tarr == t
-        d = used.num["viewing_distance_mm"][m]
-        g = np.tan(np.radians(used.num["eccentricity_deg"][m])) * d
-        ax.plot(d, g, ".", color="0.6", ms=3, label="trials")
-        dr = np.round(d / distance_round_mm) * distance_round_mm
-        lv = np.unique(dr)
-        stats = [mean_ci(g[dr == v]) for v in lv]
-        mu = np.array([s[0] for s in stats])
-        err = np.array([[s[0] - s[1], s[2] - s[0]] for s in stats]).T
+        flat[0].text(0.5, 0.5, "no conspicuity responses with a varied viewing distance "
+                     "or altitude", ha="center", va="center", fontsize=8)
+    for ax in flat[len(fits) if fits else 1:]:
+        ax.set_axis_off()
+    for ax, gf in zip(flat, fits):
+        f, u = gf.fit, gf.fit.unit
+        symbol, angle = ("d", "alpha") if u == "mm" else ("h", "beta")
+        g = np.tan(np.radians(gf.angle_deg)) * gf.x
+        ax.plot(gf.x, g, ".", color="0.6", ms=3, label="trials")
+        xr = np.round(gf.x / f.round_to) * f.round_to
+        lv = np.unique(xr)
+        stats = [mean_ci(g[xr == v]) for v in lv]
+        mu = np.array([st[0] for st in stats])
+        err = np.array([[st[0] - st[1], st[2] - st[0]] for st in stats]).T
         ax.errorbar(lv, mu, yerr=np.nan_to_num(err), fmt="o", color="C0", capsize=3,
                     label="mean, 95% CI")
-        if f.breakpoint_mm is not None and f.fit_level_mm is not None:
+        if f.breakpoint is not None and f.fit_level is not None:
             xs = np.linspace(lv[0], lv[-1], 200)
-            ys = f.fit_level_mm + (f.rising_slope or 0.0) * np.minimum(xs - f.breakpoint_mm, 0)
-            ax.plot(xs, ys, "-" if f.cg_mm is not None else ":",
-                    color="C3" if f.cg_mm is not None else "C1",
-                    label="two-segment fit" if f.cg_mm is not None
+            ys = f.fit_level + (f.rising_slope or 0.0) * np.minimum(xs - f.breakpoint, 0)
+            ax.plot(xs, ys, "-" if f.cg is not None else ":",
+                    color="C3" if f.cg is not None else "C1",
+                    label="two-segment fit" if f.cg is not None
                     else "best two-segment fit (rejected)")
-        if f.cg_mm is not None and f.d0_mm is not None:
-            ax.axhline(f.cg_mm, color="C3", ls=":", lw=1, label=f"CG = {f.cg_mm:.3g} mm")
-            ax.axvline(f.d0_mm, color="C3", ls="--", lw=1, label=f"d0 = {f.d0_mm:.0f} mm")
-        ax.set_title(f"{t}: {f.status}", fontsize=10)
-        ax.set_xlabel("viewing distance d (mm)")
-        ax.set_ylabel("tan(alpha) * d (mm)")
+        if f.cg is not None and f.threshold is not None:
+            ax.axhline(f.cg, color="C3", ls=":", lw=1, label=f"CG = {f.cg:.3g} {u}")
+            ax.axvline(f.threshold, color="C3", ls="--", lw=1,
+                       label=f"{symbol}0 = {f.threshold:.0f} {u}")
+        ax.set_title(f"{gf.label}: {f.status}", fontsize=10)
+        ax.set_xlabel(f"{f.variable} ({u})")
+        ax.set_ylabel(f"tan({angle}) * {symbol} ({u})")
         ax.legend(fontsize=7, loc="lower right")
     fig.tight_layout()
     fig.savefig(path, dpi=110)

@@ -341,3 +341,59 @@ def test_a_database_from_an_older_cosim_gains_the_new_columns(tmp_path: Path) ->
         row, created = store.record_response(_response(s["id"], 1, camera_gap_deg=12.5,
                                                        reshown=True))
         assert created and row["camera_gap_deg"] == 12.5 and row["reshown"] is True
+
+
+@pytest.mark.parametrize("north_m,east_m", [(0.0, 0.0), (12.0, -7.0), (-30.0, 21.0)])
+def test_camera_gap_is_the_renderers_angle_and_the_ground_distance(
+        tmp_path: Path, north_m: float, east_m: float) -> None:
+    """camera_gap_deg of a frame rendered from a level nadir camera 100 m up:
+    the renderer's own angle off the optical axis (from its 3-D vectors), and
+    tan(gap) * (height above the target's centre) is the target's distance
+    on the ground from the point under the camera."""
+    from cosim.renderer.camera import camera_pose
+    from cosim.renderer.config import TARGET_DEFAULTS, CameraSpec, GroundSpec, TargetSpec
+    from cosim.renderer.frame import World, WorldSpec, render_frame
+    from cosim.trials.study import Clip, GtFrame
+
+    lat, lon, ground = 37.0, -122.0, 10.0
+    length, width, height, colour = TARGET_DEFAULTS["truck"]
+    t = TargetSpec("t", "truck", north_m, east_m, None, None, 0.0, length, width, height, colour)
+    cam = CameraSpec("c", (0,), "nadir", -90.0, False, 60.0, 2 * math.degrees(
+        math.atan(math.tan(math.radians(30.0)) * 240 / 320)), 320, 240, 10.0, 12)
+    pose = camera_pose(cam, lat, lon, ground + 100.0, 0.0, 0.0, 0.0, ground_alt_m=ground)
+    _, (row,) = render_frame(World(WorldSpec(lat, lon, ground, 1, 120.0, GroundSpec(), (t,))),
+                             cam, pose, 0)
+    frame = GtFrame(frame=0, time_s=0.0, in_view=row["in_view"] == 1,
+                    bbox_px=(row["bbox_x0_px"], row["bbox_y0_px"], row["bbox_x1_px"],
+                             row["bbox_y1_px"]),
+                    center_px=(row["center_x_px"], row["center_y_px"]))
+    clip = Clip(id="c", video=tmp_path / "v.mp4", ground_truth=tmp_path / "g.csv", target="t",
+                run="", rate_hz=10.0, width_px=320, height_px=240, conditions=(),
+                frames=(frame,), hfov_deg=60.0)
+    d = Display(screen_width_px=1600, screen_height_px=900, screen_width_mm=400,
+                screen_height_mm=225, viewing_distance_mm=500)
+    m = measures_at(clip, 0, d)
+    assert m.camera_gap_deg == pytest.approx(row["eccentricity_deg"], abs=1e-6)
+    ground_m = math.tan(math.radians(m.camera_gap_deg)) * (100.0 - height / 2)
+    assert ground_m == pytest.approx(math.hypot(north_m, east_m), abs=0.02)
+    no_fov = Clip(**{**clip.__dict__, "hfov_deg": None})
+    assert measures_at(no_fov, 0, d).camera_gap_deg is None
+
+
+def test_track_camera_gap_is_the_arrows_way_in_camera_pixels(tmp_path: Path) -> None:
+    """A tracked arrow r mm from the target: its gap seen from the camera is
+    r over the screen's mm per camera pixel, over the focal length."""
+    from cosim.trials.measures import arrow_offset_mm, track_measures
+
+    p = write_study(tmp_path, "protocol: track\n" + CLIPS.replace(
+        "width_px: 320, height_px: 240,", "width_px: 320, height_px: 240, hfov_deg: 90,"))
+    clip = load_study(p).clips[0]
+    assert clip.focal_px == pytest.approx(160.0)
+    d = Display(screen_width_px=1600, screen_height_px=900, screen_width_mm=400,
+                screen_height_mm=225, viewing_distance_mm=500)
+    for direction in ((1.0, 0.0), (0.0, -1.0)):
+        m = track_measures(clip, d, direction, 2.0, 1500.0)
+        r_mm = arrow_offset_mm(2.0, 1500.0, 500.0)
+        camera_px = r_mm / (3.75 * 0.25)  # 3.75 screen px a camera px, 0.25 mm a screen px
+        assert m.onscreen_distance_mm == pytest.approx(r_mm)
+        assert m.camera_gap_deg == pytest.approx(math.degrees(math.atan(camera_px / 160.0)))
