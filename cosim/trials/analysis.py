@@ -4,10 +4,12 @@ Reads the responses CSV the trial server exports (one row per response,
 columns ``COLUMNS``), drops practice rows and writes into ``out_dir``:
 
 - ``conspicuity.csv``: experiment 1 ("disappear" and "track" protocols) per condition
-  (target, viewing distance, altitude and speed where given): n, mean and
-  median conspicuity angle alpha (deg) and conspicuity distance (mm on the
-  screen), means with a 95 % t interval, medians with a 95 % percentile
-  bootstrap interval.
+  (target, viewing distance, altitude and speed where given): n, participants,
+  mean and median conspicuity angle alpha (deg) and conspicuity distance (mm
+  on the screen), means with a 95 % t interval, medians with a 95 %
+  percentile bootstrap interval; and, where the clips' field of view is
+  known, the mean angle beta seen from the camera and the gap on the ground
+  ``tan(beta) * h`` (m).
 - ``critical_gap.csv``, ``critical_gap_check.csv``, ``critical_gap.png``: the
   critical-gap relation ``CG = tan(alpha) * d = tan(beta) * h`` (DESIGN 3.5)
   in its two planes. On the screen: per target (and altitude, when several)
@@ -816,7 +818,8 @@ CONSPICUITY_FIELDS = (
     "alpha_median_deg", "alpha_median_ci_lo_deg", "alpha_median_ci_hi_deg",
     "distance_mean_mm", "distance_mean_ci_lo_mm", "distance_mean_ci_hi_mm",
     "distance_median_mm", "distance_median_ci_lo_mm", "distance_median_ci_hi_mm",
-    "gap_mean_mm",
+    "gap_mean_mm", "participants", "beta_mean_deg", "beta_mean_ci_lo_deg",
+    "beta_mean_ci_hi_deg", "ground_gap_mean_m",
 )
 CRITICAL_GAP_FIELDS = (
     "fit", "target", "variable", "unit", "held", "status", "n", "participants", "levels",
@@ -961,6 +964,8 @@ def analyse(csv_path: str | Path, out_dir: str | Path, *, seed: int = 0,
     targets = used.text["condition_target"]
     alt = used.num["condition_alt_agl_m"]
     spd = used.num["condition_speed_kt"]
+    beta = used.num["camera_gap_deg"]
+    people = used.text["participant"]
     groups: dict[tuple[Any, ...], list[int]] = {}
     for i in range(len(used)):
         key = (targets[i], float(vd_r[i]), _key(alt[i]), _key(spd[i]))
@@ -973,9 +978,14 @@ def analyse(csv_path: str | Path, out_dir: str | Path, *, seed: int = 0,
         s_m, s_lo, s_hi = mean_ci(dist[m])
         s_md, s_mlo, s_mhi = median_ci(dist[m], rng, n_boot)
         gap = float(np.mean(np.tan(np.radians(alpha[m])) * vd[m]))
+        b = beta[m][np.isfinite(beta[m])]  # the camera's side, where the clip's fov is known
+        b_m, b_lo, b_hi = mean_ci(b)
+        ground = float(np.mean(np.tan(np.radians(b)))) * key[2] \
+            if b.size and key[2] is not None else None
         cons_rows.append(dict(zip(CONSPICUITY_FIELDS, (
             key[0], key[1], key[2], key[3], int(m.size), a_m, a_lo, a_hi, a_md, a_mlo,
-            a_mhi, s_m, s_lo, s_hi, s_md, s_mlo, s_mhi, gap))))
+            a_mhi, s_m, s_lo, s_hi, s_md, s_mlo, s_mhi, gap, len({people[i] for i in m}),
+            b_m, b_lo, b_hi, ground))))
     _write_csv(out / "conspicuity.csv", CONSPICUITY_FIELDS, cons_rows)
 
     # ---- critical gap: on the screen across viewing distances (one fit per

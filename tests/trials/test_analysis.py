@@ -444,6 +444,12 @@ def test_ground_gap_and_threshold_altitude_recovered_and_checked(tmp_path: Path)
         true_beta = math.degrees(math.atan(GROUND_CG_M / c["level"]))
         assert c["angle_predicted_deg"] == pytest.approx(true_beta, abs=0.5)
         assert c["angle_predicted_deg"] == pytest.approx(c["angle_measured_deg"], abs=0.5)
+    per_condition = {float(r["alt_agl_m"]): r for r in _read_csv(tmp_path / "out" /
+                                                                 "conspicuity.csv")}
+    for c in checks:  # the same gap on the ground, from the per-condition table
+        r = per_condition[c["level"]]
+        assert float(r["ground_gap_mean_m"]) == pytest.approx(c["gap_mean"], rel=1e-5)
+        assert r["participants"] == "10"
     row = _read_csv(tmp_path / "out" / "critical_gap.csv")[0]
     assert (row["fit"], row["held"], row["unit"]) == ("truck (ground)",
                                                      "viewing_distance_mm=600", "m")
