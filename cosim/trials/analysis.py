@@ -551,7 +551,7 @@ def _boot_sums(g: np.ndarray, level_of: np.ndarray, n_levels: int,
 def fit_gap(x: np.ndarray, angle_deg: np.ndarray, *, rng: np.random.Generator,
             variable: str, unit: str, gap: str, round_to: float,
             clusters: Sequence[str] | np.ndarray | None = None, steps: int = 10,
-            n_boot: int = 1000, min_plateau_levels: int = 3,
+            n_boot: int = 1000, min_plateau_levels: int = 3, tolerance: float = 0.1,
             level: float = 0.95) -> GapFit:
     """Estimate a target's critical gap and the threshold above which it holds.
 
@@ -576,11 +576,15 @@ def fit_gap(x: np.ndarray, angle_deg: np.ndarray, *, rng: np.random.Generator,
        interval of ``s`` (given ``x0``) includes 0, the rise is not resolved
        and the constant model (``x0`` = the lowest level) is used;
     2. residual check: the OLS slope of ``g`` against ``x`` over the trials
-       at and above ``x0`` (``min_plateau_levels`` levels) must have a 95 %
-       t interval (HC3 standard error) that contains 0 and, when there is a
-       rising part, lies below its slope ``s`` (the bend is real, not a lack
-       of data above ``x0``); otherwise no plateau is established within the
-       levels tested ("no_plateau", no CG reported);
+       at and above ``x0`` (``min_plateau_levels`` levels) must be
+       negligible: its 95 % t interval (HC3 standard error) contains 0, or
+       lies within the slope that would change the gap by ``tolerance`` of
+       its level across the plateau (with thousands of trials a change of a
+       few per cent is significant but not a change of the relation); and,
+       when there is a rising part, the interval lies below its slope ``s``
+       (the bend is real, not a lack of data above ``x0``); otherwise no
+       plateau is established within the levels tested ("no_plateau", no CG
+       reported);
     3. CG is the mean of ``g`` over the plateau; the intervals of CG and
        ``x0`` are percentile bootstrap intervals (``_boot_sums``; the
        breakpoint chosen anew each time).
@@ -632,12 +636,17 @@ def fit_gap(x: np.ndarray, angle_deg: np.ndarray, *, rng: np.random.Generator,
         rising_slope_ci=s_ci if rising_resolved else None,
         plateau_slope=pb, plateau_slope_ci=(plo, phi), plateau_n=int(above.sum()),
         plateau_levels=int(np.unique(xr[above]).size), rmse=rmse)
-    if not plo <= 0.0 <= phi:
+    # the slope that would move the gap by `tolerance` of its level across the plateau
+    negligible = tolerance * abs(fit_level) / max(float(levels[-1]) - x0, 1e-300)
+    flat = plo <= 0.0 <= phi
+    small = -negligible <= plo and phi <= negligible
+    if not (flat or small):
         return GapFit(
             status="no_plateau",
             detail=(f"{gap} still changes above the best breakpoint {x0:g} {unit}: slope "
-                    f"{pb:.4g} {unit}/{unit}, {level:.0%} CI [{plo:.4g}, {phi:.4g}] excludes 0;"
-                    f" no critical gap within {span}"),
+                    f"{pb:.4g} {unit}/{unit}, {level:.0%} CI [{plo:.4g}, {phi:.4g}] excludes 0 "
+                    f"and reaches beyond +-{negligible:.3g} ({tolerance:.0%} of the gap across "
+                    f"the plateau); no critical gap within {span}"),
             **common)
     if rising_resolved and phi >= float(s[best]):
         return GapFit(
@@ -666,7 +675,8 @@ def fit_gap(x: np.ndarray, angle_deg: np.ndarray, *, rng: np.random.Generator,
         status = "plateau"
         detail = (f"{gap} rises up to {x0:g} {unit} and is constant above it "
                   f"(slope {pb:.3g} {unit}/{unit}, {level:.0%} CI [{plo:.3g}, {phi:.3g}] "
-                  f"contains 0)")
+                  + ("contains 0)" if flat else f"within +-{negligible:.3g}, {tolerance:.0%} of "
+                                                "the gap across the plateau)"))
     else:
         status = "plateau_from_start"
         detail = (f"{gap} is constant over every level tested ({span}): the threshold is at "
@@ -695,7 +705,7 @@ def fit_ground_gap(h_m: np.ndarray, beta_deg: np.ndarray, *, rng: np.random.Gene
 
 
 def check_across_levels(fit: GapFit, x: np.ndarray, angle_deg: np.ndarray,
-                        level: float = 0.95) -> list[dict[str, Any]]:
+                        level: float = 0.95, tolerance: float = 0.1) -> list[dict[str, Any]]:
     """Whether one measurement predicts the others: per level of ``fit``'s
     variable, the angle measured there against the angle the critical gap
     predicts there (``tan(angle) = CG / x``), CG taken from the *other*
@@ -704,7 +714,9 @@ def check_across_levels(fit: GapFit, x: np.ndarray, angle_deg: np.ndarray,
     Every level gets a row: n, the measured mean gap with its t interval and
     the angle ``atan(mean gap / x)``. On the plateau (``x >= threshold``)
     also the predicted angle and ``holds``: the Welch 95 % interval of
-    (mean gap here - mean gap of the other plateau levels) contains 0;
+    (mean gap here - mean gap of the other plateau levels) contains 0 or
+    lies within ``tolerance`` of the others' gap (a difference that large
+    numbers of trials make significant but that is too small to matter);
     below the threshold the relation is not expected to hold and the
     prediction (from the whole plateau) is shown without a verdict. No
     plateau: measured values only. The difference intervals are
@@ -742,7 +754,8 @@ def check_across_levels(fit: GapFit, x: np.ndarray, angle_deg: np.ndarray,
         diff, dlo, dhi = _welch_ci(g[here], others, confidence)
         row.update(cg_from_others=cg_o, angle_predicted_deg=math.degrees(math.atan(cg_o / v)),
                    difference=diff, difference_ci_lo=dlo, difference_ci_hi=dhi,
-                   confidence=confidence, holds=bool(dlo <= 0.0 <= dhi))
+                   confidence=confidence,
+                   holds=bool(dlo <= 0.0 <= dhi or max(-dlo, dhi) <= tolerance * abs(cg_o)))
     return out
 
 

@@ -544,3 +544,25 @@ def test_relation_check_error_rates_over_seeds() -> None:
         c = {r["level"]: r for r in run(300 + s, 4.0)}
         flagged += not c or c[300.0]["holds"] is False or c[300.0]["role"] != "plateau"
     assert flagged >= 36
+
+
+@pytest.mark.parametrize("drift,plateau", [(0.03, True), (0.3, False)])
+def test_many_trials_a_small_drift_is_a_plateau_a_large_one_is_not(drift: float,
+                                                                   plateau: bool) -> None:
+    """1500 trials a distance: above d0 the gap drifts by 3 % (significant
+    with so many trials, but within the 10 % tolerance: still a plateau, and
+    the relation holds at every level) or by 30 % (not a plateau)."""
+    rng = np.random.default_rng(21)
+    d = np.repeat(DISTANCES_MM, 1500)
+    span = DISTANCES_MM[-1] - D0_MM
+    g = np.where(d < D0_MM, d * CG_MM / D0_MM, CG_MM * (1 + drift * (d - D0_MM) / span))
+    a = np.degrees(np.arctan(g / d)) + rng.normal(0.0, 0.2, d.size)
+    fit = fit_critical_gap(d, a, rng=rng, n_boot=50)
+    if plateau:
+        assert fit.status == "plateau", fit.detail
+        assert fit.plateau_slope_ci is not None and fit.plateau_slope_ci[0] > 0  # significant
+        assert "within" in fit.detail
+        checks = check_across_levels(fit, d, a)
+        assert all(c["holds"] for c in checks if c["role"] == "plateau")
+    else:
+        assert fit.status == "no_plateau" and fit.cg is None, fit.detail
