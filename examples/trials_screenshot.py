@@ -79,7 +79,7 @@ def main() -> None:
                                        ".includes(document.body.dataset.phase)")
                 page.keyboard.press("Space")
                 page.wait_for_function("document.body.dataset.phase === 'playing'")
-                clip = study.clips[s["trials"][0]["clip"]]
+                clip = study.all_clips[s["trials"][0]["clip"]]
                 deadline = time.monotonic() + 60
                 while time.monotonic() < deadline:  # the target fully in the picture
                     k = int(page.evaluate("Number(document.body.dataset.frame || -1)"))

@@ -12,9 +12,22 @@ compute measures (``measures``): the browser posts which key it saw and the
 into the frame number (``round(mediaTime * rate_hz)``) and computes every
 measure from the stored ground truth and the session's display profile.
 
-A local app: it binds 127.0.0.1 unless told ``public=True``, and refuses
-requests whose ``Host`` is not this machine's (a web page elsewhere cannot
-drive it through the browser: DNS rebinding). Request bodies are bounded.
+The participant's page reports its size (device px) when it loads, when it
+is resized and with every response; the server keeps the last one per
+session (in memory: gone on a restart until the page reports again) and the
+experimenter's page warns next to a session whose page is not the size of
+its display profile. The participant sees no such warning.
+
+A session records each trial's clip id and fingerprint (``study``); a
+session whose clip is gone from the study, or whose ground truth or video
+changed since, is refused (409, naming the clip and what changed) rather
+than measured against another clip. A session made before clip ids were
+recorded is read by clip number; one with ids but no fingerprints, by id.
+
+A local app: it binds 127.0.0.1 (or another loopback address it is given)
+unless told ``public=True``, and refuses requests whose ``Host`` is not this
+machine's or the address bound (a web page elsewhere cannot drive it through
+the browser: DNS rebinding). Request bodies are bounded.
 The frequent database calls (a participant's page fetching its session, a
 response stored) run in the thread pool, off the event loop.
 """
@@ -51,6 +64,10 @@ MAX_BODY_BYTES = 16 * 1024
 PARTICIPANT_ID = re.compile(r"^[A-Za-z0-9_.\-]{1,64}$")
 KEY_NAME = re.compile(r"^[A-Za-z0-9_ ]{1,32}$")
 LOCAL_HOSTS = ["127.0.0.1", "localhost", "[::1]", "::1"]
+#: a reaction time beyond this (10 minutes) is not one
+MAX_REACTION_MS = 600_000.0
+#: the page's size the browser may report (device px, each side)
+WINDOW_PX = (16, 16384)
 #: the condition names the export has columns of (the rest stay in ``conditions``)
 CONDITION_COLUMNS = ("speed_kt", "alt_agl_m", "target")
 DISPLAY_FIELDS = ("screen_width_px", "screen_height_px", "screen_width_mm", "screen_height_mm",
@@ -113,11 +130,35 @@ def _number(d: dict[str, Any], key: str, *, optional: bool = False) -> float | N
     return float(v)
 
 
+def _flag(d: dict[str, Any], key: str) -> bool | None:
+    """A JSON boolean, or None if absent (or null)."""
+    v = d.get(key)
+    if v is not None and not isinstance(v, bool):
+        raise BadRequest(f"{key}: expected true, false or null, got {v!r}"[:200])
+    return v
+
+
+def _window_px(d: dict[str, Any]) -> tuple[int, int] | None:
+    """The page's size (device px) a request reports, None if it does not say."""
+    w = _number(d, "window_width_px", optional=True)
+    h = _number(d, "window_height_px", optional=True)
+    if w is None or h is None:
+        return None
+    lo, hi = WINDOW_PX
+    if not (w == int(w) and h == int(h) and lo <= w <= hi and lo <= h <= hi):
+        raise BadRequest(f"window_width_px/window_height_px: whole numbers {lo}..{hi}, got "
+                         f"{w:g} x {h:g}"[:200])
+    return int(w), int(h)
+
+
 class TrialApp:
     """The study and the store behind the routes (one per app)."""
 
     def __init__(self, study: Study, store: Store) -> None:
         self.study, self.store = study, store
+        self._by_id = {c.id: n for n, c in enumerate(study.all_clips)}
+        #: the page's size (device px) each session's participant page last reported
+        self.windows: dict[str, tuple[int, int]] = {}
 
     # --- helpers ---
     def _session(self, sid: str) -> dict[str, Any]:
@@ -127,15 +168,34 @@ class TrialApp:
         return s
 
     def _clip(self, t: dict[str, Any]) -> tuple[int, Clip]:
-        """A session trial's clip (number, clip), found by its id if the study
-        file was edited since the session was created."""
-        n, clips = t["clip"], self.study.clips
-        if not (0 <= n < len(clips) and clips[n].id == t["clip_id"]):
-            n = next((i for i, c in enumerate(clips) if c.id == t["clip_id"]), -1)
-            if n < 0:
-                raise BadRequest(f"clip {t['clip_id']!r} of this session is no longer in the "
-                                 f"study {self.study.path}", 409)
-        return n, clips[n]
+        """A session trial's clip (its number in ``Study.all_clips``, the clip):
+        by the clip id and fingerprint the session recorded; refused (409) if
+        the clip is gone or changed. A session from before clip ids: by number."""
+        clips, where = self.study.all_clips, f"the study {self.study.path}"
+        cid = t.get("clip_id")
+        if cid is None:
+            n = t.get("clip")
+            if isinstance(n, bool) or not isinstance(n, int) or not 0 <= n < len(clips):
+                raise BadRequest(f"trial {t.get('index')} of this session shows clip number "
+                                 f"{n!r}, which {where} no longer has", 409)
+            return n, clips[n]
+        n = self._by_id.get(cid, -1) if isinstance(cid, str) else -1
+        if n < 0:
+            raise BadRequest(f"clip {str(cid)[:200]!r} of this session is no longer in {where}: "
+                             f"restore it, or start a new session", 409)
+        c, was = clips[n], t.get("fingerprint")
+        if was is not None and was != c.fingerprint:
+            old = was if isinstance(was, dict) else {}
+            changed = []
+            if old.get("ground_truth_sha256") != c.gt_sha256:
+                changed.append(f"its ground truth {c.ground_truth} is not the file it was")
+            if old.get("video_bytes") != c.video_bytes:
+                changed.append(f"its video {c.video} is {c.video_bytes} bytes, not "
+                               f"{old.get('video_bytes')!r}")
+            raise BadRequest(f"clip {c.id!r} of this session changed since the session was "
+                             f"created ({'; '.join(changed) or 'its fingerprint differs'}): "
+                             f"restore the files, or start a new session", 409)
+        return n, c
 
     def _view(self, s: dict[str, Any]) -> dict[str, Any]:
         done: dict[int, list[str]] = {}
@@ -172,11 +232,35 @@ class TrialApp:
     async def study_info(self, request: Request) -> Response:
         st = self.study
         return JSONResponse({"name": st.name, "protocol": st.protocol, "clips": len(st.clips),
-                             "practice": st.practice, "break_every": st.break_every,
+                             "practice": st.practice, "practice_clips": len(st.practice_clips),
+                             "break_every": st.break_every,
                              "repeats": st.repeats, "order": st.order, "seed": st.seed})
 
     async def list_sessions(self, request: Request) -> Response:
-        return JSONResponse(self.store.sessions())
+        """Every session, with the size its participant's page last reported
+        and a warning if that is not its display profile's."""
+        out = self.store.sessions()
+        for s in out:
+            px = self.windows.get(s["id"])
+            s["window_px"] = list(px) if px else None
+            s["window_warning"] = None
+            if px and px != (s["screen_width_px"], s["screen_height_px"]):
+                s["window_warning"] = (f"the participant's page is {px[0]} x {px[1]} px, not "
+                                       f"the profile's {s['screen_width_px']} x "
+                                       f"{s['screen_height_px']} (not full screen? another "
+                                       f"screen?): measured as drawn")
+        return JSONResponse(out)
+
+    async def report_window(self, request: Request) -> Response:
+        """The participant's page says its size (device px): kept for the
+        experimenter's page."""
+        d = await _json_body(request)
+        s = await run_in_threadpool(self._session, request.path_params["sid"])
+        px = _window_px(d)
+        if px is None:
+            raise BadRequest("window_width_px, window_height_px: expected the page's size")
+        self.windows[s["id"]] = px
+        return JSONResponse({"window_px": list(px)})
 
     async def create_session(self, request: Request) -> Response:
         d = await _json_body(request)
@@ -192,8 +276,10 @@ class TrialApp:
             raise BadRequest("; ".join(e.problems)) from None
         st = self.study
         number = self.store.session_count(st.name)
+        clips = st.all_clips
         order = [{"index": t.index, "practice": t.practice, "clip": t.clip,
-                  "clip_id": st.clips[t.clip].id, "break_before": t.break_before}
+                  "clip_id": clips[t.clip].id, "fingerprint": clips[t.clip].fingerprint,
+                  "break_before": t.break_before}
                  for t in st.trial_order(number)]
         s = self.store.create_session(
             participant=participant, study=st.name, protocol=st.protocol,
@@ -236,29 +322,33 @@ class TrialApp:
         _, clip = self._clip(t)
         media = _number(d, "media_time_s", optional=True)
         rt = _number(d, "reaction_time_ms", optional=True)
-        recognised = d.get("recognised")
-        if recognised is not None and not isinstance(recognised, bool):
-            raise BadRequest("recognised: expected true, false or null")
+        if rt is not None and not 0.0 <= rt <= MAX_REACTION_MS:
+            raise BadRequest(f"reaction_time_ms: expected 0..{MAX_REACTION_MS:.0f} ms (from the "
+                             f"clip's start to the press), got {rt:g}")
+        recognised = _flag(d, "recognised")
+        reshown = _flag(d, "reshown")  # shown again after a reload of the page
         if s["protocol"] == "recognise" and recognised is None:
             raise BadRequest("recognised: a recognise trial's answer must say true or false")
         if media is not None and not -1.0 <= media <= len(clip.frames) / clip.rate_hz + 1.0:
             raise BadRequest(f"media_time_s {media} is outside clip {clip.id}")
         display = Display(**{k: s[k] for k in DISPLAY_FIELDS})
-        drawn = _drawn_on(display, _number(d, "window_width_px", optional=True),
-                          _number(d, "window_height_px", optional=True))
+        px = _window_px(d)
+        drawn = _drawn_on(display, px)
+        if px is not None:
+            self.windows[s["id"]] = px
         row: dict[str, Any] = {
             "session": s["id"], "participant": s["participant"], "trial_index": ti,
             "kind": kind, "practice": bool(t["practice"]), "protocol": s["protocol"],
             "clip": clip.id, "run": clip.run, "conditions": json.dumps(clip.condition_map),
-            "key": key, "reaction_time_ms": rt, "recognised": recognised,
+            "key": key, "reaction_time_ms": rt, "recognised": recognised, "reshown": reshown,
             **{f"condition_{c}": clip.condition_map.get(c) for c in CONDITION_COLUMNS},
             **display.__dict__}
         if not row.get("condition_target"):  # a study that does not vary the target
             row["condition_target"] = clip.target
         if s["protocol"] == "track":  # the arrow's way from the target, at the press
-            if rt is None or not 0.0 <= rt <= 600_000.0:
-                raise BadRequest("reaction_time_ms: a track sub-trial needs the time from its "
-                                 "start to the press (0..600000 ms)")
+            if rt is None:
+                raise BadRequest(f"reaction_time_ms: a track sub-trial needs the time from its "
+                                 f"start to the press (0..{MAX_REACTION_MS:.0f} ms)")
             m = track_measures(clip, drawn, TRACK_DIRECTIONS[kind.split("-", 1)[1]],
                                self.study.arrow_speed_deg_s, rt)
             row.update(frame=m.frame, video_time_s=m.frame / clip.rate_hz,
@@ -289,10 +379,10 @@ class TrialApp:
                         headers={"Content-Disposition": "attachment; filename=responses.csv"})
 
     async def video(self, request: Request) -> Response:
-        n = request.path_params["n"]
-        if not 0 <= n < len(self.study.clips):
+        n, clips = request.path_params["n"], self.study.all_clips
+        if not 0 <= n < len(clips):
             raise BadRequest(f"no clip {n}", 404)
-        p = self.study.clips[n].video
+        p = clips[n].video
         if not any(p.is_relative_to(r) for r in self.study.roots):  # checked at load; again
             raise BadRequest("not a study file", 403)
         return FileResponse(p, media_type=_video_type(p))
@@ -308,16 +398,14 @@ def _directions(seed: int, session_number: int, trial: int) -> list[str]:
     return [names[i] for i in order]
 
 
-def _drawn_on(display: Display, w: float | None, h: float | None) -> Display:
+def _drawn_on(display: Display, px: tuple[int, int] | None) -> Display:
     """Where the clip was drawn: the page's size (device px) as the browser
     reported it, at the profile's millimetres per pixel, with the fixation
     mark at its centre; the profile's screen if the page did not say (or said
     the same)."""
-    if w is None or h is None:
+    if px is None:
         return display
-    if not (w == int(w) and h == int(h) and 16 <= w <= 16384 and 16 <= h <= 16384):
-        raise BadRequest("window_width_px/window_height_px: whole numbers 16..16384")
-    wi, hi = int(w), int(h)
+    wi, hi = px
     if (wi, hi) == (display.screen_width_px, display.screen_height_px):
         return display
     mx, my = display.mm_per_px
@@ -370,6 +458,7 @@ def make_app(study: Study | str | Path, db: Store | str | Path,
         Route("/api/sessions/{sid}", a.get_session),
         Route("/api/sessions/{sid}/state", _experimenter(a.set_state), methods=["POST"]),
         Route("/api/sessions/{sid}/responses", a.post_response, methods=["POST"]),
+        Route("/api/sessions/{sid}/window", a.report_window, methods=["POST"]),
         Route("/api/export.csv", _experimenter(a.export)),
         Route("/video/{n:int}", a.video),
         Mount("/static", StaticFiles(directory=STATIC), name="static"),
@@ -381,6 +470,14 @@ def make_app(study: Study | str | Path, db: Store | str | Path,
     return app
 
 
+def local_hosts(host: str) -> list[str]:
+    """The ``Host`` names a server bound to loopback address ``host`` answers:
+    this machine's usual names and ``host`` itself (IPv6 in brackets, as a
+    ``Host`` header writes it)."""
+    h = host.strip().lower()
+    if ":" in h and not h.startswith("["):
+        h = f"[{h}]"
+    return LOCAL_HOSTS + ([h] if h not in LOCAL_HOSTS else [])
 
 
 def serve(study_path: str | Path, host: str = "127.0.0.1", port: int = 8000,
@@ -394,7 +491,7 @@ def serve(study_path: str | Path, host: str = "127.0.0.1", port: int = 8000,
                           f"reachable from other machines; pass --public to mean it")
     st = load_study(study_path)
     db = db_url or str(Path(study_path).with_suffix(".sqlite"))
-    hosts = ["*"] if public else LOCAL_HOSTS
+    hosts = ["*"] if public else local_hosts(host)
     app = make_app(st, db, allowed_hosts=hosts)
     log.info("study %s: %d clips; responses in %s; experimenter page http://%s:%d/",
              st.name, len(st.clips), shown_url(db), host, port)

@@ -29,6 +29,8 @@ Example::
     #   - {video: clips/a.mp4, ground_truth: clips/a.gt.csv, target: truck,
     #      conditions: {speed_kt: 50, alt_agl_m: 100}}
     practice: 2                # practice trials first (clips drawn with the seed)
+    # practice_clips: runs/training  # draw them from these instead of the clips: a list
+    #                          # like `clips:` or a sweep folder like `sweep:`
     break_every: 12            # a break after every 12 trials (0: none)
     repeats: 1                 # every clip shown this many times
     order: latin_square        # or shuffle
@@ -40,13 +42,25 @@ so each clip appears at each position and after each other clip equally often
 over the sessions (for an odd number of clips over twice as many sessions);
 ``shuffle`` a permutation drawn by ``numpy.random.default_rng([seed,
 session_number, repeat])``. Practice clips are drawn by
-``default_rng([seed, session_number, PRACTICE_STREAM])``. The session records
-the method, the seed, its number and the resulting order.
+``default_rng([seed, session_number, PRACTICE_STREAM])`` from
+``practice_clips`` if the study has them, else from the clips themselves.
+``practice_clips`` take the same forms as ``clips:`` (a list) or ``sweep:``
+(a folder, or ``{folder, where}``); their ids must differ from the clips'
+(listed ones are ``practice0``, ``practice1``, ... unless given an ``id:``),
+and they need ``practice:`` above 0. A trial's ``clip`` numbers
+``Study.all_clips``: the clips, then the practice clips.
+
+Each clip carries a fingerprint (``Clip.fingerprint``: the SHA-256 of its
+ground-truth file and its video's size in bytes, taken when the study is
+read); a session records each trial's clip id and fingerprint, so a study
+file edited while sessions exist cannot silently show or measure another
+clip (``server`` refuses such a session).
 """
 
 from __future__ import annotations
 
 import csv
+import hashlib
 import io
 import math
 from collections.abc import Mapping
@@ -89,7 +103,7 @@ MANIFEST_COLUMNS = ("run", "vehicle", "camera", "video", "ground_truth", "frames
 GT_REQUIRED = ("frame", "time_s", "target", "in_view", "bbox_x0_px", "bbox_y0_px",
                "bbox_x1_px", "bbox_y1_px", "center_x_px", "center_y_px")
 TOP_KEYS = ("schema_version", "name", "description", "protocol", "arrow_speed_deg_s", "sweep",
-            "clips", "practice",
+            "clips", "practice", "practice_clips",
             "break_every", "repeats", "order", "seed")
 CLIP_KEYS = ("id", "video", "ground_truth", "target", "rate_hz", "width_px", "height_px",
              "hfov_deg", "conditions", "run")
@@ -125,6 +139,14 @@ class Clip:
     #: the camera's horizontal field of view (the renderer's pinhole: square
     #: pixels, focal length ``width_px / 2 / tan(hfov / 2)``); None: not known
     hfov_deg: float | None = None
+    #: the SHA-256 (hex) of the ground-truth file and the video's size, when read
+    gt_sha256: str = ""
+    video_bytes: int = 0
+
+    @property
+    def fingerprint(self) -> dict[str, Any]:
+        """What a session records to know the clip again (see the module docstring)."""
+        return {"ground_truth_sha256": self.gt_sha256, "video_bytes": self.video_bytes}
 
     @property
     def focal_px(self) -> float | None:
@@ -162,7 +184,7 @@ class Clip:
 class Trial:
     index: int
     practice: bool
-    clip: int  # index into Study.clips
+    clip: int  # index into Study.all_clips
     break_before: bool
 
 
@@ -180,6 +202,13 @@ class Study:
     roots: tuple[Path, ...]
     #: ``track``: the arrow's speed away from the target (degrees of visual angle a second)
     arrow_speed_deg_s: float = 2.0
+    #: the clips practice trials are drawn from (empty: from ``clips``)
+    practice_clips: tuple[Clip, ...] = ()
+
+    @property
+    def all_clips(self) -> tuple[Clip, ...]:
+        """The clips, then the practice clips: what ``Trial.clip`` numbers."""
+        return self.clips + self.practice_clips
 
     def trial_order(self, session_number: int) -> list[Trial]:
         """The trials of the ``session_number``-th session (0-based): practice
@@ -187,9 +216,11 @@ class Study:
         n = len(self.clips)
         trials: list[Trial] = []
         if self.practice:
+            pool = len(self.practice_clips) or n
+            first = n if self.practice_clips else 0  # the practice clips follow the clips
             rng = np.random.default_rng([self.seed, session_number, PRACTICE_STREAM])
-            picks = rng.choice(n, size=self.practice, replace=self.practice > n)
-            trials += [Trial(i, True, int(c), False) for i, c in enumerate(picks)]
+            picks = rng.choice(pool, size=self.practice, replace=self.practice > pool)
+            trials += [Trial(i, True, first + int(c), False) for i, c in enumerate(picks)]
         main: list[int] = []
         for rep in range(self.repeats):
             if self.order == "latin_square":
@@ -271,11 +302,13 @@ def _num(text: str, p: Path, line: int, col: str) -> float:
     return v
 
 
-def read_clip_truth(p: Path, target: str | None) -> tuple[str, tuple[GtFrame, ...]]:
-    """The rows of one target of a ground-truth CSV, in frame order;
-    ``target`` None: the file's only target."""
-    rows = _csv_rows(_read_bounded(p, MAX_GT_BYTES, "ground-truth file"), p,
-                     "ground-truth file", GT_REQUIRED)
+def read_clip_truth(p: Path, target: str | None) -> tuple[str, tuple[GtFrame, ...], str]:
+    """The rows of one target of a ground-truth CSV, in frame order, and the
+    file's SHA-256 (hex); ``target`` None: the file's only target."""
+    text = _read_bounded(p, MAX_GT_BYTES, "ground-truth file")
+    # the file's own bytes: it was read as strict UTF-8, which encodes back exactly
+    digest = hashlib.sha256(text.encode("utf-8")).hexdigest()
+    rows = _csv_rows(text, p, "ground-truth file", GT_REQUIRED)
     targets = sorted({r["target"] for _, r in rows})
     if target is None:
         if len(targets) != 1:
@@ -303,22 +336,24 @@ def read_clip_truth(p: Path, target: str | None) -> tuple[str, tuple[GtFrame, ..
         frames[fno] = GtFrame(frame=fno, time_s=_num(r["time_s"], p, line, "time_s"),
                               in_view=in_view == 1.0, bbox_px=bbox,  # type: ignore[arg-type]
                               center_px=centre)  # type: ignore[arg-type]
-    return target, tuple(frames[k] for k in sorted(frames))
+    return target, tuple(frames[k] for k in sorted(frames)), digest
 
 
-def _probe_video(p: Path) -> tuple[float, int, int, str, int]:
+def _probe_video(p: Path) -> tuple[float, int, int, str, int, int]:
     """(rate_hz, width_px, height_px, codec, frames: 0 if the file does not
-    say) of a video file, read by PyAV."""
+    say, size in bytes) of a video file, read by PyAV."""
     try:
         import av
 
+        size = p.stat().st_size
         with av.open(str(p)) as c:
             s = c.streams.video[0]
             rate = s.average_rate or s.guessed_rate
             if not rate:
                 raise ValueError("no frame rate")
             cc = s.codec_context
-            return float(rate), int(cc.width), int(cc.height), str(cc.name), int(s.frames or 0)
+            return (float(rate), int(cc.width), int(cc.height), str(cc.name),
+                    int(s.frames or 0), size)
     except Exception as e:  # noqa: BLE001 - any failure is "cannot read this video"
         raise ConfigError(f"{p}: cannot read it as a video ({e})") from None
 
@@ -360,22 +395,47 @@ def parse_study(text: str, path: Path) -> Study:
     if which is None and not ctx.problems:
         ctx.err((), "missing the clips: give `sweep:` (a cosim sweep folder) or `clips:` "
                     "(a list of video + ground_truth)")
-    elif which == "sweep":
-        clips = _sweep_clips(ctx, top.d["sweep"], base, roots)
-    elif which == "clips":
-        clips = _listed_clips(ctx, top.d["clips"], base, tuple(roots))
+    elif which is not None:
+        clips = _clips_of(ctx, which, top.d[which], base, roots)
     if len(clips) * (repeats or 1) > MAX_TRIALS:
         ctx.err(("clips",), f"{len(clips)} clips x {repeats} repeats is more than "
                             f"{MAX_TRIALS} trials")
-    ids = [c.id for c in clips]
-    if len(set(ids)) != len(ids):
-        dup = sorted({i for i in ids if ids.count(i) > 1})
-        ctx.err(("clips",), f"clip ids given twice: {', '.join(dup[:10])}")
+    _check_ids(ctx, which or "clips", [c.id for c in clips])
+    practice_clips: list[Clip] = []
+    if "practice_clips" in top.d:
+        practice_clips = _clips_of(ctx, "practice_clips", top.d["practice_clips"], base, roots)
+        if practice == 0:
+            ctx.err(("practice_clips",), "practice clips given, but `practice:` is 0: say how "
+                                         "many practice trials to draw from them")
+        _check_ids(ctx, "practice_clips", [c.id for c in practice_clips])
+        main_ids = {c.id for c in clips}
+        both = sorted({c.id for c in practice_clips if c.id in main_ids})
+        if both:
+            ctx.err(("practice_clips",), f"clip ids also among the main clips: "
+                                         f"{', '.join(both[:10])}; a practice clip needs an id "
+                                         f"of its own (`id:`, or another sweep folder)")
     if ctx.problems or ctx.more:
         raise ctx.error()
     return Study(path=path, name=name, protocol=protocol, clips=tuple(clips), practice=practice,
                  break_every=break_every, repeats=repeats, order=order, seed=seed,
-                 roots=tuple(roots), arrow_speed_deg_s=float(arrow or 2.0))
+                 roots=tuple(roots), arrow_speed_deg_s=float(arrow or 2.0),
+                 practice_clips=tuple(practice_clips))
+
+
+def _clips_of(ctx: _Ctx, key: str, spec: Any, base: Path, roots: list[Path]) -> list[Clip]:
+    """The clips of top-level ``key``: a list (like ``clips:``) or a sweep
+    folder (like ``sweep:``); ``key`` names them in the messages."""
+    listed = isinstance(spec, list) if key == "practice_clips" else key == "clips"
+    if listed:
+        prefix = "clip" if key == "clips" else "practice"
+        return _listed_clips(ctx, spec, base, tuple(roots), key, prefix)
+    return _sweep_clips(ctx, spec, base, roots, key)
+
+
+def _check_ids(ctx: _Ctx, key: str, ids: list[str]) -> None:
+    if len(set(ids)) != len(ids):
+        dup = sorted({i for i in ids if ids.count(i) > 1})
+        ctx.err((key,), f"clip ids given twice: {', '.join(dup[:10])}")
 
 
 def _file(ctx: _Ctx, at: tuple[Any, ...], value: Any, base: Path, roots: tuple[Path, ...],
@@ -395,8 +455,8 @@ def _clip_from(ctx: _Ctx, at: tuple[Any, ...], cid: str, video: Path, gt: Path,
                height: int | None, conditions: dict[str, str],
                hfov: float | None = None) -> Clip | None:
     try:
-        target, frames = read_clip_truth(gt, target)
-        r2, w2, h2, codec, n2 = _probe_video(video)
+        target, frames, gt_sha256 = read_clip_truth(gt, target)
+        r2, w2, h2, codec, n2, video_bytes = _probe_video(video)
         if codec not in BROWSER_CODECS:
             raise ConfigError(f"{video}: codec {codec} does not play in browsers; render the "
                               f"clips with `cameras: {{codec: h264, views: [...]}}`")
@@ -418,19 +478,21 @@ def _clip_from(ctx: _Ctx, at: tuple[Any, ...], cid: str, video: Path, gt: Path,
         return None
     return Clip(id=cid, video=video, ground_truth=gt, target=target, run=run,
                 rate_hz=float(rate), width_px=int(width), height_px=int(height),
-                conditions=tuple(conditions.items()), frames=frames, hfov_deg=hfov)
+                conditions=tuple(conditions.items()), frames=frames, hfov_deg=hfov,
+                gt_sha256=gt_sha256, video_bytes=video_bytes)
 
 
-def _listed_clips(ctx: _Ctx, items: Any, base: Path, roots: tuple[Path, ...]) -> list[Clip]:
+def _listed_clips(ctx: _Ctx, items: Any, base: Path, roots: tuple[Path, ...],
+                  key: str = "clips", id_prefix: str = "clip") -> list[Clip]:
     if not isinstance(items, list) or not items:
-        ctx.err(("clips",), f"expected a non-empty list of clips, got {_describe(items)}")
+        ctx.err((key,), f"expected a non-empty list of clips, got {_describe(items)}")
         return []
     if len(items) > MAX_CLIPS:
-        ctx.err(("clips",), f"{len(items)} clips; a study may have at most {MAX_CLIPS}")
+        ctx.err((key,), f"{len(items)} clips; a study may have at most {MAX_CLIPS}")
         return []
     out = []
     for i, item in enumerate(items):
-        at = ("clips", i)
+        at = (key, i)
         r = _Reader(ctx, item, at, CLIP_KEYS)
         before = len(ctx.problems)
         video = _file(ctx, at + ("video",), r.d.get("video"), base, roots, "video")
@@ -441,7 +503,7 @@ def _listed_clips(ctx: _Ctx, items: Any, base: Path, roots: tuple[Path, ...]) ->
         width = r.integer("width_px", None, lo=1, hi=100_000)
         height = r.integer("height_px", None, lo=1, hi=100_000)
         hfov = r.num("hfov_deg", None, lo=0, hi=179, lo_open=True)
-        cid = r.string("id", f"clip{i}")
+        cid = r.string("id", f"{id_prefix}{i}")
         run = r.string("run", "")
         conds: dict[str, str] = {}
         cd = r.d.get("conditions", {})
@@ -471,8 +533,9 @@ def _fmt_value(v: Any) -> str:
     return str(v)
 
 
-def _sweep_clips(ctx: _Ctx, spec: Any, base: Path, roots: list[Path]) -> list[Clip]:
-    at: tuple[Any, ...] = ("sweep",)
+def _sweep_clips(ctx: _Ctx, spec: Any, base: Path, roots: list[Path],
+                 key: str = "sweep") -> list[Clip]:
+    at: tuple[Any, ...] = (key,)
     where: Mapping[str, Any] = {}
     if isinstance(spec, dict):
         r = _Reader(ctx, spec, at, ("folder", "where"))
@@ -499,7 +562,8 @@ def _sweep_clips(ctx: _Ctx, spec: Any, base: Path, roots: list[Path]) -> list[Cl
         ctx.err(at, f"{folder[:200]!r}: not a sweep folder (no manifest.csv; run `cosim sweep "
                     f"... --out {folder[:200]}` first)")
         return []
-    roots.append(sweep)
+    if sweep not in roots:
+        roots.append(sweep)
     try:
         rows = _csv_rows(_read_bounded(manifest, MAX_MANIFEST_BYTES, "manifest"), manifest,
                          "sweep manifest", MANIFEST_COLUMNS)
@@ -512,7 +576,7 @@ def _sweep_clips(ctx: _Ctx, spec: Any, base: Path, roots: list[Path]) -> list[Cl
         return []
     for k in where:
         if not rows or k not in rows[0][1]:
-            ctx.err(("sweep", "where", k), f"no column {k!r} in {manifest}")
+            ctx.err((key, "where", k), f"no column {k!r} in {manifest}")
     out = []
     for line, row in rows:
         if any(row.get(k) != _fmt_value(v) for k, v in where.items()):

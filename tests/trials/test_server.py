@@ -5,6 +5,7 @@ Chromium (/usr/bin/chromium through Playwright; nothing is downloaded)."""
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import http.client
 import json
 import math
@@ -20,6 +21,7 @@ import cv2
 import numpy as np
 import pytest
 import uvicorn
+from test_store import write_gt, write_video
 
 from cosim.renderer.video import open_video
 from cosim.trials.server import make_app, serve
@@ -32,6 +34,31 @@ HALF_X, HALF_Y = 10, 6  # the target's half size (camera px)
 PROFILE = {"screen_width_px": 800, "screen_height_px": 500, "screen_width_mm": 400.0,
            "screen_height_mm": 250.0, "viewing_distance_mm": 600.0}
 SPEEDS = {"c0": 50, "c1": 100, "c2": 200}
+HFOV_DEG = 60.0  # the camera the study's clips say they were filmed with
+# every clip frame carries its number in its pixels: bit b of it in block b of a row
+# below the target's path (bright 170 or dark 20: clear through H.264, and darker than
+# the white target the screenshot test looks for)
+BITS, BIT_X0, BIT_STEP, BIT_W, BIT_Y0, BIT_Y1 = 5, 16, 60, 48, 196, 236
+assert 2 ** BITS >= FRAMES
+
+#: a page script that, at each Space pressed while a clip plays, draws the video
+#: element's current frame on a canvas and reads its number from its pixels
+PRESS_READER = f"""
+addEventListener("keydown", (e) => {{
+  if (e.code !== "Space" || document.body.dataset.phase !== "playing") return;
+  const v = document.getElementById("clip");
+  const c = document.createElement("canvas");
+  c.width = v.videoWidth; c.height = v.videoHeight;
+  const g = c.getContext("2d", {{ willReadFrequently: true }});
+  g.drawImage(v, 0, 0);
+  let k = 0;
+  for (let b = 0; b < {BITS}; b++) {{
+    const x = {BIT_X0} + {BIT_STEP} * b + {BIT_W} / 2, y = ({BIT_Y0} + {BIT_Y1}) / 2;
+    if (g.getImageData(x, y, 1, 1).data[1] > 95) k |= 1 << b;
+  }}
+  window.shownAtPress = {{ trial: Number(document.body.dataset.trial), frame: k }};
+}}, true);
+"""
 
 
 def centre(clip: str, k: int) -> tuple[float, float]:
@@ -42,7 +69,8 @@ def centre(clip: str, k: int) -> tuple[float, float]:
 
 def make_clip(folder: Path, name: str) -> None:
     """An H.264 clip (cosim's own video writer) of a white box crossing a grey
-    ground, and its ground truth in the renderer's columns."""
+    ground, each frame's number in its pixels, and its ground truth in the
+    renderer's columns."""
     sink = open_video(str(folder / f"{name}.mp4"), "h264", RATE_HZ, W, H)
     rows = ["frame,time_s,vehicle,camera,target,in_view,fully_in_view,bbox_x0_px,bbox_y0_px,"
             "bbox_x1_px,bbox_y1_px,center_x_px,center_y_px,eccentricity_px,eccentricity_deg,"
@@ -52,6 +80,9 @@ def make_clip(folder: Path, name: str) -> None:
         img = np.full((H, W, 3), 90, np.uint8)
         x0, y0, x1, y1 = cx - HALF_X, cy - HALF_Y, cx + HALF_X, cy + HALF_Y
         cv2.rectangle(img, (round(x0), round(y0)), (round(x1), round(y1)), (255, 255, 255), -1)
+        for b in range(BITS):
+            bx = BIT_X0 + BIT_STEP * b
+            img[BIT_Y0:BIT_Y1, bx:bx + BIT_W] = 170 if k >> b & 1 else 20
         sink.write(img)
         iv = int(x0 <= W - 0.5)
         rows.append(f"{k},{k / RATE_HZ:.6f},uav,nadir,truck,{iv},{int(x1 <= W - 0.5)},{x0},{y0},"
@@ -67,6 +98,7 @@ def study_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
         make_clip(folder, name)
     (folder / "secret.txt").write_text("not for the browser")
     clips = "".join(f"  - {{id: {n}, video: {n}.mp4, ground_truth: {n}.gt.csv, run: run_{n}, "
+                    f"hfov_deg: {HFOV_DEG}, "
                     f"conditions: {{speed_kt: {v}, alt_agl_m: 30, target: truck}}}}\n"
                     for n, v in SPEEDS.items())
     p = folder / "study.yaml"
@@ -147,7 +179,10 @@ def expected(clip: str, frame: int, page_px: tuple[int, int] | None = None
     x_mm = (cx - (W - 1) / 2) * scale * PROFILE["screen_width_mm"] / PROFILE["screen_width_px"]
     y_mm = (cy - (H - 1) / 2) * scale * PROFILE["screen_height_mm"] / PROFILE["screen_height_px"]
     d = math.hypot(x_mm, y_mm)
-    return {"onscreen_distance_mm": d,
+    # seen from the camera: the pixel offset over the pinhole's focal length
+    f_px = W / 2 / math.tan(math.radians(HFOV_DEG / 2))
+    gap = math.degrees(math.atan(math.hypot(cx - (W - 1) / 2, cy - (H - 1) / 2) / f_px))
+    return {"onscreen_distance_mm": d, "camera_gap_deg": gap,
             "eccentricity_deg": math.degrees(math.atan(d / PROFILE["viewing_distance_mm"]))}
 
 
@@ -186,6 +221,8 @@ def test_bad_requests(server: LiveServer) -> None:
     s = _session(server, "p-bad")
     base = f"/api/sessions/{s['id']}/responses"
     for bad, msg in (({"trial_index": 99, "key": "space"}, "trial_index"),
+                     ({"trial_index": 0, "key": "space", "reshown": "yes"},
+                      "reshown: expected true, false or null, got 'yes'"),
                      ({"trial_index": 0, "key": "<script>"}, "key"),
                      ({"trial_index": 0, "key": "space", "kind": "recognise"}, "protocol"),
                      ({"trial_index": 0, "key": "space", "media_time_s": 1e9}, "outside"),
@@ -219,6 +256,190 @@ def test_serve_refuses_public_address_without_flag(study_file: Path) -> None:
         serve(study_file, host="0.0.0.0", port=1)
 
 
+def asgi(app: Any, method: str, path: str, body: Any = None, host: str = "127.0.0.1:8000",
+         client: str = "127.0.0.1") -> tuple[int, Any]:
+    """One JSON request straight into the ASGI app (no socket): the ``Host``
+    header and the client's address as given."""
+    import asyncio
+
+    data = [b"" if body is None else json.dumps(body).encode()]
+    sent: list[dict[str, Any]] = []
+
+    async def receive() -> dict[str, Any]:
+        if data:
+            return {"type": "http.request", "body": data.pop(), "more_body": False}
+        return {"type": "http.disconnect"}
+
+    async def send(message: dict[str, Any]) -> None:
+        sent.append(message)
+
+    scope = {"type": "http", "asgi": {"version": "3.0"}, "http_version": "1.1",
+             "method": method, "scheme": "http", "path": path, "raw_path": path.encode(),
+             "root_path": "", "query_string": b"", "client": (client, 50000),
+             "server": ("127.0.0.1", 8000),
+             "headers": [(b"host", host.encode()), (b"content-type", b"application/json")]}
+    asyncio.run(app(scope, receive, send))
+    status = next(m["status"] for m in sent if m["type"] == "http.response.start")
+    raw = b"".join(m.get("body", b"") for m in sent if m["type"] == "http.response.body")
+    try:
+        return status, json.loads(raw)
+    except ValueError:
+        return status, raw
+
+
+def test_serve_on_another_loopback_address_answers_requests_to_it(
+        study_file: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--host 127.0.0.2`` is this machine: the browser's ``Host: 127.0.0.2:port``
+    is answered; another name still is not."""
+    import uvicorn
+
+    ran: dict[str, Any] = {}
+    monkeypatch.setattr(uvicorn, "run", lambda app, **kw: ran.update(app=app, **kw))
+    serve(study_file, host="127.0.0.2", port=8123, db_url=str(tmp_path / "t.sqlite"))
+    app = ran["app"]
+    try:
+        assert ran["host"] == "127.0.0.2"
+        status, body = asgi(app, "GET", "/api/study", host="127.0.0.2:8123", client="127.0.0.2")
+        assert status == 200 and body["name"] == "tiny"
+        assert asgi(app, "GET", "/api/sessions/nope", host="127.0.0.2:8123")[0] == 404
+        assert asgi(app, "GET", "/api/study", host="127.0.0.3:8123")[0] == 400
+        assert asgi(app, "GET", "/api/study", host="evil.example:8123")[0] == 400
+    finally:
+        app.state.trials.store.close()
+
+
+def small_study(folder: Path, head: str, clips: dict[str, float]) -> Path:
+    """A study file of 5-frame clips (id: the target's first x, camera px) below ``head``."""
+    for cid, x0 in clips.items():
+        write_video(folder / f"{cid}.mp4")
+        write_gt(folder / f"{cid}.gt.csv", [(f, x0 + 10 * f, 119.5, 1) for f in range(5)])
+    p = folder / "study.yaml"
+    p.write_text(head + "clips:\n" + "".join(
+        f"  - {{id: {c}, video: {c}.mp4, ground_truth: {c}.gt.csv}}\n" for c in clips))
+    return p
+
+
+@pytest.mark.parametrize("protocol", ["disappear", "recognise", "track"])
+def test_reaction_times_outside_0_to_10_minutes_are_refused(tmp_path: Path,
+                                                            protocol: str) -> None:
+    study = small_study(tmp_path, f"protocol: {protocol}\n", {"a": 150.0})
+    with Store(tmp_path / "t.sqlite") as store:
+        app = make_app(study, store)
+        status, s = asgi(app, "POST", "/api/sessions", {"participant": "p", **PROFILE})
+        assert status == 201, s
+        body = {"trial_index": 0, "kind": "track-up" if protocol == "track" else protocol,
+                "key": "space", "media_time_s": 0.2, "recognised": True}
+        path = f"/api/sessions/{s['id']}/responses"
+        for rt in (-0.5, -1e6, 600_000.5):
+            status, r = asgi(app, "POST", path, {**body, "reaction_time_ms": rt})
+            assert status == 400 and r["error"] == (
+                f"reaction_time_ms: expected 0..600000 ms (from the clip's start to the "
+                f"press), got {rt:g}"), r
+        assert asgi(app, "POST", path, {**body, "reaction_time_ms": 0.0})[0] == 201
+
+
+def test_page_size_reports_are_checked_and_kept_for_the_experimenter(
+        server: LiveServer) -> None:
+    s = _session(server, "p-size")
+    path = f"/api/sessions/{s['id']}/window"
+
+    def warning() -> Any:
+        status, listed = server.request("GET", "/api/sessions")
+        (row,) = [x for x in listed if x["id"] == s["id"]]
+        return row["window_px"], row["window_warning"]
+
+    assert warning() == (None, None)  # nothing reported yet
+    for bad in ({"window_width_px": 3.5, "window_height_px": 400},
+                {"window_width_px": 800, "window_height_px": 1e9},
+                {"window_width_px": "800", "window_height_px": 500},
+                {"window_width_px": 800}):
+        status, body = server.request("POST", path, bad)
+        assert status == 400 and "window_" in body["error"], (bad, body)
+    assert server.request("POST", "/api/sessions/nope/window",
+                          {"window_width_px": 800, "window_height_px": 500})[0] == 404
+    assert server.request("POST", path, {"window_width_px": 800, "window_height_px": 500},
+                          headers={"Origin": "http://evil.example"})[0] == 403
+    assert server.request("POST", path, {"window_width_px": 1024, "window_height_px": 500}
+                          )[0] == 200
+    px, text = warning()
+    assert px == [1024, 500] and text.startswith(
+        "the participant's page is 1024 x 500 px, not the profile's 800 x 500")
+    assert server.request("POST", path, {"window_width_px": 800, "window_height_px": 500}
+                          )[0] == 200
+    assert warning() == ([800, 500], None)
+    # a response says the page's size too: the last word
+    status, _ = server.request("POST", f"/api/sessions/{s['id']}/responses", {
+        "trial_index": 1, "kind": "disappear", "key": "space", "media_time_s": 0.5,
+        "window_width_px": 640, "window_height_px": 500})
+    assert status == 201 and warning()[0] == [640, 500]
+
+
+def test_a_session_refuses_clips_gone_or_changed(tmp_path: Path) -> None:
+    """Sessions find their clips by id and fingerprint: the study's clips
+    reordered is fine; a clip removed, or its ground truth or video changed, is
+    a 409 naming the clip and what changed. Older sessions: by id, or number."""
+    study = small_study(tmp_path, "protocol: disappear\norder: latin_square\n",
+                        {"a": 100.0, "b": 150.0})
+    head, a, b = study.read_text().rsplit("\n", 3)[:3]
+    db = tmp_path / "t.sqlite"
+
+    def call(method: str, path: str, body: Any = None) -> tuple[int, Any]:
+        with Store(db) as store:  # the study read afresh, as a restarted server would
+            return asgi(make_app(study, store), method, path, body)
+
+    status, s = call("POST", "/api/sessions", {"participant": "p", **PROFILE})
+    assert status == 201
+    assert s["trials"][0]["fingerprint"] == {
+        "ground_truth_sha256": hashlib.sha256(
+            (tmp_path / f"{s['trials'][0]['clip_id']}.gt.csv").read_bytes()).hexdigest(),
+        "video_bytes": (tmp_path / "a.mp4").stat().st_size}
+    get = f"/api/sessions/{s['id']}"
+    study.write_text(f"{head}\n{b}\n{a}\n")  # the clips listed the other way round
+    status, again = call("GET", get)
+    assert status == 200
+    assert [(t["clip_id"], t["video"]) for t in again["trials"]] == [
+        (t["clip_id"], {"a": "/video/1", "b": "/video/0"}[t["clip_id"]]) for t in s["trials"]]
+    study.write_text(f"{head}\n{a}\n")
+    status, body = call("GET", get)
+    assert status == 409 and body["error"].startswith(
+        f"clip 'b' of this session is no longer in the study {study}")
+    study.write_text(f"{head}\n{a}\n{b}\n")
+    gt = tmp_path / "b.gt.csv"
+    kept = gt.read_bytes()
+    gt.write_bytes(kept.replace(b",150.0,", b",151.0,", 1))
+    status, body = call("GET", get)
+    assert status == 409 and body["error"] == (
+        f"clip 'b' of this session changed since the session was created (its ground truth "
+        f"{gt} is not the file it was): restore the files, or start a new session")
+    response = {"trial_index": 0, "key": "space", "media_time_s": 0.1}
+    b_trial = next(t["index"] for t in s["trials"] if t["clip_id"] == "b")
+    status, body = call("POST", f"{get}/responses", {**response, "trial_index": b_trial})
+    assert status == 409 and "clip 'b'" in body["error"]
+    gt.write_bytes(kept)
+    video = tmp_path / "b.mp4"
+    size = video.stat().st_size
+    video.write_bytes(video.read_bytes() + bytes(16))
+    status, body = call("GET", get)
+    assert status == 409 and f"its video {video} is {size + 16} bytes, not {size}" in body["error"]
+    video.write_bytes(video.read_bytes()[:size])
+    assert call("GET", get)[0] == 200
+    # older sessions: without fingerprints by clip id, without clip ids by number
+    with Store(db) as store:
+        old = store.create_session(
+            participant="old", study="study", protocol="disappear",
+            display=PROFILE, order_method="shuffle", seed=0, session_number=9,
+            trial_order=[{"index": 0, "practice": False, "clip": 0, "clip_id": "a",
+                          "break_before": False},
+                         {"index": 1, "practice": False, "clip": 1, "break_before": False}])
+    gt.write_bytes(kept.replace(b",150.0,", b",151.0,", 1))  # not known to the old session
+    status, body = call("GET", f"/api/sessions/{old['id']}")
+    assert status == 200 and [t["video"] for t in body["trials"]] == ["/video/0", "/video/1"]
+    study.write_text(f"{head}\n{a}\n")
+    status, body = call("GET", f"/api/sessions/{old['id']}")
+    assert status == 409 and body["error"].startswith(
+        "trial 1 of this session shows clip number 1, which the study")
+
+
 # --- a scripted participant in Chromium -------------------------------------
 
 #: trial index -> the frame to press at (trial 3: the clip runs out without a press)
@@ -234,13 +455,14 @@ def browser_run(server: LiveServer) -> dict[str, Any]:
     s = _session(server, "p01")
     assert [t["practice"] for t in s["trials"]] == [True, False, False, False]
     assert [t["break_before"] for t in s["trials"]] == [False, False, False, True]
-    run: dict[str, Any] = {"session": s, "phases": [], "console": []}
+    run: dict[str, Any] = {"session": s, "phases": [], "console": [], "on_screen": {}}
     with sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path=CHROMIUM,
                                      args=["--autoplay-policy=no-user-gesture-required"])
         try:
             page = browser.new_page(viewport={"width": 800, "height": 500},
                                     device_scale_factor=1)
+            page.add_init_script(PRESS_READER)
             page.on("console", lambda m: run["console"].append(m.text))
             page.on("pageerror", lambda e: run["console"].append(str(e)))
             page.set_default_timeout(15_000)
@@ -258,6 +480,13 @@ def browser_run(server: LiveServer) -> dict[str, Any]:
                 # screen: press a moment (well within the 100 ms frame) after that
                 page.wait_for_timeout(30)
 
+            def press_on_clip() -> None:
+                """Space, and the number of the frame on screen then (from its pixels)."""
+                page.evaluate("window.shownAtPress = null")
+                page.keyboard.press("Space")
+                seen = page.evaluate("window.shownAtPress")
+                run["on_screen"][seen["trial"]] = seen["frame"]
+
             page.goto(f"{server.url}/participant?session={s['id']}")
             wait_phase("begin")
             page.keyboard.press("Space")
@@ -267,11 +496,11 @@ def browser_run(server: LiveServer) -> dict[str, Any]:
             wait_phase("practice")
             page.keyboard.press("Space")
             wait_frame(0, PRESSES[0])
-            page.keyboard.press("Space")
+            press_on_clip()
             wait_phase("practice-over")
             page.keyboard.press("Space")
             wait_frame(1, PRESSES[1])
-            page.keyboard.press("Space")
+            press_on_clip()
             wait_frame(*RELOAD_AT)
             # the picture on the screen where the geometry says (letterboxed, centred)
             run["shot"] = (page.screenshot(), int(page.evaluate("document.body.dataset.frame")))
@@ -282,7 +511,7 @@ def browser_run(server: LiveServer) -> dict[str, Any]:
             page.wait_for_function("document.body.dataset.phase === 'fixation'")
             run["resumed_at"] = page.evaluate("document.body.dataset.trial")
             wait_frame(2, PRESSES[2])
-            page.keyboard.press("Space")
+            press_on_clip()
             wait_phase("break")
             page.keyboard.press("Space")
             wait_phase("finished")
@@ -306,13 +535,14 @@ def test_key_presses_give_the_ground_truth_frame(browser_run: dict[str, Any]) ->
             assert (r["key"], r["frame"], r["eccentricity_deg"]) == ("none", None, None)
             continue
         assert r["key"] == "space"
-        # the frame on screen at the key press: the one waited for, or the next
-        # if the key arrived one frame period (100 ms) later
-        assert want <= r["frame"] <= want + 1, r
+        # the frame on screen at the key press, as its own pixels number it: exactly
+        assert r["frame"] == browser_run["on_screen"][r["trial_index"]], r
+        assert r["frame"] >= want  # (the script pressed once that frame was shown)
         assert r["frame"] == round(r["video_time_s"] * RATE_HZ)
         exp = expected(t["clip_id"], r["frame"])
         assert r["eccentricity_deg"] == pytest.approx(exp["eccentricity_deg"], rel=1e-9)
         assert r["onscreen_distance_mm"] == pytest.approx(exp["onscreen_distance_mm"], rel=1e-9)
+        assert r["camera_gap_deg"] == pytest.approx(exp["camera_gap_deg"], rel=1e-9)
         assert r["target_in_view"] is True
         assert 0 < r["reaction_time_ms"] - 1000 * r["video_time_s"] < 150
         for k, v in PROFILE.items():
@@ -325,6 +555,9 @@ def test_reload_resumes_at_the_first_trial_without_a_response(
     assert browser_run["resumed_at"] == "2"
     rs = browser_run["responses"]
     assert len({(r["trial_index"], r["kind"]) for r in rs}) == len(rs) == 4
+    # trial 2 was playing at the reload and was shown again from its start
+    assert {r["trial_index"]: r["reshown"] for r in rs} == {0: False, 1: False, 2: True,
+                                                            3: False}
     assert "break" in browser_run["phases"] and browser_run["phases"][-1] == "finished"
     status, s = server.request("GET", f"/api/sessions/{browser_run['session']['id']}")
     assert (s["state"], s["next_trial"], s["answered"]) == ("finished", None, 4)
@@ -360,17 +593,22 @@ def one_clip_study(study_file: Path, name: str, head: str) -> Iterator[
 
 
 def test_recognise_protocol(study_file: Path, tmp_path: Path) -> None:
-    """Press to start the sub-trial, press on recognising, answer yes."""
+    """Press to start the sub-trial, press on recognising, answer yes. The
+    page is narrower than the profile: the participant sees no warning of it,
+    the experimenter's session list does, and the measures follow the page."""
     needs_chromium()
     from playwright.sync_api import sync_playwright
 
+    page_px = (700, 500)
     with one_clip_study(study_file, "recognise", "protocol: recognise\norder: latin_square\n"
                         ) as (server, s):
         with sync_playwright() as pw:
             browser = pw.chromium.launch(executable_path=CHROMIUM,
                                          args=["--autoplay-policy=no-user-gesture-required"])
             try:
-                page = browser.new_page(viewport={"width": 800, "height": 500})
+                page = browser.new_page(viewport={"width": page_px[0], "height": page_px[1]},
+                                        device_scale_factor=1)
+                page.add_init_script(PRESS_READER)
                 page.set_default_timeout(15_000)
                 page.goto(f"{server.url}/participant?session={s['id']}")
                 for phase in ("begin", "start"):
@@ -379,23 +617,72 @@ def test_recognise_protocol(study_file: Path, tmp_path: Path) -> None:
                 page.wait_for_function("document.body.dataset.phase === 'playing' && "
                                        "Number(document.body.dataset.frame) >= 6", polling=5)
                 assert page.is_visible("#arrow") and not page.is_visible("#fixation")
+                assert page.inner_text("#status") == "" and page.is_hidden("#message")
                 page.wait_for_timeout(30)
                 page.keyboard.press("Space")
+                seen = page.evaluate("window.shownAtPress")
                 page.wait_for_function("document.body.dataset.phase === 'answer'")
                 page.keyboard.press("y")
                 page.wait_for_function("document.body.dataset.phase === 'finished'")
             finally:
                 browser.close()
         (r,) = server.store.responses(s["id"])
-    assert (r["protocol"], r["key"], r["recognised"], r["practice"]) == (
-        "recognise", "y", True, False)
-    assert 6 <= r["frame"] <= 7
+        status, listed = server.request("GET", "/api/sessions")
+    assert (r["protocol"], r["key"], r["recognised"], r["practice"], r["reshown"]) == (
+        "recognise", "y", True, False, False)
+    assert r["frame"] == seen["frame"] >= 6
     assert r["eccentricity_deg"] == pytest.approx(
-        expected("c1", r["frame"])["eccentricity_deg"], rel=1e-9)
+        expected("c1", r["frame"], page_px)["eccentricity_deg"], rel=1e-9)
+    (row,) = [x for x in listed if x["id"] == s["id"]]
+    assert row["window_px"] == list(page_px)
+    assert "page is 700 x 500 px, not the profile's 800 x 500" in row["window_warning"]
+
+
+#: a page script that has the browser expect every video frame on screen 5 s
+#: later than it will be: a press during the clip then comes before its onset
+FRAMES_DUE_LATE = """
+const rvfc = HTMLVideoElement.prototype.requestVideoFrameCallback;
+HTMLVideoElement.prototype.requestVideoFrameCallback = function (cb) {
+  return rvfc.call(this, (now, meta) =>
+    cb(now, { ...meta, expectedDisplayTime: meta.expectedDisplayTime + 5000 }));
+};
+"""
+
+
+def test_a_press_before_the_clips_onset_is_sent_as_0_ms(study_file: Path) -> None:
+    """The page takes the clip's onset from when its first frame is expected
+    on screen, which is after that frame's callback: a press in between gives
+    a negative time, which the page must send as 0 (the server refuses it)."""
+    needs_chromium()
+    from playwright.sync_api import sync_playwright
+
+    with one_clip_study(study_file, "early", "protocol: disappear\n") as (server, s):
+        with sync_playwright() as pw:
+            browser = pw.chromium.launch(executable_path=CHROMIUM,
+                                         args=["--autoplay-policy=no-user-gesture-required"])
+            try:
+                page = browser.new_page(viewport={"width": 800, "height": 500})
+                page.add_init_script(FRAMES_DUE_LATE)
+                page.set_default_timeout(10_000)
+                page.goto(f"{server.url}/participant?session={s['id']}")
+                page.wait_for_function("document.body.dataset.phase === 'begin'")
+                page.keyboard.press("Space")
+                page.wait_for_function("document.body.dataset.phase === 'playing' && "
+                                       "Number(document.body.dataset.frame) >= 2", polling=5)
+                page.keyboard.press("Space")
+                page.wait_for_function("['finished', 'error'].includes("
+                                       "document.body.dataset.phase)")
+                shown = page.inner_text("#message")
+            finally:
+                browser.close()
+        rs = server.store.responses(s["id"])
+    assert [(r["key"], r["reaction_time_ms"]) for r in rs] == [("space", 0.0)], shown
 
 
 def test_experimenter_page(server: LiveServer) -> None:
-    """Create a session from the form, start it, pause it; no script errors."""
+    """Create a session from the form, start it, pause it; the size its
+    participant's page reports, with a warning as it is not the profile's;
+    no script errors."""
     needs_chromium()
     from playwright.sync_api import sync_playwright
 
@@ -413,8 +700,13 @@ def test_experimenter_page(server: LiveServer) -> None:
                 page.fill(f"input[name={k}]", str(v))
             page.click("button:has-text('Create session')")
             row = page.locator("#sessions tr", has_text="p-form")
+            row.wait_for()
+            (sid,) = [x["id"] for x in server.store.sessions() if x["participant"] == "p-form"]
+            assert server.request("POST", f"/api/sessions/{sid}/window", {
+                "window_width_px": 640, "window_height_px": 400})[0] == 200
             row.locator("button:has-text('Start')").click()
             row.locator("td:has-text('running')").wait_for()
+            warning = row.locator(".warning").inner_text()
             row.locator("button:has-text('Pause')").click()
             row.locator("td:has-text('paused')").wait_for()
             link = row.locator("a").get_attribute("href")
@@ -424,6 +716,7 @@ def test_experimenter_page(server: LiveServer) -> None:
     assert (s["state"], s["trials"], s["answered"]) == ("paused", 4, 0)
     assert link == f"/participant?session={s['id']}"
     assert {k: s[k] for k in PROFILE} == PROFILE
+    assert "page is 640 x 400 px, not the profile's 800 x 500" in warning
     assert not errors
 
 

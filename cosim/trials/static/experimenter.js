@@ -1,4 +1,5 @@
-// The experimenter page: create sessions, start or pause them, watch progress.
+// The experimenter page: create sessions, start or pause them, watch progress
+// and the size of each participant's page (a warning if it is not the profile's).
 "use strict";
 (() => {
   const form = document.getElementById("new");
@@ -32,6 +33,14 @@
       cell(tr, s.created.replace("T", " ").slice(0, 19));
       cell(tr, `${s.answered} / ${s.trials}`);
       cell(tr, s.state);
+      const page = document.createElement("span");
+      if (s.window_warning) {
+        page.className = "warning";
+        page.textContent = `\u26a0 ${s.window_warning}`;
+      } else {
+        page.textContent = s.window_px ? `${s.window_px[0]} x ${s.window_px[1]} px` : "-";
+      }
+      cell(tr, page);
       const a = document.createElement("a");
       a.href = `/participant?session=${encodeURIComponent(s.id)}`;
       a.textContent = "open";
@@ -59,9 +68,10 @@
   });
 
   fetch("/api/study").then((r) => r.json()).then((s) => {
+    const from = s.practice_clips ? ` (from ${s.practice_clips} practice clips)` : "";
     document.getElementById("study").textContent =
       `Study ${s.name}: protocol ${s.protocol}, ${s.clips} clips x ${s.repeats}, ` +
-      `${s.practice} practice, break every ${s.break_every || "-"}, order ${s.order} ` +
+      `${s.practice} practice${from}, break every ${s.break_every || "-"}, order ${s.order} ` +
       `(seed ${s.seed})`;
   });
   refresh();

@@ -4,6 +4,10 @@
 // that was on screen at that moment (requestVideoFrameCallback metadata).
 // Resumes after a reload at the first trial without a response: the server
 // keeps the first response of a trial, so posting again never duplicates one.
+// A trial that had started playing before the reload is shown again from its
+// start and its response says so ("reshown": true).
+// The page's size goes to the server (which warns the experimenter if it is not
+// the session's display profile); the participant never sees such a warning.
 "use strict";
 (() => {
   const READY_MS = 1000; // fixation before each clip starts
@@ -17,8 +21,21 @@
   const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
   const phase = (p) => { document.body.dataset.phase = p; };
 
+  const startedKey = `cosim.started.${sid}`;
+
   function show(html) { message.innerHTML = html; message.hidden = false; }
   function hide() { message.hidden = true; }
+
+  // Marks `mark` (a trial and its kind) as started in this tab; whether this
+  // tab had started that very trial before (a reload while it played), or
+  // null if the browser keeps no sessionStorage. Kept over reloads, per tab.
+  function started(mark) {
+    try {
+      const before = sessionStorage.getItem(startedKey);
+      sessionStorage.setItem(startedKey, mark);
+      return before === mark;
+    } catch (e) { return null; }
+  }
 
   // GET (body undefined) or POST JSON. Network errors and 5xx are retried until
   // they succeed (a response must never be lost); a 4xx is an error to show.
@@ -86,7 +103,11 @@
         if (!shown.length) return; // no frame on screen yet
         let f = shown[0]; // the last frame whose display time is not after the key press
         for (const s of shown) if (s.t <= e.timeStamp) f = s;
-        finish({ code: e.code, mediaTime: f.mediaTime, rtMs: e.timeStamp - onset });
+        // The onset is when the first frame is expected on screen, which is a
+        // little after its callback ran: a press in between (as the clip starts)
+        // is stamped before the onset. The clip was on its way: 0, never negative
+        // (the server refuses a negative reaction time).
+        finish({ code: e.code, mediaTime: f.mediaTime, rtMs: Math.max(0, e.timeStamp - onset) });
       };
       const onEnded = () => finish({ code: null, mediaTime: null, rtMs: null });
       const onError = () => { cleanup(); reject(new Error(`cannot play ${trial.video}`)); };
@@ -141,6 +162,7 @@
         tracker.hidden = false;
         const go = await waitKey(["Space"]);
         const start = go.timeStamp;
+        const reshown = started(`${t.index}:${kind}`); // the dot leaves: the sub-trial runs
         phase("tracking");
         let raf = null;
         const move = (now) => {
@@ -155,8 +177,10 @@
         cancelAnimationFrame(raf);
         tracker.hidden = true;
         phase("saving");
-        await post({ trial_index: t.index, kind, key: "space",
-                     reaction_time_ms: e.timeStamp - start, ...windowPx() });
+        // both times are key events' of one clock, in order: clamped only so that
+        // a clock quirk can never send a negative time
+        await post({ trial_index: t.index, kind, key: "space", reshown,
+                     reaction_time_ms: Math.max(0, e.timeStamp - start), ...windowPx() });
       }
     } finally {
       tracker.hidden = true;
@@ -176,6 +200,7 @@
       await waitKey(["Space"]);
       hide();
       arrow.hidden = false;
+      const reshown = started(`${t.index}:recognise`);
       const r = await playClip(t, ["Space"]);
       arrow.hidden = true;
       phase("answer");
@@ -183,16 +208,17 @@
       const e = await waitKey(["KeyY", "KeyN"]);
       return { trial_index: t.index, kind: "recognise", key: e.code === "KeyY" ? "y" : "n",
                recognised: e.code === "KeyY", media_time_s: r.mediaTime,
-               reaction_time_ms: r.rtMs, ...windowPx() };
+               reaction_time_ms: r.rtMs, reshown, ...windowPx() };
     }
     phase("fixation");
     hide();
     fixation.hidden = false;
     await sleep(READY_MS);
+    const reshown = started(`${t.index}:disappear`);
     const r = await playClip(t, ["Space"]);
     fixation.hidden = true;
     return { trial_index: t.index, kind: "disappear", key: r.code ? "space" : "none",
-             media_time_s: r.mediaTime, reaction_time_ms: r.rtMs, recognised: null,
+             media_time_s: r.mediaTime, reaction_time_ms: r.rtMs, recognised: null, reshown,
              ...windowPx() };
   }
 
@@ -204,14 +230,16 @@
              window_height_px: Math.round(innerHeight * dpr) };
   }
 
-  function checkDisplay(d) {
-    const dpr = window.devicePixelRatio || 1;
-    const w = Math.round(innerWidth * dpr);
-    const h = Math.round(innerHeight * dpr);
-    if (w !== d.screen_width_px || h !== d.screen_height_px) {
-      status.textContent = `display ${w}x${h} px is not the profile's ` +
-        `${d.screen_width_px}x${d.screen_height_px} (full screen?)`;
-    }
+  // Tells the server the page's size (for the experimenter's page), now and
+  // after each resize settles; a lost report is not worth a retry or a message.
+  function reportWindow(base) {
+    const send = () => fetch(`${base}/window`, {
+      method: "POST", headers: { "Content-Type": "application/json" },
+      body: JSON.stringify(windowPx()),
+    }).catch(() => {});
+    let timer = null;
+    addEventListener("resize", () => { clearTimeout(timer); timer = setTimeout(send, 250); });
+    return send();
   }
 
   async function main() {
@@ -223,6 +251,7 @@
     }
     let s = await api(`/api/sessions/${encodeURIComponent(sid)}`);
     const base = `/api/sessions/${encodeURIComponent(s.id)}`;
+    reportWindow(base);
     const instruction = s.protocol === "disappear"
       ? "Look at the red cross in the centre. Press the space bar as soon as the target disappears."
       : s.protocol === "track"
@@ -239,7 +268,6 @@
     let breakShown = null;
     for (;;) {
       s = await api(base);
-      checkDisplay(s.display);
       if (s.next_trial === null) {
         phase("finished");
         show("<p>Finished. Thank you!</p>");
