@@ -19,10 +19,17 @@ across, ``screen_height_mm / screen_height_px`` down).
   the target centre over the camera's focal length (``Clip.focal_px``; None
   when the clip's field of view is not known). With the eyes on the
   centre it is the target's angle off the optical axis (the ground truth's
-  own ``eccentricity_deg``); for a nadir camera at height ``h`` over flat
-  ground ``h * tan(camera_gap)`` is the distance on the ground between the
-  point looked at and the target: the ``tan(beta) * h`` of the critical-gap
-  relation (DESIGN: the conspicuity angle at altitude ``h``).
+  own ``eccentricity_deg``).
+- ``target_depth_m``: the target centre's distance along the camera's
+  optical axis (``GtFrame.depth_m``: the ground truth's ``range_m *
+  cos(eccentricity_deg)``; None when the ground truth does not say).
+  ``target_depth_m * tan(camera_gap)`` is the distance, in the plane through
+  the target perpendicular to the optical axis, between the point looked at
+  and the target: for a level nadir camera the distance on the ground (at
+  the height of the target's centre), the ``tan(beta) * h`` of the
+  critical-gap relation (DESIGN: the conspicuity angle at altitude ``h``)
+  with ``h`` the camera's height above the target's centre, not above the
+  ground (a truck's centre is 1.75 m up: 6 % at 30 m).
 - ``target_angular_size_deg``: the visual angle of the target's on-screen
   bounding box (clipped to the image), the larger of the angles its two
   diagonals subtend at the eye (exact off axis too).
@@ -90,6 +97,7 @@ class Measures:
     eccentricity_deg: float | None
     target_angular_size_deg: float | None
     camera_gap_deg: float | None = None
+    target_depth_m: float | None = None  # the target centre along the optical axis
 
 
 def video_scale(display: Display, width_px: int, height_px: int) -> float:
@@ -145,7 +153,8 @@ def measures_at(clip: Clip, frame_index: int, display: Display) -> Measures:
             size = max(angle_between_deg(c00, c11, d), angle_between_deg(c01, c10, d))
     return Measures(frame=g.frame, time_s=g.time_s, target_in_view=g.in_view,
                     screen_x_mm=x_mm, screen_y_mm=y_mm, onscreen_distance_mm=dist,
-                    eccentricity_deg=ecc, target_angular_size_deg=size, camera_gap_deg=gap)
+                    eccentricity_deg=ecc, target_angular_size_deg=size, camera_gap_deg=gap,
+                    target_depth_m=g.depth_m)
 
 
 def arrow_offset_mm(speed_deg_s: float, elapsed_ms: float, viewing_distance_mm: float) -> float:
@@ -162,7 +171,8 @@ def track_measures(clip: Clip, display: Display, direction: tuple[float, float],
     """A ``track`` sub-trial's measures at the key press: the clip still at its
     ``still_frame``, the participant's eyes on the arrow that left the target
     ``elapsed_ms`` before in ``direction``; the eccentricity is the target's
-    angle from the arrow, the on-screen distance the arrow's from the target."""
+    angle from the arrow, the on-screen distance the arrow's from the target,
+    the depth the still frame's."""
     m = measures_at(clip, clip.still_frame, display)
     if m.screen_x_mm is None or m.screen_y_mm is None:
         return m
@@ -181,4 +191,5 @@ def track_measures(clip: Clip, display: Display, direction: tuple[float, float],
                     onscreen_distance_mm=r,
                     eccentricity_deg=angle_between_deg(arrow, target,
                                                        display.viewing_distance_mm),
-                    target_angular_size_deg=m.target_angular_size_deg, camera_gap_deg=gap)
+                    target_angular_size_deg=m.target_angular_size_deg, camera_gap_deg=gap,
+                    target_depth_m=m.target_depth_m)

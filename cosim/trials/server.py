@@ -72,6 +72,9 @@ WINDOW_PX = (16, 16384)
 CONDITION_COLUMNS = ("speed_kt", "alt_agl_m", "target")
 DISPLAY_FIELDS = ("screen_width_px", "screen_height_px", "screen_width_mm", "screen_height_mm",
                   "viewing_distance_mm")
+#: the measures (``cosim.trials.measures.Measures``) stored with a response
+MEASURE_FIELDS = ("frame", "target_in_view", "eccentricity_deg", "onscreen_distance_mm",
+                  "target_angular_size_deg", "camera_gap_deg", "target_depth_m")
 
 
 class BadRequest(Exception):
@@ -351,18 +354,11 @@ class TrialApp:
                                  f"start to the press (0..{MAX_REACTION_MS:.0f} ms)")
             m = track_measures(clip, drawn, TRACK_DIRECTIONS[kind.split("-", 1)[1]],
                                self.study.arrow_speed_deg_s, rt)
-            row.update(frame=m.frame, video_time_s=m.frame / clip.rate_hz,
-                       target_in_view=m.target_in_view, eccentricity_deg=m.eccentricity_deg,
-                       onscreen_distance_mm=m.onscreen_distance_mm,
-                       target_angular_size_deg=m.target_angular_size_deg,
-                       camera_gap_deg=m.camera_gap_deg)
+            row.update({k: getattr(m, k) for k in MEASURE_FIELDS},
+                       video_time_s=m.frame / clip.rate_hz)
         elif media is not None:
             m = measures_at(clip, clip.frame_at(media), drawn)
-            row.update(frame=m.frame, video_time_s=media, target_in_view=m.target_in_view,
-                       eccentricity_deg=m.eccentricity_deg,
-                       onscreen_distance_mm=m.onscreen_distance_mm,
-                       target_angular_size_deg=m.target_angular_size_deg,
-                       camera_gap_deg=m.camera_gap_deg)
+            row.update({k: getattr(m, k) for k in MEASURE_FIELDS}, video_time_s=media)
         stored, created = await run_in_threadpool(self.store.record_response, row)
         if not created:
             log.info("session %s trial %d: response posted again; kept the first",

@@ -38,7 +38,7 @@ EXPORT_COLUMNS = ("session", "participant", "trial_index", "practice", "protocol
                   "condition_speed_kt", "condition_alt_agl_m", "condition_target", "frame",
                   "video_time_s", "reaction_time_ms", "key", "target_in_view",
                   "eccentricity_deg", "onscreen_distance_mm", "target_angular_size_deg",
-                  "camera_gap_deg", "viewing_distance_mm", "screen_width_mm",
+                  "camera_gap_deg", "target_depth_m", "viewing_distance_mm", "screen_width_mm",
                   "screen_height_mm", "screen_width_px", "screen_height_px", "recognised",
                   "reshown")
 STATES = ("ready", "running", "paused", "finished")
@@ -86,6 +86,7 @@ responses = sa.Table(
     sa.Column("onscreen_distance_mm", sa.Float),
     sa.Column("target_angular_size_deg", sa.Float),
     sa.Column("camera_gap_deg", sa.Float),  # see cosim.trials.measures
+    sa.Column("target_depth_m", sa.Float),  # the target centre along the optical axis
     sa.Column("viewing_distance_mm", sa.Float, nullable=False),
     sa.Column("screen_width_mm", sa.Float, nullable=False),
     sa.Column("screen_height_mm", sa.Float, nullable=False),

@@ -6,6 +6,12 @@ each clip's per-frame ground truth for its target, the protocol, practice
 trials, breaks and the order of the trials in each session. It does not
 serve, store or measure anything (``server``, ``store``, ``measures``).
 
+A ground-truth file is the renderer's ``.gt.csv`` (``cosim.renderer.frame``)
+or one made by hand with at least its frame, time, target, in-view, box and
+centre columns. Its ``range_m`` and ``eccentricity_deg``, when present and
+not empty, give each frame's ``GtFrame.depth_m``: the target centre's
+distance along the optical axis, ``range_m * cos(eccentricity_deg)``.
+
 The file and everything it names are untrusted: the YAML goes through the
 scenario loader's limits (``cosim.scenario.yaml_lines``), every problem is
 reported as ``file:line: path: message`` (all at once, one ``ConfigError``),
@@ -118,6 +124,10 @@ class GtFrame:
     in_view: bool
     bbox_px: tuple[float, float, float, float] | None  # x0, y0, x1, y1
     center_px: tuple[float, float] | None
+    #: the target centre's distance along the camera's optical axis, ``range_m *
+    #: cos(eccentricity_deg)`` of the ground truth (for a level nadir camera: its
+    #: height above the target's centre); None: not known (a column absent or empty)
+    depth_m: float | None = None
 
 
 @dataclass(frozen=True)
@@ -302,6 +312,23 @@ def _num(text: str, p: Path, line: int, col: str) -> float:
     return v
 
 
+def _depth_m(r: dict[str, str], p: Path, line: int) -> float | None:
+    """``range_m * cos(eccentricity_deg)`` of a ground-truth row; None when
+    either is absent or empty. Each value given is checked."""
+    rng = r.get("range_m", "")
+    ecc = r.get("eccentricity_deg", "")
+    rng_m = _num(rng, p, line, "range_m")
+    ecc_deg = _num(ecc, p, line, "eccentricity_deg")
+    if rng and not (math.isfinite(rng_m) and rng_m >= 0):
+        raise ConfigError(f"{p}:{line}: range_m: expected a distance >= 0, got {rng[:40]!r}")
+    if ecc and not (math.isfinite(ecc_deg) and 0 <= ecc_deg <= 180):
+        raise ConfigError(f"{p}:{line}: eccentricity_deg: expected an angle in [0, 180], "
+                          f"got {ecc[:40]!r}")
+    if not (rng and ecc):
+        return None
+    return rng_m * math.cos(math.radians(ecc_deg))
+
+
 def read_clip_truth(p: Path, target: str | None) -> tuple[str, tuple[GtFrame, ...], str]:
     """The rows of one target of a ground-truth CSV, in frame order, and the
     file's SHA-256 (hex); ``target`` None: the file's only target."""
@@ -335,7 +362,8 @@ def read_clip_truth(p: Path, target: str | None) -> tuple[str, tuple[GtFrame, ..
         centre = tuple(vals[4:]) if all(math.isfinite(v) for v in vals[4:]) else None
         frames[fno] = GtFrame(frame=fno, time_s=_num(r["time_s"], p, line, "time_s"),
                               in_view=in_view == 1.0, bbox_px=bbox,  # type: ignore[arg-type]
-                              center_px=centre)  # type: ignore[arg-type]
+                              center_px=centre,  # type: ignore[arg-type]
+                              depth_m=_depth_m(r, p, line))
     return target, tuple(frames[k] for k in sorted(frames)), digest
 
 

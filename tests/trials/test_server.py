@@ -338,6 +338,27 @@ def test_reaction_times_outside_0_to_10_minutes_are_refused(tmp_path: Path,
         assert asgi(app, "POST", path, {**body, "reaction_time_ms": 0.0})[0] == 201
 
 
+@pytest.mark.parametrize("protocol, frame", [("disappear", 3), ("track", 2)])
+def test_a_response_stores_the_targets_depth_along_the_optical_axis(
+        tmp_path: Path, protocol: str, frame: int) -> None:
+    """target_depth_m: the ground truth's range_m * cos(eccentricity_deg) at the
+    frame measured (a track trial: its still frame, the target nearest the centre)."""
+    study = small_study(tmp_path, f"protocol: {protocol}\n", {"a": 139.5})
+    write_gt(tmp_path / "a.gt.csv", [(f, 139.5 + 10 * f, 119.5, 1) for f in range(5)],
+             range_ecc={f: (f"{40 + 10 * f}", "60") for f in range(5)})
+    with Store(tmp_path / "t.sqlite") as store:
+        app = make_app(study, store)
+        status, s = asgi(app, "POST", "/api/sessions", {"participant": "p", **PROFILE})
+        assert status == 201, s
+        status, r = asgi(app, "POST", f"/api/sessions/{s['id']}/responses", {
+            "trial_index": 0, "kind": "track-left" if protocol == "track" else protocol,
+            "key": "space", "media_time_s": 0.3, "reaction_time_ms": 700.0})
+        assert status == 201, r
+        assert r["response"]["frame"] == frame
+        assert r["response"]["target_depth_m"] == pytest.approx((40 + 10 * frame) / 2)
+        assert store.responses(s["id"])[0]["target_depth_m"] == r["response"]["target_depth_m"]
+
+
 def test_page_size_reports_are_checked_and_kept_for_the_experimenter(
         server: LiveServer) -> None:
     s = _session(server, "p-size")

@@ -15,7 +15,7 @@ from cosim.errors import ConfigError
 from cosim.renderer.video import open_video
 from cosim.trials.measures import Display, camera_to_screen_mm, measures_at, video_scale
 from cosim.trials.store import EXPORT_COLUMNS, Store, export_csv
-from cosim.trials.study import load_study, williams_row
+from cosim.trials.study import GT_REQUIRED, load_study, williams_row
 
 GT_HEADER = ("frame,time_s,vehicle,camera,target,in_view,fully_in_view,bbox_x0_px,bbox_y0_px,"
              "bbox_x1_px,bbox_y1_px,center_x_px,center_y_px,eccentricity_px,eccentricity_deg,"
@@ -23,13 +23,16 @@ GT_HEADER = ("frame,time_s,vehicle,camera,target,in_view,fully_in_view,bbox_x0_p
 
 
 def write_gt(path: Path, rows: list[tuple[int, float, float, int]], target: str = "truck",
-             half: tuple[float, float] = (10.0, 5.0)) -> Path:
-    """A ground truth: (frame, centre x, centre y, in_view) with a bbox of ``half`` sizes."""
+             half: tuple[float, float] = (10.0, 5.0),
+             range_ecc: dict[int, tuple[str, str]] | None = None) -> Path:
+    """A ground truth: (frame, centre x, centre y, in_view) with a bbox of ``half`` sizes;
+    ``range_ecc``: the range_m and eccentricity_deg cells of some frames (else empty)."""
     lines = [GT_HEADER]
     hx, hy = half
     for f, cx, cy, iv in rows:
+        rng, ecc = (range_ecc or {}).get(f, ("", ""))
         lines.append(f"{f},{f / 10:.6f},uav,nadir,{target},{iv},{iv},{cx - hx},{cy - hy},"
-                     f"{cx + hx},{cy + hy},{cx},{cy},,,,,,")
+                     f"{cx + hx},{cy + hy},{cx},{cy},,{ecc},,,{rng},")
     path.write_text("\n".join(lines) + "\n")
     return path
 
@@ -132,6 +135,52 @@ def test_ground_truth_errors_name_their_line(tmp_path: Path) -> None:
     gt.write_text("\n".join(lines) + "\n")
     with pytest.raises(ConfigError, match=r"study\.yaml:\d+: clips\[1\]: .*c1\.gt\.csv:4: "
                                           r"bbox_x0_px: expected a number, got 'abc"):
+        load_study(p)
+
+
+def test_ground_truth_gives_the_targets_depth_along_the_optical_axis(tmp_path: Path) -> None:
+    """depth_m = range_m * cos(eccentricity_deg); None where a cell is empty or
+    the file has no such columns (older and hand-made ground truths); the
+    measures carry it (a track trial: its still frame's)."""
+    from cosim.trials.measures import track_measures
+
+    p = write_study(tmp_path, "protocol: disappear\n" + CLIPS)
+    # the target crosses the centre at frame 2; 40, 50, ... m away, 60 deg off the axis
+    write_gt(tmp_path / "c0.gt.csv", [(f, 139.5 + 10 * f, 119.5, 1) for f in range(5)],
+             range_ecc={f: (f"{40 + 10 * f}", "60") for f in range(4)} | {4: ("80", "")})
+    hand = tmp_path / "c1.gt.csv"  # only the columns a ground truth needs
+    with open(hand, newline="") as f:
+        rows = list(csv.DictReader(f))
+    hand.write_text("\n".join([",".join(GT_REQUIRED)] + [
+        ",".join(r[c] for c in GT_REQUIRED) for r in rows]) + "\n")
+    c0, c1 = load_study(p).clips
+    assert [g.depth_m for g in c0.frames[:4]] == pytest.approx([20.0, 25.0, 30.0, 35.0])
+    assert c0.frames[4].depth_m is None  # an empty cell: not known
+    assert [g.depth_m for g in c1.frames] == [None] * 5
+    d = Display(screen_width_px=1600, screen_height_px=900, screen_width_mm=400,
+                screen_height_mm=225, viewing_distance_mm=500)
+    assert measures_at(c0, 3, d).target_depth_m == pytest.approx(35.0)
+    assert measures_at(c1, 3, d).target_depth_m is None
+    assert c0.still_frame == 2
+    assert track_measures(c0, d, (1.0, 0.0), 2.0, 800.0).target_depth_m == pytest.approx(30.0)
+    assert track_measures(c1, d, (1.0, 0.0), 2.0, 800.0).target_depth_m is None
+
+
+@pytest.mark.parametrize("range_ecc, match", [
+    (("-1", "10"), r"range_m: expected a distance >= 0, got '-1'"),
+    (("inf", "10"), r"range_m: expected a distance >= 0, got 'inf'"),
+    (("far", "10"), r"range_m: expected a number, got 'far'"),
+    (("50", "180.5"), r"eccentricity_deg: expected an angle in \[0, 180\], got '180\.5'"),
+    (("50", "nan"), r"eccentricity_deg: expected an angle in \[0, 180\], got 'nan'"),
+    (("", "-3"), r"eccentricity_deg: expected an angle in \[0, 180\], got '-3'"),
+])
+def test_ground_truth_range_and_eccentricity_are_checked(
+        tmp_path: Path, range_ecc: tuple[str, str], match: str) -> None:
+    p = write_study(tmp_path, "protocol: disappear\n" + CLIPS)
+    write_gt(tmp_path / "c1.gt.csv", [(f, 159.5, 119.5, 1) for f in range(5)],
+             range_ecc={2: range_ecc})
+    with pytest.raises(ConfigError, match=r"study\.yaml:\d+: clips\[1\]: .*c1\.gt\.csv:4: "
+                                          + match):
         load_study(p)
 
 
@@ -277,8 +326,8 @@ def test_responses_are_stored_once_and_exported(tmp_path: Path) -> None:
                                  session_number=0, trial_order=[{"index": 0}, {"index": 1}])
         sid = s["id"]
         assert s["trial_order"] == [{"index": 0}, {"index": 1}] and s["state"] == "ready"
-        row, created = store.record_response(_response(sid, 0))
-        assert created and row["frame"] == 12
+        row, created = store.record_response(_response(sid, 0, target_depth_m=28.25))
+        assert created and row["frame"] == 12 and row["target_depth_m"] == 28.25
         again, created = store.record_response(_response(sid, 0, frame=99, key="x"))
         assert not created and again["frame"] == 12 and again["id"] == row["id"]  # first wins
         store.record_response(_response(sid, 1, key="none", frame=None, video_time_s=None,
@@ -295,7 +344,7 @@ def test_responses_are_stored_once_and_exported(tmp_path: Path) -> None:
         "session", "participant", "trial_index", "practice", "protocol", "clip", "run",
         "condition_speed_kt", "condition_alt_agl_m", "condition_target", "frame",
         "video_time_s", "reaction_time_ms", "key", "target_in_view", "eccentricity_deg",
-        "onscreen_distance_mm", "target_angular_size_deg", "camera_gap_deg",
+        "onscreen_distance_mm", "target_angular_size_deg", "camera_gap_deg", "target_depth_m",
         "viewing_distance_mm", "screen_width_mm", "screen_height_mm", "screen_width_px",
         "screen_height_px", "recognised", "reshown")
     first = dict(zip(rows[0], rows[1]))
@@ -307,10 +356,11 @@ def test_responses_are_stored_once_and_exported(tmp_path: Path) -> None:
         "target_in_view": "1", "eccentricity_deg": "3.25", "onscreen_distance_mm": "34.1",
         "target_angular_size_deg": "0.5", "viewing_distance_mm": "600.0",
         "screen_width_mm": "531.0", "screen_height_mm": "299.0", "screen_width_px": "1920",
-        "screen_height_px": "1080", "recognised": "", "camera_gap_deg": "", "reshown": ""}
+        "screen_height_px": "1080", "recognised": "", "camera_gap_deg": "",
+        "target_depth_m": "28.25", "reshown": ""}
     second = dict(zip(rows[0], rows[2]))
-    assert (second["practice"], second["frame"], second["target_in_view"], second["key"]) == (
-        "0", "", "", "none")
+    assert (second["practice"], second["frame"], second["target_in_view"], second["key"],
+            second["target_depth_m"]) == ("0", "", "", "none", "")
     assert len(rows) == 3
 
 
@@ -322,8 +372,9 @@ def test_store_url_and_bad_url(tmp_path: Path) -> None:
 
 
 def test_a_database_from_an_older_cosim_gains_the_new_columns(tmp_path: Path) -> None:
-    """A database made before camera_gap_deg and reshown existed opens, keeps
-    its rows (the new cells empty) and takes new responses with them."""
+    """A database made before camera_gap_deg, target_depth_m and reshown
+    existed opens, keeps its rows (the new cells empty) and takes new
+    responses with them."""
     db = tmp_path / "old.sqlite"
     with Store(db) as store:
         s = store.create_session(participant="p01", study="s", protocol="disappear",
@@ -333,27 +384,31 @@ def test_a_database_from_an_older_cosim_gains_the_new_columns(tmp_path: Path) ->
     con = sqlite3.connect(db)  # make it old: SQLite >= 3.35 drops columns
     con.execute("ALTER TABLE responses DROP COLUMN camera_gap_deg")
     con.execute("ALTER TABLE responses DROP COLUMN reshown")
+    con.execute("ALTER TABLE responses DROP COLUMN target_depth_m")
     con.commit()
     con.close()
     with Store(db) as store:
         old = store.responses(s["id"])
         assert len(old) == 1 and old[0]["camera_gap_deg"] is None and old[0]["reshown"] is None
+        assert old[0]["target_depth_m"] is None
         row, created = store.record_response(_response(s["id"], 1, camera_gap_deg=12.5,
-                                                       reshown=True))
+                                                       target_depth_m=98.25, reshown=True))
         assert created and row["camera_gap_deg"] == 12.5 and row["reshown"] is True
+        assert row["target_depth_m"] == 98.25
 
 
 @pytest.mark.parametrize("north_m,east_m", [(0.0, 0.0), (12.0, -7.0), (-30.0, 21.0)])
 def test_camera_gap_is_the_renderers_angle_and_the_ground_distance(
         tmp_path: Path, north_m: float, east_m: float) -> None:
     """camera_gap_deg of a frame rendered from a level nadir camera 100 m up:
-    the renderer's own angle off the optical axis (from its 3-D vectors), and
-    tan(gap) * (height above the target's centre) is the target's distance
-    on the ground from the point under the camera."""
+    the renderer's own angle off the optical axis (from its 3-D vectors);
+    target_depth_m, read from the rendered ground truth, is the camera's
+    height above the target's centre, and tan(gap) * target_depth_m is the
+    target's distance on the ground from the point under the camera."""
     from cosim.renderer.camera import camera_pose
     from cosim.renderer.config import TARGET_DEFAULTS, CameraSpec, GroundSpec, TargetSpec
-    from cosim.renderer.frame import World, WorldSpec, render_frame
-    from cosim.trials.study import Clip, GtFrame
+    from cosim.renderer.frame import GT_COLUMNS, World, WorldSpec, render_frame
+    from cosim.trials.study import Clip, read_clip_truth
 
     lat, lon, ground = 37.0, -122.0, 10.0
     length, width, height, colour = TARGET_DEFAULTS["truck"]
@@ -363,19 +418,28 @@ def test_camera_gap_is_the_renderers_angle_and_the_ground_distance(
     pose = camera_pose(cam, lat, lon, ground + 100.0, 0.0, 0.0, 0.0, ground_alt_m=ground)
     _, (row,) = render_frame(World(WorldSpec(lat, lon, ground, 1, 120.0, GroundSpec(), (t,))),
                              cam, pose, 0)
-    frame = GtFrame(frame=0, time_s=0.0, in_view=row["in_view"] == 1,
-                    bbox_px=(row["bbox_x0_px"], row["bbox_y0_px"], row["bbox_x1_px"],
-                             row["bbox_y1_px"]),
-                    center_px=(row["center_x_px"], row["center_y_px"]))
-    clip = Clip(id="c", video=tmp_path / "v.mp4", ground_truth=tmp_path / "g.csv", target="t",
-                run="", rate_hz=10.0, width_px=320, height_px=240, conditions=(),
-                frames=(frame,), hfov_deg=60.0)
+    # the renderer's ground-truth row, every value at full precision
+    row = {**row, "frame": 0, "time_s": 0.0, "vehicle": "uav", "camera": "c", "target": "t"}
+    gt = tmp_path / "g.csv"
+    with open(gt, "w", newline="") as f:
+        csv.writer(f).writerows([GT_COLUMNS, ["" if row[c] is None else repr(row[c])
+                                              if isinstance(row[c], float) else row[c]
+                                              for c in GT_COLUMNS]])
+    _, frames, _ = read_clip_truth(gt, "t")
+    clip = Clip(id="c", video=tmp_path / "v.mp4", ground_truth=gt, target="t", run="",
+                rate_hz=10.0, width_px=320, height_px=240, conditions=(), frames=frames,
+                hfov_deg=60.0)
     d = Display(screen_width_px=1600, screen_height_px=900, screen_width_mm=400,
                 screen_height_mm=225, viewing_distance_mm=500)
     m = measures_at(clip, 0, d)
     assert m.camera_gap_deg == pytest.approx(row["eccentricity_deg"], abs=1e-6)
-    ground_m = math.tan(math.radians(m.camera_gap_deg)) * (100.0 - height / 2)
-    assert ground_m == pytest.approx(math.hypot(north_m, east_m), abs=0.02)
+    # the target stands on the curved Earth, r**2 / 2R below the camera's level
+    # (0.1 mm at 37 m): its depth is the height above its centre plus that
+    r_m = math.hypot(north_m, east_m)
+    assert m.target_depth_m == pytest.approx(100.0 - height / 2 + r_m**2 / (2 * 6_371_000.0),
+                                             abs=1e-6)
+    ground_m = math.tan(math.radians(m.camera_gap_deg)) * m.target_depth_m
+    assert ground_m == pytest.approx(r_m, abs=1e-3)
     no_fov = Clip(**{**clip.__dict__, "hfov_deg": None})
     assert measures_at(no_fov, 0, d).camera_gap_deg is None
 
