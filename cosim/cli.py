@@ -683,6 +683,24 @@ def _cmd_search_plan(a: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _gap_summary(fit: dict[str, Any], verdicts: list[str]) -> str:
+    """One line of ``cosim trials analyse``'s print-out for a critical-gap fit."""
+    u, sym = fit.get("unit"), "d" if fit.get("unit") == "mm" else "h"
+    if fit.get("cg") is None:
+        return f"{fit.get('status')} ({fit.get('detail')})"
+    lo, hi = fit["cg_ci"]
+    where = (f"from {sym}0 = {fit['threshold']:.0f} {u}" if fit["status"] == "plateau" else
+             f"constant from the lowest level tested ({fit['threshold']:g} {u}) on")
+    counts = {v: verdicts.count(v) for v in ("fails", "inconclusive", "untested")}
+    total = verdicts.count("holds") + sum(counts.values())
+    others = ", ".join(f"{k} at {n}" for k, n in counts.items() if n)
+    people = fit.get("participants") or 0
+    return (f"{fit['status']}: CG {fit['cg']:.3g} {u} (95% CI {lo:.3g}-{hi:.3g}, "
+            f"{fit.get('interval')}, {people} participant{'' if people == 1 else 's'}), "
+            f"{where}; the relation holds at {verdicts.count('holds')} of {total} plateau "
+            f"levels" + (f" ({others})" if others else ""))
+
+
 def _existing_db(db: str) -> None:
     """A database file to read must be there (opening a mistyped path would
     make an empty one)."""
@@ -716,18 +734,11 @@ def _cmd_trials(a: argparse.Namespace) -> int:
                 _existing_db(a.responses)
                 src = export_csv(a.responses, Path(tmp) / "responses.csv")
             summary = analyse(src, a.out, seed=a.seed, exclude_reshown=a.exclude_reshown)
-        checks: dict[str, list[bool]] = {}
+        verdicts: dict[str, list[str]] = {}
         for c in summary.get("critical_gap_check", []):
-            if c.get("holds") is not None:
-                checks.setdefault(c["fit"], []).append(c["holds"])
+            verdicts.setdefault(c["fit"], []).append(c["verdict"])
         for label, fit in summary.get("critical_gap", {}).items():
-            u, sym = fit.get("unit"), "d" if fit.get("unit") == "mm" else "h"
-            held = checks.get(label, [])
-            print(f"critical gap, {label}: {fit.get('status')}"
-                  + (f": CG {fit['cg']:.3g} {u} (95% CI {fit['cg_ci'][0]:.3g}-"
-                     f"{fit['cg_ci'][1]:.3g}), from {sym}0 = {fit['threshold']:.0f} {u}; "
-                     f"the relation holds at {sum(held)} of {len(held)} plateau levels"
-                     if fit.get("cg") is not None else f" ({fit.get('detail')})"))
+            print(f"critical gap, {label}: {_gap_summary(fit, verdicts.get(label, []))}")
         model = (summary.get("recognise") or {}).get("logistic") or {}
         for name, c in (model.get("coefficients") or {}).items():
             if name != "intercept":

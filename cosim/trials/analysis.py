@@ -12,19 +12,25 @@ columns ``COLUMNS``), drops practice rows and writes into ``out_dir``:
   ``tan(beta) * h`` (m).
 - ``critical_gap.csv``, ``critical_gap_check.csv``, ``critical_gap.png``: the
   critical-gap relation ``CG = tan(alpha) * d = tan(beta) * h`` (DESIGN 3.5)
-  in its two planes. On the screen: per target (and altitude, when several)
-  ``tan(alpha) * d`` (mm) against the viewing distance, its critical gap and
-  the threshold viewing distance ``d0``. On the ground: per target (and
-  viewing distance, when several) ``tan(beta) * h`` (m) against the
-  altitude, ``beta`` being the conspicuity angle seen from the camera
-  (``camera_gap_deg``: for a nadir camera ``h * tan(beta)`` is the distance on
-  the ground between the point looked at and the target), its critical gap
-  and the threshold altitude ``h0``. Each is checked: from the other levels
-  on the plateau the gap predicts the angle at each level
-  (``tan(beta) = CG / h``), compared with the angle measured there
-  (``check_across_levels``). The two planes are not mixed: the screen's mm
-  and the ground's metres are related only through a clip's camera and the
-  display, which differ between studies. See ``fit_gap`` for the method.
+  in its two planes, per protocol and target. On the screen: the
+  on-screen distance (``tan(alpha) * d``, mm) against the viewing distance,
+  per altitude when several; its critical gap and the threshold viewing
+  distance ``d0``. On the ground: ``tan(beta) * h`` (m) against the altitude,
+  per viewing distance when several, ``beta`` being the conspicuity angle
+  seen from the camera (``camera_gap_deg``) and ``h`` the camera's depth to
+  the target (``target_depth_m``; the altitude where unknown): for a nadir
+  camera the distance on the ground between the point looked at and the
+  target; its critical gap and the threshold altitude ``h0``. "Constant"
+  means equal within a tolerance (10 % of the gap), shown by an equivalence
+  test; data that cannot show it are "inconclusive" (``fit_gap``). Each
+  plateau is checked level by level: the gap of the other levels predicts
+  the angle there (``tan(beta) = CG / h``), and the difference is judged
+  "holds", "fails" or "inconclusive" (``check_across_levels``). Participants'
+  trials are not taken as independent: slopes and differences are compared
+  within participants, the CG interval resamples whole participants. The
+  two planes are not mixed: the screen's mm and the ground's metres are
+  related only through a clip's camera and the display, which differ
+  between studies.
 - ``recognition.csv``, ``recognition.png``: experiment 2 ("recognise"
   protocol) accuracy against altitude, speed, target, target angular size
   bins and eccentricity bins, with 95 % Wilson intervals, and a logistic
@@ -57,6 +63,7 @@ from typing import Any
 import numpy as np
 
 from cosim.errors import ConfigError
+from cosim.trials.measures import SCREEN_MM_RANGE, SCREEN_PX_RANGE, VIEWING_DISTANCE_MM_RANGE
 
 log = logging.getLogger(__name__)
 
@@ -69,9 +76,10 @@ COLUMNS: tuple[str, ...] = (
     "screen_width_mm", "screen_height_mm", "screen_width_px", "screen_height_px",
     "recognised",
 )
-#: columns read when present (exports of older versions lack them): the
-#: camera-side gap (the altitude analysis needs it) and the re-shown flag
-OPTIONAL_COLUMNS: tuple[str, ...] = ("camera_gap_deg", "reshown")
+#: columns read when present (exports of older versions lack them): the gap
+#: seen from the camera and the camera's depth to the target (the altitude
+#: analysis needs them) and the re-shown flag
+OPTIONAL_COLUMNS: tuple[str, ...] = ("camera_gap_deg", "target_depth_m", "reshown")
 PROTOCOLS = ("disappear", "recognise", "track")
 #: the protocols whose responses are conspicuity angles (the target's eccentricity
 #: from where the eyes are: the fixation mark, or the tracked dot)
@@ -84,34 +92,45 @@ MAX_PROBLEMS = 200
 #: eccentricity_deg and atan(onscreen_distance_mm / viewing_distance_mm) further apart
 #: than this are counted (and logged) as inconsistent
 ECCENTRICITY_TOLERANCE_DEG = 0.5
-#: participants needed to resample whole participants in a bootstrap (fewer:
-#: trials are resampled, as if independent)
-MIN_BOOT_PARTICIPANTS = 5
+#: participants needed to resample whole participants in a bootstrap (the
+#: percentile interval of a few resampled people is too narrow: 86 % coverage
+#: with 5, 90 % with 8, 93 % with 12 in a simulation); from 2 to this many, a t
+#: interval over each participant's mean (``GapFit.interval``)
+MIN_BOOT_PARTICIPANTS = 10
 #: groups with more values than this are not bootstrapped value by value
 #: (memory n_boot x values): a median gets the order-statistic interval, a
 #: distance level's resampled sum is drawn from its normal distribution (exact
 #: mean and variance)
 _EXACT_BOOT_MAX = 2000
 
-# numeric columns: name -> (required, lower bound, lower bound inclusive, upper bound)
-# (the upper bound is inclusive but for eccentricity_deg: tan(90 deg) is no distance)
+def _range(r: tuple[float, float]) -> tuple[float, bool, float]:
+    return float(r[0]), True, float(r[1])
+
+
+# numeric columns: name -> (required, lower bound, lower bound inclusive, upper bound);
+# the upper bound is inclusive but for the angles whose tangent is a distance
+# (90 deg is none). The ranges are what a trial can hold: the display's are the
+# trial server's own (``cosim.trials.measures``), an altitude under 1 m is no
+# flight, and every value is bounded so that no cell can overflow the analysis.
 _NUMERIC: dict[str, tuple[bool, float, bool, float]] = {
-    "trial_index": (True, 0.0, True, math.inf),
-    "condition_speed_kt": (False, 0.0, True, math.inf),
-    "condition_alt_agl_m": (False, 0.0, False, math.inf),
-    "frame": (False, 0.0, True, math.inf),
-    "video_time_s": (False, 0.0, True, math.inf),
-    "reaction_time_ms": (False, 0.0, True, math.inf),
+    "trial_index": (True, 0.0, True, 1e7),
+    "condition_speed_kt": (False, 0.0, True, 10_000.0),
+    "condition_alt_agl_m": (False, 1.0, True, 100_000.0),
+    "frame": (False, 0.0, True, 1e9),
+    "video_time_s": (False, 0.0, True, 1e6),
+    "reaction_time_ms": (False, 0.0, True, 600_000.0),
     "eccentricity_deg": (False, 0.0, True, 90.0),
-    "onscreen_distance_mm": (False, 0.0, True, math.inf),
+    "onscreen_distance_mm": (False, 0.0, True, 100_000.0),
     "target_angular_size_deg": (False, 0.0, False, 180.0),
     "camera_gap_deg": (False, 0.0, True, 90.0),
-    "viewing_distance_mm": (True, 0.0, False, math.inf),
-    "screen_width_mm": (True, 0.0, False, math.inf),
-    "screen_height_mm": (True, 0.0, False, math.inf),
-    "screen_width_px": (True, 0.0, False, math.inf),
-    "screen_height_px": (True, 0.0, False, math.inf),
+    "target_depth_m": (False, 0.0, False, 1e6),
+    "viewing_distance_mm": (True, *_range(VIEWING_DISTANCE_MM_RANGE)),
+    "screen_width_mm": (True, *_range(SCREEN_MM_RANGE)),
+    "screen_height_mm": (True, *_range(SCREEN_MM_RANGE)),
+    "screen_width_px": (True, *_range(SCREEN_PX_RANGE)),
+    "screen_height_px": (True, *_range(SCREEN_PX_RANGE)),
 }
+_OPEN_ABOVE = ("eccentricity_deg", "camera_gap_deg")
 _INTEGER = {"trial_index", "frame", "screen_width_px", "screen_height_px"}
 _FLAGS = ("practice", "target_in_view", "reshown")
 
@@ -286,7 +305,7 @@ def read_responses(csv_path: str | Path, *, max_bytes: int = MAX_BYTES,
         if ok and protocol in CONSPICUITY and fl["target_in_view"]:
             for c in ("eccentricity_deg", "onscreen_distance_mm"):
                 if math.isnan(values[c]):
-                    problems.add(start, f"{c}: required on a 'disappear' response with "
+                    problems.add(start, f"{c}: required on a {protocol!r} response with "
                                         "the target in view, got an empty cell")
                     ok = False
         if not ok:
@@ -322,7 +341,7 @@ def _number(cell: str, column: str, required: bool, lo: float, lo_incl: bool, hi
         return f"expected a finite number, got {cell[:40]!r}"
     if integer and v != int(v):
         return f"expected a whole number, got {cell!r}"
-    hi_incl = column != "eccentricity_deg"
+    hi_incl = column not in _OPEN_ABOVE
     if v < lo or (v == lo and not lo_incl) or v > hi or (v == hi and not hi_incl):
         left = "[" if lo_incl else "("
         right = "]" if hi_incl else ")"
@@ -333,25 +352,66 @@ def _number(cell: str, column: str, required: bool, lo: float, lo_incl: bool, hi
 # ---------------------------------------------------------------- statistics
 
 
-def t_quantile(p: float, df: float) -> float:
-    """Quantile of Student's t with ``df`` degrees of freedom.
+def _betainc(a: float, b: float, x: float) -> float:
+    """The regularized incomplete beta function I_x(a, b), by its continued
+    fraction (modified Lentz), on the side where it converges fast."""
+    if x <= 0.0:
+        return 0.0
+    if x >= 1.0:
+        return 1.0
+    if x > (a + 1.0) / (a + b + 2.0):
+        return 1.0 - _betainc(b, a, 1.0 - x)
+    log_front = (math.lgamma(a + b) - math.lgamma(a) - math.lgamma(b) + a * math.log(x)
+                 + b * math.log1p(-x))
+    tiny = 1e-300
+    c, d = 1.0, 1.0 - (a + b) * x / (a + 1.0)
+    d = 1.0 / (d if abs(d) > tiny else tiny)
+    f = d
+    for m in range(1, 500):
+        for num in (m * (b - m) * x / ((a + 2 * m - 1) * (a + 2 * m)),
+                    -(a + m) * (a + b + m) * x / ((a + 2 * m) * (a + 2 * m + 1))):
+            d = 1.0 + num * d
+            d = 1.0 / (d if abs(d) > tiny else tiny)
+            c = 1.0 + num / c
+            c = c if abs(c) > tiny else tiny
+            f *= c * d
+        if abs(c * d - 1.0) < 1e-15:
+            break
+    return math.exp(log_front) * f / a
 
-    Exact for df 1 and 2; otherwise the Cornish-Fisher expansion of
-    Abramowitz & Stegun 26.7.5 around the normal quantile (relative error
-    below 1e-3 at p = 0.975 for df >= 3).
-    """
+
+def t_cdf(t: float, df: float) -> float:
+    """P(T <= t) for Student's t with ``df`` (> 0, not necessarily whole)
+    degrees of freedom."""
+    tail = 0.5 * _betainc(df / 2.0, 0.5, df / (df + t * t))
+    return 1.0 - tail if t > 0 else tail
+
+
+def t_quantile(p: float, df: float) -> float:
+    """Quantile of Student's t with ``df`` (> 0, not necessarily whole)
+    degrees of freedom: ``t_cdf`` inverted by bisection to 1e-12 relative
+    (exact for any p and df, e.g. Bonferroni levels and Welch's fractional
+    degrees of freedom)."""
     if not 0.0 < p < 1.0 or not df > 0:
         raise ValueError(f"t_quantile: need 0 < p < 1 and df > 0, got p={p!r}, df={df!r}")
-    if df == 1:
-        return math.tan(math.pi * (p - 0.5))
-    if df == 2:
-        return (2 * p - 1) / math.sqrt(2 * p * (1 - p))
-    z = NormalDist().inv_cdf(p)
-    g1 = (z ** 3 + z) / 4
-    g2 = (5 * z ** 5 + 16 * z ** 3 + 3 * z) / 96
-    g3 = (3 * z ** 7 + 19 * z ** 5 + 17 * z ** 3 - 15 * z) / 384
-    g4 = (79 * z ** 9 + 776 * z ** 7 + 1482 * z ** 5 - 1920 * z ** 3 - 945 * z) / 92160
-    return z + g1 / df + g2 / df ** 2 + g3 / df ** 3 + g4 / df ** 4
+    if p < 0.5:
+        return -t_quantile(1.0 - p, df)
+    if p == 0.5:
+        return 0.0
+    lo, hi = 0.0, max(1.0, NormalDist().inv_cdf(p))
+    while t_cdf(hi, df) < p:
+        lo, hi = hi, hi * 2.0
+        if hi > 1e300:
+            return math.inf
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if t_cdf(mid, df) < p:
+            lo = mid
+        else:
+            hi = mid
+        if hi - lo <= 1e-12 * hi:
+            break
+    return 0.5 * (lo + hi)
 
 
 def mean_ci(x: np.ndarray, level: float = 0.95) -> tuple[float, float, float]:
@@ -401,23 +461,110 @@ def wilson_ci(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
     return max(0.0, centre - half), min(1.0, centre + half)
 
 
-def slope_ci(x: np.ndarray, y: np.ndarray, level: float = 0.95) -> tuple[float, float, float]:
-    """OLS slope of y on x and its t interval (NaN without at least 3 points
-    and 2 distinct x). The standard error is the heteroscedasticity-consistent
-    HC3 one: the spread of tan(alpha)*d grows with d (an angle error of e
-    is a distance error of about e*d)."""
+def _cluster_ids(clusters: Sequence[str] | np.ndarray | None, n: int) -> np.ndarray | None:
+    """Integer participant ids of ``n`` trials, or None when there are fewer
+    than two participants (then trials are all there is to go on)."""
+    if clusters is None:
+        return None
+    ids, who = np.unique(np.asarray(clusters, dtype=object), return_inverse=True)
+    if ids.size < 2 or who.size != n:
+        return None
+    return who
+
+
+def _within(v: np.ndarray, who: np.ndarray) -> np.ndarray:
+    """``v`` less its participant's mean (participant fixed effects)."""
+    g = int(who.max()) + 1
+    means = np.bincount(who, weights=v, minlength=g) / np.maximum(
+        np.bincount(who, minlength=g), 1)
+    return v - means[who]
+
+
+def _slope(x: np.ndarray, y: np.ndarray, who: np.ndarray | None
+           ) -> tuple[float, float, float] | None:
+    """(slope, standard error, degrees of freedom) of y on x, None when x
+    does not vary.
+
+    Without participants: OLS with the HC3 standard error (the spread of a
+    gap grows with the level: an angle error of e is a distance error of
+    about e*d), n - 2 degrees of freedom. With them: the slope *within*
+    participants (each one's own mean taken out of x and y: people whose
+    gaps differ, or who did different levels, do not make a slope), its
+    cluster-robust standard error (CR1: each participant's summed scores,
+    G/(G-1)) and G - 1 degrees of freedom for the G participants whose x
+    varies. If no participant's x varies (each did one level), the pooled
+    slope with the same cluster-robust error."""
+    if who is not None:
+        xd, yd = _within(x, who), _within(y, who)
+        inside = float(xd @ xd)
+        if inside > 1e-12 * max(float(((x - x.mean()) ** 2).sum()), 1e-300):
+            b = float(xd @ yd) / inside
+            res = yd - b * xd
+            varies = np.bincount(who, weights=np.abs(xd)) > 0
+            g = int(varies.sum())
+            if g < 2:
+                return None
+            scores = np.bincount(who, weights=xd * res)
+            return b, math.sqrt(g / (g - 1) * float(scores @ scores)) / inside, float(g - 1)
+    xc = x - x.mean()
+    sxx = float(xc @ xc)
+    if sxx == 0.0:
+        return None
+    b = float(xc @ (y - y.mean())) / sxx
+    res = y - y.mean() - b * xc
+    if who is not None:
+        g = int(who.max()) + 1
+        scores = np.bincount(who, weights=xc * res, minlength=g)
+        return b, math.sqrt(g / (g - 1) * float(scores @ scores)) / sxx, float(g - 1)
+    lev = 1.0 / x.size + xc * xc / sxx
+    return b, math.sqrt(float(np.sum((xc * res / (1.0 - lev)) ** 2))) / sxx, float(x.size - 2)
+
+
+def slope_ci(x: np.ndarray, y: np.ndarray, level: float = 0.95,
+             clusters: Sequence[str] | np.ndarray | None = None) -> tuple[float, float, float]:
+    """The slope of y on x and its t interval (NaN without at least 3 points
+    and 2 distinct x): within participants when ``clusters`` names two or
+    more (``_slope``)."""
     x = np.asarray(x, dtype=float)
     y = np.asarray(y, dtype=float)
     if x.size < 3 or np.ptp(x) == 0:
         return math.nan, math.nan, math.nan
-    xc = x - x.mean()
-    sxx = float(xc @ xc)
-    b = float(xc @ (y - y.mean())) / sxx
-    res = y - y.mean() - b * xc
-    lev = 1.0 / x.size + xc * xc / sxx
-    se = math.sqrt(float(np.sum((xc * res / (1.0 - lev)) ** 2))) / sxx
-    half = t_quantile(0.5 + level / 2, x.size - 2) * se
+    fit = _slope(x, y, _cluster_ids(clusters, x.size))
+    if fit is None:
+        return math.nan, math.nan, math.nan
+    b, se, df = fit
+    half = t_quantile(0.5 + level / 2, df) * se if se > 0 else 0.0
     return b, b - half, b + half
+
+
+def difference_ci(y: np.ndarray, here: np.ndarray, level: float = 0.95,
+                  clusters: Sequence[str] | np.ndarray | None = None
+                  ) -> tuple[float, float, float]:
+    """The difference of y between ``here`` and the rest, and its t interval:
+    Welch's (mean here - mean of the rest) without participants; with them,
+    the difference within participants (``_slope`` on the indicator: each
+    person's own level taken out). NaN when either side has fewer than two
+    trials or no participant was on both sides."""
+    y = np.asarray(y, dtype=float)
+    here = np.asarray(here, dtype=bool)
+    a, b = y[here], y[~here]
+    if a.size < 2 or b.size < 2:
+        return math.nan, math.nan, math.nan
+    who = _cluster_ids(clusters, y.size)
+    if who is not None:
+        fit = _slope(here.astype(float), y, who)
+        if fit is None:
+            return math.nan, math.nan, math.nan
+        diff, se, df = fit
+    else:
+        diff = float(a.mean() - b.mean())
+        va, vb = float(a.var(ddof=1)) / a.size, float(b.var(ddof=1)) / b.size
+        se = math.sqrt(va + vb)
+        df = (va + vb) ** 2 / (va * va / (a.size - 1) + vb * vb / (b.size - 1)) if se else 1.0
+    if se == 0.0:
+        return diff, diff, diff
+    half = t_quantile(0.5 + level / 2, df) * se
+    return diff, diff - half, diff + half
 
 
 # ---------------------------------------------------------------- critical gap
@@ -428,20 +575,31 @@ class GapFit:
     """The critical gap of one target against one variable (``fit_gap``).
 
     ``variable`` is what the levels are: the viewing distance ``d`` (the gap
-    ``tan(alpha) * d`` on the screen, in mm) or the altitude ``h`` (the gap
-    ``tan(beta) * h`` on the ground, in m); ``unit`` is the unit of the
-    levels, the gap and the threshold alike.
+    on the screen, in mm) or the altitude ``h`` (the gap on the ground, in
+    m); ``unit`` is the unit of the levels, the gap and the threshold alike.
 
-    ``status``: "plateau" (the gap rises up to ``threshold`` and is
-    constant above it), "plateau_from_start" (constant over every level
-    tested: the threshold is at or below the lowest, ``threshold``),
-    "no_plateau" (still changing above the best breakpoint: no critical
-    gap established within the levels tested; ``cg`` and ``threshold``
-    are None; ``detail`` says why) or "insufficient_data" (fewer than
-    ``min_plateau_levels + 1`` levels, or fewer than two trials a level on
-    average). ``bootstrap`` says what the intervals resampled:
-    "participants" (whole participants, with all their trials) or "trials"
-    (within each level: fewer than ``MIN_BOOT_PARTICIPANTS`` participants).
+    ``status``:
+
+    - "plateau": the gap rises up to ``threshold`` and is constant above it
+      (constant: equal within ``tolerance``, see ``fit_gap``);
+    - "plateau_from_start": constant over every level tested: the threshold
+      is at or below the lowest level (``threshold`` is that level, with no
+      interval);
+    - "no_plateau": the gap still changes above the best breakpoint (or the
+      bend cannot be told from the rise): no critical gap within the levels
+      tested;
+    - "inconclusive": the data cannot tell whether the gap is constant
+      above the breakpoint (its change is neither shown nor ruled out):
+      more trials or participants are needed;
+    - "insufficient_data": fewer than ``min_plateau_levels + 1`` levels, or
+      fewer than ``2 * (min_plateau_levels + 1)`` trials.
+
+    ``cg`` and ``threshold`` are given for the two plateau statuses only;
+    ``detail`` says why. ``interval`` says how the CG interval was made:
+    "participant bootstrap" (``MIN_BOOT_PARTICIPANTS`` or more people: whole
+    participants resampled, the breakpoint chosen anew), "participant means"
+    (2 or more: a t interval over each person's mean gap on the plateau) or
+    "trial bootstrap" (one person, or none named).
     """
 
     status: str
@@ -453,7 +611,10 @@ class GapFit:
     #: the levels are the trials' values rounded to this
     round_to: float = 1.0
     participants: int = 0
-    bootstrap: str = ""
+    interval: str = ""
+    #: replicates of the participant bootstrap without every level, left out
+    boot_dropped: int = 0
+    tolerance: float = 0.1
     cg: float | None = None
     cg_ci: tuple[float, float] | None = None
     threshold: float | None = None
@@ -464,8 +625,11 @@ class GapFit:
     rising_slope_ci: tuple[float, float] | None = None
     breakpoint: float | None = None
     #: residual check: slope of the gap against the level at and above the breakpoint
+    #: (95 % interval), and the slope that would change the gap by ``tolerance``
+    #: across the plateau
     plateau_slope: float | None = None
     plateau_slope_ci: tuple[float, float] | None = None
+    negligible_slope: float | None = None
     plateau_n: int = 0
     plateau_levels: int = 0
     rmse: float | None = None
@@ -518,26 +682,9 @@ def _hinge(levels: np.ndarray, counts: np.ndarray, sums: np.ndarray, cand: np.nd
     return part, a, slope, det
 
 
-def _boot_sums(g: np.ndarray, level_of: np.ndarray, n_levels: int,
-               clusters: np.ndarray | None, rng: np.random.Generator, n_boot: int
-               ) -> tuple[np.ndarray, np.ndarray | None, str]:
-    """Bootstrap replicates of the per-level sums of ``g``: ``(sums (B, L),
-    counts (B, L) or None (the counts of the data), what was resampled)``.
-
-    With ``MIN_BOOT_PARTICIPANTS`` or more participants (``clusters``) whole
-    participants are drawn with replacement, all their trials with them:
-    trials of one person are not independent, and the interval must say how
-    another group of people would answer. Otherwise trials are drawn with
-    replacement within each level."""
-    if clusters is not None:
-        ids, who = np.unique(clusters, return_inverse=True)
-        if ids.size >= MIN_BOOT_PARTICIPANTS:
-            s = np.zeros((ids.size, n_levels))
-            c = np.zeros((ids.size, n_levels))
-            np.add.at(s, (who, level_of), g)
-            np.add.at(c, (who, level_of), 1.0)
-            w = rng.multinomial(ids.size, np.full(ids.size, 1.0 / ids.size), size=n_boot)
-            return w @ s, w @ c, "participants"
+def _trial_boot_sums(g: np.ndarray, level_of: np.ndarray, n_levels: int,
+                     rng: np.random.Generator, n_boot: int) -> np.ndarray:
+    """(n_boot, L) sums of g over trials drawn with replacement within each level."""
     out = np.empty((n_boot, n_levels))
     for j in range(n_levels):
         gj = g[level_of == j]
@@ -545,10 +692,39 @@ def _boot_sums(g: np.ndarray, level_of: np.ndarray, n_levels: int,
             out[:, j] = gj[rng.integers(0, gj.size, size=(n_boot, gj.size))].sum(axis=1)
         else:
             out[:, j] = rng.normal(gj.sum(), math.sqrt(gj.size * float(gj.var())), n_boot)
-    return out, None, "trials"
+    return out
 
 
-def fit_gap(x: np.ndarray, angle_deg: np.ndarray, *, rng: np.random.Generator,
+def _people_boot_sums(g: np.ndarray, level_of: np.ndarray, n_levels: int, who: np.ndarray,
+                      rng: np.random.Generator, n_boot: int
+                      ) -> tuple[np.ndarray, np.ndarray, int]:
+    """Whole participants drawn with replacement, all their trials with them:
+    (sums (B, L), counts (B, L), replicates dropped). A replicate without a
+    trial at some level (people who did not do every level) is drawn again,
+    up to ten times over, and the ones still lacking a level are left out
+    (counted), so the fit is always made on every level."""
+    people = int(who.max()) + 1
+    s = np.zeros((people, n_levels))
+    c = np.zeros((people, n_levels))
+    np.add.at(s, (who, level_of), g)
+    np.add.at(c, (who, level_of), 1.0)
+    p = np.full(people, 1.0 / people)
+    sums, counts = [], []
+    dropped = 0
+    for _ in range(10):
+        w = rng.multinomial(people, p, size=n_boot)
+        bc = w @ c
+        ok = (bc > 0).all(axis=1)
+        dropped += int((~ok).sum())
+        sums.append(w[ok] @ s)
+        counts.append(bc[ok])
+        if sum(len(x) for x in counts) >= n_boot:
+            break
+    return (np.concatenate(sums)[:n_boot], np.concatenate(counts)[:n_boot],
+            dropped)
+
+
+def fit_gap(x: np.ndarray, g: np.ndarray, *, rng: np.random.Generator,
             variable: str, unit: str, gap: str, round_to: float,
             clusters: Sequence[str] | np.ndarray | None = None, steps: int = 10,
             n_boot: int = 1000, min_plateau_levels: int = 3, tolerance: float = 0.1,
@@ -556,51 +732,52 @@ def fit_gap(x: np.ndarray, angle_deg: np.ndarray, *, rng: np.random.Generator,
     """Estimate a target's critical gap and the threshold above which it holds.
 
     ``x``: each trial's level of the variable (the viewing distance, or the
-    altitude), grouped to the nearest ``round_to``; ``angle_deg``: its
-    conspicuity angle there. ``gap`` names ``tan(angle) * x`` in messages.
-    ``clusters``: each trial's participant (see ``_boot_sums``).
+    altitude), grouped to the nearest ``round_to``; ``g``: its conspicuity
+    gap there (on the screen, mm; on the ground, m). ``gap`` names it in
+    messages. ``clusters``: each trial's participant.
 
-    Method: the gap ``g = tan(angle) * x`` against ``x`` is fitted by a
-    continuous two-segment ("hinge") model ``g = CG + s * min(x - x0, 0)``
-    with ``s >= 0``: rising linearly below ``x0``, constant above. For each
-    candidate ``x0`` (``_candidates``: the levels and ``steps`` subdivisions
-    between them) the model is linear in (CG, s) and solved by least
-    squares; ``x0`` is the candidate of least squared error. At least
-    ``min_plateau_levels`` levels must lie at or above ``x0`` (with two, a
-    plateau is wrongly found in 1-2 % of data sets that rise everywhere; so
-    a threshold within the last two levels tested cannot be found).
+    Method: ``g`` against ``x`` is fitted by a continuous two-segment
+    ("hinge") model ``g = CG + s * min(x - x0, 0)`` with ``s >= 0``: rising
+    linearly below ``x0``, constant above. For each candidate ``x0``
+    (``_candidates``: the levels and ``steps`` subdivisions between them)
+    the model is linear in (CG, s) and solved by least squares; ``x0`` is
+    the candidate of least squared error. At least ``min_plateau_levels``
+    levels must lie at or above ``x0`` (so a threshold within the last two
+    levels tested cannot be found).
 
     Then, in order:
 
-    1. rising part: if ``x0`` is above the lowest level but the 95 % t
-       interval of ``s`` (given ``x0``) includes 0, the rise is not resolved
-       and the constant model (``x0`` = the lowest level) is used;
-    2. residual check: the OLS slope of ``g`` against ``x`` over the trials
-       at and above ``x0`` (``min_plateau_levels`` levels) must be
-       negligible: its 95 % t interval (HC3 standard error) contains 0, or
-       lies within the slope that would change the gap by ``tolerance`` of
-       its level across the plateau (with thousands of trials a change of a
-       few per cent is significant but not a change of the relation); and,
-       when there is a rising part, the interval lies below its slope ``s``
-       (the bend is real, not a lack of data above ``x0``); otherwise no
-       plateau is established within the levels tested ("no_plateau", no CG
-       reported);
-    3. CG is the mean of ``g`` over the plateau; the intervals of CG and
-       ``x0`` are percentile bootstrap intervals (``_boot_sums``; the
-       breakpoint chosen anew each time).
-
-    The t intervals of steps 1 and 2 treat trials as independent.
+    1. rising part: if ``x0`` is above the lowest level but the 95 %
+       interval of the rise's slope (given ``x0``, as if it were known; within
+       participants when they are named: ``slope_ci``) includes 0, the rise
+       is not resolved and the constant model (``x0`` = the lowest level) is
+       used;
+    2. is the gap constant above ``x0``? The OLS slope of ``g`` against
+       ``x`` over the trials at and above ``x0`` (standard error
+       cluster-robust over participants, else HC3; ``slope_ci``) is compared
+       with the negligible slope ``delta``, the one that changes the gap by
+       ``tolerance`` of its level across the plateau: constant when its
+       90 % interval lies within +-delta (an equivalence test at 5 %);
+       changing ("no_plateau") when its 95 % interval excludes 0 and is not
+       within +-delta; otherwise "inconclusive". With a rising part the
+       95 % interval must also lie below ``s`` (the bend is real, not a
+       lack of data above ``x0``), else "no_plateau";
+    3. CG is the mean of ``g`` over the plateau, with an interval from
+       whole participants (``GapFit.interval``); the threshold's interval
+       is a percentile bootstrap (participants, or trials within levels),
+       the breakpoint chosen anew each time.
     """
     x = np.asarray(x, dtype=float)
-    g = np.tan(np.radians(np.asarray(angle_deg, dtype=float))) * x
+    g = np.asarray(g, dtype=float)
     xr = np.round(x / round_to) * round_to
     levels, level_of = np.unique(xr, return_inverse=True)
     n = int(g.size)
     people = np.asarray(clusters, dtype=object) if clusters is not None else None
+    who = _cluster_ids(people, n)
     base: dict[str, Any] = {"n": n, "variable": variable, "unit": unit,
                             "levels": [float(v) for v in levels], "round_to": round_to,
                             "participants": int(np.unique(people).size) if people is not None
-                            else 0}
+                            else 0, "tolerance": tolerance}
     if min_plateau_levels < 2:
         raise ValueError(f"min_plateau_levels must be >= 2, got {min_plateau_levels}")
     need = min_plateau_levels + 1
@@ -615,12 +792,13 @@ def fit_gap(x: np.ndarray, angle_deg: np.ndarray, *, rng: np.random.Generator,
     sse = np.maximum(part + float(g @ g), 0.0)
     best = int(np.argmin(sse))
     x0 = float(cand[best])
-    zq = t_quantile(0.5 + level / 2, max(n - 2, 1))
     s_ci: tuple[float, float] | None = None
     if x0 > levels[0] and det[best] > 0:
-        sigma2 = float(sse[best]) / (n - 2)
-        half = zq * math.sqrt(sigma2 * n / float(det[best]))
-        s_ci = (float(s[best]) - half, float(s[best]) + half)
+        # the rise's slope given x0: the slope of g on min(x - x0, 0), within
+        # participants when they are known (slope_ci)
+        _, slo, shi = slope_ci(np.minimum(xr - x0, 0.0), g, level, people)
+        if math.isfinite(slo):
+            s_ci = (slo, shi)
     rising_resolved = s_ci is not None and s_ci[0] > 0
     if not rising_resolved:
         best = 0  # the first candidate is the lowest level: no rising part
@@ -628,26 +806,23 @@ def fit_gap(x: np.ndarray, angle_deg: np.ndarray, *, rng: np.random.Generator,
     fit_level = float(a[best])
     rmse = math.sqrt(float(sse[best]) / n)
     above = xr >= x0 - 1e-9
-    pb, plo, phi = slope_ci(xr[above], g[above], level)
     span = f"{levels[0]:g}-{levels[-1]:g} {unit}"
+    delta = tolerance * abs(fit_level) / max(float(levels[-1]) - x0, 1e-300)
+    pb, plo, phi = slope_ci(xr[above], g[above], level,
+                            people[above] if people is not None else None)
+    _, elo, ehi = slope_ci(xr[above], g[above], 2 * level - 1,  # 90 %: the equivalence test
+                           people[above] if people is not None else None)
     common: dict[str, Any] = dict(
         base, breakpoint=x0, fit_level=fit_level,
         rising_slope=float(s[best]) if rising_resolved else 0.0,
         rising_slope_ci=s_ci if rising_resolved else None,
-        plateau_slope=pb, plateau_slope_ci=(plo, phi), plateau_n=int(above.sum()),
-        plateau_levels=int(np.unique(xr[above]).size), rmse=rmse)
-    # the slope that would move the gap by `tolerance` of its level across the plateau
-    negligible = tolerance * abs(fit_level) / max(float(levels[-1]) - x0, 1e-300)
-    flat = plo <= 0.0 <= phi
-    small = -negligible <= plo and phi <= negligible
-    if not (flat or small):
-        return GapFit(
-            status="no_plateau",
-            detail=(f"{gap} still changes above the best breakpoint {x0:g} {unit}: slope "
-                    f"{pb:.4g} {unit}/{unit}, {level:.0%} CI [{plo:.4g}, {phi:.4g}] excludes 0 "
-                    f"and reaches beyond +-{negligible:.3g} ({tolerance:.0%} of the gap across "
-                    f"the plateau); no critical gap within {span}"),
-            **common)
+        plateau_slope=pb, plateau_slope_ci=(plo, phi), negligible_slope=delta,
+        plateau_n=int(above.sum()), plateau_levels=int(np.unique(xr[above]).size), rmse=rmse)
+    slope_text = (f"slope {pb:.3g} {unit}/{unit}, {level:.0%} CI [{plo:.3g}, {phi:.3g}]; "
+                  f"within +-{delta:.3g} counts as constant ({tolerance:.0%} of the gap "
+                  f"across the plateau)")
+    equivalent = -delta <= elo and ehi <= delta
+    changing = not (plo <= 0.0 <= phi) and not equivalent
     if rising_resolved and phi >= float(s[best]):
         return GapFit(
             status="no_plateau",
@@ -656,119 +831,167 @@ def fit_gap(x: np.ndarray, angle_deg: np.ndarray, *, rng: np.random.Generator,
                     f"told from the slope below it ({float(s[best]):.4g}): no plateau "
                     f"established within {span} (too few trials above it?)"),
             **common)
+    if changing:
+        return GapFit(status="no_plateau",
+                      detail=(f"{gap} still changes above the best breakpoint {x0:g} {unit} "
+                              f"({slope_text}): no critical gap within {span}"), **common)
+    if not equivalent:
+        return GapFit(status="inconclusive",
+                      detail=(f"cannot tell whether {gap} is constant above {x0:g} {unit} "
+                              f"({slope_text}; its {2 * level - 1:.0%} CI [{elo:.3g}, "
+                              f"{ehi:.3g}] is not within that): more trials or participants "
+                              f"needed; the mean above it is {float(g[above].mean()):.4g} "
+                              f"{unit}"), **common)
 
-    boot, bcounts, how = _boot_sums(g, level_of, levels.size, people, rng, n_boot)
-    use_counts = counts if bcounts is None else bcounts
-    if rising_resolved:
-        bpart, _, _, _ = _hinge(levels, use_counts, boot, cand)
+    cg = float(g[above].mean())
+    q = [(1 - level) / 2, (1 + level) / 2]
+    dropped = 0
+    if who is not None and int(who.max()) + 1 >= MIN_BOOT_PARTICIPANTS:
+        boot, bcounts, dropped = _people_boot_sums(g, level_of, levels.size, who, rng, n_boot)
+        interval = "participant bootstrap"
+    else:
+        boot, bcounts = _trial_boot_sums(g, level_of, levels.size, rng, n_boot), counts
+        interval = "trial bootstrap"
+    if boot.shape[0] and rising_resolved:
+        bpart, _, _, _ = _hinge(levels, bcounts, boot, cand)
         x0s = cand[np.argmin(bpart, axis=1)]
     else:
-        x0s = np.full(n_boot, cand[0])
+        x0s = np.full(boot.shape[0], cand[0])
     on = levels[None, :] >= x0s[:, None] - 1e-9  # (B, L): levels on the plateau
-    with np.errstate(invalid="ignore", divide="ignore"):  # a draw with no one on the plateau
-        cgs = (boot * on).sum(axis=1) / (on * use_counts).sum(axis=1)
-    q = [(1 - level) / 2, (1 + level) / 2]
-    cg_lo, cg_hi = (float(v) for v in np.nanquantile(cgs, q))
-    x0_lo, x0_hi = (float(v) for v in np.quantile(x0s, q))
-    cg = float(g[above].mean())
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cgs = (boot * on).sum(axis=1) / (on * bcounts).sum(axis=1)
+    cgs = cgs[np.isfinite(cgs)]
+    if who is not None and (interval == "trial bootstrap" or cgs.size < n_boot // 2):
+        # 2..MIN_BOOT_PARTICIPANTS-1 people (or a design too incomplete to
+        # resample): each person's mean on the plateau, a t interval over people
+        means = np.array([g[above & (who == p)].mean() for p in np.unique(who[above])])
+        _, cg_lo, cg_hi = mean_ci(means, level)
+        interval = "participant means"
+    else:
+        cg_lo, cg_hi = (float(v) for v in np.quantile(cgs, q))
+    if rising_resolved and x0s.size:
+        x0_lo, x0_hi = (float(v) for v in np.quantile(x0s, q))
+        x0_ci: tuple[float, float] | None = (x0_lo, x0_hi)
+    else:
+        x0_ci = None
     if rising_resolved:
         status = "plateau"
-        detail = (f"{gap} rises up to {x0:g} {unit} and is constant above it "
-                  f"(slope {pb:.3g} {unit}/{unit}, {level:.0%} CI [{plo:.3g}, {phi:.3g}] "
-                  + ("contains 0)" if flat else f"within +-{negligible:.3g}, {tolerance:.0%} of "
-                                                "the gap across the plateau)"))
+        detail = f"{gap} rises up to {x0:g} {unit} and is constant above it ({slope_text})"
     else:
         status = "plateau_from_start"
-        detail = (f"{gap} is constant over every level tested ({span}): the threshold is at "
-                  f"or below {levels[0]:g} {unit}")
-    return GapFit(status=status, detail=detail, bootstrap=how, cg=cg, cg_ci=(cg_lo, cg_hi),
-                  threshold=x0, threshold_ci=(x0_lo, x0_hi), **common)
+        detail = (f"{gap} is constant over every level tested ({span}; {slope_text}): the "
+                  f"threshold is at or below {levels[0]:g} {unit}")
+    return GapFit(status=status, detail=detail, interval=interval, boot_dropped=dropped,
+                  cg=cg, cg_ci=(cg_lo, cg_hi), threshold=x0, threshold_ci=x0_ci, **common)
 
 
 def fit_critical_gap(d_mm: np.ndarray, alpha_deg: np.ndarray, *, rng: np.random.Generator,
                      distance_round_mm: float = 10.0, **kw: Any) -> GapFit:
     """The critical gap on the screen, ``CG = tan(alpha) * d`` (mm), and the
     threshold viewing distance ``d0`` (mm) above which it is constant
-    (``fit_gap``; ``kw`` as there)."""
-    return fit_gap(d_mm, alpha_deg, rng=rng, variable="viewing distance d", unit="mm",
-                   gap="tan(alpha)*d", round_to=distance_round_mm, **kw)
+    (``fit_gap``; ``kw`` as there). With the eyes on the perpendicular
+    through the screen centre and the fixation mark there, ``tan(alpha) * d``
+    is the on-screen distance; ``analyse`` fits that distance itself (for a
+    tracked arrow off the centre the two differ)."""
+    d = np.asarray(d_mm, dtype=float)
+    return fit_gap(d, np.tan(np.radians(np.asarray(alpha_deg, dtype=float))) * d, rng=rng,
+                   variable="viewing distance d", unit="mm", gap="tan(alpha)*d",
+                   round_to=distance_round_mm, **kw)
 
 
 def fit_ground_gap(h_m: np.ndarray, beta_deg: np.ndarray, *, rng: np.random.Generator,
-                   altitude_round_m: float = 1.0, **kw: Any) -> GapFit:
+                   depth_m: np.ndarray | None = None, altitude_round_m: float = 1.0,
+                   **kw: Any) -> GapFit:
     """The critical gap on the ground, ``CG = tan(beta) * h`` (m), and the
     threshold altitude ``h0`` (m) above which it is constant: ``beta`` is
-    the conspicuity angle at the camera (``camera_gap_deg``) and ``h`` its
-    height above the ground (``fit_gap``; ``kw`` as there)."""
-    return fit_gap(h_m, beta_deg, rng=rng, variable="altitude h", unit="m",
-                   gap="tan(beta)*h", round_to=altitude_round_m, **kw)
+    the conspicuity angle at the camera (``camera_gap_deg``), ``h`` its
+    height above the ground (the levels) and ``depth_m``, when known, the
+    camera's depth to the target's centre (``target_depth_m``), used in
+    place of ``h`` for the gap (a target's centre is above the ground: at
+    30 m a truck's is 6 % nearer the camera). ``fit_gap``; ``kw`` as there."""
+    h = np.asarray(h_m, dtype=float)
+    depth = h if depth_m is None else np.where(np.isfinite(depth_m), depth_m, h)
+    return fit_gap(h, np.tan(np.radians(np.asarray(beta_deg, dtype=float))) * depth, rng=rng,
+                   variable="altitude h", unit="m", gap="tan(beta)*h",
+                   round_to=altitude_round_m, **kw)
 
 
-def check_across_levels(fit: GapFit, x: np.ndarray, angle_deg: np.ndarray,
-                        level: float = 0.95, tolerance: float = 0.1) -> list[dict[str, Any]]:
+#: what a level's check says (critical_gap_check.csv ``verdict``)
+VERDICTS = ("holds", "fails", "inconclusive", "untested", "below_threshold", "no_plateau")
+
+
+def check_across_levels(fit: GapFit, x: np.ndarray, g: np.ndarray, *,
+                        clusters: Sequence[str] | np.ndarray | None = None,
+                        level: float = 0.95) -> list[dict[str, Any]]:
     """Whether one measurement predicts the others: per level of ``fit``'s
-    variable, the angle measured there against the angle the critical gap
-    predicts there (``tan(angle) = CG / x``), CG taken from the *other*
-    plateau levels only (leave one level out).
+    variable, the gap (and its angle ``atan(gap / x)``) measured there
+    against the one the critical gap predicts (``tan(angle) = CG / x``), CG
+    taken from the *other* plateau levels only (leave one level out).
 
-    Every level gets a row: n, the measured mean gap with its t interval and
-    the angle ``atan(mean gap / x)``. On the plateau (``x >= threshold``)
-    also the predicted angle and ``holds``: the Welch 95 % interval of
-    (mean gap here - mean gap of the other plateau levels) contains 0 or
-    lies within ``tolerance`` of the others' gap (a difference that large
-    numbers of trials make significant but that is too small to matter);
-    below the threshold the relation is not expected to hold and the
-    prediction (from the whole plateau) is shown without a verdict. No
-    plateau: measured values only. The difference intervals are
-    Bonferroni-widened to ``1 - (1 - level) / k`` for the ``k`` plateau
-    levels checked (``confidence``), so that a fit whose relation holds
-    everywhere fails somewhere in at most ``1 - level`` of data sets."""
+    Every level gets a row: n, the measured mean gap with its t interval,
+    the measured angle. On the plateau (``x >= threshold``) also the
+    predicted angle, the difference (gap here - mean gap of the other
+    plateau levels, cluster-robust over ``clusters`` when given:
+    ``difference_ci``) and a ``verdict``:
+
+    - "holds": the difference's 90 % interval lies within ``fit.tolerance``
+      of the others' gap (an equivalence test at 5 %);
+    - "fails": its interval at ``confidence`` (Bonferroni: 1 - (1 - level) / k
+      for the k plateau levels, so a fit whose relation holds fails nowhere
+      in at least ``level`` of data sets) excludes 0, and it is not within
+      the tolerance;
+    - "inconclusive": neither (too few trials to tell);
+    - "untested": fewer than two trials here or at the other levels.
+
+    Below the threshold the relation is not expected to hold
+    ("below_threshold": the whole plateau's prediction, no verdict); no
+    plateau: measured values only ("no_plateau"). ``holds`` is True / False
+    for "holds" / "fails", else None."""
     x = np.asarray(x, dtype=float)
-    g = np.tan(np.radians(np.asarray(angle_deg, dtype=float))) * x
+    g = np.asarray(g, dtype=float)
+    people = np.asarray(clusters, dtype=object) if clusters is not None else None
     xr = np.round(x / fit.round_to) * fit.round_to
-    out = []
     on_plateau = (xr >= fit.threshold - 1e-9) if fit.threshold is not None else None
     k = len(np.unique(xr[on_plateau])) if on_plateau is not None else 0
     confidence = 1.0 - (1.0 - level) / max(k, 1)
+    out = []
     for v in np.unique(xr):
         here = xr == v
         m, lo, hi = mean_ci(g[here], level)
         row: dict[str, Any] = {
             "level": float(v), "n": int(here.sum()), "gap_mean": m, "gap_ci_lo": lo,
             "gap_ci_hi": hi, "angle_measured_deg": math.degrees(math.atan(m / v)),
-            "angle_predicted_deg": None, "cg_from_others": None, "difference": None,
+            "angle_predicted_deg": None, "cg_predicting": None, "difference": None,
             "difference_ci_lo": None, "difference_ci_hi": None, "confidence": None,
-            "role": "no_plateau", "holds": None}
+            "verdict": "no_plateau", "holds": None}
         out.append(row)
         if fit.cg is None or on_plateau is None:
             continue
         if not on_plateau[here][0]:
-            row.update(role="below_threshold", cg_from_others=fit.cg,
+            row.update(verdict="below_threshold", cg_predicting=fit.cg,
                        angle_predicted_deg=math.degrees(math.atan(fit.cg / v)))
             continue
+        mine = on_plateau  # the plateau's trials: this level against the rest
         others = g[on_plateau & ~here]
-        row["role"] = "plateau"
+        row["verdict"] = "untested"
         if others.size < 2 or here.sum() < 2:
             continue
         cg_o = float(others.mean())
-        diff, dlo, dhi = _welch_ci(g[here], others, confidence)
-        row.update(cg_from_others=cg_o, angle_predicted_deg=math.degrees(math.atan(cg_o / v)),
+        sub = people[mine] if people is not None else None
+        diff, dlo, dhi = difference_ci(g[mine], here[mine], confidence, sub)
+        _, elo, ehi = difference_ci(g[mine], here[mine], 2 * level - 1, sub)
+        margin = fit.tolerance * abs(cg_o)
+        if -margin <= elo and ehi <= margin:
+            verdict = "holds"
+        elif not dlo <= 0.0 <= dhi:
+            verdict = "fails"
+        else:
+            verdict = "inconclusive"
+        row.update(cg_predicting=cg_o, angle_predicted_deg=math.degrees(math.atan(cg_o / v)),
                    difference=diff, difference_ci_lo=dlo, difference_ci_hi=dhi,
-                   confidence=confidence,
-                   holds=bool(dlo <= 0.0 <= dhi or max(-dlo, dhi) <= tolerance * abs(cg_o)))
+                   confidence=confidence, verdict=verdict,
+                   holds={"holds": True, "fails": False}.get(verdict))
     return out
-
-
-def _welch_ci(a: np.ndarray, b: np.ndarray, level: float) -> tuple[float, float, float]:
-    """mean(a) - mean(b) and its Welch t interval."""
-    va, vb = float(a.var(ddof=1)) / a.size, float(b.var(ddof=1)) / b.size
-    diff = float(a.mean() - b.mean())
-    se = math.sqrt(va + vb)
-    if se == 0.0:
-        return diff, diff, diff
-    df = (va + vb) ** 2 / (va * va / (a.size - 1) + vb * vb / (b.size - 1))
-    half = t_quantile(0.5 + level / 2, df) * se
-    return diff, diff - half, diff + half
 
 
 # ---------------------------------------------------------------- recognition
@@ -826,25 +1049,25 @@ def _quantile_bins(v: np.ndarray, n_bins: int) -> np.ndarray:
 
 
 CONSPICUITY_FIELDS = (
-    "target", "viewing_distance_mm", "alt_agl_m", "speed_kt", "n",
+    "protocol", "target", "viewing_distance_mm", "alt_agl_m", "speed_kt", "n",
     "alpha_mean_deg", "alpha_mean_ci_lo_deg", "alpha_mean_ci_hi_deg",
     "alpha_median_deg", "alpha_median_ci_lo_deg", "alpha_median_ci_hi_deg",
     "distance_mean_mm", "distance_mean_ci_lo_mm", "distance_mean_ci_hi_mm",
     "distance_median_mm", "distance_median_ci_lo_mm", "distance_median_ci_hi_mm",
-    "gap_mean_mm", "participants", "beta_mean_deg", "beta_mean_ci_lo_deg",
+    "gap_mean_mm", "participants", "beta_n", "beta_mean_deg", "beta_mean_ci_lo_deg",
     "beta_mean_ci_hi_deg", "ground_gap_mean_m",
 )
 CRITICAL_GAP_FIELDS = (
-    "fit", "target", "variable", "unit", "held", "status", "n", "participants", "levels",
-    "cg", "cg_ci_lo", "cg_ci_hi", "threshold", "threshold_ci_lo", "threshold_ci_hi",
-    "breakpoint", "rising_slope", "plateau_slope", "plateau_slope_ci_lo",
-    "plateau_slope_ci_hi", "plateau_n", "plateau_levels", "rmse", "bootstrap",
-    "relation_holds", "relation_checked", "detail",
+    "fit", "target", "protocol", "variable", "unit", "held", "status", "n", "participants",
+    "levels", "cg", "cg_ci_lo", "cg_ci_hi", "cg_interval", "threshold", "threshold_ci_lo",
+    "threshold_ci_hi", "breakpoint", "rising_slope", "plateau_slope", "plateau_slope_ci_lo",
+    "plateau_slope_ci_hi", "negligible_slope", "plateau_n", "plateau_levels", "rmse",
+    "levels_holds", "levels_fails", "levels_inconclusive", "levels_untested", "detail",
 )
 CHECK_FIELDS = (
-    "fit", "target", "variable", "unit", "level", "n", "role", "gap_mean", "gap_ci_lo",
-    "gap_ci_hi", "angle_measured_deg", "angle_predicted_deg", "cg_from_others", "difference",
-    "difference_ci_lo", "difference_ci_hi", "confidence", "holds",
+    "fit", "target", "variable", "unit", "level", "n", "verdict", "holds", "gap_mean",
+    "gap_ci_lo", "gap_ci_hi", "angle_measured_deg", "angle_predicted_deg", "cg_predicting",
+    "difference", "difference_ci_lo", "difference_ci_hi", "confidence",
 )
 RECOGNITION_FIELDS = ("factor", "level", "bin_lo", "bin_hi", "n", "recognised", "accuracy",
                       "ci_lo", "ci_hi", "reaction_time_mean_ms")
@@ -856,9 +1079,11 @@ class _GapData:
 
     label: str
     target: str
+    protocol: str
     held: str  # what is the same for every trial of the fit ("" when nothing else varies)
     x: np.ndarray
-    angle_deg: np.ndarray
+    g: np.ndarray
+    people: np.ndarray
     fit: GapFit
 
 
@@ -867,65 +1092,81 @@ def _gap_fits(used: Responses, rng: np.random.Generator, *, n_boot: int,
               min_plateau_levels: int) -> list[_GapData]:
     """The critical-gap fits the conspicuity responses allow.
 
-    On the screen: ``tan(alpha) * d`` against the viewing distance, one fit per
-    target and altitude with at least two viewing distances. On the ground:
-    ``tan(beta) * h`` against the altitude (``beta`` = ``camera_gap_deg``),
-    one fit per target and viewing distance with at least two altitudes. A
-    label names the target, and the held altitude / viewing distance when
-    the data have more than one."""
+    On the screen: the on-screen distance (``tan(alpha) * d`` with the eyes
+    in front of the fixation mark) against the viewing distance, one fit per
+    protocol, target and altitude with at least two viewing distances. On the
+    ground: ``tan(beta) * h`` against the altitude (``beta`` =
+    ``camera_gap_deg``; ``h``: the camera's depth to the target,
+    ``target_depth_m``, where known, else the altitude), one fit per
+    protocol, target and viewing distance with at least two altitudes. A
+    label names the target, the held altitude / viewing distance when the
+    data have more than one, and the protocol when they have both."""
     t_all = np.asarray(used.text["condition_target"], dtype=object)
+    proto = np.asarray(used.text["protocol"], dtype=object)
     vd = used.num["viewing_distance_mm"]
     vd_r = np.round(vd / distance_round_mm) * distance_round_mm
     alt = used.num["condition_alt_agl_m"]
     alt_r = np.where(np.isnan(alt), np.nan, np.round(alt / altitude_round_m) * altitude_round_m)
-    beta = used.num["camera_gap_deg"]
+    depth = used.num["target_depth_m"]
+    ground = np.tan(np.radians(used.num["camera_gap_deg"])) * np.where(np.isfinite(depth),
+                                                                      depth, alt)
     people = np.asarray(used.text["participant"], dtype=object)
+    several = len(set(proto)) > 1
     out: list[_GapData] = []
-    specs = (  # (levels, held, angle, unit of held, fit function)
-        ("screen", vd, alt_r, used.num["eccentricity_deg"], "m", "alt_agl_m"),
-        ("ground", alt, vd_r, beta, "mm", "viewing_distance_mm"))
-    for which, x, held, angle, held_unit, held_name in specs:
-        for target in sorted(set(t_all)):
-            ok = (t_all == target) & np.isfinite(x) & np.isfinite(angle)
+    specs = (  # (which, levels, round_to, held, gap, unit of held, name of held)
+        ("screen", vd, distance_round_mm, alt_r, used.num["onscreen_distance_mm"], "m",
+         "alt_agl_m"),
+        ("ground", alt, altitude_round_m, vd_r, ground, "mm", "viewing_distance_mm"))
+    for which, x, step, held, gap, held_unit, held_name in specs:
+        for protocol, target in sorted(set(zip(proto, t_all))):
+            ok = (t_all == target) & (proto == protocol) & np.isfinite(x) & np.isfinite(gap)
             groups = [float(v) for v in np.unique(held[ok & ~np.isnan(held)])]
             if (ok & np.isnan(held)).any():
                 groups.append(math.nan)  # the trials that do not say
             for h in groups:
                 m = ok & ((held == h) if not math.isnan(h) else np.isnan(held))
-                step = distance_round_mm if which == "screen" else altitude_round_m
                 if np.unique(np.round(x[m] / step)).size < 2:
                     continue  # the variable does not vary: nothing to fit
-                kw = dict(rng=rng, clusters=people[m], n_boot=n_boot,
-                          min_plateau_levels=min_plateau_levels)
-                fit = (fit_critical_gap(x[m], angle[m], distance_round_mm=distance_round_mm,
-                                        **kw) if which == "screen" else
-                       fit_ground_gap(x[m], angle[m], altitude_round_m=altitude_round_m, **kw))
+                variable, unit, name = (("viewing distance d", "mm", "tan(alpha)*d")
+                                        if which == "screen" else
+                                        ("altitude h", "m", "tan(beta)*h"))
+                fit = fit_gap(x[m], gap[m], rng=rng, clusters=people[m], n_boot=n_boot,
+                              min_plateau_levels=min_plateau_levels, round_to=step,
+                              variable=variable, unit=unit, gap=name)
                 held_text = "" if math.isnan(h) else f"{held_name}={h:g}"
                 label = (target if len(groups) <= 1 or math.isnan(h)
                          else f"{target}, {h:g} {held_unit}")
+                if several:
+                    label = f"{label}, {protocol}"
                 if which == "ground":
                     label = f"{label} (ground)"
-                out.append(_GapData(label, target, held_text, x[m], angle[m], fit))
+                out.append(_GapData(label, target, protocol, held_text, x[m], gap[m], people[m],
+                                    fit))
     return out
 
 
-def _gap_row(gf: _GapData, verdicts: list[bool]) -> dict[str, Any]:
+def _gap_row(gf: _GapData, checks: list[dict[str, Any]]) -> dict[str, Any]:
     f = gf.fit
+    verdicts = [c["verdict"] for c in checks]
     return {
-        "fit": gf.label, "target": gf.target, "variable": f.variable, "unit": f.unit,
+        "fit": gf.label, "target": gf.target, "protocol": gf.protocol,
+        "variable": f.variable, "unit": f.unit,
         "held": gf.held, "status": f.status, "n": f.n, "participants": f.participants,
         "levels": " ".join(f"{v:g}" for v in f.levels), "cg": f.cg,
         "cg_ci_lo": f.cg_ci[0] if f.cg_ci else None,
-        "cg_ci_hi": f.cg_ci[1] if f.cg_ci else None, "threshold": f.threshold,
+        "cg_ci_hi": f.cg_ci[1] if f.cg_ci else None, "cg_interval": f.interval,
+        "threshold": f.threshold,
         "threshold_ci_lo": f.threshold_ci[0] if f.threshold_ci else None,
         "threshold_ci_hi": f.threshold_ci[1] if f.threshold_ci else None,
         "breakpoint": f.breakpoint, "rising_slope": f.rising_slope,
         "plateau_slope": f.plateau_slope,
         "plateau_slope_ci_lo": f.plateau_slope_ci[0] if f.plateau_slope_ci else None,
         "plateau_slope_ci_hi": f.plateau_slope_ci[1] if f.plateau_slope_ci else None,
+        "negligible_slope": f.negligible_slope,
         "plateau_n": f.plateau_n, "plateau_levels": f.plateau_levels, "rmse": f.rmse,
-        "bootstrap": f.bootstrap, "relation_holds": sum(verdicts),
-        "relation_checked": len(verdicts), "detail": f.detail}
+        **{f"levels_{v}": verdicts.count(v) for v in ("holds", "fails", "inconclusive",
+                                                        "untested")},
+        "detail": f.detail}
 
 
 def analyse(csv_path: str | Path, out_dir: str | Path, *, seed: int = 0,
@@ -967,7 +1208,10 @@ def analyse(csv_path: str | Path, out_dir: str | Path, *, seed: int = 0,
     dist = used.num["onscreen_distance_mm"]
     vd = used.num["viewing_distance_mm"]
     implied = np.degrees(np.arctan(dist / vd))
-    bad_ecc = np.abs(implied - alpha) > ECCENTRICITY_TOLERANCE_DEG
+    protocols = used.text["protocol"]
+    # (with the eyes on the fixation mark; a tracked arrow off the centre is another angle)
+    bad_ecc = (np.abs(implied - alpha) > ECCENTRICITY_TOLERANCE_DEG) & (
+        np.asarray(protocols, dtype=object) == "disappear")
     if bad_ecc.any():
         log.warning("%s: %d 'disappear' rows whose eccentricity_deg differs from "
                     "atan(onscreen_distance_mm / viewing_distance_mm) by more than %g deg "
@@ -978,10 +1222,11 @@ def analyse(csv_path: str | Path, out_dir: str | Path, *, seed: int = 0,
     alt = used.num["condition_alt_agl_m"]
     spd = used.num["condition_speed_kt"]
     beta = used.num["camera_gap_deg"]
+    depth = np.where(np.isfinite(used.num["target_depth_m"]), used.num["target_depth_m"], alt)
     people = used.text["participant"]
     groups: dict[tuple[Any, ...], list[int]] = {}
     for i in range(len(used)):
-        key = (targets[i], float(vd_r[i]), _key(alt[i]), _key(spd[i]))
+        key = (protocols[i], targets[i], float(vd_r[i]), _key(alt[i]), _key(spd[i]))
         groups.setdefault(key, []).append(i)
     cons_rows: list[dict[str, Any]] = []
     for key in sorted(groups, key=_sort_key):
@@ -991,14 +1236,14 @@ def analyse(csv_path: str | Path, out_dir: str | Path, *, seed: int = 0,
         s_m, s_lo, s_hi = mean_ci(dist[m])
         s_md, s_mlo, s_mhi = median_ci(dist[m], rng, n_boot)
         gap = float(np.mean(np.tan(np.radians(alpha[m])) * vd[m]))
-        b = beta[m][np.isfinite(beta[m])]  # the camera's side, where the clip's fov is known
-        b_m, b_lo, b_hi = mean_ci(b)
-        ground = float(np.mean(np.tan(np.radians(b)))) * key[2] \
-            if b.size and key[2] is not None else None
+        known = m[np.isfinite(beta[m])]  # the camera's side, where the clip's fov is known
+        b_m, b_lo, b_hi = mean_ci(beta[known])
+        ground = np.tan(np.radians(beta[known])) * depth[known]
+        ground = ground[np.isfinite(ground)]
         cons_rows.append(dict(zip(CONSPICUITY_FIELDS, (
-            key[0], key[1], key[2], key[3], int(m.size), a_m, a_lo, a_hi, a_md, a_mlo,
-            a_mhi, s_m, s_lo, s_hi, s_md, s_mlo, s_mhi, gap, len({people[i] for i in m}),
-            b_m, b_lo, b_hi, ground))))
+            *key, int(m.size), a_m, a_lo, a_hi, a_md, a_mlo, a_mhi, s_m, s_lo, s_hi, s_md,
+            s_mlo, s_mhi, gap, len({people[i] for i in m}), int(known.size), b_m, b_lo, b_hi,
+            float(ground.mean()) if ground.size else None))))
     _write_csv(out / "conspicuity.csv", CONSPICUITY_FIELDS, cons_rows)
 
     # ---- critical gap: on the screen across viewing distances (one fit per
@@ -1009,9 +1254,8 @@ def analyse(csv_path: str | Path, out_dir: str | Path, *, seed: int = 0,
                          min_plateau_levels=min_plateau_levels)
     cg_rows, check_rows = [], []
     for gf in gap_fits:
-        checks = check_across_levels(gf.fit, gf.x, gf.angle_deg)
-        verdicts = [c["holds"] for c in checks if c["holds"] is not None]
-        cg_rows.append(_gap_row(gf, verdicts))
+        checks = check_across_levels(gf.fit, gf.x, gf.g, clusters=gf.people)
+        cg_rows.append(_gap_row(gf, checks))
         check_rows += [{"fit": gf.label, "target": gf.target, "variable": gf.fit.variable,
                         "unit": gf.fit.unit, **c} for c in checks]
     _write_csv(out / "critical_gap.csv", CRITICAL_GAP_FIELDS, cg_rows)
@@ -1202,7 +1446,7 @@ def _plot_critical_gap(path: Path, fits: list[_GapData]) -> None:
     for ax, gf in zip(flat, fits):
         f, u = gf.fit, gf.fit.unit
         symbol, angle = ("d", "alpha") if u == "mm" else ("h", "beta")
-        g = np.tan(np.radians(gf.angle_deg)) * gf.x
+        g = gf.g
         ax.plot(gf.x, g, ".", color="0.6", ms=3, label="trials")
         xr = np.round(gf.x / f.round_to) * f.round_to
         lv = np.unique(xr)
