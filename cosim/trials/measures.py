@@ -19,7 +19,9 @@ across, ``screen_height_mm / screen_height_px`` down).
   the target centre over the camera's focal length (``Clip.focal_px``; None
   when the clip's field of view is not known). With the eyes on the
   centre it is the target's angle off the optical axis (the ground truth's
-  own ``eccentricity_deg``).
+  own ``eccentricity_deg``); with them on a tracked arrow it is not the
+  angle between two rays at the camera but the gap in the image plane in
+  focal lengths, as an angle: its tangent is what the relation below needs.
 - ``target_depth_m``: the target centre's distance along the camera's
   optical axis (``GtFrame.depth_m``: the ground truth's ``range_m *
   cos(eccentricity_deg)``; None when the ground truth does not say).
