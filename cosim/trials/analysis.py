@@ -591,8 +591,9 @@ class GapFit:
     - "inconclusive": the data cannot tell whether the gap is constant
       above the breakpoint (its change is neither shown nor ruled out):
       more trials or participants are needed;
-    - "insufficient_data": fewer than ``min_plateau_levels + 1`` levels, or
-      fewer than ``2 * (min_plateau_levels + 1)`` trials.
+    - "insufficient_data": fewer than ``min_plateau_levels + 1`` levels,
+      fewer than ``2 * (min_plateau_levels + 1)`` trials, or every trial's
+      gap the same.
 
     ``cg`` and ``threshold`` are given for the two plateau statuses only;
     ``detail`` says why. ``interval`` says how the CG interval was made:
@@ -785,6 +786,11 @@ def fit_gap(x: np.ndarray, g: np.ndarray, *, rng: np.random.Generator,
         return GapFit(status="insufficient_data",
                       detail=f"{n} trials at {levels.size} levels of the {variable}: need at "
                              f"least {2 * need} trials at {need} levels", **base)
+    if np.ptp(g) == 0.0:
+        return GapFit(status="insufficient_data",
+                      detail=f"every one of the {n} trials has the same gap, {float(g[0]):g} "
+                             f"{unit}: nothing to fit (a data error? a gap of 0 is a target "
+                             f"lost at the fixation point itself)", **base)
     cand = _candidates(levels, steps, min_plateau_levels)
     counts = np.bincount(level_of, minlength=levels.size).astype(float)
     sums = np.bincount(level_of, weights=g, minlength=levels.size)

@@ -234,6 +234,15 @@ def test_constant_everywhere_is_a_plateau_from_the_start() -> None:
     assert fit.cg == pytest.approx(CG_MM, rel=0.03)
 
 
+def test_the_same_gap_in_every_trial_is_no_fit() -> None:
+    """All angles 0 (the target lost at the fixation point every time, or a
+    broken export): not "a constant critical gap of 0"."""
+    fit = fit_critical_gap(np.repeat(DISTANCES_MM, 3), np.zeros(3 * DISTANCES_MM.size),
+                           rng=np.random.default_rng(0))
+    assert fit.status == "insufficient_data" and fit.cg is None
+    assert "the same gap, 0 mm" in fit.detail
+
+
 def test_too_few_distances_is_insufficient() -> None:
     fit = fit_critical_gap(np.array([500.0] * 5 + [600.0] * 5), np.full(10, 3.0),
                            rng=np.random.default_rng(0))
