@@ -226,6 +226,9 @@ def _build_parser() -> _Parser:
                     help="the study's database, or a responses CSV (cosim trials export)")
     ta.add_argument("--out", metavar="DIR", required=True, help="folder for the CSVs and PNGs")
     ta.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
+    ta.add_argument("--tolerance", type=float, default=0.1, metavar="SHARE",
+                    help="how far a critical gap may change and still count as constant, "
+                         "as a share of it (default 0.1: 10%%)")
     ta.add_argument("--exclude-reshown", action="store_true",
                     help="leave out trials shown a second time after the page was reloaded")
 
@@ -733,7 +736,8 @@ def _cmd_trials(a: argparse.Namespace) -> int:
             if src.suffix.lower() != ".csv":  # a database: its responses first
                 _existing_db(a.responses)
                 src = export_csv(a.responses, Path(tmp) / "responses.csv")
-            summary = analyse(src, a.out, seed=a.seed, exclude_reshown=a.exclude_reshown)
+            summary = analyse(src, a.out, seed=a.seed, exclude_reshown=a.exclude_reshown,
+                              tolerance=a.tolerance)
         verdicts: dict[str, list[str]] = {}
         for c in summary.get("critical_gap_check", []):
             verdicts.setdefault(c["fit"], []).append(c["verdict"])

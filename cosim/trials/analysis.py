@@ -1095,7 +1095,7 @@ class _GapData:
 
 def _gap_fits(used: Responses, rng: np.random.Generator, *, n_boot: int,
               distance_round_mm: float, altitude_round_m: float,
-              min_plateau_levels: int) -> list[_GapData]:
+              min_plateau_levels: int, tolerance: float) -> list[_GapData]:
     """The critical-gap fits the conspicuity responses allow.
 
     On the screen: the on-screen distance (``tan(alpha) * d`` with the eyes
@@ -1138,7 +1138,7 @@ def _gap_fits(used: Responses, rng: np.random.Generator, *, n_boot: int,
                                         ("altitude h", "m", "tan(beta)*h"))
                 fit = fit_gap(x[m], gap[m], rng=rng, clusters=people[m], n_boot=n_boot,
                               min_plateau_levels=min_plateau_levels, round_to=step,
-                              variable=variable, unit=unit, gap=name)
+                              variable=variable, unit=unit, gap=name, tolerance=tolerance)
                 held_text = "" if math.isnan(h) else f"{held_name}={h:g}"
                 label = (target if len(groups) <= 1 or math.isnan(h)
                          else f"{target}, {h:g} {held_unit}")
@@ -1177,7 +1177,8 @@ def _gap_row(gf: _GapData, checks: list[dict[str, Any]]) -> dict[str, Any]:
 
 def analyse(csv_path: str | Path, out_dir: str | Path, *, seed: int = 0,
             n_boot: int = 1000, distance_round_mm: float = 10.0, n_bins: int = 4,
-            altitude_round_m: float = 1.0, min_plateau_levels: int = 3, plots: bool = True,
+            altitude_round_m: float = 1.0, min_plateau_levels: int = 3,
+            tolerance: float = 0.1, plots: bool = True,
             exclude_reshown: bool = False, max_bytes: int = MAX_BYTES,
             max_rows: int = MAX_ROWS) -> dict[str, Any]:
     """Analyse a responses CSV into ``out_dir`` and return the summary.
@@ -1196,8 +1197,11 @@ def analyse(csv_path: str | Path, out_dir: str | Path, *, seed: int = 0,
     ``seed`` fixes the bootstraps (``n_boot`` resamples); viewing distances
     are grouped to the nearest ``distance_round_mm``, altitudes to the
     nearest ``altitude_round_m``; angular size and eccentricity are cut
-    into ``n_bins`` quantile bins.
+    into ``n_bins`` quantile bins. ``tolerance``: the share of the gap within
+    which it counts as constant (``fit_gap``).
     """
+    if not 0.0 < tolerance <= 1.0:
+        raise ConfigError(f"tolerance must be in (0, 1] (a share of the gap), got {tolerance!r}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
@@ -1257,7 +1261,7 @@ def analyse(csv_path: str | Path, out_dir: str | Path, *, seed: int = 0,
     # viewing distance), and whether one level predicts the others
     gap_fits = _gap_fits(used, rng, n_boot=n_boot, distance_round_mm=distance_round_mm,
                          altitude_round_m=altitude_round_m,
-                         min_plateau_levels=min_plateau_levels)
+                         min_plateau_levels=min_plateau_levels, tolerance=tolerance)
     cg_rows, check_rows = [], []
     for gf in gap_fits:
         checks = check_across_levels(gf.fit, gf.x, gf.g, clusters=gf.people)
@@ -1303,7 +1307,7 @@ def analyse(csv_path: str | Path, out_dir: str | Path, *, seed: int = 0,
             "logistic": logistic,
         },
         "settings": {"seed": seed, "n_boot": n_boot, "distance_round_mm": distance_round_mm,
-                     "altitude_round_m": altitude_round_m,
+                     "altitude_round_m": altitude_round_m, "tolerance": tolerance,
                      "n_bins": n_bins, "min_plateau_levels": min_plateau_levels},
         "out_dir": str(out),
         "files": files,

@@ -30,6 +30,17 @@ def test_analyse_finds_the_critical_gaps_the_responses_were_made_with(tmp_path: 
     assert alt is not None and -1.6 < float(alt.group(1)) < -0.9  # made with -1.2
     for name in ("conspicuity.csv", "critical_gap.png", "recognition.png", "analysis.json"):
         assert (tmp_path / "a" / name).stat().st_size > 0
+    ground = re.search(r"critical gap, truck \(ground\): plateau: CG ([\d.]+) m .*holds at "
+                       r"(\d+) of (\d+)", out)
+    assert ground is not None and abs(float(ground[1]) - 12.0) < 1.0, out  # made with 12 m
+    assert ground[2] == ground[3]
+    # a stricter tolerance asks more of the same data: no longer shown constant
+    assert main(["-q", "trials", "analyse", str(csv_path), "--out", str(tmp_path / "b"),
+                 "--tolerance", "0.02"]) == 0
+    assert "critical gap, truck: inconclusive" in capsys.readouterr().out
+    assert main(["-q", "trials", "analyse", str(csv_path), "--out", str(tmp_path / "c"),
+                 "--tolerance", "0"]) == 2
+    assert "tolerance must be in (0, 1]" in capsys.readouterr().err
 
 
 def test_serve_refuses_other_machines_without_public(tmp_path: Path, capsys) -> None:
