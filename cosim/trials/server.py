@@ -14,7 +14,7 @@ measure from the stored ground truth and the session's display profile.
 
 The participant's page reports its size (device px) when it loads, when it
 is resized and with every response; the server keeps the last one per
-session (in memory: gone on a restart until the page reports again) and the
+session (in the database: it survives a restart of the server) and the
 experimenter's page warns next to a session whose page is not the size of
 its display profile. The participant sees no such warning.
 
@@ -160,7 +160,8 @@ class TrialApp:
     def __init__(self, study: Study, store: Store) -> None:
         self.study, self.store = study, store
         self._by_id = {c.id: n for n, c in enumerate(study.all_clips)}
-        #: the page's size (device px) each session's participant page last reported
+        #: the page's size (device px) each session's participant page last
+        #: reported, as stored (a write only when it changes)
         self.windows: dict[str, tuple[int, int]] = {}
 
     # --- helpers ---
@@ -244,7 +245,8 @@ class TrialApp:
         and a warning if that is not its display profile's."""
         out = self.store.sessions()
         for s in out:
-            px = self.windows.get(s["id"])
+            w, h = s.pop("window_width_px", None), s.pop("window_height_px", None)
+            px = (w, h) if w is not None and h is not None else None
             s["window_px"] = list(px) if px else None
             s["window_warning"] = None
             if px and px != (s["screen_width_px"], s["screen_height_px"]):
@@ -262,8 +264,15 @@ class TrialApp:
         px = _window_px(d)
         if px is None:
             raise BadRequest("window_width_px, window_height_px: expected the page's size")
-        self.windows[s["id"]] = px
+        await self._keep_window(s["id"], px)
         return JSONResponse({"window_px": list(px)})
+
+    async def _keep_window(self, sid: str, px: tuple[int, int]) -> None:
+        """Store a session's page size when it differs from the last one stored
+        (the experimenter's warning survives a restart of the server)."""
+        if self.windows.get(sid) != px:
+            await run_in_threadpool(self.store.set_window, sid, *px)
+            self.windows[sid] = px
 
     async def create_session(self, request: Request) -> Response:
         d = await _json_body(request)
@@ -338,7 +347,7 @@ class TrialApp:
         px = _window_px(d)
         drawn = _drawn_on(display, px)
         if px is not None:
-            self.windows[s["id"]] = px
+            await self._keep_window(s["id"], px)
         row: dict[str, Any] = {
             "session": s["id"], "participant": s["participant"], "trial_index": ti,
             "kind": kind, "practice": bool(t["practice"]), "protocol": s["protocol"],

@@ -61,6 +61,9 @@ sessions = sa.Table(
     sa.Column("trial_order", sa.Text, nullable=False),  # JSON: [{index, practice, clip, ...}]
     sa.Column("state", sa.String(16), nullable=False),
     sa.Column("created", sa.String(32), nullable=False),  # ISO 8601, UTC
+    # the size (device px) the participant's page last reported
+    sa.Column("window_width_px", sa.Integer),
+    sa.Column("window_height_px", sa.Integer),
 )
 responses = sa.Table(
     "responses", metadata,
@@ -185,6 +188,12 @@ class Store:
         for r in rows:
             r["trials"] = len(json.loads(r.pop("trial_order")))
         return rows
+
+    def set_window(self, session_id: str, width_px: int, height_px: int) -> None:
+        """Record the size (device px) the session's participant page reports."""
+        with self.engine.begin() as c:
+            c.execute(sessions.update().where(sessions.c.id == session_id)
+                      .values(window_width_px=width_px, window_height_px=height_px))
 
     def set_state(self, session_id: str, state: str) -> None:
         if state not in STATES:

@@ -108,8 +108,8 @@ def study_file(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 class LiveServer:
-    def __init__(self, url: str, store: Store) -> None:
-        self.url, self.store = url, store
+    def __init__(self, url: str, store: Store, study_path: Path) -> None:
+        self.url, self.store, self.study_path = url, store, study_path
         self.host, self.port = url.removeprefix("http://").split(":")
 
     def request(self, method: str, path: str, body: Any = None,
@@ -147,7 +147,7 @@ def live_server(study_path: Path) -> Iterator[LiveServer]:
         assert time.monotonic() < deadline and th.is_alive(), "uvicorn did not start"
         time.sleep(0.02)
     try:
-        yield LiveServer(f"http://127.0.0.1:{port}", store)
+        yield LiveServer(f"http://127.0.0.1:{port}", store, study_path)
     finally:
         srv.should_exit = True
         th.join(10)
@@ -393,6 +393,11 @@ def test_page_size_reports_are_checked_and_kept_for_the_experimenter(
         "trial_index": 1, "kind": "disappear", "key": "space", "media_time_s": 0.5,
         "window_width_px": 640, "window_height_px": 500})
     assert status == 201 and warning()[0] == [640, 500]
+    # kept in the database: a server started again on it still warns
+    with live_server(server.study_path) as again:
+        status, listed = again.request("GET", "/api/sessions")
+        (row,) = [x for x in listed if x["id"] == s["id"]]
+        assert row["window_px"] == [640, 500] and "640 x 500 px" in row["window_warning"]
 
 
 def test_a_session_refuses_clips_gone_or_changed(tmp_path: Path) -> None:
