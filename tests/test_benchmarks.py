@@ -78,3 +78,11 @@ def test_the_gymnasium_reference_steps_the_same_aircraft_as_the_pool() -> None:
         assert np.array_equal(obs, states)
     r = compare(n, 0.2, 1)
     assert r["gym_steps_per_s"] > 0 and r["pool_over_gym"] > 0
+
+
+def test_trials_error_rates_runs() -> None:
+    import trials_error_rates
+
+    r = trials_error_rates.rates(2)
+    assert r["sets"] == 2 and r["screen_false_plateau"] == 0
+    assert r["ground_plateau"] == 2 and r["step_flagged"] <= r["step_plateau"]
