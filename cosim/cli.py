@@ -71,9 +71,10 @@ def _positive_float(text: str) -> float:
 
 
 def _build_parser() -> _Parser:
-    from cosim.plugins import BACKENDS, DEFAULT_BACKEND, plugin_names
+    from cosim.plugins import BACKENDS, BUILTIN_BACKENDS, DEFAULT_BACKEND, plugin_names
 
-    names = plugin_names(BACKENDS)  # registered ones included; nothing is loaded for --help
+    # registered ones included; nothing is loaded for --help
+    names = plugin_names(BACKENDS, BUILTIN_BACKENDS)
     backend_help = ("inline runs every vehicle in this process (the reference), process "
                     "shards them over worker processes; packages may register more")
     p = _Parser(prog="cosim", description="Lockstep co-simulation of UAV swarms on JSBSim.")

@@ -2,8 +2,11 @@
 
 Two Python entry-point groups, each with cosim's own entries built in:
 
-- ``cosim.backends``: pool backends (``cosim.fdm_pool.backends``);
-- ``cosim.vehicles``: vehicle classes (``cosim.vehicles``).
+- ``cosim.backends``: pool backends (``cosim.fdm_pool.backends``; cosim's
+  own are listed here, ``BUILTIN_BACKENDS``, so that ``cosim --help`` can
+  name them without importing the pool package);
+- ``cosim.vehicles``: vehicle classes (``cosim.vehicles``; cosim's own are
+  listed by the vehicles package itself, ``cosim.vehicles.registry``).
 
 A package adds an entry in its ``pyproject.toml``::
 
@@ -33,16 +36,11 @@ VEHICLES = "cosim.vehicles"
 #: the backend ``cosim run`` uses unless told otherwise
 DEFAULT_BACKEND = "process"
 
-#: cosim's own entries, group -> name -> "module:attribute"
-BUILTIN: dict[str, dict[str, str]] = {
-    BACKENDS: {"inline": "cosim.fdm_pool.inline:InlinePool",
-               "process": "cosim.fdm_pool.process:ProcessPool",
-               "ray": "cosim.fdm_pool.ray_cluster:RayPool"},
-    VEHICLES: {"fixed_wing": "cosim.vehicles.fixed_wing:FIXED_WING",
-               "jsbsim": "cosim.vehicles.plain:PLAIN",
-               "ground": "cosim.vehicles.ground:GROUND",
-               "quadrotor": "cosim.vehicles.quadrotor:QUADROTOR",
-               "fixed_wing_batched": "cosim.vehicles.fixed_wing_batched:FIXED_WING_BATCHED"},
+#: cosim's own backends, name -> "module:attribute"
+BUILTIN_BACKENDS: dict[str, str] = {
+    "inline": "cosim.fdm_pool.inline:InlinePool",
+    "process": "cosim.fdm_pool.process:ProcessPool",
+    "ray": "cosim.fdm_pool.ray_cluster:RayPool",
 }
 
 
@@ -56,19 +54,20 @@ class Plugin:
     source: str  # "cosim" or the distribution (else the entry point's value)
 
 
-def plugin_names(group: str) -> list[str]:
-    """Every entry's name in ``group``, cosim's first, without loading any."""
-    names = list(BUILTIN[group])
+def plugin_names(group: str, builtin: Mapping[str, str]) -> list[str]:
+    """Every entry's name in ``group``, cosim's own (``builtin``: name ->
+    "module:attribute") first, without loading any."""
+    names = list(builtin)
     names += [ep.name for ep in entry_points(group=group) if ep.name not in names]
     return names
 
 
-def load_plugins(group: str) -> dict[str, Plugin]:
+def load_plugins(group: str, builtin: Mapping[str, str]) -> dict[str, Plugin]:
     """Every entry of ``group`` loaded, cosim's first. An entry whose name repeats
     an earlier one is ignored, one that fails to load is skipped; both with a
     warning (a broken plug-in must not stop cosim)."""
     out: dict[str, Plugin] = {}
-    for name, target in BUILTIN[group].items():
+    for name, target in builtin.items():
         module, attr = target.split(":")
         out[name] = Plugin(name, getattr(importlib.import_module(module), attr), "cosim")
     for ep in entry_points(group=group):

@@ -100,12 +100,12 @@ _COMMON = ("self", "specs", "dt_s", "channels", "workers")
 def backends() -> dict[str, Backend]:
     """Every backend by name: the built-in ones, then the registered ones."""
     return {name: Backend(name, p.obj, p.source)
-            for name, p in load_plugins(plugins.BACKENDS).items()}
+            for name, p in load_plugins(plugins.BACKENDS, plugins.BUILTIN_BACKENDS).items()}
 
 
 def backend_names() -> list[str]:
     """The names of every backend, without loading any (for ``--help``)."""
-    return plugin_names(plugins.BACKENDS)
+    return plugin_names(plugins.BACKENDS, plugins.BUILTIN_BACKENDS)
 
 
 def get_backend(name: str) -> Backend:

@@ -22,13 +22,22 @@ log = logging.getLogger(__name__)
 
 #: a vehicle whose entry and model profile name no class
 DEFAULT_CLASS = "jsbsim"
+#: cosim's own classes, name -> "module:attribute" (the built-in twin of the
+#: entry points a package declares)
+BUILTIN_CLASSES: dict[str, str] = {
+    "fixed_wing": "cosim.vehicles.fixed_wing:FIXED_WING",
+    "jsbsim": "cosim.vehicles.plain:PLAIN",
+    "ground": "cosim.vehicles.ground:GROUND",
+    "quadrotor": "cosim.vehicles.quadrotor:QUADROTOR",
+    "fixed_wing_batched": "cosim.vehicles.fixed_wing_batched:FIXED_WING_BATCHED",
+}
 
 
 @lru_cache(maxsize=1)
 def vehicle_classes() -> dict[str, VehicleClass]:
     """Every class by name, cosim's first."""
     out: dict[str, VehicleClass] = {}
-    for name, p in plugins.load_plugins(plugins.VEHICLES).items():
+    for name, p in plugins.load_plugins(plugins.VEHICLES, BUILTIN_CLASSES).items():
         obj = p.obj() if isinstance(p.obj, type) else p.obj
         if not isinstance(obj, VehicleClass):
             log.warning("cosim.vehicles entry %r (%s) is not a VehicleClass: ignored", name,
