@@ -493,7 +493,9 @@ def _slope(x: np.ndarray, y: np.ndarray, who: np.ndarray | None
     cluster-robust standard error (CR1: each participant's summed scores,
     G/(G-1)) and G - 1 degrees of freedom for the G participants whose x
     varies. If no participant's x varies (each did one level), the pooled
-    slope with the same cluster-robust error."""
+    slope with the same cluster-robust error. None also below 3 points."""
+    if x.size < 3 or np.ptp(x) == 0:
+        return None
     if who is not None:
         xd, yd = _within(x, who), _within(y, who)
         inside = float(xd @ xd)
@@ -520,51 +522,45 @@ def _slope(x: np.ndarray, y: np.ndarray, who: np.ndarray | None
     return b, math.sqrt(float(np.sum((xc * res / (1.0 - lev)) ** 2))) / sxx, float(x.size - 2)
 
 
-def slope_ci(x: np.ndarray, y: np.ndarray, level: float = 0.95,
-             clusters: Sequence[str] | np.ndarray | None = None) -> tuple[float, float, float]:
-    """The slope of y on x and its t interval (NaN without at least 3 points
-    and 2 distinct x): within participants when ``clusters`` names two or
-    more (``_slope``)."""
-    x = np.asarray(x, dtype=float)
-    y = np.asarray(y, dtype=float)
-    if x.size < 3 or np.ptp(x) == 0:
-        return math.nan, math.nan, math.nan
-    fit = _slope(x, y, _cluster_ids(clusters, x.size))
-    if fit is None:
-        return math.nan, math.nan, math.nan
-    b, se, df = fit
-    half = t_quantile(0.5 + level / 2, df) * se if se > 0 else 0.0
-    return b, b - half, b + half
-
-
-def difference_ci(y: np.ndarray, here: np.ndarray, level: float = 0.95,
-                  clusters: Sequence[str] | np.ndarray | None = None
-                  ) -> tuple[float, float, float]:
-    """The difference of y between ``here`` and the rest, and its t interval:
-    Welch's (mean here - mean of the rest) without participants; with them,
-    the difference within participants (``_slope`` on the indicator: each
-    person's own level taken out). NaN when either side has fewer than two
-    trials or no participant was on both sides."""
-    y = np.asarray(y, dtype=float)
-    here = np.asarray(here, dtype=bool)
+def _difference(y: np.ndarray, here: np.ndarray, who: np.ndarray | None
+                ) -> tuple[float, float, float] | None:
+    """(difference of y between ``here`` and the rest, standard error, degrees
+    of freedom): Welch's (mean here - mean of the rest) without participants;
+    with them, the difference within participants (``_slope`` on the
+    indicator: each person's own level taken out). None when either side has
+    fewer than two trials or no participant was on both sides."""
     a, b = y[here], y[~here]
     if a.size < 2 or b.size < 2:
-        return math.nan, math.nan, math.nan
-    who = _cluster_ids(clusters, y.size)
+        return None
     if who is not None:
-        fit = _slope(here.astype(float), y, who)
-        if fit is None:
-            return math.nan, math.nan, math.nan
-        diff, se, df = fit
-    else:
-        diff = float(a.mean() - b.mean())
-        va, vb = float(a.var(ddof=1)) / a.size, float(b.var(ddof=1)) / b.size
-        se = math.sqrt(va + vb)
-        df = (va + vb) ** 2 / (va * va / (a.size - 1) + vb * vb / (b.size - 1)) if se else 1.0
-    if se == 0.0:
-        return diff, diff, diff
-    half = t_quantile(0.5 + level / 2, df) * se
-    return diff, diff - half, diff + half
+        return _slope(here.astype(float), y, who)
+    va, vb = float(a.var(ddof=1)) / a.size, float(b.var(ddof=1)) / b.size
+    se = math.sqrt(va + vb)
+    df = (va + vb) ** 2 / (va * va / (a.size - 1) + vb * vb / (b.size - 1)) if se else 1.0
+    return float(a.mean() - b.mean()), se, df
+
+
+def _interval(est: tuple[float, float, float] | None, level: float) -> tuple[float, float]:
+    """The t interval at ``level`` of an (estimate, standard error, degrees of
+    freedom); NaN bounds for no estimate."""
+    if est is None:
+        return math.nan, math.nan
+    b, se, df = est
+    half = t_quantile(0.5 + level / 2, df) * se if se > 0 else 0.0
+    return b - half, b + half
+
+
+def _judge(est: tuple[float, float, float] | None, margin: float, level: float,
+           test_level: float) -> str:
+    """Whether an estimated change is shown negligible or shown real:
+    "equal" when its ``2 * level - 1`` interval lies within +-``margin`` (an
+    equivalence test at ``1 - level``), "differs" when its ``test_level``
+    interval excludes 0 (NaN bounds count as excluding it), "unclear" else."""
+    elo, ehi = _interval(est, 2 * level - 1)
+    if -margin <= elo and ehi <= margin:
+        return "equal"
+    lo, hi = _interval(est, test_level)
+    return "unclear" if lo <= 0.0 <= hi else "differs"
 
 
 # ---------------------------------------------------------------- critical gap
@@ -750,12 +746,12 @@ def fit_gap(x: np.ndarray, g: np.ndarray, *, rng: np.random.Generator,
 
     1. rising part: if ``x0`` is above the lowest level but the 95 %
        interval of the rise's slope (given ``x0``, as if it were known; within
-       participants when they are named: ``slope_ci``) includes 0, the rise
+       participants when they are named: ``_slope``) includes 0, the rise
        is not resolved and the constant model (``x0`` = the lowest level) is
        used;
     2. is the gap constant above ``x0``? The OLS slope of ``g`` against
        ``x`` over the trials at and above ``x0`` (standard error
-       cluster-robust over participants, else HC3; ``slope_ci``) is compared
+       cluster-robust over participants, else HC3; ``_slope``) is compared
        with the negligible slope ``delta``, the one that changes the gap by
        ``tolerance`` of its level across the plateau: constant when its
        90 % interval lies within +-delta (an equivalence test at 5 %);
@@ -801,8 +797,8 @@ def fit_gap(x: np.ndarray, g: np.ndarray, *, rng: np.random.Generator,
     s_ci: tuple[float, float] | None = None
     if x0 > levels[0] and det[best] > 0:
         # the rise's slope given x0: the slope of g on min(x - x0, 0), within
-        # participants when they are known (slope_ci)
-        _, slo, shi = slope_ci(np.minimum(xr - x0, 0.0), g, level, people)
+        # participants when they are known (_slope)
+        slo, shi = _interval(_slope(np.minimum(xr - x0, 0.0), g, who), level)
         if math.isfinite(slo):
             s_ci = (slo, shi)
     rising_resolved = s_ci is not None and s_ci[0] > 0
@@ -814,10 +810,10 @@ def fit_gap(x: np.ndarray, g: np.ndarray, *, rng: np.random.Generator,
     above = xr >= x0 - 1e-9
     span = f"{levels[0]:g}-{levels[-1]:g} {unit}"
     delta = tolerance * abs(fit_level) / max(float(levels[-1]) - x0, 1e-300)
-    pb, plo, phi = slope_ci(xr[above], g[above], level,
-                            people[above] if people is not None else None)
-    _, elo, ehi = slope_ci(xr[above], g[above], 2 * level - 1,  # 90 %: the equivalence test
-                           people[above] if people is not None else None)
+    est = _slope(xr[above], g[above], who[above] if who is not None else None)
+    pb = est[0] if est is not None else math.nan
+    plo, phi = _interval(est, level)
+    elo, ehi = _interval(est, 2 * level - 1)  # 90 %: the equivalence test
     common: dict[str, Any] = dict(
         base, breakpoint=x0, fit_level=fit_level,
         rising_slope=float(s[best]) if rising_resolved else 0.0,
@@ -827,8 +823,7 @@ def fit_gap(x: np.ndarray, g: np.ndarray, *, rng: np.random.Generator,
     slope_text = (f"slope {pb:.3g} {unit}/{unit}, {level:.0%} CI [{plo:.3g}, {phi:.3g}]; "
                   f"within +-{delta:.3g} counts as constant ({tolerance:.0%} of the gap "
                   f"across the plateau)")
-    equivalent = -delta <= elo and ehi <= delta
-    changing = not (plo <= 0.0 <= phi) and not equivalent
+    verdict = _judge(est, delta, level, level)
     if rising_resolved and phi >= float(s[best]):
         return GapFit(
             status="no_plateau",
@@ -837,11 +832,11 @@ def fit_gap(x: np.ndarray, g: np.ndarray, *, rng: np.random.Generator,
                     f"told from the slope below it ({float(s[best]):.4g}): no plateau "
                     f"established within {span} (too few trials above it?)"),
             **common)
-    if changing:
+    if verdict == "differs":
         return GapFit(status="no_plateau",
                       detail=(f"{gap} still changes above the best breakpoint {x0:g} {unit} "
                               f"({slope_text}): no critical gap within {span}"), **common)
-    if not equivalent:
+    if verdict == "unclear":
         return GapFit(status="inconclusive",
                       detail=(f"cannot tell whether {gap} is constant above {x0:g} {unit} "
                               f"({slope_text}; its {2 * level - 1:.0%} CI [{elo:.3g}, "
@@ -938,7 +933,7 @@ def check_across_levels(fit: GapFit, x: np.ndarray, g: np.ndarray, *,
     the measured angle. On the plateau (``x >= threshold``) also the
     predicted angle, the difference (gap here - mean gap of the other
     plateau levels, cluster-robust over ``clusters`` when given:
-    ``difference_ci``) and a ``verdict``:
+    ``_difference``) and a ``verdict`` (``_judge``):
 
     - "holds": the difference's 90 % interval lies within ``fit.tolerance``
       of the others' gap (an equivalence test at 5 %);
@@ -955,7 +950,7 @@ def check_across_levels(fit: GapFit, x: np.ndarray, g: np.ndarray, *,
     for "holds" / "fails", else None."""
     x = np.asarray(x, dtype=float)
     g = np.asarray(g, dtype=float)
-    people = np.asarray(clusters, dtype=object) if clusters is not None else None
+    who = _cluster_ids(clusters, x.size)
     xr = np.round(x / fit.round_to) * fit.round_to
     on_plateau = (xr >= fit.threshold - 1e-9) if fit.threshold is not None else None
     k = len(np.unique(xr[on_plateau])) if on_plateau is not None else 0
@@ -977,22 +972,18 @@ def check_across_levels(fit: GapFit, x: np.ndarray, g: np.ndarray, *,
             row.update(verdict="below_threshold", cg_predicting=fit.cg,
                        angle_predicted_deg=math.degrees(math.atan(fit.cg / v)))
             continue
-        mine = on_plateau  # the plateau's trials: this level against the rest
         others = g[on_plateau & ~here]
         row["verdict"] = "untested"
         if others.size < 2 or here.sum() < 2:
             continue
         cg_o = float(others.mean())
-        sub = people[mine] if people is not None else None
-        diff, dlo, dhi = difference_ci(g[mine], here[mine], confidence, sub)
-        _, elo, ehi = difference_ci(g[mine], here[mine], 2 * level - 1, sub)
-        margin = fit.tolerance * abs(cg_o)
-        if -margin <= elo and ehi <= margin:
-            verdict = "holds"
-        elif not dlo <= 0.0 <= dhi:
-            verdict = "fails"
-        else:
-            verdict = "inconclusive"
+        # this level against the rest of the plateau
+        est = _difference(g[on_plateau], here[on_plateau],
+                          who[on_plateau] if who is not None else None)
+        diff = est[0] if est is not None else math.nan
+        dlo, dhi = _interval(est, confidence)
+        verdict = {"equal": "holds", "differs": "fails", "unclear": "inconclusive"}[
+            _judge(est, fit.tolerance * abs(cg_o), level, confidence)]
         row.update(cg_predicting=cg_o, angle_predicted_deg=math.degrees(math.atan(cg_o / v)),
                    difference=diff, difference_ci_lo=dlo, difference_ci_hi=dhi,
                    confidence=confidence, verdict=verdict,
