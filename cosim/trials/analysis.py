@@ -555,7 +555,10 @@ def _judge(est: tuple[float, float, float] | None, margin: float, level: float,
     """Whether an estimated change is shown negligible or shown real:
     "equal" when its ``2 * level - 1`` interval lies within +-``margin`` (an
     equivalence test at ``1 - level``), "differs" when its ``test_level``
-    interval excludes 0 (NaN bounds count as excluding it), "unclear" else."""
+    interval excludes 0, "unclear" else, and when there is no estimate (too
+    few points, or too few participants on both sides of it)."""
+    if est is None:
+        return "unclear"
     elo, ehi = _interval(est, 2 * level - 1)
     if -margin <= elo and ehi <= margin:
         return "equal"

@@ -712,3 +712,23 @@ def test_reshown_and_camera_gap_columns_are_optional(tmp_path: Path) -> None:
     bad = [dict(rows[0], reshown="yes")]
     with pytest.raises(ConfigError, match=r"new2.csv:2: reshown: expected 0 or 1"):
         read_responses(_write(tmp_path / "new2.csv", bad, COLUMNS + OPTIONAL_COLUMNS))
+
+
+def test_a_difference_no_two_people_can_show_is_not_a_failure() -> None:
+    """Only one participant saw more than one altitude: a slope or difference
+    within participants cannot be estimated. That is not a gap shown to
+    change (the fit said "still changes" from an interval of NaN) nor a
+    level that fails its check: both are "cannot tell"."""
+    rows = _ground_rows(seed=3, ground_gap=lambda h: GROUND_CG_M, people=6, trials=10,
+                        person_sd_m=0.3,
+                        levels=lambda p: GROUND_ALTITUDES_M if p == 0 else
+                        GROUND_ALTITUDES_M[p:p + 1])
+    h, b, depth, who = _arrays(rows)
+    g = np.tan(np.radians(b)) * depth
+    within = fit_ground_gap(h, b, depth_m=depth, rng=np.random.default_rng(0), clusters=who,
+                            n_boot=50)
+    assert within.status == "inconclusive" and "cannot tell" in within.detail, within.detail
+    as_trials = fit_ground_gap(h, b, depth_m=depth, rng=np.random.default_rng(0), n_boot=50)
+    assert as_trials.cg is not None, as_trials.detail
+    checks = check_across_levels(as_trials, h, g, clusters=who)
+    assert {c["verdict"] for c in checks} == {"inconclusive"}, checks
