@@ -160,9 +160,6 @@ class TrialApp:
     def __init__(self, study: Study, store: Store) -> None:
         self.study, self.store = study, store
         self._by_id = {c.id: n for n, c in enumerate(study.all_clips)}
-        #: the page's size (device px) each session's participant page last
-        #: reported, as stored (a write only when it changes)
-        self.windows: dict[str, tuple[int, int]] = {}
 
     # --- helpers ---
     def _session(self, sid: str) -> dict[str, Any]:
@@ -264,15 +261,14 @@ class TrialApp:
         px = _window_px(d)
         if px is None:
             raise BadRequest("window_width_px, window_height_px: expected the page's size")
-        await self._keep_window(s["id"], px)
+        await self._keep_window(s, px)
         return JSONResponse({"window_px": list(px)})
 
-    async def _keep_window(self, sid: str, px: tuple[int, int]) -> None:
-        """Store a session's page size when it differs from the last one stored
-        (the experimenter's warning survives a restart of the server)."""
-        if self.windows.get(sid) != px:
-            await run_in_threadpool(self.store.set_window, sid, *px)
-            self.windows[sid] = px
+    async def _keep_window(self, s: dict[str, Any], px: tuple[int, int]) -> None:
+        """Store the session ``s``'s page size when it differs from the one its
+        row holds (the experimenter's warning survives a restart of the server)."""
+        if (s["window_width_px"], s["window_height_px"]) != px:
+            await run_in_threadpool(self.store.set_window, s["id"], *px)
 
     async def create_session(self, request: Request) -> Response:
         d = await _json_body(request)
@@ -347,7 +343,7 @@ class TrialApp:
         px = _window_px(d)
         drawn = _drawn_on(display, px)
         if px is not None:
-            await self._keep_window(s["id"], px)
+            await self._keep_window(s, px)
         row: dict[str, Any] = {
             "session": s["id"], "participant": s["participant"], "trial_index": ti,
             "kind": kind, "practice": bool(t["practice"]), "protocol": s["protocol"],
