@@ -81,8 +81,6 @@ def parse_target(text: str, allow_remote: bool = False) -> VideoTarget:
     return VideoTarget(sysid, m["cam"], host, u.port, fmt)
 
 
-
-
 def sdp(target: VideoTarget, name: str) -> str:
     """The SDP describing an RTP H.264 stream (what ffplay opens)."""
     return (f"v=0\no=- 0 0 IN IP4 {target.host}\ns={name}\nc=IN IP4 {target.host}\nt=0 0\n"
