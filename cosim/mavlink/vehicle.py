@@ -348,7 +348,9 @@ class MavVehicle:
             enabled &= ~_CONTROL
         if not self.armed:
             enabled &= ~mav.SENSOR_MOTOR_OUTPUTS
-        health = present
+        # the geofence is healthy unless breached, with or without a fence, as
+        # ArduPilot reports it: stations read a clear bit as a breach
+        health = present | mav.SENSOR_GEOFENCE
         if not self.prearm_ok():
             health &= ~(mav.SENSOR_PREARM_CHECK | mav.SENSOR_AHRS)
         if self.mission.breached:

@@ -205,6 +205,32 @@ def test_fence_upload_download_and_a_breach_returns_home_with_an_event(rig) -> N
     assert r.ep.counters()["fence_breaches"] == 1
 
 
+def _fence_bits(r) -> tuple[bool, bool, bool]:
+    """SYS_STATUS's geofence bits (present, enabled, healthy) of vehicle 1."""
+    _, replies = r.request(lambda: r.gcs.mav.command_long_send(
+        1, 1, ML.MAV_CMD_REQUEST_MESSAGE, 0, ML.MAVLINK_MSG_ID_SYS_STATUS, 0, 0, 0, 0, 0, 0))
+    ss = of_type(replies, "SYS_STATUS")[-1]
+    bit = ML.MAV_SYS_STATUS_GEOFENCE
+    return (bool(ss.onboard_control_sensors_present & bit),
+            bool(ss.onboard_control_sensors_enabled & bit),
+            bool(ss.onboard_control_sensors_health & bit))
+
+
+def test_sys_status_fence_bits_say_breach_only_when_breached(rig) -> None:
+    """As ArduPilot reports them: healthy unless breached, fence or not, so
+    that MAVProxy (which says 'fence breach' when the health bit drops) stays
+    quiet until a breach."""
+    r = rig(1)
+    assert _fence_bits(r) == (False, False, True)  # no fence: nothing to breach
+    lat, lon = r.states[0, S["lat_deg"]], r.states[0, S["lon_deg"]]
+    circle = [(REL, ML.MAV_CMD_NAV_FENCE_CIRCLE_INCLUSION, 2000, 0, 0, 0, lat, lon, 0)]
+    upload_list(r, circle, ML.MAV_MISSION_TYPE_FENCE)
+    assert _fence_bits(r) == (True, True, True)  # inside it
+    reach(r, lat + 0.05, lon)  # 5.5 km north: outside
+    assert r.ep.vehicles[0].mission.breached
+    assert _fence_bits(r) == (True, True, False)
+
+
 def test_rtl_goes_to_the_nearest_rally_point(rig) -> None:
     r = rig(1)
     lat, lon = r.states[0, S["lat_deg"]], r.states[0, S["lon_deg"]]
