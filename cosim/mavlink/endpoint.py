@@ -740,8 +740,8 @@ class MavlinkEndpoint:
         while not done:
             left = deadline - time.monotonic()
             if left <= 0 or isinstance(self.link, NullLink):
-                what = ("any message" if ts1 is None else
-                        f"the TIMESYNC answer for tick {pending}")
+                what = ("message" if ts1 is None else
+                        f"TIMESYNC answer for tick {pending}")
                 raise LockstepTimeout(
                     f"mavlink lockstep: no {what} from the controller (system {sysid}) "
                     f"within {self.config.lockstep_timeout_s:g} s at tick {tick}; is it "

@@ -141,3 +141,14 @@ def test_a_new_bank_limit_is_announced_as_param_value(tmp_path: Path) -> None:
     ep.exchange(8, states)  # announced once
     assert not [m for m in got if m.name == "PARAM_VALUE"]
     ep.close()
+
+
+def test_a_controller_that_never_says_hello_is_a_named_timeout(tmp_path: Path) -> None:
+    ep = _endpoint(tmp_path, 1, url="udpin:127.0.0.1:0", lockstep_sysid=CTRL,
+                   lockstep_timeout_s=0.2)
+    try:
+        with pytest.raises(LockstepTimeout, match=r"no message from the controller "
+                                                  r"\(system 245\) within 0.2 s at tick 0"):
+            ep.exchange(0, state_rows(1))
+    finally:
+        ep.close()
