@@ -231,6 +231,7 @@ def load_signing_key(config: MavlinkConfig) -> bytes | None:
         except OSError as e:
             raise ConfigError(f"mavlink signing: cannot read {where}: "
                               f"{e.strerror or e}") from None
+        _warn_if_open(Path(config.signing_key_file))
     else:
         name = str(config.signing_key_env)
         where = f"environment variable {name!r}"
@@ -250,6 +251,26 @@ def load_signing_key(config: MavlinkConfig) -> bytes | None:
     except UnicodeEncodeError:
         raise ConfigError(f"mavlink signing: the passphrase in {where} is not ASCII "
                           "(MAVProxy's 'signing key' takes an ASCII passphrase)") from None
+
+
+#: key files already warned about, with their mode (each is said once a process)
+_warned_open: set[tuple[str, int]] = set()
+
+
+def _warn_if_open(path: Path) -> None:
+    """Warn, as ssh does, when other users may read or change the key file
+    (any group or other permission bit); the run goes on, keyed."""
+    if os.name != "posix":  # no Unix modes to judge
+        return
+    try:
+        mode = path.stat().st_mode & 0o777
+    except OSError:
+        return
+    if mode & 0o077 and (str(path), mode) not in _warned_open:
+        _warned_open.add((str(path), mode))
+        log.warning("mavlink signing: key file %s has mode %04o: other users of this machine "
+                    "can read or change the passphrase and so command every vehicle; "
+                    "make it yours only: chmod 600 %s", path, mode, path)
 
 
 class VehicleCommand(NamedTuple):

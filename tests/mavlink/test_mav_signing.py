@@ -5,6 +5,7 @@ SETUP_SIGNING is ignored; with it off nothing changes."""
 from __future__ import annotations
 
 import hashlib
+import re
 import time
 from pathlib import Path
 from typing import Any
@@ -151,6 +152,25 @@ def test_the_key_is_read_from_a_file(tmp_path: Path, rig) -> None:
     r = rig(1, config=cfg, anchor_us=_now_us(), gcs_key=KEY)
     cmds, _ = r.request(lambda: _loiter(r.gcs))
     assert len(cmds) == 1
+
+
+@pytest.mark.parametrize("mode, warned", [(0o600, False), (0o400, False), (0o640, True),
+                                           (0o644, True), (0o602, True)])
+def test_a_key_file_other_users_can_read_or_change_is_warned_about(
+        tmp_path: Path, caplog: pytest.LogCaptureFixture, mode: int, warned: bool) -> None:
+    f = tmp_path / "mavlink.key"
+    f.write_text(PASSPHRASE + "\n", encoding="ascii")
+    f.chmod(mode)
+    with caplog.at_level("WARNING", logger="cosim.mavlink"):
+        assert load_signing_key(MavlinkConfig(url=URL, signing_key_file=f)) == KEY
+    said = [r.getMessage() for r in caplog.records if "key file" in r.getMessage()]
+    if not warned:
+        assert said == []
+        return
+    assert len(said) == 1
+    assert re.search(rf"key file {re.escape(str(f))} has mode {mode:04o}: other users of this "
+                     rf"machine can read or change the passphrase .*chmod 600 "
+                     rf"{re.escape(str(f))}$", said[0]), said[0]
 
 
 def test_the_key_is_read_from_an_environment_variable(monkeypatch: pytest.MonkeyPatch) -> None:
