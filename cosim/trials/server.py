@@ -27,7 +27,8 @@ recorded is read by clip number; one with ids but no fingerprints, by id.
 A local app: it binds 127.0.0.1 (or another loopback address it is given)
 unless told ``public=True``, and refuses requests whose ``Host`` is not this
 machine's or the address bound (a web page elsewhere cannot drive it through
-the browser: DNS rebinding). Request bodies are bounded.
+the browser: DNS rebinding). Request bodies are bounded in size and nesting,
+requests in the time they take to arrive, connections in number (``limits``).
 The frequent database calls (a participant's page fetching its session, a
 response stored) run in the thread pool, off the event loop.
 """
@@ -46,13 +47,20 @@ from starlette.applications import Starlette
 from starlette.concurrency import run_in_threadpool
 from starlette.middleware import Middleware
 from starlette.middleware.trustedhost import TrustedHostMiddleware
-from starlette.requests import Request
+from starlette.requests import ClientDisconnect, Request
 from starlette.responses import FileResponse, JSONResponse, Response
 from starlette.routing import Mount, Route
 from starlette.staticfiles import StaticFiles
 
 from cosim.errors import ConfigError
 from cosim.netaddr import is_loopback
+from cosim.trials.limits import (
+    MAX_BODY_BYTES,
+    MAX_JSON_DEPTH,
+    HeadLimit,
+    json_depth,
+    uvicorn_settings,
+)
 from cosim.trials.measures import Display, measures_at, track_measures
 from cosim.trials.store import Store, shown_url, write_csv
 from cosim.trials.study import TRACK_DIRECTIONS, Clip, Study, load_study
@@ -60,7 +68,6 @@ from cosim.trials.study import TRACK_DIRECTIONS, Clip, Study, load_study
 log = logging.getLogger(__name__)
 
 STATIC = Path(__file__).resolve().parent / "static"
-MAX_BODY_BYTES = 16 * 1024
 PARTICIPANT_ID = re.compile(r"^[A-Za-z0-9_.\-]{1,64}$")
 KEY_NAME = re.compile(r"^[A-Za-z0-9_ ]{1,32}$")
 LOCAL_HOSTS = ["127.0.0.1", "localhost", "[::1]", "::1"]
@@ -111,10 +118,16 @@ def _experimenter(fn: Any) -> Any:
 async def _json_body(request: Request) -> dict[str, Any]:
     _same_origin(request)
     body = b""
-    async for chunk in request.stream():
-        body += chunk
-        if len(body) > MAX_BODY_BYTES:
-            raise BadRequest(f"request body over {MAX_BODY_BYTES} bytes", 413)
+    try:
+        async for chunk in request.stream():
+            body += chunk
+            if len(body) > MAX_BODY_BYTES:
+                raise BadRequest(f"request body over {MAX_BODY_BYTES} bytes", 413)
+    except ClientDisconnect:  # gone (or cut off for sending too slowly): no one to answer
+        raise BadRequest("the client disconnected before its request body arrived") from None
+    if json_depth(body) > MAX_JSON_DEPTH:
+        raise BadRequest(f"request body: JSON nested deeper than {MAX_JSON_DEPTH} levels; "
+                         f"expected a flat JSON object")
     try:
         data = json.loads(body or b"{}")
     except ValueError as e:
@@ -465,7 +478,8 @@ def make_app(study: Study | str | Path, db: Store | str | Path,
         Mount("/static", StaticFiles(directory=STATIC), name="static"),
     ]
     app = Starlette(routes=routes, exception_handlers={BadRequest: _bad_request},
-                    middleware=[Middleware(TrustedHostMiddleware,
+                    middleware=[Middleware(HeadLimit),
+                                Middleware(TrustedHostMiddleware,
                                            allowed_hosts=allowed_hosts or LOCAL_HOSTS)])
     app.state.trials = a
     return app
@@ -496,4 +510,4 @@ def serve(study_path: str | Path, host: str = "127.0.0.1", port: int = 8000,
     app = make_app(st, db, allowed_hosts=hosts)
     log.info("study %s: %d clips; responses in %s; experimenter page http://%s:%d/",
              st.name, len(st.clips), shown_url(db), host, port)
-    uvicorn.run(app, host=host, port=port, log_level="info")
+    uvicorn.run(app, host=host, port=port, log_level="info", **uvicorn_settings())
