@@ -456,6 +456,7 @@ SIG_UNSIGNED: Final[str] = "unsigned"
 SIG_BAD: Final[str] = "bad_signature"
 SIG_REPLAY: Final[str] = "replay"
 SIG_STALE: Final[str] = "stale_stream"
+SIG_OWN: Final[str] = "own_stream"
 
 Stream = tuple[int, int, int]  # (link id, system, component)
 
@@ -466,17 +467,23 @@ class SignatureChecker:
     ``check(raw)`` (``raw``: one packet exactly as received, ``Message.raw``)
     returns ``SIG_OK``, ``SIG_MAVLINK1`` (a MAVLink 1 packet: it cannot carry
     a signature), ``SIG_UNSIGNED``, ``SIG_BAD`` (wrong key or tampered),
-    ``SIG_REPLAY`` (a correct signature whose timestamp is not newer than
-    the last accepted one of the same stream: link id, system, component) or
-    ``SIG_STALE`` (the first packet of a stream, stamped more than a minute
-    behind the local timestamp). The local timestamp is the latest of the
-    wall clock, ``timestamp`` (what was accepted or sent before, in this run
-    or, restored by the caller, in earlier ones) and every accepted packet's
+    ``SIG_OWN`` (a correct signature on one of the streams this side signs
+    with, ``own``: our own packet sent back), ``SIG_REPLAY`` (a correct
+    signature whose timestamp is not newer than the last accepted one of the
+    same stream: link id, system, component) or ``SIG_STALE`` (the first
+    packet of a stream, stamped more than a minute behind the local
+    timestamp). The local timestamp is the latest of the wall clock,
+    ``timestamp`` (what was accepted or sent before, in this run or,
+    restored by the caller, in earlier ones) and every accepted packet's
     stamp. The signature is checked before the timestamp, and only an
     accepted packet advances anything, so forged packets cannot block a
     stream. ``streams`` (the last accepted timestamp of each) and
-    ``timestamp`` may be given from an earlier run: a packet recorded then
-    is a replay now.
+    ``timestamp`` may be given from an earlier run, or merged in later
+    (``merge``) from other runs: a packet accepted there is a replay here.
+
+    ``check`` is ``verify`` (the signature) then ``admit`` (the stream's
+    timestamps), which a caller sharing the state with other processes runs
+    apart: verify first, then admit under its lock.
     """
 
     def __init__(self, key: bytes, timestamp: int = 0,
@@ -487,35 +494,56 @@ class SignatureChecker:
         self._key = bytes(key)
         self.timestamp = int(timestamp)
         self.last_timestamp: dict[Stream, int] = dict(streams or {})
-        self.changed = False  # something was accepted since the caller last looked
+        #: the streams this side signs with: never accepted from the network
+        self.own: set[Stream] = set()
 
     def local_timestamp(self) -> int:
         """The latest of the wall clock and everything accepted or restored."""
         self.timestamp = max(self.timestamp, wall_signing_timestamp())
         return self.timestamp
 
-    def check(self, raw: bytes) -> str:
+    def merge(self, timestamp: int, streams: Mapping[Stream, int]) -> None:
+        """Take in what others accepted: the maximum of every timestamp."""
+        self.timestamp = max(self.timestamp, int(timestamp))
+        last = self.last_timestamp
+        for s, t in streams.items():
+            if t > last.get(s, -1):
+                last[s] = t
+
+    def verify(self, raw: bytes) -> tuple[str, Stream, int]:
+        """The signature alone: (``SIG_OK`` if it is correct, else the verdict;
+        the packet's stream; its timestamp). Changes nothing."""
         if not raw or raw[0] != _V2_MARKER:
-            return SIG_MAVLINK1
+            return SIG_MAVLINK1, (0, 0, 0), 0
         if len(raw) < 10 + 2 + _SIGNATURE_LEN or not raw[2] & _IFLAG_SIGNED:
-            return SIG_UNSIGNED
+            return SIG_UNSIGNED, (0, 0, 0), 0
         body, sig = raw[:-6], raw[-6:]
         expect = hashlib.sha256(self._key + body).digest()[:6]
         if not hmac.compare_digest(expect, sig):
-            return SIG_BAD
-        link_id = raw[-_SIGNATURE_LEN]
-        timestamp = int.from_bytes(raw[-12:-6], "little")
-        stream = (int(link_id), int(raw[5]), int(raw[6]))
+            return SIG_BAD, (0, 0, 0), 0
+        stream = (int(raw[-_SIGNATURE_LEN]), int(raw[5]), int(raw[6]))
+        return SIG_OK, stream, int.from_bytes(raw[-12:-6], "little")
+
+    def admit(self, stream: Stream, timestamp: int, remember: bool = True) -> str:
+        """Whether a correctly signed packet of ``stream`` stamped
+        ``timestamp`` goes on: ``SIG_OK`` (remembered, unless not
+        ``remember``), ``SIG_OWN``, ``SIG_REPLAY`` or ``SIG_STALE``."""
+        if stream in self.own:
+            return SIG_OWN
         last = self.last_timestamp.get(stream)
         if last is not None:
             if timestamp <= last:
                 return SIG_REPLAY
         elif timestamp + NEW_STREAM_WINDOW < self.local_timestamp():
             return SIG_STALE
-        self.last_timestamp[stream] = timestamp
-        self.timestamp = max(self.timestamp, timestamp)
-        self.changed = True
+        if remember:
+            self.last_timestamp[stream] = timestamp
+            self.timestamp = max(self.timestamp, timestamp)
         return SIG_OK
+
+    def check(self, raw: bytes) -> str:
+        verdict, stream, timestamp = self.verify(raw)
+        return verdict if verdict != SIG_OK else self.admit(stream, timestamp)
 
 
 #: Decoder counters (keys always present)

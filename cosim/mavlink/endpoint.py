@@ -43,13 +43,18 @@ MAVLink 2 signing (``MavlinkConfig.signing_key_file`` / ``signing_key_env``):
   ``stale_stream_dropped``. MAVLink 1 packets cannot be signed, so they are
   dropped too (counted in ``unsigned_dropped`` and, separately,
   ``mavlink1_dropped``);
-- the newest timestamp and each stream's last one are kept between runs
-  (``cosim.mavlink.signing``, saved at most once a second and at close): a
-  signed packet recorded in one run, or read from its tlog, is a replay in
-  every later run;
-- only a sender of an accepted packet becomes a peer (gets telemetry): a
-  ground station without the key receives nothing from a ``udpin`` link
-  (from ``udpout`` it receives packets it cannot verify);
+- the timestamps are shared with the run's other links (``signing``, a
+  ``SharedSigning``) and, through a file under a lock, with every run using
+  the key (``cosim.mavlink.signing``): a signed packet accepted on any link
+  of any run, or read from a tlog, is a replay everywhere else, whatever its
+  link id;
+- a correctly signed packet from one of our vehicles (its own stream, or its
+  system id with component 1) is our own packet sent back: dropped
+  (``echoes``);
+- only a sender of an accepted packet that is not an echo becomes a peer
+  (gets telemetry): a ground station without the key receives nothing from
+  a ``udpin`` link (from ``udpout`` it receives packets it cannot verify),
+  even by reflecting the vehicles' signed packets;
 - SETUP_SIGNING is never obeyed, even correctly signed
   (``setup_signing_ignored``): the key comes from the operator only;
 - ``inject()``-ed messages are in-process, not checked.
@@ -97,7 +102,7 @@ from cosim.mavlink.batch import BatchEncoder
 from cosim.mavlink.errors import EndpointClosed, LockstepTimeout
 from cosim.mavlink.handlers import Handler, Outcome, command_ack
 from cosim.mavlink.link import DEFAULT_URL, NullLink, UdpLink
-from cosim.mavlink.signing import SigningState
+from cosim.mavlink.signing import SharedSigning
 from cosim.mavlink.tlog import STAMP_LEN as TLOG_STAMP_LEN
 from cosim.mavlink.tlog import TlogWriter
 from cosim.mavlink.tlog import stamp as tlog_stamp
@@ -327,12 +332,14 @@ class MavlinkEndpoint:
     ``clock_anchor_unix_us``: the wall-clock instant of tick 0 in
     SYSTEM_TIME and tlogs (default: the start of the current second, so
     real-time runs show the wall clock; pass a fixed value for
-    reproducible tlogs).
+    reproducible tlogs); ``signing``: the replay protection shared with the
+    run's other links (None: its own, when the config signs).
     """
 
     def __init__(self, vehicles: Sequence[MavVehicleSpec], physics_hz: float,
                  config: MavlinkConfig | None = None, tlog_dir: str | Path | None = None,
-                 clock_anchor_unix_us: int | None = None) -> None:
+                 clock_anchor_unix_us: int | None = None,
+                 signing: SharedSigning | None = None) -> None:
         config = config or MavlinkConfig()
         problems = check_rates(config.rates_hz)
         if not physics_hz > 0:
@@ -355,16 +362,18 @@ class MavlinkEndpoint:
         self.frame = StateFrame()  # this exchange's rows, read by vehicles on demand
         self.vehicles = [MavVehicle(s, self.clock, config.rates_hz, self.frame, i)
                          for i, s in enumerate(vehicles)]
-        #: verifies incoming signatures (None: signing off)
-        self.signature_checker: mav.SignatureChecker | None = None
-        #: the key's replay-protection state between runs (None: signing off)
-        self.signing_state: SigningState | None = None
+        #: the key's replay protection, shared with the run's other links and,
+        #: through its file, with other runs (None: signing off)
+        self.signing: SharedSigning | None = None
+        self._owns_signing = False
         self._signing_saved = time.monotonic()
+        #: the signature stream of each vehicle's packets
+        self._own_streams = [(config.signing_link_id, v.sysid, mav.MAV_COMP_ID_AUTOPILOT1)
+                             for v in self.vehicles]
         if key is not None:
-            self.signing_state = SigningState(key, config.signing_state_dir)
-            timestamp, streams = self.signing_state.load()
-            self.signature_checker = mav.SignatureChecker(key, timestamp, streams)
-            start = self.signature_checker.local_timestamp()
+            self._owns_signing = signing is None
+            self.signing = signing or SharedSigning(key, config.signing_state_dir)
+            start = self.signing.add_own(self._own_streams)
             for v in self.vehicles:
                 v.packer.enable_signing(key, config.signing_link_id)
                 v.packer.advance_signing_time(start)
@@ -453,25 +462,24 @@ class MavlinkEndpoint:
             self._save_signing(force=True)
         self.link.close()
 
+    @property
+    def signature_checker(self) -> mav.SignatureChecker | None:
+        """Verifies incoming signatures (None: signing off)."""
+        return None if self.signing is None else self.signing.checker
+
     def _save_signing(self, force: bool = False) -> None:
-        """Keep the signing timestamps for later runs (at most once a second
-        unless ``force``; only when something was accepted or sent)."""
-        chk, state = self.signature_checker, self.signing_state
-        if chk is None or state is None:
+        """Keep the vehicles' signing timestamps for later runs (at most once a
+        second unless ``force``: they advance with every packet sent)."""
+        if self.signing is None:
             return
         now = time.monotonic()
         if not force and now - self._signing_saved < SIGNING_SAVE_S:
             return
         self._signing_saved = now
-        sent = max((v.packer.signing_timestamp for v in self.vehicles), default=0)
-        if not chk.changed and sent <= chk.timestamp:
-            return
-        chk.timestamp = max(chk.timestamp, sent)
-        chk.changed = False
-        try:
-            state.save(chk.timestamp, chk.last_timestamp)
-        except OSError as e:  # the run goes on; later runs start from the wall clock
-            log.error("%s", e)
+        self.signing.save_sent({s: v.packer.signing_timestamp
+                                for s, v in zip(self._own_streams, self.vehicles)})
+        if force and self._owns_signing:
+            self.signing.close()
 
     # -- per exchange ----------------------------------------------------------
     def inject(self, message: mav.Message) -> None:
@@ -563,8 +571,9 @@ class MavlinkEndpoint:
             self.counts["injected"] += 1
             self._dispatch(m, tick, commands)
         for msgs, addr in self._receive(tick):
-            if msgs:
-                self.link.remember(addr, len(msgs))
+            heard = sum(not self._echo(m) for m in msgs)
+            if heard:  # our own packets sent back make no sender a peer
+                self.link.remember(addr, heard)
             for m in msgs:
                 self._dispatch(m, tick, commands, addr)
         for v in self.vehicles:  # missions flown and the fence, after the messages
@@ -649,7 +658,7 @@ class MavlinkEndpoint:
         self._first_due = int(self._next_due[on].min()) if on.any() else 2 ** 62
         if not due.any():
             return
-        signing = self.signature_checker is not None
+        signing = self.signing is not None
         seq = None if signing else self._seq
         blobs: list[bytes] = []
         lengths: list[np.ndarray] = []
@@ -725,15 +734,15 @@ class MavlinkEndpoint:
             if t is not None:
                 t.write_records(unix_us, data[byte_at[a]:byte_at[b]], b - a)
 
-    def _decode(self, data: bytes) -> list[mav.Message]:
-        msgs = self.decoder.decode(data)
-        if self.signature_checker is not None:
-            msgs = [a for a in (self._authenticate(m) for m in msgs) if a is not None]
-        return msgs
-
     def _poll(self) -> list[tuple[list[mav.Message], tuple[str, int]]]:
-        """The datagrams waiting now, decoded (and authenticated), with their senders."""
-        return [(self._decode(data), addr) for data, addr in self.link.poll()]
+        """The datagrams waiting now, decoded (and authenticated: all at once,
+        one look at the shared signing state), with their senders."""
+        got = [(self.decoder.decode(data), addr) for data, addr in self.link.poll()]
+        if self.signing is None:
+            return got
+        verdicts = iter(self.signing.authenticate([m.raw for msgs, _ in got for m in msgs]))
+        return [([a for a in (self._authenticated(m, next(verdicts)) for m in msgs)
+                  if a is not None], addr) for msgs, addr in got]
 
     def _receive(self, tick: int) -> list[tuple[list[mav.Message], tuple[str, int]]]:
         """The datagrams waiting, decoded; in lockstep, first wait for the
@@ -774,11 +783,9 @@ class MavlinkEndpoint:
         self._lockstep_pending = None
         return got
 
-    def _authenticate(self, m: mav.Message) -> mav.Message | None:
-        """A received message if its signature is good (marked signed), else
-        None, counted; SETUP_SIGNING is never obeyed (signing on)."""
-        assert self.signature_checker is not None
-        verdict = self.signature_checker.check(m.raw)
+    def _authenticated(self, m: mav.Message, verdict: str) -> mav.Message | None:
+        """A received message if ``verdict`` (its signature's) is good (marked
+        signed), else None, counted; SETUP_SIGNING is never obeyed."""
         if verdict != mav.SIG_OK:
             if verdict == mav.SIG_MAVLINK1:
                 self.counts["mavlink1_dropped"] += 1
@@ -789,6 +796,8 @@ class MavlinkEndpoint:
                 self.counts["bad_signature_dropped"] += 1
             elif verdict == mav.SIG_STALE:
                 self.counts["stale_stream_dropped"] += 1
+            elif verdict == mav.SIG_OWN:  # a vehicle's own packet sent back
+                self.counts["echoes"] += 1
             else:
                 self.counts["replay_dropped"] += 1
             return None
@@ -802,7 +811,7 @@ class MavlinkEndpoint:
               to: tuple[str, int] | None = None) -> None:
         """Send one message from ``v`` to the peers (and ``to``: the sender of
         the message it answers)."""
-        if self.signature_checker is not None:
+        if self.signing is not None:
             v.packer.advance_signing_time(mav.wall_signing_timestamp())
         v.packer.seq = int(self._seq[v.index])  # one sequence per vehicle, batches included
         pkt = v.packer.pack(name, **fields)
@@ -833,11 +842,16 @@ class MavlinkEndpoint:
         except (ValueError, TypeError, KeyError):
             return b""
 
+    def _echo(self, m: mav.Message) -> bool:
+        """Whether ``m`` came from the network as one of our vehicles (our own
+        packet looped back by the network setup, or sent back by someone)."""
+        return bool(m.raw) and m.src_system in self._by_sysid \
+            and m.src_component == mav.MAV_COMP_ID_AUTOPILOT1
+
     def _dispatch(self, m: mav.Message, tick: int, commands: list[VehicleCommand],
                   sender: tuple[str, int] | None = None) -> None:
-        if m.src_system in self._by_sysid and m.src_component == mav.MAV_COMP_ID_AUTOPILOT1 \
-                and m.raw:
-            self.counts["echoes"] += 1  # our own packets looped back by the network setup
+        if self._echo(m):
+            self.counts["echoes"] += 1
             return
         tgt = m.target_system
         if tgt is None:  # not addressed to a vehicle (a ground station's HEARTBEAT, ...)

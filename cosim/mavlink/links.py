@@ -14,7 +14,10 @@ scenario's ``mavlink.vehicles`` selects, when it does):
   links apart by the ``link`` index ``subscribe`` callbacks receive and
   ``inject`` takes.
 
-``MavlinkLinks`` drives them together with the endpoint's interface.
+``MavlinkLinks`` drives them together with the endpoint's interface. With
+signing on, the links share one replay protection (``SharedSigning``): a
+signed packet accepted on one link is a replay on every other, whatever its
+link id says.
 """
 
 from __future__ import annotations
@@ -35,8 +38,10 @@ from cosim.mavlink.endpoint import (
     MavlinkConfig,
     MavlinkEndpoint,
     VehicleCommand,
+    load_signing_key,
 )
 from cosim.mavlink.link import LinkUrl
+from cosim.mavlink.signing import SharedSigning
 from cosim.mavlink.vehicle import MavVehicleSpec, mav_specs
 from cosim.vehicles.spec import VehicleSpec
 
@@ -84,11 +89,14 @@ class MavlinkLinks:
         self.config = config
         self.urls = link_urls(config.url, n)
         self.endpoints: list[MavlinkEndpoint] = []
+        key = load_signing_key(config)
+        #: the links' one replay protection (None: signing off)
+        self.signing = None if key is None else SharedSigning(key, config.signing_state_dir)
         try:
             for specs, url in zip(self.specs, self.urls):
                 self.endpoints.append(MavlinkEndpoint(
                     specs, physics_hz, dataclasses.replace(config, url=url), tlog_dir=tlog_dir,
-                    clock_anchor_unix_us=clock_anchor_unix_us))
+                    clock_anchor_unix_us=clock_anchor_unix_us, signing=self.signing))
                 if clock_anchor_unix_us is None:  # every link on the same clock
                     clock_anchor_unix_us = self.endpoints[0].clock.anchor_unix_us
         except BaseException:
@@ -108,6 +116,8 @@ class MavlinkLinks:
     def close(self) -> None:
         for e in self.endpoints:
             e.close()
+        if self.signing is not None:
+            self.signing.close()
 
     def inject(self, message: mav.Message, link: int = 0) -> None:
         """Queue an in-process message for the vehicles of ``link``."""

@@ -312,25 +312,6 @@ def test_a_new_stream_stamped_long_ago_is_refused(signed, age_s: float | None) -
     assert len(_deliver(r, lambda: r.gcs.send_raw(pkt))) == 1
 
 
-def test_signing_state_holds_no_key_and_only_grows(tmp_path: Path) -> None:
-    from cosim.mavlink.signing import MAX_STREAMS, SigningState
-
-    st = SigningState(KEY, tmp_path)
-    assert st.load() == (0, {})
-    st.save(500, {(1, 2, 3): 400})
-    st.save(300, {(1, 2, 3): 100, (0, 9, 9): 450})  # merged: the maxima stay
-    assert st.load() == (500, {(1, 2, 3): 400, (0, 9, 9): 450})
-    text = st.path.read_text()
-    assert KEY.hex() not in text and PASSPHRASE not in text and KEY.hex()[:16] not in \
-        st.path.name
-    st.save(0, {(0, i % 256, i // 256): 1000 + i for i in range(MAX_STREAMS + 50)})
-    ts, streams = st.load()
-    assert len(streams) == MAX_STREAMS and min(streams.values()) == 1050 and ts == 1000 + \
-        MAX_STREAMS + 49
-    st.path.write_text("not json")
-    assert st.load() == (0, {})  # reported, treated as empty
-
-
 @pytest.mark.parametrize("loopback, signing", [(False, False), (False, True), (True, False)])
 def test_a_non_loopback_link_without_signing_is_warned_about(
         monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture, tmp_path: Path,
