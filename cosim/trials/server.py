@@ -40,6 +40,7 @@ import json
 import logging
 import math
 import re
+import stat
 from pathlib import Path
 from typing import Any
 
@@ -54,6 +55,7 @@ from starlette.staticfiles import StaticFiles
 
 from cosim.errors import ConfigError
 from cosim.netaddr import is_loopback
+from cosim.trials.files import file_kind
 from cosim.trials.limits import (
     MAX_BODY_BYTES,
     MAX_JSON_DEPTH,
@@ -399,7 +401,15 @@ class TrialApp:
         p = clips[n].video
         if not any(p.is_relative_to(r) for r in self.study.roots):  # checked at load; again
             raise BadRequest("not a study file", 403)
-        return FileResponse(p, media_type=_video_type(p))
+        try:  # still the regular file it was at load (a FIFO would hang the reader)
+            st = p.stat()
+        except OSError:
+            raise BadRequest(f"clip {clips[n].id!r}: its video {p} is gone: restore it",
+                             409) from None
+        if not stat.S_ISREG(st.st_mode):
+            raise BadRequest(f"clip {clips[n].id!r}: its video {p} is {file_kind(st.st_mode)}, "
+                             f"not a regular file", 409)
+        return FileResponse(p, media_type=_video_type(p), stat_result=st)
 
 
 def _directions(seed: int, session_number: int, trial: int) -> list[str]:

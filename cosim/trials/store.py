@@ -25,6 +25,7 @@ import csv
 import json
 import math
 import secrets
+import stat
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, TextIO
@@ -33,6 +34,7 @@ import sqlalchemy as sa
 from sqlalchemy.exc import IntegrityError
 
 from cosim.errors import ConfigError
+from cosim.trials.files import file_kind
 
 EXPORT_COLUMNS = ("session", "participant", "trial_index", "practice", "protocol", "clip", "run",
                   "condition_speed_kt", "condition_alt_agl_m", "condition_target", "frame",
@@ -131,6 +133,7 @@ class Store:
 
     def __init__(self, db: str | Path) -> None:
         url = database_url(db)
+        _check_sqlite_file(url, db)
         try:
             self.engine = sa.create_engine(url)
             if self.engine.dialect.name == "sqlite":
@@ -231,6 +234,24 @@ class Store:
             q = q.where(responses.c.session == session_id)
         with self.engine.connect() as c:
             return [dict(r) for r in c.execute(q).mappings()]
+
+
+def _check_sqlite_file(url: str, db: str | Path) -> None:
+    """A SQLite database that exists must be a regular file (a FIFO or a
+    device would be waited on, or read as garbage): ``ConfigError`` if not."""
+    try:
+        u = sa.engine.make_url(url)
+    except Exception:  # noqa: BLE001 - not a URL: Store says so when it opens it
+        return
+    if u.get_backend_name() != "sqlite" or u.database in (None, "", ":memory:"):
+        return
+    try:
+        mode = Path(u.database).stat().st_mode
+    except OSError:  # none yet: SQLite makes it
+        return
+    if not stat.S_ISREG(mode):
+        raise ConfigError(f"cannot open the trial database {shown_url(str(db))}: it is "
+                          f"{file_kind(mode)}, not a regular file")
 
 
 def _add_missing_columns(engine: sa.Engine) -> None:

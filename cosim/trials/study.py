@@ -18,9 +18,11 @@ reported as ``file:line: path: message`` (all at once, one ``ConfigError``),
 the manifest and ground-truth files are bounded in size and read row by row
 with their own ``file:line`` errors, and every video and ground-truth path
 must resolve (symlinks followed) to a regular file inside the study's
-folders: the study file's folder and the sweep folder. Only those resolved
-paths are ever served, by clip number, never a path from a request. Each
-video is opened with PyAV: its size must match the manifest's and its codec
+folders: the study file's folder and the sweep folder. Every file is
+checked to be a regular file on the descriptor opened, before it is read (a
+FIFO or a device is refused, never waited on: ``open_regular``). Only those
+resolved paths are ever served, by clip number, never a path from a request.
+Each video is opened with PyAV: its size must match the manifest's and its codec
 must play in browsers (H.264, VP8/9, AV1; cosim renders ``mp4v`` unless a
 scenario says ``cameras: {codec: h264, ...}``).
 
@@ -69,6 +71,8 @@ import csv
 import hashlib
 import io
 import math
+import os
+import stat
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -77,13 +81,14 @@ from typing import Any
 import numpy as np
 
 from cosim.errors import ConfigError
+from cosim.scenario.limits import MAX_FILE_BYTES
 from cosim.scenario.schema import _Ctx, _describe, _Reader
 from cosim.scenario.yaml_lines import (
     YamlProblem,
     load_with_lines,
-    read_scenario_text,
     read_text_bounded,
 )
+from cosim.trials.files import file_kind, open_regular
 
 #: clips in one study (after ``repeats``: trials in one session)
 MAX_CLIPS = 5000
@@ -291,15 +296,20 @@ def _csv_rows(text: str, p: Path, what: str, required: tuple[str, ...]
         csv.field_size_limit(old)
 
 
-def _inside(p: Path, roots: tuple[Path, ...]) -> Path | None:
-    """``p`` resolved (symlinks followed) if it is a regular file inside one of ``roots``."""
+def _inside(p: Path, roots: tuple[Path, ...]) -> tuple[Path | None, str]:
+    """(``p`` resolved, symlinks followed, "") if it is a regular file inside
+    one of ``roots``; else (None, what it is instead, for a message: "" if it
+    is missing or outside)."""
     try:
         r = p.resolve(strict=True)
+        mode = r.stat().st_mode
     except (OSError, RuntimeError):
-        return None
-    if not any(r.is_relative_to(root) for root in roots) or not r.is_file():
-        return None
-    return r
+        return None, ""
+    if not any(r.is_relative_to(root) for root in roots):
+        return None, ""
+    if not stat.S_ISREG(mode):
+        return None, f"; it is {file_kind(mode)}, not a regular file"
+    return r, ""
 
 
 def _num(text: str, p: Path, line: int, col: str) -> float:
@@ -370,11 +380,12 @@ def read_clip_truth(p: Path, target: str | None) -> tuple[str, tuple[GtFrame, ..
 def _probe_video(p: Path) -> tuple[float, int, int, str, int, int]:
     """(rate_hz, width_px, height_px, codec, frames: 0 if the file does not
     say, size in bytes) of a video file, read by PyAV."""
+    f = open_regular(p)
     try:
         import av
 
-        size = p.stat().st_size
-        with av.open(str(p)) as c:
+        size = os.fstat(f.fileno()).st_size
+        with av.open(f) as c:
             s = c.streams.video[0]
             rate = s.average_rate or s.guessed_rate
             if not rate:
@@ -384,12 +395,14 @@ def _probe_video(p: Path) -> tuple[float, int, int, str, int, int]:
                     int(s.frames or 0), size)
     except Exception as e:  # noqa: BLE001 - any failure is "cannot read this video"
         raise ConfigError(f"{p}: cannot read it as a video ({e})") from None
+    finally:
+        f.close()
 
 
 def load_study(path: str | Path) -> Study:
     """Read and check a study file; ``ConfigError`` lists every problem found."""
     p = Path(path)
-    text = read_scenario_text(p)
+    text = read_text_bounded(p, MAX_FILE_BYTES, "the study file", "a study file")
     return parse_study(text, p)
 
 
@@ -471,10 +484,10 @@ def _file(ctx: _Ctx, at: tuple[Any, ...], value: Any, base: Path, roots: tuple[P
     if not isinstance(value, str) or not value or "\x00" in value:
         ctx.err(at, f"expected the path of the {what}, got {_describe(value)}")
         return None
-    p = _inside(base / value, roots)
+    p, instead = _inside(base / value, roots)
     if p is None:
         ctx.err(at, f"{value[:200]!r}: the {what} must be an existing file inside the study's "
-                    f"folders ({', '.join(str(r) for r in roots)})")
+                    f"folders ({', '.join(str(r) for r in roots)}){instead}")
     return p
 
 
@@ -586,7 +599,7 @@ def _sweep_clips(ctx: _Ctx, spec: Any, base: Path, roots: list[Path],
         ctx.err(at, f"{folder[:200]!r}: cannot open the sweep folder: {e}")
         return []
     manifest = sweep / "manifest.csv"
-    if not sweep.is_dir() or not manifest.is_file():
+    if not sweep.is_dir() or not manifest.exists():  # (a FIFO is refused as it is read)
         ctx.err(at, f"{folder[:200]!r}: not a sweep folder (no manifest.csv; run `cosim sweep "
                     f"... --out {folder[:200]}` first)")
         return []
@@ -611,12 +624,13 @@ def _sweep_clips(ctx: _Ctx, spec: Any, base: Path, roots: list[Path],
             continue
         where_at = f"{manifest}:{line}"
         sroots = (sweep,)
-        video = _inside(sweep / row["video"], sroots) if row["video"] else None
-        gt = _inside(sweep / row["ground_truth"], sroots) if row["ground_truth"] else None
+        video, v_instead = _inside(sweep / row["video"], sroots) if row["video"] else (None, "")
+        gt, g_instead = (_inside(sweep / row["ground_truth"], sroots) if row["ground_truth"]
+                         else (None, ""))
         if video is None or gt is None:
-            bad = "video" if video is None else "ground_truth"
+            bad, instead = ("video", v_instead) if video is None else ("ground_truth", g_instead)
             ctx.err(at, f"{where_at}: {bad} {row[bad][:200]!r} must be an existing file inside "
-                        f"the sweep folder")
+                        f"the sweep folder{instead}")
             continue
         try:
             rate = float(row["rate_hz"])

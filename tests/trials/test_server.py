@@ -507,6 +507,23 @@ def test_page_size_reports_are_checked_and_kept_for_the_experimenter(
         assert row["window_px"] == [640, 500] and "640 x 500 px" in row["window_warning"]
 
 
+def test_a_video_gone_or_made_a_fifo_while_serving_is_refused(tmp_path: Path) -> None:
+    """A clip's video replaced by a FIFO (or removed) after the study was read
+    is a 409 naming it, not a server error."""
+    study = small_study(tmp_path, "protocol: disappear\n", {"a": 150.0})
+    with Store(tmp_path / "t.sqlite") as store:
+        app = make_app(study, store)
+        assert asgi(app, "GET", "/video/0")[0] == 200
+        video = tmp_path / "a.mp4"
+        video.unlink()
+        status, body = asgi(app, "GET", "/video/0")
+        assert status == 409 and body["error"] == f"clip 'a': its video {video} is gone: restore it"
+        os.mkfifo(video)
+        status, body = asgi(app, "GET", "/video/0")
+        assert status == 409 and body["error"] == (f"clip 'a': its video {video} is a FIFO, not "
+                                                   f"a regular file")
+
+
 def test_a_session_refuses_clips_gone_or_changed(tmp_path: Path) -> None:
     """Sessions find their clips by id and fingerprint: the study's clips
     reordered is fine; a clip removed, or its ground truth or video changed, is

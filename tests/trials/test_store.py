@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import math
 import os
+import re
 import sqlite3
 from pathlib import Path
 
@@ -369,6 +370,21 @@ def test_store_url_and_bad_url(tmp_path: Path) -> None:
         assert store.sessions() == []
     with pytest.raises(ConfigError, match=r"cannot open the trial database nosuch://x"):
         Store("nosuch://x")
+
+
+def test_a_database_that_is_not_a_regular_file_is_refused(tmp_path: Path) -> None:
+    """A FIFO (or a folder) where the database should be: said so, by path or
+    by URL (SQLite had said "disk I/O error")."""
+    fifo = tmp_path / "f.sqlite"
+    os.mkfifo(fifo)
+    for db in (fifo, f"sqlite:///{fifo}"):
+        with pytest.raises(ConfigError, match=rf"cannot open the trial database "
+                                              rf"{re.escape(str(db))}: it is a FIFO, not a "
+                                              rf"regular file"):
+            Store(db)
+    (tmp_path / "d.sqlite").mkdir()
+    with pytest.raises(ConfigError, match=r"d\.sqlite: it is a folder, not a regular file"):
+        Store(tmp_path / "d.sqlite")
 
 
 def test_a_database_from_an_older_cosim_gains_the_new_columns(tmp_path: Path) -> None:

@@ -1,9 +1,14 @@
-"""The study file's practice clips and clip fingerprints (the rest of the
-study file: tests/trials/test_store.py)."""
+"""The study file's practice clips, clip fingerprints and files that are not
+regular files (the rest of the study file: tests/trials/test_store.py)."""
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import os
+import re
+import threading
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -80,3 +85,71 @@ def test_a_clips_fingerprint_is_its_ground_truth_and_video_size(tmp_path: Path) 
     assert c.fingerprint == {
         "ground_truth_sha256": hashlib.sha256((tmp_path / "c1.gt.csv").read_bytes()).hexdigest(),
         "video_bytes": (tmp_path / "c1.mp4").stat().st_size}
+
+
+def _fifo(p: Path) -> Path:
+    p.unlink(missing_ok=True)
+    os.mkfifo(p)
+    return p
+
+
+def _raised_within(fn: Callable[[], object], fifos: list[Path], timeout_s: float = 10.0
+                   ) -> BaseException | None:
+    """What ``fn()`` raised, run in a thread. If it is still running after
+    ``timeout_s`` (waiting on a FIFO), each FIFO is opened for writing and
+    closed, which lets the reader go on, and the test fails."""
+    raised: list[BaseException] = []
+
+    def run() -> None:
+        try:
+            fn()
+        except BaseException as e:  # noqa: BLE001 - handed to the test
+            raised.append(e)
+
+    th = threading.Thread(target=run, daemon=True)
+    th.start()
+    th.join(timeout_s)
+    if th.is_alive():
+        for f in fifos:
+            with contextlib.suppress(OSError):
+                os.close(os.open(f, os.O_WRONLY | os.O_NONBLOCK))
+        th.join(10)
+        pytest.fail(f"still waiting on a FIFO after {timeout_s} s")
+    return raised[0] if raised else None
+
+
+@pytest.mark.parametrize("fifo, match", [
+    ("study.yaml", r"study\.yaml: cannot read the study file: not a regular file"),
+    ("c1.mp4", r"study\.yaml:\d+: clips\[1\]\.video: 'c1\.mp4': the video must be an existing "
+               r"file inside the study's folders \(.*\); it is a FIFO, not a regular file"),
+    ("c1.gt.csv", r"study\.yaml:\d+: clips\[1\]\.ground_truth: 'c1\.gt\.csv': .*; it is a "
+                  r"FIFO, not a regular file"),
+    ("exp2/manifest.csv", r"study\.yaml:\d+: sweep: .*manifest\.csv: cannot read manifest: "
+                          r"not a regular file"),
+    ("exp2/run_0000/cameras/uav_nadir.mp4",
+     r"study\.yaml:\d+: sweep: .*manifest\.csv:2: video 'run_0000/cameras/uav_nadir\.mp4' must "
+     r"be an existing file inside the sweep folder; it is a FIFO, not a regular file"),
+])
+def test_a_fifo_among_the_study_files_is_refused_not_waited_on(tmp_path: Path, fifo: str,
+                                                               match: str) -> None:
+    if fifo.startswith("exp2/"):
+        _sweep(tmp_path / "exp2", "run_0000/cameras/uav_nadir.mp4")
+        p = tmp_path / "study.yaml"
+        p.write_text("protocol: disappear\nsweep: exp2\n")
+    else:
+        p = write_study(tmp_path, "protocol: disappear\n" + CLIPS)
+    f = _fifo(tmp_path / fifo)
+    e = _raised_within(lambda: load_study(p), [f])
+    assert isinstance(e, ConfigError), e
+    assert re.search(match, str(e)), str(e)
+
+
+def test_a_video_made_a_fifo_after_its_check_is_refused_not_waited_on(tmp_path: Path) -> None:
+    """The video's probe checks the file it opened: a FIFO put in place of a
+    video after the study's path check is refused, not waited on."""
+    from cosim.trials.study import _probe_video
+
+    f = _fifo(tmp_path / "v.mp4")
+    e = _raised_within(lambda: _probe_video(f), [f])
+    assert isinstance(e, ConfigError), e
+    assert str(e) == f"{f}: it is a FIFO, not a regular file"
