@@ -505,6 +505,13 @@ def local_hosts(host: str) -> list[str]:
     return LOCAL_HOSTS + ([h] if h not in LOCAL_HOSTS else [])
 
 
+def default_db(study_path: str | Path) -> Path:
+    """Where a study's responses go unless ``--db`` says: ``STUDY.sqlite`` beside
+    the study file (``studies/exp2.yaml``: ``studies/exp2.sqlite``; git ignores
+    ``*.sqlite``: participants' data stay out of the repository)."""
+    return Path(study_path).with_suffix(".sqlite")
+
+
 def serve(study_path: str | Path, host: str = "127.0.0.1", port: int = 8000,
           db_url: str | None = None, public: bool = False) -> None:
     """Run the app until Ctrl-C. ``db_url`` default: ``<study>.sqlite`` beside
@@ -515,7 +522,7 @@ def serve(study_path: str | Path, host: str = "127.0.0.1", port: int = 8000,
         raise ConfigError(f"refusing to listen on {host}: participants' responses would be "
                           f"reachable from other machines; pass --public to mean it")
     st = load_study(study_path)
-    db = db_url or str(Path(study_path).with_suffix(".sqlite"))
+    db = db_url or str(default_db(study_path))
     hosts = ["*"] if public else local_hosts(host)
     app = make_app(st, db, allowed_hosts=hosts)
     log.info("study %s: %d clips; responses in %s; experimenter page http://%s:%d/",

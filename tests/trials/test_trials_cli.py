@@ -9,6 +9,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from cosim.cli import main
 
 REPO = Path(__file__).resolve().parents[2]
@@ -62,3 +64,20 @@ def test_tracked_dot_responses_are_conspicuity_angles_too(tmp_path: Path, capsys
     assert main(["-q", "trials", "analyse", str(tracked), "--out", str(tmp_path / "a")]) == 0
     out = capsys.readouterr().out
     assert re.search(r"critical gap, truck: plateau: CG 39\.\d mm", out), out
+
+
+def test_a_studys_default_database_is_kept_out_of_the_repository() -> None:
+    """`cosim trials serve studies/exp2.yaml` (the README's) writes participants'
+    responses to studies/exp2.sqlite and SQLite's files beside it: git ignores
+    them all, so `git add` cannot publish them."""
+    from cosim.trials.server import default_db
+
+    if not (REPO / ".git").exists():
+        pytest.skip("not a git checkout")
+    db = default_db(REPO / "studies" / "exp2.yaml")
+    assert db == REPO / "studies" / "exp2.sqlite"
+    for name in (db.name, f"{db.name}-wal", f"{db.name}-shm", f"{db.name}-journal"):
+        path = db.with_name(name).relative_to(REPO)
+        r = subprocess.run(["git", "-C", str(REPO), "check-ignore", "--no-index", "-q",
+                            str(path)], check=False)
+        assert r.returncode == 0, f"git does not ignore {path}"
