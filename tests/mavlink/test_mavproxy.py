@@ -32,7 +32,9 @@ from cosim.logs import read_states  # noqa: E402
 from tests.mavlink.mavtest import GroundStation, free_udp_port  # noqa: E402
 from tests.mavlink.test_mav_run import _dist_m, _start_sim, _stop_sim  # noqa: E402
 
-LOITER, GUIDED = 12, 15  # ArduPlane custom modes
+LOITER, AUTO, GUIDED = 12, 10, 15  # ArduPlane custom modes
+#: the mission file the README's MAVProxy walkthrough loads
+SQUARE = Path(__file__).resolve().parents[2] / "examples" / "square.txt"
 
 
 class MavProxy:
@@ -165,11 +167,15 @@ def _heartbeat_modes(tlog: Path, sysid: int) -> list[int]:
 
 
 def test_mavproxy_sees_the_vehicles_sets_guided_and_flies_a_goto(tmp_path: Path) -> None:
+    """The README's walkthrough: modes, a guided goto, the mission file it
+    loads flown in AUTO; no 'fence breach' (no fence is uploaded), and no
+    altitude read-outs once `set altreadout 0` (the README's advice)."""
     with _session(tmp_path, 600, "10") as s:
         assert s.mp is not None
         mp = s.mp
         for sysid in (1, 2, 3):
             mp.wait_for(rf"Detected vehicle {sysid}:1 on link 0", 60)
+        quiet = mp.send("set altreadout 0")
         mark = mp.send("vehicle 3")
         mp.wait_for(r"Set vehicle 3", since=mark)
         # vehicles start in GUIDED: go LOITER first so that GUIDED is a change
@@ -181,7 +187,8 @@ def test_mavproxy_sees_the_vehicles_sets_guided_and_flies_a_goto(tmp_path: Path)
         seen = s.follow(3, lambda msgs: any(m.get_type() == "GLOBAL_POSITION_INT" for m in msgs))
         last = [m for m in seen if m.get_type() == "GLOBAL_POSITION_INT"][-1]
         target = (last.lat * 1e-7 - 2000.0 / 111_000.0, last.lon * 1e-7)  # about 2 km south
-        mark = mp.send(f"guided {target[0]:.7f} {target[1]:.7f} 300")  # 300 m above home
+        # 400 m above home: a climb of 100 m, which MAVProxy would read out
+        mark = mp.send(f"guided {target[0]:.7f} {target[1]:.7f} 400")
         mp.wait_for(r"Got COMMAND_ACK: DO_REPOSITION: ACCEPTED", since=mark)
 
         def dist(msgs: list[Any]) -> float:
@@ -190,6 +197,23 @@ def test_mavproxy_sees_the_vehicles_sets_guided_and_flies_a_goto(tmp_path: Path)
 
         seen = s.follow(3, lambda msgs: dist(msgs) <= 500, timeout_s=90)
         assert dist(seen) <= 500, f"vehicle 3 got no closer than {dist(seen):.0f} m"
+
+        mark = mp.send("vehicle 2")
+        mp.wait_for(r"Set vehicle 2", since=mark)
+        mark = mp.send(f"wp load {SQUARE}")
+        mp.wait_for(r"Loaded 6 waypoints from", since=mark)
+        mp.wait_for(r"Sent all 6 waypoints", since=mark)
+        mark = mp.send("mode AUTO")
+        mp.wait_for(r"Got COMMAND_ACK: DO_SET_MODE: ACCEPTED", since=mark)
+
+        def flying_item_1(msgs: list[Any]) -> bool:
+            return AUTO in _modes(msgs) and any(
+                m.get_type() == "MISSION_CURRENT" and m.seq == 1 for m in msgs)
+
+        seen = s.follow(2, flying_item_1)
+        assert flying_item_1(seen), f"vehicle 2 heartbeats {_modes(seen)} after AUTO"
+        assert "fence breach" not in mp.text()
+        assert not [x for x in mp.lines[quiet + 1:] if re.search(r"(^|> )height \d+$", x)]
     assert s.sim.returncode == 130, s.sim_stderr
     out = s.out
     assert _heartbeat_modes(out / "uav2.tlog", 3)[-2:] == [LOITER, GUIDED]
@@ -206,6 +230,7 @@ def test_mavproxy_sees_the_vehicles_sets_guided_and_flies_a_goto(tmp_path: Path)
 def test_signed_run_ignores_mavproxy_until_it_has_the_key(tmp_path: Path) -> None:
     keyfile = tmp_path / "key"
     keyfile.write_text("correct-horse\n")
+    keyfile.chmod(0o600)
     with _session(tmp_path, 300, "5", "--mavlink-signing-key-file", str(keyfile)) as s:
         assert s.mp is not None
         mp = s.mp
