@@ -520,20 +520,30 @@ def _validate_file(f: str, deep: bool, workers: int | None) -> tuple[Scenario, i
     with ``deep``, build the vehicles of each distinct combination. Returns
     the first combination's scenario, the combinations checked and built."""
     from cosim.scenario import load_scenario
-    from cosim.sweep.spec import format_value, read_sweep
+    from cosim.scenario.schema import Memo, check_scenario
+    from cosim.sweep.spec import read_sweep
 
-    spec = read_sweep(f)
-    points = spec.points() if spec.values else [None]
-    problems: list[str] = []
+    memo = Memo()  # the file parsed once; parts the same in two combinations checked once
+    data, lines, _, _ = memo.parsed(memo.read(Path(f)), f)
+    spec = read_sweep(f, (data, lines))
+    points: list[dict[str, Any] | None] = list(spec.points()) if spec.values else [None]
+    found: dict[str, list[int]] = {}  # problem -> the combinations that have it
     more = 0  # problems counted beyond those kept
     first: Scenario | None = None
     seen: set[tuple[Any, ...]] = set()
     built = 0
-    for point in points:
-        label = "" if point is None or len(points) == 1 else "sweep combination " + ", ".join(
-            f"{n}={format_value(point[n])}" for n in spec.swept) + ": "
+    t0 = last = time.monotonic()
+    for done, point in enumerate(points):
+        if time.monotonic() - last >= 5.0:
+            last = time.monotonic()
+            log.info("%s: %d of %d sweep combinations checked (%.0f s)", f, done, len(points),
+                     last - t0)
+        problems: list[str] = []
         try:
-            scn = load_scenario(f, sweep_point=point)
+            if first is not None and not deep:  # only the problems matter
+                check_scenario(f, sweep_point=point, memo=memo)
+                continue
+            scn = load_scenario(f, sweep_point=point, memo=memo)
             if first is None:
                 first = scn
             key = tuple((v.model, v.vehicle_class, v.alt_msl_m, v.airspeed_mps, v.trim,
@@ -543,14 +553,57 @@ def _validate_file(f: str, deep: bool, workers: int | None) -> tuple[Scenario, i
                 built += 1
                 _build_all(scn, f, workers)
         except ConfigError as e:
-            problems += [f"{label}{m}" for m in e.problems]
-            more += e.more
+            problems, more = e.problems, more + e.more
         except (CosimError, OSError) as e:
-            problems.append(f"{label}{f}: {e}")
-    if problems:
-        raise ConfigError(problems, more)
+            problems = [f"{f}: {e}"]
+        for m in problems:
+            where = found.setdefault(m, [])
+            if not where or where[-1] != done:
+                where.append(done)
+    if found:
+        def line(problem: str) -> int:  # in file order, as one combination's are
+            m = re.match(rf"{re.escape(f)}:(\d+): ", problem)
+            return int(m.group(1)) if m else 0
+
+        raise ConfigError([_in_combinations(m, [points[i] for i in rows], len(points),
+                                            spec.values, spec.swept)
+                           for m, rows in sorted(found.items(), key=lambda kv: line(kv[0]))],
+                          more)
     assert first is not None
     return first, len(points), built
+
+
+def _in_combinations(problem: str, where: list[dict[str, Any] | None], total: int,
+                     values: dict[str, tuple[Any, ...]], swept: Sequence[str]) -> str:
+    """A problem found in the sweep combinations ``where`` (of ``total``; the
+    sweep's ``values``), said once: ``sweep combinations speed_kt=400,
+    alt_agl_m=any (12 of 36): ...``; combinations that do not make such a
+    product are named by the first and counted."""
+    from cosim.sweep.spec import format_value
+
+    points = [p for p in where if p is not None]
+    if total == 1 or not points:  # no sweep
+        return problem
+    if len(points) == total:
+        return f"every sweep combination: {problem}"
+    seen = {n: list(dict.fromkeys(p[n] for p in points)) for n in swept}
+
+    def named(n: str, vals: list[Any]) -> str:
+        if len(vals) > 1 and len(vals) == len(values[n]):
+            return f"{n}=any"
+        return f"{n}={'|'.join(format_value(v) for v in vals)}"
+
+    product = 1
+    for vals in seen.values():
+        product *= len(vals)
+    if len(points) == 1:
+        return f"sweep combination {', '.join(named(n, v) for n, v in seen.items())}: {problem}"
+    if product == len(points):  # every combination of the values seen
+        return (f"sweep combinations {', '.join(named(n, v) for n, v in seen.items())} "
+                f"({len(points)} of {total}): {problem}")
+    first = ", ".join(named(n, [points[0][n]]) for n in swept)
+    return (f"sweep combination {first} (and {len(points) - 1} other "
+            f"combination{'s' * (len(points) > 2)}): {problem}")
 
 
 def _build_all(scn: Scenario, fname: str, workers: int | None) -> None:

@@ -83,9 +83,20 @@ class BuildError(CosimError):
         plural = "s" if n != 1 or self.total is not None else ""
         lines = [f"{n}{of} vehicle{plural} could not be built and trimmed "
                  f"(try another airspeed or altitude, or trim: false):"]
-        lines += [f"  {msg}" for _, msg in self.failures[:self.SHOWN]]
-        if n > self.SHOWN:
-            lines.append(f"  ... and {n - self.SHOWN} more")
+        # vehicles that failed for the same reason are one line
+        same: dict[str, list[str]] = {}
+        for vid, msg in self.failures:
+            head = f"vehicle {vid!r}"
+            key = "\0" + msg[len(head):] if msg.startswith(head) else msg
+            same.setdefault(key, []).append(vid)
+        for msg, ids in list(same.items())[:self.SHOWN]:
+            if not msg.startswith("\0") or len(ids) == 1:
+                lines += [f"  {msg.replace(chr(0), f'vehicle {v!r}', 1)}" for v in ids]
+                continue
+            shown = ", ".join(ids[:8]) + (f", ... ({len(ids)} in all)" if len(ids) > 8 else "")
+            lines.append(f"  vehicles {shown}{msg[1:]}")
+        if len(same) > self.SHOWN:
+            lines.append(f"  ... and {len(same) - self.SHOWN} more")
         return "\n".join(lines)
 
 

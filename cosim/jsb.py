@@ -8,6 +8,8 @@ catalog. It does not step, trim or schedule anything.
 
 from __future__ import annotations
 
+import contextlib
+import difflib
 import hashlib
 import logging
 import os
@@ -15,6 +17,7 @@ import re
 import shutil
 import tempfile
 import threading
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -73,11 +76,39 @@ class _LoggingBridge(jsbsim.FGLogger):
     def flush(self) -> None:
         text = "".join(self._parts).strip()
         self._parts = []
-        if text and self._log.isEnabledFor(self._level):
+        if not text:
+            return
+        held = getattr(_quiet, "held", None)
+        if held is not None and self._level >= logging.WARNING:
+            held.append((self._level, f"{self._where}{text}"))
+        elif self._log.isEnabledFor(self._level):
             self._log.log(self._level, "%s%s", self._where, text)
 
 
 _quiet = threading.local()
+
+
+@contextlib.contextmanager
+def held_messages() -> Iterator[list[tuple[int, str]]]:
+    """JSBSim's warnings and errors in this thread held back in the list
+    yielded ((level, text), in order), for a caller that reports them as part
+    of its own error (a trim that fails says why once, in its message, rather
+    than JSBSim printing it for every vehicle). The caller logs what it does
+    not report (``release``)."""
+    outer = getattr(_quiet, "held", None)
+    held: list[tuple[int, str]] = []
+    _quiet.held = held
+    try:
+        yield held
+    finally:
+        _quiet.held = outer
+
+
+def release(held: list[tuple[int, str]]) -> None:
+    """Log messages ``held_messages`` held back, as JSBSim would have."""
+    bridge_log = logging.getLogger("cosim.jsbsim")
+    for level, text in held:
+        bridge_log.log(level, "%s", text)
 
 
 def quiet_jsbsim() -> None:
@@ -166,8 +197,13 @@ def find_model(name: str, extra: tuple[str, ...] = ()) -> ModelInfo:
     if name in cat:
         return cat[name]
     names = sorted(cat, key=str.lower)
+    lower = {n.lower(): n for n in names}
     close = [n for n in names if n.lower() == name.lower()]
-    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    if not close:  # the nearest spellings, best first (ties in name order)
+        scored = sorted((-difflib.SequenceMatcher(None, name.lower(), k).ratio(), v)
+                        for k, v in lower.items())
+        close = [v for score, v in scored[:3] if -score >= 0.75]
+    hint = f" (did you mean {' or '.join(repr(c) for c in close)}?)" if close else ""
     raise ModelNotFound(f"unknown aircraft model {name!r}{hint}; available: {', '.join(names)}")
 
 

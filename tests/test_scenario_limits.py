@@ -313,10 +313,13 @@ def test_aircraft_path_entries_must_hold_models(tmp_path: Path) -> None:
 
 # --- deep validation and build failures ---------------------------------------------
 
+# c172x: JSBSim's own model, without a cosim profile, so no envelope says before
+# the build that it cannot fly at 4-5 kt (c172p's profile does: a static check)
 UNTRIMMABLE = scenario(vehicles=VEHICLE + VEHICLE.replace("id: a", "id: b").replace(
-    "airspeed_kt: 90", "airspeed_kt: 5").replace("north_m: 0", "north_m: 300") + """\
+    "airspeed_kt: 90", "airspeed_kt: 5").replace("north_m: 0", "north_m: 300").replace(
+    "c172p", "c172x") + """\
   - id: c
-    model: c172p
+    model: c172x
     count: 2
     formation: {type: line, spacing_m: 100}
     init: {north_m: 900, east_m: 0, alt_agl_m: 500, heading_deg: 0, airspeed_kt: 4}
@@ -333,7 +336,7 @@ def test_validate_deep_builds_and_trims_every_vehicle(tmp_path: Path, capsys) ->
     assert [e.split(": vehicle ")[0] for e in err] == [f"{p}:8: vehicles[1]",
                                                        f"{p}:9: vehicles[2]",
                                                        f"{p}:9: vehicles[2]"]
-    assert "'b' (c172p): JSBSim could not trim at 2.6 m/s TAS (5 kt)" in err[0]
+    assert "'b' (c172x): JSBSim could not trim at 2.6 m/s TAS (5 kt)" in err[0]
     assert "'c0'" in err[1] and "'c1'" in err[2]
     p.write_text(scenario())
     assert main(["validate", "--deep", str(p)]) == 0
@@ -347,11 +350,48 @@ def test_run_reports_every_untrimmable_vehicle_at_once(tmp_path: Path, capsys) -
     assert main(["run", str(p), "--out", str(out), "--workers", "2", "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert "3 of 4 vehicles could not be built and trimmed" in err
-    for vid, kt in (("b", 5), ("c0", 4), ("c1", 4)):
-        assert f"vehicle '{vid}' (c172p): JSBSim could not trim" in err
-        assert f"({kt} kt), 900.0 m MSL (500.0 m above the ground)" in err
+    assert "vehicle 'b' (c172x): JSBSim could not trim at 2.6 m/s TAS (5 kt)" in err
+    # the two that fail for the same reason are one line, JSBSim's reason in it
+    assert re.search(r"vehicles c0, c1 \(c172x\): JSBSim could not trim at 2.1 m/s TAS "
+                     r"\(4 kt\), 900.0 m MSL \(500.0 m above the ground\), heading 0.0 deg: "
+                     r"Trim Failed", err)
+    assert "cosim.jsbsim" not in err  # ... and JSBSim does not print it for each vehicle
     summary = json.loads((out / "summary.json").read_text())
     assert summary["stop_reason"] == "error" and "BuildError" in summary["error"]
+
+
+def test_validate_refuses_a_start_outside_the_envelope(tmp_path: Path, capsys) -> None:
+    """A fixed-wing whose profile gives its envelope (the quickstart's c172p:
+    55..140 kt) and starts trimmed below it is a static error, with its line,
+    not a surprise of --deep or of the run."""
+    quick = Path(__file__).resolve().parent.parent / "scenarios" / "quickstart.yaml"
+    p = tmp_path / "slow.yaml"
+    p.write_text(quick.read_text().replace("airspeed_kt: 100", "airspeed_kt: 20"))
+    assert main(["validate", str(p)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1, err  # said once for the entry, not for each of 5 vehicles
+    assert re.search(r"slow\.yaml:15: vehicles\[0\]\.init: starts at 20\.0 kt, outside the "
+                     r"envelope of c172p \(55\.\.140 kt TAS\)", err)
+    p.write_text(quick.read_text().replace("airspeed_kt: 100", "airspeed_kt: 20")
+                 .replace("model: c172p\n", "model: c172p\n    trim: false\n"))
+    assert main(["validate", str(p)]) == 0  # not trimmed: no envelope to be in
+    p.write_text(quick.read_text())
+    assert main(["validate", str(p)]) == 0
+
+
+def test_a_vehicle_in_error_is_not_also_missing(tmp_path: Path, capsys) -> None:
+    """A misspelt model is one problem: the schedule, the swarm or the cameras
+    naming that vehicle are not also told it matches nothing."""
+    quick = Path(__file__).resolve().parent.parent / "scenarios" / "quickstart.yaml"
+    p = tmp_path / "typo.yaml"
+    p.write_text(quick.read_text().replace("model: c172p", "model: c172"))
+    assert main(["validate", str(p)]) == 2
+    err = capsys.readouterr().err
+    assert "unknown aircraft model 'c172' (did you mean 'c172p'" in err
+    assert "matches no vehicle" not in err and err.count("\n") == 1, err
+    p.write_text(quick.read_text().replace("vehicles: c172-2", "vehicles: c172-9"))
+    assert main(["validate", str(p)]) == 2  # a real mismatch is still said
+    assert "'c172-9' matches no vehicle" in capsys.readouterr().err
 
 
 def test_a_long_build_shows_progress(caplog, specs) -> None:

@@ -9,6 +9,7 @@ This module owns the schema; it never steps an FDM.
 
 from __future__ import annotations
 
+import functools
 import math
 import re
 from collections.abc import Callable, Mapping, Sequence
@@ -199,11 +200,29 @@ class Scenario:
 class _Ctx:
     """Collects problems with file and line."""
 
-    def __init__(self, fname: str, lines: dict[P, int]) -> None:
+    def __init__(self, fname: str, lines: dict[P, int], vehicles: Any = None) -> None:
         self.fname = fname
         self.lines = lines
         self.problems: list[tuple[int, str]] = []
         self.more = 0  # problems found beyond MAX_PROBLEMS_KEPT (counted only)
+        self.vehicles = vehicles  # the ``vehicles:`` node as written (``declared``)
+        self._declared: list[str] | None = None
+
+    def declared(self) -> list[str]:
+        """The vehicle ids the ``vehicles:`` entries ask for, those in error
+        included (a pattern matching one of them has been answered by that
+        entry's own problem)."""
+        if self._declared is None:
+            self._declared = []
+            for vd in self.vehicles if isinstance(self.vehicles, list) else []:
+                vid = vd.get("id") if isinstance(vd, dict) else None
+                if not isinstance(vid, str):
+                    continue
+                n = vd.get("count", 1)
+                n = n if isinstance(n, int) and 1 <= n <= lim.MAX_ALL_VEHICLES else 1
+                w = len(str(n - 1))
+                self._declared += [vid] if n == 1 else [f"{vid}{j:0{w}d}" for j in range(n)]
+        return self._declared
 
     def line(self, path: P) -> int:
         while path and path not in self.lines:
@@ -211,10 +230,14 @@ class _Ctx:
         return self.lines.get(path, 1)
 
     def err(self, path: P, msg: str) -> None:
+        self.add((self.line(path), f"{format_path(path)}: {msg}"))
+
+    def add(self, problem: tuple[int, str]) -> None:
+        """Keep ``(line, message)``, or count it beyond ``MAX_PROBLEMS_KEPT``."""
         if len(self.problems) >= lim.MAX_PROBLEMS_KEPT:
             self.more += 1
             return
-        self.problems.append((self.line(path), f"{format_path(path)}: {msg}"))
+        self.problems.append(problem)
 
     def format(self) -> list[str]:
         return [f"{self.fname}:{ln}: {m}" for ln, m in sorted(self.problems, key=lambda x: x[0])]
@@ -402,27 +425,108 @@ def _prop_values(ctx: _Ctx, d: Any, path: P) -> list[tuple[str, float]]:
     return out
 
 
+class Memo:
+    """Work shared by the loads of one scenario file at many sweep
+    combinations (``cosim validate`` and ``cosim sweep`` load every one): the
+    file is read and parsed once, and a part whose input, once the
+    placeholders are substituted, equals that of an earlier combination is not
+    checked again: its result is reused and its problems reported again,
+    exactly as a fresh check would report them. At most ``MAX_PARTS`` results
+    of each part are kept (the most recent)."""
+
+    MAX_PARTS = 64
+
+    def __init__(self) -> None:
+        self._texts: dict[str, str] = {}
+        self._parsed: dict[str, tuple[Any, dict[P, int], list[tuple[int, str]],
+                                      dict[str, str]]] = {}
+        self._parts: dict[str, dict[Any, tuple[Any, list[tuple[int, str]], int]]] = {}
+        #: (model, aircraft folder) -> an FDM whose properties are looked up
+        self.fdms: dict[tuple[str, str], Any] = {}
+        self.hits = 0  # parts reused (for tests and progress)
+
+    def read(self, path: Path) -> str:
+        key = str(path)
+        if key not in self._texts:
+            self._texts = {key: read_scenario_text(path)}  # one file at a time
+        return self._texts[key]
+
+    def parsed(self, text: str, fname: str
+               ) -> tuple[Any, dict[P, int], list[tuple[int, str]], dict[str, str]]:
+        """(data, lines, duplicate-key problems, placeholders) of ``text``.
+        The data is shared: callers must not change it (``substitute`` copies)."""
+        if text not in self._parsed:
+            from cosim.sweep.spec import protect_placeholders  # ${...}: sweep values
+
+            protected, placeholders = protect_placeholders(text)
+            try:
+                data, lines, dups = load_with_lines(protected)
+            except YamlProblem as e:
+                raise ConfigError([f"{fname}:{ln}: {m}" for ln, m in e.problems]) from None
+            self._parsed = {text: (data, lines, dups, placeholders)}
+        return self._parsed[text]
+
+    def part(self, name: str, key: Any, ctx: _Ctx, check: Callable[[_Ctx], Any]) -> Any:
+        """``check(sub)`` (a part's check, reporting into ``sub``), or its
+        result for the same ``key`` kept from an earlier call; its problems
+        are reported into ``ctx`` either way."""
+        kept = self._parts.setdefault(name, {})
+        if key in kept:
+            self.hits += 1
+            result, problems, more = kept.pop(key)
+        else:
+            sub = _Ctx(ctx.fname, ctx.lines, ctx.vehicles)
+            result = check(sub)
+            problems, more = sub.problems, sub.more
+            if len(kept) >= self.MAX_PARTS:
+                del kept[next(iter(kept))]
+        kept[key] = (result, problems, more)  # most recent last
+        for problem in problems:
+            ctx.add(problem)
+        ctx.more += more
+        return result
+
+
 def load_scenario(path: str | Path, check_properties: bool = True,
-                  sweep_point: dict[str, Any] | None = None) -> Scenario:
+                  sweep_point: dict[str, Any] | None = None, memo: Memo | None = None
+                  ) -> Scenario:
     """Read, validate and resolve a scenario file; ``ConfigError`` lists every problem.
-    ``sweep_point``: the values of the ``sweep:`` names (default: the first of each)."""
+    ``sweep_point``: the values of the ``sweep:`` names (default: the first of each).
+    ``memo``: shared by the loads of one file at several sweep points (see ``Memo``)."""
     p = Path(path)
-    return parse_scenario(read_scenario_text(p), str(p), check_properties=check_properties,
-                          sweep_point=sweep_point)
+    text = memo.read(p) if memo is not None else read_scenario_text(p)
+    return parse_scenario(text, str(p), check_properties=check_properties,
+                          sweep_point=sweep_point, memo=memo)
+
+
+def check_scenario(path: str | Path, sweep_point: dict[str, Any] | None = None,
+                   memo: Memo | None = None) -> None:
+    """``load_scenario`` without its result: ``ConfigError`` listing every
+    problem, or nothing. Quicker where only the problems matter (the vehicles'
+    random seeds are not derived)."""
+    p = Path(path)
+    text = memo.read(p) if memo is not None else read_scenario_text(p)
+    _parse(text, str(p), True, sweep_point, memo, seeds=False)
 
 
 def parse_scenario(text: str, fname: str = "<scenario>", check_properties: bool = True,
-                   sweep_point: dict[str, Any] | None = None) -> Scenario:
-    from cosim.sweep.spec import protect_placeholders, substitute  # ${...}: sweep values
+                   sweep_point: dict[str, Any] | None = None, memo: Memo | None = None
+                   ) -> Scenario:
+    scn = _parse(text, fname, check_properties, sweep_point, memo, seeds=True)
+    assert scn is not None
+    return scn
 
-    text, placeholders = protect_placeholders(text)
-    try:
-        data, lines, dups = load_with_lines(text)
-    except YamlProblem as e:
-        raise ConfigError([f"{fname}:{ln}: {m}" for ln, m in e.problems]) from None
+
+def _parse(text: str, fname: str, check_properties: bool, sweep_point: dict[str, Any] | None,
+           memo: Memo | None, seeds: bool) -> Scenario | None:
+    from cosim.sweep.spec import substitute  # ${...}: sweep values
+
+    memo = memo or Memo()
+    data, lines, dups, placeholders = memo.parsed(text, fname)
     ctx = _Ctx(fname, lines)
     ctx.problems.extend(dups)
     data = substitute(data, ctx.err, sweep_point, fname, placeholders)
+    ctx.vehicles = data.get("vehicles") if isinstance(data, dict) else None
     top = _Reader(ctx, data, (), ("schema_version", "name", "description", "origin", "rates",
                                   "duration_s", "seed", "aircraft_path", "plot", "mavlink",
                                   "vehicles", "schedule", *SECTIONS))
@@ -450,23 +554,42 @@ def parse_scenario(text: str, fname: str = "<scenario>", check_properties: bool 
     else:
         apath = _aircraft_path(ctx, raw_ap, Path(fname).resolve().parent)
 
-    vehicles = _vehicles(ctx, top.d.get("vehicles", _MISSING), origin, tuple(apath), seed or 0)
+    raw_vehicles, raw_schedule = top.d.get("vehicles", _MISSING), top.d.get("schedule", [])
+    # the vehicles and the schedule are most of the work: a sweep's combinations
+    # that give them the same input share one check (``Memo``)
+    vkey = (repr(raw_vehicles), origin, tuple(apath), not ctx.problems)
+    vehicles = memo.part("vehicles", vkey, ctx, lambda sub: _vehicles(
+        sub, raw_vehicles, origin, tuple(apath), separation=vkey[-1]))
     if duration is None:
         duration = 1.0
-    schedule = _schedule(ctx, top.d.get("schedule", []), vehicles, rates, duration)
+    schedule = memo.part("schedule", (repr(raw_schedule), vkey, rates, duration), ctx,
+                         lambda sub: _schedule(sub, raw_schedule, vehicles, rates, duration))
     if mavlink is not None and "vehicles" in mavlink:
         _mavlink_vehicles(ctx, mavlink, vehicles)
     if check_properties:
-        _check_properties(ctx, vehicles, schedule)
+        _check_properties(ctx, vehicles, schedule, memo.fdms)
     sections: dict[str, Any] = {}
     info = SectionInfo(ctx, origin, rates, duration, [v for v, _ in vehicles], Path(fname),
                        mavlink, seed or 0, sections)
+    earlier: list[tuple[str, str]] = []  # the sections parsed so far, as written
     for key in SECTIONS:
         if key in top.d:
-            sections[key] = _section_parser(key)(info, top.d[key], (key,))
+            raw = repr(top.d[key])
+            # a section's parser sees its own node, the scenario so far and the
+            # sections before it: with the same of each, it gives the same
+            skey = (key, raw, origin, rates, duration, vkey, repr(mavlink), seed,
+                    tuple(earlier), len(ctx.problems))
+            parsed, changed = memo.part("section", skey, ctx, functools.partial(
+                _parse_section, info, key=key, node=top.d[key]))
+            sections[key] = parsed
+            sections.update(changed)
+            earlier.append((key, raw))
     vehicles = _with_world(ctx, vehicles, sections, origin)
     if ctx.problems:
         raise ctx.error()
+    if not seeds:
+        return None
+    vehicles = _derive_seeds(vehicles, seed or 0)
     return Scenario(name=name or Path(fname).stem, path=fname, origin=origin, rates=rates,
                     duration_s=duration,
                     seed=seed, vehicles=tuple(v for v, _ in vehicles), schedule=tuple(schedule),
@@ -505,6 +628,21 @@ SECTIONS: dict[str, str] = {
     "obstacles": "cosim.obstacles:parse_obstacles",
     "search": "cosim.search.spec:parse_search",  # after targets: its fires join them
 }
+
+
+def _parse_section(info: SectionInfo, ctx: _Ctx, *, key: str, node: Any
+                   ) -> tuple[Any, dict[str, Any]]:
+    """Section ``key`` parsed from ``node``, its problems reported into ``ctx``;
+    returns the parsed object and what it changed in the sections before it."""
+    before = dict(info.sections)
+    outer, info.ctx = info.ctx, ctx
+    info.earlier_problems = len(outer.problems)
+    try:
+        parsed = _section_parser(key)(info, node, (key,))
+    finally:
+        info.ctx, info.earlier_problems = outer, 0
+    changed = {k: v for k, v in info.sections.items() if before.get(k) is not v and k != key}
+    return parsed, changed
 
 
 def _section_parser(key: str) -> Callable[[SectionInfo, Any, P], Any]:
@@ -549,9 +687,13 @@ class SectionInfo:
         """Vehicle rows chosen by ``'all'``, an id, a pattern or a list of them."""
         return _select(self.ctx, sel, path, self.ids)
 
+    #: problems found before the section being parsed (reported elsewhere)
+    earlier_problems: int = 0
+
     @property
     def problems(self) -> int:
-        return len(self.ctx.problems)
+        """Problems found so far in the whole scenario."""
+        return self.earlier_problems + len(self.ctx.problems)
 
 
 def _mavlink(ctx: _Ctx, d: Any) -> dict[str, Any] | None:
@@ -629,8 +771,26 @@ def _rates(ctx: _Ctx, d: Any) -> Rates:
     return Rates()  # reported: the rest of the file is checked against the defaults
 
 
-def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: int
-              ) -> list[tuple[VehicleSpec, P]]:
+#: a vehicle's ``random_seed`` until ``_derive_seeds`` derives it from the scenario's
+_DERIVED_SEED = -1
+
+
+def _derive_seeds(vehicles: list[tuple[VehicleSpec, P]], seed: int
+                  ) -> list[tuple[VehicleSpec, P]]:
+    """Each vehicle without a ``random_seed`` of its own given one derived from
+    the scenario's ``seed`` and its row."""
+    import dataclasses
+
+    return [(v if v.random_seed != _DERIVED_SEED else dataclasses.replace(
+        v, random_seed=int(np.random.SeedSequence([seed, i]).generate_state(1)[0]
+                           % (2**31 - 1))), p) for i, (v, p) in enumerate(vehicles)]
+
+
+def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...],
+              separation: bool = True) -> list[tuple[VehicleSpec, P]]:
+    """The vehicle entries, each expanded by its ``count`` and formation (seeds
+    to derive: ``_derive_seeds``); ``separation``: check the start positions
+    are apart too (when nothing else is wrong)."""
     path: P = ("vehicles",)
     if d is _MISSING:
         ctx.err((), "missing required key 'vehicles'")
@@ -789,6 +949,7 @@ def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: i
             lats, lons = np.array([lat]), np.array([lon])
         width = len(str(count - 1))
         rows = []
+        said: set[str] = set()  # a class's start problems, once an entry
         for j in range(count):
             uid = vid if count == 1 else f"{vid}{j:0{width}d}"
             if len(uid) > lim.MAX_NAME_CHARS:
@@ -800,21 +961,25 @@ def _vehicles(ctx: _Ctx, d: Any, origin: Origin, apath: tuple[str, ...], seed: i
                                       f"{format_path(seen[uid])}, line {ctx.line(seen[uid])})")
                 continue
             seen[uid] = vp
-            index = len(out)
-            vseed = fixed_seed if fixed_seed is not None and count == 1 else int(
-                np.random.SeedSequence([seed, index]).generate_state(1)[0] % (2**31 - 1))
-            out.append((VehicleSpec(
+            # derived from the scenario's seed later (``_derive_seeds``)
+            vseed = fixed_seed if fixed_seed is not None and count == 1 else _DERIVED_SEED
+            spec = VehicleSpec(
                 id=uid, model=model.name, aircraft_dir=model.aircraft_dir,
                 model_source=model.source, lat_deg=float(lats[j]), lon_deg=float(lons[j]),
                 vehicle_class=vclass.name, class_params=dict(params),
                 alt_msl_m=float(alts[j]), heading_deg=float(heading) % 360.0,
                 airspeed_mps=float(speed), terrain_alt_m=ground, trim=trim,
                 random_seed=vseed, initial_props=tuple(props),
-                profile=dict(model.profile or {})), vp))
+                profile=dict(model.profile or {}))
+            for problem in vclass.check_start(spec):
+                if problem not in said:
+                    said.add(problem)
+                    ctx.err(vp + ("init",), problem)
+            out.append((spec, vp))
             rows.append(j)
         where_ned.append(np.stack([np.broadcast_to(north, (count,))[rows],
                                    np.broadcast_to(east, (count,))[rows], alts[rows]], axis=1))
-    if where_ned and not ctx.problems:
+    if where_ned and separation and not ctx.problems:
         _check_separation(ctx, out, np.concatenate(where_ned))
     return out
 
@@ -898,7 +1063,7 @@ def _select(ctx: _Ctx, sel: Any, path: P, ids: list[str]) -> list[int]:
     chosen: set[int] = set()
     for pat in pats:
         hits = [i for i, v in enumerate(ids) if fnmatchcase(v, pat)]
-        if not hits:
+        if not hits and not any(fnmatchcase(v, pat) for v in ctx.declared()):
             shown = ", ".join(ids[:8]) + (", ..." if len(ids) > 8 else "")
             ctx.err(path, f"{pat!r} matches no vehicle (vehicles: {shown})")
         chosen.update(hits)
@@ -982,11 +1147,11 @@ def _check_commands(ctx: _Ctx, schedule: list[ScheduleItem], specs: list[Vehicle
 
 
 def _check_properties(ctx: _Ctx, vehicles: list[tuple[VehicleSpec, P]],
-                      schedule: list[ScheduleItem]) -> None:
+                      schedule: list[ScheduleItem], fdms: dict[tuple[str, str], Any]) -> None:
     """Every property written must exist, and be writable, in every model it is
     written to (JSBSim silently creates misspelled properties and silently
-    ignores writes to read-only ones)."""
-    fdms: dict[tuple[str, str], Any] = {}
+    ignores writes to read-only ones). ``fdms``: one FDM of each model, built
+    when first needed (kept by the caller: only read, never stepped)."""
 
     def fdm_of(spec: VehicleSpec) -> Any:
         key = (spec.model, spec.aircraft_dir)

@@ -45,6 +45,7 @@ single values, so ``scenario.resolved.yaml`` records it and loads again.
 from __future__ import annotations
 
 import ast
+import functools
 import hashlib
 import itertools
 import logging
@@ -192,6 +193,27 @@ def _eval(node: ast.AST, env: Mapping[str, Scalar]) -> Any:
     raise _ExprError(f"not allowed in a placeholder: {ast.unparse(node)[:80]!r}")
 
 
+@functools.lru_cache(maxsize=4096)
+def _parse(expr: str) -> tuple[ast.Expression | None, frozenset[str], str | None]:
+    """(syntax tree, names it mentions, problem) of one expression, parsed once
+    however many sweep combinations evaluate it. Every name mentioned counts as
+    used, also in a branch not taken, and the names of an expression that
+    cannot be parsed too, so a typo is not also reported as "unused"."""
+    if len(expr) > MAX_EXPR_CHARS:
+        words = frozenset(re.findall(r"[A-Za-z_][A-Za-z0-9_]*", expr[:MAX_EXPR_CHARS * 4]))
+        return None, words, f"longer than {MAX_EXPR_CHARS} characters"
+    try:
+        tree = ast.parse(expr.strip(), mode="eval")
+    except (SyntaxError, ValueError, RecursionError, MemoryError):
+        return None, frozenset(re.findall(r"[A-Za-z_][A-Za-z0-9_]*", expr)), \
+            "not a valid expression"
+    nodes = list(ast.walk(tree))
+    names = frozenset(n.id for n in nodes if isinstance(n, ast.Name))
+    if len(nodes) > MAX_EXPR_NODES:
+        return None, names, f"more than {MAX_EXPR_NODES} terms"
+    return tree, names, None
+
+
 def evaluate(expr: str, env: Mapping[str, Scalar], used: set[str] | None = None) -> Scalar:
     """The value of one placeholder's expression; ``used`` collects the names it
     reads. The work is bounded: at most ``MAX_EXPR_CHARS`` characters and
@@ -199,20 +221,10 @@ def evaluate(expr: str, env: Mapping[str, Scalar], used: set[str] | None = None)
     (powers checked before they are computed), text within ``MAX_STR_CHARS``;
     anything beyond is an ``_ExprError``, found in microseconds."""
     used = used if used is not None else set()
-    if len(expr) > MAX_EXPR_CHARS:
-        used.update(re.findall(r"[A-Za-z_][A-Za-z0-9_]*", expr[:MAX_EXPR_CHARS * 4]))
-        raise _ExprError(f"longer than {MAX_EXPR_CHARS} characters")
-    try:
-        tree = ast.parse(expr.strip(), mode="eval")
-    except (SyntaxError, ValueError, RecursionError, MemoryError):
-        # record the names it mentions, so a typo is not also reported as "unused"
-        used.update(re.findall(r"[A-Za-z_][A-Za-z0-9_]*", expr))
-        raise _ExprError("not a valid expression") from None
-    # every name the expression mentions counts as used, also in a branch not taken
-    nodes = list(ast.walk(tree))
-    used.update(n.id for n in nodes if isinstance(n, ast.Name))
-    if len(nodes) > MAX_EXPR_NODES:
-        raise _ExprError(f"more than {MAX_EXPR_NODES} terms")
+    tree, names, problem = _parse(expr)
+    used.update(names)
+    if problem is not None or tree is None:
+        raise _ExprError(problem or "not a valid expression")
     try:
         value = _eval(tree, env)
     except _ExprError:
@@ -424,8 +436,11 @@ class SweepSpec:
         return name
 
 
-def read_sweep(path: str | Path) -> SweepSpec:
-    """The ``sweep:`` section of a scenario file; ``ConfigError`` with lines."""
+def read_sweep(path: str | Path, parsed: tuple[Any, dict[P, int]] | None = None
+               ) -> SweepSpec:
+    """The ``sweep:`` section of a scenario file; ``ConfigError`` with lines.
+    ``parsed``: the file's (data, lines) when the caller has parsed it already
+    (placeholders protected)."""
     from cosim.scenario.yaml_lines import (
         YamlProblem,
         format_path,
@@ -434,11 +449,14 @@ def read_sweep(path: str | Path) -> SweepSpec:
     )
 
     p = Path(path)
-    text = read_scenario_text(p)
-    try:
-        data, lines, _ = load_with_lines(protect_placeholders(text)[0])
-    except YamlProblem as e:
-        raise ConfigError([f"{p}:{ln}: {m}" for ln, m in e.problems]) from None
+    if parsed is None:
+        text = read_scenario_text(p)
+        try:
+            data, lines, _ = load_with_lines(protect_placeholders(text)[0])
+        except YamlProblem as e:
+            raise ConfigError([f"{p}:{ln}: {m}" for ln, m in e.problems]) from None
+    else:
+        data, lines = parsed
     problems: list[tuple[int, str]] = []
 
     def err(q: P, msg: str) -> None:

@@ -20,7 +20,7 @@ import numpy as np
 
 from cosim.errors import JSBSimError
 from cosim.geo import FT_TO_M, KT_TO_MPS
-from cosim.jsb import ModelInfo, has_property, new_fdm
+from cosim.jsb import ModelInfo, has_property, held_messages, new_fdm, release
 from cosim.vehicles.spec import STATE_FIELDS, StateField, VehicleSpec, VehicleStatus
 
 _MPS_TO_FPS = 1.0 / FT_TO_M
@@ -127,15 +127,19 @@ class Vehicle:
             raise JSBSimError(f"vehicle {s.id!r}: JSBSim run_ic() failed", s.id)
         fdm["propulsion/set-running"] = -1
         if s.trim:
-            try:
-                fdm.do_trim(1)  # full trim
-            except (jsbsim.BaseError, RuntimeError) as e:
-                agl = s.alt_msl_m - s.terrain_alt_m
-                raise JSBSimError(
-                    f"vehicle {s.id!r} ({s.model}): JSBSim could not trim at "
-                    f"{s.airspeed_mps:.1f} m/s TAS ({s.airspeed_mps / KT_TO_MPS:.0f} kt), "
-                    f"{s.alt_msl_m:.1f} m MSL ({agl:.1f} m above the ground), heading "
-                    f"{s.heading_deg:.1f} deg: {' '.join(str(e).split())}", s.id) from None
+            with held_messages() as said:  # JSBSim's reason goes into the error, once
+                try:
+                    fdm.do_trim(1)  # full trim
+                except (jsbsim.BaseError, RuntimeError) as e:
+                    agl = s.alt_msl_m - s.terrain_alt_m
+                    why = "; ".join(dict.fromkeys(t for _, t in said))
+                    raise JSBSimError(
+                        f"vehicle {s.id!r} ({s.model}): JSBSim could not trim at "
+                        f"{s.airspeed_mps:.1f} m/s TAS ({s.airspeed_mps / KT_TO_MPS:.0f} kt), "
+                        f"{s.alt_msl_m:.1f} m MSL ({agl:.1f} m above the ground), heading "
+                        f"{s.heading_deg:.1f} deg: {' '.join(str(e).split())}"
+                        + (f" ({why})" if why else ""), s.id) from None
+            release(said)
         for name, value in s.initial_props:
             fdm[name] = value
 

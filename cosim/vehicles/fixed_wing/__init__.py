@@ -64,6 +64,18 @@ class FixedWing(VehicleClass):
         return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) \
             else DEFAULT_MIN_ALT_AGL_M
 
+    def check_start(self, spec: VehicleSpec) -> list[str]:
+        """A trimmed start inside the model's envelope (its profile's airspeed
+        range): JSBSim cannot trim a fixed-wing below its stall speed."""
+        lo, hi = spec.profile.get("airspeed_min_kt"), spec.profile.get("airspeed_max_kt")
+        kt = spec.airspeed_mps / KT_TO_MPS
+        if spec.trim and ((lo is not None and kt < lo - 1e-9)
+                          or (hi is not None and kt > hi + 1e-9)):
+            return [f"starts at {kt:.1f} kt, outside the envelope of {spec.model} "
+                    f"({_envelope(lo, hi)} kt TAS): it could not be trimmed there (give an "
+                    f"airspeed inside it)"]
+        return []
+
     def command_problems(self, cmd: Command, spec: VehicleSpec, limits: Limits) -> list[str]:
         """Airspeeds inside the model's envelope (its profile), then the rule of
         every command path: no altitude below the class minimum above the
@@ -76,7 +88,7 @@ class FixedWing(VehicleClass):
             kt = spd / KT_TO_MPS
             if (lo is not None and kt < lo - 1e-9) or (hi is not None and kt > hi + 1e-9):
                 return [f"airspeed {kt:.1f} kt is outside the envelope of {spec.model} "
-                        f"({lo:g}..{hi:g} kt TAS)"]
+                        f"({_envelope(lo, hi)} kt TAS)"]
         return self.safety_problems(cmd, limits, spec.id)
 
     def safety_problems(self, cmd: Command, limits: Limits, who: str) -> list[str]:
@@ -95,6 +107,11 @@ class FixedWing(VehicleClass):
             return f"model {spec.model} has no clmax in its cosim profile: its stall speed " \
                    f"is unknown"
         return None
+
+
+def _envelope(lo: float | None, hi: float | None) -> str:
+    """A profile's airspeed range as text, either end possibly open."""
+    return f"{'0' if lo is None else f'{lo:g}'}..{'' if hi is None else f'{hi:g}'}"
 
 
 FIXED_WING = FixedWing()
