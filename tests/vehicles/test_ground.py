@@ -306,3 +306,27 @@ cameras:
         row = next(r for r in csv.DictReader(f) if r["target"] == "truck")
     f_px = 320 / 2 / math.tan(math.radians(30.0))
     assert float(row["bbox_y1_px"]) == pytest.approx((240 - 1) / 2 + f_px * 1.5 / 15.0, abs=1.0)
+
+
+def test_obstacle_discovered_names_the_scout_by_its_id(tmp_path: Path) -> None:
+    """The event says which vehicle's camera saw the obstacle by the vehicle's
+    id (as every event names vehicles), not by its row in the state array."""
+    body = f"""\
+duration_s: 0.5
+vehicles:
+  - {{id: car, class: ground, knows_obstacles: false, scout: look,
+     init: {{north_m: 0, east_m: 0}}}}
+  - {{id: quad, model: F450, init: {{north_m: 45, east_m: 0, alt_agl_m: 30}}}}
+obstacles:
+  - {{id: barn, polygon: {BARN}}}
+cameras:
+  render_workers: 0
+  views:
+    - {{name: look, vehicles: quad, mount: nadir, vfov_deg: 60, width_px: 32, height_px: 24,
+       rate_hz: 5}}
+"""
+    res = run_scenario(_scenario(tmp_path, body, "scout"), tmp_path / "scout", backend="inline")
+    assert res.stop_reason == "completed", res.error
+    events = [json.loads(x) for x in (res.out_dir / "events.jsonl").read_text().splitlines()]
+    found = [e for e in events if e["event"] == "obstacle_discovered"]
+    assert [(e["vehicle"], e["obstacle"], e["by"]) for e in found] == [("car", "barn", "quad")]

@@ -79,6 +79,7 @@ class GroundGuidance:
         self.start_ne = start_ne
         self.c_speed, self.c_steer = channel_index[SPEED_CMD], channel_index[STEER_CMD]
         self.rows = list(rows)
+        self.ids = [s.id for s in specs]  # by state row: events name vehicles by id
         self.labels = [""] * n
         self.route: dict[int, list[np.ndarray]] = {}
         self.heading: dict[int, float] = {}  # drive on a heading (rad)
@@ -192,7 +193,7 @@ class GroundGuidance:
                     del self.unknown[i][oid]
                     ok = self.learn(i, poly, states)
                     events.append(GuidanceEvent("obstacle_discovered", i, {
-                        "obstacle": oid, "by": int(r)}))
+                        "obstacle": oid, "by": self.ids[r]}))
                     if not ok:
                         events.append(GuidanceEvent("route_blocked", i, {"obstacle": oid}))
         return events
