@@ -11,8 +11,14 @@ the simulation waiting. The simulation never sees the stream.
 
 Destinations are loopback addresses unless ``allow_remote`` (``cosim run
 --video-allow-remote``): a camera feed is not sent off the machine by
-accident. Each stream's VIDEO_STREAM_INFORMATION (``info``) is what the
-vehicle answers on MAVLink.
+accident. IPv6 addresses are written in brackets (``udp://[::1]:5600``).
+Each stream's VIDEO_STREAM_INFORMATION (``info``) is what the vehicle
+answers on MAVLink.
+
+A stream that fails (FFmpeg cannot send to its destination), or sends no
+frame in a run that completes, fails the run at its end (``VideoStreamError``
+naming the stream; ``cosim run`` exits 1), after the simulation went on: the
+user asked for video and got none.
 """
 
 from __future__ import annotations
@@ -29,8 +35,9 @@ from urllib.parse import parse_qs, urlsplit
 
 import numpy as np
 
-from cosim.errors import ConfigError
+from cosim.errors import ConfigError, CosimError
 from cosim.netaddr import is_loopback
+from cosim.sync.participants import ParticipantFailed
 
 log = logging.getLogger(__name__)
 
@@ -38,6 +45,10 @@ FORMATS = ("rtp", "mpegts")
 #: frames waiting to be encoded before new ones are dropped
 QUEUE_FRAMES = 8
 _SPEC = re.compile(r"^(?P<sysid>\d+)(?::(?P<cam>[A-Za-z0-9_.-]+))?=(?P<url>.+)$")
+
+
+class VideoStreamError(CosimError):
+    """A requested video stream failed or sent nothing."""
 
 
 @dataclass(frozen=True)
@@ -51,8 +62,17 @@ class VideoTarget:
     fmt: str  # "rtp" or "mpegts"
 
     @property
+    def ipv6(self) -> bool:
+        return ":" in self.host
+
+    @property
+    def netloc(self) -> str:
+        """``HOST:PORT`` as a URL writes it (an IPv6 address in brackets)."""
+        return f"[{self.host}]:{self.port}" if self.ipv6 else f"{self.host}:{self.port}"
+
+    @property
     def uri(self) -> str:
-        return f"udp://{self.host}:{self.port}"
+        return f"udp://{self.netloc}"
 
 
 def parse_target(text: str, allow_remote: bool = False) -> VideoTarget:
@@ -83,7 +103,8 @@ def parse_target(text: str, allow_remote: bool = False) -> VideoTarget:
 
 def sdp(target: VideoTarget, name: str) -> str:
     """The SDP describing an RTP H.264 stream (what ffplay opens)."""
-    return (f"v=0\no=- 0 0 IN IP4 {target.host}\ns={name}\nc=IN IP4 {target.host}\nt=0 0\n"
+    ip = "IP6" if target.ipv6 else "IP4"
+    return (f"v=0\no=- 0 0 IN {ip} {target.host}\ns={name}\nc=IN {ip} {target.host}\nt=0 0\n"
             f"m=video {target.port} RTP/AVP 96\na=rtpmap:96 H264/90000\n"
             f"a=fmtp:96 packetization-mode=1\n")
 
@@ -96,8 +117,8 @@ class _Encoder:
 
         self.target = target
         self.width, self.height = width - width % 2, height - height % 2
-        url = (f"rtp://{target.host}:{target.port}" if target.fmt == "rtp"
-               else f"udp://{target.host}:{target.port}?pkt_size=1316")
+        url = (f"rtp://{target.netloc}" if target.fmt == "rtp"
+               else f"udp://{target.netloc}?pkt_size=1316")
         self.container = av.open(url, mode="w", format=target.fmt)
         fps = max(1, round(rate_hz))
         s = self.container.add_stream("libx264", rate=fps)
@@ -231,7 +252,20 @@ class VideoParticipant:
         return None
 
     def finish(self, tick: int, reason: str) -> dict[str, Any] | None:
-        return {f"{v}/{c}": e.close() for (v, c), e in self.encoders.items()}
+        """Each stream's counts; ``ParticipantFailed`` (``VideoStreamError``)
+        naming the streams that failed, or sent no frame in a completed run."""
+        section = {f"{v}/{c}": e.close() for (v, c), e in self.encoders.items()}
+        failed = []
+        for name, st in section.items():
+            what = f"video {name} to {st['uri']}"
+            if "error" in st:
+                failed.append(f"{what} stopped after {st['frames_sent']} frame(s): "
+                              f"{st['error']}")
+            elif st["frames_sent"] == 0 and reason == "completed":
+                failed.append(f"{what} sent no frame ({st['frames_dropped']} dropped)")
+        if failed:
+            raise ParticipantFailed(VideoStreamError("; ".join(failed)), section)
+        return section
 
     def after_run(self, out_dir: Path) -> None:
         return None
