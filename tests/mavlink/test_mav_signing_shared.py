@@ -49,6 +49,7 @@ states, tick, commands = state_rows(1), 0, 0
 while not select.select([sys.stdin], [], [], 0.005)[0]:
     commands += len(ep.exchange(tick, states))
     tick += 4
+commands += len(ep.exchange(tick, states))  # what was sent before the stop
 ep.close()
 print(json.dumps({"commands": commands, **ep.counters()}), flush=True)
 """
@@ -72,11 +73,10 @@ def test_a_packet_accepted_by_one_run_is_refused_by_another_running_at_the_same_
         assert len(_deliver(here, lambda: here.gcs.send_raw(captured))) == 1
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
             s.sendto(captured, ("127.0.0.1", port))  # replayed to the other run
-            time.sleep(0.3)
+            time.sleep(0.1)
             s.sendto(bytes(here.gcs.mav.command_long_encode(  # the station's next: obeyed
                 1, 1, ML.MAV_CMD_NAV_LOITER_UNLIM, 0, 0, 0, 0, 0, 0, 0, 0).pack(here.gcs.mav)),
                 ("127.0.0.1", port))
-            time.sleep(0.3)
         out, err = other.communicate("stop\n", timeout=20)
     finally:
         if other.poll() is None:
@@ -147,7 +147,7 @@ def test_a_vehicles_own_signed_packets_sent_back_make_no_peer(keyed: None, rig: 
     """A keyless sender reflecting the vehicles' signed heartbeats (each one
     fresh, so no replay of an accepted stream) gets no telemetry, and is not
     obeyed; neither is one signing as a vehicle (system 1, component 1) with
-    the key."""
+    the key, nor one replaying the station's accepted command."""
     r = _signed_rig(rig, tmp_path)
     r.step(int(PHYSICS_HZ) + 1)
     beats = [bytes(m.get_msgbuf()) for m in of_type(r.gcs.drain(wait_s=1.0), "HEARTBEAT")]
@@ -172,6 +172,10 @@ def test_a_vehicles_own_signed_packets_sent_back_make_no_peer(keyed: None, rig: 
             assert _deliver(r, lambda p=pkt: reflector.sendto(p, r.ep.local_address)) == []
         assert r.ep.link.peers == peers
         assert r.ep.counters()["echoes"] == len(beats) + 2
+        accepted = _rtl(r.gcs)  # the station's own, obeyed once; replayed from elsewhere
+        assert len(_deliver(r, lambda: r.gcs.send_raw(accepted))) == 1
+        assert _deliver(r, lambda: reflector.sendto(accepted, r.ep.local_address)) == []
+        assert r.ep.link.peers == peers and r.ep.counters()["replay_dropped"] == 1
         r.step(int(PHYSICS_HZ) + 1)  # a second of telemetry: none for the reflector
         with pytest.raises(TimeoutError):
             reflector.recv(65535)
