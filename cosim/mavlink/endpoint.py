@@ -185,8 +185,8 @@ class MavlinkConfig:
     signing_key_file: str | Path | None = None
     signing_key_env: str | None = None
     signing_link_id: int = 0
-    #: where the signing timestamps are kept between runs (None: the cache
-    #: folder, ``cosim.mavlink.signing.default_folder()``)
+    #: where the signing timestamps are shared with other runs using the key
+    #: (None: the cache folder, ``cosim.mavlink.signing.default_folder()``)
     signing_state_dir: str | Path | None = None
     #: lockstep with an outside controller of this system id (see ``MavlinkEndpoint``)
     lockstep_sysid: int | None = None
