@@ -4,11 +4,13 @@ Owns HTTP: the experimenter page (``/``: create a session with a
 pseudonymous participant id and a display profile, start and pause it, watch
 its progress), the participant page (``/participant?session=ID``: the
 session's clips full screen in order; ``static/participant.js``), the JSON
-API both use, and the clips' videos (``/video/N``: only the files the study
+API both use, the clips' videos (``/video/N``: only the files the study
 resolved inside its folders, by number; nothing a request names is ever
-opened). It does not parse the study (``study``), store (``store``) or
-compute measures (``measures``): the browser posts which key it saw and the
-``mediaTime`` of the frame on screen at that moment; the server turns that
+opened) and a picture of each target (``/target/N``, cut from a clip by
+``target_picture``) that the participant's page shows. It does not parse
+the study (``study``), store (``store``) or compute measures
+(``measures``): the browser posts which key it saw and the ``mediaTime`` of
+the frame on screen at that moment; the server turns that
 into the frame number (``round(mediaTime * rate_hz)``) and computes every
 measure from the stored ground truth and the session's display profile.
 
@@ -66,6 +68,7 @@ from cosim.trials.limits import (
 from cosim.trials.measures import Display, measures_at, track_measures
 from cosim.trials.store import Store, shown_url, write_csv
 from cosim.trials.study import TRACK_DIRECTIONS, Clip, Study, load_study
+from cosim.trials.target_picture import choose_still, target_png
 
 log = logging.getLogger(__name__)
 
@@ -175,6 +178,9 @@ class TrialApp:
     def __init__(self, study: Study, store: Store) -> None:
         self.study, self.store = study, store
         self._by_id = {c.id: n for n, c in enumerate(study.all_clips)}
+        #: the study's targets, numbered for ``/target/N`` (their pictures)
+        self.targets = sorted({c.target for c in study.all_clips})
+        self._pictures: dict[int, bytes] = {}
 
     # --- helpers ---
     def _session(self, sid: str) -> dict[str, Any]:
@@ -224,7 +230,8 @@ class TrialApp:
             n, c = self._clip(t)
             view = {**t, "clip": n, "video": f"/video/{n}", "rate_hz": c.rate_hz,
                     "frames": len(c.frames), "answered": t["index"] in answered,
-                    "done": sorted(done.get(t["index"], []))}
+                    "done": sorted(done.get(t["index"], [])), "target": c.target,
+                    "target_picture": f"/target/{self.targets.index(c.target)}"}
             if s["protocol"] == "track":  # the still frame and the target on it
                 g = c.frames[c.still_frame]
                 view.update(still_time_s=c.still_frame / c.rate_hz,
@@ -394,6 +401,27 @@ class TrialApp:
         return Response(buf.getvalue(), media_type="text/csv",
                         headers={"Content-Disposition": "attachment; filename=responses.csv"})
 
+    async def target_picture(self, request: Request) -> Response:
+        """A picture of the study's N-th target, cut from a clip's frame
+        (``cosim.trials.target_picture``); made once, on the first request."""
+        k = request.path_params["n"]
+        if not 0 <= k < len(self.targets):
+            raise BadRequest(f"no target {k}", 404)
+        if k not in self._pictures:
+            self._pictures[k] = await run_in_threadpool(self._picture, self.targets[k])
+        return Response(self._pictures[k], media_type="image/png")
+
+    def _picture(self, target: str) -> bytes:
+        st = self.study
+        still = choose_still(st.clips, st.practice_clips, target)
+        if still is None:
+            raise BadRequest(f"no picture of target {target[:100]!r}: no frame of its clips "
+                             f"has it in view", 404)
+        try:
+            return target_png(still)
+        except ConfigError as e:
+            raise BadRequest("; ".join(e.problems), 409) from None
+
     async def video(self, request: Request) -> Response:
         n, clips = request.path_params["n"], self.study.all_clips
         if not 0 <= n < len(clips):
@@ -485,6 +513,7 @@ def make_app(study: Study | str | Path, db: Store | str | Path,
         Route("/api/sessions/{sid}/window", a.report_window, methods=["POST"]),
         Route("/api/export.csv", _experimenter(a.export)),
         Route("/video/{n:int}", a.video),
+        Route("/target/{n:int}", a.target_picture),
         Mount("/static", StaticFiles(directory=STATIC), name="static"),
     ]
     app = Starlette(routes=routes, exception_handlers={BadRequest: _bad_request},

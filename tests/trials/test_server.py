@@ -507,6 +507,25 @@ def test_page_size_reports_are_checked_and_kept_for_the_experimenter(
         assert row["window_px"] == [640, 500] and "640 x 500 px" in row["window_warning"]
 
 
+def test_the_targets_picture_is_cut_from_its_clip(server: LiveServer) -> None:
+    """/target/0: the square twice the target's box around it, from the frame
+    of the clips where it is largest and wholly in view (clip c0's first, where
+    the box is centred at x 30): the white box in the middle of grey ground."""
+    s = _session(server, "p-picture")
+    assert {(t["target"], t["target_picture"]) for t in s["trials"]} == {("truck", "/target/0")}
+    status, png = server.request("GET", "/target/0")
+    assert status == 200 and isinstance(png, bytes)
+    img = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)
+    assert img.shape == (4 * HALF_X, 4 * HALF_X, 3)  # twice the box's longer side
+    ys, xs = np.nonzero(img.min(axis=2) > 200)
+    # the box (21 x 13 px drawn) in the middle: another frame's would be 18 px off
+    assert (xs.max() - xs.min() + 1, ys.max() - ys.min() + 1) == (2 * HALF_X + 1, 2 * HALF_Y + 1)
+    assert abs(xs.mean() - 19.5) <= 1 and abs(ys.mean() - 19.5) <= 1
+    assert abs(float(np.median(img[img.min(axis=2) < 200])) - 90) < 10  # grey ground around
+    status, body = server.request("GET", "/target/1")
+    assert status == 404 and body["error"] == "no target 1"
+
+
 def test_a_video_gone_or_made_a_fifo_while_serving_is_refused(tmp_path: Path) -> None:
     """A clip's video replaced by a FIFO (or removed) after the study was read
     is a 409 naming it, not a server error."""
@@ -597,15 +616,38 @@ PRESSES: dict[int, int] = {0: 5, 1: 8, 2: 10}
 RELOAD_AT = (2, 3)  # reload the page while trial 2 shows frame 3
 
 
+#: the state of the participant page's texts, its target pictures and its label
+PAGE_STATE = """(() => {
+  const m = document.getElementById("message"), label = document.getElementById("label");
+  return {
+    phase: document.body.dataset.phase, trial: document.body.dataset.trial,
+    text: m.hidden ? null : m.innerText,
+    paragraphs: m.hidden ? [] : [...m.querySelectorAll("p")].map((p) => {
+      const r = p.getBoundingClientRect();
+      return { text: p.innerText, top: r.top, bottom: r.bottom };
+    }),
+    pictures: m.hidden ? [] : [...m.querySelectorAll("img.target")].map((i) => ({
+      src: i.getAttribute("src"), loaded: i.complete && i.naturalWidth > 0,
+      natural: [i.naturalWidth, i.naturalHeight], shown_px: i.getBoundingClientRect().width,
+      caption: i.closest("figure").innerText })),
+    label: !label || label.hidden ? null : label.innerText,
+  };
+})()"""
+PICTURES_LOADED = ("[...document.querySelectorAll('#message img.target')]"
+                   ".every((i) => i.complete && i.naturalWidth > 0)")
+
+
 @pytest.fixture(scope="module")
-def browser_run(server: LiveServer) -> dict[str, Any]:
+def browser_run(server: LiveServer, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     needs_chromium()
     from playwright.sync_api import sync_playwright
 
     s = _session(server, "p01")
     assert [t["practice"] for t in s["trials"]] == [True, False, False, False]
     assert [t["break_before"] for t in s["trials"]] == [False, False, False, True]
-    run: dict[str, Any] = {"session": s, "phases": [], "console": [], "on_screen": {}}
+    shots = tmp_path_factory.mktemp("participant_page")
+    run: dict[str, Any] = {"session": s, "phases": [], "console": [], "on_screen": {},
+                           "state": {}, "shots": shots}
     with sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path=CHROMIUM,
                                      args=["--autoplay-policy=no-user-gesture-required"])
@@ -637,20 +679,35 @@ def browser_run(server: LiveServer) -> dict[str, Any]:
                 seen = page.evaluate("window.shownAtPress")
                 run["on_screen"][seen["trial"]] = seen["frame"]
 
+            def keep(name: str) -> None:
+                """The page's state and a screenshot of it (``shots/NAME.png``)."""
+                page.wait_for_function(PICTURES_LOADED)
+                run["state"][name] = page.evaluate(PAGE_STATE)
+                page.screenshot(path=str(shots / f"{name}.png"))
+
             page.goto(f"{server.url}/participant?session={s['id']}")
             wait_phase("begin")
+            keep("begin")
             page.keyboard.press("Space")
             wait_phase("waiting")  # not started yet
             assert server.request("POST", f"/api/sessions/{s['id']}/state",
                                   {"state": "running"})[0] == 200
             wait_phase("practice")
+            keep("practice")
             page.keyboard.press("Space")
             wait_frame(0, PRESSES[0])
+            keep("practice clip")
             press_on_clip()
             wait_phase("practice-over")
             page.keyboard.press("Space")
             wait_frame(1, PRESSES[1])
+            keep("clip")
             press_on_clip()
+            wait_phase("next")  # the next clip waits for the participant
+            keep("next")
+            page.wait_for_timeout(1500)  # (the page had started it after 1 s)
+            run["state"]["next, 1.5 s later"] = page.evaluate(PAGE_STATE)
+            page.keyboard.press("Space")
             wait_frame(*RELOAD_AT)
             # the picture on the screen where the geometry says (letterboxed, centred)
             run["shot"] = (page.screenshot(), int(page.evaluate("document.body.dataset.frame")))
@@ -669,6 +726,48 @@ def browser_run(server: LiveServer) -> dict[str, Any]:
             browser.close()
     run["responses"] = server.store.responses(s["id"])
     return run
+
+
+def test_the_instructions_are_lines_of_their_own_with_the_targets_picture(
+        browser_run: dict[str, Any]) -> None:
+    """Each instruction a paragraph under the last (they had run together:
+    "...disappears.Press the space bar"), and the target's picture, loaded
+    and enlarged, between them and the key to press."""
+    begin = browser_run["state"]["begin"]
+    texts = [p["text"] for p in begin["paragraphs"]]
+    assert texts == ["Look at the red cross in the centre of the screen while each clip plays.",
+                     "Press the space bar as soon as the target disappears.",
+                     "The target looks like this (enlarged, in the middle of the picture):",
+                     "Press the space bar to begin."], begin
+    tops = [(p["top"], p["bottom"]) for p in begin["paragraphs"]]
+    assert all(b0 <= t1 for (_, b0), (t1, _) in zip(tops, tops[1:])), tops
+    assert "disappears.Press" not in begin["text"]
+    (picture,) = begin["pictures"]
+    assert picture["src"] == "/target/0" and picture["loaded"] and picture["caption"] == "truck"
+    assert picture["natural"] == [40, 40] and picture["shown_px"] >= 150  # enlarged
+    assert (browser_run["shots"] / "begin.png").stat().st_size > 0
+
+
+def test_practice_trials_are_labelled_on_the_page(browser_run: dict[str, Any]) -> None:
+    st = browser_run["state"]
+    assert st["practice"]["paragraphs"][0]["text"] == "Practice clip 1 of 1"
+    assert "First, 1 practice clip to get used to the task: it does not count." in \
+        st["practice"]["text"]
+    assert (st["practice clip"]["trial"], st["practice clip"]["label"]) == ("0", "Practice")
+    assert (st["clip"]["trial"], st["clip"]["label"]) == ("1", None)
+
+
+def test_the_next_clip_starts_when_the_participant_asks(browser_run: dict[str, Any]) -> None:
+    """After a press, a prompt with the next clip's number and target, and no
+    clip until the space bar (it had started a second after each press)."""
+    st = browser_run["state"]
+    nxt = st["next"]
+    assert [p["text"] for p in nxt["paragraphs"]] == [
+        "Clip 2 of 3", "Press the space bar for the next clip."], nxt
+    assert [p["src"] for p in nxt["pictures"]] == ["/target/0"] and nxt["label"] is None
+    later = st["next, 1.5 s later"]
+    assert (later["phase"], later["text"]) == ("next", nxt["text"])
+    assert browser_run["phases"].count("next") == 1
 
 
 def test_key_presses_give_the_ground_truth_frame(browser_run: dict[str, Any]) -> None:
@@ -974,6 +1073,8 @@ def test_track_protocol(study_file: Path) -> None:
                     page.wait_for_function("document.body.dataset.phase === 'track-start'")
                     assert page.evaluate("document.body.dataset.direction") == \
                         t0["directions"][k]
+                    assert page.inner_text("#hint") == ("Clip 1 of 1: press the space bar to "
+                                                        "start the dot.")
                     page.keyboard.press("Space")
                     page.wait_for_timeout(400 + 100 * k)
                     box = page.locator("#tracker").bounding_box()

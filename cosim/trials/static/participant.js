@@ -8,6 +8,9 @@
 // start and its response says so ("reshown": true).
 // The page's size goes to the server (which warns the experimenter if it is not
 // the session's display profile); the participant never sees such a warning.
+// The instructions show a picture of each target (/target/N: cut from a clip by
+// the server); practice trials are labelled as such; a clip starts only when the
+// participant presses the space bar for it.
 "use strict";
 (() => {
   const READY_MS = 1000; // fixation before each clip starts
@@ -18,13 +21,71 @@
   const tracker = document.getElementById("tracker");
   const message = document.getElementById("message");
   const status = document.getElementById("status");
+  const label = document.getElementById("label");
+  const hint = document.getElementById("hint");
   const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
   const phase = (p) => { document.body.dataset.phase = p; };
 
   const startedKey = `cosim.started.${sid}`;
 
-  function show(html) { message.innerHTML = html; message.hidden = false; }
+  function show(html) {
+    message.innerHTML = html;
+    message.hidden = false;
+    for (const img of message.querySelectorAll("img.target")) {
+      img.onerror = () => { img.closest("figure").hidden = true; }; // no picture: no box
+    }
+  }
   function hide() { message.hidden = true; }
+  const esc = (text) => String(text).replace(/[&<>"']/g, (c) => `&#${c.charCodeAt(0)};`);
+  // each line a paragraph of its own
+  const paragraphs = (lines) => lines.map((l) => `<p>${l}</p>`).join("");
+  const plural = (n, one, many) => `${n} ${n === 1 ? one : many}`;
+
+  // What the participant is told first, by protocol: one instruction a line.
+  const INSTRUCTIONS = {
+    disappear: ["Look at the red cross in the centre of the screen while each clip plays.",
+                "Press the space bar as soon as the target disappears."],
+    track: ["Each clip stands still. Press the space bar to start the red dot, and " +
+            "follow the dot with your eyes.",
+            "Press the space bar again as soon as the target disappears."],
+    recognise: ["Follow the arrow while each clip plays.",
+                "Press the space bar as soon as you recognise the target; then answer " +
+                "whether you recognised it."],
+  };
+
+  // The pictures of `targets` (trials' {target, target_picture}, one per target),
+  // each with its name; `small` for the reminder before a clip.
+  function pictures(targets, small) {
+    const seen = new Map();
+    for (const t of targets) seen.set(t.target, t.target_picture);
+    const figs = [...seen].map(([name, src]) =>
+      `<figure><img class="target" src="${esc(src)}" alt="the target: ${esc(name)}">` +
+      `<figcaption>${esc(name.replace(/_/g, " "))}</figcaption></figure>`);
+    return `<div class="targets${small ? " small" : ""}">${figs.join("")}</div>`;
+  }
+
+  // "Practice clip 1 of 2" or "Clip 3 of 12": the trial `t` among its kind.
+  function title(s, t) {
+    const same = s.trials.filter((x) => x.practice === t.practice);
+    const k = same.filter((x) => x.index <= t.index).length;
+    return `${t.practice ? "Practice clip" : "Clip"} ${k} of ${same.length}`;
+  }
+
+  // A screen before trial `t` (phase `p`): `heading` (the trial's title),
+  // `lines`, its target's picture and `key`, the press it waits for.
+  async function ask(p, s, t, lines, key = "Press the space bar for the next clip.",
+                     heading = title(s, t)) {
+    phase(p);
+    show(`<p class="title">${heading}</p>${paragraphs(lines)}${pictures([t], true)}` +
+         `<p class="key">${key}</p>`);
+    await waitKey(["Space"]);
+  }
+
+  // "Practice" in a corner of the screen while practice trial `t` runs
+  function practiceLabel(t) {
+    label.textContent = "Practice";
+    label.hidden = !t.practice;
+  }
 
   // Marks `mark` (a trial and its kind) as started in this tab; whether this
   // tab had started that very trial before (a reload while it played), or
@@ -135,8 +196,9 @@
   // dot that leaves the target at the study's angular speed, the eyes on it; a
   // key when the target is gone posts the time since that start (the server
   // works out where the dot was). Sub-trials already stored are skipped.
-  async function trackTrial(t, display, post) {
+  async function trackTrial(session, t, display, post) {
     hide();
+    practiceLabel(t);
     await new Promise((resolve) => {
       video.onseeked = () => { video.onseeked = null; resolve(); };
       video.currentTime = t.still_time_s;
@@ -160,7 +222,10 @@
         tracker.style.left = `${x0 / dpr}px`;
         tracker.style.top = `${y0 / dpr}px`;
         tracker.hidden = false;
+        hint.textContent = `${title(session, t)}: press the space bar to start the dot.`;
+        hint.hidden = false;
         const go = await waitKey(["Space"]);
+        hint.hidden = true;
         const start = go.timeStamp;
         const reshown = started(`${t.index}:${kind}`); // the dot leaves: the sub-trial runs
         phase("tracking");
@@ -183,28 +248,27 @@
                      reaction_time_ms: Math.max(0, e.timeStamp - start), ...windowPx() });
       }
     } finally {
-      tracker.hidden = true;
+      tracker.hidden = hint.hidden = label.hidden = true;
       video.classList.remove("still");
       delete document.body.dataset.direction;
     }
   }
 
-  async function runTrial(t, protocol) {
+  async function runTrial(s, t) {
     document.body.dataset.trial = String(t.index);
     delete document.body.dataset.frame;
     await load(t);
-    if (protocol === "recognise") {
-      phase("start");
-      show(`<p>${t.practice ? "Practice trial. " : ""}Follow the arrow.<br>` +
-           "Press the space bar to start; press it again when you recognise the target.</p>");
-      await waitKey(["Space"]);
+    if (s.protocol === "recognise") {
+      await ask("start", s, t, ["Follow the arrow; press the space bar again as soon as you " +
+                                "recognise the target."], "Press the space bar to start.");
       hide();
+      practiceLabel(t);
       arrow.hidden = false;
       const reshown = started(`${t.index}:recognise`);
       const r = await playClip(t, ["Space"]);
-      arrow.hidden = true;
+      arrow.hidden = label.hidden = true;
       phase("answer");
-      show("<p>Did you recognise the target?<br><b>Y</b> yes &nbsp; <b>N</b> no</p>");
+      show(paragraphs(["Did you recognise the target?", "<b>Y</b> yes &nbsp; <b>N</b> no"]));
       const e = await waitKey(["KeyY", "KeyN"]);
       return { trial_index: t.index, kind: "recognise", key: e.code === "KeyY" ? "y" : "n",
                recognised: e.code === "KeyY", media_time_s: r.mediaTime,
@@ -212,11 +276,12 @@
     }
     phase("fixation");
     hide();
+    practiceLabel(t);
     fixation.hidden = false;
     await sleep(READY_MS);
     const reshown = started(`${t.index}:disappear`);
     const r = await playClip(t, ["Space"]);
-    fixation.hidden = true;
+    fixation.hidden = label.hidden = true;
     return { trial_index: t.index, kind: "disappear", key: r.code ? "space" : "none",
              media_time_s: r.mediaTime, reaction_time_ms: r.rtMs, recognised: null, reshown,
              ...windowPx() };
@@ -252,20 +317,19 @@
     let s = await api(`/api/sessions/${encodeURIComponent(sid)}`);
     const base = `/api/sessions/${encodeURIComponent(s.id)}`;
     reportWindow(base);
-    const instruction = s.protocol === "disappear"
-      ? "Look at the red cross in the centre. Press the space bar as soon as the target disappears."
-      : s.protocol === "track"
-        ? "Press the space bar to start the red dot, follow it with your eyes, and press " +
-          "again as soon as the target disappears."
-        : "Follow the arrow. Answer whether you recognised the target.";
     phase("begin");
-    show(`<p>${instruction}</p><p>Press the space bar to begin.</p>`);
+    show(paragraphs(INSTRUCTIONS[s.protocol] || []) +
+         `<p>${s.trials.some((t) => t.target !== s.trials[0].target) ? "The targets look"
+                                                                      : "The target looks"} ` +
+         "like this (enlarged, in the middle of the picture):</p>" +
+         pictures(s.trials, false) + '<p class="key">Press the space bar to begin.</p>');
     await waitKey(["Space"]);
     if (document.documentElement.requestFullscreen) {
       document.documentElement.requestFullscreen().catch(() => {});
     }
     let last = null; // the previous trial run in this page
     let breakShown = null;
+    let asked = true; // the participant has just pressed for what comes next
     for (;;) {
       s = await api(base);
       if (s.next_trial === null) {
@@ -277,34 +341,40 @@
         phase("waiting");
         show(s.state === "paused" ? "<p>Paused by the experimenter.</p>"
                                   : "<p>Waiting for the experimenter to start.</p>");
+        asked = false;
         await sleep(500);
         continue;
       }
       const t = s.trials[s.next_trial];
       if (t.break_before && breakShown !== t.index) {
         breakShown = t.index;
-        phase("break");
-        show("<p>Break. Press the space bar when you are ready to go on.</p>");
-        await waitKey(["Space"]);
+        await ask("break", s, t, [`Next: ${title(s, t).toLowerCase()}.`],
+                  "Press the space bar when you are ready for it.", "Break");
+        asked = true;
         continue;
       }
       if (t.practice && last === null) {
-        phase("practice");
-        show("<p>First some practice trials. Press the space bar.</p>");
-        await waitKey(["Space"]);
+        const n = s.trials.filter((x) => x.practice).length;
+        await ask("practice", s, t, [`First, ${plural(n, "practice clip", "practice clips")} ` +
+                                     `to get used to the task: ${n === 1 ? "it does" : "they do"}` +
+                                     " not count."],
+                  "Press the space bar to start.");
       } else if (!t.practice && last !== null && last.practice) {
-        phase("practice-over");
-        show("<p>Practice over: the experiment starts now. Press the space bar.</p>");
-        await waitKey(["Space"]);
+        await ask("practice-over", s, t, ["Practice over: the experiment starts now."],
+                  "Press the space bar for the first clip.");
+      } else if (!asked && s.protocol === "disappear") {
+        // (recognise asks before each clip, track before each dot, on their own)
+        await ask("next", s, t, []);
       }
+      asked = false;
       last = t;
       if (s.protocol === "track") {
         await load(t);
         document.body.dataset.trial = String(t.index);
-        await trackTrial(t, s.display, (b) => api(`${base}/responses`, b));
+        await trackTrial(s, t, s.display, (b) => api(`${base}/responses`, b));
         continue;
       }
-      const body = await runTrial(t, s.protocol);
+      const body = await runTrial(s, t);
       phase("saving");
       show("<p>\u2026</p>");
       await api(`${base}/responses`, body);
