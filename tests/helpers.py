@@ -47,3 +47,19 @@ def backend_ready(request: Any, name: str) -> None:
     the session's cluster)."""
     if name == "ray":
         request.getfixturevalue("ray_cluster")
+
+
+def same_states(a: Any, b: Any) -> bool:
+    """Two runs' states tables hold the same rows, bit for bit. Their layout is
+    not compared: the writer flushes parts by the wall clock (nothing is lost
+    on a crash), so how many chunks the rows arrive in, and each chunk's
+    dictionary of vehicle ids and command texts, depend on the machine's
+    speed, never the values."""
+    import pyarrow as pa
+
+    def plain(t: Any) -> Any:
+        cols = [c.cast(c.type.value_type) if pa.types.is_dictionary(c.type) else c
+                for c in t.columns]
+        return pa.table(cols, names=t.column_names).combine_chunks()
+
+    return bool(plain(a).equals(plain(b)))
