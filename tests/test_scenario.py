@@ -411,11 +411,11 @@ def test_misspelled_property_in_vehicle_set() -> None:
 
 def test_read_only_property_is_rejected() -> None:
     """JSBSim silently ignores writes to read-only properties such as vt-fps."""
-    text = HEAD + VSET.replace("{prop}", "velocities/vt-fps").replace("0.7", "12")
+    text = HEAD + VSET.replace("{prop}", "fcs/mag-elevator-pos-rad").replace("0.7", "0.1")
     probs = problems(text)
     assert len(probs) == 1
-    assert has(probs, line_of(text, "vt-fps"), "vehicles[0].set.velocities/vt-fps",
-               "JSBSim property 'velocities/vt-fps' is read-only in model c172p")
+    assert has(probs, line_of(text, "mag-elevator"), "vehicles[0].set.fcs/mag-elevator-pos-rad",
+               "JSBSim property 'fcs/mag-elevator-pos-rad' is read-only in model c172p")
     text = HEAD + ONE + SCHED.replace("{prop}", "aero/alpha-deg")
     assert has(problems(text), line_of(text, "alpha-deg"), "schedule[0].set.aero/alpha-deg",
                "is read-only in model c172p")

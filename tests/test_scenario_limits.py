@@ -394,6 +394,40 @@ def test_a_vehicle_in_error_is_not_also_missing(tmp_path: Path, capsys) -> None:
     assert "'c172-9' matches no vehicle" in capsys.readouterr().err
 
 
+def test_raw_writes_that_move_a_vehicle_are_refused(tmp_path: Path, capsys) -> None:
+    """A ``set:`` may work the controls (a throttle cut, the elevator, the
+    stall protection off) but not teleport the aircraft, set its speed or
+    attitude, or give the autopilot a setpoint the commands' rule would
+    refuse (the ground as the altitude), nor push a control beyond its range."""
+    quick = (Path(__file__).resolve().parent.parent / "scenarios" / "quickstart.yaml"
+             ).read_text()
+    p = tmp_path / "s.yaml"
+    for write, fragment in (
+            ("position/h-sl-ft: 0", "'position/h-sl-ft' would move the vehicle by decree"),
+            ("velocities/v-north-fps: 9000", "'velocities/v-north-fps' would move"),
+            ("attitude/phi-rad: 3", "'attitude/phi-rad' would move"),
+            ("ic/h-sl-ft: 0", "'ic/h-sl-ft' would move"),
+            ("simulation/dt: 1", "'simulation/dt' would move"),
+            ("cosim/ap/alt-cmd-ft: 0", "'cosim/ap/alt-cmd-ft' is an autopilot setpoint"),
+            ("cosim/ap/speed-cmd-kt: 900", "'cosim/ap/speed-cmd-kt' is an autopilot setpoint"),
+            ("fcs/throttle-cmd-norm: 1e9", "normalised control: 0 to 1, got 1e+09"),
+            ("fcs/elevator-cmd-norm: -3", "normalised control: -1 to 1, got -3")):
+        p.write_text(quick.replace("fcs/throttle-cmd-norm: 0.0", write))
+        assert main(["validate", str(p)]) == 2, write
+        err = capsys.readouterr().err
+        assert re.search(rf"s\.yaml:19: schedule\[0\]\.set\.{re.escape(write.split(':')[0])}: "
+                         rf".*{re.escape(fragment)}", err), err
+        # a vehicle's own set: (written after its trim) follows the same rule
+        p.write_text(quick.replace("    set: {fcs/throttle-cmd-norm: 0.0}\n", "").replace(
+            "    model: c172p\n", f"    model: c172p\n    set: {{{write}}}\n"))
+        assert main(["validate", str(p)]) == 2, write
+        err = capsys.readouterr().err
+        assert f"vehicles[0].set.{write.split(':')[0]}: " in err and fragment in err, err
+    p.write_text(quick.replace("fcs/throttle-cmd-norm: 0.0", "fcs/throttle-cmd-norm: 0.0, "
+                               "fcs/elevator-cmd-norm: -0.5, cosim/ap/stall-protect: 0"))
+    assert main(["validate", str(p)]) == 0, capsys.readouterr().err
+
+
 def test_a_long_build_shows_progress(caplog, specs) -> None:
     from cosim.fdm_pool.base import BuildProgress
 

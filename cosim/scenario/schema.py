@@ -564,6 +564,7 @@ def _parse(text: str, fname: str, check_properties: bool, sweep_point: dict[str,
         duration = 1.0
     schedule = memo.part("schedule", (repr(raw_schedule), vkey, rates, duration), ctx,
                          lambda sub: _schedule(sub, raw_schedule, vehicles, rates, duration))
+    _check_writes(ctx, vehicles, schedule)
     if mavlink is not None and "vehicles" in mavlink:
         _mavlink_vehicles(ctx, mavlink, vehicles)
     if check_properties:
@@ -1146,6 +1147,31 @@ def _check_commands(ctx: _Ctx, schedule: list[ScheduleItem], specs: list[Vehicle
                 break
 
 
+def _check_writes(ctx: _Ctx, vehicles: list[tuple[VehicleSpec, P]],
+                  schedule: list[ScheduleItem]) -> None:
+    """Every raw property write (a vehicle's ``set:``, a schedule item's) as
+    the vehicle's class allows it (``VehicleClass.write_problems``: nothing
+    that moves a vehicle by decree or bypasses the rule of the commands)."""
+    def check(where: P, specs: list[VehicleSpec], props: Sequence[tuple[str, float]]) -> None:
+        for name, value in props:
+            said: set[str] = set()
+            for spec in specs:
+                for problem in get_class(spec.vehicle_class).write_problems(name, value, spec):
+                    if problem not in said:
+                        said.add(problem)
+                        ctx.err(where + (name,), problem)
+
+    done: set[P] = set()
+    for spec, vp in vehicles:
+        if spec.initial_props and vp not in done:
+            done.add(vp)
+            check(vp + ("set",), [spec], spec.initial_props)
+    specs = [v for v, _ in vehicles]
+    for item in schedule:
+        if item.sets:
+            check(("schedule", item.index, "set"), [specs[j] for j in item.vehicles], item.sets)
+
+
 def _check_properties(ctx: _Ctx, vehicles: list[tuple[VehicleSpec, P]],
                       schedule: list[ScheduleItem], fdms: dict[tuple[str, str], Any]) -> None:
     """Every property written must exist, and be writable, in every model it is
@@ -1178,7 +1204,9 @@ def _check_properties(ctx: _Ctx, vehicles: list[tuple[VehicleSpec, P]],
                                if name not in get_class(s.vehicle_class).channels}):
                 report(where + (name,), f"{name!r} is not an input of class {bad} (its "
                                         f"inputs: {', '.join(get_class(bad).channels) or 'none'})")
-        for name, _ in props:
+        for name, value in props:
+            if any(get_class(s.vehicle_class).write_problems(name, value, s) for s in specs):
+                continue  # refused already (``_check_writes``)
             missing = sorted({s.model for s in specs if not exists(s, name)})
             if missing:
                 report(where + (name,), f"JSBSim property {name!r} does not exist in model "

@@ -104,6 +104,13 @@ class SwarmLimits:
     stalls: bool
 
 
+#: JSBSim property prefixes a scenario may not write: they set the state the
+#: flight model integrates (a write teleports the vehicle or corrupts the
+#: integration) or the simulation itself
+MOVES_BY_DECREE = ("position/", "velocities/", "attitude/", "accelerations/", "ic/",
+                   "simulation/", "propagate/")
+
+
 class VehicleClass:
     """One kind of vehicle (see the module docstring). Subclass it, set
     ``name``, and override what the class has."""
@@ -211,6 +218,19 @@ class VehicleClass:
         """Why the scenario's schedule must not give ``cmd`` to ``spec``'s vehicle
         (its model's envelope, then ``safety_problems``); empty: it may."""
         return [f"{spec.id} ({self.name}) takes no commands"]
+
+    def write_problems(self, name: str, value: float, spec: VehicleSpec) -> list[str]:
+        """Why a scenario's raw property write (a ``set:`` of the vehicle or of
+        the schedule) must not reach ``spec``'s vehicle; empty: it may. JSBSim
+        kinds: nothing that moves the vehicle by decree (``MOVES_BY_DECREE``:
+        its position, velocities, attitude, initial conditions, the clock),
+        which no command could do either."""
+        if self.model_kind == "jsbsim" and name.startswith(MOVES_BY_DECREE):
+            return [f"{name!r} would move the vehicle by decree (position, velocity, "
+                    f"attitude, initial condition or the simulation clock), bypassing the "
+                    f"flight model and the rule every command path keeps; fly it there "
+                    f"with a command: instead"]
+        return []
 
     def safety_problems(self, cmd: Command, limits: Limits, who: str) -> list[str]:
         """Why ``cmd`` would fly the vehicle into the ground or ask what it cannot

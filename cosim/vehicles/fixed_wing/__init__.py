@@ -76,6 +76,21 @@ class FixedWing(VehicleClass):
                     f"airspeed inside it)"]
         return []
 
+    def write_problems(self, name: str, value: float, spec: VehicleSpec) -> list[str]:
+        """Besides the state (``VehicleClass.write_problems``): the autopilot's
+        setpoints are commands' (a raw altitude, heading or speed would skip
+        the floor, the envelope and the turn-radius rule), and the pilot's
+        normalised controls stay in their range."""
+        if name.startswith(_SETPOINTS):
+            return [f"{name!r} is an autopilot setpoint: give it as a command: (heading_deg, "
+                    f"alt_agl_m, airspeed_kt, loiter, ...), which is checked against the "
+                    f"ground and the aircraft's envelope"]
+        lo = 0.0 if name.startswith(("fcs/throttle", "fcs/mixture", "fcs/left-brake",
+                                     "fcs/right-brake", "fcs/center-brake")) else -1.0
+        if name.startswith("fcs/") and name.endswith("-norm") and not lo <= value <= 1.0:
+            return [f"{name!r} is a normalised control: {lo:g} to 1, got {value:g}"]
+        return super().write_problems(name, value, spec)
+
     def command_problems(self, cmd: Command, spec: VehicleSpec, limits: Limits) -> list[str]:
         """Airspeeds inside the model's envelope (its profile), then the rule of
         every command path: no altitude below the class minimum above the
@@ -107,6 +122,12 @@ class FixedWing(VehicleClass):
             return f"model {spec.model} has no clmax in its cosim profile: its stall speed " \
                    f"is unknown"
         return None
+
+
+#: the autopilot setpoints (aircraft/systems/cosim_autopilot.xml) only commands
+#: write: what to hold, and where
+_SETPOINTS = ("cosim/ap/engage", "cosim/ap/heading-", "cosim/ap/bank-limit", "cosim/ap/alt-",
+              "cosim/ap/speed-", "cosim/ap/landing", "cosim/ap/vs-")
 
 
 def _envelope(lo: float | None, hi: float | None) -> str:
