@@ -1,9 +1,11 @@
-"""The README's picture of the participant page: serve a study, open a
-session in headless Chromium (Debian's /usr/bin/chromium), start the first
-clip and take a screenshot when its target is in view (from the clip's
-ground truth).
+"""The README's pictures of the participant page: serve a study, open a
+session in headless Chromium (Debian's /usr/bin/chromium), take a
+screenshot of the instructions with the target's picture (``--instructions-out``),
+start the first clip and take one when its target is in view (from the
+clip's ground truth).
 
-    python examples/trials_screenshot.py STUDY.yaml --out participant.png
+    python examples/trials_screenshot.py STUDY.yaml --out participant.jpg \
+        --instructions-out instructions.png
 
 A fresh database beside the output is used (the study's own is left alone).
 """
@@ -21,6 +23,7 @@ from pathlib import Path
 
 import uvicorn
 
+from cosim.trials.limits import uvicorn_settings
 from cosim.trials.server import make_app
 from cosim.trials.store import Store
 from cosim.trials.study import load_study
@@ -48,6 +51,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("study")
     ap.add_argument("--out", required=True)
+    ap.add_argument("--instructions-out", help="also the instructions page, here")
     a = ap.parse_args()
     from playwright.sync_api import sync_playwright
 
@@ -58,7 +62,7 @@ def main() -> None:
         sock.bind(("127.0.0.1", 0))
         port = sock.getsockname()[1]
         srv = uvicorn.Server(uvicorn.Config(make_app(a.study, store), log_level="warning",
-                                            lifespan="off"))
+                                            lifespan="off", **uvicorn_settings()))
         th = threading.Thread(target=srv.run, kwargs={"sockets": [sock]}, daemon=True)
         th.start()
         while not srv.started:
@@ -74,10 +78,15 @@ def main() -> None:
                                                   "height": PROFILE["screen_height_px"]})
                 page.goto(f"{url}/participant?session={s['id']}")
                 page.wait_for_function("document.body.dataset.phase === 'begin'")
+                if a.instructions_out:
+                    page.wait_for_function("[...document.querySelectorAll('img.target')]"
+                                           ".every((i) => i.complete && i.naturalWidth > 0)")
+                    page.screenshot(path=a.instructions_out)
                 page.keyboard.press("Space")
-                page.wait_for_function("['practice', 'fixation', 'playing']"
+                page.wait_for_function("['practice', 'fixation']"
                                        ".includes(document.body.dataset.phase)")
-                page.keyboard.press("Space")
+                if page.evaluate("document.body.dataset.phase") == "practice":
+                    page.keyboard.press("Space")  # (the practice clips' screen)
                 page.wait_for_function("document.body.dataset.phase === 'playing'")
                 clip = study.all_clips[s["trials"][0]["clip"]]
                 deadline = time.monotonic() + 60
