@@ -245,19 +245,28 @@ def _build_parser() -> _Parser:
     sw.add_argument("--connect-timeout-s", type=_positive_float, default=60.0, metavar="S",
                     help="give up if the simulation does not answer within S (default 60)")
 
-    b = sub.add_parser("bench", help="measure pool throughput against the serial loop")
+    b = sub.add_parser("bench", help="measure pool throughput against the serial loop",
+                       epilog="One row per fleet size; what each column means is printed "
+                              "under the table (and in benchmarks/README.md).")
     b.add_argument("--vehicles", type=_positive_int_list, default=[1, 16, 128, 512, 1024],
-                   metavar="N,N,...")
-    b.add_argument("--model", default="c172p")
+                   metavar="N,N,...",
+                   help="fleet sizes to measure, one row each (default 1,16,128,512,1024)")
+    b.add_argument("--model", default="c172p", metavar="MODEL",
+                   help="the aircraft model, as in a scenario (default c172p; `cosim models` "
+                        "lists them)")
     b.add_argument("--backend", choices=names, default=DEFAULT_BACKEND,
                    help=f"{backend_help} (default {DEFAULT_BACKEND})")
-    b.add_argument("--workers", type=int, metavar="N")
+    b.add_argument("--workers", type=int, metavar="N",
+                   help="worker processes of the pool (default: one per core)")
     b.add_argument("--seconds", type=_positive_float, default=5.0, metavar="S",
                    help="simulated seconds per measured segment (default 5)")
     b.add_argument("--repeat", type=int, default=3, metavar="R",
                    help="segments per configuration; the best is reported (default 3)")
-    b.add_argument("--physics-hz", type=_positive_float, default=120.0)
-    b.add_argument("--control-hz", type=_positive_float, default=30.0)
+    b.add_argument("--physics-hz", type=_positive_float, default=120.0, metavar="HZ",
+                   help="JSBSim steps per simulated second (default 120)")
+    b.add_argument("--control-hz", type=_positive_float, default=30.0, metavar="HZ",
+                   help="exchanges (setpoints in, states out) per simulated second; must "
+                        "divide --physics-hz (default 30)")
     b.add_argument("--no-baselines", action="store_true",
                    help="skip the serial and no-communication ceiling measurements")
     b.add_argument("--json", metavar="FILE", help="write the results as JSON")
