@@ -20,14 +20,14 @@ from typing import Any
 
 import numpy as np
 
-from cosim.errors import ConfigError
+from cosim.errors import ConfigError, install_extra
 
 
 def require_gymnasium() -> Any:
     try:
         import gymnasium
     except ImportError:
-        raise ConfigError("the gymnasium reference needs gymnasium: pip install 'cosim[rl]'"
+        raise ConfigError(f"the gymnasium reference needs gymnasium: {install_extra('rl')}"
                           ) from None
     return gymnasium
 

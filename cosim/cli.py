@@ -125,7 +125,7 @@ def _build_parser() -> _Parser:
                    help="a worker silent this long in one exchange fails the run (default 60)")
     r.add_argument("--no-progress", action="store_true", help="no progress bar or lines")
     r.add_argument("--view", metavar="URL", nargs="?", const="spawn",
-                   help="watch the run in 3-D in Rerun's viewer (pip install 'cosim[view]'): "
+                   help="watch the run in 3-D in Rerun's viewer (the view extra): "
                         "alone, opens a viewer here; with URL, streams to a viewer running "
                         "there (e.g. rerun+http://127.0.0.1:9876/proxy)")
     r.add_argument("--record-view", metavar="FILE",
@@ -651,17 +651,37 @@ def _cmd_models(a: argparse.Namespace) -> int:
         for name, cls in vehicle_classes().items():
             print(f"{name:12s} {cls.model_kind:8s} {type(cls).__module__:28s} {cls.description}")
         return EXIT_OK
-    failed = 0
-    for m in list_models():
+    from cosim.jsb import held_messages
+    from cosim.vehicles import DEFAULT_CLASS, vehicle_classes
+
+    classes = vehicle_classes()
+    failed: list[str] = []
+    models = list_models()
+    print(f"{'check   ' if a.check else ''}{'MODEL':18s} {'SOURCE':7s} {'CLASS':12s} "
+          f"{'COMMANDS':8s} DESCRIPTION")
+    for m in models:
         status = ""
-        if a.check:
-            try:
-                new_fdm(m, 1 / 120)
-                status = "ok      "
-            except CosimError:
-                status = "FAILED  "
-                failed += 1
-        print(f"{status}{m.name:18s} {m.source:7s} {m.description}")
+        if a.check:  # JSBSim's own messages are held: a failure says its first error
+            with held_messages() as said:
+                try:
+                    new_fdm(m, 1 / 120)
+                    status = "ok      "
+                except CosimError as e:
+                    status = "FAILED  "
+                    errors = [t for level, t in said if level >= logging.ERROR]
+                    failed.append(f"{m.name}: {(errors or [str(e)])[0].splitlines()[0]}")
+            for _level, text in said:
+                log.debug("%s: %s", m.name, text)
+        name = str((m.profile or {}).get("class", DEFAULT_CLASS))
+        commands = "yes" if name in classes and classes[name].commandable else "no"
+        print(f"{status}{m.name:18s} {m.source:7s} {name:12s} {commands:8s} {m.description}")
+    print("COMMANDS yes: the model has a cosim profile (aircraft/profiles/, "
+          "aircraft/<model>/cosim.yaml) that makes it a vehicle class taking command:, "
+          "MAVLink commands, missions and the swarm; no: it flies open-loop, worked by set: "
+          "only (JSBSim properties).")
+    if a.check:
+        print(f"{len(models) - len(failed)} of {len(models)} models load"
+              + "".join(f"\n  {f}" for f in failed))
     return EXIT_FAIL if failed else EXIT_OK
 
 

@@ -7,9 +7,22 @@ send one to the driver intact.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 
 class CosimError(Exception):
     """Base class of every error cosim raises on purpose."""
+
+
+def install_extra(extra: str) -> str:
+    """The command that installs cosim's optional ``extra`` (e.g. "ray") the
+    way this cosim was installed: from its checkout (``pip install -e
+    '/path/to/cosim[ray]'``) or from a package index (``pip install
+    'cosim[ray]'``)."""
+    root = Path(__file__).resolve().parent.parent
+    if (root / "pyproject.toml").is_file() and (root / "cosim").is_dir():
+        return f"pip install -e '{root}[{extra}]'"
+    return f"pip install 'cosim[{extra}]'"
 
 
 class ConfigError(CosimError):

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from cosim.errors import ConfigError
+from cosim.errors import ConfigError, install_extra
 from cosim.vehicles.spec import STATE_INDEX
 
 log = logging.getLogger(__name__)
@@ -47,7 +47,7 @@ def _rerun() -> Any:
     try:
         import rerun
     except ImportError:
-        raise ConfigError("the live view needs Rerun: pip install 'cosim[view]' "
+        raise ConfigError(f"the live view needs Rerun: {install_extra('view')} "
                           "(or pip install rerun-sdk)") from None
     return rerun
 

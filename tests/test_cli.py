@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -87,10 +88,41 @@ def test_a_backend_missing_its_library_is_a_usage_error(tmp_path: Path, capsys,
     assert not out.exists()
 
 
+def test_an_extra_is_installed_the_way_cosim_was(monkeypatch: pytest.MonkeyPatch,
+                                                 tmp_path: Path) -> None:
+    from cosim import errors
+
+    assert errors.install_extra("view") == f"pip install -e '{REPO}[view]'"
+    installed = tmp_path / "site-packages" / "cosim"
+    installed.mkdir(parents=True)
+    monkeypatch.setattr(errors, "__file__", str(installed / "errors.py"))
+    assert errors.install_extra("view") == "pip install 'cosim[view]'"
+
+
 def test_models_lists_bundled_aircraft(capsys) -> None:
     assert main(["models"]) == 0
     out = capsys.readouterr().out
     assert any(line.split()[0] == "c172p" and "jsbsim" in line for line in out.splitlines())
+
+
+def test_models_say_which_take_commands(capsys) -> None:
+    assert main(["models"]) == 0
+    rows = {line.split()[0]: line.split() for line in capsys.readouterr().out.splitlines()[1:]
+            if line.strip() and not line.startswith("COMMANDS")}
+    assert rows["c172p"][2:4] == ["fixed_wing", "yes"]
+    assert rows["F450"][2:4] == ["quadrotor", "yes"]
+    assert rows["737"][2:4] == ["jsbsim", "no"]
+
+
+def test_models_check_keeps_jsbsim_quiet_and_says_why_one_fails(capsys) -> None:
+    """JSBSim's console messages (78 lines: warnings of every bundled model)
+    are held; a model that does not load says its first error, once."""
+    assert main(["models", "--check"]) == 1  # JSBSim's bundled 'blank' does not load
+    out, err = capsys.readouterr()
+    assert err == ""
+    assert re.search(r"^(\d+) of \1 models load$", out, re.M) is None
+    assert re.search(r"^\d+ of \d+ models load\n  blank: YOU HAVE AN INCOMPATIBLE CFG FILE",
+                     out, re.M)
 
 
 def test_models_classes_lists_the_registered_classes(capsys) -> None:
