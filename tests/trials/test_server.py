@@ -530,6 +530,7 @@ PAGE_STATE = """(() => {
     pictures: m.hidden ? [] : [...m.querySelectorAll("img.target")].map((i) => ({
       src: i.getAttribute("src"), loaded: i.complete && i.naturalWidth > 0,
       natural: [i.naturalWidth, i.naturalHeight], shown_px: i.getBoundingClientRect().width,
+      rendering: getComputedStyle(i).imageRendering,
       caption: i.closest("figure").innerText })),
     label: !label || label.hidden ? null : label.innerText,
   };
@@ -633,12 +634,12 @@ def test_the_instructions_are_lines_of_their_own_with_the_targets_picture(
         browser_run: dict[str, Any]) -> None:
     """Each instruction a paragraph under the last (they had run together:
     "...disappears.Press the space bar"), and the target's picture, loaded
-    and enlarged, between them and the key to press."""
+    and enlarged with sharp pixels, between them and the key to press."""
     begin = browser_run["state"]["begin"]
     texts = [p["text"] for p in begin["paragraphs"]]
     assert texts == ["Look at the red cross in the centre of the screen while each clip plays.",
                      "Press the space bar as soon as the target disappears.",
-                     "The target looks like this (enlarged, in the middle of the picture):",
+                     "The target looks like this, in the middle of the picture:",
                      "Press the space bar to begin."], begin
     tops = [(p["top"], p["bottom"]) for p in begin["paragraphs"]]
     assert all(b0 <= t1 for (_, b0), (t1, _) in zip(tops, tops[1:])), tops
@@ -646,6 +647,7 @@ def test_the_instructions_are_lines_of_their_own_with_the_targets_picture(
     (picture,) = begin["pictures"]
     assert picture["src"] == "/target/0" and picture["loaded"] and picture["caption"] == "truck"
     assert picture["natural"] == [40, 40] and picture["shown_px"] >= 150  # enlarged
+    assert picture["rendering"] == "pixelated"
     assert (browser_run["shots"] / "begin.png").stat().st_size > 0
 
 

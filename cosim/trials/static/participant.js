@@ -33,6 +33,9 @@
     message.hidden = false;
     for (const img of message.querySelectorAll("img.target")) {
       img.onerror = () => { img.closest("figure").hidden = true; }; // no picture: no box
+      // enlarged: its pixels kept sharp; made smaller: smoothed (not every n-th pixel)
+      img.onload = () => img.classList.toggle("enlarged", img.naturalWidth <
+        img.getBoundingClientRect().width * (window.devicePixelRatio || 1));
     }
   }
   function hide() { message.hidden = true; }
@@ -321,7 +324,7 @@
     show(paragraphs(INSTRUCTIONS[s.protocol] || []) +
          `<p>${s.trials.some((t) => t.target !== s.trials[0].target) ? "The targets look"
                                                                       : "The target looks"} ` +
-         "like this (enlarged, in the middle of the picture):</p>" +
+         "like this, in the middle of the picture:</p>" +
          pictures(s.trials, false) + '<p class="key">Press the space bar to begin.</p>');
     await waitKey(["Space"]);
     if (document.documentElement.requestFullscreen) {
