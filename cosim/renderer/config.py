@@ -10,12 +10,14 @@ of exchanges.
 from __future__ import annotations
 
 import math
+import os
 import re
 from dataclasses import dataclass, replace
 from typing import Any
 
 from cosim.geo import MAX_DISTANCE_M
 from cosim.guidance.commands import GIMBAL_PITCH_DEG, GIMBAL_YAW_DEG
+from cosim.renderer import imagery
 from cosim.scenario.limits import MAX_NAME_CHARS, MIN_EXCHANGE_HZ
 from cosim.scenario.schema import SectionInfo
 from cosim.vehicles import get_class
@@ -63,6 +65,14 @@ class GroundSpec:
     base_m_per_px: float = 0.05  # finest procedural level (no blur at 30 m)
     tile_px: int = 256
     max_range_m: float = 5000.0  # ground farther than this is drawn as haze/sky
+    #: the folders the image and the files it names must lie in (resolved); empty:
+    #: the image's own folder
+    image_folders: tuple[str, ...] = ()
+
+    def image_roots(self) -> tuple[str, ...]:
+        """The folders the image and the files it names may be read from."""
+        assert self.image is not None
+        return self.image_folders or imagery.folders(os.path.dirname(self.image))
 
 
 @dataclass(frozen=True)
@@ -132,8 +142,8 @@ def _rgb(info: SectionInfo, v: Any, path: P) -> tuple[int, int, int] | None:
 
 
 def parse_ground(info: SectionInfo, node: Any, path: P) -> GroundSpec:
-    r = info.reader(node, path, ("texture", "image", "origin", "m_per_px", "base_m_per_px",
-                                 "tile_px", "max_range_m"))
+    r = info.reader(node, path, ("texture", "image", "image_folders", "origin", "m_per_px",
+                                 "base_m_per_px", "tile_px", "max_range_m"))
     kind = r.string("texture", "image" if r.has("image") else "procedural",
                     choices=("procedural", "image"))
     base = r.num("base_m_per_px", 0.05, lo=0.005, hi=10.0)
@@ -144,17 +154,14 @@ def parse_ground(info: SectionInfo, node: Any, path: P) -> GroundSpec:
     o_ll: tuple[float, float] | None = None
     mpp = 1.0
     geotiff = False
+    listed = _image_folders(info, r.d.get("image_folders"), path + ("image_folders",))
     if kind == "image":
         raw = r.string("image")
         if raw is not None:
-            p = (info.path.resolve().parent / raw).resolve()
-            if not p.is_file():
-                info.err(path + ("image",), f"no such image file: {p}")
-            elif p.suffix.lower() in (".tif", ".tiff", ".vrt"):
-                # a TIFF or VRT without origin and m_per_px must place itself (GeoTIFF)
-                geotiff = not (r.has("origin") or r.has("m_per_px"))
-                _check_geotiff(info, str(p), geotiff, path)
-            image = str(p)
+            # a TIFF or VRT without origin and m_per_px must place itself (GeoTIFF)
+            geotiff = os.path.splitext(raw)[1].lower() in (".tif", ".tiff", ".vrt") and \
+                not (r.has("origin") or r.has("m_per_px"))
+            image = _check_image(info, raw, listed, geotiff, path)
         if not geotiff:
             mpp = r.num("m_per_px", lo=0.0, lo_open=True, hi=10_000.0) or 1.0
             o = info.reader(r.d.get("origin"), path + ("origin",),
@@ -173,7 +180,50 @@ def parse_ground(info: SectionInfo, node: Any, path: P) -> GroundSpec:
     return GroundSpec(kind=kind or "procedural", image=image, origin_ne_m=o_ne,
                       origin_latlon_deg=o_ll, m_per_px=mpp, geotiff=geotiff,
                       base_m_per_px=base or 0.05,
-                      tile_px=tile or 256, max_range_m=max_range or 5000.0)
+                      tile_px=tile or 256, max_range_m=max_range or 5000.0,
+                      image_folders=imagery.folders(info.path.resolve().parent, listed))
+
+
+def _image_folders(info: SectionInfo, node: Any, path: P) -> tuple[str, ...]:
+    """``image_folders``: folders besides the scenario's from which a ground image
+    and the files it names may be read (relative to the scenario's folder)."""
+    if node is None:
+        return ()
+    if not isinstance(node, list) or len(node) > imagery.MAX_IMAGE_FOLDERS \
+            or not all(isinstance(f, str) and f and "\0" not in f and len(f) <= 4096
+                       for f in node):
+        info.err(path, f"expected a list of at most {imagery.MAX_IMAGE_FOLDERS} folder names")
+        return ()
+    out = []
+    for i, f in enumerate(node):
+        p = str(info.path.resolve().parent / f)
+        why = imagery.check_folder(p)
+        if why is not None:
+            info.err(path + (i,), why)
+        else:
+            out.append(p)
+    return tuple(out)
+
+
+def _check_image(info: SectionInfo, raw: str, listed: tuple[str, ...], geotiff: bool,
+                 path: P) -> str | None:
+    """The image's resolved path, once it and everything it names are allowed
+    (cosim.renderer.imagery) and, for a TIFF or VRT, GDAL has read its metadata
+    (``_check_geotiff``); None if a problem was reported."""
+    roots = imagery.folders(info.path.resolve().parent, listed)
+    name = str(info.path.resolve().parent / raw)
+    suffix = os.path.splitext(raw)[1].lower()
+    try:
+        if geotiff or suffix == ".vrt":  # read by GDAL, with what it names
+            real = imagery.check_georeferenced(name, roots)
+        else:  # decoded whole
+            real = imagery.check_picture(name, roots)
+    except imagery.ImageRefused as e:
+        info.err(path + ("image",), str(e))
+        return None
+    if suffix in (".tif", ".tiff", ".vrt"):
+        _check_geotiff(info, real, geotiff, path)
+    return real
 
 
 def _check_geotiff(info: SectionInfo, image: str, geotiff: bool, path: P) -> None:

@@ -46,6 +46,7 @@ import cv2
 import numpy as np
 
 from cosim.geo import LocalFrame
+from cosim.renderer.imagery import GDAL_OPTIONS, ImageRefused, gdal_driver
 
 log = logging.getLogger(__name__)
 
@@ -99,15 +100,19 @@ class GeoRef:
 
 
 def _env() -> Any:
-    """The GDAL settings every read runs under (its block cache bounded)."""
+    """The GDAL settings every read runs under: its block cache bounded, and
+    cosim.renderer.imagery's ``GDAL_OPTIONS`` (no network, no side files that
+    name other paths, no Python or raw VRT bands)."""
     import rasterio
 
-    return rasterio.Env(GDAL_CACHEMAX=GDAL_CACHE_MB << 20)
+    return rasterio.Env(GDAL_CACHEMAX=GDAL_CACHE_MB << 20, **GDAL_OPTIONS)
 
 
 def _open(path: str, overview: int | None = None) -> Any:
     """The rasterio dataset at ``path`` (its overview ``overview``: 0 the first),
-    quietly (a file without georeference is reported by the caller)."""
+    quietly (a file without georeference is reported by the caller), by the one
+    GDAL driver its content calls for (GTiff or VRT: no other driver gets to
+    guess at it)."""
     import rasterio
     from rasterio.errors import NotGeoreferencedWarning, RasterioIOError
 
@@ -115,8 +120,8 @@ def _open(path: str, overview: int | None = None) -> Any:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", NotGeoreferencedWarning)
         try:
-            return rasterio.open(path, **kw)
-        except (RasterioIOError, OSError) as err:
+            return rasterio.open(path, driver=gdal_driver(path), **kw)
+        except (RasterioIOError, OSError, ImageRefused) as err:
             raise GeoTiffError(f"{path}: cannot read it as a raster image: {err}") from err
 
 

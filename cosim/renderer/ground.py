@@ -541,8 +541,13 @@ class _ImageLayer:
 
     def __init__(self, spec: GroundSpec, frame: LocalFrame) -> None:
         from cosim.errors import ConfigError
+        from cosim.renderer.imagery import ImageRefused, check_picture
 
         assert spec.image is not None
+        try:  # its declared size within what a render worker may hold, before decoding
+            check_picture(spec.image, spec.image_roots())
+        except ImageRefused as err:
+            raise ConfigError(f"ground.image: {err}") from None
         bgr = cv2.imread(spec.image, cv2.IMREAD_COLOR)
         if bgr is None:
             raise ConfigError(f"ground.image: cannot read {spec.image} as an image")
@@ -612,11 +617,13 @@ class _GeoRasterLayer:
     def __init__(self, spec: GroundSpec, frame: LocalFrame) -> None:
         from cosim.errors import ConfigError
         from cosim.renderer import geotiff
+        from cosim.renderer.imagery import ImageRefused, check_georeferenced
 
         assert spec.image is not None
-        try:
+        try:  # what validation checked, again where it is opened
+            check_georeferenced(spec.image, spec.image_roots())
             self.src = geotiff.GeoRaster(spec.image, frame)
-        except geotiff.GeoTiffError as err:
+        except (geotiff.GeoTiffError, ImageRefused) as err:
             raise ConfigError(f"ground.image: {err}") from err
         self.mpp, self.n0, self.e0 = self.src.m_per_px, self.src.n0, self.src.e0
         self.bounds_ne = self.src.bounds_ne

@@ -315,7 +315,9 @@ def test_bad_rasters_are_refused_with_why(tmp_path: Path, big: Big) -> None:
     scn = parse_scenario(SCENARIO + "ground: {image: site.tif}\n", str(tmp_path / "s.yaml"))
     assert scn.sections["ground"].geotiff
     (tmp_path / "vrt").symlink_to(big.vrt.parent)
-    scn = parse_scenario(SCENARIO + "ground: {image: vrt/big.vrt}\n", str(tmp_path / "s.yaml"))
+    # the mosaic lies in a folder of its own, which the scenario allows
+    scn = parse_scenario(SCENARIO + "ground: {image: vrt/big.vrt, image_folders: [vrt]}\n",
+                         str(tmp_path / "s.yaml"))
     assert scn.sections["ground"].geotiff  # a VRT places itself too
 
     def refused(name: str, *why: str, ground: str | None = None) -> None:
@@ -338,7 +340,9 @@ def test_bad_rasters_are_refused_with_why(tmp_path: Path, big: Big) -> None:
     cut.write_bytes(site.read_bytes()[:1200])
     refused("cut.tif", "cannot read")
     refused("big.vrt", "carries its own georeference",
-            ground="ground: {image: vrt/big.vrt, m_per_px: 1.0}\n")
+            ground="ground: {image: vrt/big.vrt, image_folders: [vrt], m_per_px: 1.0}\n")
+    refused("big.vrt", "outside the allowed folders", "ground.image_folders",
+            ground="ground: {image: vrt/big.vrt}\n")
     # a mosaic whose piece went missing: the window that needs it says so
     broken = tmp_path / "broken.vrt"
     broken.write_text(big.vrt.read_text().replace(
