@@ -789,8 +789,8 @@ def _gap_summary(fit: dict[str, Any], verdicts: list[str]) -> str:
 
 def _existing_db(db: str) -> None:
     """A database file to read must be there (opening a mistyped path would
-    make an empty one)."""
-    if "://" not in db and not Path(db).is_file():
+    make an empty one; ``Store`` refuses one that is not a regular file)."""
+    if "://" not in db and not Path(db).exists():
         raise ConfigError(f"{db}: no such trial database")
 
 
@@ -803,15 +803,20 @@ def _cmd_trials(a: argparse.Namespace) -> int:
         serve(a.study, host=a.host, port=a.port, db_url=a.db, public=a.public)
         return EXIT_OK
     if a.trials_cmd == "export":
-        from cosim.trials.store import export_csv
+        from cosim.trials.spreadsheet import safe_values
+        from cosim.trials.store import Store, write_csv
 
         _existing_db(a.db)
-        print(export_csv(a.db, a.out))
+        with Store(a.db) as store:  # text a spreadsheet would run as a formula, neutralised
+            rows = list(safe_values(store.responses()))
+        with open(a.out, "w", newline="") as f:
+            write_csv(rows, f)
+        print(a.out)
         return EXIT_OK
     if a.trials_cmd == "analyse":
         import tempfile
 
-        from cosim.trials.analysis import analyse
+        from cosim.trials.analysis import MAX_PANELS, analyse, shown_first
         from cosim.trials.store import export_csv
 
         src = Path(a.responses)
@@ -824,8 +829,20 @@ def _cmd_trials(a: argparse.Namespace) -> int:
         verdicts: dict[str, list[str]] = {}
         for c in summary.get("critical_gap_check", []):
             verdicts.setdefault(c["fit"], []).append(c["verdict"])
-        for label, fit in summary.get("critical_gap", {}).items():
-            print(f"critical gap, {label}: {_gap_summary(fit, verdicts.get(label, []))}")
+        fits = summary.get("critical_gap", {})
+        labels = list(fits)
+        order = shown_first([fits[label].get("status", "") for label in labels])
+        for i in order[:MAX_PANELS]:  # those with a critical gap first, as in the figure
+            fit = fits[labels[i]]
+            print(f"critical gap, {labels[i]}: {_gap_summary(fit, verdicts.get(labels[i], []))}")
+        if len(order) > MAX_PANELS:
+            print(f"critical gap: {len(order) - MAX_PANELS} more of the {len(order)} fits in "
+                  f"critical_gap.csv (those above have a critical gap first)")
+        for which, columns in summary.get("binned_conditions", {}).items():
+            for column, bins in columns.items():
+                print(f"{column}: {sum(b['values'] for b in bins)} values in the {which} "
+                      f"responses, cut into {len(bins)} bins of about equal trials, each "
+                      f"analysed at its trials' mean (the bins in analysis.json)")
         model = (summary.get("recognise") or {}).get("logistic") or {}
         for name, c in (model.get("coefficients") or {}).items():
             if name != "intercept":

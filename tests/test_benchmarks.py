@@ -86,3 +86,21 @@ def test_trials_error_rates_runs() -> None:
     r = trials_error_rates.rates(2)
     assert r["sets"] == 2 and r["screen_false_plateau"] == 0
     assert r["ground_plateau"] == 2 and r["step_flagged"] <= r["step_plateau"]
+    covered, fits = trials_error_rates.coverage(2, 10)
+    assert 0 <= covered <= fits <= 2
+    found, bad, good = trials_error_rates.off_level(2, 12, 0.25)
+    assert bad == found and good == 0
+
+
+def test_trials_analyse_speed_writes_what_it_analyses(tmp_path: Path) -> None:
+    """The speed benchmark's responses are valid, and continuous altitudes
+    are binned (the figures' sizes are for benchmarks/README.md)."""
+    import trials_analyse_speed
+
+    from cosim.trials.analysis import MAX_LEVELS, analyse
+
+    src = tmp_path / "r.csv"
+    assert trials_analyse_speed.responses_csv(src, 600, 20, "continuous") == 600
+    s = analyse(src, tmp_path / "out", n_boot=20, plots=False)
+    assert s["rows"] == 600
+    assert len(s["binned_conditions"]["conspicuity"]["condition_alt_agl_m"]) == MAX_LEVELS

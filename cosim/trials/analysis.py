@@ -24,10 +24,12 @@ columns ``COLUMNS``), drops practice rows and writes into ``out_dir``:
   means equal within a tolerance (10 % of the gap), shown by an equivalence
   test; data that cannot show it are "inconclusive" (``fit_gap``). Each
   plateau is checked level by level: the gap of the other levels predicts
-  the angle there (``tan(beta) = CG / h``), and the difference is judged
-  "holds", "fails" or "inconclusive" (``check_across_levels``). Participants'
-  trials are not taken as independent: slopes and differences are compared
-  within participants, the CG interval resamples whole participants. The
+  the angle there (``tan(beta) = CG / h``; levels that fail themselves left
+  out of the others), and the difference is judged "holds", "fails" (shown
+  to exceed the tolerance) or "inconclusive" (``check_across_levels``).
+  Participants' trials are not taken as independent: slopes and
+  differences are compared within participants, the CG interval is a t
+  interval over participants. The
   two planes are not mixed: the screen's mm and the ground's metres are
   related only through a clip's camera and the display, which differ
   between studies.
@@ -37,19 +39,26 @@ columns ``COLUMNS``), drops practice rows and writes into ``out_dir``:
   regression of recognition on altitude and speed (target as a factor).
 - ``analysis.json``: the summary ``analyse`` returns.
 
-The CSV is untrusted: it is read up to ``MAX_BYTES`` and ``MAX_ROWS`` (larger
+The CSV is untrusted: it must be a regular file (a FIFO or a device is never
+opened for reading), it is read up to ``MAX_BYTES`` and ``MAX_ROWS`` (larger
 files are refused), every row is checked and all problems are reported at
-once as ``ConfigError`` lines ``file:line: column: message``.
+once as ``ConfigError`` lines ``file:line: column: message``. The work is
+bounded whatever the file holds: a condition with more than ``MAX_LEVELS``
+distinct values (a measured altitude exported in place of the swept one) is
+cut into ``MAX_LEVELS`` bins (``bin_conditions``), at most ``MAX_FITS``
+critical-gap fits are made (more is refused) and ``critical_gap.png`` shows at
+most ``MAX_PANELS`` of them. Every CSV written is safe to open in a
+spreadsheet (``cosim.trials.spreadsheet``).
 
 Owns only the reading and statistics of response files; it never talks to
-the trial server, renders or runs a scenario. numpy, matplotlib (Agg) and the
-standard library only (no scipy: the t and normal quantiles are computed
-here).
+the trial server, renders or runs a scenario. numpy, scipy.stats (the t
+distribution), matplotlib (Agg) and the standard library.
 """
 
 from __future__ import annotations
 
 import csv
+import functools
 import io
 import json
 import logging
@@ -61,9 +70,12 @@ from statistics import NormalDist
 from typing import Any
 
 import numpy as np
+from scipy import stats
 
 from cosim.errors import ConfigError
+from cosim.scenario.yaml_lines import read_text_bounded
 from cosim.trials.measures import SCREEN_MM_RANGE, SCREEN_PX_RANGE, VIEWING_DISTANCE_MM_RANGE
+from cosim.trials.spreadsheet import SafeWriter
 
 log = logging.getLogger(__name__)
 
@@ -92,11 +104,23 @@ MAX_PROBLEMS = 200
 #: eccentricity_deg and atan(onscreen_distance_mm / viewing_distance_mm) further apart
 #: than this are counted (and logged) as inconsistent
 ECCENTRICITY_TOLERANCE_DEG = 0.5
-#: participants needed to resample whole participants in a bootstrap (the
-#: percentile interval of a few resampled people is too narrow: 86 % coverage
-#: with 5, 90 % with 8, 93 % with 12 in a simulation); from 2 to this many, a t
-#: interval over each participant's mean (``GapFit.interval``)
+#: participants needed to resample whole participants for the threshold's
+#: interval (fewer: trials are resampled within levels). The critical gap's
+#: own interval is a t interval over participants from two on: a percentile
+#: bootstrap of a few people's means is too narrow (0.905 coverage with 10
+#: people against 0.95 for the t interval; benchmarks/trials_error_rates.py)
 MIN_BOOT_PARTICIPANTS = 10
+#: a condition (viewing distance, altitude, speed) with more distinct values
+#: than this among the rows analysed together is cut into this many bins of
+#: about equal trial counts (``bin_conditions``): the levels of a fit, the
+#: fits per held condition and the rows of the tables stay few
+MAX_LEVELS = 20
+#: critical-gap fits one analysis makes at most (protocols x targets x held
+#: conditions x the two planes); responses asking for more are refused
+MAX_FITS = 200
+#: panels of critical_gap.png (the fits with a critical gap first); every fit
+#: is in critical_gap.csv
+MAX_PANELS = 12
 #: groups with more values than this are not bootstrapped value by value
 #: (memory n_boot x values): a median gets the order-statistic interval, a
 #: distance level's resampled sum is drawn from its normal distribution (exact
@@ -193,28 +217,18 @@ def read_responses(csv_path: str | Path, *, max_bytes: int = MAX_BYTES,
 
     The header must hold every column of ``COLUMNS`` and may hold those of
     ``OPTIONAL_COLUMNS`` (in any order; other columns are ignored with a
-    warning). Files over ``max_bytes`` or with
-    more than ``max_rows`` data rows are refused. Each cell is checked:
+    warning). Anything but a regular file (a FIFO, a device, a folder),
+    files over ``max_bytes`` and files with more than ``max_rows`` data rows
+    are refused. Each cell is checked:
     numbers finite and in range, flags 0/1, ``protocol`` one of
     ``PROTOCOLS``, ``recognised`` empty/0/1 (0/1 on "recognise" rows),
     ``eccentricity_deg`` and ``onscreen_distance_mm`` present on
     "disappear" rows with the target in view.
     """
     name = str(csv_path)
-    try:
-        with open(csv_path, "rb") as f:
-            raw = f.read(max_bytes + 1)
-    except OSError as e:
-        raise ConfigError(f"{name}: cannot read: {e.strerror or e}") from e
-    if len(raw) > max_bytes:
-        raise ConfigError(f"{name}: larger than the limit of {max_bytes} bytes; refused "
-                          "(split the file or analyse fewer sessions)")
-    try:
-        content = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as e:
-        line = raw[:e.start].count(b"\n") + 1
-        raise ConfigError(f"{name}:{line}: not UTF-8 text ({e.reason} at byte {e.start})") from e
-
+    # a regular file only (a FIFO would block for ever), at most max_bytes
+    content = read_text_bounded(csv_path, max_bytes, "the responses CSV",
+                                "a responses CSV").removeprefix("\ufeff")
     problems = _Problems(name)
     reader = csv.reader(io.StringIO(content, newline=""))
     try:
@@ -352,66 +366,15 @@ def _number(cell: str, column: str, required: bool, lo: float, lo_incl: bool, hi
 # ---------------------------------------------------------------- statistics
 
 
-def _betainc(a: float, b: float, x: float) -> float:
-    """The regularized incomplete beta function I_x(a, b), by its continued
-    fraction (modified Lentz), on the side where it converges fast."""
-    if x <= 0.0:
-        return 0.0
-    if x >= 1.0:
-        return 1.0
-    if x > (a + 1.0) / (a + b + 2.0):
-        return 1.0 - _betainc(b, a, 1.0 - x)
-    log_front = (math.lgamma(a + b) - math.lgamma(a) - math.lgamma(b) + a * math.log(x)
-                 + b * math.log1p(-x))
-    tiny = 1e-300
-    c, d = 1.0, 1.0 - (a + b) * x / (a + 1.0)
-    d = 1.0 / (d if abs(d) > tiny else tiny)
-    f = d
-    for m in range(1, 500):
-        for num in (m * (b - m) * x / ((a + 2 * m - 1) * (a + 2 * m)),
-                    -(a + m) * (a + b + m) * x / ((a + 2 * m) * (a + 2 * m + 1))):
-            d = 1.0 + num * d
-            d = 1.0 / (d if abs(d) > tiny else tiny)
-            c = 1.0 + num / c
-            c = c if abs(c) > tiny else tiny
-            f *= c * d
-        if abs(c * d - 1.0) < 1e-15:
-            break
-    return math.exp(log_front) * f / a
-
-
-def t_cdf(t: float, df: float) -> float:
-    """P(T <= t) for Student's t with ``df`` (> 0, not necessarily whole)
-    degrees of freedom."""
-    tail = 0.5 * _betainc(df / 2.0, 0.5, df / (df + t * t))
-    return 1.0 - tail if t > 0 else tail
-
-
+@functools.lru_cache(maxsize=4096)
 def t_quantile(p: float, df: float) -> float:
-    """Quantile of Student's t with ``df`` (> 0, not necessarily whole)
-    degrees of freedom: ``t_cdf`` inverted by bisection to 1e-12 relative
-    (exact for any p and df, e.g. Bonferroni levels and Welch's fractional
-    degrees of freedom)."""
+    """Quantile of Student's t with ``df`` (> 0, not necessarily whole: Welch's
+    degrees of freedom) at ``p`` (Bonferroni levels included), from
+    ``scipy.stats.t``. Cached: an analysis asks for the same few levels and
+    degrees of freedom once per condition and level."""
     if not 0.0 < p < 1.0 or not df > 0:
         raise ValueError(f"t_quantile: need 0 < p < 1 and df > 0, got p={p!r}, df={df!r}")
-    if p < 0.5:
-        return -t_quantile(1.0 - p, df)
-    if p == 0.5:
-        return 0.0
-    lo, hi = 0.0, max(1.0, NormalDist().inv_cdf(p))
-    while t_cdf(hi, df) < p:
-        lo, hi = hi, hi * 2.0
-        if hi > 1e300:
-            return math.inf
-    for _ in range(200):
-        mid = 0.5 * (lo + hi)
-        if t_cdf(mid, df) < p:
-            lo = mid
-        else:
-            hi = mid
-        if hi - lo <= 1e-12 * hi:
-            break
-    return 0.5 * (lo + hi)
+    return float(stats.t.ppf(p, df))
 
 
 def mean_ci(x: np.ndarray, level: float = 0.95) -> tuple[float, float, float]:
@@ -540,6 +503,27 @@ def _difference(y: np.ndarray, here: np.ndarray, who: np.ndarray | None
     return float(a.mean() - b.mean()), se, df
 
 
+def _mean(y: np.ndarray, who: np.ndarray | None) -> tuple[float, float, float] | None:
+    """(mean of y, standard error, degrees of freedom), None below two values.
+    Without participants: the trials' standard error, n - 1 degrees of
+    freedom. With them: cluster-robust (CR1: each participant's summed
+    deviations, G/(G-1)) with G - 1 degrees of freedom for the G participants:
+    when every participant has as many trials, exactly the t interval over
+    the participants' means, and centred on the trials' mean when they do
+    not. None also below two participants."""
+    if y.size < 2:
+        return None
+    m = float(y.mean())
+    if who is None:
+        return m, float(y.std(ddof=1)) / math.sqrt(y.size), float(y.size - 1)
+    _, person = np.unique(who, return_inverse=True)
+    g = int(person.max()) + 1
+    if g < 2:
+        return None
+    scores = np.bincount(person, weights=y - m)
+    return m, math.sqrt(g / (g - 1) * float(scores @ scores)) / y.size, float(g - 1)
+
+
 def _interval(est: tuple[float, float, float] | None, level: float) -> tuple[float, float]:
     """The t interval at ``level`` of an (estimate, standard error, degrees of
     freedom); NaN bounds for no estimate."""
@@ -552,18 +536,21 @@ def _interval(est: tuple[float, float, float] | None, level: float) -> tuple[flo
 
 def _judge(est: tuple[float, float, float] | None, margin: float, level: float,
            test_level: float) -> str:
-    """Whether an estimated change is shown negligible or shown real:
-    "equal" when its ``2 * level - 1`` interval lies within +-``margin`` (an
-    equivalence test at ``1 - level``), "differs" when its ``test_level``
-    interval excludes 0, "unclear" else, and when there is no estimate (too
-    few points, or too few participants on both sides of it)."""
+    """Whether an estimated change is shown negligible or shown larger than
+    negligible: "equal" when its ``2 * level - 1`` interval lies within
+    +-``margin`` (an equivalence test at ``1 - level``), "differs" when its
+    ``test_level`` interval lies entirely outside +-``margin`` (a change shown
+    to exceed the margin, not merely shown to be there: a change of 7 % is
+    not "differs" for a 10 % margin however many trials show it), "unclear"
+    else, and when there is no estimate (too few points, or too few
+    participants on both sides of it)."""
     if est is None:
         return "unclear"
     elo, ehi = _interval(est, 2 * level - 1)
     if -margin <= elo and ehi <= margin:
         return "equal"
     lo, hi = _interval(est, test_level)
-    return "unclear" if lo <= 0.0 <= hi else "differs"
+    return "differs" if lo > margin or hi < -margin else "unclear"
 
 
 # ---------------------------------------------------------------- critical gap
@@ -584,9 +571,9 @@ class GapFit:
     - "plateau_from_start": constant over every level tested: the threshold
       is at or below the lowest level (``threshold`` is that level, with no
       interval);
-    - "no_plateau": the gap still changes above the best breakpoint (or the
-      bend cannot be told from the rise): no critical gap within the levels
-      tested;
+    - "no_plateau": the gap still changes above the best breakpoint, by
+      more than ``tolerance`` across it (or the bend cannot be told from
+      the rise): no critical gap within the levels tested;
     - "inconclusive": the data cannot tell whether the gap is constant
       above the breakpoint (its change is neither shown nor ruled out):
       more trials or participants are needed;
@@ -596,10 +583,12 @@ class GapFit:
 
     ``cg`` and ``threshold`` are given for the two plateau statuses only;
     ``detail`` says why. ``interval`` says how the CG interval was made:
-    "participant bootstrap" (``MIN_BOOT_PARTICIPANTS`` or more people: whole
-    participants resampled, the breakpoint chosen anew), "participant means"
-    (2 or more: a t interval over each person's mean gap on the plateau) or
-    "trial bootstrap" (one person, or none named).
+    "t over participants" (2 or more people on the plateau: a t interval
+    with one degree of freedom less than people, each person's trials
+    counted as one unit, cluster-robust; over people who did as many trials
+    each it is the t interval over their mean gaps) or "trial bootstrap"
+    (one person, or none named: trials resampled within levels, the
+    breakpoint chosen anew).
     """
 
     status: str
@@ -758,14 +747,16 @@ def fit_gap(x: np.ndarray, g: np.ndarray, *, rng: np.random.Generator,
        with the negligible slope ``delta``, the one that changes the gap by
        ``tolerance`` of its level across the plateau: constant when its
        90 % interval lies within +-delta (an equivalence test at 5 %);
-       changing ("no_plateau") when its 95 % interval excludes 0 and is not
-       within +-delta; otherwise "inconclusive". With a rising part the
+       changing ("no_plateau") when its 95 % interval lies entirely outside
+       +-delta (a change shown to exceed the tolerance); otherwise
+       "inconclusive" (``_judge``). With a rising part the
        95 % interval must also lie below ``s`` (the bend is real, not a
        lack of data above ``x0``), else "no_plateau";
-    3. CG is the mean of ``g`` over the plateau, with an interval from
-       whole participants (``GapFit.interval``); the threshold's interval
-       is a percentile bootstrap (participants, or trials within levels),
-       the breakpoint chosen anew each time.
+    3. CG is the mean of ``g`` over the plateau, with a t interval over
+       the participants there (``_mean``: each participant counted once,
+       ``GapFit.interval``); the threshold's interval is a percentile
+       bootstrap (participants, or trials within levels), the breakpoint
+       chosen anew each time.
     """
     x = np.asarray(x, dtype=float)
     g = np.asarray(g, dtype=float)
@@ -837,8 +828,9 @@ def fit_gap(x: np.ndarray, g: np.ndarray, *, rng: np.random.Generator,
             **common)
     if verdict == "differs":
         return GapFit(status="no_plateau",
-                      detail=(f"{gap} still changes above the best breakpoint {x0:g} {unit} "
-                              f"({slope_text}): no critical gap within {span}"), **common)
+                      detail=(f"{gap} still changes above the best breakpoint {x0:g} {unit}, "
+                              f"by more than {tolerance:.0%} across it ({slope_text}): no "
+                              f"critical gap within {span}"), **common)
     if verdict == "unclear":
         return GapFit(status="inconclusive",
                       detail=(f"cannot tell whether {gap} is constant above {x0:g} {unit} "
@@ -850,29 +842,31 @@ def fit_gap(x: np.ndarray, g: np.ndarray, *, rng: np.random.Generator,
     cg = float(g[above].mean())
     q = [(1 - level) / 2, (1 + level) / 2]
     dropped = 0
-    if who is not None and int(who.max()) + 1 >= MIN_BOOT_PARTICIPANTS:
-        boot, bcounts, dropped = _people_boot_sums(g, level_of, levels.size, who, rng, n_boot)
-        interval = "participant bootstrap"
-    else:
-        boot, bcounts = _trial_boot_sums(g, level_of, levels.size, rng, n_boot), counts
-        interval = "trial bootstrap"
-    if boot.shape[0] and rising_resolved:
-        bpart, _, _, _ = _hinge(levels, bcounts, boot, cand)
-        x0s = cand[np.argmin(bpart, axis=1)]
-    else:
-        x0s = np.full(boot.shape[0], cand[0])
-    on = levels[None, :] >= x0s[:, None] - 1e-9  # (B, L): levels on the plateau
-    with np.errstate(invalid="ignore", divide="ignore"):
-        cgs = (boot * on).sum(axis=1) / (on * bcounts).sum(axis=1)
-    cgs = cgs[np.isfinite(cgs)]
-    if who is not None and (interval == "trial bootstrap" or cgs.size < n_boot // 2):
-        # 2..MIN_BOOT_PARTICIPANTS-1 people (or a design too incomplete to
-        # resample): each person's mean on the plateau, a t interval over people
-        means = np.array([g[above & (who == p)].mean() for p in np.unique(who[above])])
-        _, cg_lo, cg_hi = mean_ci(means, level)
-        interval = "participant means"
-    else:
-        cg_lo, cg_hi = (float(v) for v in np.quantile(cgs, q))
+    # the CG's interval: a t interval over the participants on the plateau
+    people_est = _mean(g[above], who[above]) if who is not None else None
+    x0s = np.empty(0)
+    if rising_resolved or people_est is None:  # the bootstrap: the threshold, or the CG
+        if who is not None and int(who.max()) + 1 >= MIN_BOOT_PARTICIPANTS:
+            boot, bcounts, dropped = _people_boot_sums(g, level_of, levels.size, who, rng,
+                                                       n_boot)
+            interval = "participant bootstrap"
+        else:
+            boot, bcounts = _trial_boot_sums(g, level_of, levels.size, rng, n_boot), counts
+            interval = "trial bootstrap"
+        if boot.shape[0] and rising_resolved:
+            bpart, _, _, _ = _hinge(levels, bcounts, boot, cand)
+            x0s = cand[np.argmin(bpart, axis=1)]
+        else:
+            x0s = np.full(boot.shape[0], cand[0])
+        on = levels[None, :] >= x0s[:, None] - 1e-9  # (B, L): levels on the plateau
+        with np.errstate(invalid="ignore", divide="ignore"):
+            cgs = (boot * on).sum(axis=1) / (on * bcounts).sum(axis=1)
+        cgs = cgs[np.isfinite(cgs)]
+        cg_lo, cg_hi = ((float(v) for v in np.quantile(cgs, q)) if cgs.size
+                        else (math.nan, math.nan))
+    if people_est is not None:
+        cg_lo, cg_hi = _interval(people_est, level)
+        interval = "t over participants"
     if rising_resolved and x0s.size:
         x0_lo, x0_hi = (float(v) for v in np.quantile(x0s, q))
         x0_ci: tuple[float, float] | None = (x0_lo, x0_hi)
@@ -930,20 +924,26 @@ def check_across_levels(fit: GapFit, x: np.ndarray, g: np.ndarray, *,
     """Whether one measurement predicts the others: per level of ``fit``'s
     variable, the gap (and its angle ``atan(gap / x)``) measured there
     against the one the critical gap predicts (``tan(angle) = CG / x``), CG
-    taken from the *other* plateau levels only (leave one level out).
+    taken from the *other* plateau levels only (leave one level out), and of
+    those only the ones that are not themselves off: each level is first
+    compared with all the others; the levels found off ("fails") are left
+    out of the others' gap and every level compared again, until the levels
+    left out no longer change (a level 25 % off no longer drags the others'
+    gap and makes correct levels fail). ``compared_with`` lists the levels
+    each was compared with.
 
     Every level gets a row: n, the measured mean gap with its t interval,
     the measured angle. On the plateau (``x >= threshold``) also the
-    predicted angle, the difference (gap here - mean gap of the other
-    plateau levels, cluster-robust over ``clusters`` when given:
+    predicted angle, the difference (gap here - mean gap of the levels
+    compared with, cluster-robust over ``clusters`` when given:
     ``_difference``) and a ``verdict`` (``_judge``):
 
     - "holds": the difference's 90 % interval lies within ``fit.tolerance``
       of the others' gap (an equivalence test at 5 %);
     - "fails": its interval at ``confidence`` (Bonferroni: 1 - (1 - level) / k
-      for the k plateau levels, so a fit whose relation holds fails nowhere
-      in at least ``level`` of data sets) excludes 0, and it is not within
-      the tolerance;
+      for the k plateau levels) lies entirely outside the tolerance: the
+      difference is shown to be larger than the tolerance (a level 7 % off
+      with a 10 % tolerance does not fail);
     - "inconclusive": neither (too few trials to tell);
     - "untested": fewer than two trials here or at the other levels.
 
@@ -959,15 +959,16 @@ def check_across_levels(fit: GapFit, x: np.ndarray, g: np.ndarray, *,
     k = len(np.unique(xr[on_plateau])) if on_plateau is not None else 0
     confidence = 1.0 - (1.0 - level) / max(k, 1)
     out = []
+    judged: dict[float, dict[str, Any]] = {}  # the plateau's rows
     for v in np.unique(xr):
         here = xr == v
         m, lo, hi = mean_ci(g[here], level)
         row: dict[str, Any] = {
             "level": float(v), "n": int(here.sum()), "gap_mean": m, "gap_ci_lo": lo,
             "gap_ci_hi": hi, "angle_measured_deg": math.degrees(math.atan(m / v)),
-            "angle_predicted_deg": None, "cg_predicting": None, "difference": None,
-            "difference_ci_lo": None, "difference_ci_hi": None, "confidence": None,
-            "verdict": "no_plateau", "holds": None}
+            "angle_predicted_deg": None, "cg_predicting": None, "compared_with": None,
+            "difference": None, "difference_ci_lo": None, "difference_ci_hi": None,
+            "confidence": None, "verdict": "no_plateau", "holds": None}
         out.append(row)
         if fit.cg is None or on_plateau is None:
             continue
@@ -975,22 +976,40 @@ def check_across_levels(fit: GapFit, x: np.ndarray, g: np.ndarray, *,
             row.update(verdict="below_threshold", cg_predicting=fit.cg,
                        angle_predicted_deg=math.degrees(math.atan(fit.cg / v)))
             continue
-        others = g[on_plateau & ~here]
+        judged[float(v)] = row
+    if on_plateau is None:
+        return out
+    plateau = on_plateau
+
+    def compare(v: float, row: dict[str, Any], left_out: set[float]) -> None:
+        here = xr == v
+        others = plateau & ~here
+        kept = others & ~np.isin(xr, list(left_out))
+        if kept.sum() >= 2:  # (when every other level is off: all of them)
+            others = kept
         row["verdict"] = "untested"
-        if others.size < 2 or here.sum() < 2:
-            continue
-        cg_o = float(others.mean())
-        # this level against the rest of the plateau
-        est = _difference(g[on_plateau], here[on_plateau],
-                          who[on_plateau] if who is not None else None)
-        diff = est[0] if est is not None else math.nan
+        if others.sum() < 2 or here.sum() < 2:
+            return
+        cg_o = float(g[others].mean())
+        both = here | others
+        est = _difference(g[both], here[both], who[both] if who is not None else None)
         dlo, dhi = _interval(est, confidence)
         verdict = {"equal": "holds", "differs": "fails", "unclear": "inconclusive"}[
             _judge(est, fit.tolerance * abs(cg_o), level, confidence)]
         row.update(cg_predicting=cg_o, angle_predicted_deg=math.degrees(math.atan(cg_o / v)),
-                   difference=diff, difference_ci_lo=dlo, difference_ci_hi=dhi,
-                   confidence=confidence, verdict=verdict,
-                   holds={"holds": True, "fails": False}.get(verdict))
+                   compared_with=" ".join(f"{u:g}" for u in np.unique(xr[others])),
+                   difference=est[0] if est is not None else math.nan,
+                   difference_ci_lo=dlo, difference_ci_hi=dhi, confidence=confidence,
+                   verdict=verdict, holds={"holds": True, "fails": False}.get(verdict))
+
+    left_out: set[float] = set()
+    for _ in range(len(judged) + 1):  # (settles in two or three rounds)
+        for v, row in judged.items():
+            compare(v, row, left_out)
+        off = {v for v, row in judged.items() if row["verdict"] == "fails"}
+        if off == left_out:
+            break
+        left_out = off
     return out
 
 
@@ -1067,7 +1086,7 @@ CRITICAL_GAP_FIELDS = (
 CHECK_FIELDS = (
     "fit", "target", "variable", "unit", "level", "n", "verdict", "holds", "gap_mean",
     "gap_ci_lo", "gap_ci_hi", "angle_measured_deg", "angle_predicted_deg", "cg_predicting",
-    "difference", "difference_ci_lo", "difference_ci_hi", "confidence",
+    "compared_with", "difference", "difference_ci_lo", "difference_ci_hi", "confidence",
 )
 RECOGNITION_FIELDS = ("factor", "level", "bin_lo", "bin_hi", "n", "recognised", "accuracy",
                       "ci_lo", "ci_hi", "reaction_time_mean_ms")
@@ -1087,8 +1106,57 @@ class _GapData:
     fit: GapFit
 
 
-def _gap_fits(used: Responses, rng: np.random.Generator, *, n_boot: int,
-              distance_round_mm: float, altitude_round_m: float,
+def condition_levels(v: np.ndarray, round_to: float | None = None,
+                     max_levels: int = MAX_LEVELS) -> tuple[np.ndarray, list[dict[str, Any]]]:
+    """Each trial's level of a condition: its value rounded to ``round_to``
+    (none when None), NaN where it has none. More than ``max_levels``
+    distinct levels (a measured value exported in place of the swept one)
+    are cut into ``max_levels`` bins of about equal trial counts, never
+    splitting one value, and each trial's level is its bin's mean (rounded
+    likewise, so it lies within the bin). Returns (levels, bins): the bins
+    as ``{"lo", "hi", "level", "n" (trials), "values" (distinct values)}``,
+    empty when the values were few."""
+    v = np.asarray(v, dtype=float)
+    out = v.copy()
+    ok = np.isfinite(v)
+    vr = np.round(v[ok] / round_to) * round_to if round_to else v[ok]
+    out[ok] = vr
+    values, inverse, counts = np.unique(vr, return_inverse=True, return_counts=True)
+    if values.size <= max_levels:
+        return out, []
+    # the bin of each distinct value: by the share of trials below it
+    first = (np.cumsum(counts) - counts) * max_levels // vr.size
+    _, value_bin = np.unique(first, return_inverse=True)
+    trial_bin = value_bin[inverse]
+    n = np.bincount(trial_bin)
+    mean = np.bincount(trial_bin, weights=vr) / n
+    level = np.round(mean / round_to) * round_to if round_to else mean
+    out[ok] = level[trial_bin]
+    lo = np.full(n.size, np.inf)
+    hi = np.full(n.size, -np.inf)
+    np.minimum.at(lo, value_bin, values)
+    np.maximum.at(hi, value_bin, values)
+    held = np.bincount(value_bin)
+    return out, [{"lo": float(a), "hi": float(b), "level": float(c), "n": int(k),
+                  "values": int(u)} for a, b, c, k, u in zip(lo, hi, level, n, held)]
+
+
+#: the order in which figures and print-outs show fits: a critical gap first
+_SHOWN_FIRST = ("plateau", "plateau_from_start", "no_plateau", "inconclusive",
+                "insufficient_data")
+
+
+def shown_first(statuses: Sequence[str]) -> list[int]:
+    """Indices of fits (by their ``GapFit.status``) in the order figures and
+    print-outs show them: those with a critical gap first, then those
+    without one, then those without enough data; the fits' own order within
+    each."""
+    rank = {st: i for i, st in enumerate(_SHOWN_FIRST)}
+    return sorted(range(len(statuses)), key=lambda i: rank.get(statuses[i], len(rank)))
+
+
+def _gap_fits(used: Responses, levels: dict[str, np.ndarray], rng: np.random.Generator, *,
+              n_boot: int, distance_round_mm: float, altitude_round_m: float,
               min_plateau_levels: int, tolerance: float) -> list[_GapData]:
     """The critical-gap fits the conspicuity responses allow.
 
@@ -1100,48 +1168,56 @@ def _gap_fits(used: Responses, rng: np.random.Generator, *, n_boot: int,
     ``target_depth_m``, where known, else the altitude), one fit per
     protocol, target and viewing distance with at least two altitudes. A
     label names the target, the held altitude / viewing distance when the
-    data have more than one, and the protocol when they have both."""
+    data have more than one, and the protocol when they have both.
+    ``levels``: each trial's level of the viewing distance and the altitude
+    (``condition_levels``: rounded, and binned when there are many). More
+    than ``MAX_FITS`` fits are refused (``ConfigError``)."""
     t_all = np.asarray(used.text["condition_target"], dtype=object)
     proto = np.asarray(used.text["protocol"], dtype=object)
-    vd = used.num["viewing_distance_mm"]
-    vd_r = np.round(vd / distance_round_mm) * distance_round_mm
-    alt = used.num["condition_alt_agl_m"]
-    alt_r = np.where(np.isnan(alt), np.nan, np.round(alt / altitude_round_m) * altitude_round_m)
-    depth = used.num["target_depth_m"]
-    ground = np.tan(np.radians(used.num["camera_gap_deg"])) * np.where(np.isfinite(depth),
-                                                                      depth, alt)
+    vd = levels["viewing_distance_mm"]
+    alt = levels["condition_alt_agl_m"]
+    ground = np.tan(np.radians(used.num["camera_gap_deg"])) * used.num["target_depth_m"]
     people = np.asarray(used.text["participant"], dtype=object)
     several = len(set(proto)) > 1
-    out: list[_GapData] = []
-    specs = (  # (which, levels, round_to, held, gap, unit of held, name of held)
-        ("screen", vd, distance_round_mm, alt_r, used.num["onscreen_distance_mm"], "m",
-         "alt_agl_m"),
-        ("ground", alt, altitude_round_m, vd_r, ground, "mm", "viewing_distance_mm"))
-    for which, x, step, held, gap, held_unit, held_name in specs:
-        for protocol, target in sorted(set(zip(proto, t_all))):
-            ok = (t_all == target) & (proto == protocol) & np.isfinite(x) & np.isfinite(gap)
-            groups = [float(v) for v in np.unique(held[ok & ~np.isnan(held)])]
-            if (ok & np.isnan(held)).any():
-                groups.append(math.nan)  # the trials that do not say
-            for h in groups:
-                m = ok & ((held == h) if not math.isnan(h) else np.isnan(held))
-                if np.unique(np.round(x[m] / step)).size < 2:
+    jobs: list[tuple[str, str, str, np.ndarray, np.ndarray, np.ndarray, str, str]] = []
+    specs = (  # (which, levels, held, gap, unit of held, name of held)
+        ("screen", vd, alt, used.num["onscreen_distance_mm"], "m", "alt_agl_m"),
+        ("ground", alt, vd, ground, "mm", "viewing_distance_mm"))
+    for which, x, held, gap, held_unit, held_name in specs:
+        groups: dict[tuple[str, str], dict[float | None, list[int]]] = {}
+        for i in np.flatnonzero(np.isfinite(x) & np.isfinite(gap)):
+            groups.setdefault((proto[i], t_all[i]), {}).setdefault(
+                _key(held[i]), []).append(int(i))
+        for protocol, target in sorted(groups):
+            by_held = groups[(protocol, target)]
+            # the held values in order, the trials that do not say last
+            for h in sorted(by_held, key=lambda v: (v is None, v or 0.0)):
+                m = np.asarray(by_held[h], dtype=np.int64)
+                if np.unique(x[m]).size < 2:
                     continue  # the variable does not vary: nothing to fit
-                variable, unit, name = (("viewing distance d", "mm", "tan(alpha)*d")
-                                        if which == "screen" else
-                                        ("altitude h", "m", "tan(beta)*h"))
-                fit = fit_gap(x[m], gap[m], rng=rng, clusters=people[m], n_boot=n_boot,
-                              min_plateau_levels=min_plateau_levels, round_to=step,
-                              variable=variable, unit=unit, gap=name, tolerance=tolerance)
-                held_text = "" if math.isnan(h) else f"{held_name}={h:g}"
-                label = (target if len(groups) <= 1 or math.isnan(h)
-                         else f"{target}, {h:g} {held_unit}")
+                label = target if len(by_held) <= 1 or h is None else \
+                    f"{target}, {h:g} {held_unit}"
                 if several:
                     label = f"{label}, {protocol}"
                 if which == "ground":
                     label = f"{label} (ground)"
-                out.append(_GapData(label, target, protocol, held_text, x[m], gap[m], people[m],
-                                    fit))
+                jobs.append((which, label, target, x[m], gap[m], people[m], protocol,
+                             "" if h is None else f"{held_name}={h:g}"))
+    if len(jobs) > MAX_FITS:
+        raise ConfigError(
+            f"{used.path}: the conspicuity responses ask for {len(jobs)} critical-gap fits "
+            f"(one per protocol, target and held altitude or viewing distance, in each "
+            f"plane), more than the {MAX_FITS} one analysis makes: analyse fewer targets "
+            f"at a time")
+    out: list[_GapData] = []
+    for which, label, target, x_m, gap_m, people_m, protocol, held_text in jobs:
+        variable, unit, name, step = (
+            ("viewing distance d", "mm", "tan(alpha)*d", distance_round_mm)
+            if which == "screen" else ("altitude h", "m", "tan(beta)*h", altitude_round_m))
+        fit = fit_gap(x_m, gap_m, rng=rng, clusters=people_m, n_boot=n_boot,
+                      min_plateau_levels=min_plateau_levels, round_to=step,
+                      variable=variable, unit=unit, gap=name, tolerance=tolerance)
+        out.append(_GapData(label, target, protocol, held_text, x_m, gap_m, people_m, fit))
     return out
 
 
@@ -1200,10 +1276,30 @@ def analyse(csv_path: str | Path, out_dir: str | Path, *, seed: int = 0,
     out.mkdir(parents=True, exist_ok=True)
     rng = np.random.default_rng(seed)
     allr = read_responses(csv_path, max_bytes=max_bytes, max_rows=max_rows)
+    # the camera's depth to the target, where the export does not say: the altitude
+    depth = allr.num["target_depth_m"]
+    allr.num["target_depth_m"] = np.where(np.isfinite(depth), depth,
+                                          allr.num["condition_alt_agl_m"])
     r = allr.subset(~allr.practice & ~(allr.reshown & exclude_reshown))
     protocol = np.asarray(r.text["protocol"], dtype=object)
     dis = r.subset(np.isin(protocol, CONSPICUITY))
     rec = r.subset(protocol == "recognise")
+    rounding = {"viewing_distance_mm": distance_round_mm,
+                "condition_alt_agl_m": altitude_round_m, "condition_speed_kt": None}
+    binned: dict[str, dict[str, list[dict[str, Any]]]] = {}
+
+    def levels_of(sub: Responses, which: str) -> dict[str, np.ndarray]:
+        """Each trial's level of each condition (``condition_levels``)."""
+        lv = {}
+        for col, step in rounding.items():
+            lv[col], bins = condition_levels(sub.num[col], step)
+            if bins:
+                binned.setdefault(which, {})[col] = bins
+                log.warning("%s: %s takes %d values in the %s responses: cut into %d bins "
+                            "of about equal trials, each analysed at its trials' mean (the "
+                            "bins are in analysis.json)", allr.path, col,
+                            sum(b["values"] for b in bins), which, len(bins))
+        return lv
 
     # ---- experiment 1: conspicuity per condition
     in_view = dis.target_in_view
@@ -1221,12 +1317,13 @@ def analyse(csv_path: str | Path, out_dir: str | Path, *, seed: int = 0,
                     "atan(onscreen_distance_mm / viewing_distance_mm) by more than %g deg "
                     "(first at line %d)", allr.path, int(bad_ecc.sum()),
                     ECCENTRICITY_TOLERANCE_DEG, int(used.line[np.argmax(bad_ecc)]))
-    vd_r = np.round(vd / distance_round_mm) * distance_round_mm
+    levels = levels_of(used, "conspicuity")
+    vd_r = levels["viewing_distance_mm"]
+    alt = levels["condition_alt_agl_m"]
+    spd = levels["condition_speed_kt"]
     targets = used.text["condition_target"]
-    alt = used.num["condition_alt_agl_m"]
-    spd = used.num["condition_speed_kt"]
     beta = used.num["camera_gap_deg"]
-    depth = np.where(np.isfinite(used.num["target_depth_m"]), used.num["target_depth_m"], alt)
+    depth = used.num["target_depth_m"]
     people = used.text["participant"]
     groups: dict[tuple[Any, ...], list[int]] = {}
     for i in range(len(used)):
@@ -1253,8 +1350,8 @@ def analyse(csv_path: str | Path, out_dir: str | Path, *, seed: int = 0,
     # ---- critical gap: on the screen across viewing distances (one fit per
     # target and altitude), on the ground across altitudes (per target and
     # viewing distance), and whether one level predicts the others
-    gap_fits = _gap_fits(used, rng, n_boot=n_boot, distance_round_mm=distance_round_mm,
-                         altitude_round_m=altitude_round_m,
+    gap_fits = _gap_fits(used, levels, rng, n_boot=n_boot,
+                         distance_round_mm=distance_round_mm, altitude_round_m=altitude_round_m,
                          min_plateau_levels=min_plateau_levels, tolerance=tolerance)
     cg_rows, check_rows = [], []
     for gf in gap_fits:
@@ -1266,13 +1363,15 @@ def analyse(csv_path: str | Path, out_dir: str | Path, *, seed: int = 0,
     _write_csv(out / "critical_gap_check.csv", CHECK_FIELDS, check_rows)
 
     # ---- experiment 2: recognition
-    rec_rows, logistic = _recognition(rec, n_bins)
+    rec_rows, logistic = _recognition(rec, levels_of(rec, "recognise"),
+                                      binned.get("recognise", {}), n_bins)
     _write_csv(out / "recognition.csv", RECOGNITION_FIELDS, rec_rows)
 
     files = ["conspicuity.csv", "critical_gap.csv", "critical_gap_check.csv",
              "recognition.csv", "analysis.json"]
+    panels = 0
     if plots:
-        _plot_critical_gap(out / "critical_gap.png", gap_fits)
+        panels = _plot_critical_gap(out / "critical_gap.png", gap_fits)
         _plot_recognition(out / "recognition.png", rec_rows)
         files += ["critical_gap.png", "recognition.png"]
 
@@ -1292,6 +1391,8 @@ def analyse(csv_path: str | Path, out_dir: str | Path, *, seed: int = 0,
             "conditions": len(cons_rows),
         },
         "critical_gap": {gf.label: gf.fit.as_dict() for gf in gap_fits},
+        "critical_gap_figure": {"fits": len(gap_fits), "panels": panels},
+        "binned_conditions": binned,
         "critical_gap_check": check_rows,
         "recognise": {
             "responses": n_rec, "recognised": k_rec,
@@ -1311,15 +1412,20 @@ def analyse(csv_path: str | Path, out_dir: str | Path, *, seed: int = 0,
     return summary
 
 
-def _recognition(rec: Responses, n_bins: int) -> tuple[list[dict[str, Any]], dict[str, Any]]:
-    """Accuracy tables per factor, and the logistic regression on altitude and speed."""
+def _recognition(rec: Responses, levels: dict[str, np.ndarray],
+                 bins: dict[str, list[dict[str, Any]]], n_bins: int
+                 ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """Accuracy tables per factor, and the logistic regression on altitude and
+    speed. ``levels``: each trial's altitude and speed level, ``bins`` those
+    of the conditions cut into bins (``condition_levels``): a row a level,
+    or a bin."""
     y = rec.recognised
     rt = rec.num["reaction_time_ms"]
     rows: list[dict[str, Any]] = []
 
     def add(factor: str, label: str, m: np.ndarray, lo: float | None = None,
             hi: float | None = None) -> None:
-        n = int(m.sum())
+        n = int(m.size)  # m: the trials' indices
         k = int(y[m].sum())
         c_lo, c_hi = wilson_ci(k, n)
         rts = rt[m][~np.isnan(rt[m])]
@@ -1328,12 +1434,19 @@ def _recognition(rec: Responses, n_bins: int) -> tuple[list[dict[str, Any]], dic
             float(rts.mean()) if rts.size else None))))
 
     for factor, col in (("alt_agl_m", "condition_alt_agl_m"), ("speed_kt", "condition_speed_kt")):
-        v = rec.num[col]
-        for lv in sorted({float(x) for x in v if not math.isnan(x)}):
-            add(factor, f"{lv:g}", v == lv, lv, lv)
+        v = levels[col]
+        have = np.flatnonzero(np.isfinite(v))
+        values, which = np.unique(v[have], return_inverse=True)
+        ranges = {b["level"]: (b["lo"], b["hi"]) for b in bins.get(col, [])}
+        for j, lv in enumerate(values):
+            lo, hi = ranges.get(float(lv), (float(lv), float(lv)))
+            add(factor, f"{lv:g}" if lo == hi else f"{lo:g}-{hi:g}", have[which == j], lo, hi)
     tarr = np.asarray(rec.text["condition_target"], dtype=object)
-    for t in sorted(set(rec.text["condition_target"])):
-        add("target", t, tarr == t)
+    by_target: dict[str, list[int]] = {}
+    for i, t in enumerate(rec.text["condition_target"]):
+        by_target.setdefault(t, []).append(i)
+    for t in sorted(by_target):
+        add("target", t, np.asarray(by_target[t], dtype=np.int64))
     for factor, col in (("angular_size_bin_deg", "target_angular_size_deg"),
                         ("eccentricity_bin_deg", "eccentricity_deg")):
         v = rec.num[col]
@@ -1345,7 +1458,7 @@ def _recognition(rec: Responses, n_bins: int) -> tuple[list[dict[str, Any]], dic
             lo, hi = float(edges[i]), float(edges[i + 1])
             last = i == edges.size - 2
             m = ok & (v >= lo) & ((v <= hi) if last else (v < hi))
-            add(factor, f"[{lo:.3g}, {hi:.3g}{']' if last else ')'}", m, lo, hi)
+            add(factor, f"[{lo:.3g}, {hi:.3g}{']' if last else ')'}", np.flatnonzero(m), lo, hi)
 
     # logistic regression: altitude (per 100 m), speed (per 100 kt), target as a factor
     alt = rec.num["condition_alt_agl_m"]
@@ -1359,8 +1472,11 @@ def _recognition(rec: Responses, n_bins: int) -> tuple[list[dict[str, Any]], dic
             use &= present
             cols.append(v / scale)
             names.append(nm)
-    targets = sorted(set(rec.text["condition_target"]))
-    for t in targets[1:]:
+    targets = sorted(by_target)
+    # a factor of more than MAX_LEVELS targets would make the model's matrix
+    # (targets x targets) the whole cost: the model is made without it
+    as_factor = targets[1:] if len(targets) <= MAX_LEVELS else []
+    for t in as_factor:
         cols.append((tarr == t).astype(float))
         names.append(f"target[{t}]")
     if not names or use.sum() < len(names) + 2:
@@ -1369,8 +1485,11 @@ def _recognition(rec: Responses, n_bins: int) -> tuple[list[dict[str, Any]], dic
     else:
         x = np.column_stack([c[use] for c in cols])
         logistic = logistic_regression(x, y[use], names)
-        if targets[1:]:
+        if as_factor:
             logistic["reference_target"] = targets[0]
+    if len(targets) > MAX_LEVELS:
+        logistic["targets_left_out"] = (f"{len(targets)} targets, more than {MAX_LEVELS}: "
+                                        "the model is made without the target as a factor")
     return rows, logistic
 
 
@@ -1402,7 +1521,7 @@ def _fmt(v: Any) -> str:
 
 def _write_csv(path: Path, fields: Sequence[str], rows: Iterable[dict[str, Any]]) -> None:
     with open(path, "w", newline="", encoding="utf-8") as f:
-        w = csv.writer(f)
+        w = SafeWriter(f)  # a target or participant named "=..." is not run as a formula
         w.writerow(fields)
         for row in rows:
             w.writerow([_fmt(row.get(k)) for k in fields])
@@ -1433,14 +1552,20 @@ def _pyplot() -> Any:
     return plt
 
 
-def _plot_critical_gap(path: Path, fits: list[_GapData]) -> None:
+def _plot_critical_gap(path: Path, all_fits: list[_GapData]) -> int:
     """One panel a fit: the trials' gaps, level means with 95 % intervals and
-    the two-segment fit (dotted when it was rejected)."""
+    the two-segment fit (dotted when it was rejected). At most ``MAX_PANELS``
+    panels, the fits with a critical gap first (``shown_first``); a line at
+    the foot says how many were left out. Returns the panels drawn."""
     plt = _pyplot()
+    fits = [all_fits[i] for i in shown_first([gf.fit.status for gf in all_fits])[:MAX_PANELS]]
     n = max(len(fits), 1)
     cols = min(n, 2 if n <= 4 else 3)
     rows = math.ceil(n / cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(4.5 * cols, 3.8 * rows), squeeze=False)
+    left_out = len(all_fits) - len(fits)
+    foot = 0.35 if left_out else 0.0  # inches for the line saying what was left out
+    fig, axes = plt.subplots(rows, cols, figsize=(4.5 * cols, 3.8 * rows + foot),
+                             squeeze=False)
     flat = list(axes.ravel())
     if not fits:
         flat[0].text(0.5, 0.5, "no conspicuity responses with a varied viewing distance "
@@ -1474,9 +1599,15 @@ def _plot_critical_gap(path: Path, fits: list[_GapData]) -> None:
         ax.set_xlabel(f"{f.variable} ({u})")
         ax.set_ylabel(f"tan({angle}) * {symbol} ({u})")
         ax.legend(fontsize=7, loc="lower right")
-    fig.tight_layout()
+    height = 3.8 * rows + foot
+    if left_out:
+        fig.text(0.5, 0.12 / height, f"{len(fits)} of {len(all_fits)} fits shown, those with "
+                 f"a critical gap first; {left_out} more in critical_gap.csv", ha="center",
+                 va="bottom", fontsize=9, color="C3")
+    fig.tight_layout(rect=(0.0, foot / height, 1.0, 1.0))
     fig.savefig(path, dpi=110)
     plt.close(fig)
+    return len(fits)
 
 
 def _plot_recognition(path: Path, rows: list[dict[str, Any]]) -> None:
@@ -1495,11 +1626,17 @@ def _plot_recognition(path: Path, rows: list[dict[str, Any]]) -> None:
     if not by:
         flat[0].text(0.5, 0.5, "no 'recognise' responses", ha="center", va="center")
     for ax, (factor, rs) in zip(flat, by.items()):
+        label = titles.get(factor, factor)
+        if len(rs) > MAX_LEVELS:  # (targets: the others are cut into MAX_LEVELS bins)
+            keep = sorted(sorted(range(len(rs)), key=lambda i: -rs[i]["n"])[:MAX_LEVELS])
+            label += (f" ({MAX_LEVELS} of {len(rs)} with the most trials; all in "
+                      "recognition.csv)")
+            rs = [rs[i] for i in keep]
         acc = np.array([r["accuracy"] for r in rs], dtype=float)
         err = np.array([[r["accuracy"] - r["ci_lo"], r["ci_hi"] - r["accuracy"]] for r in rs],
                        dtype=float).T
-        if factor in ("alt_agl_m", "speed_kt"):
-            x = np.array([r["bin_lo"] for r in rs], dtype=float)
+        if factor in ("alt_agl_m", "speed_kt"):  # at the middle of a bin
+            x = np.array([(r["bin_lo"] + r["bin_hi"]) / 2 for r in rs], dtype=float)
             ax.errorbar(x, acc, yerr=err, fmt="o-", capsize=3)
         else:
             x = np.arange(len(rs), dtype=float)
@@ -1507,7 +1644,7 @@ def _plot_recognition(path: Path, rows: list[dict[str, Any]]) -> None:
             ax.set_xticks(x)
             ax.set_xticklabels([r["level"] for r in rs], rotation=20, fontsize=7)
         ax.set_ylim(-0.02, 1.02)
-        ax.set_xlabel(titles.get(factor, factor))
+        ax.set_xlabel(label, fontsize=10 if len(label) < 40 else 7)
         ax.set_ylabel("accuracy (95% Wilson)")
     for ax in flat[len(by) if by else 1:]:
         ax.set_axis_off()

@@ -96,6 +96,6 @@ def test_model_participants_give_back_their_gap_on_the_ground(sweep: Path) -> No
     # flight (100 kt at 30 frames/s: 1.7 m) either way
     mean_gap = sum(GAPS_M.values()) / len(GAPS_M)
     assert fit["cg"] == pytest.approx(mean_gap, abs=0.85)
-    assert fit["interval"] == "participant bootstrap" and fit["participants"] == len(GAPS_M)
+    assert fit["interval"] == "t over participants" and fit["participants"] == len(GAPS_M)
     checks = [c for c in summary["critical_gap_check"] if c["fit"] == "truck (ground)"]
     assert [c["verdict"] for c in checks] == ["holds"] * len(ALTITUDES_M), checks
