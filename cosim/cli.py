@@ -803,15 +803,10 @@ def _cmd_trials(a: argparse.Namespace) -> int:
         serve(a.study, host=a.host, port=a.port, db_url=a.db, public=a.public)
         return EXIT_OK
     if a.trials_cmd == "export":
-        from cosim.trials.spreadsheet import safe_values
-        from cosim.trials.store import Store, write_csv
+        from cosim.trials.store import export_csv
 
         _existing_db(a.db)
-        with Store(a.db) as store:  # text a spreadsheet would run as a formula, neutralised
-            rows = list(safe_values(store.responses()))
-        with open(a.out, "w", newline="") as f:
-            write_csv(rows, f)
-        print(a.out)
+        print(export_csv(a.db, a.out))
         return EXIT_OK
     if a.trials_cmd == "analyse":
         import tempfile

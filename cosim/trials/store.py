@@ -21,7 +21,6 @@ Nothing here knows about HTTP or the study file.
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 import secrets
@@ -305,8 +304,13 @@ def export_csv(db: Store | str | Path, path: str | Path) -> Path:
 
 
 def write_csv(rows: list[dict[str, Any]], f: TextIO) -> None:
-    """Responses (``Store.responses()`` rows) as CSV with ``EXPORT_COLUMNS``."""
-    w = csv.writer(f)
+    """Responses (``Store.responses()`` rows) as CSV with ``EXPORT_COLUMNS``;
+    text a spreadsheet would run as a formula is neutralised
+    (``spreadsheet.safe_cell``), for ``cosim trials export`` and the
+    experimenter's download alike."""
+    from cosim.trials.spreadsheet import SafeWriter
+
+    w = SafeWriter(f)
     w.writerow(EXPORT_COLUMNS)
     for r in rows:
         w.writerow([_cell(r[c]) for c in EXPORT_COLUMNS])

@@ -89,6 +89,11 @@ def test_export_holds_no_formula_and_keeps_numbers(tmp_path: Path,
         row = next(csv.DictReader(f))
     assert (row["participant"], row["condition_target"]) == ("'" + who, "'@x")
     assert (row["condition_speed_kt"], row["video_time_s"]) == ("-5", "-0.5")
+    # the experimenter's download (the server's /api/export.csv) writes the same
+    from cosim.trials.store import export_csv
+
+    again = export_csv(db, tmp_path / "download.csv")
+    assert again.read_text() == out.read_text()
     assert main(["-q", "trials", "analyse", str(out), "--out", str(tmp_path / "a")]) == 2
     assert "condition_speed_kt: expected a value in [0, 10000], got '-5'" in \
         capsys.readouterr().err  # read back as the number it is
