@@ -24,6 +24,11 @@ ticks inside an exchange) are stepped ``every`` substeps at a time with
 their state row recorded after each run, which gives the same states as
 stepping them in one go. Batched classes integrate a whole exchange at
 once, so their vehicles cannot be watched.
+
+A layout that ends with the ``cosim.vehicles.resume`` columns (a pool whose
+vehicles may have to be rebuilt elsewhere: the ray backend's agents) also
+gets, after every exchange, what such a rebuild needs beyond the state
+array: each JSBSim vehicle's body rates, controls and autopilot integrators.
 """
 
 from __future__ import annotations
@@ -36,6 +41,9 @@ from cosim.errors import BuildError, ConfigError, CosimError, JSBSimError, Vehic
 from cosim.vehicles.base import BatchedModel
 from cosim.vehicles.jsbsim_model import Vehicle
 from cosim.vehicles.registry import get_class, state_layout
+from cosim.vehicles.resume import FIELDS as RESUME_FIELDS
+from cosim.vehicles.resume import Reader
+from cosim.vehicles.resume import columns as resume_columns
 from cosim.vehicles.spec import (
     N_STATE,
     STATE_FIELDS,
@@ -72,6 +80,9 @@ class Shard:
         self._watch_every = 0
         self._bad: list[tuple[int, int]] = []  # (watched position, first non-finite chunk)
         self._extra_of: dict[int, int] = {}  # JSBSim vehicle index -> its first extra column
+        #: the first of the ``cosim.vehicles.resume`` columns, when the layout has them
+        self._resume_at: int | None = None
+        self._readers: list[Reader] = []
 
     @classmethod
     def build(cls, specs: Sequence[VehicleSpec], dt_s: float, channels: Sequence[str],
@@ -126,6 +137,9 @@ class Shard:
         if watch is not None:
             shard._set_watch(specs, watch[0], watch[1])
         shard._radius_m = np.array([v.contact_radius_m for v in shard.vehicles])
+        shard._resume_at = column.get(RESUME_FIELDS[0].name)
+        if shard._resume_at is not None:  # gathered for a rebuild elsewhere
+            shard._readers = [Reader(v.fdm) for v in shard.vehicles]
         shard._active = list(range(len(shard.vehicles)))
         shard._check = [True] * len(shard._active)
         return shard
@@ -170,6 +184,11 @@ class Shard:
         out[idx, STATUS_COL] = status
         if self._extra:
             self._write_extra(out, set(act[finite].tolist()))
+        if self._resume_at is not None and finite.any():
+            ok = act[finite]
+            at = self._resume_at
+            reads = np.array([self._readers[i].read() for i in ok.tolist()], dtype=np.float64)
+            out[self._rows[ok], at:at + len(RESUME_FIELDS)] = resume_columns(reads)
         if (status != VehicleStatus.ACTIVE).any():
             keep = status == VehicleStatus.ACTIVE
             act = act[keep]

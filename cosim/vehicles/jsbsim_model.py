@@ -70,7 +70,12 @@ class Vehicle:
         model = ModelInfo(spec.model, spec.aircraft_dir, spec.model_source, profile=spec.profile)
         fdm = new_fdm(model, dt_s)
         self.fdm = fdm
-        self._set_ic()
+        if spec.resume:  # a rebuild: where it was, as it was
+            from cosim.vehicles.resume import restore
+
+            restore(fdm, spec)
+        else:
+            self._set_ic()
         #: ground contact is possible only with the CG this close to the ground
         self.contact_radius_m = contact_radius_m(fdm)
         pm = fdm.get_property_manager()

@@ -85,4 +85,7 @@ class VehicleSpec:
     vehicle_class: str = "jsbsim"
     #: what its class read from the scenario beyond the common keys
     class_params: dict[str, Any] = field(default_factory=dict)
+    #: a rebuild: the JSBSim properties it starts from in place of a trim
+    #: (``cosim.vehicles.resume``; empty: built from the fields above)
+    resume: tuple[tuple[str, float], ...] = field(default=())
 
