@@ -223,7 +223,24 @@ def _check_image(info: SectionInfo, raw: str, listed: tuple[str, ...], geotiff: 
         return None
     if suffix in (".tif", ".tiff", ".vrt"):
         _check_geotiff(info, real, geotiff, path)
+    if not geotiff and suffix != ".vrt" and not _decodes(real):
+        info.err(path + ("image",), f"cannot read {real} as an image (its pixels: cut short "
+                                    "or damaged?)")
     return real
+
+
+def _decodes(picture: str) -> bool:
+    """Whether OpenCV decodes the picture (its size already bounded), as every
+    render worker will."""
+    import cv2
+    from cv2.utils import logging as cv_log
+
+    level = cv_log.getLogLevel()
+    cv_log.setLogLevel(cv_log.LOG_LEVEL_SILENT)  # the message says it, once
+    try:
+        return cv2.imread(picture, cv2.IMREAD_REDUCED_COLOR_8) is not None
+    finally:
+        cv_log.setLogLevel(level)
 
 
 def _check_geotiff(info: SectionInfo, image: str, geotiff: bool, path: P) -> None:

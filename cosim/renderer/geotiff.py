@@ -139,8 +139,12 @@ def _georef(path: str, ds: Any) -> GeoRef:
     affine = (t.a, t.b, t.c, t.d, t.e, t.f)
     if abs(t.a * t.e - t.b * t.d) < 1e-300:
         raise GeoTiffError(f"{path}: its raster-to-model transform is singular")
+    overviews = tuple(int(f) for f in ds.overviews(1))
+    if any(f < 2 for f in overviews):  # GDAL's factor of an overview as large as the image
+        raise GeoTiffError(f"{path}: its overviews (factors {list(overviews)}) are not smaller "
+                           "than the image; make them again (gdaladdo -r average FILE)")
     return GeoRef(affine, crs.to_epsg(), int(ds.width), int(ds.height), crs.to_wkt(),
-                  tuple(int(f) for f in ds.overviews(1)))
+                  overviews)
 
 
 def read_georef(path: str) -> GeoRef:

@@ -8,11 +8,9 @@ plain mosaic inside the folder (or in a folder the scenario allows) passes."""
 
 from __future__ import annotations
 
-import http.server
 import os
 import re
 import struct
-import threading
 import zlib
 from collections.abc import Iterator
 from pathlib import Path
@@ -27,6 +25,7 @@ from cosim.errors import ConfigError
 from cosim.geo import LocalFrame
 from cosim.renderer.config import GroundSpec
 from cosim.renderer.ground import GroundTexture
+from tests.renderer.test_fuzz_rasters import Traps, _tiff_entries
 from tests.renderer.test_geotiff import SCENARIO
 
 LAT0, LON0 = 37.0, -122.0
@@ -107,26 +106,11 @@ def refused(folder: Path, ground: str, capsys: pytest.CaptureFixture[str], *why:
 @pytest.fixture
 def server() -> Iterator[tuple[int, list[str]]]:
     """A loopback HTTP server on an ephemeral port and the requests it saw."""
-    seen: list[str] = []
-
-    class Handler(http.server.BaseHTTPRequestHandler):
-        def do_GET(self) -> None:
-            seen.append(self.path)
-            self.send_response(404)
-            self.end_headers()
-
-        do_HEAD = do_GET
-
-        def log_message(self, *a: object) -> None:
-            pass
-
-    srv = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Handler)
-    threading.Thread(target=srv.serve_forever, daemon=True).start()
+    traps = Traps([])
     try:
-        yield srv.server_address[1], seen
+        yield traps.port, traps.requests
     finally:
-        srv.shutdown()
-        srv.server_close()
+        traps.close()
 
 
 @pytest.fixture
@@ -293,3 +277,44 @@ def test_gdal_reads_with_the_network_and_side_files_off(site: Path, server) -> N
     assert "cannot read its pixels" in (gt.probe(str(site / "net.vrt")) or "")
     assert seen == []
     assert imagery.GDAL_OPTIONS["GDAL_VRT_ENABLE_PYTHON"] == "NO"
+
+
+def test_overviews_larger_than_the_image_are_refused(site: Path, capsys) -> None:
+    """GDAL gives an overview wider than its image the factor 0 (a division by
+    zero when the ground was drawn): found by tests/renderer/test_fuzz_rasters.py."""
+    from rasterio.enums import Resampling
+
+    path = geotiff(site / "ovr.tif", side=256)
+    with rasterio.open(path, "r+") as ds:
+        ds.build_overviews([2], Resampling.average)
+    data = bytearray(path.read_bytes())
+    widths = [at for tag, _, at in _tiff_entries(bytes(data)) if tag == 256]
+    assert len(widths) == 2  # the image's and its overview's
+    data[widths[1]:widths[1] + 4] = struct.pack("<I", 4096)
+    path.write_bytes(bytes(data))
+    refused(site, "ground: {image: ovr.tif}", capsys,
+            r"ovr\.tif: its overviews \(factors \[0\]\) are not smaller than the image")
+
+
+def test_a_picture_whose_pixels_do_not_decode_is_refused(site: Path, capfd) -> None:
+    """Validation decodes a picture as the render workers will (its size bounded
+    first); OpenCV's own log lines are kept out of the messages."""
+    import cv2
+
+    rng = np.random.default_rng(1)
+    place = "m_per_px: 0.5, origin: {north_m: 0, east_m: 0}"
+
+    def damaged(name: str) -> str:
+        cv2.imwrite(str(site / name), rng.integers(0, 255, (64, 64, 3), np.uint8))
+        data = bytearray((site / name).read_bytes())
+        n = len(data)  # its header whole, its pixels damaged
+        data[n // 4:n // 2] = rng.integers(0, 255, n // 2 - n // 4, np.uint8).tobytes()
+        (site / f"bad{name[3:]}").write_bytes(data)
+        return f"bad{name[3:]}"
+
+    refused(site, f"ground: {{image: {damaged('pic.png')}, {place}}}", capfd,
+            r"cannot read .*bad\.png as an image")
+    # a TIFF's decoder gets through with errors: valid, and quiet about them
+    rc, err = validate(scenario(site, f"ground: {{image: {damaged('pic.tif')}, {place}}}"),
+                       capfd)
+    assert rc == 0 and "TIFF_Error" not in err, err
