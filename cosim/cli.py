@@ -102,6 +102,9 @@ def _build_parser() -> _Parser:
     r.add_argument("--strict", action="store_true",
                    help="stop with an error when a machine of the cluster is lost, rather "
                         "than rebuild its vehicles elsewhere (which ends bit-exactness)")
+    r.add_argument("--connect-timeout-s", type=_positive_float, metavar="S",
+                   help="how long joining the cluster may take before the run fails, for a "
+                        "backend that joins one (ray: default 30)")
     r.add_argument("--realtime", nargs="?", const=1.0, type=_positive_float, metavar="FACTOR",
                    help="pace to the wall clock (FACTOR x real time, default 1)")
     r.add_argument("--duration-s", type=_positive_float, metavar="S",
@@ -351,9 +354,9 @@ def _load_scenario(path: str) -> Scenario:
 
 
 def _backend_options(a: argparse.Namespace) -> dict[str, Any]:
-    """``--address`` and ``--strict``, for the backend to take or refuse; a
-    refusal, or a backend that cannot run here, is a usage error before
-    anything is built."""
+    """``--address``, ``--strict`` and ``--connect-timeout-s``, for the backend
+    to take or refuse; a refusal, or a backend that cannot run here, is a
+    usage error before anything is built."""
     from cosim.fdm_pool import get_backend
 
     get_backend(a.backend).check()  # a library it needs, missing: said before anything runs
@@ -362,10 +365,12 @@ def _backend_options(a: argparse.Namespace) -> dict[str, Any]:
         opts["address"] = a.address
     if a.strict:
         opts["strict"] = True
+    if a.connect_timeout_s is not None:
+        opts["connect_timeout_s"] = a.connect_timeout_s
     unknown = sorted(set(opts) - set(get_backend(a.backend).options))
     if unknown:
-        raise ConfigError(f"--{unknown[0]}: the {a.backend} backend does not take it; "
-                          f"backends that do: "
+        raise ConfigError(f"--{unknown[0].replace('_', '-')}: the {a.backend} backend does "
+                          f"not take it; backends that do: "
                           + (", ".join(b.name for b in _backends_with(unknown[0])) or "none"))
     return opts
 
@@ -472,7 +477,7 @@ def _cmd_run(a: argparse.Namespace) -> int:
         return EXIT_INTERRUPTED
     from cosim.errors import BuildError
 
-    if isinstance(res.error, BuildError):  # the scenario's starts: a config error
+    if isinstance(res.error, (BuildError, ConfigError)):  # the scenario's or a flag's fault
         return EXIT_USAGE
     return EXIT_FAIL
 

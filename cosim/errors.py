@@ -219,6 +219,35 @@ class AgentLost(WorkerDied):
                 f"{_vehicle_list(self.vehicles)}")
 
 
+class MachineWorkerDied(WorkerDied):
+    """A worker process on one machine of a cluster backend ended without being
+    asked to: ``worker`` and ``pid`` are that machine's (every machine has a
+    worker 1), so the machine, its node and its agent (``None``: the share
+    the driver steps itself) are named beside them."""
+
+    def __init__(self, worker: int, pid: int | None, exitcode: int | None,
+                 vehicles: list[str], tick: int | None, machine: str, node_id: str,
+                 agent: int | None) -> None:
+        super().__init__(worker, pid, exitcode, vehicles, tick)
+        self.args = (worker, pid, exitcode, vehicles, tick, machine, node_id, agent)  # pickled
+        self.machine = machine
+        self.node_id = node_id
+        self.agent = agent
+
+    def __str__(self) -> str:
+        at = f" at tick {self.tick}" if self.tick is not None else ""
+        whose = f"agent {self.agent}" if self.agent is not None else "the driver's own share"
+        return (f"worker {self.worker} (pid {self.pid}) on machine {self.machine} (node "
+                f"{self.node_id[:12]}, {whose}) {how_it_ended(self.exitcode)}{at}; its "
+                f"vehicles: {_vehicle_list(self.vehicles)}")
+
+
+class ClusterUnreachable(CosimError):
+    """The cluster a backend was told to join did not accept this process
+    (nothing listening, no answer in time, refused): names the address and
+    what to check."""
+
+
 class WorkerTimeout(WorkerDied):
     """A worker is alive but did not answer within the deadline (stuck, stopped)."""
 

@@ -24,23 +24,37 @@ any of this.
 
 Connecting: ``address`` (``HOST:PORT`` of a cluster started with ``ray start
 --head``; else ``RAY_ADDRESS``; else a local Ray is started for this
-process and stopped with it). A cluster with token authentication
-(``RAY_AUTH_MODE=token``) needs the same token in this process's
-environment (``RAY_AUTH_TOKEN`` or ``RAY_AUTH_TOKEN_PATH``), as every Ray
-client does.
+process and stopped with it), within ``connect_timeout_s`` (default
+``CONNECT_TIMEOUT_S``): first a plain TCP connection to the address (nothing
+listening there is said at once), then ``ray.init``, which Ray would retry
+for many minutes in native code, deaf to signals. It runs in a thread of its
+own while this one waits, so Ctrl-C and SIGTERM act at once (and Ray does
+not replace the process's SIGTERM handler); an attempt given up on is left
+to end with the process (or, should it still succeed, is shut down). A
+failure is a ``ClusterUnreachable`` naming the address and what to check. A
+cluster with token authentication (``RAY_AUTH_MODE=token``) needs the same
+token in this process's environment (``RAY_AUTH_TOKEN`` or
+``RAY_AUTH_TOKEN_PATH``), as every Ray client does.
 
 Faults: a lost agent (its process killed, its machine gone) is killed for
-good (it may only be unreachable) and replaced: a new agent, on the same
-machine if Ray still lists it, else on the live machine with the most CPUs,
-rebuilds its vehicles from the last states gathered (position, heading and
-speed, trimmed there) and is given again the last value sent on every
-channel; its frozen vehicles stay frozen in their rows (an agent left with
-none is not replaced). A replacement lost too stops the run. The run is no
-longer bit-exact from that exchange on, and a ``pool_recovered`` notice says
-so (the run logs it as an event). ``strict=True`` stops instead, with an
-``AgentLost`` naming the machine. A worker process of the driver's own share
-lost is a ``WorkerDied``, as in the process backend (the driver's machine is
-the run's own). Closing the pool stops every agent's worker processes and
+good (it may only be unreachable) and replaced, and so is one of whose
+worker processes died (the OS killed it, it crashed): its surviving workers
+are stopped first. A new agent, on the same machine if Ray still lists it,
+else on the live machine with the most CPUs, rebuilds its vehicles from the
+last states gathered (``cosim.vehicles.resume``: the agents gather, beside
+each state row, the body rates, controls and autopilot integrators, so a
+JSBSim vehicle goes on where and as it was; a batched one from its position,
+heading and speed) and is sent the last value of every channel; its frozen
+vehicles stay frozen in their rows (an agent left with none is not
+replaced). A replacement lost too stops the run. The run is no longer
+bit-exact from that exchange on, and a ``pool_recovered`` notice says so,
+with the machine, node, agent, cause and vehicles (the run logs it as an
+event). ``strict=True`` stops instead, with an ``AgentLost`` or a
+``MachineWorkerDied`` naming the machine. A worker process of the driver's
+own share lost stops the run with a ``MachineWorkerDied``, as in the process
+backend: a process killed beside the driver (by the OOM killer, by hand)
+is the run's own machine failing, which a rebuild there would only repeat.
+Closing the pool stops every agent's worker processes and
 then the agent: nothing is left running on any machine.
 """
 
@@ -51,15 +65,29 @@ import logging
 import os
 import socket
 import sys
+import threading
 import time
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
-from cosim.errors import AgentLost, BuildError, ConfigError, CosimError, WorkerTimeout
+from cosim.errors import (
+    AgentLost,
+    BuildError,
+    ClusterUnreachable,
+    ConfigError,
+    CosimError,
+    MachineWorkerDied,
+    WorkerDied,
+    WorkerTimeout,
+    how_it_ended,
+    install_extra,
+)
 from cosim.fdm_pool.base import Pool, Watch
 from cosim.fdm_pool.process import ProcessPool, default_workers, shard_bounds
+from cosim.vehicles.resume import FIELDS as RESUME_FIELDS
+from cosim.vehicles.resume import NOT_RESTORED, RESTORED, resume_spec
 from cosim.vehicles.spec import STATE_INDEX, StateField, VehicleSpec, VehicleStatus
 
 log = logging.getLogger(__name__)
@@ -69,6 +97,8 @@ log = logging.getLogger(__name__)
 _LOCAL_OBJECT_STORE_BYTES = 128 * 1024 * 1024
 _STOP_TIMEOUT_S = 10.0
 _PATIENCE_S = 30.0  # a build this long on an agent is logged
+#: how long joining a cluster may take unless told (``connect``, ``--connect-timeout-s``)
+CONNECT_TIMEOUT_S = 30.0
 #: a private local Ray's address: on the loopback net (on Linux Ray replaces
 #: 127.0.0.1 itself by the machine's routable address, but keeps 127.0.0.2)
 LOCAL_NODE_IP = "127.0.0.2" if sys.platform.startswith("linux") else "127.0.0.1"
@@ -78,14 +108,18 @@ def _ray() -> Any:
     try:
         import ray
     except ImportError:
-        raise ConfigError("the ray backend needs Ray: pip install 'cosim[ray]'") from None
+        raise ConfigError(f"the ray backend needs Ray: {install_extra('ray')}") from None
     return ray
 
 
-def connect(address: str | None = None) -> str:
+def connect(address: str | None = None, timeout_s: float = CONNECT_TIMEOUT_S) -> str:
     """Join the Ray cluster at ``address`` (else ``RAY_ADDRESS``, else start a
-    local one), unless this process already has; returns where it is."""
+    local one) within ``timeout_s``, unless this process already has; returns
+    where it is. ``ClusterUnreachable`` says why not (``ConfigError``: an
+    address that is not ``HOST:PORT``)."""
     ray = _ray()
+    if not timeout_s > 0:
+        raise ConfigError(f"the connect timeout must be > 0 s, got {timeout_s}")
     if ray.is_initialized():
         here = str(ray.get_runtime_context().gcs_address)
         if address and address.split("://")[-1] != here:
@@ -99,14 +133,134 @@ def connect(address: str | None = None) -> str:
         kw.update(num_cpus=default_workers(), include_dashboard=False,
                   _node_ip_address=LOCAL_NODE_IP,
                   object_store_memory=_LOCAL_OBJECT_STORE_BYTES)
-    try:
-        ctx = ray.init(address=target, **kw)
-    except (ConnectionError, ValueError, RuntimeError) as e:
-        raise ConfigError(f"cannot join the Ray cluster at {target}: {e} (is it started with "
-                          f"'ray start --head', and is its token in RAY_AUTH_TOKEN?)") from e
-    where = target or "a local Ray"
-    log.info("ray backend: joined %s (%s)", where, ctx.address_info.get("gcs_address", "?"))
+    ctx = _Joining(ray, target, kw, timeout_s).join()
+    log.info("ray backend: joined %s (%s)", target or "a local Ray",
+             ctx.address_info.get("gcs_address", "?"))
     return str(ray.get_runtime_context().gcs_address)
+
+
+def host_port(address: str) -> tuple[str, int]:
+    """``(host, port)`` of ``HOST:PORT`` (``[IPv6]:PORT``, ``ray://HOST:PORT``);
+    ``ConfigError`` otherwise."""
+    rest = address.split("://", 1)[-1].rstrip("/")
+    host, sep, port = rest.rpartition(":")
+    host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
+    if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise ConfigError(f"the Ray cluster's address {address!r} is not HOST:PORT (the "
+                          f"head's address and port, as 'ray start --head' printed them, "
+                          f"e.g. 10.0.0.5:6379)")
+    return host, int(port)
+
+
+class _QuietThreadWarning(logging.Filter):
+    """Drops Ray's warning that ``ray.init`` outside the main thread sets no
+    SIGTERM handler: not setting one is why it runs there."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not record.getMessage().startswith("SIGTERM handler is not set")
+
+
+_QUIET = _QuietThreadWarning()
+#: an attempt to join given up on, still running (``_Joining``)
+_abandoned: threading.Thread | None = None
+
+
+class _Joining:
+    """One attempt to join a cluster, in a thread, waited for here within a
+    deadline and interruptibly (a signal handler that raises ends the wait)."""
+
+    def __init__(self, ray: Any, target: str | None, kw: dict[str, Any],
+                 timeout_s: float) -> None:
+        self.ray, self.target, self.kw, self.timeout_s = ray, target, kw, timeout_s
+        self.where = None if target in (None, "auto") else host_port(target)
+        self.ctx: Any = None
+        self.error: BaseException | None = None
+        self.reached = False  # the TCP probe got through
+        self.given_up = False
+        self.lock = threading.Lock()
+        self.done = threading.Event()
+
+    def _attempt(self) -> None:
+        try:
+            if self.where is not None:  # nothing listening: said at once, not after retries
+                with socket.create_connection(self.where, timeout=self.timeout_s):
+                    self.reached = True
+            ctx = self.ray.init(address=self.target, **self.kw)
+            with self.lock:
+                if self.given_up:  # too late: nobody uses it
+                    self.ray.shutdown()
+                    return
+                self.ctx = ctx
+        except BaseException as e:  # reported by join()
+            self.error = e
+        finally:
+            self.done.set()
+
+    def join(self) -> Any:
+        global _abandoned
+        if _abandoned is not None and _abandoned.is_alive():
+            raise ClusterUnreachable("an earlier attempt of this process to join a Ray "
+                                     "cluster, given up on, has not ended yet; start a new "
+                                     "process to try again")
+        logging.getLogger("ray._private.worker").addFilter(_QUIET)
+        thread = threading.Thread(target=self._attempt, name="cosim-ray-join", daemon=True)
+        deadline = time.monotonic() + self.timeout_s
+        thread.start()
+        try:
+            while not self.done.wait(max(0.0, min(0.1, deadline - time.monotonic()))):
+                if time.monotonic() >= deadline:
+                    break
+        finally:
+            with self.lock:
+                if self.ctx is None:  # interrupted, or out of time: left to end with us
+                    self.given_up = True
+                    _abandoned = thread
+        if self.ctx is not None:
+            return self.ctx
+        raise ClusterUnreachable(self._why())
+
+    def _why(self) -> str:
+        version = getattr(self.ray, "__version__", "?")
+        if self.target is None:
+            what = "a local Ray for this run could not be started"
+            if self.error is None:
+                return f"{what} within {self.timeout_s:g} s (--connect-timeout-s)"
+            return f"{what}: {_one_line(self.error)}"
+        head = f"cannot join the Ray cluster at {self.target}"
+        token = ("and that RAY_AUTH_TOKEN (or RAY_AUTH_TOKEN_PATH) holds its token if it "
+                 "uses token authentication")
+        if self.where is None:  # 'auto': Ray looks for a cluster on this machine
+            return (f"{head}: {_one_line(self.error) if self.error else 'no answer'} (is a "
+                    f"Ray cluster started on this machine with 'ray start --head'?)")
+        host, port = self.where
+        e = self.error
+        if isinstance(e, ConnectionRefusedError):
+            return (f"{head}: nothing listens there (connection refused). Check that the "
+                    f"cluster's head is started on {host} ('ray start --head --port {port}') "
+                    f"and that {host}:{port} is the address it printed")
+        if isinstance(e, socket.gaierror):
+            return (f"{head}: {host!r} is not a host name this machine knows "
+                    f"({e.strerror or e}). Check the address: the head's IP address or name "
+                    f"and the port 'ray start --head' printed")
+        if e is None or isinstance(e, TimeoutError):
+            if not self.reached:
+                return (f"{head}: no answer within {self.timeout_s:g} s (--connect-timeout-s). "
+                        f"Check that {host} is up and reachable from this machine on port "
+                        f"{port} (a wrong address, a firewall that drops packets)")
+            return (f"{head}: something listens there but did not take this process into a "
+                    f"Ray cluster within {self.timeout_s:g} s (--connect-timeout-s). Check "
+                    f"that it is a Ray head's port ('ray start --head --port {port}'), that "
+                    f"the head runs Ray {version} as this machine does, {token}")
+        if isinstance(e, OSError):
+            return (f"{head}: {e.strerror or e}. Check that this machine reaches {host} "
+                    f"(its network, routes and firewall)")
+        return (f"{head}: {_one_line(e)}. Check that it is a Ray head ('ray start --head') "
+                f"running Ray {version} as this machine does, {token}")
+
+
+def _one_line(e: BaseException) -> str:
+    text = " ".join(str(e).split())
+    return (text[:300] + " ...") if len(text) > 300 else (text or type(e).__name__)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -162,8 +316,9 @@ class Agent:
               workers: int, layout: tuple[StateField, ...], tick: int,
               setpoints: np.ndarray | None,
               watch: Watch | None = None) -> tuple[np.ndarray, int, str]:
-        """Build and trim ``specs``; ``setpoints`` (a rebuild): written before
-        the first exchange. Returns the states, this process's pid and host."""
+        """Build ``specs`` (trimmed, or as they were: ``VehicleSpec.resume``);
+        ``setpoints`` (a rebuild): written before the first exchange. Returns
+        the states, this process's pid and host."""
         self.pool = ProcessPool(specs, dt_s, channels, workers=workers, driver_steps=True,
                                 layout=layout, watch=watch)
         self.pool.tick = tick
@@ -232,13 +387,15 @@ class RayPool(Pool):
     def __init__(self, specs: Sequence[VehicleSpec], dt_s: float, channels: Sequence[str] = (),
                  workers: int | None = None, address: str | None = None,
                  strict: bool = False, local_share: bool = True,
-                 start_timeout_s: float | None = None, watch: Watch | None = None) -> None:
+                 start_timeout_s: float | None = None, watch: Watch | None = None,
+                 connect_timeout_s: float | None = None) -> None:
         super().__init__(specs, dt_s, channels, watch=watch)
         ray = _ray()
         if workers is not None and int(workers) < 1:
             raise ValueError(f"workers must be >= 1, got {workers}")
         self.strict = bool(strict)
-        self.address = connect(address)
+        self.address = connect(address, CONNECT_TIMEOUT_S if connect_timeout_s is None
+                               else float(connect_timeout_s))
         nodes = live_nodes()
         w = (sum(n.cpus for n in nodes) if workers is None else int(workers))
         w = max(1, min(w, self.n))
@@ -252,8 +409,14 @@ class RayPool(Pool):
         self._local_node: Node | None = None
         self._local_js = np.zeros(0, dtype=np.intp)
         self._refs: list[Any] = []
-        #: the last value sent on each channel of each vehicle (for a rebuild)
+        #: the agents' states have the ``resume`` columns after the run's own
+        self._agent_layout = (*self.layout, *RESUME_FIELDS)
+        #: each vehicle's last ``resume`` columns, from its agent (for a rebuild)
+        self._resume = np.full((self.n, len(RESUME_FIELDS)), np.nan)
+        #: the last value sent on each channel of each vehicle, up to the last
+        #: exchange finished, and this exchange's (for a rebuild)
         self._latched = np.full((self.n, len(self.channels)), np.nan)
+        self._sent = np.full((self.n, len(self.channels)), np.nan)
         self._frozen = np.zeros(self.n, dtype=bool)  # rows kept as they are after a rebuild
         self._frozen_rows: np.ndarray | None = None
         self._frozen_states = np.zeros((0, len(self.layout)))
@@ -315,8 +478,7 @@ class RayPool(Pool):
         self._nsub = nsub
         sp = self.setpoints if self.channels else None
         if sp is not None:
-            written = ~np.isnan(sp)
-            self._latched[written] = sp[written]
+            self._sent[:] = sp
         self._refs = [s.handle.step.remote(None if sp is None else sp[s.rows], nsub)
                       if s.handle is not None else None for s in self._shares]
         if self._local is not None:
@@ -326,9 +488,13 @@ class RayPool(Pool):
 
     def _wait(self, timeout_s: float | None) -> None:
         ray = _ray()
+        k = len(self.layout)
         m = self._nsub // self.watch.every if self.watch is not None else 0
         if self._local is not None:  # the agents step theirs meanwhile
-            self.states[self._local_rows] = self._local.wait(timeout_s)
+            try:
+                self.states[self._local_rows] = self._local.wait(timeout_s)
+            except WorkerDied as e:
+                raise self._local_fault(e) from None
             if len(self._local_js):
                 self.watched[:m, self._local_js] = self._local.watched[:m]
         refs = self._refs
@@ -347,18 +513,27 @@ class RayPool(Pool):
             try:
                 block, s.busy, watched = ray.get(ref)
             except ray.exceptions.RayTaskError as e:
-                raise _cause(e) from None
+                cause = _cause(e)
+                if type(cause) is not WorkerDied:  # a vehicle's failure, not the machine's
+                    raise cause from None
+                block, watched = self._replace(i, self._worker_fault(s, cause))
+                s = self._shares[i]
             except ray.exceptions.RayActorError as e:
-                block, watched = self._replace(i, e)
+                block, watched = self._replace(i, AgentLost(
+                    i, s.node.ip, s.node.id, s.pid, self._ids_of(s), self.tick, _reason(e)))
                 s = self._shares[i]  # its replacement, holding the survivors' rows
-            self.states[s.rows] = block
+            self.states[s.rows] = block[:, :k]
+            self._resume[s.rows] = block[:, k:]
             if watched is not None:
-                self.watched[:m, s.watch_js] = watched
+                self.watched[:m, s.watch_js] = watched[..., :k]
         if self._frozen_rows is not None:
             self.states[self._frozen_rows] = self._frozen_states
             if self.watch is not None:  # the frozen ones among the watched stay as they are
                 frozen = self._frozen[list(self.watch.rows)]
                 self.watched[:m, frozen] = self.states[np.asarray(self.watch.rows)[frozen]]
+        if self.channels:  # the exchange is done: its setpoints are the last ones sent
+            written = ~np.isnan(self._sent)
+            self._latched[written] = self._sent[written]
 
     def _close(self) -> None:
         if self._local is not None:
@@ -383,6 +558,22 @@ class RayPool(Pool):
         self._shares.clear()
         self._refs = []
 
+    # -- faults ---------------------------------------------------------------
+
+    def _worker_fault(self, s: _Share, e: WorkerDied) -> MachineWorkerDied:
+        """A worker process under agent ``s`` died (``e``, in its agent's
+        numbering): the same, naming the machine."""
+        return MachineWorkerDied(e.worker, e.pid, e.exitcode, e.vehicles, e.tick, s.node.ip,
+                                 s.node.id, self._shares.index(s))
+
+    def _local_fault(self, e: WorkerDied) -> WorkerDied:
+        """A worker process of the driver's own share died: the same, naming
+        this machine (a timeout stays as it is)."""
+        if type(e) is not WorkerDied or self._local_node is None:
+            return e
+        return MachineWorkerDied(e.worker, e.pid, e.exitcode, e.vehicles, e.tick,
+                                 self._local_node.ip, self._local_node.id, None)
+
     # -- building and rebuilding ---------------------------------------------
 
     def _spawn(self, node: Node, workers: int, soft: bool) -> Any:
@@ -399,8 +590,9 @@ class RayPool(Pool):
         be built, on any machine, is in one ``BuildError``."""
         ray = _ray()
         layout = tuple(self.layout)
+        k = len(layout)
         refs = [s.handle.build.remote(list(specs), self.dt_s, self.channels, s.workers,
-                                      layout, self.tick, sp, s.watch)
+                                      self._agent_layout, self.tick, sp, s.watch)
                 for s, specs, sp in jobs]
         failures: list[tuple[str, str]] = []
         if local is not None:
@@ -431,6 +623,8 @@ class RayPool(Pool):
                 block, s.pid, s.host = ray.get(ref)
             except ray.exceptions.RayTaskError as e:
                 cause = _cause(e)
+                if type(cause) is WorkerDied:
+                    raise self._worker_fault(s, cause) from None
                 if not isinstance(cause, BuildError):
                     raise cause from None
                 failures += cause.failures
@@ -438,21 +632,22 @@ class RayPool(Pool):
             except ray.exceptions.RayActorError as e:
                 raise AgentLost(self._shares.index(s), s.node.ip, s.node.id, s.pid,
                                 [v.id for v in specs], self.tick, _reason(e)) from None
-            self.states[s.rows] = block
+            self.states[s.rows] = block[:, :k]
+            self._resume[s.rows] = block[:, k:]
         if failures:
             order = {v: k for k, v in enumerate(self.ids)}
             raise BuildError(sorted(failures, key=lambda f: order.get(f[0], 0)), self.n)
 
-    def _replace(self, i: int, e: Exception) -> tuple[np.ndarray, np.ndarray | None]:
-        """Agent ``i`` is lost: stop (``strict``) or rebuild its vehicles from
-        their last states on a new agent and run this exchange there."""
+    def _replace(self, i: int, fault: WorkerDied) -> tuple[np.ndarray, np.ndarray | None]:
+        """Agent ``i``'s share is lost (``fault``: the agent, ``AgentLost``, or
+        a worker process of it, ``MachineWorkerDied``): stop (``strict``) or
+        rebuild its vehicles from their last states on a new agent and run
+        this exchange there."""
         old = self._shares[i]
-        lost = AgentLost(i, old.node.ip, old.node.id, old.pid, self._ids_of(old), self.tick,
-                         _reason(e))
         if self.strict:
-            raise lost
-        log.warning("%s; rebuilding them from their last states (the run is no longer "
-                    "bit-exact)", lost)
+            raise fault
+        log.warning("%s; rebuilding its machine's vehicles from their last states (the run is "
+                    "no longer bit-exact)", fault)
         rows = np.arange(self.n)[old.rows]
         status = self.states[rows, STATE_INDEX["status"]]
         alive = rows[status == VehicleStatus.ACTIVE]
@@ -462,34 +657,58 @@ class RayPool(Pool):
             self._frozen_rows = np.flatnonzero(self._frozen)
             self._frozen_states = self.states[self._frozen_rows].copy()
         ray = _ray()
+        if isinstance(fault, MachineWorkerDied):  # the agent lives: its other workers first
+            try:
+                ray.get(old.handle.stop.remote(), timeout=_STOP_TIMEOUT_S)
+            except Exception:  # gone meanwhile, or stuck: killed next all the same
+                pass
         try:  # it may only be unreachable: it must not go on holding CPUs and workers
             ray.kill(old.handle, no_restart=True)
         except Exception:
             pass
+        reason = (fault.reason if isinstance(fault, AgentLost) else
+                  f"its worker {fault.worker} (pid {fault.pid} there) "
+                  f"{how_it_ended(fault.exitcode)}; that worker's vehicles: "
+                  f"{', '.join(fault.vehicles)}")
+        ids = [self.ids[r] for r in alive.tolist()]
+        frozen_ids = [self.ids[r] for r in frozen.tolist()]
         self.notices.append(("pool_recovered", {
-            "machine": old.node.ip, "vehicles": len(alive), "frozen": len(frozen),
-            "bit_exact": False, "reason": _reason(e)}))
+            "machine": old.node.ip, "node": old.node.id, "agent": i,
+            "cause": "agent_lost" if isinstance(fault, AgentLost) else "worker_died",
+            "reason": reason, "vehicles": len(alive), "vehicle_ids": ids,
+            "frozen": len(frozen), "frozen_ids": frozen_ids, "bit_exact": False,
+            "restored": list(RESTORED), "not_restored": list(NOT_RESTORED)}))
         if not len(alive):  # nothing left to fly there: no agent
             self._shares[i] = _Share(None, old.node, 0, alive)
-            return self.states[alive], None
+            return np.zeros((0, len(self._agent_layout))), None
         nodes = {n.id: n for n in live_nodes()}
         if not nodes:
             raise AgentLost(i, old.node.ip, old.node.id, old.pid, self._ids_of(old), self.tick,
-                            f"{_reason(e)}; no live machine is left to rebuild its vehicles on")
+                            f"{reason}; no live machine is left to rebuild its vehicles on")
         node = nodes.get(old.node.id) or max(nodes.values(), key=lambda n: n.cpus)
         self.notices[-1][1]["replaced_on"] = node.ip
         workers = min(old.workers, len(alive))
         share = _Share(self._spawn(node, workers, soft=True), node, workers, alive)
         share.watch, share.watch_js = self._part(alive)
         self._shares[i] = share
-        specs = [_resume_spec(self.specs[r], self.states[r]) for r in alive.tolist()]
-        latched = self._latched[alive] if self.channels else None
-        self._build([(share, specs, latched)])
+        specs = [resume_spec(self.specs[r], self.states[r], self._resume[r], self.channels,
+                             self._latched[r]) for r in alive.tolist()]
+        # this exchange's setpoints, applied as it starts; a vehicle not restored
+        # from its properties (a batched one) is sent every channel's last value too
+        sent = None
+        if self.channels:
+            sent = self._sent[alive].copy()
+            again = np.array([not spec.resume for spec in specs])
+            earlier = self._latched[alive][again]
+            sent[again] = np.where(np.isnan(sent[again]), earlier, sent[again])
+        self._build([(share, specs, sent)])
         try:  # one chance: a replacement lost too stops the run
             block, share.busy, watched = ray.get(share.handle.step.remote(None, self._nsub),
                                                  timeout=self._timeout_s)
         except ray.exceptions.RayTaskError as err:
-            raise _cause(err) from None
+            cause = _cause(err)
+            raise (self._worker_fault(share, cause) if type(cause) is WorkerDied
+                   else cause) from None
         except ray.exceptions.RayActorError as err:
             raise AgentLost(i, node.ip, node.id, share.pid, self._ids_of(share), self.tick,
                             f"its replacement was lost too: {_reason(err)}") from None
@@ -520,16 +739,6 @@ class RayPool(Pool):
                 except (ProcessLookupError, PermissionError):
                     break
                 time.sleep(0.02)
-
-
-def _resume_spec(spec: VehicleSpec, row: np.ndarray) -> VehicleSpec:
-    """``spec`` started from a state row: where it was, heading and speed."""
-    s = STATE_INDEX
-    return dataclasses.replace(spec, lat_deg=float(row[s["lat_deg"]]),
-                               lon_deg=float(row[s["lon_deg"]]),
-                               alt_msl_m=float(row[s["alt_msl_m"]]),
-                               heading_deg=float(row[s["yaw_deg"]]) % 360.0,
-                               airspeed_mps=float(row[s["airspeed_mps"]]))
 
 
 def _cause(e: Any) -> BaseException:

@@ -1,0 +1,140 @@
+"""Joining a Ray cluster that is not there: ``cosim run --backend ray`` ends
+within a bound with an error naming the address, and Ctrl-C or SIGTERM end
+it at once while it tries (Ray itself would retry for many minutes in native
+code, deaf to signals). No cluster is started: the addresses are loopback
+ones where nothing listens, or where a socket listens and never answers."""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.skipif(importlib.util.find_spec("ray") is None,
+                                reason="the ray backend needs Ray (pip install -e '.[test]')")
+
+SCENARIO = Path(__file__).resolve().parents[2] / "scenarios" / "quickstart.yaml"
+HOST = "127.0.0.2"  # loopback, as the test clusters use
+Starter = Callable[..., "subprocess.Popen[str]"]
+#: python, cosim and Ray imported, the scenario read: a few seconds on the test machine
+START_S = 20.0
+
+
+@pytest.fixture
+def run(tmp_path: Path) -> Iterator[Starter]:
+    """``run(*args)``: ``cosim run`` of a small scenario on the ray backend, in
+    a process of its own (killed at the end if it still runs)."""
+    procs: list[subprocess.Popen[str]] = []
+    env = {k: v for k, v in os.environ.items() if not k.startswith("RAY_")}
+
+    def start(*args: str) -> subprocess.Popen[str]:
+        procs.append(subprocess.Popen(
+            [sys.executable, "-m", "cosim", "run", str(SCENARIO), "--out", str(tmp_path / "run"),
+             "--no-progress", "--backend", "ray", *args],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env))
+        return procs[-1]
+
+    yield start
+    for p in procs:
+        if p.poll() is None:
+            p.kill()
+            p.communicate()
+
+
+@pytest.fixture
+def silent() -> Iterator[socket.socket]:
+    """A loopback port that accepts connections and never says a word."""
+    with socket.socket() as srv:
+        srv.bind((HOST, 0))
+        srv.listen(8)
+        srv.settimeout(START_S + 30.0)
+        yield srv
+
+
+def _finish(p: subprocess.Popen[str], timeout_s: float) -> str:
+    """Its stderr once it has ended; killed (and the test failed) if it has
+    not within ``timeout_s``."""
+    try:
+        return p.communicate(timeout=timeout_s)[1]
+    except subprocess.TimeoutExpired:
+        p.kill()
+        p.communicate()
+        pytest.fail(f"cosim run still ran after {timeout_s:g} s (killed)")
+
+
+def _accept(srv: socket.socket, n: int) -> list[socket.socket]:
+    """The first ``n`` connections (cosim's check that something listens, then Ray's)."""
+    return [srv.accept()[0] for _ in range(n)]
+
+
+def test_nothing_listening_is_said_at_once_naming_the_address(run: Starter) -> None:
+    with socket.socket() as held:  # bound, not listening: connections are refused
+        held.bind((HOST, 0))
+        address = f"{HOST}:{held.getsockname()[1]}"
+        t0 = time.monotonic()
+        p = run("--address", address)
+        err = _finish(p, START_S + 30.0)
+    assert time.monotonic() - t0 < START_S, "it should not wait for Ray's retries"
+    assert p.returncode == 1, err
+    assert f"cannot join the Ray cluster at {address}: nothing listens there (connection " \
+           f"refused)" in err and "ray start --head" in err, err
+    assert "Traceback" not in err
+
+
+def test_no_answer_ends_the_run_after_the_connect_timeout(run: Starter,
+                                                          silent: socket.socket) -> None:
+    address = f"{HOST}:{silent.getsockname()[1]}"
+    p = run("--address", address, "--connect-timeout-s", "2")
+    held = _accept(silent, 2)
+    t0 = time.monotonic()
+    err = _finish(p, 30.0)
+    assert time.monotonic() - t0 < 10.0
+    assert p.returncode == 1, err
+    assert f"cannot join the Ray cluster at {address}: something listens there but did not " \
+           f"take this process into a Ray cluster within 2 s (--connect-timeout-s)" in err, err
+    assert "RAY_AUTH_TOKEN" in err and "Traceback" not in err
+    for c in held:
+        c.close()
+
+
+@pytest.mark.parametrize("sig, reason", [(signal.SIGINT, "interrupted"),
+                                         (signal.SIGTERM, "terminated")])
+def test_a_signal_while_joining_ends_the_run_at_once(run: Starter, silent: socket.socket,
+                                                     sig: signal.Signals, reason: str) -> None:
+    p = run("--address", f"{HOST}:{silent.getsockname()[1]}")
+    held = _accept(silent, 2)  # Ray is connecting: the default timeout is 30 s away
+    time.sleep(0.5)
+    t0 = time.monotonic()
+    p.send_signal(sig)
+    err = _finish(p, 30.0)
+    assert time.monotonic() - t0 < 5.0
+    assert p.returncode == 130, err
+    assert f"stopped while building the vehicles ({reason})" in err, err
+    for c in held:
+        c.close()
+
+
+def test_an_address_that_is_not_host_port_is_a_usage_error(run: Starter) -> None:
+    p = run("--address", "headnode")
+    err = _finish(p, START_S + 30.0)
+    assert p.returncode == 2, err
+    assert "the Ray cluster's address 'headnode' is not HOST:PORT" in err, err
+
+
+def test_the_connect_timeout_is_refused_by_a_backend_that_joins_nothing(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from cosim.cli import main
+
+    rc = main(["run", str(SCENARIO), "--out", str(tmp_path / "run"), "--backend", "inline",
+               "--connect-timeout-s", "5"])
+    assert rc == 2
+    assert "--connect-timeout-s: the inline backend does not take it; backends that do: " \
+           "ray" in capsys.readouterr().err
