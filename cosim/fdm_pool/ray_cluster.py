@@ -24,14 +24,17 @@ any of this.
 
 Connecting: ``address`` (``HOST:PORT`` of a cluster started with ``ray start
 --head``; else ``RAY_ADDRESS``; else a local Ray is started for this
-process and stopped with it), within ``connect_timeout_s`` (default
-``CONNECT_TIMEOUT_S``): first a plain TCP connection to the address (nothing
-listening there is said at once), then ``ray.init``, which Ray would retry
-for many minutes in native code, deaf to signals. It runs in a thread of its
-own while this one waits, so Ctrl-C and SIGTERM act at once (and Ray does
-not replace the process's SIGTERM handler); an attempt given up on is left
-to end with the process (or, should it still succeed, is shut down). A
-failure is a ``ClusterUnreachable`` naming the address and what to check. A
+process and stopped with it). Joining an address takes at most
+``connect_timeout_s`` (default ``CONNECT_TIMEOUT_S``): first a plain TCP
+connection to it (nothing listening there is said at once), then
+``ray.init``, which Ray would retry for many minutes in native code, deaf to
+signals. That runs in a thread of its own while this one waits, so Ctrl-C
+and SIGTERM act at once (and Ray does not replace the process's SIGTERM
+handler); an attempt given up on is left to end with the process (or,
+should it still succeed, is shut down). A local Ray is started from the
+calling thread (its processes die with the thread that starts them), with
+no timeout. A failure is a ``ClusterUnreachable`` naming the address and
+what to check. A
 cluster with token authentication (``RAY_AUTH_MODE=token``) needs the same
 token in this process's environment (``RAY_AUTH_TOKEN`` or
 ``RAY_AUTH_TOKEN_PATH``), as every Ray client does.
@@ -63,6 +66,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import os
+import signal
 import socket
 import sys
 import threading
@@ -198,6 +202,8 @@ class _Joining:
 
     def join(self) -> Any:
         global _abandoned
+        if self.target is None:
+            return self._start_here()
         if _abandoned is not None and _abandoned.is_alive():
             raise ClusterUnreachable("an earlier attempt of this process to join a Ray "
                                      "cluster, given up on, has not ended yet; start a new "
@@ -219,13 +225,27 @@ class _Joining:
             return self.ctx
         raise ClusterUnreachable(self._why())
 
+    def _start_here(self) -> Any:
+        """A private local Ray, started from this thread: the processes Ray
+        starts die with the thread that started them (PR_SET_PDEATHSIG), so
+        not from a thread that ends. Ray's own SIGTERM handler (it exits the
+        process) is undone."""
+        main = threading.current_thread() is threading.main_thread()
+        before = signal.getsignal(signal.SIGTERM) if main else None
+        try:
+            return self.ray.init(address=None, **self.kw)
+        except Exception as e:
+            self.error = e
+            raise ClusterUnreachable(self._why()) from None
+        finally:
+            if main and before is not None:
+                signal.signal(signal.SIGTERM, before)
+
     def _why(self) -> str:
         version = getattr(self.ray, "__version__", "?")
         if self.target is None:
-            what = "a local Ray for this run could not be started"
-            if self.error is None:
-                return f"{what} within {self.timeout_s:g} s (--connect-timeout-s)"
-            return f"{what}: {_one_line(self.error)}"
+            assert self.error is not None
+            return f"a local Ray for this run could not be started: {_one_line(self.error)}"
         head = f"cannot join the Ray cluster at {self.target}"
         token = ("and that RAY_AUTH_TOKEN (or RAY_AUTH_TOKEN_PATH) holds its token if it "
                  "uses token authentication")

@@ -2,7 +2,9 @@
 within a bound with an error naming the address, and Ctrl-C or SIGTERM end
 it at once while it tries (Ray itself would retry for many minutes in native
 code, deaf to signals). No cluster is started: the addresses are loopback
-ones where nothing listens, or where a socket listens and never answers."""
+ones where nothing listens, or where a socket listens and never answers;
+and without an address, a private local Ray runs the scenario and is gone
+afterwards."""
 
 from __future__ import annotations
 
@@ -138,3 +140,32 @@ def test_the_connect_timeout_is_refused_by_a_backend_that_joins_nothing(
     assert rc == 2
     assert "--connect-timeout-s: the inline backend does not take it; backends that do: " \
            "ray" in capsys.readouterr().err
+
+
+def _ray_processes() -> set[int]:
+    """Running (not zombie) Ray core processes on this machine."""
+    out = set()
+    for d in Path("/proc").iterdir():
+        try:
+            cmd = (d / "cmdline").read_bytes().split(b"\0")[0]
+            state = (d / "stat").read_text().rsplit(")", 1)[1].split()[0]
+        except (OSError, IndexError, ValueError):
+            continue
+        if state != "Z" and cmd.endswith((b"gcs_server", b"raylet")):
+            out.add(int(d.name))
+    return out
+
+
+def test_without_an_address_a_private_local_ray_runs_it_and_is_gone_after(
+        run: Starter) -> None:
+    # its processes die with the thread that started them: that thread must
+    # live as long as the run (a joining thread that ended killed them)
+    before = _ray_processes()
+    p = run("--duration-s", "1")
+    err = _finish(p, 120.0)
+    assert p.returncode == 0, err
+    assert "joined a local Ray" in err
+    deadline = time.monotonic() + 15.0
+    while (left := _ray_processes() - before) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not left, f"Ray processes left running: {sorted(left)}"
