@@ -125,7 +125,8 @@ def _build_parser() -> _Parser:
                    help="the scenario's swarm controller runs in another process (cosim swarm "
                         "SCENARIO --connect URL), kept in lockstep over --mavlink")
     r.add_argument("--step-timeout-s", type=_positive_float, default=60.0, metavar="S",
-                   help="a worker silent this long in one exchange fails the run (default 60)")
+                   help="a physics worker silent this long in one exchange, or a render "
+                        "worker this long with frames to render, fails the run (default 60)")
     r.add_argument("--no-progress", action="store_true", help="no progress bar or lines")
     r.add_argument("--view", metavar="URL", nargs="?", const="spawn",
                    help="watch the run in 3-D in Rerun's viewer (the view extra): "

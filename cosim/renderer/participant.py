@@ -23,12 +23,15 @@ gimbal and the frame's ground truth, the same rows as the ``.gt.csv``) and a
 ``still`` event; at most ``MAX_STILLS`` a run (more are counted, not taken).
 
 Failures end the run, naming what failed: a stream that cannot be opened or
-written (``RenderError``: camera, vehicle, tick, the worker's traceback) and
-a render worker that dies (``RenderWorkerDied``: worker, pid, signal or exit
+written (``RenderError``: camera, vehicle, tick, the worker's traceback), a
+render worker that dies (``RenderWorkerDied``: worker, pid, signal or exit
 code, its cameras), noticed at the next exchange (its process sentinel is
 polled without blocking) or within ``_POLL_S`` while the loop waits for
-frames. An error the loop did not see yet is raised by ``finish`` as
-``ParticipantFailed`` with the section.
+frames, and one that is alive but silent (stopped, stuck: ``RenderWorkerTimeout``)
+for the run's ``step_timeout_s`` while it has frames to render (from its start
+until it is ready: at least ``_START_S``), noticed likewise; it is killed, the
+others finish their frames. An error the loop did not see yet is raised by
+``finish`` as ``ParticipantFailed`` with the section.
 """
 
 from __future__ import annotations
@@ -42,6 +45,7 @@ import os
 import queue
 import time
 import traceback
+from collections import deque
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
 from multiprocessing.connection import wait as wait_any
@@ -65,11 +69,13 @@ log = logging.getLogger(__name__)
 
 _POSE_COLS = [STATE_INDEX[c] for c in ("lat_deg", "lon_deg", "alt_msl_m", "roll_deg",
                                        "pitch_deg", "yaw_deg")]
-_RESULT_TIMEOUT_S = 60.0
 #: the most stills a run takes (more are counted in the summary, not taken)
 MAX_STILLS = 10_000
 #: while waiting for frames, how often the render workers' liveness is checked
 _POLL_S = 0.2
+#: the least time a render worker has to start (import, build its world) and
+#: render its first frame
+_START_S = 60.0
 
 
 class RenderError(CosimError):
@@ -107,6 +113,24 @@ class RenderWorkerDied(CosimError):
         return (f"render worker {self.worker} (pid {self.pid}) "
                 f"{how_it_ended(self.exitcode)}{at}; its cameras (vehicle/camera): "
                 f"{', '.join(self.cameras)}")
+
+
+class RenderWorkerTimeout(RenderWorkerDied):
+    """A render worker is alive but sent nothing for ``timeout_s`` while it had
+    frames to render (stopped, stuck): names the frame it was on."""
+
+    def __init__(self, worker: int, pid: int | None, cameras: list[str], tick: int | None,
+                 timeout_s: float, frame: str) -> None:
+        CosimError.__init__(self, worker, pid, cameras, tick, timeout_s, frame)
+        self.worker, self.pid, self.exitcode, self.cameras, self.tick = (
+            worker, pid, None, list(cameras), tick)
+        self.timeout_s, self.frame = timeout_s, frame
+
+    def __str__(self) -> str:
+        at = f" at tick {self.tick}" if self.tick is not None else ""
+        return (f"render worker {self.worker} (pid {self.pid}) sent nothing for "
+                f"{self.timeout_s:g} s while rendering {self.frame}{at} (stopped or stuck; "
+                f"--step-timeout-s); its cameras (vehicle/camera): {', '.join(self.cameras)}")
 
 
 @dataclass(frozen=True)
@@ -263,6 +287,7 @@ def _worker_main(world_spec: WorldSpec, streams: list[Stream], out_dir: str, cod
                       worker_kit.remote_traceback()))
         results.send(("done", {}))
         return
+    results.send(("ready",))
     try:
         while True:
             try:
@@ -298,6 +323,12 @@ class CameraParticipant:
         #: dies mid-message is an end of file, never a read waiting forever
         self.results: list[Connection] = []
         self.in_flight: list[int] = []
+        #: per render worker: (stream, tick) of each frame sent and not yet back,
+        #: when it was last heard from (or given work while idle), whether it is ready
+        self.pending: list[deque[tuple[int, int]]] = []
+        self.heard: list[float] = []
+        self.ready: set[int] = set()
+        self.step_timeout_s = 60.0
         self.closed: dict[int, dict[str, Any]] = {}
         self.operator: Any = None
         self.finished = False
@@ -365,6 +396,7 @@ class CameraParticipant:
                 raise self.failed from None
             return
         mpc = worker_kit.context()
+        self.step_timeout_s = ctx.step_timeout_s
         for k in range(n):
             q = mpc.Queue()
             reader, writer = mpc.Pipe(duplex=False)
@@ -377,6 +409,8 @@ class CameraParticipant:
             self.jobs.append(q)
             self.results.append(reader)
             self.in_flight.append(0)
+            self.pending.append(deque())
+            self.heard.append(time.monotonic())
         log.info("cameras: %d stream(s) on %d render worker(s)", len(self.streams), n)
 
     def point_gimbal(self, row: int, cmd: Any, source: str) -> None:
@@ -571,10 +605,18 @@ class CameraParticipant:
             self._thumb(s.index, frame_no, thumb)
         else:
             k = s.index % len(self.procs)
-            self.jobs[k].put((s.index, frame_no, tick, pose6, gimbal, still))
-            self.in_flight[k] += 1
+            self._give(k, (s.index, frame_no, tick, pose6, gimbal, still))
+            self.pending[k].append((s.index, tick))
             while self.in_flight[k] >= self.spec.max_in_flight:
                 self._collect(block=True)
+
+    def _give(self, k: int, job: tuple[Any, ...] | None) -> None:
+        """Queue ``job`` for render worker ``k`` (None: finish); its silence is
+        timed from now if it had nothing to do."""
+        if not self.in_flight[k] and k in self.ready:
+            self.heard[k] = time.monotonic()
+        self.jobs[k].put(job)
+        self.in_flight[k] += 1
 
     def _thumb(self, stream: int, frame_no: int, thumb: np.ndarray | None) -> None:
         """A rendered frame's thumbnail: to the operator view and the taps."""
@@ -592,11 +634,33 @@ class CameraParticipant:
 
     def _check_workers(self) -> None:
         """Raise for a render worker that has ended (without blocking): first
-        whatever it reported (a failure at start), else ``RenderWorkerDied``."""
+        whatever it reported (a failure at start), else ``RenderWorkerDied``;
+        then for one silent too long with frames to render (``RenderWorkerTimeout``)."""
         ended = worker_kit.ended(self.procs)
         if ended:
             self._drain()  # a worker that failed says why before it exits
             self._died(ended[0])
+        self._drain()  # what has arrived counts as heard
+        for k in range(len(self.procs)):
+            if self.in_flight[k]:
+                self._check_silence(k)
+
+    def _check_silence(self, k: int) -> None:
+        """``RenderWorkerTimeout`` if worker ``k`` has been silent longer than the
+        run allows (before it is ready: at least ``_START_S``); it is killed
+        (a stopped process ends only so)."""
+        limit = self.step_timeout_s if k in self.ready else max(self.step_timeout_s, _START_S)
+        if time.monotonic() - self.heard[k] <= limit:
+            return
+        stream, tick = self.pending[k][0] if self.pending[k] else (-1, self.tick)
+        s = self.streams[stream] if 0 <= stream < len(self.streams) else None
+        frame = f"the frame at tick {tick} of {s.vehicle}/{s.camera.name}" if s else \
+            "its first frame"
+        p = self.procs[k]
+        self.failed = RenderWorkerTimeout(k, p.pid, self._cameras_of(k), self.tick, limit, frame)
+        self.done.add(k)  # nothing more is waited for from it
+        p.kill()
+        raise self.failed
 
     def _died(self, k: int) -> None:
         p = self.procs[k]
@@ -623,9 +687,14 @@ class CameraParticipant:
 
     def _handle(self, k: int, msg: tuple[Any, ...]) -> None:
         kind = msg[0]
-        if kind == "frame":
+        self.heard[k] = time.monotonic()
+        if kind == "ready":
+            self.ready.add(k)
+        elif kind == "frame":
             _, stream, frame_no, thumb, still = msg
-            self.in_flight[stream % len(self.procs)] -= 1
+            self.in_flight[k] -= 1
+            if self.pending[k]:
+                self.pending[k].popleft()
             self._still_done(still)
             if thumb is not None:
                 self._thumb(stream, frame_no, thumb)
@@ -667,15 +736,10 @@ class CameraParticipant:
         if self.inline is not None:
             self.closed = self.inline.close()
         elif self.procs:
-            for q in self.jobs:
-                q.put(None)
-            deadline = time.monotonic() + _RESULT_TIMEOUT_S
+            for k in range(len(self.jobs)):
+                self._give(k, None)  # the goodbye is work too: its silence is timed
             waiting = set(range(len(self.procs))) - self.done  # may still send
             while waiting:
-                if time.monotonic() > deadline:
-                    error = error or RenderError("?", "?", tick, f"render workers did not "
-                                                 f"finish in {_RESULT_TIMEOUT_S:g} s")
-                    break
                 for conn in wait_any([self.results[k] for k in waiting], timeout=_POLL_S):
                     k = self.results.index(conn)  # type: ignore[arg-type]
                     try:
@@ -684,6 +748,11 @@ class CameraParticipant:
                         waiting.discard(k)
                         error = error or e
                     except RenderError as e:
+                        error = error or e
+                for k in waiting - self.done:  # silent too long: killed, the others go on
+                    try:
+                        self._check_silence(k)
+                    except RenderWorkerTimeout as e:
                         error = error or e
                 waiting -= self.done
             worker_kit.stop(self.procs, 10.0)

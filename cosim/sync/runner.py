@@ -426,7 +426,8 @@ class Run:
                    if pool.watch is not None else None)
         ctx = RunContext(scn, self.out, ids, scn.origin.frame, start_ned, hz,
                          scn.rates.control_every, events, self.mavlink, pool.workers,
-                         commander, frame_taps=[], watched=watched)
+                         commander, frame_taps=[], watched=watched,
+                         step_timeout_s=self.step_timeout_s)
         for part in self.participants:  # taps on the frames, before the cameras start
             pre = getattr(part, "prepare", None)
             if pre is not None:

@@ -6,9 +6,11 @@ readable."""
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -84,32 +86,74 @@ def test_a_camera_that_cannot_write_fails_the_run_naming_it(tmp_path: Path, caps
     assert "camera 'belly'" in s["cameras"]["error"] and s["cameras"]["streams"]
 
 
-def test_a_killed_render_worker_is_noticed_within_a_second_and_named(tmp_path: Path) -> None:
+def _render_worker_signalled(tmp_path: Path, sig: signal.Signals, *args: str
+                             ) -> tuple[subprocess.Popen, Path, int, float | None, str]:
+    """A real-time flyover with one render worker which gets ``sig`` once it has
+    rendered some frames: the process, its run folder, the worker's pid, how
+    long after the signal the run's error event came (None: not within 15 s)
+    and the run's stderr (the run ended; the worker killed if still there)."""
     out = tmp_path / "run"
     p = _cosim("run", str(_flyover(tmp_path, 1)), "--out", str(out), "--backend", "inline",
-               "--realtime", "1", "--no-progress")
+               "--realtime", "1", "--no-progress", *args)
     gt = out / "cameras" / "uav1_belly.gt.csv"
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline and (not gt.exists() or gt.stat().st_size < 2000):
         time.sleep(0.05)
     workers = _spawned(p.pid)
     assert len(workers) == 1, workers
-    os.kill(workers[0], signal.SIGKILL)
+    os.kill(workers[0], sig)
     t0 = time.monotonic()
     noticed = None
-    while noticed is None and time.monotonic() - t0 < 10:
-        if any(e["event"] == "error" for e in _events(out)):
-            noticed = time.monotonic() - t0
-        time.sleep(0.02)
-    _, err = p.communicate(timeout=30)
+    try:
+        while noticed is None and time.monotonic() - t0 < 15:
+            if any(e["event"] == "error" for e in _events(out)):
+                noticed = time.monotonic() - t0
+            time.sleep(0.02)
+        _, err = p.communicate(timeout=30)
+    finally:
+        if p.poll() is None:
+            p.kill()
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(workers[0], signal.SIGKILL)
+    return p, out, workers[0], noticed, err
+
+
+def test_a_killed_render_worker_is_noticed_within_a_second_and_named(tmp_path: Path) -> None:
+    p, out, worker, noticed, err = _render_worker_signalled(tmp_path, signal.SIGKILL)
     assert noticed is not None and noticed < 1.0, noticed
     assert p.returncode == 1, err
-    assert f"render worker 0 (pid {workers[0]}) killed by SIGKILL" in err
+    assert f"render worker 0 (pid {worker}) killed by SIGKILL" in err
     assert "its cameras (vehicle/camera): uav1/belly" in err
     errors = [e for e in _events(out) if e["event"] == "error"]
     assert len(errors) == 1 and errors[0]["vehicle"] == "uav1"
     s = json.loads((out / "summary.json").read_text())
     assert s["stop_reason"] == "error" and "RenderWorkerDied" in s["error"]
+
+
+def test_a_stopped_render_worker_fails_the_run_within_the_step_timeout(tmp_path: Path) -> None:
+    """A render worker that stops (SIGSTOP) is alive but silent: the run ends
+    within --step-timeout-s of its last frame with an error naming it, the frame
+    it was on and its cameras, everything logged so far on disk, exit 1; the
+    stopped process is killed."""
+    p, out, worker, noticed, err = _render_worker_signalled(tmp_path, signal.SIGSTOP,
+                                                            "--step-timeout-s", "1")
+    # the timeout, then the next exchange (10 Hz) or poll (0.2 s)
+    assert noticed is not None and noticed < 2.0, noticed
+    assert p.returncode == 1, err
+    assert re.search(rf"render worker 0 \(pid {worker}\) sent nothing for 1 s while "
+                     r"rendering the frame at tick \d+ of uav1/belly at tick \d+ \(stopped or "
+                     r"stuck; --step-timeout-s\); its cameras \(vehicle/camera\): uav1/belly",
+                     err), err
+    errors = [e for e in _events(out) if e["event"] == "error"]
+    assert len(errors) == 1 and errors[0]["vehicle"] == "uav1"
+    s = json.loads((out / "summary.json").read_text())
+    assert s["stop_reason"] == "error" and "RenderWorkerTimeout" in s["error"]
+    ticks = read_states(out)["tick"].to_numpy()  # the states so far, readable
+    assert ticks.max() >= errors[0]["tick"] - 12
+    deadline = time.monotonic() + 5  # killed, not left stopped
+    while time.monotonic() < deadline and os.path.exists(f"/proc/{worker}"):
+        time.sleep(0.05)
+    assert not os.path.exists(f"/proc/{worker}"), "the stopped worker is still there"
 
 
 # --- full disk ------------------------------------------------------------------------
