@@ -10,10 +10,12 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import shutil
 import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -35,7 +37,11 @@ def run(tmp_path: Path) -> Iterator[Starter]:
     """``run(*args)``: ``cosim run`` of a small scenario on the ray backend, in
     a process of its own (killed at the end if it still runs)."""
     procs: list[subprocess.Popen[str]] = []
+    # a local Ray's files in a folder of the test's (short: Ray's socket paths
+    # must fit in 107 bytes), not in /tmp/ray
+    ray_tmp = tempfile.mkdtemp(prefix="cr", dir="/tmp")
     env = {k: v for k, v in os.environ.items() if not k.startswith("RAY_")}
+    env["RAY_TMPDIR"] = ray_tmp
 
     def start(*args: str) -> subprocess.Popen[str]:
         procs.append(subprocess.Popen(
@@ -49,6 +55,7 @@ def run(tmp_path: Path) -> Iterator[Starter]:
         if p.poll() is None:
             p.kill()
             p.communicate()
+    shutil.rmtree(ray_tmp, ignore_errors=True)
 
 
 @pytest.fixture
