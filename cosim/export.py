@@ -18,7 +18,10 @@ Times are seconds of simulation time after ``epoch`` (the simulation has no
 calendar: 2000-01-01T00:00:00Z unless given). Samples are taken at ``rate_hz``
 (default 10 Hz: the first logged row of each vehicle in each 1/rate_hz
 interval), so a long run with many vehicles stays a file a viewer can open.
-Files are written as they are built, a frame or a vehicle at a time.
+Files are written as they are built, a frame or a vehicle at a time, into a
+temporary file renamed into place when whole. The run folder is untrusted
+input (``cosim.logs.runfolder``): samples without a known position or
+attitude (NaN) are left out; a value out of range is an error naming its row.
 """
 
 from __future__ import annotations
@@ -33,9 +36,10 @@ from typing import IO, Any
 from xml.sax.saxutils import escape
 
 import numpy as np
-import yaml
 
-from cosim.errors import ConfigError, CosimError
+from cosim.errors import ConfigError
+from cosim.logs import RunFolder, replacing
+from cosim.logs.runfolder import RESOLVED, rows_by_vehicle
 
 FORMATS = ("acmi", "kml", "czml")
 DEFAULT_EPOCH = datetime(2000, 1, 1, tzinfo=timezone.utc)
@@ -71,63 +75,46 @@ class Tracks:
 
 
 def load_tracks(run: Path, rate_hz: float = DEFAULT_RATE_HZ) -> Tracks:
-    """A finished (or recovered) run's tracks sampled at ``rate_hz``."""
-    from cosim.logs import read_states
-
-    if not (run / "states.parquet").exists():
+    """A finished (or recovered) run's tracks sampled at ``rate_hz``; the
+    folder is read as untrusted input (``cosim.logs.runfolder``)."""
+    folder = RunFolder(run)
+    if not folder.has("states.parquet"):
         raise ConfigError(f"{run}: not a cosim run folder (no states.parquet)")
-    resolved = run / "scenario.resolved.yaml"
-    if not resolved.exists():
-        raise ConfigError(f"{run}: no scenario.resolved.yaml (run `cosim recover {run}` "
-                          f"first if the run was killed)")
+    if not folder.has(RESOLVED):
+        raise ConfigError(f"{run}: no {RESOLVED} (run `cosim recover {run}` first if the run "
+                          f"was killed)")
     if not (math.isfinite(rate_hz) and 0 < rate_hz <= MAX_RATE_HZ):
         raise ConfigError(f"--rate-hz must be > 0 and at most {MAX_RATE_HZ:g}, got {rate_hz:g}")
-    doc = yaml.safe_load(resolved.read_text())
-    if not isinstance(doc, dict) or not isinstance(doc.get("vehicles"), list):
-        raise ConfigError(f"{resolved}: not a resolved scenario (no vehicles)")
-    vehicles = [_vehicle(v) for v in doc["vehicles"] if isinstance(v, dict) and "id" in v]
-    origin = doc.get("origin") or {}
-    table = read_states(run).select(list(_COLUMNS))
-    cols = {c: table[c].to_numpy(zero_copy_only=False) for c in _COLUMNS}
-    ids = cols["vehicle"].astype(str)
+    resolved = folder.resolved()
+    assert resolved is not None
+    table = folder.states(_COLUMNS)
+    cols = {c: table[c].to_numpy(zero_copy_only=False).astype(float) for c in _COLUMNS
+            if c != "vehicle"}
+    rows = rows_by_vehicle(table)
     slot = np.floor(cols["time_s"] * rate_hz + 1e-9)
+    known = np.ones(table.num_rows, dtype=bool)  # NaN: not known, left out
+    for c in _COLUMNS[2:]:
+        known &= np.isfinite(cols[c])
     out: dict[str, dict[str, np.ndarray]] = {k: {} for k in _COLUMNS[2:]}
     times: dict[str, np.ndarray] = {}
-    for v in vehicles:
-        rows = np.flatnonzero(ids == v.id)
-        if not len(rows):
+    for v in resolved.vehicles:
+        r = rows.get(v.id)
+        if r is None:
             continue
-        s = slot[rows]
-        keep = rows[np.concatenate(([True], s[1:] != s[:-1]))]
-        ok = keep[np.isfinite(cols["lat_deg"][keep]) & np.isfinite(cols["lon_deg"][keep])]
-        times[v.id] = cols["time_s"][ok].astype(float)
+        s = slot[r]
+        keep = r[np.concatenate(([True], s[1:] != s[:-1]))]
+        ok = keep[known[keep]]
+        if not len(ok):
+            continue
+        times[v.id] = cols["time_s"][ok]
         for k in _COLUMNS[2:]:
-            out[k][v.id] = cols[k][ok].astype(float)
+            out[k][v.id] = cols[k][ok]
     if not times:
         raise ConfigError(f"{run}: the run logged no states to export")
-    return Tracks([v for v in vehicles if v.id in times], times, out["lat_deg"],
-                  out["lon_deg"], out["alt_msl_m"], out["roll_deg"], out["pitch_deg"],
-                  out["yaw_deg"], (float(origin.get("lat_deg", 0.0)),
-                                   float(origin.get("lon_deg", 0.0))),
-                  str(doc.get("name") or run.name))
-
-
-def _vehicle(entry: dict[str, Any]) -> Vehicle:
-    """A resolved scenario's vehicle entry: its class's replay type (its
-    ``class``, else its model profile's; a name cosim cannot resolve any
-    more, from an older run, gives the generic type)."""
-    from cosim.jsb import find_model
-    from cosim.vehicles import DEFAULT_CLASS, get_class
-
-    model = str(entry.get("model") or "")
-    name = entry.get("class")
-    try:
-        if name is None:
-            name = find_model(model).profile.get("class", DEFAULT_CLASS)
-        kind = get_class(str(name)).display_type
-    except CosimError:
-        kind = "Air"
-    return Vehicle(str(entry["id"]), model or str(name), kind)
+    return Tracks([Vehicle(v.id, v.model, v.kind) for v in resolved.vehicles if v.id in times],
+                  times, out["lat_deg"], out["lon_deg"], out["alt_msl_m"], out["roll_deg"],
+                  out["pitch_deg"], out["yaw_deg"],
+                  (resolved.origin_lat_deg, resolved.origin_lon_deg), resolved.name)
 
 
 def _iso(epoch: datetime, t: float) -> str:
@@ -281,9 +268,13 @@ def export_run(run: Path, fmt: str, out: Path | None = None, rate_hz: float = DE
     if fmt not in WRITERS:
         raise ConfigError(f"unknown export format {fmt!r}; expected one of: {', '.join(FORMATS)}")
     tracks = load_tracks(run, rate_hz)
+    last_s = max(float(t[-1]) for t in tracks.time_s.values())
+    try:
+        _iso(epoch, last_s)
+    except OverflowError:
+        raise ConfigError(f"--epoch {epoch.isoformat()}: the run's last sample, {last_s:g} s "
+                          f"later, would fall after the year 9999") from None
     path = out if out is not None else run / f"track.{fmt}"
-    tmp = path.with_name(path.name + ".part")
-    with open(tmp, "w", encoding="utf-8", newline="\n") as f:
+    with replacing(path) as f:
         WRITERS[fmt](tracks, f, epoch)
-    tmp.replace(path)
     return path

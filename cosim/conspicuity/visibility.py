@@ -28,21 +28,28 @@ Experiment 1 needs all four.
 from __future__ import annotations
 
 import csv
-import json
+import io
 import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from cosim.errors import CosimError
+from cosim.errors import ConfigError
+from cosim.logs import RunFolder, replacing
+from cosim.logs.runfolder import MAX_GROUND_TRUTH_BYTES, MAX_TIME_S, is_number, physics_hz
+from cosim.scenario.limits import MAX_NUMBER
+from cosim.scenario.yaml_lines import open_bounded
 
 #: ground-truth columns this module needs
 REQUIRED_COLUMNS = ("frame", "time_s", "vehicle", "camera", "target", "in_view")
+#: a camera's frame rate, as a run's summary may give it (Hz)
+MAX_RATE_HZ = 10_000.0
 
 
-class GroundTruthError(CosimError):
-    """A ground-truth file is missing, unreadable or malformed."""
+class GroundTruthError(ConfigError):
+    """A ground-truth file (or the summary naming it) is missing, unreadable
+    or malformed: bad input, exit 2."""
 
 
 @dataclass(frozen=True)
@@ -97,38 +104,71 @@ class TargetVisibility:
         return self.passes[-1].last_visible_s if self.passes else None
 
 
-def _num(text: str | None) -> float:
+def _num(text: str | None, name: str) -> float:
+    """A number of the file (empty: NaN, not known); at most ``MAX_NUMBER``."""
     if text is None or text == "":
         return math.nan
-    return float(text)
+    try:
+        x = float(text)
+    except ValueError:
+        raise ValueError(f"{name}: expected a number, got {text[:40]!r}") from None
+    if not (math.isnan(x) or abs(x) <= MAX_NUMBER):
+        raise ValueError(f"{name}: expected a number within +-{MAX_NUMBER:.10g}, got {text[:40]!r}")
+    return x
+
+
+def _whole(text: str, name: str, hi: float) -> int:
+    try:
+        x = int(text)
+    except ValueError:
+        x = -1
+    if not 0 <= x <= hi:
+        raise ValueError(f"{name}: expected a whole number from 0 to {hi:.10g}, got {text[:40]!r}")
+    return x
+
+
+def _row(r: dict[str, str]) -> GtRow:
+    time_s = _num(r["time_s"], "time_s")
+    if not 0 <= time_s <= MAX_TIME_S:  # (NaN fails too)
+        raise ValueError(f"time_s: expected 0 to {MAX_TIME_S:.10g} s, got {r['time_s'][:40]!r}")
+    return GtRow(frame=_whole(r["frame"], "frame", MAX_NUMBER), time_s=time_s,
+                 in_view=_whole(r["in_view"], "in_view", 1) == 1,
+                 eccentricity_deg=_num(r.get("eccentricity_deg"), "eccentricity_deg"),
+                 angular_size_deg=_num(r.get("angular_size_deg"), "angular_size_deg"),
+                 range_m=_num(r.get("range_m"), "range_m"),
+                 center_x_px=_num(r.get("center_x_px"), "center_x_px"),
+                 center_y_px=_num(r.get("center_y_px"), "center_y_px"))
 
 
 def read_ground_truth(path: str | Path) -> dict[tuple[str, str, str], list[GtRow]]:
-    """Rows of one ground-truth CSV grouped by (vehicle, camera, target), in frame order."""
+    """Rows of one ground-truth CSV grouped by (vehicle, camera, target), in
+    frame order. The file is untrusted: a regular file of at most
+    ``MAX_GROUND_TRUTH_BYTES``, every value checked (``GroundTruthError``
+    with its line otherwise)."""
     p = Path(path)
-    try:
-        f = p.open(newline="")
-    except OSError as e:
-        raise GroundTruthError(f"{p}: cannot read ground truth: {e.strerror or e}") from None
     out: dict[tuple[str, str, str], list[GtRow]] = {}
-    with f:
-        reader = csv.DictReader(f)
-        missing = [c for c in REQUIRED_COLUMNS if c not in (reader.fieldnames or [])]
-        if missing:
-            raise GroundTruthError(f"{p}: not a ground-truth file: missing column(s) "
-                                   f"{', '.join(missing)}")
-        for n, r in enumerate(reader, start=2):
-            try:
-                row = GtRow(frame=int(r["frame"]), time_s=float(r["time_s"]),
-                            in_view=int(r["in_view"]) != 0,
-                            eccentricity_deg=_num(r.get("eccentricity_deg")),
-                            angular_size_deg=_num(r.get("angular_size_deg")),
-                            range_m=_num(r.get("range_m")),
-                            center_x_px=_num(r.get("center_x_px")),
-                            center_y_px=_num(r.get("center_y_px")))
-            except (TypeError, ValueError) as e:
-                raise GroundTruthError(f"{p}:{n}: bad value: {e}") from None
-            out.setdefault((r["vehicle"], r["camera"], r["target"]), []).append(row)
+    n = 1
+    try:
+        with open_bounded(p, MAX_GROUND_TRUTH_BYTES, "ground truth", "a ground-truth file") as b:
+            reader = csv.DictReader(io.TextIOWrapper(b, encoding="utf-8", newline=""))
+            missing = [c for c in REQUIRED_COLUMNS if c not in (reader.fieldnames or [])]
+            if missing:
+                raise GroundTruthError(f"{p}: not a ground-truth file: missing column(s) "
+                                       f"{', '.join(missing)}")
+            for r in reader:
+                n = reader.line_num
+                if None in r or None in r.values():
+                    raise GroundTruthError(f"{p}:{n}: expected {len(reader.fieldnames or [])} "
+                                           f"fields, as in the header")
+                out.setdefault((r["vehicle"], r["camera"], r["target"]), []).append(_row(r))
+    except GroundTruthError:
+        raise
+    except ConfigError as e:
+        raise GroundTruthError(e.problems) from None
+    except UnicodeDecodeError as e:
+        raise GroundTruthError(f"{p}: not UTF-8 text (byte {e.object[e.start]:#04x})") from None
+    except (ValueError, csv.Error) as e:
+        raise GroundTruthError(f"{p}:{n}: {e}") from None
     for rows in out.values():
         rows.sort(key=lambda x: x.frame)
     return out
@@ -180,13 +220,18 @@ def screen_direction(run: Sequence[GtRow]) -> str:
     return "down" if dy > 0 else "up"
 
 
-def _period_from_times(rows: Sequence[GtRow]) -> float:
+def _period_from_times(rows: Sequence[GtRow], where: str = "") -> float:
     """The frame period from the rows' times: the first-to-last span over the
     frame count between them (precise even with times rounded in the file)."""
     if len(rows) < 2 or rows[-1].frame == rows[0].frame:
-        raise GroundTruthError("cannot tell the frame period from fewer than two frames; "
-                               "give the camera's rate_hz")
-    return (rows[-1].time_s - rows[0].time_s) / (rows[-1].frame - rows[0].frame)
+        raise GroundTruthError(f"{where}cannot tell the frame period from fewer than two "
+                               f"frames; give the camera's rate_hz")
+    period = (rows[-1].time_s - rows[0].time_s) / (rows[-1].frame - rows[0].frame)
+    if not period > 0:
+        raise GroundTruthError(f"{where}time_s does not grow with the frame number (frame "
+                               f"{rows[0].frame} at {rows[0].time_s:g} s, frame "
+                               f"{rows[-1].frame} at {rows[-1].time_s:g} s)")
+    return period
 
 
 def visibility(path: str | Path, rate_hz: float | None = None) -> list[TargetVisibility]:
@@ -194,7 +239,7 @@ def visibility(path: str | Path, rate_hz: float | None = None) -> list[TargetVis
     camera's frame rate (default: read from the frame times)."""
     out = []
     for (vehicle, camera, target), rows in read_ground_truth(path).items():
-        period = 1.0 / rate_hz if rate_hz else _period_from_times(rows)
+        period = 1.0 / rate_hz if rate_hz else _period_from_times(rows, f"{path}: ")
         out.append(TargetVisibility(vehicle=vehicle, camera=camera, target=target,
                                     frame_period_s=period, frames=len(rows),
                                     passes=tuple(passes(rows, period))))
@@ -204,27 +249,39 @@ def visibility(path: str | Path, rate_hz: float | None = None) -> list[TargetVis
 def camera_entries(run_dir: str | Path) -> list[dict[str, Any]]:
     """The run's cameras: summary.json's ``cameras`` list, or its ``streams``
     list when ``cameras`` is a mapping (paths made absolute),
-    or, without one, every ``cameras/*.gt.csv`` in the folder."""
-    run = Path(run_dir)
-    summary_path = run / "summary.json"
+    or, without one, every ``cameras/*.gt.csv`` in the folder. The folder is
+    untrusted (``cosim.logs.runfolder``): an entry's files must be inside it."""
+    run = RunFolder(run_dir)
+    summary = run.summary() or {}
+    where = run.path / "summary.json"
+    cams = summary.get("cameras") or []
+    if isinstance(cams, dict):  # {"streams": [...], "codec": ...}
+        cams = cams.get("streams") or []
+    if not isinstance(cams, list):
+        raise GroundTruthError(f"{where}: cameras: expected a list of streams, got "
+                               f"{type(cams).__name__}")
     entries: list[dict[str, Any]] = []
-    if summary_path.exists():
-        try:
-            summary = json.loads(summary_path.read_text())
-        except (OSError, ValueError) as e:
-            raise GroundTruthError(f"{summary_path}: cannot read: {e}") from None
-        cams = summary.get("cameras") or []
-        if isinstance(cams, dict):  # {"streams": [...], "codec": ...}
-            cams = cams.get("streams") or []
-        for c in cams:
-            entry = dict(c)
-            for key in ("video", "ground_truth"):
-                if entry.get(key):
-                    entry[key] = str(run / entry[key])
-            entries.append(entry)
-    if not entries:
-        for gt in sorted((run / "cameras").glob("*.gt.csv")):
-            entries.append({"ground_truth": str(gt)})
+    for i, c in enumerate(cams):
+        if not isinstance(c, dict):
+            raise GroundTruthError(f"{where}: cameras[{i}]: expected an object, got "
+                                   f"{type(c).__name__}")
+        entry = dict(c)
+        rate = entry.get("rate_hz")
+        if rate is not None and not (is_number(rate) and 0 < rate <= MAX_RATE_HZ):
+            raise GroundTruthError(f"{where}: cameras[{i}].rate_hz: expected a frame rate "
+                                   f"above 0 and at most {MAX_RATE_HZ:g} Hz, got {rate!r}")
+        for key in ("video", "ground_truth"):
+            value = entry.get(key)
+            if value is None or value == "":
+                continue
+            if not isinstance(value, str) or Path(value).is_absolute():
+                raise GroundTruthError(f"{where}: cameras[{i}].{key}: expected a path inside "
+                                       f"the run folder, got {str(value)[:80]!r}")
+            entry[key] = str(run.file(value))
+        entries.append(entry)
+    if not entries and run.has("cameras"):
+        for gt in sorted(run.file("cameras").glob("*.gt.csv")):
+            entries.append({"ground_truth": str(run.file(gt.relative_to(run.path)))})
     return entries
 
 
@@ -232,16 +289,14 @@ def run_visibility(run_dir: str | Path) -> list[TargetVisibility]:
     """Every target seen by every camera of one run."""
     out: list[TargetVisibility] = []
     for e in camera_entries(run_dir):
-        out.extend(visibility(e["ground_truth"], e.get("rate_hz")))
+        if e.get("ground_truth"):
+            out.extend(visibility(e["ground_truth"], e.get("rate_hz")))
     return out
 
 
 def physics_hz_of(run_dir: str | Path) -> float | None:
-    try:
-        hz = json.loads((Path(run_dir) / "summary.json").read_text()).get("physics_hz")
-    except (OSError, ValueError):
-        return None
-    return float(hz) if hz else None
+    """summary.json's physics rate (None: none, or not a rate)."""
+    return physics_hz(RunFolder(run_dir).summary() or {})
 
 
 PASS_COLUMNS = ("vehicle", "camera", "target", "pass", "first_visible_s", "last_visible_s",
@@ -282,15 +337,14 @@ def pass_rows(results: Iterable[TargetVisibility], physics_hz: float | None
 
 
 def write_csv(path: str | Path, columns: Sequence[str], rows: Iterable[dict[str, Any]]) -> Path:
-    """Write ``rows`` (missing keys left empty) atomically."""
+    """Write ``rows`` (missing keys left empty) atomically (a symlink at
+    ``path`` is replaced, never written through)."""
     p = Path(path)
-    tmp = p.with_name(p.name + ".tmp")
-    with tmp.open("w", newline="") as f:
+    with replacing(p) as f:
         w = csv.DictWriter(f, fieldnames=list(columns), restval="", extrasaction="ignore")
         w.writeheader()
         for r in rows:
             w.writerow(r)
-    tmp.replace(p)
     return p
 
 

@@ -15,9 +15,12 @@ already written.
 - ``faulthandler.log``: Python tracebacks of a driver that crashed hard
   (segfault, abort); removed when empty.
 
-This package writes files; it never steps vehicles or decides when to stop.
+This package writes those files, and reads them back as untrusted input
+(``runfolder``: bounded, inside the folder, checked); it never steps
+vehicles or decides when to stop.
 """
 
+from cosim.logs.runfolder import RunFolder, read_states
 from cosim.logs.writers import (
     RUN_OUTPUTS,
     STATE_COLUMNS,
@@ -25,9 +28,9 @@ from cosim.logs.writers import (
     EventLog,
     StateLog,
     clear_outputs,
-    read_states,
+    replacing,
     write_json_atomic,
 )
 
-__all__ = ["RUN_OUTPUTS", "STATE_COLUMNS", "DiskReserve", "EventLog", "StateLog", "clear_outputs",
-           "read_states", "write_json_atomic"]
+__all__ = ["RUN_OUTPUTS", "STATE_COLUMNS", "DiskReserve", "EventLog", "RunFolder", "StateLog",
+           "clear_outputs", "read_states", "replacing", "write_json_atomic"]

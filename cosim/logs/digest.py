@@ -20,7 +20,8 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from cosim.logs.writers import STATE_COLUMNS, read_states
+from cosim.logs.runfolder import read_states
+from cosim.logs.writers import STATE_COLUMNS
 
 #: event fields that say how a run was made, not what happened in it
 _NOT_BEHAVIOUR = {"backend", "workers", "wall_s", "wall_time_s"}

@@ -1,18 +1,18 @@
 """Plots of a run: ground track (north/east) and altitude over time, per vehicle.
 
 Reads only the run's ``states.parquet``, ``events.jsonl`` and the obstacles of
-``scenario.resolved.yaml`` (drawn grey on the track); writes a PNG.
-matplotlib runs headless (Agg).
+``scenario.resolved.yaml`` (drawn grey on the track), as untrusted input
+(``cosim.logs.runfolder``); writes a PNG. matplotlib runs headless (Agg).
 """
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 
-from cosim.logs.writers import read_states
+from cosim.logs.runfolder import RunFolder
+from cosim.logs.writers import replacing
 
 _MARKED = {"goal_reached": "*", "waypoint_reached": "o", "stall": "x", "ground_impact": "X"}
 
@@ -24,8 +24,9 @@ def plot_run(run_dir: str | Path, png: str | Path | None = None, max_vehicles: i
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    run = Path(run_dir)
-    t = read_states(run)
+    folder = RunFolder(run_dir)
+    run = folder.path
+    t = folder.states(["tick", "time_s", "vehicle", "north_m", "east_m", "alt_msl_m"])
     vehicle = np.asarray(t["vehicle"].cast("string").to_pylist())
     north, east = t["north_m"].to_numpy(), t["east_m"].to_numpy()
     alt, time_s = t["alt_msl_m"].to_numpy(), t["time_s"].to_numpy()
@@ -37,20 +38,18 @@ def plot_run(run_dir: str | Path, png: str | Path | None = None, max_vehicles: i
         (line,) = ax_map.plot(east[m], north[m], lw=1.2, label=vid)
         ax_map.plot(east[m][:1], north[m][:1], "^", color=line.get_color(), ms=6)
         ax_alt.plot(time_s[m], alt[m], lw=1.2, color=line.get_color(), label=vid)
-    for poly in _obstacles(run):
+    resolved = folder.resolved()
+    for poly in resolved.obstacles if resolved else ():
         ax_map.fill([p[1] for p in poly], [p[0] for p in poly], color="0.6", alpha=0.7, lw=0)
-    events = run / "events.jsonl"
-    if events.exists():
-        for line_text in events.read_text().splitlines():
-            e = json.loads(line_text)
-            mark = _MARKED.get(e["event"])
-            if mark is None or e.get("vehicle") not in ids:
-                continue
-            m = (vehicle == e["vehicle"]) & (t["tick"].to_numpy() <= e["tick"])
-            if m.any():
-                k = np.flatnonzero(m)[-1]
-                ax_map.plot(east[k], north[k], mark, color="k", ms=8)
-                ax_alt.plot(time_s[k], alt[k], mark, color="k", ms=8)
+    for e in folder.events():
+        mark = _MARKED.get(e.kind)
+        if mark is None or e.vehicle not in ids:
+            continue
+        m = (vehicle == e.vehicle) & (t["tick"].to_numpy() <= e.tick)
+        if m.any():
+            k = np.flatnonzero(m)[-1]
+            ax_map.plot(east[k], north[k], mark, color="k", ms=8)
+            ax_alt.plot(time_s[k], alt[k], mark, color="k", ms=8)
     ax_map.set_xlabel("east (m)")
     ax_map.set_ylabel("north (m)")
     ax_map.set_aspect("equal", adjustable="datalim")
@@ -64,21 +63,8 @@ def plot_run(run_dir: str | Path, png: str | Path | None = None, max_vehicles: i
         ax_alt.legend(fontsize=8, loc="best")
     fig.tight_layout()
     out = Path(png) if png else run / "track.png"
-    fig.savefig(out, dpi=110)
+    with replacing(out, "wb") as f:
+        fig.savefig(f, dpi=110, format="png")
     plt.close(fig)
     return out
 
-
-def _obstacles(run: Path) -> list[list[list[float]]]:
-    """The obstacles' corners ([north, east]) recorded in the run's resolved scenario."""
-    import yaml
-
-    try:
-        d = yaml.safe_load((run / "scenario.resolved.yaml").read_text()) or {}
-    except (OSError, yaml.YAMLError):
-        return []
-    obstacles = d.get("obstacles") if isinstance(d, dict) else None
-    if not isinstance(obstacles, list):
-        return []
-    return [o["polygon"] for o in obstacles
-            if isinstance(o, dict) and isinstance(o.get("polygon"), list)]

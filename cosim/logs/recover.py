@@ -18,12 +18,15 @@ module turns that into ordinary output:
   reason of the stop event, else ``killed``).
 
 It is idempotent: a second call finds nothing to do. It never runs a
-simulation and never touches a complete run's files.
+simulation and never touches a complete run's files. The folder is
+untrusted input (``runfolder``): it reads, truncates and replaces only
+regular files inside it, bounded, and a damaged file is a ``ConfigError``
+naming it (a line of ``events.jsonl`` that is not an event is skipped and
+reported).
 """
 
 from __future__ import annotations
 
-import json
 import logging
 import os
 from dataclasses import dataclass, field
@@ -34,11 +37,21 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from cosim.errors import ConfigError
-from cosim.logs.writers import journal_batches, read_states, stored_schema, write_json_atomic
+from cosim.logs.runfolder import (
+    MAX_EVENTS_BYTES,
+    RunFolder,
+    journal_batches,
+    physics_hz,
+    state_files,
+    stored_schema,
+)
+from cosim.logs.writers import replacing, write_json_atomic
+from cosim.scenario.yaml_lines import open_bounded
 
 log = logging.getLogger(__name__)
 
 _TEMPORARY = ("summary.json.tmp", ".cosim-reserve", ".cosim-reserve-summary")
+_MARKS = ("events.jsonl", "states.parquet", "summary.json", "scenario.resolved.yaml")
 
 
 @dataclass
@@ -55,46 +68,35 @@ class Recovery:
         return bool(self.actions)
 
 
-def _is_run(folder: Path) -> bool:
-    return folder.is_dir() and any(
-        (folder / n).exists() for n in ("events.jsonl", "states.parquet", "summary.json",
-                                        "scenario.resolved.yaml"))
-
-
-def _load_json(path: Path) -> dict[str, Any] | None:
-    try:
-        data = json.loads(path.read_text())
-    except (OSError, ValueError):
-        return None
-    return data if isinstance(data, dict) else None
-
-
-def _recover_states(states: Path, rec: Recovery) -> None:
+def _recover_states(run: RunFolder, rec: Recovery) -> None:
     """Journals to parts; hidden temporary parts removed."""
+    if not run.has("states.parquet"):
+        return
+    states = run.file("states.parquet")
     if not states.is_dir():
         return
     for tmp in sorted(states.glob(".part-*.tmp")):
-        tmp.unlink()
+        tmp.unlink()  # a symlink is removed, never followed
         rec.actions.append(f"removed the unfinished part {tmp.name}")
-    schema = stored_schema(sorted(states.glob("part-*.parquet")),
-                           sorted(states.glob("_journal-*.arrows")))
+    parts, journals = state_files(states)
+    journals = [run.file(j.relative_to(run.path)) for j in journals]
+    schema = stored_schema([run.file(x.relative_to(run.path)) for x in parts], journals)
+    in_place = {x.name for x in parts}
     for journal in sorted(states.glob("_journal-*.arrows")):
-        number = journal.name[len("_journal-"):-len(".arrows")]
-        part = states / f"part-{number}.parquet"
-        if part.exists():
+        part = states / f"part-{journal.name[len('_journal-'):-len('.arrows')]}.parquet"
+        if part.name in in_place:
             journal.unlink()
             rec.actions.append(f"removed {journal.name} (its part is in place)")
             continue
-        batches, complete = journal_batches(journal)
+        batches, complete = journal_batches(run.file(journal.relative_to(run.path)))
         if batches:
-            table = pa.Table.from_batches(batches, schema).unify_dictionaries().combine_chunks()
-            tmp = states / f".{part.name}.tmp"
             try:
-                pq.write_table(table, tmp, compression="zstd")
-                os.replace(tmp, part)
-            except OSError as e:
-                tmp.unlink(missing_ok=True)
-                raise OSError(e.errno, f"cannot write {part}: {e.strerror or e}") from e
+                table = pa.Table.from_batches(batches, schema).unify_dictionaries()
+            except (pa.ArrowException, ValueError) as e:
+                raise ConfigError(f"{journal}: not the columns of the run's other states "
+                                  f"files: {e}") from None
+            with replacing(part, "wb", tmp=states / f".{part.name}.tmp") as f:
+                pq.write_table(table.combine_chunks(), f, compression="zstd")
             rec.actions.append(f"wrote {part.name} from {journal.name} ({table.num_rows} rows, "
                                f"{len(batches)} ticks)")
         if not complete:
@@ -105,56 +107,73 @@ def _recover_states(states: Path, rec: Recovery) -> None:
             rec.actions.append(f"removed {journal.name} (no complete tick in it)")
 
 
-def _recover_events(path: Path, rec: Recovery) -> dict[str, Any]:
+def _cut_partial_line(run: RunFolder, rec: Recovery) -> None:
+    """A last line of ``events.jsonl`` without its newline (a run killed while
+    writing it) cut off; the file is read backwards from its end, a block at
+    a time, to the last newline."""
+    p = run.file("events.jsonl")
+    with open_bounded(p, MAX_EVENTS_BYTES, "events", "an events file") as f:
+        size = f.seek(0, os.SEEK_END)
+        end = size
+        while end > 0:
+            start = max(0, end - 65536)
+            f.seek(start)
+            block = f.read(end - start)
+            nl = block.rfind(b"\n")
+            if nl >= 0:
+                end = start + nl + 1
+                break
+            end = start
+    if end < size:
+        os.truncate(p, end)
+        rec.actions.append(f"cut a truncated last line off events.jsonl ({size - end} bytes)")
+
+
+def _recover_events(run: RunFolder, rec: Recovery) -> dict[str, Any]:
     """Event counts and the last stop event; a truncated last line cut off."""
     counts: dict[str, int] = {}
-    stop: dict[str, Any] | None = None
+    stop = None
     last_tick = None
-    if not path.exists():
+    if not run.has("events.jsonl"):
         return {"counts": counts, "stop": stop, "tick": last_tick}
-    data = path.read_bytes()
-    good = data.rfind(b"\n") + 1
-    if good < len(data):
-        with open(path, "r+b") as f:
-            f.truncate(good)
-        rec.actions.append(f"cut a truncated last line off events.jsonl "
-                           f"({len(data) - good} bytes)")
-    for line in data[:good].splitlines():
-        try:
-            ev = json.loads(line)
-        except ValueError:
-            continue
-        kind = str(ev.get("event"))
-        counts[kind] = counts.get(kind, 0) + 1
-        if isinstance(ev.get("tick"), int):
-            last_tick = ev["tick"]
-        if kind == "stop":
+    _cut_partial_line(run, rec)
+    skipped: list[str] = []
+    for ev in run.events(skipped):
+        counts[ev.kind] = counts.get(ev.kind, 0) + 1
+        last_tick = ev.tick
+        if ev.kind == "stop":
             stop = ev
+    if skipped:
+        log.warning("skipped %d line(s) of events.jsonl that are not events: %s",
+                    len(skipped), "; ".join(skipped[:3]))
+        rec.actions.append(f"left out {len(skipped)} line(s) of events.jsonl that are not "
+                           f"events (the first: {skipped[0]})")
     return {"counts": counts, "stop": stop, "tick": last_tick}
 
 
 def recover_run(folder: str | Path) -> Recovery:
     """Make a run folder readable (see the module docstring); ``ConfigError``
-    if ``folder`` is not a cosim run folder."""
+    if ``folder`` is not a cosim run folder, or a file in it is damaged
+    beyond what a crash leaves."""
     out = Path(folder)
-    if not _is_run(out):
+    run = RunFolder(out)
+    if not any(run.has(n) for n in _MARKS):
         raise ConfigError(f"{out}: not a cosim run folder (no summary.json, events.jsonl, "
                           f"states.parquet or scenario.resolved.yaml)")
     rec = Recovery(out)
     for name in _TEMPORARY:
-        p = out / name
-        if p.exists():
-            p.unlink()
+        if run.has(name):
+            (out / name).unlink()  # a symlink is removed, never followed
             rec.actions.append(f"removed {name}")
-    fault = out / "faulthandler.log"
-    if fault.exists() and fault.stat().st_size == 0:  # a run removes it when empty
-        fault.unlink()
-        rec.actions.append("removed the empty faulthandler.log")
-    _recover_states(out / "states.parquet", rec)
-    events = _recover_events(out / "events.jsonl", rec)
-    summary = _load_json(out / "summary.json")
-    states = out / "states.parquet"
-    table = read_states(out) if states.exists() else None
+    if run.has("faulthandler.log"):
+        fault = run.file("faulthandler.log")
+        if fault.is_file() and fault.stat().st_size == 0:  # a run removes it when empty
+            fault.unlink()
+            rec.actions.append("removed the empty faulthandler.log")
+    _recover_states(run, rec)
+    events = _recover_events(run, rec)
+    summary = _summary(run, rec)
+    table = run.states(["tick", "vehicle"]) if run.has("states.parquet") else None
     if table is not None and table.num_rows:
         ticks = table["tick"].to_numpy()
         rec.rows, rec.ticks = table.num_rows, int(ticks.max())
@@ -165,14 +184,14 @@ def recover_run(folder: str | Path) -> Recovery:
     stop = events["stop"]
     tick = rec.ticks if rec.ticks is not None else (events["tick"] or 0)
     if stop is not None:
-        tick = max(tick, int(stop.get("tick", 0)))
-    hz = new.get("physics_hz") or _physics_hz(out)
+        tick = max(tick, stop.tick)
+    hz = _physics_hz(run, new)
     new.update({
         "ticks": tick,
         "sim_time_s": tick / hz if hz else None,
         "state_rows": rec.rows,
         "events": events["counts"],
-        "stop_reason": str(stop.get("reason")) if stop is not None else "killed",
+        "stop_reason": str(stop.fields.get("reason"))[:200] if stop is not None else "killed",
         "complete": False,
         "recovered": True,
     })
@@ -186,12 +205,24 @@ def recover_run(folder: str | Path) -> Recovery:
     return rec
 
 
-def _physics_hz(out: Path) -> float | None:
-    """The physics rate from scenario.resolved.yaml, if it is there."""
-    import yaml
-
+def _summary(run: RunFolder, rec: Recovery) -> dict[str, Any] | None:
+    """``summary.json``; None when it is missing or unreadable (cut short by
+    a kill, damaged, not a file in the folder: it is then written again, in
+    its place)."""
+    p = run.path / "summary.json"
+    if p.is_dir() and not p.is_symlink():
+        raise ConfigError(f"{p}: a folder, where the run's summary belongs")
     try:
-        doc = yaml.safe_load((out / "scenario.resolved.yaml").read_text())
-        return float(doc["rates"]["physics_hz"])
-    except (OSError, ValueError, TypeError, KeyError, yaml.YAMLError):
+        return run.summary()
+    except ConfigError as e:
+        rec.actions.append(f"found summary.json unreadable ({e})")
         return None
+
+
+def _physics_hz(run: RunFolder, summary: dict[str, Any]) -> float | None:
+    """The physics rate: the summary's, else the resolved scenario's."""
+    hz = physics_hz(summary)
+    if hz is None:
+        resolved = run.resolved()
+        hz = resolved.physics_hz if resolved is not None else None
+    return hz

@@ -2,19 +2,19 @@
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import json
 import math
 import os
 import shutil
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
 from cosim.geo import LocalFrame
@@ -33,7 +33,7 @@ _FROM_STATE = ("lat_deg", "lon_deg", "alt_msl_m", "alt_agl_m", "roll_deg", "pitc
 _FLAGS = ("ap_engaged", "stalled", "stall_protection_active", "status")
 
 
-def _schema(extra: Sequence[str] = ()) -> pa.Schema:
+def state_schema(extra: Sequence[str] = ()) -> pa.Schema:
     """The columns of states.parquet: ``STATE_COLUMNS``, then (float64) the
     columns the run's vehicle classes add."""
     fields = []
@@ -87,7 +87,7 @@ class StateLog:
         self.flush_s = flush_s
         #: the columns vehicle classes add: (name, state column), logged after ``status``
         self.extra = list(extra)
-        self.schema = _schema([name for name, _ in self.extra])
+        self.schema = state_schema([name for name, _ in self.extra])
         self._batches: list[pa.RecordBatch] = []
         self._vehicle = pa.DictionaryArray.from_arrays(
             pa.array(np.arange(self.n, dtype=np.int32)), self.ids)
@@ -232,82 +232,6 @@ class StateLog:
                     self._abandon_journal()
 
 
-def journal_batches(path: Path) -> tuple[list[pa.RecordBatch], bool]:
-    """Every complete record batch of a journal, and whether it ended cleanly
-    (False: the last one was cut short by a crash or a full disk, and is left out)."""
-    batches: list[pa.RecordBatch] = []
-    try:
-        with pa.OSFile(str(path)) as f:
-            reader = pa.ipc.open_stream(f)
-            while True:
-                batches.append(reader.read_next_batch())
-    except StopIteration:
-        return batches, True
-    except (ValueError, OSError):  # pa.ArrowInvalid: cut short
-        pass
-    try:  # nothing after the last complete batch?
-        clean = os.path.getsize(path) == _journal_end(path, len(batches))
-    except (ValueError, OSError):  # not even the schema is whole
-        clean = False
-    return batches, clean
-
-
-def _journal_end(path: Path, n: int) -> int:
-    """The byte offset after the schema and ``n`` record batches of a journal."""
-    with pa.OSFile(str(path)) as f:
-        reader = pa.ipc.MessageReader.open_stream(f)
-        for _ in range(n + 1):
-            reader.read_next_message()
-        return int(f.tell())
-
-
-def _read_journal(path: Path) -> list[pa.RecordBatch]:
-    """Every complete record batch of a journal (a truncated last one is ignored)."""
-    return journal_batches(path)[0]
-
-
-def stored_schema(parts: Sequence[Path], journals: Sequence[Path] = ()) -> pa.Schema:
-    """The schema a run's states were written with (its first part's, else its
-    first journal's; the columns its classes added included)."""
-    for x in parts:
-        return pq.read_schema(x).remove_metadata()
-    for j in journals:
-        try:
-            with pa.OSFile(str(j)) as f:
-                return pa.ipc.open_stream(f).schema
-        except (ValueError, OSError):
-            continue
-    return _schema()
-
-
-def read_states(folder: str | Path) -> pa.Table:
-    """Read a run's ``states.parquet`` (a file or a parts folder) as one table,
-    in tick order: every part, then the ticks journalled but not yet in a part
-    (a run that crashed or could not write its last part)."""
-    p = Path(folder)
-    if p.is_dir() and (p / "states.parquet").exists():
-        p = p / "states.parquet"
-    if not p.is_dir():
-        return pq.read_table(p)
-    parts = sorted(p.glob("part-*.parquet"))
-    journals = [j for j in sorted(p.glob("_journal-*.arrows"))
-                if j.name[len("_journal-"):-len(".arrows")]
-                not in {x.name[len("part-"):-len(".parquet")] for x in parts}]
-    schema = stored_schema(parts, journals)
-    tables = [pq.read_table(x, schema=schema) for x in parts]
-    for j in journals:  # (a journal whose part is in place: the crash came before it went)
-        batches = _read_journal(j)
-        if batches:
-            tables.append(pa.Table.from_batches(batches, schema))
-    if not tables:
-        return schema.empty_table()
-    table = pa.concat_tables(tables)
-    ticks = table["tick"].to_numpy()
-    if ticks.size and (np.diff(ticks) < 0).any():
-        table = table.take(pc.sort_indices(table, sort_keys=[("tick", "ascending")]))
-    return table
-
-
 #: what a run writes into its output folder (``clear_outputs`` removes them)
 RUN_OUTPUTS = ("states.parquet", "events.jsonl", "summary.json", "scenario.resolved.yaml",
                "track.png", "faulthandler.log", ".cosim-reserve", ".cosim-reserve-summary")
@@ -394,19 +318,38 @@ class EventLog:
         self._fd = -1
 
 
-def write_json_atomic(path: Path, data: Any) -> None:
-    """Replace ``path`` with ``data`` as JSON, whole or not at all: a failed
-    write (``OSError`` naming the file) leaves the old file and no ``.tmp``."""
-    tmp = Path(str(path) + ".tmp")
+@contextlib.contextmanager
+def replacing(path: str | Path, mode: str = "w", tmp: str | Path | None = None
+              ) -> Iterator[IO[Any]]:
+    """A new file to write ``path``'s content into: ``tmp`` (default
+    ``PATH.tmp``), created afresh (a stale one, or a symlink left in its
+    place, is removed, never followed) and renamed over ``path`` when the
+    block ends, so ``path`` is replaced whole or not at all (a symlink at
+    ``path`` is replaced, not written through). A failure removes the
+    temporary file and is an ``OSError`` naming ``path``."""
+    path = Path(path)
+    tmp = Path(tmp) if tmp is not None else Path(str(path) + ".tmp")
     try:
-        with open(tmp, "w") as f:
-            f.write(json.dumps(data, indent=2, default=_jsonable) + "\n")
-            f.flush()
-            os.fsync(f.fileno())
+        tmp.unlink(missing_ok=True)
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        with os.fdopen(fd, mode, encoding=None if "b" in mode else "utf-8") as f:
+            yield f
         os.replace(tmp, path)
     except OSError as e:
         tmp.unlink(missing_ok=True)
         raise OSError(e.errno, f"cannot write {path}: {e.strerror or e}") from e
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def write_json_atomic(path: Path, data: Any) -> None:
+    """Replace ``path`` with ``data`` as JSON, whole or not at all: a failed
+    write (``OSError`` naming the file) leaves the old file and no ``.tmp``."""
+    with replacing(path) as f:
+        f.write(json.dumps(data, indent=2, default=_jsonable) + "\n")
+        f.flush()
+        os.fsync(f.fileno())
 
 
 class DiskReserve:

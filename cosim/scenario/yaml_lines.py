@@ -18,11 +18,13 @@ expanded, and whole numbers beyond ``MAX_INT`` (see ``limits``).
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 import stat
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import yaml
 
@@ -57,10 +59,12 @@ def read_scenario_text(path: str | Path) -> str:
     return read_text_bounded(path, MAX_FILE_BYTES, "scenario", "a scenario file")
 
 
-def read_text_bounded(path: str | Path, limit: int, what: str, one: str) -> str:
-    """The UTF-8 text of a regular file of at most ``limit`` bytes (``what``
-    it is, e.g. "scenario", and ``one`` of them, e.g. "a scenario file",
-    in the messages); ``ConfigError`` saying what is wrong otherwise."""
+@contextlib.contextmanager
+def open_bounded(path: str | Path, limit: int, what: str, one: str) -> Iterator[BinaryIO]:
+    """A regular file of at most ``limit`` bytes, open for reading (binary;
+    ``what`` it is and ``one`` of them in the messages, as for
+    ``read_text_bounded``); ``ConfigError`` saying what is wrong otherwise (a
+    device such as ``/dev/zero`` or a FIFO is never read, nor waited for)."""
     p = Path(path)
     try:
         fd = os.open(p, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
@@ -75,11 +79,30 @@ def read_text_bounded(path: str | Path, limit: int, what: str, one: str) -> str:
             raise ConfigError(f"{p}: {st.st_size} bytes; {one} may have at most "
                               f"{limit} ({limit / 1024 / 1024:g} MiB)")
         with os.fdopen(fd, "rb", closefd=False) as f:
-            data = f.read(limit + 1)
+            yield f
     except OSError as e:
         raise ConfigError(f"{p}: cannot read {what}: {e.strerror or e}") from None
     finally:
         os.close(fd)
+
+
+def read_bounded(f: BinaryIO, limit: int) -> bytes:
+    """The rest of a file ``open_bounded`` opened: at most ``limit + 1``
+    bytes (more than ``limit``: it grew since it was opened), read without
+    setting aside ``limit`` bytes first."""
+    data = f.read(min(os.fstat(f.fileno()).st_size, limit) + 1)
+    while len(data) <= limit and (more := f.read(min(65536, limit + 1 - len(data)))):
+        data += more
+    return data
+
+
+def read_text_bounded(path: str | Path, limit: int, what: str, one: str) -> str:
+    """The UTF-8 text of a regular file of at most ``limit`` bytes (``what``
+    it is, e.g. "scenario", and ``one`` of them, e.g. "a scenario file",
+    in the messages); ``ConfigError`` saying what is wrong otherwise."""
+    p = Path(path)
+    with open_bounded(p, limit, what, one) as f:
+        data = read_bounded(f, limit)
     if len(data) > limit:  # grew while we looked
         raise ConfigError(f"{p}: {one} may have at most {limit} bytes")
     try:
@@ -90,7 +113,7 @@ def read_text_bounded(path: str | Path, limit: int, what: str, one: str) -> str:
                           f"{data[e.start]:#04x} at offset {e.start})") from None
 
 
-def _check_structure(text: str) -> None:
+def _check_structure(text: str, max_nodes: int = MAX_NODES) -> None:
     """Nesting depth, alias count and the number of values once aliases are
     expanded, from the event stream: iterative (no recursion however deep the
     text nests) and before anything is expanded (an alias "bomb" is counted,
@@ -122,8 +145,8 @@ def _check_structure(text: str) -> None:
                 total += size.get(ev.anchor, 1)  # not yet closed: recursive, found later
                 if aliases > MAX_ALIASES:
                     problem = (line, f"more than {MAX_ALIASES} aliases (*name)")
-            if problem is None and total > MAX_NODES:
-                problem = (line, f"more than {MAX_NODES} values once aliases are expanded")
+            if problem is None and total > max_nodes:
+                problem = (line, f"more than {max_nodes} values once aliases are expanded")
             if problem is not None:
                 raise YamlProblem(*problem)
     except yaml.YAMLError:
@@ -145,12 +168,15 @@ def format_path(path: Path_) -> str:
     return out or "(top level)"
 
 
-def load_with_lines(text: str) -> tuple[Any, dict[Path_, int], list[tuple[int, str]]]:
+def load_with_lines(text: str, max_nodes: int = MAX_NODES
+                    ) -> tuple[Any, dict[Path_, int], list[tuple[int, str]]]:
     """Parse ``text``; return (data, lines, duplicate-key problems).
 
-    Raises ``YamlProblem`` on a syntax error or a limit exceeded.
+    Raises ``YamlProblem`` on a syntax error or a limit exceeded; ``max_nodes``
+    bounds the values once aliases are expanded (a run's resolved scenario,
+    which lists every vehicle, may hold more than a scenario file).
     """
-    _check_structure(text)
+    _check_structure(text, max_nodes)
     try:
         node = yaml.compose(text, Loader=_Loader)
     except yaml.MarkedYAMLError as e:
@@ -182,8 +208,8 @@ def load_with_lines(text: str) -> tuple[Any, dict[Path_, int], list[tuple[int, s
     def build(n: yaml.Node, path: Path_) -> Any:
         nonlocal nodes
         nodes += 1
-        if nodes > MAX_NODES:
-            raise YamlProblem(n.start_mark.line + 1, f"more than {MAX_NODES} values once "
+        if nodes > max_nodes:
+            raise YamlProblem(n.start_mark.line + 1, f"more than {max_nodes} values once "
                                                      f"aliases are expanded")
         line = n.start_mark.line + 1
         lines[path] = line

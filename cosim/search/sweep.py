@@ -13,10 +13,11 @@ their end time with an open marker.
 from __future__ import annotations
 
 import csv
-import json
 import logging
 from pathlib import Path
 from typing import Any
+
+from cosim.logs import replacing
 
 log = logging.getLogger(__name__)
 
@@ -31,14 +32,18 @@ DEADLINE_S = 600.0
 def write_table(result: Any, spec: Any) -> Path | None:
     """``search.csv`` and ``search_curve.png`` in the sweep folder (None: no
     run searched)."""
+    from cosim.errors import ConfigError
+    from cosim.logs import RunFolder
+
     out = Path(result.out_dir)
     rows = []
     for o in result.runs:
         if o.status != "completed":
             continue
-        try:
-            s = json.loads((out / o.name / "summary.json").read_text())
-        except (OSError, ValueError):
+        try:  # read as untrusted input: bounded, inside the run's folder
+            s = RunFolder(out / o.name).summary() or {}
+        except ConfigError as e:
+            log.warning("search.csv: run %s left out: %s", o.name, e)
             continue
         sec = s.get("search")
         if not sec:
@@ -57,7 +62,7 @@ def write_table(result: Any, spec: Any) -> Path | None:
         return None
     names = [n for n in spec.swept if n not in COLUMNS]
     path = out / "search.csv"
-    with open(path, "w", newline="") as f:
+    with replacing(path) as f:
         w = csv.DictWriter(f, names + list(COLUMNS))
         w.writeheader()
         w.writerows([{k: ("" if v is None else v) for k, v in r.items()} for r in rows])
@@ -121,5 +126,6 @@ def plot_curve(rows: list[dict[str, Any]], names: list[str], png: Path) -> None:
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(png, dpi=110)
+    with replacing(png, "wb") as f:
+        fig.savefig(f, dpi=110, format="png")
     plt.close(fig)

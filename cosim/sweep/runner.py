@@ -225,9 +225,9 @@ def _states(run_dir: Path) -> dict[str, list[Any]] | None:
     from cosim.logs import read_states
 
     try:
-        return read_states(run_dir).select(
-            ["vehicle", "time_s", "airspeed_mps", "alt_agl_m", "vn_mps", "ve_mps"]).to_pydict()
-    except (OSError, CosimError, ValueError, KeyError):
+        return read_states(run_dir, ["vehicle", "time_s", "airspeed_mps", "alt_agl_m", "vn_mps",
+                                     "ve_mps"]).to_pydict()
+    except (OSError, CosimError):
         return None
 
 
@@ -301,24 +301,70 @@ def manifest_rows(spec: SweepSpec, outcome: RunOutcome, out: Path) -> list[dict[
 
 def rewrite_tables(out_dir: str | Path) -> SweepResult:
     """Rebuild a finished sweep's tables from its ``sweep.json`` (e.g. after
-    changing the analysis)."""
-    out = Path(out_dir)
-    try:
-        s = json.loads((out / "sweep.json").read_text())
-    except (OSError, ValueError) as e:
-        raise ConfigError(f"{out}: not a sweep folder ({e})") from None
-    spec = SweepSpec(path=s["scenario"], values={k: tuple(v) for k, v in s["swept"].items()},
-                     swept=tuple(s["swept"]))
-    result = SweepResult(out_dir=out, wall_s=s.get("wall_time_s", 0.0), runs=[
-        RunOutcome(name=r["run"], point=r["point"], status=r["status"], error=r["error"],
-                   wall_s=r["wall_s"]) for r in s["results"]])
+    changing the analysis). The folder is untrusted input, read as a run
+    folder is (``cosim.logs.runfolder``): ``sweep.json`` is checked, and each
+    run's folder must be a plain name inside the sweep folder."""
+    from cosim.logs import RunFolder
+
+    folder = RunFolder(out_dir)
+    if not folder.has("sweep.json"):
+        raise ConfigError(f"{folder.path}: not a sweep folder (no sweep.json)")
+    where = folder.path / "sweep.json"
+    s = folder.json("sweep.json")
+    if not isinstance(s, dict):
+        raise ConfigError(f"{where}: expected a JSON object, got {type(s).__name__}")
+    swept = s.get("swept")
+    if not (isinstance(swept, dict) and all(isinstance(v, list) and all(map(_scalar, v))
+                                            for v in swept.values())):
+        raise ConfigError(f"{where}: swept: expected an object of lists of values")
+    scenario, results = s.get("scenario"), s.get("results")
+    if not isinstance(scenario, str):
+        raise ConfigError(f"{where}: scenario: expected the scenario's path")
+    if not isinstance(results, list):
+        raise ConfigError(f"{where}: results: expected a list of runs")
+    spec = SweepSpec(path=scenario, values={k: tuple(v) for k, v in swept.items()},
+                     swept=tuple(swept))
+    result = SweepResult(out_dir=folder.path, wall_s=_number(s.get("wall_time_s")),
+                         runs=[_outcome(r, i, spec, folder, where)
+                               for i, r in enumerate(results)])
     write_tables(result, spec)
     return result
 
 
+def _scalar(v: Any) -> bool:
+    return isinstance(v, (str, bool, int)) or (isinstance(v, float) and math.isfinite(v))
+
+
+def _number(v: Any) -> float:
+    return float(v) if isinstance(v, (int, float)) and math.isfinite(v) else 0.0
+
+
+def _outcome(r: Any, i: int, spec: SweepSpec, folder: Any, where: Path) -> RunOutcome:
+    """One run of sweep.json's results, checked: its folder a plain name
+    inside the sweep folder, its point a value for every swept name."""
+    at = f"{where}: results[{i}]"
+    if not isinstance(r, dict):
+        raise ConfigError(f"{at}: expected an object, got {type(r).__name__}")
+    name, point, status, error = r.get("run"), r.get("point"), r.get("status"), r.get("error")
+    if not (isinstance(name, str) and 0 < len(name) <= 255 and "/" not in name
+            and "\\" not in name and name not in (".", "..")):
+        raise ConfigError(f"{at}.run: expected a run folder's name (no / or ..), got "
+                          f"{str(name)[:80]!r}")
+    folder.file(name)  # a symlink out of the sweep folder is refused
+    if not (isinstance(point, dict) and all(n in point and _scalar(point[n])
+                                            for n in spec.swept)):
+        raise ConfigError(f"{at}.point: expected a value for each of "
+                          f"{', '.join(spec.swept) or 'no name'}")
+    if not isinstance(status, str) or not (error is None or isinstance(error, str)):
+        raise ConfigError(f"{at}: status (text) and error (text or null) expected")
+    return RunOutcome(name=name, point=point, status=status, error=error,
+                      wall_s=_number(r.get("wall_s")))
+
+
 def write_tables(result: SweepResult, spec: SweepSpec) -> None:
     """visibility.csv, manifest.csv and sweep.json from the runs that completed."""
-    from cosim.conspicuity.visibility import GroundTruthError, write_csv
+    from cosim.conspicuity.visibility import write_csv
+    from cosim.logs import replacing
 
     out = result.out_dir
     vis: list[dict[str, str]] = []
@@ -329,7 +375,7 @@ def write_tables(result: SweepResult, spec: SweepSpec) -> None:
         try:
             vis.extend(visibility_rows(spec, o, out / o.name))
             man.extend(manifest_rows(spec, o, out))
-        except GroundTruthError as e:
+        except ConfigError as e:  # its ground truth or its summary (GroundTruthError, ...)
             o.status, o.error = "failed", f"reading its ground truth: {e}"
     off = sorted({r["run"] for r in vis if r.get("speed_off") == "true"})
     if off:
@@ -353,6 +399,5 @@ def write_tables(result: SweepResult, spec: SweepSpec) -> None:
                "wall_time_s": result.wall_s, "swept": {k: list(spec.values[k]) for k in swept},
                "results": [{"run": o.name, "point": o.point, "status": o.status,
                             "error": o.error, "wall_s": o.wall_s} for o in result.runs]}
-    tmp = out / "sweep.json.tmp"
-    tmp.write_text(json.dumps(summary, indent=1))
-    tmp.replace(out / "sweep.json")
+    with replacing(out / "sweep.json") as f:
+        f.write(json.dumps(summary, indent=1))
