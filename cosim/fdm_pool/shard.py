@@ -51,6 +51,7 @@ from cosim.vehicles.spec import (
     STATUS_COL,
     VehicleSpec,
     VehicleStatus,
+    plausible,
 )
 
 _SCALES = np.array([f.scale for f in STATE_FIELDS if f.prop is not None])
@@ -172,7 +173,7 @@ class Shard:
         block = np.array([vs[i].raw_state() for i in active], dtype=np.float64).reshape(
             len(active), N_STATE - 1)
         block *= _SCALES
-        finite = np.isfinite(block).all(axis=1)
+        finite = plausible(block)
         status = np.array([vs[i].status for i in active], dtype=np.float64)
         if not finite.all():
             for j in np.flatnonzero(~finite).tolist():
@@ -288,7 +289,7 @@ class Shard:
             if v.status == VehicleStatus.ACTIVE:
                 v.step(every, check)
             row = np.asarray(v.raw_state(), dtype=np.float64) * _SCALES
-            if not np.isfinite(row).all():  # diverged: from here on its frozen row,
+            if not plausible(row[None, :])[0]:  # diverged: from here on its frozen row,
                 self._bad.append((self._watch_of[i], c))  # known once write_states ran
                 return
             rows[c, :STATUS_COL] = row

@@ -420,6 +420,9 @@ def _prop_values(ctx: _Ctx, d: Any, path: P) -> list[tuple[str, float]]:
             out.append((k, 1.0 if v else 0.0))
         elif not isinstance(v, (int, float)) or not math.isfinite(v):
             ctx.err(path + (k,), f"expected a number, got {_describe(v)}")
+        elif abs(v) > lim.MAX_NUMBER:
+            ctx.err(path + (k,), f"{v:g} is out of range (no scenario value exceeds "
+                                 f"+-{lim.MAX_NUMBER:g}; a unit mistake?)")
         else:
             out.append((k, float(v)))
     return out

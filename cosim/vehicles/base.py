@@ -109,6 +109,9 @@ class SwarmLimits:
 #: integration) or the simulation itself
 MOVES_BY_DECREE = ("position/", "velocities/", "attitude/", "accelerations/", "ic/",
                    "simulation/", "propagate/")
+#: ... but for the fault a scenario may inject on purpose: the flight model
+#: stops (JSBSim's run() fails), which the run reports naming the vehicle
+FAULTS = ("simulation/terminate",)
 
 
 class VehicleClass:
@@ -225,7 +228,8 @@ class VehicleClass:
         kinds: nothing that moves the vehicle by decree (``MOVES_BY_DECREE``:
         its position, velocities, attitude, initial conditions, the clock),
         which no command could do either."""
-        if self.model_kind == "jsbsim" and name.startswith(MOVES_BY_DECREE):
+        if self.model_kind == "jsbsim" and name.startswith(MOVES_BY_DECREE) \
+                and name not in FAULTS:
             return [f"{name!r} would move the vehicle by decree (position, velocity, "
                     f"attitude, initial condition or the simulation clock), bypassing the "
                     f"flight model and the rule every command path keeps; fly it there "

@@ -22,7 +22,25 @@ class VehicleStatus(IntEnum):
 
     ACTIVE = 0
     GROUND_IMPACT = 1  # touched the ground while airborne: frozen
-    DIVERGED = 2  # a state became NaN/inf: frozen at its last finite state
+    #: a state became NaN, infinite or larger than ``MAX_STATE_ABS``: frozen
+    #: at its last plausible state
+    DIVERGED = 2
+
+
+#: no state of a vehicle that still flies comes near this (metres, m/s,
+#: degrees, newtons): a flight model that reaches it has diverged (a state
+#: at 1e21 m is a blow-up on its way to NaN, not a flight)
+MAX_STATE_ABS = 1e9
+
+
+def plausible(states: Any) -> Any:
+    """For each row of ``states`` (an ``(n, k)`` array of SI states): whether
+    every value is finite and within ``MAX_STATE_ABS``."""
+    import numpy as np
+
+    a = np.asarray(states)
+    with np.errstate(invalid="ignore"):
+        return (np.abs(a) <= MAX_STATE_ABS).all(axis=1)
 
 
 @dataclass(frozen=True)

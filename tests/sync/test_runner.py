@@ -85,7 +85,8 @@ def test_ground_impact_and_divergence_are_events_and_the_rest_fly_on(
     assert [e["vehicle"] for e in impact] == ["diver"]
     assert impact[0]["vd_mps"] > 0 and impact[0]["tick"] > 0
     div = [e for e in ev if e["event"] == "divergence"]
-    assert [e["vehicle"] for e in div] == ["nan"] and div[0]["tick"] == 244  # 2 s + 1 exchange
+    # 2 s + 1 exchange: its states pass 1e9 (on their way to NaN) in that exchange
+    assert [e["vehicle"] for e in div] == ["nan"] and div[0]["tick"] == 244
     for e in ev:
         assert {"event", "tick", "time_s", "vehicle"} <= set(e)
         assert e["time_s"] == e["tick"] / 120
@@ -97,7 +98,8 @@ def test_ground_impact_and_divergence_are_events_and_the_rest_fly_on(
     assert len(set(after["lat_deg"].to_pylist())) == 1  # frozen
     nan = t.filter(pc.equal(veh, "nan"))
     assert set(nan.filter(pc.greater(nan["tick"], 244))["status"].to_pylist()) == {2}
-    assert all(np.isfinite(nan["alt_msl_m"].to_numpy()))
+    for col in ("alt_msl_m", "north_m", "vn_mps", "airspeed_mps"):  # frozen where it was
+        assert (np.abs(nan[col].to_numpy()) < 1e5).all(), col  # plausible, not 1e21
     a0 = t.filter(pc.equal(veh, "a0"))
     assert set(a0["status"].to_pylist()) == {0}
     assert a0["north_m"].to_numpy()[-1] - a0["north_m"].to_numpy()[0] > 200  # still flying
