@@ -84,7 +84,8 @@ def test_a_backend_missing_its_library_is_a_usage_error(tmp_path: Path, capsys,
     out = tmp_path / "r"
     assert main(["run", str(REPO / "scenarios" / "quickstart.yaml"), "--backend", "ray",
                  "--out", str(out)]) == 2
-    assert "the ray backend needs Ray: pip install 'cosim[ray]'" in capsys.readouterr().err
+    # this cosim is a checkout: the extra is installed from it, not from PyPI
+    assert f"the ray backend needs Ray: pip install -e '{REPO}[ray]'" in capsys.readouterr().err
     assert not out.exists()
 
 
