@@ -159,9 +159,15 @@ def _build_parser() -> _Parser:
     m.add_argument("--classes", action="store_true",
                    help="list the vehicle classes instead (cosim's and installed packages')")
 
-    pl = sub.add_parser("plot", help="plot a run's ground track and altitude (PNG)")
+    pl = sub.add_parser("plot", help="plot a run's ground tracks, the aircraft's altitude and "
+                                     "the ground vehicles' speed (PNG)")
     pl.add_argument("run", metavar="RUN_DIR", help="a cosim run output folder")
     pl.add_argument("--out", metavar="PNG", help="output file (default RUN_DIR/track.png)")
+    pl.add_argument("--vehicles", metavar="IDS",
+                    help="comma-separated vehicle ids or patterns (fleet00*) to draw "
+                         "(default: every vehicle)")
+    pl.add_argument("--max-vehicles", type=int, metavar="N",
+                    help="draw at most the first N (in the scenario's order)")
 
     ex = sub.add_parser("export", help="write a run's tracks for Tacview (ACMI), Google Earth "
                                        "(KML) or Cesium (CZML)")
@@ -697,7 +703,8 @@ def _cmd_plot(a: argparse.Namespace) -> int:
     run = Path(a.run)
     if not (run / "states.parquet").exists():
         raise ConfigError(f"{run}: not a cosim run folder (no states.parquet)")
-    print(plot_run(run, a.out))
+    patterns = [x.strip() for x in a.vehicles.split(",") if x.strip()] if a.vehicles else None
+    print(plot_run(run, a.out, patterns, a.max_vehicles))
     return EXIT_OK
 
 

@@ -63,3 +63,15 @@ def same_states(a: Any, b: Any) -> bool:
         return pa.table(cols, names=t.column_names).combine_chunks()
 
     return bool(plain(a).equals(plain(b)))
+
+
+def finished_run(text: str, folder: Path) -> Path:
+    """The run folder of scenario ``text`` run to its end (inline) in
+    ``folder/run`` (the scenario written as ``folder/s.yaml``)."""
+    from cosim.scenario import parse_scenario
+    from cosim.sync import run_scenario
+
+    res = run_scenario(parse_scenario(text, str(folder / "s.yaml")), folder / "run",
+                       backend="inline")
+    assert res.stop_reason == "completed", res.error
+    return folder / "run"

@@ -19,8 +19,7 @@ import pytest
 from cosim.errors import ConfigError
 from cosim.export import body_to_ecef_quaternion, export_run, load_tracks
 from cosim.logs import read_states
-from cosim.scenario import parse_scenario
-from cosim.sync import run_scenario
+from tests.helpers import finished_run
 
 SCENARIO = """\
 schema_version: 1
@@ -44,11 +43,7 @@ TYPES = {"plane": "Air+FixedWing", "quad": "Air+Rotorcraft", "car": "Ground+Vehi
 
 @pytest.fixture(scope="module")
 def run(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    tmp = tmp_path_factory.mktemp("export")
-    res = run_scenario(parse_scenario(SCENARIO, str(tmp / "s.yaml")), tmp / "run",
-                       backend="inline")
-    assert res.stop_reason == "completed", res.error
-    return tmp / "run"
+    return finished_run(SCENARIO, tmp_path_factory.mktemp("export"))
 
 
 def _states(run: Path) -> dict[str, dict[str, np.ndarray]]:
