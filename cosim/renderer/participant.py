@@ -43,12 +43,12 @@ import logging
 import math
 import os
 import queue
+import threading
 import time
 import traceback
 from collections import deque
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
-from multiprocessing.connection import wait as wait_any
 from pathlib import Path
 from typing import Any
 
@@ -76,6 +76,8 @@ _POLL_S = 0.2
 #: the least time a render worker has to start (import, build its world) and
 #: render its first frame
 _START_S = 60.0
+#: what a results thread reports when its worker's pipe ends
+_EOF = ("eof",)
 
 
 class RenderError(CosimError):
@@ -273,6 +275,19 @@ class StreamFailed(Exception):
         self.index, self.tb = index, tb
 
 
+def _read_results(k: int, conn: Connection, inbox: queue.SimpleQueue[Any]) -> None:
+    """A thread per render worker: its messages, in order, into ``inbox`` as
+    ``(k, message)``, then ``(k, _EOF)`` when its pipe ends. A worker stopped
+    in the middle of a message holds up only this thread, never the loop."""
+    while True:
+        try:
+            msg = conn.recv()
+        except (EOFError, OSError):  # it is gone (mid-message, perhaps)
+            inbox.put((k, _EOF))
+            return
+        inbox.put((k, msg))
+
+
 def _worker_main(world_spec: WorldSpec, streams: list[Stream], out_dir: str, codec: str,
                  digest: bool, jobs: Any, results: Connection) -> None:
     cv2.setNumThreads(1)
@@ -319,9 +334,13 @@ class CameraParticipant:
         self.inline: RenderWorker | None = None
         self.procs: list[Any] = []
         self.jobs: list[Any] = []
-        #: one pipe of results per render worker, read only here: a worker that
-        #: dies mid-message is an end of file, never a read waiting forever
+        #: one pipe of results per render worker, each read by a thread of its own
+        #: into ``inbox`` (a worker that dies mid-message is an end of file; one
+        #: stopped mid-message holds up its thread only), the pipes that have ended
         self.results: list[Connection] = []
+        self.readers: list[threading.Thread] = []
+        self.inbox: queue.SimpleQueue[tuple[int, tuple[Any, ...]]] = queue.SimpleQueue()
+        self.eof: set[int] = set()
         self.in_flight: list[int] = []
         #: per render worker: (stream, tick) of each frame sent and not yet back,
         #: when it was last heard from (or given work while idle), whether it is ready
@@ -408,6 +427,10 @@ class CameraParticipant:
             self.procs.append(p)
             self.jobs.append(q)
             self.results.append(reader)
+            t = threading.Thread(target=_read_results, args=(k, reader, self.inbox),
+                                 name=f"cosim-render-{k}-results", daemon=True)
+            t.start()
+            self.readers.append(t)
             self.in_flight.append(0)
             self.pending.append(deque())
             self.heard.append(time.monotonic())
@@ -636,10 +659,16 @@ class CameraParticipant:
         """Raise for a render worker that has ended (without blocking): first
         whatever it reported (a failure at start), else ``RenderWorkerDied``;
         then for one silent too long with frames to render (``RenderWorkerTimeout``)."""
-        ended = worker_kit.ended(self.procs)
-        if ended:
-            self._drain()  # a worker that failed says why before it exits
-            self._died(ended[0])
+        ended = [k for k in worker_kit.ended(self.procs) if k not in self.done]
+        if ended:  # a worker that failed says why before it exits: read to its end
+            k = ended[0]
+            deadline = time.monotonic() + 1.0
+            while k not in self.eof and (left := deadline - time.monotonic()) > 0:
+                try:
+                    self._take(*self.inbox.get(timeout=left))
+                except queue.Empty:
+                    break
+            self._died(k)
         self._drain()  # what has arrived counts as heard
         for k in range(len(self.procs)):
             if self.in_flight[k]:
@@ -668,22 +697,23 @@ class CameraParticipant:
         self.failed = RenderWorkerDied(k, p.pid, p.exitcode, self._cameras_of(k), self.tick)
         raise self.failed
 
-    def _read(self, k: int) -> None:
-        """Handle one message from worker ``k`` (its pipe is readable)."""
-        try:
-            msg = self.results[k].recv()
-        except (EOFError, OSError):  # the worker is gone (mid-message, perhaps)
-            if k in self.done:  # it said goodbye first: a normal end
-                self.results[k].close()
-                return
-            self._died(k)
+    def _take(self, k: int, msg: tuple[Any, ...]) -> None:
+        """Handle one message from worker ``k``, or the end of its pipe."""
+        if msg == _EOF:
+            self.eof.add(k)
+            if k not in self.done:  # gone without saying goodbye
+                self._died(k)
+            return
         self._handle(k, msg)
 
     def _drain(self) -> None:
         """Handle every result waiting now (raises a reported error)."""
-        for k, conn in enumerate(self.results):
-            while not conn.closed and conn.poll(0):
-                self._read(k)
+        while True:
+            try:
+                item = self.inbox.get_nowait()
+            except queue.Empty:
+                return
+            self._take(*item)
 
     def _handle(self, k: int, msg: tuple[Any, ...]) -> None:
         kind = msg[0]
@@ -715,11 +745,14 @@ class CameraParticipant:
             self._drain()
             return
         while True:
-            ready = wait_any(self.results, timeout=_POLL_S)
-            if ready:
-                self._drain()
-                return
-            self._check_workers()
+            try:
+                item = self.inbox.get(timeout=_POLL_S)
+            except queue.Empty:
+                self._check_workers()
+                continue
+            self._take(*item)
+            self._drain()
+            return
 
     def finish(self, tick: int, reason: str) -> dict[str, Any] | None:
         if self.finished:
@@ -738,27 +771,30 @@ class CameraParticipant:
         elif self.procs:
             for k in range(len(self.jobs)):
                 self._give(k, None)  # the goodbye is work too: its silence is timed
-            waiting = set(range(len(self.procs))) - self.done  # may still send
+            waiting = set(range(len(self.procs))) - self.done - self.eof  # may still send
             while waiting:
-                for conn in wait_any([self.results[k] for k in waiting], timeout=_POLL_S):
-                    k = self.results.index(conn)  # type: ignore[arg-type]
-                    try:
-                        self._read(k)
-                    except RenderWorkerDied as e:
-                        waiting.discard(k)
-                        error = error or e
-                    except RenderError as e:
-                        error = error or e
+                try:
+                    k, msg = self.inbox.get(timeout=_POLL_S)
+                    self._take(k, msg)
+                except queue.Empty:
+                    pass
+                except RenderWorkerDied as e:
+                    waiting.discard(k)
+                    error = error or e
+                except RenderError as e:
+                    error = error or e
                 for k in waiting - self.done:  # silent too long: killed, the others go on
                     try:
                         self._check_silence(k)
                     except RenderWorkerTimeout as e:
                         error = error or e
-                waiting -= self.done
+                waiting -= self.done | self.eof
             worker_kit.stop(self.procs, 10.0)
             for q in self.jobs:  # the workers are gone: nothing left to deliver at exit
                 q.cancel_join_thread()
                 q.close()
+            for t in self.readers:  # their pipes have ended with the workers
+                t.join(1.0)
             for conn in self.results:
                 conn.close()
         out: dict[str, Any] = {"streams": [], "codec": self.spec.codec}
