@@ -39,7 +39,8 @@ import numpy as np
 
 from cosim.errors import ConfigError
 from cosim.logs import RunFolder, replacing
-from cosim.logs.runfolder import RESOLVED, rows_by_vehicle
+from cosim.logs.resolved import RESOLVED
+from cosim.logs.runfolder import rows_by_vehicle
 
 FORMATS = ("acmi", "kml", "czml")
 DEFAULT_EPOCH = datetime(2000, 1, 1, tzinfo=timezone.utc)

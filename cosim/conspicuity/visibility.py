@@ -37,7 +37,8 @@ from typing import Any
 
 from cosim.errors import ConfigError
 from cosim.logs import RunFolder, replacing
-from cosim.logs.runfolder import MAX_GROUND_TRUTH_BYTES, MAX_TIME_S, is_number, physics_hz
+from cosim.logs.resolved import is_number
+from cosim.logs.runfolder import MAX_GROUND_TRUTH_BYTES, MAX_TIME_S, physics_hz
 from cosim.scenario.limits import MAX_NUMBER
 from cosim.scenario.yaml_lines import open_bounded
 

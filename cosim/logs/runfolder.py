@@ -9,10 +9,9 @@ here, bounded:
   followed, stays inside the run folder: a symlink to ``/dev/zero`` or out of
   the folder, a FIFO, a folder where a file belongs are refused before a
   byte is read; and only up to its limit (``MAX_*_BYTES``);
-- ``scenario.resolved.yaml`` is read by the scenario loader's YAML reader
-  (nesting, aliases, whole numbers; at most ``MAX_RESOLVED_VALUES`` values)
-  and checked field by field; JSON is nested at most ``MAX_DEPTH`` levels;
-  an ``events.jsonl`` line holds at most ``MAX_LINE_BYTES``;
+- ``scenario.resolved.yaml`` is read and checked field by field by
+  ``cosim.logs.resolved``; JSON is nested at most ``MAX_DEPTH`` levels; an
+  ``events.jsonl`` line holds at most ``MAX_LINE_BYTES``;
 - states: at most ``MAX_STATE_ROWS`` rows in at most ``MAX_STATE_FILES``
   files (a part's rows counted from its footer before it is read), the
   columns a command needs present and of their type, and every value read
@@ -29,15 +28,15 @@ import json
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, TypeGuard
+from typing import Any
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from cosim.errors import ConfigError, CosimError
-from cosim.geo import MAX_DISTANCE_M
+from cosim.errors import ConfigError
+from cosim.logs.resolved import RESOLVED, Resolved, is_number, read_resolved, show_value
 from cosim.logs.writers import state_schema
 from cosim.scenario.limits import (
     MAX_DEPTH,
@@ -47,20 +46,8 @@ from cosim.scenario.limits import (
     MIN_EXCHANGE_HZ,
     PHYSICS_HZ_RANGE,
 )
-from cosim.scenario.yaml_lines import (
-    YamlProblem,
-    format_path,
-    load_with_lines,
-    open_bounded,
-    read_bounded,
-    read_text_bounded,
-)
+from cosim.scenario.yaml_lines import open_bounded, read_bounded, read_text_bounded
 
-#: ``scenario.resolved.yaml`` lists every vehicle: about 240 bytes and 11
-#: values each (a 5001-vehicle run's is 1.2 MB), so 200,000 vehicles take
-#: about 48 MB
-MAX_RESOLVED_BYTES = 64 * 1024 * 1024
-MAX_RESOLVED_VALUES = 5_000_000
 #: ``summary.json``, ``sweep.json``
 MAX_JSON_BYTES = 16 * 1024 * 1024
 #: ``events.jsonl`` and one line of it
@@ -80,7 +67,6 @@ MAX_STATE_ROWS = 100_000_000
 MAX_TIME_S = MAX_DURATION_S + 1.0 / MIN_EXCHANGE_HZ
 MAX_TICK = int(MAX_TIME_S * PHYSICS_HZ_RANGE[1])
 
-RESOLVED = "scenario.resolved.yaml"
 _TEXT_COLUMNS = ("vehicle", "command")
 
 
@@ -120,63 +106,12 @@ def parse_json(text: str | bytes, where: str, line: int | None = None) -> Any:
     return value
 
 
-def is_number(v: Any) -> TypeGuard[int | float]:
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
-
-
 def physics_hz(d: dict[str, Any]) -> float | None:
     """``d``'s ``physics_hz`` (a summary's) if it is a physics rate cosim runs at."""
     hz = d.get("physics_hz")
     if is_number(hz) and PHYSICS_HZ_RANGE[0] <= hz <= PHYSICS_HZ_RANGE[1]:
         return float(hz)
     return None
-
-
-def _kind(model: str, vehicle_class: str | None, cache: dict[tuple[str, str | None], str]
-          ) -> str:
-    """The replay type (a class's ``display_type``) of a vehicle: its class's,
-    else its model profile's class's; a name cosim cannot resolve (an older
-    run's) gives the generic ``Air``."""
-    from cosim.jsb import find_model
-    from cosim.vehicles import DEFAULT_CLASS, get_class
-
-    key = (model, vehicle_class)
-    if key not in cache:
-        try:
-            name = vehicle_class
-            if name is None:
-                name = find_model(model).profile.get("class", DEFAULT_CLASS)
-            cache[key] = get_class(str(name)).display_type
-        except (CosimError, OSError, ValueError):
-            cache[key] = "Air"
-    return cache[key]
-
-
-@dataclass(frozen=True)
-class RunVehicle:
-    """A vehicle of a run as its resolved scenario lists it."""
-
-    id: str
-    model: str
-    vehicle_class: str | None
-    kind: str  # the class's replay type, e.g. "Air+FixedWing", "Ground+Vehicle"
-
-    @property
-    def on_ground(self) -> bool:
-        return self.kind.startswith("Ground")
-
-
-@dataclass(frozen=True)
-class Resolved:
-    """What the commands use of a run's ``scenario.resolved.yaml``."""
-
-    name: str
-    origin_lat_deg: float
-    origin_lon_deg: float
-    physics_hz: float | None
-    vehicles: tuple[RunVehicle, ...]
-    #: each obstacle's corners (north_m, east_m)
-    obstacles: tuple[tuple[tuple[float, float], ...], ...]
 
 
 @dataclass(frozen=True)
@@ -187,57 +122,6 @@ class Event:
     tick: int
     vehicle: str | None
     fields: dict[str, Any]
-
-
-class _Checker:
-    """Problems of a YAML document, each as ``file:line: path: message``."""
-
-    def __init__(self, where: Path, lines: dict[tuple[Any, ...], int]) -> None:
-        self.where, self.lines = where, lines
-        self.problems: list[str] = []
-
-    def bad(self, path: tuple[Any, ...], message: str) -> None:
-        p = path
-        while p and p not in self.lines:
-            p = p[:-1]
-        self.problems.append(f"{self.where}:{self.lines.get(p, 1)}: {format_path(path)}: "
-                             f"{message}")
-
-    def text(self, d: dict[str, Any], key: str, path: tuple[Any, ...], limit: int,
-             default: str | None = None) -> str | None:
-        v = d.get(key, default)
-        if v is None or (isinstance(v, str) and 0 < len(v) <= limit):
-            return v
-        self.bad(path + (key,), f"expected text of 1 to {limit} characters, got "
-                                f"{_show(v)}")
-        return default
-
-    def number(self, d: dict[str, Any], key: str, path: tuple[Any, ...], lo: float,
-               hi: float, default: float | None) -> float | None:
-        v = d.get(key, default)
-        if v is None or (is_number(v) and lo <= v <= hi):
-            return None if v is None else float(v)
-        self.bad(path + (key,), f"expected a number from {lo:g} to {hi:g}, got {_show(v)}")
-        return default
-
-    def mapping(self, d: dict[str, Any], key: str, path: tuple[Any, ...]) -> dict[str, Any]:
-        v = d.get(key)
-        if v is None or isinstance(v, dict):
-            return v or {}
-        self.bad(path + (key,), f"expected a mapping, got {_show(v)}")
-        return {}
-
-    def listing(self, d: dict[str, Any], key: str, path: tuple[Any, ...]) -> list[Any]:
-        v = d.get(key)
-        if v is None or isinstance(v, list):
-            return v or []
-        self.bad(path + (key,), f"expected a list, got {_show(v)}")
-        return []
-
-
-def _show(v: Any) -> str:
-    text = repr(v)
-    return text if len(text) <= 40 else text[:37] + "..."
 
 
 class RunFolder:
@@ -316,57 +200,12 @@ class RunFolder:
                     raise
                 skipped.append(str(e))
 
-    # -- scenario.resolved.yaml ---------------------------------------------------------
     def resolved(self) -> Resolved | None:
-        """The run's resolved scenario (None: there is none), checked; every
-        problem at once, with its line."""
+        """The run's resolved scenario (None: there is none), checked
+        (``cosim.logs.resolved``)."""
         if not self.has(RESOLVED):
             return None
-        p = self.file(RESOLVED)
-        text = read_text_bounded(p, MAX_RESOLVED_BYTES, "resolved scenario",
-                                 "a resolved scenario")
-        try:
-            data, lines, _ = load_with_lines(text, MAX_RESOLVED_VALUES)
-        except YamlProblem as e:
-            raise ConfigError([f"{p}:{line}: {msg}" for line, msg in e.problems]) from None
-        if not isinstance(data, dict):
-            raise ConfigError(f"{p}:1: expected a resolved scenario (a mapping with "
-                              f"vehicles:), got {_show(data)}")
-        c = _Checker(p, lines)
-        origin = c.mapping(data, "origin", ())
-        rates = c.mapping(data, "rates", ())
-        vehicles: list[RunVehicle] = []
-        kinds: dict[tuple[str, str | None], str] = {}
-        seen: set[str] = set()
-        for i, v in enumerate(c.listing(data, "vehicles", ())):
-            path = ("vehicles", i)
-            if not isinstance(v, dict):
-                c.bad(path, f"expected a vehicle (a mapping with id:), got {_show(v)}")
-                continue
-            vid = c.text(v, "id", path, MAX_NAME_CHARS)
-            if vid is None:
-                c.bad(path, "no id")
-                continue
-            if vid in seen:
-                c.bad(path + ("id",), f"vehicle {vid!r} listed twice")
-            seen.add(vid)
-            model = c.text(v, "model", path, 200) or ""
-            cls = c.text(v, "class", path, 200)
-            vehicles.append(RunVehicle(vid, model or cls or "", cls, _kind(model, cls, kinds)))
-        obstacles = []
-        for i, o in enumerate(c.listing(data, "obstacles", ())):
-            poly = _polygon(c, o, ("obstacles", i))
-            if poly is not None:
-                obstacles.append(poly)
-        out = Resolved(
-            name=c.text(data, "name", (), MAX_NAME_CHARS, "") or self.path.name,
-            origin_lat_deg=c.number(origin, "lat_deg", ("origin",), -90, 90, 0.0) or 0.0,
-            origin_lon_deg=c.number(origin, "lon_deg", ("origin",), -180, 180, 0.0) or 0.0,
-            physics_hz=c.number(rates, "physics_hz", ("rates",), *PHYSICS_HZ_RANGE, None),
-            vehicles=tuple(vehicles), obstacles=tuple(obstacles))
-        if c.problems:
-            raise ConfigError(c.problems)
-        return out
+        return read_resolved(self.file(RESOLVED), self.path.name)
 
     # -- states.parquet -------------------------------------------------------------------
     def states(self, columns: Sequence[str] | None = None, name: str = "states.parquet"
@@ -496,34 +335,18 @@ def _select(schema: pa.Schema, columns: Sequence[str] | None, path: Path) -> pa.
 
 def _event(e: Any, where: str) -> Event:
     if not isinstance(e, dict):
-        raise ConfigError(f"{where}: expected an event (a JSON object), got {_show(e)}")
+        raise ConfigError(f"{where}: expected an event (a JSON object), got {show_value(e)}")
     kind, tick, vehicle = e.get("event"), e.get("tick"), e.get("vehicle")
     if not (isinstance(kind, str) and 0 < len(kind) <= MAX_NAME_CHARS):
         raise ConfigError(f"{where}: event: expected a name of 1 to {MAX_NAME_CHARS} "
-                          f"characters, got {_show(kind)}")
+                          f"characters, got {show_value(kind)}")
     if not (isinstance(tick, int) and not isinstance(tick, bool) and 0 <= tick <= MAX_TICK):
         raise ConfigError(f"{where}: tick: expected a whole number from 0 to {MAX_TICK}, got "
-                          f"{_show(tick)}")
+                          f"{show_value(tick)}")
     if not (vehicle is None or (isinstance(vehicle, str) and len(vehicle) <= MAX_NAME_CHARS)):
         raise ConfigError(f"{where}: vehicle: expected a vehicle id or null, got "
-                          f"{_show(vehicle)}")
+                          f"{show_value(vehicle)}")
     return Event(kind, tick, vehicle, e)
-
-
-def _polygon(c: _Checker, o: Any, path: tuple[Any, ...]
-             ) -> tuple[tuple[float, float], ...] | None:
-    if not isinstance(o, dict) or not isinstance(o.get("polygon"), list):
-        c.bad(path, f"expected an obstacle with a polygon: list, got {_show(o)}")
-        return None
-    pts = o["polygon"]
-    ok = len(pts) >= 3 and all(
-        isinstance(p, list) and len(p) == 2 and all(is_number(x) and abs(x) <= MAX_DISTANCE_M
-                                                    for x in p) for p in pts)
-    if not ok:
-        c.bad(path + ("polygon",), f"expected 3 or more [north_m, east_m] corners within "
-                                   f"{MAX_DISTANCE_M / 1000:g} km of the origin")
-        return None
-    return tuple((float(n), float(e)) for n, e in pts)
 
 
 def rows_by_vehicle(table: pa.Table) -> dict[str, np.ndarray]:
