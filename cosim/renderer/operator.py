@@ -2,6 +2,10 @@
 vehicle and target positions, one frame per period of the slowest camera
 shown, written to ``cameras/operator.<ext>`` by the loop's process.
 
+The map (``map_panel``) is north up, centred on what it shows, with its title,
+a north arrow, a scale bar of a round length (``scale_bar``), a legend of its
+symbols (``LEGEND``) and, for a few vehicles, their ids.
+
 The frame at tick T shows each camera's frame at or before T, so it depends
 only on the tick (not on when the render workers deliver).
 """
@@ -25,6 +29,88 @@ if TYPE_CHECKING:
     from cosim.sync.participants import RunContext
 
 _LAT, _LON = STATE_INDEX["lat_deg"], STATE_INDEX["lon_deg"]
+#: the map's colours (BGR) and its legend: (symbol, colour, label)
+AIRCRAFT_BGR, TARGET_BGR, TEXT_BGR, BACKGROUND = (0, 255, 255), (0, 0, 255), (230, 230, 230), 32
+LEGEND = (("dot", AIRCRAFT_BGR, "vehicle"), ("cross", TARGET_BGR, "target"))
+#: vehicles labelled with their ids on the map, at most
+MAX_LABELLED = 6
+_FONT = cv2.FONT_HERSHEY_SIMPLEX
+
+
+def scale_bar(px_per_m: float, width_px: int) -> tuple[float, int]:
+    """A scale bar for a map of ``px_per_m``: a round length (1, 2 or 5 times a
+    power of ten metres) drawn about a quarter of ``width_px`` long at most,
+    and its length in pixels."""
+    want_m = width_px / 4 / px_per_m
+    base = 10.0 ** math.floor(math.log10(want_m))
+    metres = max(m * base for m in (1, 2, 5) if m * base <= want_m)
+    return metres, max(1, round(metres * px_per_m))
+
+
+def _length(metres: float) -> str:
+    return f"{metres / 1000:g} km" if metres >= 1000 else f"{metres:g} m"
+
+
+def map_panel(width_px: int, height_px: int, vehicles_ne: np.ndarray, targets_ne: np.ndarray,
+              ids: list[str] | None = None, target_ids: list[str] | None = None) -> np.ndarray:
+    """The operator view's map (BGR): vehicles (``vehicles_ne``, (n, 2) north/east
+    m) as dots and targets as crosses, each kind labelled with its ``ids`` /
+    ``target_ids`` when there are at most ``MAX_LABELLED`` of it, north up, with
+    a title, a north arrow, a scale bar and a legend."""
+    w, h = width_px, height_px
+    img = np.full((h, w, 3), BACKGROUND, np.uint8)
+    pts = np.concatenate([np.reshape(vehicles_ne, (-1, 2)), np.reshape(targets_ne, (-1, 2))])
+    cn, ce = (pts[:, 0].max() + pts[:, 0].min()) / 2, (pts[:, 1].max() + pts[:, 1].min()) / 2
+    span = max(np.ptp(pts[:, 0]), np.ptp(pts[:, 1]), 200.0) * 1.3
+    scale = min(w, h) / span  # px per m
+    fs = max(0.3, min(w, h) / 600)  # font scale
+    lh = int(22 * fs) + 4  # a text line's height
+
+    def px(nn: float, ee: float) -> tuple[int, int]:
+        return int(w / 2 + (ee - ce) * scale), int(h / 2 - (nn - cn) * scale)
+
+    mark = max(6, int(14 * fs))
+    dot = max(3, mark // 2)
+
+    def name(names: list[str] | None, k: int, n: int, at: tuple[int, int]) -> None:
+        if names is not None and n <= MAX_LABELLED:
+            cv2.putText(img, names[k], (at[0] + mark // 2 + 2, at[1] - mark // 3), _FONT,
+                        fs * 0.9, TEXT_BGR, 1, cv2.LINE_AA)
+
+    targets = np.reshape(targets_ne, (-1, 2))
+    for k, (tn, te) in enumerate(targets):
+        cv2.drawMarker(img, px(tn, te), TARGET_BGR, cv2.MARKER_TILTED_CROSS, mark, 2)
+        name(target_ids, k, len(targets), px(tn, te))
+    vehicles = np.reshape(vehicles_ne, (-1, 2))
+    for k, (vn, ve) in enumerate(vehicles):
+        cv2.circle(img, px(vn, ve), dot, AIRCRAFT_BGR, -1)
+        name(ids, k, len(vehicles), px(vn, ve))
+    # title, north arrow (top right), legend (bottom left), scale bar (bottom right)
+    cv2.putText(img, "map, north up", (6, lh), _FONT, fs, TEXT_BGR, 1, cv2.LINE_AA)
+    ax, ay = w - lh, 6
+    cv2.arrowedLine(img, (ax, ay + 2 * lh), (ax, ay), TEXT_BGR, 1, cv2.LINE_AA, tipLength=0.35)
+    cv2.putText(img, "N", (ax - lh, ay + lh), _FONT, fs, TEXT_BGR, 1, cv2.LINE_AA)
+    box_w = int(110 * fs) + lh
+    top = h - len(LEGEND) * lh - 6
+    cv2.rectangle(img, (2, top - 4), (2 + box_w, h - 3), (60, 60, 60), -1)
+    for i, (symbol, colour, label) in enumerate(LEGEND):
+        cy = top + i * lh + lh // 2
+        if symbol == "dot":
+            cv2.circle(img, (6 + lh // 2, cy), dot, colour, -1)
+        else:
+            cv2.drawMarker(img, (6 + lh // 2, cy), colour, cv2.MARKER_TILTED_CROSS, mark, 2)
+        cv2.putText(img, label, (8 + lh, cy + int(8 * fs)), _FONT, fs, TEXT_BGR, 1,
+                    cv2.LINE_AA)
+    metres, bar = scale_bar(scale, w)
+    x1, y = w - 8, h - 8
+    cv2.line(img, (x1 - bar, y), (x1, y), TEXT_BGR, 2)
+    for x in (x1 - bar, x1):
+        cv2.line(img, (x, y - 4), (x, y + 2), TEXT_BGR, 1)
+    text = _length(metres)
+    (tw, _), _ = cv2.getTextSize(text, _FONT, fs, 1)
+    cv2.putText(img, text, (x1 - bar // 2 - tw // 2, y - 6), _FONT, fs, TEXT_BGR, 1,
+                cv2.LINE_AA)
+    return img
 
 
 class OperatorView:
@@ -52,6 +138,8 @@ class OperatorView:
         self.video = open_video(str(ctx.out_dir / self.path), spec.codec, self.rate_hz,
                                 *self.size)
         self.frame = ctx.frame
+        self.ids = list(ctx.ids)
+        self.target_ids = [t.id for t in world.targets]
         self.targets = TargetSet(world.targets, ctx.frame, world.ground_alt_m)
         self.thumbs: dict[tuple[int, int], np.ndarray] = {}
         self.pending: list[tuple[int, np.ndarray]] = []  # (tick, map image)
@@ -68,24 +156,10 @@ class OperatorView:
             self._flush()
 
     def _map(self, states: np.ndarray) -> np.ndarray:
-        img = np.full((self.th, self.tw, 3), 32, np.uint8)
         n, e, _ = self.frame.geodetic_to_ned(states[:, _LAT], states[:, _LON], 0.0)
-        pn = np.concatenate([n, self.targets.north_m])
-        pe = np.concatenate([e, self.targets.east_m])
-        cn, ce = (pn.max() + pn.min()) / 2, (pe.max() + pe.min()) / 2
-        span = max(pn.max() - pn.min(), pe.max() - pe.min(), 200.0) * 1.2
-        scale = min(self.tw, self.th) / span
-
-        def px(nn: float, ee: float) -> tuple[int, int]:
-            return int(self.tw / 2 + (ee - ce) * scale), int(self.th / 2 - (nn - cn) * scale)
-
-        for tn, te in zip(self.targets.north_m, self.targets.east_m):
-            cv2.drawMarker(img, px(tn, te), (0, 0, 255), cv2.MARKER_TILTED_CROSS, 8, 2)
-        for vn, ve in zip(n, e):
-            cv2.circle(img, px(vn, ve), 4, (0, 255, 255), -1)
-        cv2.putText(img, f"{span:.0f} m", (4, self.th - 6), cv2.FONT_HERSHEY_SIMPLEX, 0.4,
-                    (200, 200, 200), 1)
-        return img
+        targets = np.column_stack([self.targets.north_m, self.targets.east_m])
+        return map_panel(self.tw, self.th, np.column_stack([n, e]), targets, self.ids,
+                         self.target_ids)
 
     def _flush(self) -> None:
         while self.pending:

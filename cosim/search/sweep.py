@@ -98,12 +98,17 @@ def plot_curve(rows: list[dict[str, Any]], names: list[str], png: Path) -> None:
     import matplotlib.pyplot as plt
     import numpy as np
 
+    from cosim.search.plot import plain_log_axis
+
     fig, ax = plt.subplots(figsize=(8, 5))
+    handles: list[Any] = []
+    most = 0  # runs behind one point
     for k, (label, rs) in enumerate(sorted(_groups(rows, names).items())):
         fleets = sorted({r["aircraft"] for r in rs})
         mean, lo, hi, plan, miss = [], [], [], [], []
         for n in fleets:
             mine = [r for r in rs if r["aircraft"] == n]
+            most = max(most, len(mine))
             t = [r["time_to_detect_s"] for r in mine if r["time_to_detect_s"] is not None]
             mean.append(np.mean(t) / 60 if t else np.nan)
             lo.append(min(t) / 60 if t else np.nan)
@@ -114,17 +119,25 @@ def plot_curve(rows: list[dict[str, Any]], names: list[str], png: Path) -> None:
         x = np.array(fleets, dtype=float) * (1.0 + 0.015 * k)  # side by side where they overlap
         color = f"C{k}"
         m, lo_a, hi_a = np.array(mean), np.array(lo), np.array(hi)
-        ax.errorbar(x, m, yerr=[m - lo_a, hi_a - m], fmt="o-", color=color, capsize=3,
-                    label=f"{label}: time to detect (mean, range over runs)")
-        ax.plot(x, plan, ":", color=color, lw=1, label=f"{label}: plan done")
+        handles.append(ax.errorbar(x, m, yerr=[m - lo_a, hi_a - m], fmt="o-", color=color,
+                                   capsize=3, label=f"{label}: fire found (mean, range over "
+                                                    f"the runs)"))
+        handles += ax.plot(x, plan, ":", marker="_", ms=8, color=color, lw=1.2,
+                           label=f"{label}: plan done (area covered)")
         if not np.all(np.isnan(miss)):
-            ax.plot(x, miss, "o", mfc="none", color=color, label=f"{label}: not found by then")
-    ax.axhline(DEADLINE_S / 60, color="red", ls="--", lw=1, label="10 minutes")
+            handles += ax.plot(x, miss, "o", mfc="none", color=color,
+                               label=f"{label}: fire not found by the run's end")
+    handles.append(ax.axhline(DEADLINE_S / 60, color="red", ls="--", lw=1,
+                              label=f"deadline ({DEADLINE_S / 60:g} min)"))
     ax.set_xscale("log")
-    ax.set_xlabel("aircraft")
-    ax.set_ylabel("time (min)")
-    ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=7)
+    plain_log_axis(ax.xaxis, [r["aircraft"] for r in rows])
+    ax.set_xlabel("aircraft in the fleet (log scale)")
+    ax.set_ylabel("time from the start (min)")
+    ax.set_ylim(bottom=0)
+    ax.grid(alpha=0.3, which="major")
+    ax.set_title(f"Time to find the fire against the fleet size ({len(rows)} runs, up to "
+                 f"{most} a point)", fontsize=10)
+    ax.legend(handles=handles, fontsize=7, loc="upper right", framealpha=0.9)
     fig.tight_layout()
     with replacing(png, "wb") as f:
         fig.savefig(f, dpi=110, format="png")
