@@ -2,7 +2,9 @@
 targets; frames to video plus a ground-truth record per frame.
 
 Owns ``cameras:``/``ground:``/``targets:`` (``config``), the camera model
-(``camera``), the ground texture (``ground``), target drawing and ground truth
+(``camera``), the ground texture (``ground``; georeferenced files: ``geotiff``;
+what a ground image may read and declare, checked before anything opens it:
+``imagery``, ``headers``), target drawing and ground truth
 (``targets``), one frame (``frame``) and the render pool and outputs
 (``participant``). It reads the loop's state array at exchange ticks and never
 touches the FDM pool, the logs' files or other participants. Frames depend only
