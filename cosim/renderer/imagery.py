@@ -203,7 +203,8 @@ def _bad_entries(walk: _Walk, folder: str) -> list[tuple[str, str]]:
                         continue
                     if e.is_symlink():
                         real = os.path.realpath(e.path)
-                        if os.path.isfile(real) and _inside(real, walk.roots):
+                        if _inside(real, walk.roots) and (os.path.isfile(real)
+                                                          or os.path.isdir(real)):
                             continue
                         got.append((e.name, f"a link to {real}"))
                     elif not e.is_dir(follow_symlinks=False):

@@ -254,6 +254,8 @@ def test_files_gdal_opens_beside_a_raster_are_checked(site: Path, capsys) -> Non
     os.mkfifo(site / "near.tif.msk")
     refused(site, "ground: {image: near.tif}", capsys, r"near\.tif\.msk \(not a regular file\)")
     (site / "near.tif.msk").unlink()
+    (site / "tiles").mkdir()  # a link that stays inside is fine, to a folder too
+    (site / "near_tiles").symlink_to(site / "tiles")
     rc, err = validate(scenario(site, "ground: {image: near.tif}"), capsys)
     assert rc == 0, err
 
