@@ -20,7 +20,6 @@ flyover's ground, about the size OpenCV's writer gives), ``h264`` x264's
 
 from __future__ import annotations
 
-import functools
 import importlib.util
 from fractions import Fraction
 from typing import Any, Protocol
@@ -36,7 +35,6 @@ MPEG4_QUANTISER = 4
 H264_PRESET, H264_CRF = "ultrafast", 23
 
 
-@functools.lru_cache(maxsize=1)
 def have_pyav() -> bool:
     return importlib.util.find_spec("av") is not None
 
