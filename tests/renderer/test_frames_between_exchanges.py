@@ -98,10 +98,15 @@ def test_the_config_error_names_the_rates_that_fit(tmp_path: Path) -> None:
 def test_a_failed_build_finishes_no_participant_that_never_started(tmp_path: Path) -> None:
     """The cameras are made before the pool (they ask for their watch), but a
     pool that cannot be built leaves them out of the run: one error, its own."""
+    import dataclasses
+
     f = tmp_path / "stall.yaml"
-    f.write_text(SCENARIO.format(control=10, vehicles="cam", other="", more="").replace(
-        "airspeed_kt: 100}}", "airspeed_kt: 4}}"))  # cannot be trimmed
-    res = Run(load_scenario(f), tmp_path / "run", backend="inline").run()
+    f.write_text(SCENARIO.format(control=10, vehicles="cam", other="", more=""))
+    scn = load_scenario(f)
+    # a start no trim reaches (a scenario's envelope check would refuse it)
+    slow = dataclasses.replace(scn.vehicles[0], airspeed_mps=2.0)
+    scn = dataclasses.replace(scn, vehicles=(slow, *scn.vehicles[1:]))
+    res = Run(scn, tmp_path / "run", backend="inline").run()
     assert not res.ok and "could not trim" in str(res.error)
     events = [json.loads(x) for x in (tmp_path / "run" / "events.jsonl").read_text().splitlines()]
     errors = [e for e in events if e["event"] == "error"]
