@@ -45,14 +45,22 @@ BAD_VALUES = [float("nan"), float("inf"), -float("inf"), 1e12, -1.0, 1e300, 95.0
 
 
 # -- mutations: each changes the copy ``run``; ``outside`` is a folder beside it --------
+def _plain(p: Path) -> Path:
+    """``p`` if it is a regular file (not one an earlier mutation made a
+    symlink, perhaps to a FIFO that would block the mutation's reading)."""
+    if p.is_symlink() or not p.is_file():
+        raise OSError(f"{p}: not a regular file any more")
+    return p
+
+
 def _truncate(rng: random.Random, run: Path, outside: Path) -> None:
-    p = run / rng.choice(FILES)
+    p = _plain(run / rng.choice(FILES))
     data = p.read_bytes()
     p.write_bytes(data[:rng.randrange(len(data) + 1)])
 
 
 def _garble(rng: random.Random, run: Path, outside: Path) -> None:
-    p = run / rng.choice(FILES)
+    p = _plain(run / rng.choice(FILES))
     data = bytearray(p.read_bytes())
     for _ in range(rng.choice([1, 3, 20])):
         at = rng.randrange(len(data) + 1)
@@ -66,6 +74,8 @@ def _link(rng: random.Random, run: Path, outside: Path) -> None:
     name = rng.choice([*FILES, "states.parquet", "cameras", "events.jsonl"])
     p = run / name
     kept = outside / f"copy-{p.name}"  # a tempting target: the real content, outside
+    if p.is_symlink():
+        raise OSError(f"{p}: a symlink already")
     if p.is_dir():
         shutil.copytree(p, kept)
         shutil.rmtree(p)
@@ -83,7 +93,7 @@ def _remove(rng: random.Random, run: Path, outside: Path) -> None:
 
 
 def _yaml(rng: random.Random, run: Path, outside: Path) -> None:
-    p = run / "scenario.resolved.yaml"
+    p = _plain(run / "scenario.resolved.yaml")
     text = p.read_text()
     op = rng.randrange(7)
     if op == 0:
@@ -111,7 +121,7 @@ def _yaml(rng: random.Random, run: Path, outside: Path) -> None:
 
 def _json(rng: random.Random, run: Path, outside: Path) -> None:
     if rng.random() < 0.5:
-        p = run / "events.jsonl"
+        p = _plain(run / "events.jsonl")
         n = rng.choice(JSON_NUMBERS)
         line = rng.choice([
             f'{{"event": "goal_reached", "tick": {n}, "vehicle": "uav"}}',
@@ -123,7 +133,7 @@ def _json(rng: random.Random, run: Path, outside: Path) -> None:
         with p.open("a") as f:
             f.write(line + rng.choice(["\n", ""]))
         return
-    p = run / "summary.json"
+    p = _plain(run / "summary.json")
     s = json.loads(p.read_text())
     stream = s["cameras"]["streams"][0]
     op = rng.randrange(6)
@@ -146,7 +156,7 @@ def _json(rng: random.Random, run: Path, outside: Path) -> None:
 
 
 def _states(rng: random.Random, run: Path, outside: Path) -> None:
-    p = run / "states.parquet" / "part-000000.parquet"
+    p = _plain(run / "states.parquet" / "part-000000.parquet")
     t = pq.read_table(p)
     op = rng.randrange(5)
     if op == 0:
@@ -170,8 +180,10 @@ def _states(rng: random.Random, run: Path, outside: Path) -> None:
 def _journal(rng: random.Random, run: Path, outside: Path) -> None:
     """A killed run: ticks journalled (whole, cut short, garbage, linked away)."""
     states = run / "states.parquet"
-    t = pq.read_table(states / "part-000000.parquet")
+    t = pq.read_table(_plain(states / "part-000000.parquet"))
     j = states / f"_journal-{rng.choice([0, 1]):06d}.arrows"
+    if j.is_symlink():
+        raise OSError(f"{j}: linked away already")
     sink = pa.BufferOutputStream()
     with pa.ipc.new_stream(sink, t.schema) as w:
         for b in t.to_batches(max_chunksize=5):
@@ -186,13 +198,13 @@ def _journal(rng: random.Random, run: Path, outside: Path) -> None:
         j.write_bytes(bytes(rng.randrange(256) for _ in range(rng.choice([0, 8, 5000]))))
     else:
         j.symlink_to(rng.choice(["/dev/zero", str(outside / "fifo"), str(j)]))
-    s = json.loads((run / "summary.json").read_text())
+    s = json.loads(_plain(run / "summary.json").read_text())
     s.update(complete=False, stop_reason="running")
     (run / "summary.json").write_text(json.dumps(s))
 
 
 def _csv(rng: random.Random, run: Path, outside: Path) -> None:
-    p = run / "cameras" / "uav_nadir.gt.csv"
+    p = _plain(run / "cameras" / "uav_nadir.gt.csv")
     lines = p.read_text().splitlines(keepends=True)
     op = rng.randrange(5)
     if op == 0:
@@ -217,7 +229,8 @@ def _outputs(rng: random.Random, run: Path, outside: Path) -> None:
     """Symlinks where the commands write, pointing out of the folder."""
     for name in rng.sample(OUTPUTS, rng.choice([1, 3, len(OUTPUTS)])):
         target = rng.choice([outside / "secret.csv", outside / f"new-{name.replace('/', '_')}"])
-        (run / name).symlink_to(target)
+        if (run / name).parent.is_dir() and not (run / name).parent.is_symlink():
+            (run / name).symlink_to(target)
 
 
 MUTATIONS: list[Callable[[random.Random, Path, Path], None]] = [
@@ -277,7 +290,8 @@ def fuzz(tmp_path: Path, base: Path, capsys: pytest.CaptureFixture[str], seed: i
         outside.mkdir()
         (outside / "secret.csv").write_text("frame,time_s\n")
         os.mkfifo(outside / "fifo")
-        mutate(rng, run, outside)
+        with watchdog(COMMAND_LIMIT_S, f"mutating case {k}"):
+            mutate(rng, run, outside)
         for fmt in ("acmi", "kml", "czml"):
             outcomes[_check(["export", str(run), "--format", fmt], run, outside, capsys)] += 1
         outcomes[_check(["visibility", str(run)], run, outside, capsys)] += 1
