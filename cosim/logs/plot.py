@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from cosim.errors import ConfigError
+from cosim.logs.resolved import RESOLVED
 from cosim.logs.runfolder import RunFolder, rows_by_vehicle
 from cosim.logs.writers import replacing
 
@@ -150,7 +151,8 @@ def plot_run(run_dir: str | Path, png: str | Path | None = None,
     if "air" in panels:
         ax = panels["air"]
         ax.set_ylabel("altitude (m above the WGS-84 ellipsoid)")
-        ax.set_title(f"altitude of the aircraft ({len(air)})")
+        ax.set_title(f"altitude of the aircraft ({len(air)})" if resolved else
+                     f"altitude ({len(air)}; no {RESOLVED} to tell the ground vehicles)")
     if "ground" in panels:
         ax = panels["ground"]
         ax.set_ylabel("ground speed (m/s)")
