@@ -452,8 +452,12 @@ def plot_scaling(series: dict[str, list[dict[str, Any]]], path: str | Path,
 
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.2))
     top = 1.0
+    sizes: list[float] = []
+    rtfs: list[float] = [1.0]
     for label, rows in series.items():
         n = [r["vehicles"] for r in rows]
+        sizes += n
+        rtfs += [r["pool_rtf"] for r in rows]
         ax1.plot(n, [r["pool_rtf"] for r in rows], "o-", label=label)
         eff = [(r["vehicles"], r["fraction_of_ceiling"]) for r in rows
                if "fraction_of_ceiling" in r]
@@ -461,14 +465,15 @@ def plot_scaling(series: dict[str, list[dict[str, Any]]], path: str | Path,
             ax2.plot(*zip(*eff), "o-", label=label)
             top = max(top, *(e for _, e in eff))
     ax1.axhline(1.0, color="k", lw=1, ls="--", label="real time")
-    ax1.set(xlabel="aircraft", ylabel="real-time factor (simulated s / wall s)",
-            title="speed")
-    plain_log_axis(ax1, "both")
+    ax1.set(xscale="log", yscale="log", xlabel="aircraft",
+            ylabel="real-time factor (simulated s / wall s)", title="speed")
+    plain_log_axis(ax1.xaxis, sizes)
+    plain_log_axis(ax1.yaxis, rtfs, own_values=False)
     ax2.axhline(1.0, color="k", lw=1, ls="--", label="the ceiling")
     # above 1 the pool beat its ceiling (a noisy measurement): shown, not clipped
-    ax2.set(xlabel="aircraft", ylabel="pool / no-communication ceiling",
+    ax2.set(xscale="log", xlabel="aircraft", ylabel="pool / no-communication ceiling",
             title="efficiency", ylim=(0, max(1.2, top * 1.1)))
-    plain_log_axis(ax2, "x")
+    plain_log_axis(ax2.xaxis, sizes)
     ax1.legend(fontsize=8)
     ax2.legend(fontsize=8)
     ax1.grid(True, which="both", alpha=0.3)

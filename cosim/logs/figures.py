@@ -1,38 +1,58 @@
 """What every figure cosim draws shares: log axes read as plain numbers.
 
-matplotlib labels a log axis that spans less than a decade with minor ticks
-such as ``2x10^1, 3x10^1``; a reader wants ``20, 30``. ``plain_log_axis``
-puts ticks at 1, 2 and 5 times each power of ten (every integer multiple
-when the axis spans less than a decade) and writes them as ordinary numbers.
+matplotlib labels a log axis with ``10^1``, ``2x10^1``; a reader wants
+``10, 20``. ``plain_log_axis`` labels one axis with plain numbers: the
+values drawn themselves when they are few and are what the axis counts (a
+fleet size a point: 6, 12, 23, 32, 64, 128), else the 1-2-5 steps between
+the smallest and the largest value and those two (3, 5, 10, 20, 50, 100,
+200, 500), labels nearer each other than 15 % of a decade thinned.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
+#: a log axis with at most this many distinct values is labelled with them
+MAX_VALUE_TICKS = 8
+
 
 def plain_number(v: float) -> str:
-    """``v`` as a reader writes it: 20, 0.5, 1500, 2e+06 for very large."""
+    """``v`` as a reader writes it: 20, 0.5, 1500, 2e+06 (very large or small)."""
     if v == 0:
         return "0"
     if abs(v) >= 1e6 or abs(v) < 1e-3:
         return f"{v:.0e}"
-    return f"{v:,.6g}".replace(",", "\u2009") if abs(v) >= 1e4 else f"{v:.6g}"
+    return f"{v:.6g}"
 
 
-def plain_log_axis(ax: Any, which: str = "x") -> None:
-    """Log scale on ``which`` ("x", "y" or "both") of ``ax``, its ticks
-    labelled as plain numbers (see the module docstring)."""
-    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter, NullLocator
+def plain_log_axis(axis: Any, values: Any, own_values: bool = True) -> None:
+    """Label the log ``axis`` (``ax.xaxis`` or ``ax.yaxis``, already on a log
+    scale) with plain numbers for the data ``values`` along it (see the
+    module docstring). ``own_values``: label the values themselves when
+    there are few (counts such as fleet sizes); False: always the 1-2-5
+    steps (measurements, whose own values are not round)."""
+    from matplotlib.ticker import FixedLocator, NullFormatter, NullLocator
 
-    for name in ("x", "y") if which == "both" else (which,):
-        axis = ax.xaxis if name == "x" else ax.yaxis
-        (ax.set_xscale if name == "x" else ax.set_yscale)("log")
-        lo, hi = sorted(ax.get_xlim() if name == "x" else ax.get_ylim())
-        narrow = lo > 0 and hi / lo < 10
-        subs = tuple(range(1, 10)) if narrow else (1.0, 2.0, 5.0)
-        axis.set_major_locator(LogLocator(base=10, subs=subs))
-        axis.set_major_formatter(FuncFormatter(lambda v, _pos: plain_number(v)))
-        axis.set_minor_locator(NullLocator() if narrow else LogLocator(base=10,
-                                                                       subs=tuple(range(1, 10))))
-        axis.set_minor_formatter(NullFormatter())
+    v = np.unique(np.asarray([x for x in np.ravel(values) if x > 0], dtype=float))
+    if not len(v):
+        return
+    lo, hi = float(v[0]), float(v[-1])
+    if own_values and len(v) <= MAX_VALUE_TICKS:
+        ticks = [float(x) for x in v]
+    else:
+        steps = [m * 10.0 ** e for e in range(int(np.floor(np.log10(lo))) - 1,
+                                              int(np.ceil(np.log10(hi))) + 1) for m in (1, 2, 5)]
+        inside = {t for t in steps if lo <= t <= hi}
+        ticks = sorted(inside | ({lo, hi} if own_values or len(inside) < 2 else set()))
+    keep = [ticks[0]]
+    for t in ticks[1:]:
+        if np.log10(t / keep[-1]) >= 0.065:
+            keep.append(t)
+        elif t == hi:  # the largest stays; the one before it goes
+            keep[-1] = t
+    axis.set_major_locator(FixedLocator(keep))
+    axis.set_major_formatter(lambda x, _: plain_number(x))
+    axis.set_minor_locator(NullLocator())
+    axis.set_minor_formatter(NullFormatter())

@@ -1,7 +1,5 @@
 """The search's pictures: the coverage map and coverage against time, each
-with a title, its units and a legend for every kind of mark; and the tick
-labels of log axes as plain numbers (``plain_log_axis``), for the sweep's
-fleet-size curve too."""
+with a title, its units and a legend for every kind of mark."""
 
 from __future__ import annotations
 
@@ -14,39 +12,6 @@ from cosim.search.coverage_map import NEVER
 
 #: the deadline drawn on the search's time axes (min)
 DEADLINE_MIN = 10.0
-#: a log axis with at most this many distinct values is labelled with them
-MAX_VALUE_TICKS = 8
-
-
-def plain_log_axis(axis: Any, values: Any) -> None:
-    """Label a log ``axis`` (``ax.xaxis``) with plain numbers, none of
-    matplotlib's 10^1 or 2x10^1: the values themselves when there are at most
-    ``MAX_VALUE_TICKS`` of them (a fleet size a point: 6, 12, 23, 32, 64, 128),
-    else the 1-2-5 steps between the smallest and the largest and those two
-    (3, 5, 10, 20, 50, 100, 200, 500). Labels nearer each other than 15 % of a
-    decade are thinned."""
-    from matplotlib.ticker import FixedLocator, NullFormatter, NullLocator
-
-    v = np.unique(np.asarray([x for x in np.ravel(values) if x > 0], dtype=float))
-    if not len(v):
-        return
-    lo, hi = float(v[0]), float(v[-1])
-    if len(v) <= MAX_VALUE_TICKS:
-        ticks = [float(x) for x in v]
-    else:
-        steps = [m * 10.0 ** e for e in range(int(np.floor(np.log10(lo))) - 1,
-                                              int(np.ceil(np.log10(hi))) + 1) for m in (1, 2, 5)]
-        ticks = sorted({t for t in steps if lo <= t <= hi} | {lo, hi})
-    keep = [ticks[0]]
-    for t in ticks[1:]:
-        if np.log10(t / keep[-1]) >= 0.065:
-            keep.append(t)
-        elif t == hi:  # the largest stays; the one before it goes
-            keep[-1] = t
-    axis.set_major_locator(FixedLocator(keep))
-    axis.set_major_formatter(lambda x, _: f"{x:g}")
-    axis.set_minor_locator(NullLocator())
-    axis.set_minor_formatter(NullFormatter())
 
 
 def _title(part: Any) -> str:

@@ -98,7 +98,7 @@ def plot_curve(rows: list[dict[str, Any]], names: list[str], png: Path) -> None:
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from cosim.search.plot import plain_log_axis
+    from cosim.logs.figures import plain_log_axis
 
     fig, ax = plt.subplots(figsize=(8, 5))
     handles: list[Any] = []

@@ -15,9 +15,10 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
+from cosim.logs.figures import plain_log_axis
 from cosim.search import sweep
 from cosim.search.coverage_map import NEVER
-from cosim.search.plot import coverage_figure, coverage_map_figure, plain_log_axis
+from cosim.search.plot import coverage_figure, coverage_map_figure
 
 
 def _part() -> Any:
