@@ -14,6 +14,9 @@
 "use strict";
 (() => {
   const READY_MS = 1000; // fixation before each clip starts
+  // how long past two frames after a key press a stalled clip is waited for before
+  // the frame is taken from the frames reported by then
+  const PRESS_WAIT_MS = 500;
   const sid = new URLSearchParams(location.search).get("session");
   const video = document.getElementById("clip");
   const fixation = document.getElementById("fixation");
@@ -144,39 +147,77 @@
     });
   }
 
+  // The mediaTime of the frame on screen at `at` (ms, a key event's clock) among
+  // `shown`, the frames reported in order ({mediaTime, t: when due on screen, n:
+  // presentedFrames}): the last one due by then, or the first if none was yet
+  // (the clip was on its way). A busy page is reported only the latest of the
+  // frames presented since its last report (presentedFrames jumps): if the press
+  // fell in such a gap, the frame is the one the media clock had reached then
+  // (it runs at the clip's speed), among those not yet reported.
+  function frameAt(shown, at, rateHz) {
+    let i = 0;
+    while (i + 1 < shown.length && shown[i + 1].t <= at) i++;
+    const a = shown[i], b = shown[i + 1];
+    if (a.t > at || !b || b.n - a.n <= 1) return a.mediaTime;
+    const ka = Math.round(a.mediaTime * rateHz), kb = Math.round(b.mediaTime * rateHz);
+    const k = Math.floor((a.mediaTime + (at - a.t) / 1000) * rateHz + 1e-6);
+    return Math.min(Math.max(k, ka), kb - 1) / rateHz;
+  }
+
   // Plays the loaded clip. Resolves at the first key in `codes` with the
-  // mediaTime of the frame on screen then, or with mediaTime null at its end.
+  // mediaTime of the frame on screen at that press, or with mediaTime null at
+  // its end. A frame is reported (requestVideoFrameCallback) after it went to
+  // the compositor, and on a busy page a key event can be handled before the
+  // report of a frame already on screen: the frame is chosen once a frame due
+  // after the press is reported (the clip plays on until then: at most a frame
+  // more), at its end, or PRESS_WAIT_MS after a later frame was due.
   function playClip(trial, codes) {
     return new Promise((resolve, reject) => {
-      const shown = []; // recently presented frames: {mediaTime, t (display time, ms)}
+      const shown = []; // recently reported frames: {mediaTime, t (due on screen, ms), n}
+      const frameMs = 1000 / trial.rate_hz;
       let onset = null; // when media time 0 was (or would have been) on screen
+      let press = null; // a key pressed, waiting for its frame: {code, at (ms)}
       let done = false;
       let handle = null;
-      const onFrame = (now, meta) => {
+      let timer = null;
+      const decide = () => {
         if (done) return;
-        const t = meta.expectedDisplayTime ?? now;
-        if (onset === null) onset = t - meta.mediaTime * 1000;
-        shown.push({ mediaTime: meta.mediaTime, t });
-        if (shown.length > 32) shown.shift();
-        document.body.dataset.frame = String(Math.round(meta.mediaTime * trial.rate_hz));
-        handle = video.requestVideoFrameCallback(onFrame);
-      };
-      const onKey = (e) => {
-        if (done || e.repeat || !codes.includes(e.code)) return;
-        e.preventDefault();
-        if (!shown.length) return; // no frame on screen yet
-        let f = shown[0]; // the last frame whose display time is not after the key press
-        for (const s of shown) if (s.t <= e.timeStamp) f = s;
         // The onset is when the first frame is expected on screen, which is a
         // little after its callback ran: a press in between (as the clip starts)
         // is stamped before the onset. The clip was on its way: 0, never negative
         // (the server refuses a negative reaction time).
-        finish({ code: e.code, mediaTime: f.mediaTime, rtMs: Math.max(0, e.timeStamp - onset) });
+        finish({ code: press.code, mediaTime: frameAt(shown, press.at, trial.rate_hz),
+                 rtMs: Math.max(0, press.at - onset) });
       };
-      const onEnded = () => finish({ code: null, mediaTime: null, rtMs: null });
+      const onFrame = (now, meta) => {
+        if (done) return;
+        const t = meta.expectedDisplayTime ?? now;
+        if (onset === null) onset = t - meta.mediaTime * 1000;
+        shown.push({ mediaTime: meta.mediaTime, t, n: meta.presentedFrames });
+        if (shown.length > 32) shown.shift();
+        document.body.dataset.frame = String(Math.round(meta.mediaTime * trial.rate_hz));
+        handle = video.requestVideoFrameCallback(onFrame);
+        if (press !== null && t > press.at) decide(); // every frame up to the press is known
+      };
+      const onKey = (e) => {
+        if (done || e.repeat || !codes.includes(e.code)) return;
+        e.preventDefault();
+        if (press !== null || !shown.length) return; // one press; none before a frame
+        press = { code: e.code, at: e.timeStamp };
+        if (shown[shown.length - 1].t > press.at) { decide(); return; }
+        timer = setTimeout(decide, Math.max(0, press.at + 2 * frameMs - performance.now()) +
+                                   PRESS_WAIT_MS);
+      };
+      // at the clip's end, a press waiting for its frame is decided at the next
+      // animation frame (a report still due runs before its callbacks)
+      const onEnded = () => {
+        if (press === null) finish({ code: null, mediaTime: null, rtMs: null });
+        else requestAnimationFrame(decide);
+      };
       const onError = () => { cleanup(); reject(new Error(`cannot play ${trial.video}`)); };
       function cleanup() {
         done = true;
+        clearTimeout(timer);
         removeEventListener("keydown", onKey, true);
         video.removeEventListener("ended", onEnded);
         video.removeEventListener("error", onError);
