@@ -387,8 +387,13 @@ def test_validate_checks_every_sweep_combination(tmp_path: Path, capsys) -> None
     bad.write_text(src.read_text().replace("speed_kt: [50, 100, 200]", "speed_kt: [50, 100, 400]"))
     assert main(["validate", str(bad)]) == 2
     err = capsys.readouterr().err
-    assert "sweep combination speed_kt=400, alt_agl_m=30, target=truck" in err
-    assert "outside the envelope" in err and "speed_kt=100" not in err
+    # the 12 combinations at 400 kt, said once for the start and once for the command
+    lines = err.splitlines()
+    assert len(lines) == 2 and all(line.startswith(
+        "sweep combinations speed_kt=400, alt_agl_m=any, target=any (12 of 36): ")
+        for line in lines), err
+    assert "starts at 400.0 kt, outside the envelope" in lines[0]
+    assert "airspeed 400.0 kt is outside the envelope" in lines[1]
     assert main(["validate", str(src)]) == 0
     assert "all 36 sweep combinations" in capsys.readouterr().out
 
