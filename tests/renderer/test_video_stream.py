@@ -50,8 +50,10 @@ def test_rtp_decodes_to_the_cameras_frames(tmp_path: Path) -> None:
     frames: list[tuple[int, int]] = []
 
     def receive() -> None:
+        # FFmpeg's timeout is per read: long enough for the run's start on a busy
+        # machine (a 3 s one had ended the receiver before the first packet)
         c = av.open(str(tmp_path / "rx.sdp"), format="sdp", options={
-            "protocol_whitelist": "file,udp,rtp", "timeout": "3000000"})
+            "protocol_whitelist": "file,udp,rtp", "timeout": "60000000"})
         try:
             frames.extend((f.width, f.height) for f in c.decode(video=0))
         except av.error.FFmpegError:
@@ -61,7 +63,10 @@ def test_rtp_decodes_to_the_cameras_frames(tmp_path: Path) -> None:
     time.sleep(1.0)  # listening before the first packet
     r = _sim(tmp_path, f"1=udp://127.0.0.1:{port}")
     assert r.returncode == 0, r.stderr
-    rx.join(15)
+    deadline, seen = time.monotonic() + 15, -1
+    while time.monotonic() < deadline and len(frames) != seen:  # until no frame comes
+        seen = len(frames)
+        time.sleep(1.0)
     assert 25 <= len(frames) <= 31 and set(frames) == {(640, 480)}  # 3 s at 10 Hz
     assert (tmp_path / "run" / "video_1_belly.sdp").read_text() == \
         sdp(VideoTarget(1, None, "127.0.0.1", port, "rtp"), "cosim uav1/belly")
