@@ -51,7 +51,7 @@ def main(argv: list[str] | None = None) -> int:
         v.raw_state()
     read_us = (time.perf_counter() - t0) / 2000 * 1e6
     # the same row by property name, through JSBSim's two name lookups
-    from cosim.vehicles.spec import STATE_FIELDS
+    from cosim.core.state import STATE_FIELDS
 
     names = [f.prop for f in STATE_FIELDS if f.prop is not None and v.fdm.get_property_manager()
              .hasNode(f.prop)]

@@ -34,7 +34,7 @@ from typing import Any
 
 import cv2
 
-from cosim.geo import LocalFrame
+from cosim.core.geo import LocalFrame
 from cosim.renderer.config import CameraSpec
 from cosim.renderer.ground import CACHE_ENV
 from cosim.renderer.participant import RenderWorker, Stream

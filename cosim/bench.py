@@ -43,16 +43,17 @@ from typing import Any
 import numpy as np
 
 from cosim import workers as worker_kit
+from cosim.core.geo import LocalFrame
+from cosim.core.state import VehicleSpec
+from cosim.core.units import KT_TO_MPS
 from cosim.errors import CosimError
 from cosim.fdm_pool import get_backend, make_pool
 from cosim.fdm_pool.process import default_workers, shard_bounds
 from cosim.fdm_pool.shard import Shard
-from cosim.geo import KT_TO_MPS, LocalFrame
 from cosim.jsb import find_model
 from cosim.scenario.formation import formation_offsets
 from cosim.vehicles import DEFAULT_CLASS
 from cosim.vehicles.registry import get_class
-from cosim.vehicles.spec import VehicleSpec
 
 log = logging.getLogger(__name__)
 

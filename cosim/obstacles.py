@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from cosim.geo import MAX_DISTANCE_M
+from cosim.core.geo import MAX_DISTANCE_M
 
 MAX_OBSTACLES = 1000
 MAX_VERTICES = 64

@@ -24,8 +24,8 @@ from typing import Any
 
 import numpy as np
 
+from cosim.core.state import STATE_INDEX
 from cosim.errors import ConfigError, install_extra
-from cosim.vehicles.spec import STATE_INDEX
 
 log = logging.getLogger(__name__)
 

@@ -17,6 +17,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
+from cosim.core.units import KT_TO_MPS
 from cosim.coverage import (  # noqa: E402
     area_polygon,
     completion_s,
@@ -24,7 +25,6 @@ from cosim.coverage import (  # noqa: E402
     no_fly_polygon,
     swath_m,
 )
-from cosim.geo import KT_TO_MPS  # noqa: E402
 
 
 def main() -> None:

@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from cosim.geo import FT_TO_M, KT_TO_MPS
-from cosim.guidance.commands import G_MPS2, min_turn_radius_m
+from cosim.core.units import FT_TO_M, G_MPS2, KT_TO_MPS
+from cosim.guidance.commands import min_turn_radius_m
 from cosim.logs import read_states
 
 LB_TO_KG = 0.45359237

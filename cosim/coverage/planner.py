@@ -54,8 +54,8 @@ from shapely.geometry.base import BaseGeometry
 from shapely.ops import unary_union
 
 from cosim.coverage.dubins import DubinsChain, DubinsPath, Flight, candidates, shortest
+from cosim.guidance.commands import min_turn_radius_m
 
-G_MPS2 = 9.80665
 _BISECT_TOL = 1e-9  # relative area error of a cut
 MAX_NO_FLY_ZONES = 100
 MAX_ZONE_VERTICES = 1000
@@ -69,7 +69,7 @@ def turn_radius_m(airspeed_mps: float, bank_deg: float) -> float:
     """The tightest level turn: ``v^2 / (g tan(bank))``."""
     if not 0 < bank_deg < 90:
         raise ValueError(f"bank_deg must be in (0, 90), got {bank_deg}")
-    return airspeed_mps ** 2 / (G_MPS2 * math.tan(math.radians(bank_deg)))
+    return min_turn_radius_m(airspeed_mps, bank_deg)
 
 
 def swath_m(alt_agl_m: float, hfov_deg: float) -> float:

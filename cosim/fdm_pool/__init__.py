@@ -14,17 +14,11 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+from cosim.core.state import N_STATE, STATE_FIELDS, STATE_INDEX, VehicleSpec, VehicleStatus
 from cosim.fdm_pool.backends import Backend, backend_names, backends, get_backend
 from cosim.fdm_pool.base import Pool, PoolState
 from cosim.fdm_pool.inline import InlinePool
 from cosim.fdm_pool.process import ProcessPool, default_workers
-from cosim.vehicles.spec import (
-    N_STATE,
-    STATE_FIELDS,
-    STATE_INDEX,
-    VehicleSpec,
-    VehicleStatus,
-)
 
 
 def make_pool(specs: Sequence[VehicleSpec], dt_s: float, channels: Sequence[str] = (),

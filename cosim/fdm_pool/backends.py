@@ -36,10 +36,10 @@ from functools import lru_cache
 from typing import Any
 
 from cosim import plugins
+from cosim.core.state import VehicleSpec
 from cosim.errors import ConfigError
 from cosim.fdm_pool.base import Pool
 from cosim.plugins import load_plugins, plugin_names
-from cosim.vehicles.spec import VehicleSpec
 
 #: the default backend of ``cosim run``
 DEFAULT = plugins.DEFAULT_BACKEND

@@ -39,9 +39,9 @@ from typing import Any
 
 import numpy as np
 
+from cosim.core.state import StateField, VehicleSpec
 from cosim.errors import PoolStateError
 from cosim.vehicles.registry import state_layout
-from cosim.vehicles.spec import StateField, VehicleSpec
 
 log = logging.getLogger(__name__)
 

@@ -8,9 +8,9 @@ from __future__ import annotations
 import time
 from collections.abc import Sequence
 
+from cosim.core.state import VehicleSpec
 from cosim.fdm_pool.base import BuildProgress, Pool, Watch
 from cosim.fdm_pool.shard import Shard
-from cosim.vehicles.spec import VehicleSpec
 
 
 class InlinePool(Pool):

@@ -36,10 +36,10 @@ from typing import Any
 import numpy as np
 
 from cosim import workers as worker_kit
+from cosim.core.state import StateField, VehicleSpec
 from cosim.errors import BuildError, WorkerDied, WorkerError, WorkerTimeout
 from cosim.fdm_pool.base import BuildProgress, Pool, Watch
 from cosim.fdm_pool.shard import Shard
-from cosim.vehicles.spec import StateField, VehicleSpec
 
 log = logging.getLogger(__name__)
 

@@ -76,6 +76,7 @@ from typing import Any
 
 import numpy as np
 
+from cosim.core.state import STATE_INDEX, StateField, VehicleSpec, VehicleStatus
 from cosim.errors import (
     AgentLost,
     BuildError,
@@ -92,7 +93,6 @@ from cosim.fdm_pool.base import Pool, Watch
 from cosim.fdm_pool.process import ProcessPool, default_workers, shard_bounds
 from cosim.vehicles.resume import FIELDS as RESUME_FIELDS
 from cosim.vehicles.resume import NOT_RESTORED, RESTORED, resume_spec
-from cosim.vehicles.spec import STATE_INDEX, StateField, VehicleSpec, VehicleStatus
 
 log = logging.getLogger(__name__)
 

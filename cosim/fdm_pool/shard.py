@@ -37,14 +37,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from cosim.errors import BuildError, ConfigError, CosimError, JSBSimError, VehicleError
-from cosim.vehicles.base import BatchedModel
-from cosim.vehicles.jsbsim_model import Vehicle
-from cosim.vehicles.registry import get_class, state_layout
-from cosim.vehicles.resume import FIELDS as RESUME_FIELDS
-from cosim.vehicles.resume import Reader
-from cosim.vehicles.resume import columns as resume_columns
-from cosim.vehicles.spec import (
+from cosim.core.state import (
     N_STATE,
     STATE_FIELDS,
     STATE_INDEX,
@@ -53,6 +46,13 @@ from cosim.vehicles.spec import (
     VehicleStatus,
     plausible,
 )
+from cosim.errors import BuildError, ConfigError, CosimError, JSBSimError, VehicleError
+from cosim.vehicles.base import BatchedModel
+from cosim.vehicles.jsbsim_model import Vehicle
+from cosim.vehicles.registry import get_class, state_layout
+from cosim.vehicles.resume import FIELDS as RESUME_FIELDS
+from cosim.vehicles.resume import Reader
+from cosim.vehicles.resume import columns as resume_columns
 
 _SCALES = np.array([f.scale for f in STATE_FIELDS if f.prop is not None])
 _AGL, _VD = STATE_INDEX["alt_agl_m"], STATE_INDEX["vd_mps"]

@@ -48,9 +48,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from cosim.geo import KT_TO_MPS, MAX_DISTANCE_M
+from cosim.core.geo import MAX_DISTANCE_M
+from cosim.core.units import G_MPS2, KT_TO_MPS
 
-G_MPS2 = 9.80665
 DEFAULT_BANK_LIMIT_DEG = 45.0
 P = tuple[Any, ...]
 Report = Callable[[P, str], None]

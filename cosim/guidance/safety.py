@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from cosim.geo import KT_TO_MPS
+from cosim.core.units import KT_TO_MPS
 from cosim.guidance.commands import Command, min_turn_radius_m
 
 

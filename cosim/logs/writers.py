@@ -17,8 +17,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from cosim.geo import LocalFrame
-from cosim.vehicles.spec import STATE_INDEX
+from cosim.core.geo import LocalFrame
+from cosim.core.state import STATE_INDEX
 
 #: the columns of states.parquet, in order
 STATE_COLUMNS: tuple[str, ...] = (

@@ -112,7 +112,7 @@ class ArduPilotLike(Personality):
             out.replies.extend(text("orbit: radius must be 1..10000 m (param1)"))
             return mav.MAV_RESULT_DENIED
         row = v.row_or_raise()
-        from cosim.vehicles.spec import STATE_INDEX as _S
+        from cosim.core.state import STATE_INDEX as _S
 
         centre = req.location() or (float(row[_S["lat_deg"]]), float(row[_S["lon_deg"]]))
         lo: dict[str, Any] = {"center": {"lat_deg": centre[0], "lon_deg": centre[1]},

@@ -95,6 +95,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from cosim.core.state import N_STATE, STATE_INDEX
 from cosim.errors import ConfigError
 from cosim.guidance.commands import Command
 from cosim.mavlink import adapter as mav
@@ -118,7 +119,6 @@ from cosim.mavlink.vehicle import (
     check_rates,
     safe_name,
 )
-from cosim.vehicles.spec import N_STATE, STATE_INDEX
 
 log = logging.getLogger(__name__)
 

@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from cosim.core.state import VehicleSpec
 from cosim.errors import ConfigError
 from cosim.guidance.commands import Command
 from cosim.mavlink import adapter as mav
@@ -43,7 +44,6 @@ from cosim.mavlink.endpoint import (
 from cosim.mavlink.link import LinkUrl
 from cosim.mavlink.signing import SharedSigning
 from cosim.mavlink.vehicle import MavVehicleSpec, mav_specs
-from cosim.vehicles.spec import VehicleSpec
 
 
 def link_specs(vehicles: Sequence[VehicleSpec], rows: Sequence[int] | None = None

@@ -50,9 +50,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any, Final
 
+from cosim.core.state import STATE_INDEX as _S
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.services.base import Context, Outcome, text, vocab
-from cosim.vehicles.spec import STATE_INDEX as _S
 
 if TYPE_CHECKING:
     from cosim.mavlink.vehicle import MavVehicle

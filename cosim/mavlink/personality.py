@@ -19,17 +19,17 @@ import math
 from collections.abc import Callable, Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
+from cosim.core.state import STATE_INDEX
 from cosim.guidance.commands import DEFAULT_BANK_LIMIT_DEG, Command
 from cosim.guidance.safety import Limits
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.params import SYSID_THISMAV, ParamDef
 from cosim.mavlink.services.base import CommandRequest, Context, Outcome, mission_ack, text
-from cosim.vehicles.spec import STATE_INDEX
 
 if TYPE_CHECKING:
+    from cosim.core.state import VehicleSpec
     from cosim.mavlink.mission import MissionItem
     from cosim.mavlink.vehicle import MavVehicle
-    from cosim.vehicles.spec import VehicleSpec
 
 #: a class's handler of one MAV_CMD: (context, vehicle, request, tick, outcome) -> MAV_RESULT
 CommandFn = Callable[[Context, "MavVehicle", CommandRequest, int, Outcome], int]

@@ -23,12 +23,12 @@ from typing import Any
 
 import numpy as np
 
+from cosim.core.state import STATE_INDEX, VehicleSpec, VehicleStatus
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.mission import Mission
 from cosim.mavlink.params import ParamTable
 from cosim.mavlink.personality import Personality
 from cosim.vehicles.registry import DEFAULT_CLASS
-from cosim.vehicles.spec import STATE_INDEX, VehicleSpec, VehicleStatus
 
 _S = STATE_INDEX
 
@@ -461,7 +461,7 @@ def _c_gps_raw_int(r: np.ndarray, pqr: np.ndarray, home_alt: np.ndarray, clock: 
             "lon": _iv(r[:, _S["lon_deg"]] * 1e7, -1_800_000_000, 1_800_000_000),
             "alt": alt_mm, "eph": 100, "epv": 100, "vel": _iv(gs * 100.0, 0, 65534),
             "cog": cog, "satellites_visible": 12,
-            # cosim has no geoid: heights are ellipsoidal throughout (cosim.geo)
+            # cosim has no geoid: heights are ellipsoidal throughout (cosim.core.geo)
             "alt_ellipsoid": alt_mm, "h_acc": 500, "v_acc": 800, "vel_acc": 100,
             "hdg_acc": 0, "yaw": 0}
 

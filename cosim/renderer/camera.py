@@ -30,7 +30,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from cosim.geo import LocalFrame, geodetic_to_ecef
+from cosim.core.geo import LocalFrame, geodetic_to_ecef
 from cosim.renderer.config import CameraSpec
 
 NEAR_M = 0.05  # points closer than this along the optical axis are clipped

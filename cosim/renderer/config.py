@@ -15,7 +15,7 @@ import re
 from dataclasses import dataclass, replace
 from typing import Any
 
-from cosim.geo import MAX_DISTANCE_M
+from cosim.core.geo import MAX_DISTANCE_M
 from cosim.guidance.commands import GIMBAL_PITCH_DEG, GIMBAL_YAW_DEG
 from cosim.renderer import imagery
 from cosim.scenario.limits import MAX_NAME_CHARS, MIN_EXCHANGE_HZ

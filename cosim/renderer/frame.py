@@ -31,7 +31,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from cosim.geo import LocalFrame, geodetic_to_ecef
+from cosim.core.geo import LocalFrame, geodetic_to_ecef
 from cosim.obstacles import signed_area
 from cosim.renderer.camera import NEAR_M, Pose, ground_homography, intrinsics, project, to_camera
 from cosim.renderer.config import CameraSpec, GroundSpec, TargetSpec

@@ -45,7 +45,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from cosim.geo import LocalFrame
+from cosim.core.geo import LocalFrame
 from cosim.renderer.imagery import GDAL_OPTIONS, ImageRefused, gdal_driver
 
 log = logging.getLogger(__name__)

@@ -41,7 +41,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from cosim.geo import LocalFrame
+from cosim.core.geo import LocalFrame
 from cosim.renderer.config import GroundSpec
 
 log = logging.getLogger(__name__)

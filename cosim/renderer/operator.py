@@ -18,10 +18,10 @@ from typing import TYPE_CHECKING, Any
 import cv2
 import numpy as np
 
+from cosim.core.state import STATE_INDEX
 from cosim.renderer.config import CamerasSpec
 from cosim.renderer.targets import TargetSet
 from cosim.renderer.video import open_video
-from cosim.vehicles.spec import STATE_INDEX
 
 if TYPE_CHECKING:
     from cosim.renderer.frame import WorldSpec

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cosim.geo import LocalFrame, geodetic_to_ecef
+from cosim.core.geo import LocalFrame, geodetic_to_ecef
 from cosim.renderer.config import TargetSpec
 
 SUN_ELEVATION_DEG, SUN_AZIMUTH_DEG = 50.0, 135.0  # from the south-east

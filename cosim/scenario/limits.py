@@ -11,7 +11,7 @@ from __future__ import annotations
 
 #: horizontal distance of any vehicle, target or commanded point from the
 #: scenario origin (m); defined beside the frame it bounds
-from cosim.geo import MAX_DISTANCE_M  # noqa: F401
+from cosim.core.geo import MAX_DISTANCE_M  # noqa: F401
 
 #: bytes in a scenario file (a 5000-vehicle scenario listing every vehicle
 #: takes about 0.8 MB; formations with ``count`` take one line)

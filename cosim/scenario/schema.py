@@ -20,8 +20,10 @@ from typing import Any
 
 import numpy as np
 
+from cosim.core.geo import LocalFrame
+from cosim.core.state import VehicleSpec
+from cosim.core.units import KT_TO_MPS
 from cosim.errors import ConfigError, CosimError
-from cosim.geo import KT_TO_MPS, LocalFrame
 from cosim.guidance import (
     DEFAULT_BANK_LIMIT_DEG,
     Command,
@@ -38,7 +40,6 @@ from cosim.scenario.yaml_lines import (
     read_scenario_text,
 )
 from cosim.vehicles import DEFAULT_CLASS, ModelChoice, VehicleClass, get_class
-from cosim.vehicles.spec import VehicleSpec
 
 SCHEMA_VERSION = 1
 ALT_MIN_M, ALT_MAX_M = -500.0, 100_000.0  # every vehicle's resolved height must lie here

@@ -21,11 +21,11 @@ from typing import Any
 
 import numpy as np
 
+from cosim.core.state import STATE_INDEX
 from cosim.renderer.frame import probe_offsets
 from cosim.search import sensing
 from cosim.search.image_detect import detect_fires, match_blobs
 from cosim.search.spec import dwell_frames
-from cosim.vehicles.spec import STATE_INDEX
 
 log = logging.getLogger(__name__)
 

@@ -35,13 +35,13 @@ from typing import Any
 
 import numpy as np
 
+from cosim.core.state import STATE_INDEX
 from cosim.renderer.frame import probe_offsets
 from cosim.renderer.targets import TargetSet
 from cosim.search import sensing
 from cosim.search.coverage_map import CoverageMap
 from cosim.search.spec import SearchSpec
 from cosim.sync.participants import ParticipantFailed, RunContext
-from cosim.vehicles.spec import STATE_INDEX
 
 log = logging.getLogger(__name__)
 

@@ -43,7 +43,8 @@ from typing import Any
 
 import numpy as np
 
-from cosim.geo import KT_TO_MPS, MAX_DISTANCE_M
+from cosim.core.geo import MAX_DISTANCE_M
+from cosim.core.units import KT_TO_MPS
 
 P = tuple[Any, ...]
 

@@ -43,7 +43,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from cosim.geo import LocalFrame
+from cosim.core.geo import LocalFrame
+from cosim.core.state import VehicleSpec
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.endpoint import CONTROLLER_SYSID
 from cosim.mavlink.params import ParamTable
@@ -52,7 +53,6 @@ from cosim.mavlink.vehicle import MavVehicleSpec, mav_specs
 from cosim.swarm import laws
 from cosim.swarm.config import Phase, SwarmGroup, SwarmSpec
 from cosim.vehicles import get_class
-from cosim.vehicles.spec import VehicleSpec
 
 log = logging.getLogger(__name__)
 

@@ -1,7 +1,7 @@
 """The consensus laws of DESIGN.md 3.4, pure numpy, vectorised over vehicles.
 
 Positions are horizontal ``(n, 2)`` arrays of (north, east) metres in one
-local tangent frame (``cosim.geo.LocalFrame``: exact WGS-84, no flat-earth
+local tangent frame (``cosim.core.geo.LocalFrame``: exact WGS-84, no flat-earth
 shortcut). Distances are **horizontal**: the swarm is altitude-layered (each
 vehicle holds its own layer altitude, ``SwarmGroup.layer_spacing_m``), so a
 vehicle "at" the centroid is above or below the others, and the consensus
@@ -112,7 +112,7 @@ def level_stall_constant_mps(mass_kg: float, wing_area_m2: float, clmax: float,
     """The level-flight stall true airspeed ``sqrt(2 m g / (rho(h) S CL_max))``
     at altitude (ISA density), from the model's own numbers."""
     from cosim.analysis.flight import isa_density
-    from cosim.guidance.commands import G_MPS2
+    from cosim.core.units import G_MPS2
 
     rho = np.asarray(isa_density(alt_msl_m), dtype=np.float64)
     return np.asarray(np.sqrt(2.0 * mass_kg * G_MPS2 / (rho * wing_area_m2 * clmax)),

@@ -19,12 +19,12 @@ from typing import Any
 
 import numpy as np
 
+from cosim.core.state import STATE_INDEX
 from cosim.scenario import Scenario
 from cosim.swarm.config import SwarmSpec
 from cosim.swarm.controller import SwarmController, to_message
 from cosim.swarm.metrics import SwarmMonitor
 from cosim.sync.participants import RunContext
-from cosim.vehicles.spec import STATE_INDEX
 
 log = logging.getLogger(__name__)
 _S = STATE_INDEX

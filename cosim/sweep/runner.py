@@ -235,7 +235,7 @@ def _measured(t: dict[str, list[Any]] | None, vehicle: str, t0_s: float | None,
               t1_s: float | None) -> tuple[float, float, float]:
     """Mean airspeed (kt), height above ground (m) and ground speed (kt) of
     ``vehicle`` between t0_s and t1_s (the whole run when None), from ``_states``."""
-    from cosim.geo import KT_TO_MPS
+    from cosim.core.units import KT_TO_MPS
 
     if t is None:
         return math.nan, math.nan, math.nan

@@ -19,7 +19,7 @@ import numpy as np
 from cosim.vehicles import Guidance, GuidanceEvent, get_class
 
 if TYPE_CHECKING:
-    from cosim.geo import LocalFrame
+    from cosim.core.geo import LocalFrame
     from cosim.guidance.commands import Command
     from cosim.scenario import Scenario
 

@@ -47,7 +47,7 @@ import numpy as np
 from cosim.errors import CosimError
 
 if TYPE_CHECKING:
-    from cosim.geo import LocalFrame
+    from cosim.core.geo import LocalFrame
     from cosim.logs import EventLog
     from cosim.scenario import Scenario
 

@@ -28,8 +28,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from cosim.core.state import STATE_INDEX, VehicleStatus
 from cosim.vehicles import get_class
-from cosim.vehicles.spec import STATE_INDEX, VehicleStatus
 
 if TYPE_CHECKING:
     from cosim.fdm_pool import Pool

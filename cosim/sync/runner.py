@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from cosim.core.state import STATE_FIELDS
 from cosim.errors import VehicleError, WorkerDied, WorkerError
 from cosim.fdm_pool import make_pool
 from cosim.fdm_pool.base import Pool, Watch
@@ -46,7 +47,6 @@ from cosim.sync.participants import (
 )
 from cosim.sync.parts import StateLogger, StatusEvents
 from cosim.vehicles.registry import state_layout
-from cosim.vehicles.spec import STATE_FIELDS
 
 log = logging.getLogger(__name__)
 

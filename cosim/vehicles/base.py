@@ -33,10 +33,10 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 if TYPE_CHECKING:
-    from cosim.geo import LocalFrame
+    from cosim.core.geo import LocalFrame
+    from cosim.core.state import StateField, VehicleSpec
     from cosim.guidance.commands import Command
     from cosim.guidance.safety import Limits
-    from cosim.vehicles.spec import StateField, VehicleSpec
 
 
 @dataclass(frozen=True)

@@ -15,8 +15,8 @@ from collections.abc import Sequence
 from functools import lru_cache
 
 from cosim import plugins
+from cosim.core.state import STATE_FIELDS, StateField, VehicleSpec
 from cosim.vehicles.base import VehicleClass
-from cosim.vehicles.spec import STATE_FIELDS, StateField, VehicleSpec
 
 log = logging.getLogger(__name__)
 

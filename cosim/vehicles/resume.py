@@ -40,11 +40,11 @@ from collections.abc import Sequence
 import jsbsim
 import numpy as np
 
+from cosim.core.state import STATE_INDEX, StateField, VehicleSpec
+from cosim.core.units import FT_TO_M
 from cosim.errors import JSBSimError
-from cosim.geo import FT_TO_M
 from cosim.jsb import has_property
 from cosim.vehicles.registry import get_class
-from cosim.vehicles.spec import STATE_INDEX, StateField, VehicleSpec
 
 _get = jsbsim.FGPropertyNode.get_double_value
 

@@ -23,15 +23,15 @@ from typing import Any
 
 import numpy as np
 
+from cosim.core.geo import LocalFrame
+from cosim.core.state import STATE_INDEX, StateField, VehicleSpec, VehicleStatus
 from cosim.errors import ConfigError
-from cosim.geo import LocalFrame
 from cosim.guidance.commands import Command
 from cosim.guidance.safety import Limits
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.personality import CommandFn, Personality
 from cosim.mavlink.services.base import CommandRequest, Context, Outcome, text, vocab
 from cosim.vehicles import GuidanceEvent, ModelChoice, VehicleClass
-from cosim.vehicles.spec import STATE_INDEX, StateField, VehicleSpec, VehicleStatus
 
 SPEED_CMD = "toy_cart/speed-cmd-mps"  # the setpoint channel its guidance writes
 _S = STATE_INDEX

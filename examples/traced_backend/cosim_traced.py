@@ -24,8 +24,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from cosim.core.state import VehicleSpec
 from cosim.fdm_pool.inline import InlinePool
-from cosim.vehicles.spec import VehicleSpec
 
 log = logging.getLogger("cosim.traced")
 

@@ -12,8 +12,8 @@ import pyarrow.parquet as pq
 from shapely.geometry import LineString
 from shapely.ops import unary_union
 
+from cosim.core.units import KT_TO_MPS
 from cosim.coverage import area_polygon, completion_s, plan_coverage, swath_m, turn_radius_m
-from cosim.geo import KT_TO_MPS
 from cosim.scenario import load_scenario
 from cosim.sync import Run
 

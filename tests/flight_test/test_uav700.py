@@ -19,7 +19,7 @@ from cosim.analysis.flight import (
     turn_radius_m,
     vehicle_columns,
 )
-from cosim.geo import KT_TO_MPS
+from cosim.core.units import KT_TO_MPS
 from cosim.scenario import load_scenario
 from cosim.sync import run_scenario
 

@@ -11,8 +11,8 @@ import numpy as np
 import pyarrow.compute as pc
 import pytest
 
+from cosim.core.units import KT_TO_MPS
 from cosim.errors import ConfigError
-from cosim.geo import KT_TO_MPS
 from cosim.guidance import min_turn_radius_m
 from cosim.logs import read_states
 from cosim.scenario import load_scenario, parse_scenario

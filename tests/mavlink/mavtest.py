@@ -15,8 +15,8 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")  # before mavutil picks its dialect
 mavutil = pytest.importorskip("pymavlink.mavutil")
 
+from cosim.core.state import N_STATE, STATE_INDEX  # noqa: E402
 from cosim.mavlink import MavlinkConfig, MavlinkEndpoint, MavVehicleSpec  # noqa: E402
-from cosim.vehicles.spec import N_STATE, STATE_INDEX  # noqa: E402
 
 S = STATE_INDEX
 PHYSICS_HZ = 120.0

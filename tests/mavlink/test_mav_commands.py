@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from mavtest import HOME_ALT_M, START_ALT_M, S, mavutil, of_type, start_of, state_rows
 
-from cosim.geo import LocalFrame
+from cosim.core.geo import LocalFrame
 from cosim.mavlink.adapter import make_message
 from cosim.vehicles.fixed_wing.guidance import AP_CHANNELS, FixedWingGuidance
 from cosim.vehicles.fixed_wing.mavlink import PlaneMode

@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 from mavtest import PHYSICS_HZ, mavutil, state_rows, vehicle_specs
 
-from cosim.geo import LocalFrame
+from cosim.core.geo import LocalFrame
 from cosim.mavlink import MavlinkConfig, MavlinkEndpoint
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.handlers import Handler

@@ -9,10 +9,10 @@ from pathlib import Path
 import pytest
 from mavtest import ANCHOR_US, PHYSICS_HZ, GroundStation, of_type, state_rows
 
+from cosim.core.state import VehicleSpec
 from cosim.errors import ConfigError
 from cosim.mavlink import MavlinkConfig, MavlinkLinks, link_specs
 from cosim.mavlink.links import link_urls
-from cosim.vehicles.spec import VehicleSpec
 
 
 def _vehicles(n: int) -> list[VehicleSpec]:

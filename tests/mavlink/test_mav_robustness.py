@@ -19,6 +19,7 @@ from mavtest import (
     vehicle_specs,
 )
 
+from cosim.core.state import VehicleSpec
 from cosim.errors import ConfigError
 from cosim.mavlink import (
     EndpointClosed,
@@ -29,7 +30,6 @@ from cosim.mavlink import (
     mav_specs,
 )
 from cosim.mavlink.adapter import Decoder, Packer
-from cosim.vehicles.spec import VehicleSpec
 
 ML = mavutil.mavlink
 

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from PIL import Image, TiffImagePlugin, TiffTags
 
+from cosim.core.geo import LocalFrame
 from cosim.errors import ConfigError
-from cosim.geo import LocalFrame
 from cosim.renderer import geotiff
 from cosim.renderer.camera import camera_pose
 from cosim.renderer.config import CameraSpec, GroundSpec

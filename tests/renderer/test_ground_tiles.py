@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from cosim.geo import LocalFrame
+from cosim.core.geo import LocalFrame
 from cosim.renderer import ground
 from cosim.renderer.config import GroundSpec
 from cosim.renderer.ground import GroundTexture

@@ -21,8 +21,8 @@ import rasterio
 from affine import Affine
 
 from cosim.cli import main
+from cosim.core.geo import LocalFrame
 from cosim.errors import ConfigError
-from cosim.geo import LocalFrame
 from cosim.renderer.config import GroundSpec
 from cosim.renderer.ground import GroundTexture
 from tests.renderer.test_fuzz_rasters import Traps, _tiff_entries

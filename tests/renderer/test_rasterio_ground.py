@@ -28,8 +28,8 @@ from rasterio.crs import CRS
 from rasterio.errors import NotGeoreferencedWarning
 from rasterio.windows import Window
 
+from cosim.core.geo import LocalFrame
 from cosim.errors import ConfigError
-from cosim.geo import LocalFrame
 from cosim.renderer import geotiff
 from cosim.renderer.camera import Pose, camera_pose, intrinsics, project, to_camera
 from cosim.renderer.config import CameraSpec, GroundSpec

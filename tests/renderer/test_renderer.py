@@ -14,8 +14,9 @@ import numpy as np
 import pytest
 
 from cosim.conspicuity.visibility import passes, read_ground_truth
+from cosim.core.geo import LocalFrame
+from cosim.core.state import N_STATE, STATE_INDEX
 from cosim.errors import ConfigError
-from cosim.geo import LocalFrame
 from cosim.guidance.commands import Command
 from cosim.obstacles import Obstacle
 from cosim.renderer import video
@@ -28,7 +29,6 @@ from cosim.renderer.targets import lambert
 from cosim.renderer.video import have_pyav
 from cosim.scenario import parse_scenario
 from cosim.sync.participants import RunContext
-from cosim.vehicles.spec import N_STATE, STATE_INDEX
 
 LAT0, LON0, GROUND_M = 37.0, -122.0, 10.0
 

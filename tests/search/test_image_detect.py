@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 import pytest
 
-from cosim.geo import LocalFrame
+from cosim.core.geo import LocalFrame
 from cosim.renderer.camera import camera_pose
 from cosim.renderer.config import TARGET_DEFAULTS, CameraSpec, GroundSpec, TargetSpec
 from cosim.renderer.frame import World, WorldSpec, render_frame

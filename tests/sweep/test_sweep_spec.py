@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 import yaml
 
+from cosim.core.units import KT_TO_MPS
 from cosim.errors import ConfigError
-from cosim.geo import KT_TO_MPS
 from cosim.scenario import load_scenario
 from cosim.sweep import read_sweep
 

@@ -238,7 +238,7 @@ import errno, json, resource, signal, sys
 import numpy as np
 from pathlib import Path
 from cosim.fdm_pool import N_STATE
-from cosim.geo import LocalFrame
+from cosim.core.geo import LocalFrame
 from cosim.logs import EventLog, StateLog
 signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write over the limit fails with EFBIG
 resource.setrlimit(resource.RLIMIT_FSIZE, (__LIMIT__, __LIMIT__))
@@ -290,8 +290,8 @@ def test_a_failed_journal_append_is_cut_back_to_its_last_complete_tick(tmp_path:
 def test_state_log_close_after_a_failure_does_not_raise_it_again(tmp_path: Path,
                                                                  monkeypatch) -> None:
     import cosim.logs.writers as w
+    from cosim.core.geo import LocalFrame
     from cosim.fdm_pool import N_STATE
-    from cosim.geo import LocalFrame
 
     log = StateLog(tmp_path / "s", ["a"], LocalFrame(47, 8, 0), 120.0, flush_rows=2)
 

@@ -16,7 +16,7 @@ import pyarrow.compute as pc
 import pytest
 import yaml
 
-from cosim.geo import LocalFrame
+from cosim.core.geo import LocalFrame
 from cosim.logs import STATE_COLUMNS, read_states
 from cosim.scenario import load_scenario
 from cosim.sync import Run, run_scenario

@@ -237,9 +237,9 @@ def test_it_is_an_ardurover_on_mavlink(tmp_path: Path) -> None:
     drives it to a point in GUIDED; a plane beside it stays a plane."""
     from pymavlink import mavutil
 
+    from cosim.core.state import N_STATE, STATE_INDEX
     from cosim.mavlink import MavlinkConfig, MavlinkEndpoint, mav_specs
     from cosim.mavlink.adapter import make_message
-    from cosim.vehicles.spec import N_STATE, STATE_INDEX
 
     ML = mavutil.mavlink
     body = """\

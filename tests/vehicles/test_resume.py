@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from cosim.bench import bench_specs
+from cosim.core.state import STATE_INDEX, VehicleSpec
 from cosim.fdm_pool.shard import Shard
 from cosim.vehicles.registry import state_layout
 from cosim.vehicles.resume import FIELDS, resume_spec
-from cosim.vehicles.spec import STATE_INDEX, VehicleSpec
 
 DT = 1 / 120
 S = STATE_INDEX

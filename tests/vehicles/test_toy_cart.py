@@ -138,9 +138,9 @@ def test_its_personality_answers_its_own_command_and_refuses_the_planes(
         toy_cart: Path, tmp_path: Path) -> None:
     from pymavlink import mavutil
 
+    from cosim.core.state import N_STATE
     from cosim.mavlink import MavlinkConfig, MavlinkEndpoint, mav_specs
     from cosim.mavlink.adapter import make_message
-    from cosim.vehicles.spec import N_STATE
 
     ML = mavutil.mavlink
     scn = load_scenario(_scenario(tmp_path))

@@ -21,6 +21,7 @@ stream).
 
 from __future__ import annotations
 
+from cosim.core.state import STATE_INDEX as _S
 from cosim.mavlink import adapter as mav
 from cosim.mavlink import fence
 from cosim.mavlink.mission import (
@@ -35,7 +36,6 @@ from cosim.mavlink.mission import (
 )
 from cosim.mavlink.services.base import Context, Outcome, Reply, mission_ack, text
 from cosim.mavlink.vehicle import MavVehicle
-from cosim.vehicles.spec import STATE_INDEX as _S
 
 _MISSION = mav.MAV_MISSION_TYPE_MISSION
 

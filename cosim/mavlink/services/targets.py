@@ -12,11 +12,11 @@ import logging
 import math
 from typing import Any
 
-from cosim.geo import LocalFrame
+from cosim.core.geo import LocalFrame
+from cosim.core.state import STATE_INDEX as _S
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.services.base import Context, Outcome, text, vocab
 from cosim.mavlink.vehicle import MavVehicle
-from cosim.vehicles.spec import STATE_INDEX as _S
 
 log = logging.getLogger(__name__)
 

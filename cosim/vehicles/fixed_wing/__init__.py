@@ -19,19 +19,19 @@ from typing import Any
 
 import numpy as np
 
-from cosim.geo import KT_TO_MPS, LocalFrame
+from cosim.core.geo import LocalFrame
+from cosim.core.state import StateField, VehicleSpec
+from cosim.core.units import KT_TO_MPS, LBF_TO_N
 from cosim.guidance.commands import Command
 from cosim.guidance.safety import Limits, floor_problems, radius_problems
 from cosim.vehicles.base import Guidance, SwarmLimits, VehicleClass
 from cosim.vehicles.fixed_wing.guidance import AP_CHANNELS, FixedWingGuidance
 from cosim.vehicles.fixed_wing.mavlink import ARDUPLANE
-from cosim.vehicles.spec import StateField, VehicleSpec
 
 #: how low a fixed-wing may be commanded, above the ground (m); the study's
 #: lowest passes were 30 m above the ground
 DEFAULT_MIN_ALT_AGL_M = 20.0
 #: newtons in a pound-force
-LBF_TO_N = 4.4482216152605
 
 
 class FixedWing(VehicleClass):

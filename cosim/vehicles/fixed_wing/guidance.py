@@ -34,17 +34,17 @@ from typing import Any
 
 import numpy as np
 
-from cosim.geo import FT_TO_M, KT_TO_MPS, LocalFrame, bearing_deg
+from cosim.core.geo import LocalFrame, bearing_deg
+from cosim.core.state import STATE_INDEX
+from cosim.core.units import FT_TO_M, G_MPS2, KT_TO_MPS
 from cosim.guidance.commands import (
     DEFAULT_BANK_LIMIT_DEG,
-    G_MPS2,
     Command,
     Point,
     min_turn_radius_m,
     waypoint_accept_radius_m,
 )
 from cosim.vehicles.base import GuidanceEvent
-from cosim.vehicles.spec import STATE_INDEX
 
 #: the autopilot setpoints guidance writes (see aircraft/systems/cosim_autopilot.xml)
 AP_CHANNELS: tuple[str, ...] = (

@@ -56,7 +56,9 @@ from dataclasses import replace
 from enum import IntEnum
 from typing import TYPE_CHECKING, Any
 
-from cosim.geo import KT_TO_MPS, LocalFrame
+from cosim.core.geo import LocalFrame
+from cosim.core.state import STATE_INDEX as _S
+from cosim.core.units import KT_TO_MPS
 from cosim.guidance.commands import (
     DEFAULT_BANK_LIMIT_DEG,
     Command,
@@ -78,11 +80,10 @@ from cosim.mavlink.services.base import (
     text,
     vocab,
 )
-from cosim.vehicles.spec import STATE_INDEX as _S
 
 if TYPE_CHECKING:
+    from cosim.core.state import VehicleSpec
     from cosim.mavlink.vehicle import MavVehicle
-    from cosim.vehicles.spec import VehicleSpec
 
 
 class PlaneMode(IntEnum):

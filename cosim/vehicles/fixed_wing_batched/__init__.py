@@ -28,14 +28,15 @@ from typing import Any
 
 import numpy as np
 
+from cosim.core.geo import LocalFrame
+from cosim.core.state import StateField, VehicleSpec
+from cosim.core.units import G_MPS2, KT_TO_MPS
 from cosim.errors import ConfigError
-from cosim.geo import KT_TO_MPS, LocalFrame
 from cosim.vehicles.base import Guidance, ModelChoice
 from cosim.vehicles.fixed_wing import FIXED_WING, LBF_TO_N, FixedWing
 from cosim.vehicles.fixed_wing.guidance import FixedWingGuidance
-from cosim.vehicles.fixed_wing_batched.model import G, PointMassModel
+from cosim.vehicles.fixed_wing_batched.model import PointMassModel
 from cosim.vehicles.registry import state_layout
-from cosim.vehicles.spec import StateField, VehicleSpec
 
 #: sea-level density of the standard atmosphere (kg/m^3)
 RHO0 = 1.225
@@ -60,7 +61,7 @@ def class_params(model: str, aircraft_dir: str, source: str,
     return {"origin": origin, "weight_n": weight,
             "vs1g_sl_mps": float(np.sqrt(2.0 * weight / (RHO0 * area * prof["clmax"]))),
             "v_max_mps": float(prof["airspeed_max_kt"]) * KT_TO_MPS,
-            "thrust_accel_mps2": float(prof["max_thrust_n"]) * G / weight,
+            "thrust_accel_mps2": float(prof["max_thrust_n"]) * G_MPS2 / weight,
             "alpha_stall_deg": float(prof["alpha_stall_deg"])}
 
 

@@ -43,10 +43,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from cosim.geo import FT_TO_M, KT_TO_MPS, LocalFrame
-from cosim.vehicles.spec import STATE_INDEX, VehicleSpec, VehicleStatus
+from cosim.core.geo import LocalFrame
+from cosim.core.state import STATE_INDEX, VehicleSpec, VehicleStatus
+from cosim.core.units import FT_TO_M, G_MPS2, KT_TO_MPS
 
-G = 9.80665
 #: the mean Earth radius (m), for the curvature drop of a point in the flat frame
 R_EARTH_M = 6_371_008.8
 #: the JSBSim autopilot's gains, in SI (``aircraft/systems/cosim_autopilot.xml``)
@@ -141,7 +141,8 @@ class PointMassModel:
 
     def _trim(self, v: np.ndarray, hdot: np.ndarray) -> np.ndarray:
         """The throttle that holds speed ``v`` at climb rate ``hdot``."""
-        return np.clip((v / self.v_max) ** 2 + G * hdot / np.maximum(v, 1.0) / self.a_t, 0.0, 1.0)
+        return np.clip((v / self.v_max) ** 2 + G_MPS2 * hdot / np.maximum(v, 1.0) / self.a_t,
+                       0.0, 1.0)
 
     def apply(self, setpoints: np.ndarray) -> None:
         for name, j in self.idx.items():
@@ -171,7 +172,7 @@ class PointMassModel:
         err = np.remainder(np.radians(self.hdg_cmd) - self.psi + np.pi, 2.0 * np.pi) - np.pi
         lim = np.radians(self.bank_lim)
         want = np.where(on & (self.hdg_hold > 0.5),
-                        np.clip(np.arctan(v * K_PSI * err / G), -lim, lim), 0.0)
+                        np.clip(np.arctan(v * K_PSI * err / G_MPS2), -lim, lim), 0.0)
         want = np.where(on, want, self.phi_cmd)
         rate = np.radians(ROLL_RATE_DPS) * dt
         self.phi_cmd = self.phi_cmd + np.clip(want - self.phi_cmd, -rate, rate)
@@ -195,11 +196,11 @@ class PointMassModel:
         thr = np.where(on & (self.spd_hold > 0.5),
                        np.clip(self._trim(v, hdot) + K_V * (spd - v), 0.0, 1.0), self.throttle)
         power = self.power + (thr - self.power) * (dt / TAU_ENGINE_S)
-        vdot = self.a_t * (power - (v / self.v_max) ** 2) - G * hdot / v
+        vdot = self.a_t * (power - (v / self.v_max) ** 2) - G_MPS2 * hdot / v
         vdot = np.where(self.on_ground, -ROLLOUT_DECEL, vdot)
         vnew = np.maximum(self.v + vdot * dt, 0.0)
         # move
-        psi = self.psi + np.where(air, G * np.tan(phi) / v, 0.0) * dt
+        psi = self.psi + np.where(air, G_MPS2 * np.tan(phi) / v, 0.0) * dt
         gs = vnew * np.sqrt(np.maximum(1.0 - (hdot / np.maximum(vnew, 1.0)) ** 2, 0.0))
         n = self.n + gs * np.cos(self.psi) * dt
         e = self.e + gs * np.sin(self.psi) * dt

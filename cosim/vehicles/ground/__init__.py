@@ -30,8 +30,9 @@ from typing import Any
 
 import numpy as np
 
+from cosim.core.geo import LocalFrame
+from cosim.core.state import StateField, VehicleSpec
 from cosim.errors import ConfigError
-from cosim.geo import LocalFrame
 from cosim.guidance.commands import Command
 from cosim.guidance.safety import Limits
 from cosim.obstacles import Obstacle, inside
@@ -39,7 +40,6 @@ from cosim.vehicles.base import ModelChoice, SwarmLimits, VehicleClass
 from cosim.vehicles.ground.guidance import GroundGuidance
 from cosim.vehicles.ground.mavlink import ArduRover
 from cosim.vehicles.ground.model import SPEED_CMD, STEER_CMD, BicycleModel
-from cosim.vehicles.spec import StateField, VehicleSpec
 
 #: key -> (default, low, high)
 KEYS: dict[str, tuple[float, float, float]] = {

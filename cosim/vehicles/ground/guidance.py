@@ -30,13 +30,13 @@ from typing import Any
 
 import numpy as np
 
-from cosim.geo import LocalFrame
+from cosim.core.geo import LocalFrame
+from cosim.core.state import STATE_INDEX, VehicleSpec
 from cosim.guidance.commands import Command, Point
 from cosim.obstacles import inflate, inside, plan_route
 from cosim.renderer.camera import camera_pose, footprint
 from cosim.vehicles.base import GuidanceEvent
 from cosim.vehicles.ground.model import SPEED_CMD, STEER_CMD
-from cosim.vehicles.spec import STATE_INDEX, VehicleSpec
 
 _S = STATE_INDEX
 #: within this of a route's end and stopped: arrived

@@ -30,9 +30,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from cosim.geo import LocalFrame
+from cosim.core.geo import LocalFrame
+from cosim.core.state import STATE_INDEX, VehicleSpec, VehicleStatus
 from cosim.obstacles import inside
-from cosim.vehicles.spec import STATE_INDEX, VehicleSpec, VehicleStatus
 
 SPEED_CMD = "ground/speed-cmd-mps"
 STEER_CMD = "ground/steer-cmd-deg"

@@ -20,7 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from cosim.geo import LocalFrame
+from cosim.core.geo import LocalFrame
+from cosim.core.state import VehicleSpec
 from cosim.guidance.commands import Command
 from cosim.guidance.safety import Limits
 from cosim.vehicles.base import SwarmLimits, VehicleClass
@@ -36,7 +37,6 @@ from cosim.vehicles.quadrotor.guidance import (
     QuadGuidance,
 )
 from cosim.vehicles.quadrotor.mavlink import ARDUCOPTER
-from cosim.vehicles.spec import VehicleSpec
 
 #: the fastest horizontal speed a command may ask for (m/s)
 MAX_SPEED_MPS = 15.0

@@ -28,10 +28,10 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from cosim.geo import LocalFrame
+from cosim.core.geo import LocalFrame
+from cosim.core.state import STATE_INDEX
 from cosim.guidance.commands import Command, Point
 from cosim.vehicles.base import GuidanceEvent
-from cosim.vehicles.spec import STATE_INDEX
 
 _S = STATE_INDEX
 ENGAGE, POS_HOLD = "cosim/quad/engage", "cosim/quad/pos-hold"

@@ -1,4 +1,4 @@
-"""cosim.geo: WGS-84 geodetic <-> ECEF <-> local NED, checked against textbook
+"""cosim.core.geo: WGS-84 geodetic <-> ECEF <-> local NED, checked against textbook
 points, JSBSim's own ECEF position and exact geometric identities."""
 
 from __future__ import annotations
@@ -8,8 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from cosim.geo import (
-    FT_TO_M,
+from cosim.core.geo import (
     WGS84_A_M,
     WGS84_B_M,
     WGS84_E2,
@@ -17,6 +16,7 @@ from cosim.geo import (
     ecef_to_geodetic,
     geodetic_to_ecef,
 )
+from cosim.core.units import FT_TO_M
 
 A, B, E2 = WGS84_A_M, WGS84_B_M, WGS84_E2
 

@@ -23,9 +23,6 @@ WGS84_B_M = WGS84_A_M * (1.0 - WGS84_F)
 WGS84_E2 = WGS84_F * (2.0 - WGS84_F)
 WGS84_EP2 = WGS84_E2 / (1.0 - WGS84_E2)
 
-FT_TO_M = 0.3048
-KT_TO_MPS = 1852.0 / 3600.0
-
 #: the farthest a scenario places anything (vehicles, targets, commanded
 #: points) from its origin, horizontally (m). The frame is exact at any
 #: distance; a scenario spanning more is almost surely a unit mistake.

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from enum import IntEnum
 from typing import Any
 
-from cosim.geo import FT_TO_M
+from cosim.core.units import FT_TO_M
 
 
 class VehicleStatus(IntEnum):
