@@ -34,8 +34,8 @@ from typing import Any
 
 import cv2
 
+from cosim.core.camera import CameraSpec
 from cosim.core.geo import LocalFrame
-from cosim.renderer.config import CameraSpec
 from cosim.renderer.ground import CACHE_ENV
 from cosim.renderer.participant import RenderWorker, Stream
 from cosim.renderer.video import EXTENSIONS

@@ -15,6 +15,7 @@ import re
 from dataclasses import dataclass, replace
 from typing import Any
 
+from cosim.core.camera import CameraSpec
 from cosim.core.geo import MAX_DISTANCE_M
 from cosim.guidance.commands import GIMBAL_PITCH_DEG, GIMBAL_YAW_DEG
 from cosim.renderer import imagery
@@ -98,26 +99,6 @@ class TargetSpec:
         grow = self.growth_m_per_s * max(0.0, time_s)
         return replace(self, length_m=self.length_m + grow, width_m=self.width_m + grow,
                        growth_m_per_s=0.0)
-
-
-@dataclass(frozen=True)
-class CameraSpec:
-    name: str
-    vehicles: tuple[int, ...]  # rows of Scenario.vehicles carrying this camera
-    mount: str  # nadir | forward | gimbal (only a gimbal follows gimbal commands)
-    pitch_deg: float  # the mount's pitch (nadir -90, forward 0); a gimbal's at the start
-    stabilised: bool  # roll and pitch of the body removed (a stabilised gimbal)
-    hfov_deg: float
-    vfov_deg: float
-    width_px: int
-    height_px: int
-    rate_hz: float
-    frame_every: int  # physics ticks per frame
-    yaw_deg: float = 0.0  # the mount's yaw from the nose (positive: right); a gimbal's at start
-
-    @property
-    def fx_px(self) -> float:
-        return self.width_px / 2.0 / math.tan(math.radians(self.hfov_deg) / 2.0)
 
 
 @dataclass(frozen=True)

@@ -31,10 +31,18 @@ from typing import Any
 import cv2
 import numpy as np
 
+from cosim.core.camera import (
+    NEAR_M,
+    CameraSpec,
+    Pose,
+    ground_homography,
+    intrinsics,
+    project,
+    to_camera,
+)
 from cosim.core.geo import LocalFrame, geodetic_to_ecef
 from cosim.obstacles import signed_area
-from cosim.renderer.camera import NEAR_M, Pose, ground_homography, intrinsics, project, to_camera
-from cosim.renderer.config import CameraSpec, GroundSpec, TargetSpec
+from cosim.renderer.config import GroundSpec, TargetSpec
 from cosim.renderer.ground import GroundTexture
 from cosim.renderer.targets import (
     FACE_IDX,

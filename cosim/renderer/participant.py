@@ -56,10 +56,10 @@ import cv2
 import numpy as np
 
 from cosim import workers as worker_kit
+from cosim.core.camera import CameraSpec, camera_pose
 from cosim.core.state import STATE_INDEX
 from cosim.errors import CosimError, how_it_ended
-from cosim.renderer.camera import camera_pose
-from cosim.renderer.config import CameraSpec, CamerasSpec, GroundSpec
+from cosim.renderer.config import CamerasSpec, GroundSpec
 from cosim.renderer.frame import GT_COLUMNS, World, WorldSpec, render_frame
 from cosim.renderer.video import EXTENSIONS, open_video
 from cosim.sync.participants import ParticipantFailed, RunContext

@@ -27,14 +27,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from cosim.renderer.camera import (
-    NEAR_M,
-    Pose,
-    camera_pose,
-    intrinsics,
-    mount_rotation,
-)
-from cosim.renderer.config import CameraSpec
+from cosim.core.camera import NEAR_M, CameraSpec, Pose, camera_pose, intrinsics, mount_rotation
 
 #: a footprint corner whose ray misses the ground, or meets it farther than
 #: this, is cut back to this horizontal range (as the renderer draws haze)

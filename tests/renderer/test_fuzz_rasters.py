@@ -32,9 +32,8 @@ from affine import Affine
 from rasterio.enums import Resampling
 
 from cosim.cli import main
+from cosim.core.camera import CameraSpec, camera_pose
 from cosim.errors import ConfigError
-from cosim.renderer.camera import camera_pose
-from cosim.renderer.config import CameraSpec
 from cosim.renderer.frame import World, WorldSpec, render_frame
 from cosim.renderer.geotiff import GeoTiffError
 from cosim.scenario import load_scenario

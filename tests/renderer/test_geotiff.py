@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 from PIL import Image, TiffImagePlugin, TiffTags
 
+from cosim.core.camera import CameraSpec, camera_pose
 from cosim.core.geo import LocalFrame
 from cosim.errors import ConfigError
 from cosim.renderer import geotiff
-from cosim.renderer.camera import camera_pose
-from cosim.renderer.config import CameraSpec, GroundSpec
+from cosim.renderer.config import GroundSpec
 from cosim.renderer.frame import World, WorldSpec, render_frame
 from cosim.scenario import parse_scenario
 

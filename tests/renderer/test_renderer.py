@@ -14,14 +14,14 @@ import numpy as np
 import pytest
 
 from cosim.conspicuity.visibility import passes, read_ground_truth
+from cosim.core.camera import CameraSpec, camera_pose, footprint
 from cosim.core.geo import LocalFrame
 from cosim.core.state import N_STATE, STATE_INDEX
 from cosim.errors import ConfigError
 from cosim.guidance.commands import Command
 from cosim.obstacles import Obstacle
 from cosim.renderer import video
-from cosim.renderer.camera import camera_pose, footprint
-from cosim.renderer.config import TARGET_DEFAULTS, CameraSpec, GroundSpec, TargetSpec
+from cosim.renderer.config import TARGET_DEFAULTS, GroundSpec, TargetSpec
 from cosim.renderer.frame import OBSTACLE_RGB, World, WorldSpec, render_frame
 from cosim.renderer.ground import GroundTexture
 from cosim.renderer.participant import CameraParticipant

@@ -21,9 +21,9 @@ import cv2
 import numpy as np
 import pytest
 
+from cosim.core.camera import CameraSpec, camera_pose
 from cosim.core.geo import LocalFrame
-from cosim.renderer.camera import camera_pose
-from cosim.renderer.config import TARGET_DEFAULTS, CameraSpec, GroundSpec, TargetSpec
+from cosim.renderer.config import TARGET_DEFAULTS, GroundSpec, TargetSpec
 from cosim.renderer.frame import World, WorldSpec, render_frame
 from cosim.search.image_detect import (
     BlobMatch,

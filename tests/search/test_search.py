@@ -14,9 +14,9 @@ import pyarrow.parquet as pq
 import pytest
 from shapely.geometry import Polygon, box
 
+from cosim.core.camera import CameraSpec, camera_pose, footprint
 from cosim.errors import ConfigError
-from cosim.renderer.camera import camera_pose, footprint
-from cosim.renderer.config import CameraSpec, GroundSpec, TargetSpec
+from cosim.renderer.config import GroundSpec, TargetSpec
 from cosim.renderer.frame import World, WorldSpec, probe_offsets, render_frame
 from cosim.renderer.targets import TargetSet
 from cosim.scenario import Scenario, load_scenario, parse_scenario

@@ -421,8 +421,8 @@ def test_camera_gap_is_the_renderers_angle_and_the_ground_distance(
     target_depth_m, read from the rendered ground truth, is the camera's
     height above the target's centre, and tan(gap) * target_depth_m is the
     target's distance on the ground from the point under the camera."""
-    from cosim.renderer.camera import camera_pose
-    from cosim.renderer.config import TARGET_DEFAULTS, CameraSpec, GroundSpec, TargetSpec
+    from cosim.core.camera import CameraSpec, camera_pose
+    from cosim.renderer.config import TARGET_DEFAULTS, GroundSpec, TargetSpec
     from cosim.renderer.frame import GT_COLUMNS, World, WorldSpec, render_frame
     from cosim.trials.study import Clip, read_clip_truth
 

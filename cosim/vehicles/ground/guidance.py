@@ -30,11 +30,11 @@ from typing import Any
 
 import numpy as np
 
+from cosim.core.camera import camera_pose, footprint
 from cosim.core.geo import LocalFrame
 from cosim.core.state import STATE_INDEX, VehicleSpec
 from cosim.guidance.commands import Command, Point
 from cosim.obstacles import inflate, inside, plan_route
-from cosim.renderer.camera import camera_pose, footprint
 from cosim.vehicles.base import GuidanceEvent
 from cosim.vehicles.ground.model import SPEED_CMD, STEER_CMD
 

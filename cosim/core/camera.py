@@ -1,4 +1,7 @@
-"""The camera model: pinhole intrinsics, mounts and the pose at a frame tick.
+"""The camera model: a camera's spec (``CameraSpec``), pinhole intrinsics,
+mounts, the pose at a frame tick, projection and the ground footprint. Kernel
+geometry: the renderer draws with it, the ground vehicles' guidance and the
+search reason with it.
 
 Frames (all right-handed):
 
@@ -31,7 +34,27 @@ from functools import lru_cache
 import numpy as np
 
 from cosim.core.geo import LocalFrame, geodetic_to_ecef
-from cosim.renderer.config import CameraSpec
+
+
+@dataclass(frozen=True)
+class CameraSpec:
+    name: str
+    vehicles: tuple[int, ...]  # rows of Scenario.vehicles carrying this camera
+    mount: str  # nadir | forward | gimbal (only a gimbal follows gimbal commands)
+    pitch_deg: float  # the mount's pitch (nadir -90, forward 0); a gimbal's at the start
+    stabilised: bool  # roll and pitch of the body removed (a stabilised gimbal)
+    hfov_deg: float
+    vfov_deg: float
+    width_px: int
+    height_px: int
+    rate_hz: float
+    frame_every: int  # physics ticks per frame
+    yaw_deg: float = 0.0  # the mount's yaw from the nose (positive: right); a gimbal's at start
+
+    @property
+    def fx_px(self) -> float:
+        return self.width_px / 2.0 / math.tan(math.radians(self.hfov_deg) / 2.0)
+
 
 NEAR_M = 0.05  # points closer than this along the optical axis are clipped
 
