@@ -600,7 +600,7 @@ def _in_combinations(problem: str, where: list[dict[str, Any] | None], total: in
     sweep's ``values``), said once: ``sweep combinations speed_kt=400,
     alt_agl_m=any (12 of 36): ...``; combinations that do not make such a
     product are named by the first and counted."""
-    from cosim.sweep.spec import format_value
+    from cosim.scenario.placeholders import format_value
 
     points = [p for p in where if p is not None]
     if total == 1 or not points:  # no sweep

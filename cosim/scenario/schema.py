@@ -460,7 +460,7 @@ class Memo:
         """(data, lines, duplicate-key problems, placeholders) of ``text``.
         The data is shared: callers must not change it (``substitute`` copies)."""
         if text not in self._parsed:
-            from cosim.sweep.spec import protect_placeholders  # ${...}: sweep values
+            from cosim.scenario.placeholders import protect_placeholders
 
             protected, placeholders = protect_placeholders(text)
             try:
@@ -523,7 +523,7 @@ def parse_scenario(text: str, fname: str = "<scenario>", check_properties: bool 
 
 def _parse(text: str, fname: str, check_properties: bool, sweep_point: dict[str, Any] | None,
            memo: Memo | None, seeds: bool) -> Scenario | None:
-    from cosim.sweep.spec import substitute  # ${...}: sweep values
+    from cosim.scenario.placeholders import substitute
 
     memo = memo or Memo()
     data, lines, dups, placeholders = memo.parsed(text, fname)

@@ -33,7 +33,8 @@ from typing import Any
 
 from cosim import workers as worker_kit
 from cosim.errors import ConfigError, CosimError
-from cosim.sweep.spec import Scalar, SweepSpec, format_value, read_sweep
+from cosim.scenario.placeholders import Scalar, format_value
+from cosim.sweep.spec import SweepSpec, read_sweep
 
 log = logging.getLogger(__name__)
 
