@@ -28,7 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cosim.trials.analysis import COLUMNS, OPTIONAL_COLUMNS, analyse
+from cosim.trials.analysis import analyse
+from cosim.trials.responses import COLUMNS, OPTIONAL_COLUMNS
 
 DISTANCES_MM = np.arange(300.0, 1201.0, 100.0)
 ALTITUDES_M = np.array([30.0, 60.0, 100.0, 150.0, 200.0, 300.0, 500.0])

@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 
-from cosim.trials.analysis import COLUMNS, OPTIONAL_COLUMNS
+from cosim.trials.responses import COLUMNS, OPTIONAL_COLUMNS
 
 CG_MM = {"truck": 40.0, "fire_truck": 60.0}
 D0_MM = 600.0
@@ -69,12 +69,12 @@ def rows(seed: int) -> list[dict[str, object]]:
                                 "reaction_time_ms": int(rng.uniform(300, 1500))})
     for h in (30, 100, 200, 300, 500):
         for v in (50, 100, 200):
-            p = 1.0 / (1.0 + math.exp(-(2.5 - 1.2 * h / 100.0)))
+            p_rec = 1.0 / (1.0 + math.exp(-(2.5 - 1.2 * h / 100.0)))
             for _ in range(40):
                 out.append({**base, "protocol": "recognise", "condition_target": "truck",
                             "participant": f"p{rng.integers(12):02d}",
                             "condition_alt_agl_m": h, "condition_speed_kt": v,
-                            "recognised": int(rng.random() < p), "viewing_distance_mm": 600,
+                            "recognised": int(rng.random() < p_rec), "viewing_distance_mm": 600,
                             "target_angular_size_deg": round(2.0 * 30.0 / h, 4),
                             "eccentricity_deg": round(rng.uniform(0, 15), 3),
                             "onscreen_distance_mm": "",

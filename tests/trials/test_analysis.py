@@ -18,11 +18,9 @@ import pytest
 from cosim.cli import main
 from cosim.errors import ConfigError
 from cosim.trials.analysis import (
-    COLUMNS,
     MAX_FITS,
     MAX_LEVELS,
     MAX_PANELS,
-    OPTIONAL_COLUMNS,
     GapFit,
     analyse,
     check_across_levels,
@@ -31,10 +29,10 @@ from cosim.trials.analysis import (
     fit_gap,
     fit_ground_gap,
     mean_ci,
-    read_responses,
     t_quantile,
     wilson_ci,
 )
+from cosim.trials.responses import COLUMNS, OPTIONAL_COLUMNS, read_responses
 
 CG_MM = 40.0
 D0_MM = 600.0
