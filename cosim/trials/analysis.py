@@ -57,7 +57,6 @@ distribution), matplotlib (Agg) and the standard library.
 
 from __future__ import annotations
 
-import functools
 import json
 import logging
 import math
@@ -68,9 +67,20 @@ from statistics import NormalDist
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
 from cosim.errors import ConfigError
+from cosim.trials.estimates import (
+    EXACT_BOOT_MAX,
+    cluster_ids,
+    difference_estimate,
+    judge,
+    mean_ci,
+    mean_estimate,
+    median_ci,
+    slope_estimate,
+    t_interval,
+    wilson_ci,
+)
 from cosim.trials.responses import CONSPICUITY, MAX_BYTES, MAX_ROWS, Responses, read_responses
 from cosim.trials.spreadsheet import SafeWriter
 
@@ -96,201 +106,6 @@ MAX_FITS = 200
 #: panels of critical_gap.png (the fits with a critical gap first); every fit
 #: is in critical_gap.csv
 MAX_PANELS = 12
-#: groups with more values than this are not bootstrapped value by value
-#: (memory n_boot x values): a median gets the order-statistic interval, a
-#: distance level's resampled sum is drawn from its normal distribution (exact
-#: mean and variance)
-_EXACT_BOOT_MAX = 2000
-
-
-# ---------------------------------------------------------------- statistics
-
-
-@functools.lru_cache(maxsize=4096)
-def t_quantile(p: float, df: float) -> float:
-    """Quantile of Student's t with ``df`` (> 0, not necessarily whole: Welch's
-    degrees of freedom) at ``p`` (Bonferroni levels included), from
-    ``scipy.stats.t``. Cached: an analysis asks for the same few levels and
-    degrees of freedom once per condition and level."""
-    if not 0.0 < p < 1.0 or not df > 0:
-        raise ValueError(f"t_quantile: need 0 < p < 1 and df > 0, got p={p!r}, df={df!r}")
-    return float(stats.t.ppf(p, df))
-
-
-def mean_ci(x: np.ndarray, level: float = 0.95) -> tuple[float, float, float]:
-    """Mean and its t interval (NaN bounds for fewer than two values)."""
-    x = np.asarray(x, dtype=float)
-    if x.size == 0:
-        return math.nan, math.nan, math.nan
-    m = float(x.mean())
-    if x.size < 2:
-        return m, math.nan, math.nan
-    half = t_quantile(0.5 + level / 2, x.size - 1) * float(x.std(ddof=1)) / math.sqrt(x.size)
-    return m, m - half, m + half
-
-
-def median_ci(x: np.ndarray, rng: np.random.Generator, n_boot: int = 1000,
-              level: float = 0.95) -> tuple[float, float, float]:
-    """Median and its percentile bootstrap interval (NaN bounds below two
-    values). Above ``_EXACT_BOOT_MAX`` values the distribution-free
-    order-statistic interval (ranks n/2 -+ z sqrt(n)/2) replaces the bootstrap."""
-    x = np.asarray(x, dtype=float)
-    if x.size == 0:
-        return math.nan, math.nan, math.nan
-    med = float(np.median(x))
-    if x.size < 2:
-        return med, math.nan, math.nan
-    if x.size > _EXACT_BOOT_MAX:
-        z = NormalDist().inv_cdf(0.5 + level / 2)
-        xs = np.sort(x)
-        half = z * math.sqrt(x.size) / 2
-        j = max(int(math.floor(x.size / 2 - half)), 0)
-        k = min(int(math.ceil(x.size / 2 + half)), x.size - 1)
-        return med, float(xs[j]), float(xs[k])
-    boots = np.median(x[rng.integers(0, x.size, size=(n_boot, x.size))], axis=1)
-    lo, hi = np.quantile(boots, [(1 - level) / 2, (1 + level) / 2])
-    return med, float(lo), float(hi)
-
-
-def wilson_ci(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
-    """Wilson score interval of a proportion k/n ((NaN, NaN) for n = 0)."""
-    if n <= 0:
-        return math.nan, math.nan
-    z = NormalDist().inv_cdf(0.5 + level / 2)
-    p = k / n
-    den = 1 + z * z / n
-    centre = (p + z * z / (2 * n)) / den
-    half = z / den * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
-    return max(0.0, centre - half), min(1.0, centre + half)
-
-
-def _cluster_ids(clusters: Sequence[str] | np.ndarray | None, n: int) -> np.ndarray | None:
-    """Integer participant ids of ``n`` trials, or None when there are fewer
-    than two participants (then trials are all there is to go on)."""
-    if clusters is None:
-        return None
-    ids, who = np.unique(np.asarray(clusters, dtype=object), return_inverse=True)
-    if ids.size < 2 or who.size != n:
-        return None
-    return who
-
-
-def _within(v: np.ndarray, who: np.ndarray) -> np.ndarray:
-    """``v`` less its participant's mean (participant fixed effects)."""
-    g = int(who.max()) + 1
-    means = np.bincount(who, weights=v, minlength=g) / np.maximum(
-        np.bincount(who, minlength=g), 1)
-    return v - means[who]
-
-
-def _slope(x: np.ndarray, y: np.ndarray, who: np.ndarray | None
-           ) -> tuple[float, float, float] | None:
-    """(slope, standard error, degrees of freedom) of y on x, None when x
-    does not vary.
-
-    Without participants: OLS with the HC3 standard error (the spread of a
-    gap grows with the level: an angle error of e is a distance error of
-    about e*d), n - 2 degrees of freedom. With them: the slope *within*
-    participants (each one's own mean taken out of x and y: people whose
-    gaps differ, or who did different levels, do not make a slope), its
-    cluster-robust standard error (CR1: each participant's summed scores,
-    G/(G-1)) and G - 1 degrees of freedom for the G participants whose x
-    varies. If no participant's x varies (each did one level), the pooled
-    slope with the same cluster-robust error. None also below 3 points."""
-    if x.size < 3 or np.ptp(x) == 0:
-        return None
-    if who is not None:
-        xd, yd = _within(x, who), _within(y, who)
-        inside = float(xd @ xd)
-        if inside > 1e-12 * max(float(((x - x.mean()) ** 2).sum()), 1e-300):
-            b = float(xd @ yd) / inside
-            res = yd - b * xd
-            varies = np.bincount(who, weights=np.abs(xd)) > 0
-            g = int(varies.sum())
-            if g < 2:
-                return None
-            scores = np.bincount(who, weights=xd * res)
-            return b, math.sqrt(g / (g - 1) * float(scores @ scores)) / inside, float(g - 1)
-    xc = x - x.mean()
-    sxx = float(xc @ xc)
-    if sxx == 0.0:
-        return None
-    b = float(xc @ (y - y.mean())) / sxx
-    res = y - y.mean() - b * xc
-    if who is not None:
-        g = int(who.max()) + 1
-        scores = np.bincount(who, weights=xc * res, minlength=g)
-        return b, math.sqrt(g / (g - 1) * float(scores @ scores)) / sxx, float(g - 1)
-    lev = 1.0 / x.size + xc * xc / sxx
-    return b, math.sqrt(float(np.sum((xc * res / (1.0 - lev)) ** 2))) / sxx, float(x.size - 2)
-
-
-def _difference(y: np.ndarray, here: np.ndarray, who: np.ndarray | None
-                ) -> tuple[float, float, float] | None:
-    """(difference of y between ``here`` and the rest, standard error, degrees
-    of freedom): Welch's (mean here - mean of the rest) without participants;
-    with them, the difference within participants (``_slope`` on the
-    indicator: each person's own level taken out). None when either side has
-    fewer than two trials or no participant was on both sides."""
-    a, b = y[here], y[~here]
-    if a.size < 2 or b.size < 2:
-        return None
-    if who is not None:
-        return _slope(here.astype(float), y, who)
-    va, vb = float(a.var(ddof=1)) / a.size, float(b.var(ddof=1)) / b.size
-    se = math.sqrt(va + vb)
-    df = (va + vb) ** 2 / (va * va / (a.size - 1) + vb * vb / (b.size - 1)) if se else 1.0
-    return float(a.mean() - b.mean()), se, df
-
-
-def _mean(y: np.ndarray, who: np.ndarray | None) -> tuple[float, float, float] | None:
-    """(mean of y, standard error, degrees of freedom), None below two values.
-    Without participants: the trials' standard error, n - 1 degrees of
-    freedom. With them: cluster-robust (CR1: each participant's summed
-    deviations, G/(G-1)) with G - 1 degrees of freedom for the G participants:
-    when every participant has as many trials, exactly the t interval over
-    the participants' means, and centred on the trials' mean when they do
-    not. None also below two participants."""
-    if y.size < 2:
-        return None
-    m = float(y.mean())
-    if who is None:
-        return m, float(y.std(ddof=1)) / math.sqrt(y.size), float(y.size - 1)
-    _, person = np.unique(who, return_inverse=True)
-    g = int(person.max()) + 1
-    if g < 2:
-        return None
-    scores = np.bincount(person, weights=y - m)
-    return m, math.sqrt(g / (g - 1) * float(scores @ scores)) / y.size, float(g - 1)
-
-
-def _interval(est: tuple[float, float, float] | None, level: float) -> tuple[float, float]:
-    """The t interval at ``level`` of an (estimate, standard error, degrees of
-    freedom); NaN bounds for no estimate."""
-    if est is None:
-        return math.nan, math.nan
-    b, se, df = est
-    half = t_quantile(0.5 + level / 2, df) * se if se > 0 else 0.0
-    return b - half, b + half
-
-
-def _judge(est: tuple[float, float, float] | None, margin: float, level: float,
-           test_level: float) -> str:
-    """Whether an estimated change is shown negligible or shown larger than
-    negligible: "equal" when its ``2 * level - 1`` interval lies within
-    +-``margin`` (an equivalence test at ``1 - level``), "differs" when its
-    ``test_level`` interval lies entirely outside +-``margin`` (a change shown
-    to exceed the margin, not merely shown to be there: a change of 7 % is
-    not "differs" for a 10 % margin however many trials show it), "unclear"
-    else, and when there is no estimate (too few points, or too few
-    participants on both sides of it)."""
-    if est is None:
-        return "unclear"
-    elo, ehi = _interval(est, 2 * level - 1)
-    if -margin <= elo and ehi <= margin:
-        return "equal"
-    lo, hi = _interval(est, test_level)
-    return "differs" if lo > margin or hi < -margin else "unclear"
 
 
 # ---------------------------------------------------------------- critical gap
@@ -417,7 +232,7 @@ def _trial_boot_sums(g: np.ndarray, level_of: np.ndarray, n_levels: int,
     out = np.empty((n_boot, n_levels))
     for j in range(n_levels):
         gj = g[level_of == j]
-        if gj.size <= _EXACT_BOOT_MAX:
+        if gj.size <= EXACT_BOOT_MAX:
             out[:, j] = gj[rng.integers(0, gj.size, size=(n_boot, gj.size))].sum(axis=1)
         else:
             out[:, j] = rng.normal(gj.sum(), math.sqrt(gj.size * float(gj.var())), n_boot)
@@ -478,22 +293,22 @@ def fit_gap(x: np.ndarray, g: np.ndarray, *, rng: np.random.Generator,
 
     1. rising part: if ``x0`` is above the lowest level but the 95 %
        interval of the rise's slope (given ``x0``, as if it were known; within
-       participants when they are named: ``_slope``) includes 0, the rise
+       participants when they are named: ``slope_estimate``) includes 0, the rise
        is not resolved and the constant model (``x0`` = the lowest level) is
        used;
     2. is the gap constant above ``x0``? The OLS slope of ``g`` against
        ``x`` over the trials at and above ``x0`` (standard error
-       cluster-robust over participants, else HC3; ``_slope``) is compared
+       cluster-robust over participants, else HC3; ``slope_estimate``) is compared
        with the negligible slope ``delta``, the one that changes the gap by
        ``tolerance`` of its level across the plateau: constant when its
        90 % interval lies within +-delta (an equivalence test at 5 %);
        changing ("no_plateau") when its 95 % interval lies entirely outside
        +-delta (a change shown to exceed the tolerance); otherwise
-       "inconclusive" (``_judge``). With a rising part the
+       "inconclusive" (``judge``). With a rising part the
        95 % interval must also lie below ``s`` (the bend is real, not a
        lack of data above ``x0``), else "no_plateau";
     3. CG is the mean of ``g`` over the plateau, with a t interval over
-       the participants there (``_mean``: each participant counted once,
+       the participants there (``mean_estimate``: each participant counted once,
        ``GapFit.interval``); the threshold's interval is a percentile
        bootstrap (participants, or trials within levels), the breakpoint
        chosen anew each time.
@@ -504,7 +319,7 @@ def fit_gap(x: np.ndarray, g: np.ndarray, *, rng: np.random.Generator,
     levels, level_of = np.unique(xr, return_inverse=True)
     n = int(g.size)
     people = np.asarray(clusters, dtype=object) if clusters is not None else None
-    who = _cluster_ids(people, n)
+    who = cluster_ids(people, n)
     base: dict[str, Any] = {"n": n, "variable": variable, "unit": unit,
                             "levels": [float(v) for v in levels], "round_to": round_to,
                             "participants": int(np.unique(people).size) if people is not None
@@ -531,8 +346,8 @@ def fit_gap(x: np.ndarray, g: np.ndarray, *, rng: np.random.Generator,
     s_ci: tuple[float, float] | None = None
     if x0 > levels[0] and det[best] > 0:
         # the rise's slope given x0: the slope of g on min(x - x0, 0), within
-        # participants when they are known (_slope)
-        slo, shi = _interval(_slope(np.minimum(xr - x0, 0.0), g, who), level)
+        # participants when they are known (slope_estimate)
+        slo, shi = t_interval(slope_estimate(np.minimum(xr - x0, 0.0), g, who), level)
         if math.isfinite(slo):
             s_ci = (slo, shi)
     rising_resolved = s_ci is not None and s_ci[0] > 0
@@ -544,10 +359,10 @@ def fit_gap(x: np.ndarray, g: np.ndarray, *, rng: np.random.Generator,
     above = xr >= x0 - 1e-9
     span = f"{levels[0]:g}-{levels[-1]:g} {unit}"
     delta = tolerance * abs(fit_level) / max(float(levels[-1]) - x0, 1e-300)
-    est = _slope(xr[above], g[above], who[above] if who is not None else None)
+    est = slope_estimate(xr[above], g[above], who[above] if who is not None else None)
     pb = est[0] if est is not None else math.nan
-    plo, phi = _interval(est, level)
-    elo, ehi = _interval(est, 2 * level - 1)  # 90 %: the equivalence test
+    plo, phi = t_interval(est, level)
+    elo, ehi = t_interval(est, 2 * level - 1)  # 90 %: the equivalence test
     common: dict[str, Any] = dict(
         base, breakpoint=x0, fit_level=fit_level,
         rising_slope=float(s[best]) if rising_resolved else 0.0,
@@ -557,7 +372,7 @@ def fit_gap(x: np.ndarray, g: np.ndarray, *, rng: np.random.Generator,
     slope_text = (f"slope {pb:.3g} {unit}/{unit}, {level:.0%} CI [{plo:.3g}, {phi:.3g}]; "
                   f"within +-{delta:.3g} counts as constant ({tolerance:.0%} of the gap "
                   f"across the plateau)")
-    verdict = _judge(est, delta, level, level)
+    verdict = judge(est, delta, level, level)
     if rising_resolved and phi >= float(s[best]):
         return GapFit(
             status="no_plateau",
@@ -583,7 +398,7 @@ def fit_gap(x: np.ndarray, g: np.ndarray, *, rng: np.random.Generator,
     q = [(1 - level) / 2, (1 + level) / 2]
     dropped = 0
     # the CG's interval: a t interval over the participants on the plateau
-    people_est = _mean(g[above], who[above]) if who is not None else None
+    people_est = mean_estimate(g[above], who[above]) if who is not None else None
     x0s = np.empty(0)
     if rising_resolved or people_est is None:  # the bootstrap: the threshold, or the CG
         if who is not None and int(who.max()) + 1 >= MIN_BOOT_PARTICIPANTS:
@@ -605,7 +420,7 @@ def fit_gap(x: np.ndarray, g: np.ndarray, *, rng: np.random.Generator,
         cg_lo, cg_hi = ((float(v) for v in np.quantile(cgs, q)) if cgs.size
                         else (math.nan, math.nan))
     if people_est is not None:
-        cg_lo, cg_hi = _interval(people_est, level)
+        cg_lo, cg_hi = t_interval(people_est, level)
         interval = "t over participants"
     if rising_resolved and x0s.size:
         x0_lo, x0_hi = (float(v) for v in np.quantile(x0s, q))
@@ -676,7 +491,7 @@ def check_across_levels(fit: GapFit, x: np.ndarray, g: np.ndarray, *,
     the measured angle. On the plateau (``x >= threshold``) also the
     predicted angle, the difference (gap here - mean gap of the levels
     compared with, cluster-robust over ``clusters`` when given:
-    ``_difference``) and a ``verdict`` (``_judge``):
+    ``difference_estimate``) and a ``verdict`` (``judge``):
 
     - "holds": the difference's 90 % interval lies within ``fit.tolerance``
       of the others' gap (an equivalence test at 5 %);
@@ -693,7 +508,7 @@ def check_across_levels(fit: GapFit, x: np.ndarray, g: np.ndarray, *,
     for "holds" / "fails", else None."""
     x = np.asarray(x, dtype=float)
     g = np.asarray(g, dtype=float)
-    who = _cluster_ids(clusters, x.size)
+    who = cluster_ids(clusters, x.size)
     xr = np.round(x / fit.round_to) * fit.round_to
     on_plateau = (xr >= fit.threshold - 1e-9) if fit.threshold is not None else None
     k = len(np.unique(xr[on_plateau])) if on_plateau is not None else 0
@@ -732,10 +547,10 @@ def check_across_levels(fit: GapFit, x: np.ndarray, g: np.ndarray, *,
             return
         cg_o = float(g[others].mean())
         both = here | others
-        est = _difference(g[both], here[both], who[both] if who is not None else None)
-        dlo, dhi = _interval(est, confidence)
+        est = difference_estimate(g[both], here[both], who[both] if who is not None else None)
+        dlo, dhi = t_interval(est, confidence)
         verdict = {"equal": "holds", "differs": "fails", "unclear": "inconclusive"}[
-            _judge(est, fit.tolerance * abs(cg_o), level, confidence)]
+            judge(est, fit.tolerance * abs(cg_o), level, confidence)]
         row.update(cg_predicting=cg_o, angle_predicted_deg=math.degrees(math.atan(cg_o / v)),
                    compared_with=" ".join(f"{u:g}" for u in np.unique(xr[others])),
                    difference=est[0] if est is not None else math.nan,

@@ -28,10 +28,8 @@ from cosim.trials.analysis import (
     fit_critical_gap,
     fit_gap,
     fit_ground_gap,
-    mean_ci,
-    t_quantile,
-    wilson_ci,
 )
+from cosim.trials.estimates import mean_ci, t_quantile, wilson_ci
 from cosim.trials.responses import COLUMNS, OPTIONAL_COLUMNS, read_responses
 
 CG_MM = 40.0
