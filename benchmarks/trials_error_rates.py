@@ -37,12 +37,8 @@ from test_analysis import (  # noqa: E402
     _model,
 )
 
-from cosim.trials.analysis import (  # noqa: E402
-    GapFit,
-    check_across_levels,
-    fit_critical_gap,
-    fit_ground_gap,
-)
+from cosim.trials.critical_gap import GapFit, fit_critical_gap, fit_ground_gap  # noqa: E402
+from cosim.trials.critical_gap_check import check_across_levels  # noqa: E402
 
 
 def _ground(seed: int, step_m: float, *, share: float = 0.0, people: int = 12,
