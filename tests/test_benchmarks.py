@@ -97,7 +97,8 @@ def test_trials_analyse_speed_writes_what_it_analyses(tmp_path: Path) -> None:
     are binned (the figures' sizes are for benchmarks/README.md)."""
     import trials_analyse_speed
 
-    from cosim.trials.analysis import MAX_LEVELS, analyse
+    from cosim.trials.analysis import analyse
+    from cosim.trials.conditions import MAX_LEVELS
 
     src = tmp_path / "r.csv"
     assert trials_analyse_speed.responses_csv(src, 600, 20, "continuous") == 600

@@ -63,15 +63,16 @@ import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from statistics import NormalDist
 from typing import Any
 
 import numpy as np
 
 from cosim.errors import ConfigError
+from cosim.trials.conditions import MAX_LEVELS, condition_levels, level_key
 from cosim.trials.critical_gap import GapFit, fit_gap
 from cosim.trials.critical_gap_check import check_across_levels
 from cosim.trials.estimates import mean_ci, median_ci, wilson_ci
+from cosim.trials.recognition import RECOGNITION_FIELDS, analyse_recognition, by_factor
 from cosim.trials.responses import CONSPICUITY, MAX_BYTES, MAX_ROWS, Responses, read_responses
 from cosim.trials.spreadsheet import SafeWriter
 
@@ -80,11 +81,6 @@ log = logging.getLogger(__name__)
 #: eccentricity_deg and atan(onscreen_distance_mm / viewing_distance_mm) further apart
 #: than this are counted (and logged) as inconsistent
 ECCENTRICITY_TOLERANCE_DEG = 0.5
-#: a condition (viewing distance, altitude, speed) with more distinct values
-#: than this among the rows analysed together is cut into this many bins of
-#: about equal trial counts (``bin_conditions``): the levels of a fit, the
-#: fits per held condition and the rows of the tables stay few
-MAX_LEVELS = 20
 #: critical-gap fits one analysis makes at most (protocols x targets x held
 #: conditions x the two planes); responses asking for more are refused
 MAX_FITS = 200
@@ -94,54 +90,6 @@ MAX_PANELS = 12
 
 
 # ---------------------------------------------------------------- recognition
-
-
-def logistic_regression(x: np.ndarray, y: np.ndarray, names: Sequence[str], *,
-                        level: float = 0.95, max_iter: int = 50) -> dict[str, Any]:
-    """Maximum-likelihood logistic regression by Newton/IRLS (an intercept is
-    added), with Wald intervals. Returns ``{"converged": False, ...}`` when
-    the fit does not converge or the data are separated."""
-    x = np.column_stack([np.ones(len(y)), np.asarray(x, dtype=float).reshape(len(y), -1)])
-    y = np.asarray(y, dtype=float)
-    beta = np.zeros(x.shape[1])
-    converged = False
-    cov = None
-    for _ in range(max_iter):
-        p = 1.0 / (1.0 + np.exp(-np.clip(x @ beta, -30, 30)))
-        w = p * (1 - p)
-        info = x.T @ (x * w[:, None])
-        try:
-            step = np.linalg.solve(info, x.T @ (y - p))
-        except np.linalg.LinAlgError:
-            break
-        beta = beta + step
-        if np.max(np.abs(step)) < 1e-8:
-            converged = True
-            break
-    if converged:
-        p = 1.0 / (1.0 + np.exp(-np.clip(x @ beta, -30, 30)))
-        info = x.T @ (x * (p * (1 - p))[:, None])
-        try:
-            cov = np.linalg.inv(info)
-        except np.linalg.LinAlgError:
-            converged = False
-    if not converged or cov is None or np.max(np.abs(beta)) > 25 or not np.all(np.diag(cov) > 0):
-        return {"converged": False, "n": int(len(y)),
-                "detail": "no maximum-likelihood fit (separated or degenerate data)"}
-    z = NormalDist().inv_cdf(0.5 + level / 2)
-    se = np.sqrt(np.diag(cov))
-    coef = {}
-    for i, nm in enumerate(["intercept", *names]):
-        coef[nm] = {"estimate": float(beta[i]), "se": float(se[i]),
-                    "ci": [float(beta[i] - z * se[i]), float(beta[i] + z * se[i])]}
-    return {"converged": True, "n": int(len(y)), "coefficients": coef}
-
-
-def _quantile_bins(v: np.ndarray, n_bins: int) -> np.ndarray:
-    edges = np.unique(np.quantile(v, np.linspace(0, 1, n_bins + 1)))
-    if edges.size < 2:
-        edges = np.array([v.min(), v.max()])
-    return edges
 
 
 # ---------------------------------------------------------------- the whole analysis
@@ -168,8 +116,6 @@ CHECK_FIELDS = (
     "gap_ci_lo", "gap_ci_hi", "angle_measured_deg", "angle_predicted_deg", "cg_predicting",
     "compared_with", "difference", "difference_ci_lo", "difference_ci_hi", "confidence",
 )
-RECOGNITION_FIELDS = ("factor", "level", "bin_lo", "bin_hi", "n", "recognised", "accuracy",
-                      "ci_lo", "ci_hi", "reaction_time_mean_ms")
 
 
 @dataclass(frozen=True)
@@ -184,41 +130,6 @@ class _GapData:
     g: np.ndarray
     people: np.ndarray
     fit: GapFit
-
-
-def condition_levels(v: np.ndarray, round_to: float | None = None,
-                     max_levels: int = MAX_LEVELS) -> tuple[np.ndarray, list[dict[str, Any]]]:
-    """Each trial's level of a condition: its value rounded to ``round_to``
-    (none when None), NaN where it has none. More than ``max_levels``
-    distinct levels (a measured value exported in place of the swept one)
-    are cut into ``max_levels`` bins of about equal trial counts, never
-    splitting one value, and each trial's level is its bin's mean (rounded
-    likewise, so it lies within the bin). Returns (levels, bins): the bins
-    as ``{"lo", "hi", "level", "n" (trials), "values" (distinct values)}``,
-    empty when the values were few."""
-    v = np.asarray(v, dtype=float)
-    out = v.copy()
-    ok = np.isfinite(v)
-    vr = np.round(v[ok] / round_to) * round_to if round_to else v[ok]
-    out[ok] = vr
-    values, inverse, counts = np.unique(vr, return_inverse=True, return_counts=True)
-    if values.size <= max_levels:
-        return out, []
-    # the bin of each distinct value: by the share of trials below it
-    first = (np.cumsum(counts) - counts) * max_levels // vr.size
-    _, value_bin = np.unique(first, return_inverse=True)
-    trial_bin = value_bin[inverse]
-    n = np.bincount(trial_bin)
-    mean = np.bincount(trial_bin, weights=vr) / n
-    level = np.round(mean / round_to) * round_to if round_to else mean
-    out[ok] = level[trial_bin]
-    lo = np.full(n.size, np.inf)
-    hi = np.full(n.size, -np.inf)
-    np.minimum.at(lo, value_bin, values)
-    np.maximum.at(hi, value_bin, values)
-    held = np.bincount(value_bin)
-    return out, [{"lo": float(a), "hi": float(b), "level": float(c), "n": int(k),
-                  "values": int(u)} for a, b, c, k, u in zip(lo, hi, level, n, held)]
 
 
 #: the order in which figures and print-outs show fits: a critical gap first
@@ -267,7 +178,7 @@ def _gap_fits(used: Responses, levels: dict[str, np.ndarray], rng: np.random.Gen
         groups: dict[tuple[str, str], dict[float | None, list[int]]] = {}
         for i in np.flatnonzero(np.isfinite(x) & np.isfinite(gap)):
             groups.setdefault((proto[i], t_all[i]), {}).setdefault(
-                _key(held[i]), []).append(int(i))
+                level_key(held[i]), []).append(int(i))
         for protocol, target in sorted(groups):
             by_held = groups[(protocol, target)]
             # the held values in order, the trials that do not say last
@@ -407,7 +318,7 @@ def analyse(csv_path: str | Path, out_dir: str | Path, *, seed: int = 0,
     people = used.text["participant"]
     groups: dict[tuple[Any, ...], list[int]] = {}
     for i in range(len(used)):
-        key = (protocols[i], targets[i], float(vd_r[i]), _key(alt[i]), _key(spd[i]))
+        key = (protocols[i], targets[i], float(vd_r[i]), level_key(alt[i]), level_key(spd[i]))
         groups.setdefault(key, []).append(i)
     cons_rows: list[dict[str, Any]] = []
     for key in sorted(groups, key=_sort_key):
@@ -443,8 +354,8 @@ def analyse(csv_path: str | Path, out_dir: str | Path, *, seed: int = 0,
     _write_csv(out / "critical_gap_check.csv", CHECK_FIELDS, check_rows)
 
     # ---- experiment 2: recognition
-    rec_rows, logistic = _recognition(rec, levels_of(rec, "recognise"),
-                                      binned.get("recognise", {}), n_bins)
+    rec_rows, logistic = analyse_recognition(rec, levels_of(rec, "recognise"),
+                                             binned.get("recognise", {}), n_bins)
     _write_csv(out / "recognition.csv", RECOGNITION_FIELDS, rec_rows)
 
     files = ["conspicuity.csv", "critical_gap.csv", "critical_gap_check.csv",
@@ -478,7 +389,7 @@ def analyse(csv_path: str | Path, out_dir: str | Path, *, seed: int = 0,
             "responses": n_rec, "recognised": k_rec,
             "accuracy": k_rec / n_rec if n_rec else None,
             "accuracy_ci": list(wilson_ci(k_rec, n_rec)) if n_rec else None,
-            "by": _by_factor(rec_rows),
+            "by": by_factor(rec_rows),
             "logistic": logistic,
         },
         "settings": {"seed": seed, "n_boot": n_boot, "distance_round_mm": distance_round_mm,
@@ -490,99 +401,6 @@ def analyse(csv_path: str | Path, out_dir: str | Path, *, seed: int = 0,
     summary = _json_clean(summary)
     (out / "analysis.json").write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n")
     return summary
-
-
-def _recognition(rec: Responses, levels: dict[str, np.ndarray],
-                 bins: dict[str, list[dict[str, Any]]], n_bins: int
-                 ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
-    """Accuracy tables per factor, and the logistic regression on altitude and
-    speed. ``levels``: each trial's altitude and speed level, ``bins`` those
-    of the conditions cut into bins (``condition_levels``): a row a level,
-    or a bin."""
-    y = rec.recognised
-    rt = rec.num["reaction_time_ms"]
-    rows: list[dict[str, Any]] = []
-
-    def add(factor: str, label: str, m: np.ndarray, lo: float | None = None,
-            hi: float | None = None) -> None:
-        n = int(m.size)  # m: the trials' indices
-        k = int(y[m].sum())
-        c_lo, c_hi = wilson_ci(k, n)
-        rts = rt[m][~np.isnan(rt[m])]
-        rows.append(dict(zip(RECOGNITION_FIELDS, (
-            factor, label, lo, hi, n, k, k / n if n else None, c_lo, c_hi,
-            float(rts.mean()) if rts.size else None))))
-
-    for factor, col in (("alt_agl_m", "condition_alt_agl_m"), ("speed_kt", "condition_speed_kt")):
-        v = levels[col]
-        have = np.flatnonzero(np.isfinite(v))
-        values, which = np.unique(v[have], return_inverse=True)
-        ranges = {b["level"]: (b["lo"], b["hi"]) for b in bins.get(col, [])}
-        for j, lv in enumerate(values):
-            lo, hi = ranges.get(float(lv), (float(lv), float(lv)))
-            add(factor, f"{lv:g}" if lo == hi else f"{lo:g}-{hi:g}", have[which == j], lo, hi)
-    tarr = np.asarray(rec.text["condition_target"], dtype=object)
-    by_target: dict[str, list[int]] = {}
-    for i, t in enumerate(rec.text["condition_target"]):
-        by_target.setdefault(t, []).append(i)
-    for t in sorted(by_target):
-        add("target", t, np.asarray(by_target[t], dtype=np.int64))
-    for factor, col in (("angular_size_bin_deg", "target_angular_size_deg"),
-                        ("eccentricity_bin_deg", "eccentricity_deg")):
-        v = rec.num[col]
-        ok = ~np.isnan(v)
-        if not ok.any():
-            continue
-        edges = _quantile_bins(v[ok], n_bins)
-        for i in range(edges.size - 1):
-            lo, hi = float(edges[i]), float(edges[i + 1])
-            last = i == edges.size - 2
-            m = ok & (v >= lo) & ((v <= hi) if last else (v < hi))
-            add(factor, f"[{lo:.3g}, {hi:.3g}{']' if last else ')'}", np.flatnonzero(m), lo, hi)
-
-    # logistic regression: altitude (per 100 m), speed (per 100 kt), target as a factor
-    alt = rec.num["condition_alt_agl_m"]
-    spd = rec.num["condition_speed_kt"]
-    cols: list[np.ndarray] = []
-    names: list[str] = []
-    use = np.ones(len(rec), dtype=bool)
-    for nm, v, scale in (("alt_per_100m", alt, 100.0), ("speed_per_100kt", spd, 100.0)):
-        present = ~np.isnan(v)
-        if np.unique(v[present]).size >= 2:
-            use &= present
-            cols.append(v / scale)
-            names.append(nm)
-    targets = sorted(by_target)
-    # a factor of more than MAX_LEVELS targets would make the model's matrix
-    # (targets x targets) the whole cost: the model is made without it
-    as_factor = targets[1:] if len(targets) <= MAX_LEVELS else []
-    for t in as_factor:
-        cols.append((tarr == t).astype(float))
-        names.append(f"target[{t}]")
-    if not names or use.sum() < len(names) + 2:
-        logistic: dict[str, Any] = {"converged": False, "n": int(use.sum()),
-                                    "detail": "no factor varies (or too few responses)"}
-    else:
-        x = np.column_stack([c[use] for c in cols])
-        logistic = logistic_regression(x, y[use], names)
-        if as_factor:
-            logistic["reference_target"] = targets[0]
-    if len(targets) > MAX_LEVELS:
-        logistic["targets_left_out"] = (f"{len(targets)} targets, more than {MAX_LEVELS}: "
-                                        "the model is made without the target as a factor")
-    return rows, logistic
-
-
-def _by_factor(rows: Iterable[dict[str, Any]]) -> dict[str, list[dict[str, Any]]]:
-    by: dict[str, list[dict[str, Any]]] = {}
-    for row in rows:
-        by.setdefault(row["factor"], []).append(
-            {k: row[k] for k in ("level", "n", "accuracy", "ci_lo", "ci_hi")})
-    return by
-
-
-def _key(v: float) -> float | None:
-    return None if math.isnan(v) else float(v)
 
 
 def _sort_key(key: tuple[Any, ...]) -> tuple[Any, ...]:

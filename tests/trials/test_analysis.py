@@ -17,7 +17,8 @@ import pytest
 
 from cosim.cli import main
 from cosim.errors import ConfigError
-from cosim.trials.analysis import MAX_FITS, MAX_LEVELS, MAX_PANELS, analyse, condition_levels
+from cosim.trials.analysis import MAX_FITS, MAX_PANELS, analyse
+from cosim.trials.conditions import MAX_LEVELS, condition_levels
 from cosim.trials.critical_gap import GapFit, fit_critical_gap, fit_gap, fit_ground_gap
 from cosim.trials.critical_gap_check import check_across_levels
 from cosim.trials.estimates import mean_ci, t_quantile, wilson_ci
