@@ -163,3 +163,18 @@ def by_factor(rows: Iterable[dict[str, Any]]) -> dict[str, list[dict[str, Any]]]
         by.setdefault(row["factor"], []).append(
             {k: row[k] for k in ("level", "n", "accuracy", "ci_lo", "ci_hi")})
     return by
+
+
+def recognition_summary(rec: Responses, rows: list[dict[str, Any]],
+                        logistic: dict[str, Any]) -> dict[str, Any]:
+    """The "recognise" part of the analysis' summary: responses, accuracy
+    with its Wilson interval, the accuracy rows by factor and the model."""
+    n_rec = len(rec)
+    k_rec = int(np.nansum(rec.recognised))
+    return {
+        "responses": n_rec, "recognised": k_rec,
+        "accuracy": k_rec / n_rec if n_rec else None,
+        "accuracy_ci": list(wilson_ci(k_rec, n_rec)) if n_rec else None,
+        "by": by_factor(rows),
+        "logistic": logistic,
+    }

@@ -17,11 +17,13 @@ import pytest
 
 from cosim.cli import main
 from cosim.errors import ConfigError
-from cosim.trials.analysis import MAX_FITS, MAX_PANELS, analyse
+from cosim.trials.analysis import analyse
 from cosim.trials.conditions import MAX_LEVELS, condition_levels
 from cosim.trials.critical_gap import GapFit, fit_critical_gap, fit_gap, fit_ground_gap
 from cosim.trials.critical_gap_check import check_across_levels
+from cosim.trials.critical_gap_fits import MAX_FITS
 from cosim.trials.estimates import mean_ci, t_quantile, wilson_ci
+from cosim.trials.figures import MAX_PANELS
 from cosim.trials.responses import COLUMNS, OPTIONAL_COLUMNS, read_responses
 
 CG_MM = 40.0
