@@ -103,6 +103,7 @@ from cosim.mavlink.batch import BatchEncoder
 from cosim.mavlink.errors import EndpointClosed, LockstepTimeout
 from cosim.mavlink.handlers import Handler, Outcome, command_ack
 from cosim.mavlink.link import DEFAULT_URL, NullLink, UdpLink
+from cosim.mavlink.scenario import mavlink_rows
 from cosim.mavlink.signing import SharedSigning
 from cosim.mavlink.tlog import STAMP_LEN as TLOG_STAMP_LEN
 from cosim.mavlink.tlog import TlogWriter
@@ -198,8 +199,6 @@ class MavlinkConfig:
         """The config a scenario's ``mavlink:`` section asks for (None: no
         section); ``ids``: the scenario's vehicle ids, for its ``vehicles``
         patterns."""
-        from cosim.scenario.schema import mavlink_rows
-
         if section is None:
             return None
         return cls(url=section["url"], rates_hz=dict(section["rates_hz"]),

@@ -12,7 +12,7 @@ from __future__ import annotations
 import functools
 import math
 import re
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from fnmatch import fnmatchcase
 from pathlib import Path
@@ -702,55 +702,19 @@ class SectionInfo:
 
 
 def _mavlink(ctx: _Ctx, d: Any) -> dict[str, Any] | None:
-    """``mavlink: true`` or ``mavlink: {url: udpout:HOST:PORT, rates_hz: {MSG: Hz},
-    vehicles: PATTERNS}``."""
-    from cosim.mavlink import DEFAULT_URL
-    from cosim.mavlink.link import LinkUrl
-    from cosim.mavlink.vehicle import check_rates
+    """``mavlink:``, read by its part (``cosim.mavlink.scenario``)."""
+    from cosim.mavlink.scenario import parse_mavlink
 
-    if d is False:
-        return None
-    if d is True:
-        d = {}
-    r = _Reader(ctx, d, ("mavlink",), ("url", "rates_hz", "vehicles"))
-    url = r.string("url", DEFAULT_URL)
-    if url is not None:
-        try:
-            LinkUrl.parse(url)
-        except ConfigError as e:
-            ctx.err(("mavlink", "url"), str(e))
-    rates = r.d.get("rates_hz", {})
-    if not isinstance(rates, dict) or not all(
-            isinstance(v, (int, float)) and not isinstance(v, bool) for v in rates.values()):
-        ctx.err(("mavlink", "rates_hz"), "expected a mapping of message name: Hz")
-        rates = {}
-    for problem in check_rates(rates):
-        ctx.err(("mavlink", "rates_hz"), problem)
-    out: dict[str, Any] = {"url": url or DEFAULT_URL,
-                           "rates_hz": {str(k): float(v) for k, v in rates.items()}}
-    if r.has("vehicles"):  # checked against the vehicles by _mavlink_vehicles
-        out["vehicles"] = r.d["vehicles"]
-    return out
-
-
-def mavlink_rows(section: Mapping[str, Any] | None, ids: Sequence[str]
-                 ) -> tuple[int, ...] | None:
-    """The state rows of the vehicles a scenario's ``mavlink:`` section puts
-    on MAVLink (its ``vehicles`` patterns); None: every vehicle."""
-    pats = (section or {}).get("vehicles")
-    if pats is None or pats == ["all"]:
-        return None
-    return tuple(i for i, v in enumerate(ids) if any(fnmatchcase(v, p) for p in pats))
+    return parse_mavlink(d, ctx.err, lambda node, path, keys: _Reader(ctx, node, path, keys))
 
 
 def _mavlink_vehicles(ctx: _Ctx, mavlink: dict[str, Any],
                       vehicles: list[tuple[VehicleSpec, P]]) -> None:
-    """``mavlink.vehicles``: which vehicles are on MAVLink ('all', an id, a
-    pattern or a list of them; default all). Stored as patterns, resolved to
-    rows by ``mavlink_rows``."""
-    sel = mavlink["vehicles"]
-    _select(ctx, sel, ("mavlink", "vehicles"), [v.id for v, _ in vehicles])
-    mavlink["vehicles"] = sel if isinstance(sel, list) else [sel]
+    """``mavlink.vehicles``, checked against the vehicles by its part."""
+    from cosim.mavlink.scenario import check_vehicles
+
+    ids = [v.id for v, _ in vehicles]
+    check_vehicles(mavlink, lambda sel, path: _select(ctx, sel, path, ids))
 
 
 def _rates(ctx: _Ctx, d: Any) -> Rates:

@@ -428,7 +428,7 @@ def parse_search(info: Any, node: Any, path: P) -> SearchSpec | None:
 
 def _check_aircraft(info: Any, rows: list[int], path: P) -> None:
     """Every search aircraft must fly missions and be on MAVLink."""
-    from cosim.scenario.schema import mavlink_rows
+    from cosim.mavlink.scenario import mavlink_rows
     from cosim.vehicles import get_class
 
     for r in rows:

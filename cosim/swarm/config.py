@@ -44,7 +44,8 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
-from cosim.scenario.schema import SectionInfo, mavlink_rows
+from cosim.mavlink.scenario import mavlink_rows
+from cosim.scenario.schema import SectionInfo
 from cosim.swarm import laws
 from cosim.vehicles import get_class
 
