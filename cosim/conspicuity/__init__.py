@@ -1,15 +1,15 @@
-"""conspicuity: measurements for the conspicuity experiments (DESIGN.md 3.5).
+"""conspicuity: measurements for the conspicuity experiments.
 
 Owns the analysis of the renderer's per-frame ground truth (how long each
-target is visible, pass by pass), the critical-gap relation between a
+target is visible, pass by pass) and the critical-gap relation between a
 conspicuity angle measured at a viewing distance and the angle at a flight
-altitude, and the conversion between on-screen distance and visual angle for
-a display profile. It reads run folders; it never renders, steps an FDM or
-writes into a run's own files (``cosim visibility`` adds ``visibility.csv``).
+altitude. The display profile (on-screen distance <-> visual angle) is the
+kernel's, ``cosim.core.display``, and part of this package's API. It reads
+run folders; it never renders, steps an FDM or writes into a run's own files
+(``cosim visibility`` adds ``visibility.csv``).
 """
 
 from cosim.conspicuity.angles import (
-    DisplayProfile,
     angle_at_altitude_deg,
     angle_at_viewing_distance_deg,
     angle_for_gap_deg,
@@ -24,6 +24,7 @@ from cosim.conspicuity.visibility import (
     visibility,
     write_visibility_csv,
 )
+from cosim.core.display import DisplayProfile
 
 __all__ = ["DisplayProfile", "Pass", "TargetVisibility", "angle_at_altitude_deg",
            "angle_at_viewing_distance_deg", "angle_for_gap_deg", "critical_gap_m", "passes",

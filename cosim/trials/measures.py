@@ -1,13 +1,13 @@
 """Conspicuity measures of a trial response, from the clip's ground truth.
 
-Owns the geometry from a camera pixel to the participant's eye: the video is
-drawn as large as fits the screen with its aspect ratio kept, centred
-(letterboxed), so one camera pixel is ``scale = min(W / w, H / h)`` screen
-pixels and the image centre is the screen centre, where the fixation mark
-is. Camera pixel coordinates put pixel centres at integers (the image spans
-``[-0.5, w - 0.5]``, ``cosim.renderer.camera``), so the image centre is
-``((w - 1) / 2, (h - 1) / 2)``. Screen pixels become millimetres through the
-display profile's physical size (``screen_width_mm / screen_width_px``
+Owns what a trial measures at a key press and what display profile it
+accepts (``participant_display``: each value within ``SCREEN_PX_RANGE``,
+``SCREEN_MM_RANGE``, ``VIEWING_DISTANCE_MM_RANGE``). The geometry from a
+camera pixel to the participant's eye is the display profile's
+(``cosim.core.display``): the video is drawn as large as fits the screen
+with its aspect ratio kept, centred (letterboxed), the image centre on the
+screen centre, where the fixation mark is; screen pixels become millimetres
+through the profile's physical size (``screen_width_mm / screen_width_px``
 across, ``screen_height_mm / screen_height_px`` down).
 
 - ``onscreen_distance_mm``: from the screen centre to the target centre.
@@ -29,7 +29,7 @@ across, ``screen_height_mm / screen_height_px`` down).
   the target perpendicular to the optical axis, between the point looked at
   and the target: for a level nadir camera the distance on the ground (at
   the height of the target's centre), the ``tan(beta) * h`` of the
-  critical-gap relation (DESIGN: the conspicuity angle at altitude ``h``)
+  critical-gap relation (``beta`` the conspicuity angle at altitude ``h``)
   with ``h`` the camera's height above the target's centre, not above the
   ground (a truck's centre is 1.75 m up: 6 % at 30 m).
 - ``target_angular_size_deg``: the visual angle of the target's on-screen
@@ -46,6 +46,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from cosim.core.display import DisplayProfile, angle_between_deg
 from cosim.errors import ConfigError
 from cosim.trials.study import Clip
 
@@ -55,37 +56,30 @@ SCREEN_MM_RANGE = (20.0, 20_000.0)
 VIEWING_DISTANCE_MM_RANGE = (100.0, 20_000.0)
 
 
-@dataclass(frozen=True)
-class Display:
-    """The participant's screen and where their eyes are."""
-
-    screen_width_px: int
-    screen_height_px: int
-    screen_width_mm: float
-    screen_height_mm: float
-    viewing_distance_mm: float
-
-    def __post_init__(self) -> None:
-        problems = []
-        for name in ("screen_width_px", "screen_height_px"):
-            v = getattr(self, name)
-            lo, hi = SCREEN_PX_RANGE
-            if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
-                problems.append(f"{name} must be a whole number in [{lo}, {hi}], got {v!r}")
-        for name, (lo_f, hi_f) in (("screen_width_mm", SCREEN_MM_RANGE),
-                                   ("screen_height_mm", SCREEN_MM_RANGE),
-                                   ("viewing_distance_mm", VIEWING_DISTANCE_MM_RANGE)):
-            v = getattr(self, name)
-            if (isinstance(v, bool) or not isinstance(v, (int, float))
-                    or not math.isfinite(v) or not lo_f <= v <= hi_f):
-                problems.append(f"{name} must be a number in [{lo_f:g}, {hi_f:g}], got {v!r}")
-        if problems:
-            raise ConfigError([f"display profile: {p}" for p in problems])
-
-    @property
-    def mm_per_px(self) -> tuple[float, float]:
-        return (self.screen_width_mm / self.screen_width_px,
-                self.screen_height_mm / self.screen_height_px)
+def participant_display(screen_width_px: int, screen_height_px: int, screen_width_mm: float,
+                        screen_height_mm: float, viewing_distance_mm: float) -> DisplayProfile:
+    """The participant's screen and where their eyes are, as a trial takes
+    them (a session's profile, or the page as the browser drew it): each
+    value within what a trial may hold, every problem listed at once in a
+    ``ConfigError``."""
+    problems = []
+    lo, hi = SCREEN_PX_RANGE
+    for name, v in (("screen_width_px", screen_width_px),
+                    ("screen_height_px", screen_height_px)):
+        if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
+            problems.append(f"{name} must be a whole number in [{lo}, {hi}], got {v!r}")
+    for name, f, (lo_f, hi_f) in (
+            ("screen_width_mm", screen_width_mm, SCREEN_MM_RANGE),
+            ("screen_height_mm", screen_height_mm, SCREEN_MM_RANGE),
+            ("viewing_distance_mm", viewing_distance_mm, VIEWING_DISTANCE_MM_RANGE)):
+        if (isinstance(f, bool) or not isinstance(f, (int, float))
+                or not math.isfinite(f) or not lo_f <= f <= hi_f):
+            problems.append(f"{name} must be a number in [{lo_f:g}, {hi_f:g}], got {f!r}")
+    if problems:
+        raise ConfigError([f"display profile: {p}" for p in problems])
+    return DisplayProfile(viewing_distance_mm=viewing_distance_mm, width_px=screen_width_px,
+                          height_px=screen_height_px, screen_width_mm=screen_width_mm,
+                          screen_height_mm=screen_height_mm)
 
 
 @dataclass(frozen=True)
@@ -102,31 +96,7 @@ class Measures:
     target_depth_m: float | None = None  # the target centre along the optical axis
 
 
-def video_scale(display: Display, width_px: int, height_px: int) -> float:
-    """Screen pixels per camera pixel when the video is drawn as large as fits."""
-    return min(display.screen_width_px / width_px, display.screen_height_px / height_px)
-
-
-def camera_to_screen_mm(display: Display, width_px: int, height_px: int, u_px: float,
-                        v_px: float) -> tuple[float, float]:
-    """Camera pixel (u, v) -> millimetres right of and below the screen centre."""
-    s = video_scale(display, width_px, height_px)
-    mx, my = display.mm_per_px
-    return ((u_px - (width_px - 1) / 2) * s * mx, (v_px - (height_px - 1) / 2) * s * my)
-
-
-def angle_between_deg(a_mm: tuple[float, float], b_mm: tuple[float, float],
-                      viewing_distance_mm: float) -> float:
-    """Visual angle between two points on the screen (mm from its centre)."""
-    d = viewing_distance_mm
-    ax, ay = a_mm
-    bx, by = b_mm
-    dot = ax * bx + ay * by + d * d
-    cross = math.sqrt((ay * d - d * by) ** 2 + (d * bx - ax * d) ** 2 + (ax * by - ay * bx) ** 2)
-    return math.degrees(math.atan2(cross, dot))
-
-
-def measures_at(clip: Clip, frame_index: int, display: Display) -> Measures:
+def measures_at(clip: Clip, frame_index: int, display: DisplayProfile) -> Measures:
     """The measures at video frame ``frame_index`` of ``clip`` on ``display``."""
     if not 0 <= frame_index < len(clip.frames):
         raise ValueError(f"clip {clip.id}: frame index {frame_index} outside 0.."
@@ -135,9 +105,9 @@ def measures_at(clip: Clip, frame_index: int, display: Display) -> Measures:
     w, h = clip.width_px, clip.height_px
     x_mm = y_mm = dist = ecc = size = gap = None
     if g.center_px is not None:
-        x_mm, y_mm = camera_to_screen_mm(display, w, h, *g.center_px)
+        x_mm, y_mm = display.camera_to_screen_mm(w, h, *g.center_px)
         dist = math.hypot(x_mm, y_mm)
-        ecc = math.degrees(math.atan(dist / display.viewing_distance_mm))
+        ecc = display.mm_to_deg(dist)
         f = clip.focal_px
         if f is not None:
             off = math.hypot(g.center_px[0] - (w - 1) / 2, g.center_px[1] - (h - 1) / 2)
@@ -147,10 +117,10 @@ def measures_at(clip: Clip, frame_index: int, display: Display) -> Measures:
         x0, x1 = max(x0, -0.5), min(x1, w - 0.5)
         y0, y1 = max(y0, -0.5), min(y1, h - 0.5)
         if x1 >= x0 and y1 >= y0:
-            c00 = camera_to_screen_mm(display, w, h, x0, y0)
-            c11 = camera_to_screen_mm(display, w, h, x1, y1)
-            c01 = camera_to_screen_mm(display, w, h, x0, y1)
-            c10 = camera_to_screen_mm(display, w, h, x1, y0)
+            c00 = display.camera_to_screen_mm(w, h, x0, y0)
+            c11 = display.camera_to_screen_mm(w, h, x1, y1)
+            c01 = display.camera_to_screen_mm(w, h, x0, y1)
+            c10 = display.camera_to_screen_mm(w, h, x1, y0)
             d = display.viewing_distance_mm
             size = max(angle_between_deg(c00, c11, d), angle_between_deg(c01, c10, d))
     return Measures(frame=g.frame, time_s=g.time_s, target_in_view=g.in_view,
@@ -168,7 +138,7 @@ def arrow_offset_mm(speed_deg_s: float, elapsed_ms: float, viewing_distance_mm: 
     return viewing_distance_mm * math.tan(a)
 
 
-def track_measures(clip: Clip, display: Display, direction: tuple[float, float],
+def track_measures(clip: Clip, display: DisplayProfile, direction: tuple[float, float],
                    speed_deg_s: float, elapsed_ms: float) -> Measures:
     """A ``track`` sub-trial's measures at the key press: the clip still at its
     ``still_frame``, the participant's eyes on the arrow that left the target
@@ -184,7 +154,7 @@ def track_measures(clip: Clip, display: Display, direction: tuple[float, float],
     gap = None
     f = clip.focal_px
     if f is not None:  # the arrow's way back in camera pixels
-        s = video_scale(display, clip.width_px, clip.height_px)
+        s = display.scale(clip.width_px, clip.height_px)
         mx, my = display.mm_per_px
         gap = math.degrees(math.atan(
             math.hypot(r * direction[0] / (s * mx), r * direction[1] / (s * my)) / f))

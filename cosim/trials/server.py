@@ -55,6 +55,7 @@ from starlette.responses import FileResponse, JSONResponse, Response
 from starlette.routing import Mount, Route
 from starlette.staticfiles import StaticFiles
 
+from cosim.core.display import DisplayProfile
 from cosim.errors import ConfigError
 from cosim.netaddr import is_loopback
 from cosim.trials.files import file_kind
@@ -65,7 +66,7 @@ from cosim.trials.limits import (
     json_depth,
     uvicorn_settings,
 )
-from cosim.trials.measures import Display, measures_at, track_measures
+from cosim.trials.measures import measures_at, participant_display, track_measures
 from cosim.trials.store import Store, shown_url, write_csv
 from cosim.trials.study import TRACK_DIRECTIONS, Clip, Study, load_study
 from cosim.trials.target_picture import choose_still, target_png
@@ -301,7 +302,7 @@ class TrialApp:
         try:
             fields: dict[str, Any] = {k: _whole(d.get(k)) if k.endswith("_px") else d.get(k)
                                       for k in DISPLAY_FIELDS}
-            display = Display(**fields)
+            participant_display(**fields)  # checked; stored as given
         except ConfigError as e:
             raise BadRequest("; ".join(e.problems)) from None
         st = self.study
@@ -313,8 +314,8 @@ class TrialApp:
                  for t in st.trial_order(number)]
         s = self.store.create_session(
             participant=participant, study=st.name, protocol=st.protocol,
-            display={k: float(getattr(display, k)) if k.endswith("_mm")
-                     else int(getattr(display, k)) for k in DISPLAY_FIELDS},
+            display={k: float(fields[k]) if k.endswith("_mm") else int(fields[k])
+                     for k in DISPLAY_FIELDS},
             order_method=st.order, seed=st.seed, session_number=number, trial_order=order)
         log.info("session %s for participant %s: %d trials", s["id"], participant, len(order))
         return JSONResponse(self._view(s), status_code=201)
@@ -361,7 +362,8 @@ class TrialApp:
             raise BadRequest("recognised: a recognise trial's answer must say true or false")
         if media is not None and not -1.0 <= media <= len(clip.frames) / clip.rate_hz + 1.0:
             raise BadRequest(f"media_time_s {media} is outside clip {clip.id}")
-        display = Display(**{k: s[k] for k in DISPLAY_FIELDS})
+        profile = {k: s[k] for k in DISPLAY_FIELDS}
+        display = participant_display(**profile)
         px = _window_px(d)
         drawn = _drawn_on(display, px)
         if px is not None:
@@ -372,7 +374,7 @@ class TrialApp:
             "clip": clip.id, "run": clip.run, "conditions": json.dumps(clip.condition_map),
             "key": key, "reaction_time_ms": rt, "recognised": recognised, "reshown": reshown,
             **{f"condition_{c}": clip.condition_map.get(c) for c in CONDITION_COLUMNS},
-            **display.__dict__}
+            **profile}
         if not row.get("condition_target"):  # a study that does not vary the target
             row["condition_target"] = clip.target
         if s["protocol"] == "track":  # the arrow's way from the target, at the press
@@ -450,7 +452,7 @@ def _directions(seed: int, session_number: int, trial: int) -> list[str]:
     return [names[i] for i in order]
 
 
-def _drawn_on(display: Display, px: tuple[int, int] | None) -> Display:
+def _drawn_on(display: DisplayProfile, px: tuple[int, int] | None) -> DisplayProfile:
     """Where the clip was drawn: the page's size (device px) as the browser
     reported it, at the profile's millimetres per pixel, with the fixation
     mark at its centre; the profile's screen if the page did not say (or said
@@ -458,13 +460,13 @@ def _drawn_on(display: Display, px: tuple[int, int] | None) -> Display:
     if px is None:
         return display
     wi, hi = px
-    if (wi, hi) == (display.screen_width_px, display.screen_height_px):
+    if (wi, hi) == (display.width_px, display.height_px):
         return display
     mx, my = display.mm_per_px
     log.warning("the participant's page is %d x %d px, not the profile's %d x %d: measured "
-                "as drawn", wi, hi, display.screen_width_px, display.screen_height_px)
+                "as drawn", wi, hi, display.width_px, display.height_px)
     try:
-        return Display(wi, hi, wi * mx, hi * my, display.viewing_distance_mm)
+        return participant_display(wi, hi, wi * mx, hi * my, display.viewing_distance_mm)
     except ConfigError as e:
         raise BadRequest(f"the page's size {wi} x {hi} px: {e}") from None
 

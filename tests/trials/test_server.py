@@ -1056,7 +1056,7 @@ def test_track_protocol(study_file: Path) -> None:
     needs_chromium()
     from playwright.sync_api import sync_playwright
 
-    from cosim.trials.measures import angle_between_deg
+    from cosim.core.display import angle_between_deg
 
     with one_clip_study(study_file, "track", "protocol: track\narrow_speed_deg_s: 4\nseed: 3\n"
                         ) as (server, s):

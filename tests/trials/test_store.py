@@ -12,9 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cosim.core.display import DisplayProfile
 from cosim.errors import ConfigError
 from cosim.renderer.video import open_video
-from cosim.trials.measures import Display, camera_to_screen_mm, measures_at, video_scale
+from cosim.trials.measures import measures_at, participant_display
 from cosim.trials.store import EXPORT_COLUMNS, Store, export_csv
 from cosim.trials.study import GT_REQUIRED, load_study, williams_row
 
@@ -158,8 +159,8 @@ def test_ground_truth_gives_the_targets_depth_along_the_optical_axis(tmp_path: P
     assert [g.depth_m for g in c0.frames[:4]] == pytest.approx([20.0, 25.0, 30.0, 35.0])
     assert c0.frames[4].depth_m is None  # an empty cell: not known
     assert [g.depth_m for g in c1.frames] == [None] * 5
-    d = Display(screen_width_px=1600, screen_height_px=900, screen_width_mm=400,
-                screen_height_mm=225, viewing_distance_mm=500)
+    d = participant_display(screen_width_px=1600, screen_height_px=900, screen_width_mm=400,
+                            screen_height_mm=225, viewing_distance_mm=500)
     assert measures_at(c0, 3, d).target_depth_m == pytest.approx(35.0)
     assert measures_at(c1, 3, d).target_depth_m is None
     assert c0.still_frame == 2
@@ -277,10 +278,11 @@ def test_measures_by_hand(tmp_path: Path) -> None:
                                       (2, 400.0, 99.5, 0), (3, 400.0, 99.5, 0),
                                       (4, 400.0, 99.5, 0)])
     clip = load_study(p).clips[0]
-    d = Display(screen_width_px=1600, screen_height_px=900, screen_width_mm=400,
-                screen_height_mm=225, viewing_distance_mm=500)
-    assert video_scale(d, 320, 240) == 3.75
-    assert camera_to_screen_mm(d, 320, 240, -0.5, -0.5) == (-150.0, -112.5)  # image corner
+    d = participant_display(screen_width_px=1600, screen_height_px=900, screen_width_mm=400,
+                            screen_height_mm=225, viewing_distance_mm=500)
+    assert isinstance(d, DisplayProfile)  # the one display geometry (cosim.core.display)
+    assert d.scale(320, 240) == 3.75
+    assert d.camera_to_screen_mm(320, 240, -0.5, -0.5) == (-150.0, -112.5)  # image corner
     m0 = measures_at(clip, 0, d)  # the target at the image centre = the fixation mark
     assert (m0.frame, m0.onscreen_distance_mm, m0.eccentricity_deg) == (0, 0.0, 0.0)
     # its bbox 20 x 10 camera px = 18.75 x 9.375 mm, centred: 2 atan(half diagonal / 500)
@@ -299,8 +301,8 @@ def test_measures_by_hand(tmp_path: Path) -> None:
 
 def test_display_profile_is_checked() -> None:
     with pytest.raises(ConfigError, match=r"viewing_distance_mm must be a number in"):
-        Display(screen_width_px=1920, screen_height_px=1080, screen_width_mm=500,
-                screen_height_mm=280, viewing_distance_mm=0)
+        participant_display(screen_width_px=1920, screen_height_px=1080, screen_width_mm=500,
+                            screen_height_mm=280, viewing_distance_mm=0)
 
 
 # --- store ---
@@ -445,8 +447,8 @@ def test_camera_gap_is_the_renderers_angle_and_the_ground_distance(
     clip = Clip(id="c", video=tmp_path / "v.mp4", ground_truth=gt, target="t", run="",
                 rate_hz=10.0, width_px=320, height_px=240, conditions=(), frames=frames,
                 hfov_deg=60.0)
-    d = Display(screen_width_px=1600, screen_height_px=900, screen_width_mm=400,
-                screen_height_mm=225, viewing_distance_mm=500)
+    d = participant_display(screen_width_px=1600, screen_height_px=900, screen_width_mm=400,
+                            screen_height_mm=225, viewing_distance_mm=500)
     m = measures_at(clip, 0, d)
     assert m.camera_gap_deg == pytest.approx(row["eccentricity_deg"], abs=1e-6)
     # the target stands on the curved Earth, r**2 / 2R below the camera's level
@@ -469,8 +471,8 @@ def test_track_camera_gap_is_the_arrows_way_in_camera_pixels(tmp_path: Path) -> 
         "width_px: 320, height_px: 240,", "width_px: 320, height_px: 240, hfov_deg: 90,"))
     clip = load_study(p).clips[0]
     assert clip.focal_px == pytest.approx(160.0)
-    d = Display(screen_width_px=1600, screen_height_px=900, screen_width_mm=400,
-                screen_height_mm=225, viewing_distance_mm=500)
+    d = participant_display(screen_width_px=1600, screen_height_px=900, screen_width_mm=400,
+                            screen_height_mm=225, viewing_distance_mm=500)
     for direction in ((1.0, 0.0), (0.0, -1.0)):
         m = track_measures(clip, d, direction, 2.0, 1500.0)
         r_mm = arrow_offset_mm(2.0, 1500.0, 500.0)
