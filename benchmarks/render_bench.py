@@ -86,7 +86,7 @@ def per_frame(frames: int, cache_dir: str, codec: str = "mp4v") -> dict[str, flo
     from cosim.renderer.frame import WorldSpec
 
     ws = WorldSpec(scn.origin.lat_deg, scn.origin.lon_deg, scn.origin.ground_alt_m, scn.seed,
-                   120.0, scn.sections["ground"], scn.sections["targets"])
+                   120.0, scn.world.ground, scn.world.targets)
     cam: CameraSpec = scn.sections["cameras"].views[0]
     frame = LocalFrame(scn.origin.lat_deg, scn.origin.lon_deg, scn.origin.ground_alt_m)
     poses = []

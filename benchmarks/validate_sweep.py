@@ -20,7 +20,7 @@ from pathlib import Path
 
 from cosim.cli import _validate_file
 from cosim.scenario import load_scenario
-from cosim.sweep import read_sweep
+from cosim.sweep.spec import read_sweep
 
 SWEEP = """\
 schema_version: 1

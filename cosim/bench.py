@@ -54,6 +54,7 @@ from cosim.jsb import find_model
 from cosim.scenario.formation import formation_offsets
 from cosim.vehicles import DEFAULT_CLASS
 from cosim.vehicles.registry import get_class
+from cosim.world import World
 
 log = logging.getLogger(__name__)
 
@@ -79,7 +80,7 @@ def bench_specs(n: int, model: str = "c172p", spacing_m: float = 300.0,
                          alt_msl_m=1000.0, heading_deg=0.0, airspeed_mps=100 * KT_TO_MPS,
                          random_seed=i, profile=m.profile, vehicle_class=cls)
              for i in range(n)]
-    return [vc.with_world(v, {}, ORIGIN) for v in specs]
+    return [vc.with_world(v, World(), {}, ORIGIN) for v in specs]
 
 
 def _serial_loop(shard: Shard, ticks: int, k: int) -> float:

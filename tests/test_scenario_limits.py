@@ -1,4 +1,4 @@
-"""Scenario files are untrusted input: every limit in ``cosim.scenario.limits``
+"""Scenario files are untrusted input: every limit in ``cosim.core.limits``
 is a line-numbered config error (exit 2), found fast, never a traceback, a
 hang, a silent change of the value or a file written outside the run folder."""
 
@@ -15,8 +15,9 @@ from pathlib import Path
 import pytest
 
 from cosim.cli import main
+from cosim.core import limits
 from cosim.errors import ConfigError
-from cosim.scenario import limits, load_scenario, parse_scenario
+from cosim.scenario import load_scenario, parse_scenario
 from cosim.sweep.spec import SweepSpec, read_sweep
 
 HEAD = """\

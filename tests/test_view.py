@@ -23,7 +23,7 @@ from cosim.errors import ConfigError  # noqa: E402
 from cosim.logs import read_states  # noqa: E402
 from cosim.scenario import load_scenario  # noqa: E402
 from cosim.sync import run_scenario  # noqa: E402
-from cosim.view import ViewParticipant, enu_quaternions  # noqa: E402
+from cosim.sync.view import ViewParticipant, enu_quaternions  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 FLYOVER = REPO / "scenarios" / "cameras" / "flyover.yaml"

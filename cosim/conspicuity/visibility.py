@@ -35,11 +35,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from cosim.core.limits import MAX_NUMBER
 from cosim.errors import ConfigError
 from cosim.logs import RunFolder, replacing
 from cosim.logs.resolved import is_number
 from cosim.logs.runfolder import MAX_GROUND_TRUTH_BYTES, MAX_TIME_S, physics_hz
-from cosim.scenario.limits import MAX_NUMBER
 from cosim.scenario.yaml_lines import open_bounded
 
 #: ground-truth columns this module needs

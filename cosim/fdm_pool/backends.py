@@ -35,11 +35,11 @@ from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
 
-from cosim import plugins
+from cosim.core import plugins
+from cosim.core.plugins import load_plugins, plugin_names
 from cosim.core.state import VehicleSpec
 from cosim.errors import ConfigError
 from cosim.fdm_pool.base import Pool
-from cosim.plugins import load_plugins, plugin_names
 
 #: the default backend of ``cosim run``
 DEFAULT = plugins.DEFAULT_BACKEND

@@ -14,8 +14,8 @@ from pathlib import Path
 from typing import Any, TypeGuard
 
 from cosim.core.geo import MAX_DISTANCE_M
+from cosim.core.limits import MAX_NAME_CHARS, PHYSICS_HZ_RANGE
 from cosim.errors import ConfigError, CosimError
-from cosim.scenario.limits import MAX_NAME_CHARS, PHYSICS_HZ_RANGE
 from cosim.scenario.yaml_lines import YamlProblem, format_path, load_with_lines, read_text_bounded
 
 #: ``scenario.resolved.yaml`` lists every vehicle: about 240 bytes and 11

@@ -35,10 +35,7 @@ import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
 
-from cosim.errors import ConfigError
-from cosim.logs.resolved import RESOLVED, Resolved, is_number, read_resolved, show_value
-from cosim.logs.writers import state_schema
-from cosim.scenario.limits import (
+from cosim.core.limits import (
     MAX_DEPTH,
     MAX_DURATION_S,
     MAX_NAME_CHARS,
@@ -46,6 +43,9 @@ from cosim.scenario.limits import (
     MIN_EXCHANGE_HZ,
     PHYSICS_HZ_RANGE,
 )
+from cosim.errors import ConfigError
+from cosim.logs.resolved import RESOLVED, Resolved, is_number, read_resolved, show_value
+from cosim.logs.writers import state_schema
 from cosim.scenario.yaml_lines import open_bounded, read_bounded, read_text_bounded
 
 #: ``summary.json``, ``sweep.json``

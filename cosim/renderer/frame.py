@@ -41,8 +41,6 @@ from cosim.core.camera import (
     to_camera,
 )
 from cosim.core.geo import LocalFrame, geodetic_to_ecef
-from cosim.obstacles import signed_area
-from cosim.renderer.config import GroundSpec, TargetSpec
 from cosim.renderer.ground import GroundTexture
 from cosim.renderer.targets import (
     FACE_IDX,
@@ -57,6 +55,9 @@ from cosim.renderer.targets import (
     smoke_puffs,
     to_local,
 )
+from cosim.world.ground import GroundSpec
+from cosim.world.obstacles import signed_area
+from cosim.world.targets import TargetSpec
 
 GT_COLUMNS = ("frame", "time_s", "vehicle", "camera", "target", "in_view", "fully_in_view",
               "bbox_x0_px", "bbox_y0_px", "bbox_x1_px", "bbox_y1_px", "center_x_px",

@@ -42,7 +42,7 @@ import cv2
 import numpy as np
 
 from cosim.core.geo import LocalFrame
-from cosim.renderer.config import GroundSpec
+from cosim.world.ground import GroundSpec
 
 log = logging.getLogger(__name__)
 
@@ -541,7 +541,7 @@ class _ImageLayer:
 
     def __init__(self, spec: GroundSpec, frame: LocalFrame) -> None:
         from cosim.errors import ConfigError
-        from cosim.renderer.imagery import ImageRefused, check_picture
+        from cosim.world.imagery import ImageRefused, check_picture
 
         assert spec.image is not None
         try:  # its declared size within what a render worker may hold, before decoding
@@ -616,8 +616,8 @@ class _GeoRasterLayer:
 
     def __init__(self, spec: GroundSpec, frame: LocalFrame) -> None:
         from cosim.errors import ConfigError
-        from cosim.renderer import geotiff
-        from cosim.renderer.imagery import ImageRefused, check_georeferenced
+        from cosim.world import geotiff
+        from cosim.world.imagery import ImageRefused, check_georeferenced
 
         assert spec.image is not None
         try:  # what validation checked, again where it is opened

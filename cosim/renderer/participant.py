@@ -59,7 +59,7 @@ from cosim import workers as worker_kit
 from cosim.core.camera import CameraSpec, camera_pose
 from cosim.core.state import STATE_INDEX
 from cosim.errors import CosimError, how_it_ended
-from cosim.renderer.config import CamerasSpec, GroundSpec
+from cosim.renderer.config import CamerasSpec
 from cosim.renderer.frame import GT_COLUMNS, World, WorldSpec, render_frame
 from cosim.renderer.video import EXTENSIONS, open_video
 from cosim.sync.participants import ParticipantFailed, RunContext
@@ -395,10 +395,8 @@ class CameraParticipant:
             ctx.commander.observers.append(self.trigger_camera)
         scn = ctx.scenario
         ws = WorldSpec(scn.origin.lat_deg, scn.origin.lon_deg, scn.origin.ground_alt_m,
-                       int(scn.seed), float(ctx.physics_hz),
-                       scn.sections.get("ground") or GroundSpec(),
-                       tuple(scn.sections.get("targets") or ()),
-                       tuple(scn.sections.get("obstacles") or ()))
+                       int(scn.seed), float(ctx.physics_hz), scn.world.ground,
+                       scn.world.targets, scn.world.obstacles)
         n = self.spec.render_workers
         if n is None:
             n = min(len(self.streams), os.cpu_count() or 1)

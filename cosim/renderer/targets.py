@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cosim.core.geo import LocalFrame, geodetic_to_ecef
-from cosim.renderer.config import TargetSpec
+from cosim.world.targets import TargetSpec
 
 SUN_ELEVATION_DEG, SUN_AZIMUTH_DEG = 50.0, 135.0  # from the south-east
 _el, _az = math.radians(SUN_ELEVATION_DEG), math.radians(SUN_AZIMUTH_DEG)

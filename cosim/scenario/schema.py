@@ -12,15 +12,18 @@ from __future__ import annotations
 import functools
 import math
 import re
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from fnmatch import fnmatchcase
 from pathlib import Path
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
 
+from cosim.core import limits as lim
 from cosim.core.geo import LocalFrame
+from cosim.core.section import Section, scenario_sections
 from cosim.core.state import VehicleSpec
 from cosim.core.units import KT_TO_MPS
 from cosim.errors import ConfigError, CosimError
@@ -31,7 +34,6 @@ from cosim.guidance import (
 )
 from cosim.guidance.safety import Limits, speed_after
 from cosim.jsb import find_model, has_property, is_writable, new_fdm
-from cosim.scenario import limits as lim
 from cosim.scenario.formation import FORMATIONS, formation_offsets
 from cosim.scenario.yaml_lines import (
     YamlProblem,
@@ -40,6 +42,7 @@ from cosim.scenario.yaml_lines import (
     read_scenario_text,
 )
 from cosim.vehicles import DEFAULT_CLASS, ModelChoice, VehicleClass, get_class
+from cosim.world import World
 
 SCHEMA_VERSION = 1
 ALT_MIN_M, ALT_MAX_M = -500.0, 100_000.0  # every vehicle's resolved height must lie here
@@ -109,8 +112,10 @@ class Scenario:
     plot: bool = False  # write track.png (ground track and altitude) after the run
     #: MAVLink link of the run: {"url": ..., "rates_hz": {...}}; None: no MAVLink
     mavlink: dict[str, Any] | None = None
-    #: parsed top-level sections owned by other parts (``SECTIONS``): key -> object
+    #: parsed top-level sections (``cosim.scenario.sections``): key -> object
     sections: dict[str, Any] = field(default_factory=dict, compare=False)
+    #: what exists in the scenario (ground, targets, obstacles), from the sections
+    world: World = field(default_factory=World, compare=False)
     #: the sections as written (YAML data), for ``resolved_dict``
     section_sources: dict[str, Any] = field(default_factory=dict, compare=False)
     schema_version: int = SCHEMA_VERSION
@@ -533,7 +538,7 @@ def _parse(text: str, fname: str, check_properties: bool, sweep_point: dict[str,
     ctx.vehicles = data.get("vehicles") if isinstance(data, dict) else None
     top = _Reader(ctx, data, (), ("schema_version", "name", "description", "origin", "rates",
                                   "duration_s", "seed", "aircraft_path", "plot", "mavlink",
-                                  "vehicles", "schedule", *SECTIONS))
+                                  "vehicles", "schedule", *scenario_sections()))
     version = top.integer("schema_version")
     if version is not None and version != SCHEMA_VERSION:
         ctx.err(("schema_version",), f"unsupported schema_version {version}; this cosim reads "
@@ -575,21 +580,29 @@ def _parse(text: str, fname: str, check_properties: bool, sweep_point: dict[str,
         _check_properties(ctx, vehicles, schedule, memo.fdms)
     sections: dict[str, Any] = {}
     info = SectionInfo(ctx, origin, rates, duration, [v for v, _ in vehicles], Path(fname),
-                       mavlink, seed or 0, sections)
+                       mavlink, seed or 0)
     earlier: list[tuple[str, str]] = []  # the sections parsed so far, as written
-    for key in SECTIONS:
-        if key in top.d:
-            raw = repr(top.d[key])
-            # a section's parser sees its own node, the scenario so far and the
-            # sections before it: with the same of each, it gives the same
-            skey = (key, raw, origin, rates, duration, vkey, repr(mavlink), seed,
-                    tuple(earlier), len(ctx.problems))
-            parsed, changed = memo.part("section", skey, ctx, functools.partial(
-                _parse_section, info, key=key, node=top.d[key]))
-            sections[key] = parsed
-            sections.update(changed)
-            earlier.append((key, raw))
-    vehicles = _with_world(ctx, vehicles, sections, origin)
+    adds: list[tuple[str, Any]] = []  # what each adds to the world
+    for key, section in scenario_sections().items():  # each after those it reads
+        if key not in top.d:
+            continue
+        raw = repr(top.d[key])
+        # a section's parser sees its own node, the scenario so far and the
+        # sections it reads: with the same of each, it gives the same
+        skey = (key, raw, origin, rates, duration, vkey, repr(mavlink), seed,
+                tuple(earlier), len(ctx.problems))
+        info.sections = MappingProxyType({k: sections[k] for k in section.reads
+                                          if k in sections})
+        parsed = memo.part("section", skey, ctx, functools.partial(
+            _parse_section, info, section=section, node=top.d[key]))
+        sections[key] = parsed
+        earlier.append((key, raw))
+        if parsed is not None:
+            adds.append((key, section.world(parsed)))
+    world, clashes = World.assemble(adds)
+    for key, problem in clashes:
+        ctx.err((key,), problem)
+    vehicles = _with_world(ctx, vehicles, world, sections, origin)
     if ctx.problems:
         raise ctx.error()
     if not seeds:
@@ -599,68 +612,42 @@ def _parse(text: str, fname: str, check_properties: bool, sweep_point: dict[str,
                     duration_s=duration,
                     seed=seed, vehicles=tuple(v for v, _ in vehicles), schedule=tuple(schedule),
                     description=description, aircraft_path=tuple(apath), plot=plot,
-                    mavlink=mavlink, sections=sections,
+                    mavlink=mavlink, sections=sections, world=world,
                     section_sources={k: top.d[k] for k in sections if k in top.d},
                     extra={"vehicle_paths": [pp for _, pp in vehicles],
                            "vehicle_lines": [ctx.line(pp) for _, pp in vehicles]})
 
 
-def _with_world(ctx: _Ctx, vehicles: list[tuple[VehicleSpec, P]], sections: dict[str, Any],
-                origin: Origin) -> list[tuple[VehicleSpec, P]]:
-    """Each vehicle given what of the world its class needs (``with_world``),
-    and checked in it."""
+def _with_world(ctx: _Ctx, vehicles: list[tuple[VehicleSpec, P]], world: World,
+                sections: dict[str, Any], origin: Origin) -> list[tuple[VehicleSpec, P]]:
+    """Each vehicle given what of the world (and of the sections) its class
+    needs (``with_world``), and checked in it."""
     out = []
     o = (origin.lat_deg, origin.lon_deg, origin.ground_alt_m)
+    view = MappingProxyType(sections)
     for v, p in vehicles:
         vc = get_class(v.vehicle_class)
-        v = vc.with_world(v, sections, o)
+        v = vc.with_world(v, world, view, o)
         for problem in vc.world_problems(v):
             ctx.err(p, problem)
         out.append((v, p))
     return out
 
 
-#: top-level sections parsed by the part that owns them: key -> "module:function".
-#: The function is ``parse(info: SectionInfo, node, path) -> object`` (the
-#: object lands in ``Scenario.sections[key]``); it reports problems with
-#: ``info.err`` / ``info.reader`` and never raises for bad input.
-SECTIONS: dict[str, str] = {
-    "swarm": "cosim.swarm.config:parse_swarm",
-    "ground": "cosim.renderer.config:parse_ground",
-    "targets": "cosim.renderer.config:parse_targets",
-    "cameras": "cosim.renderer.config:parse_cameras",
-    "sweep": "cosim.sweep.spec:parse_sweep",
-    "obstacles": "cosim.obstacles:parse_obstacles",
-    "search": "cosim.search.spec:parse_search",  # after targets: its fires join them
-}
-
-
-def _parse_section(info: SectionInfo, ctx: _Ctx, *, key: str, node: Any
-                   ) -> tuple[Any, dict[str, Any]]:
-    """Section ``key`` parsed from ``node``, its problems reported into ``ctx``;
-    returns the parsed object and what it changed in the sections before it."""
-    before = dict(info.sections)
+def _parse_section(info: SectionInfo, ctx: _Ctx, *, section: Section, node: Any) -> Any:
+    """``section`` parsed from ``node``, its problems reported into ``ctx``."""
     outer, info.ctx = info.ctx, ctx
     info.earlier_problems = len(outer.problems)
     try:
-        parsed = _section_parser(key)(info, node, (key,))
+        return section.parse(info, node, (section.key,))
     finally:
         info.ctx, info.earlier_problems = outer, 0
-    changed = {k: v for k, v in info.sections.items() if before.get(k) is not v and k != key}
-    return parsed, changed
-
-
-def _section_parser(key: str) -> Callable[[SectionInfo, Any, P], Any]:
-    import importlib
-
-    module, func = SECTIONS[key].split(":")
-    parser: Callable[[SectionInfo, Any, P], Any] = getattr(importlib.import_module(module), func)
-    return parser
 
 
 @dataclass
 class SectionInfo:
-    """What a section parser sees: the scenario parsed so far, and the problem list."""
+    """What a section parser sees (``cosim.core.section.SectionContext``): the
+    scenario parsed so far, the sections it reads, and the problem list."""
 
     ctx: _Ctx
     origin: Origin
@@ -671,9 +658,8 @@ class SectionInfo:
     #: the scenario's ``mavlink:`` section as resolved ({"url", "rates_hz"}), or None
     mavlink: dict[str, Any] | None = None
     seed: int = 0  # the scenario's random seed
-    #: the sections parsed so far (in ``SECTIONS`` order): a section may add to
-    #: an earlier one's (the search's fires join the targets)
-    sections: dict[str, Any] = field(default_factory=dict)
+    #: the parsed objects of the sections the one being parsed reads (read only)
+    sections: Mapping[str, Any] = field(default_factory=dict)
 
     @property
     def ids(self) -> list[str]:

@@ -28,8 +28,8 @@ from typing import Any, BinaryIO
 
 import yaml
 
+from cosim.core.limits import MAX_ALIASES, MAX_DEPTH, MAX_FILE_BYTES, MAX_INT, MAX_NODES
 from cosim.errors import ConfigError
-from cosim.scenario.limits import MAX_ALIASES, MAX_DEPTH, MAX_FILE_BYTES, MAX_INT, MAX_NODES
 
 _EXP_FLOAT = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)[eE][-+]?\d+$")
 

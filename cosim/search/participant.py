@@ -116,7 +116,7 @@ class SearchParticipant:
         self.cov_every = s.coverage_every
         # the fires, placed as the renderer places targets
         ids = [f.id for f in s.fires]
-        specs = [t for t in scn.sections.get("targets") or () if t.id in ids]
+        specs = [t for t in scn.world.targets if t.id in ids]
         self.fire_specs = specs
         self.decoy = np.array([f.decoy for f in s.fires], dtype=bool)
         self.targets = TargetSet(tuple(specs), ctx.frame, self.ground)

@@ -31,8 +31,8 @@
 Everything is bounded: the area's extent, vertex counts, the number of fires,
 the coverage map's cells. Fires placed at random are drawn from the
 scenario's seed, inside the area and outside the no-fly zones, so the same
-scenario always hides them in the same places. The fires join the
-scenario's targets (kind ``fire``), so cameras render them.
+scenario always hides them in the same places. The fires join the world's
+targets (kind ``fire``), so cameras render them.
 """
 
 from __future__ import annotations
@@ -284,10 +284,10 @@ def _fires(info: Any, d: Any, p: P, frame: Any, area: Any, zones: list[Any], see
 
 def parse_search(info: Any, node: Any, path: P) -> SearchSpec | None:
     """The ``search:`` section (see the module docstring); problems go to ``info``.
-    Its fires are added to the scenario's targets."""
+    Its fires join the world as targets (``fire_targets``, through the section)."""
     from shapely.geometry import Polygon
 
-    from cosim.renderer.config import _camera
+    from cosim.renderer.config import parse_camera
 
     frame = info.origin.frame
     r = info.reader(node, path, ("area", "area_latlon", "no_fly", "no_fly_latlon", "base",
@@ -334,7 +334,7 @@ def parse_search(info: Any, node: Any, path: P) -> SearchSpec | None:
         cam_node = {"name": "search", "width_px": 1280, "height_px": 720, "rate_hz": 2.0,
                     "stabilised": True, **cam_node, "mount": "nadir",
                     "vehicles": "all"}
-    camera = _camera(info, cam_node, path + ("camera",), 0)
+    camera = parse_camera(info, cam_node, path + ("camera",), 0)
     if camera is not None and camera.frame_every % info.rates.control_every:
         info.err(path + ("camera", "rate_hz"),
                  f"the search camera's frames must fall on exchanges: rate_hz "
@@ -413,7 +413,6 @@ def parse_search(info: Any, node: Any, path: P) -> SearchSpec | None:
                      "not on a gimbal, with frames on exchanges (rate_hz: control_hz divided "
                      "by a whole number)")
     _check_aircraft(info, rows, path)
-    _add_targets(info, fires, path)
     spec = SearchSpec(area_ne=area_pts or (), no_fly_ne=zone_pts, base_ne=base,
                       rows=tuple(rows), airspeed_kt=v_kt, bank_deg=bank,
                       flown_bank_deg=flown or bank, alt_agl_m=alt,
@@ -472,21 +471,13 @@ def _check_plan(info: Any, spec: SearchSpec, path: P) -> None:
             return
 
 
-def _add_targets(info: Any, fires: tuple[FireSpec, ...], path: P) -> None:
-    """The fires join the scenario's targets (so cameras draw them)."""
-    from cosim.renderer.config import TARGET_DEFAULTS, TargetSpec
+def fire_targets(spec: SearchSpec) -> tuple[Any, ...]:
+    """The search's fires as targets of the world (kind ``fire``), so cameras
+    draw them and detections are scored against them."""
+    from cosim.world.targets import TARGET_DEFAULTS, TargetSpec
 
-    have = tuple(info.sections.get("targets") or ())
-    ids = {t.id for t in have}
     color = TARGET_DEFAULTS["fire"][3]
-    extra = []
-    for f in fires:
-        if f.id in ids:
-            info.err(path + ("fires",), f"a target is already called {f.id!r}; search fires "
-                                        f"are named {TARGET_ID} and {DECOY_PREFIX}1, ...")
-            continue
-        extra.append(TargetSpec(id=f.id, kind="fire", north_m=f.north_m, east_m=f.east_m,
-                                 lat_deg=None, lon_deg=None, heading_deg=0.0, length_m=f.size_m,
-                                 width_m=f.size_m, height_m=f.height_m, color_rgb=color,
-                                 growth_m_per_s=f.growth_m_per_s))
-    info.sections["targets"] = have + tuple(extra)
+    return tuple(TargetSpec(id=f.id, kind="fire", north_m=f.north_m, east_m=f.east_m,
+                            lat_deg=None, lon_deg=None, heading_deg=0.0, length_m=f.size_m,
+                            width_m=f.size_m, height_m=f.height_m, color_rgb=color,
+                            growth_m_per_s=f.growth_m_per_s) for f in spec.fires)

@@ -35,7 +35,7 @@ sets the loiter floor of every commanded speed (see
 ``rate_hz`` must give a whole number of exchanges per controller step (it
 divides the physics rate and its period is a multiple of the exchange
 period). Parsing reports every problem (file:line: path: message) through
-``SectionInfo`` and never raises for bad input.
+``SectionContext`` and never raises for bad input.
 """
 
 from __future__ import annotations
@@ -44,8 +44,8 @@ import re
 from dataclasses import dataclass
 from typing import Any
 
+from cosim.core.section import SectionContext
 from cosim.mavlink.scenario import mavlink_rows
-from cosim.scenario.schema import SectionInfo
 from cosim.swarm import laws
 from cosim.vehicles import get_class
 
@@ -93,7 +93,7 @@ class SwarmSpec:
         return tuple(sorted(r for g in self.groups for r in g.rows))
 
 
-def _phase(info: SectionInfo, d: Any, p: P) -> Phase | None:
+def _phase(info: SectionContext, d: Any, p: P) -> Phase | None:
     r = info.reader(d, p, ("behaviour", "mu", "k_s", "radius_m", "q", "duration_s",
                            "timeout_s"))
     beh = r.string("behaviour", choices=BEHAVIOURS)
@@ -159,7 +159,7 @@ def _phase(info: SectionInfo, d: Any, p: P) -> Phase | None:
     return Phase(beh, mu, k_s, radius, q, duration, timeout)
 
 
-def _rate(info: SectionInfo, r: Any, path: P) -> tuple[float, int]:
+def _rate(info: SectionContext, r: Any, path: P) -> tuple[float, int]:
     rate = r.num("rate_hz", DEFAULT_RATE_HZ, lo=0, lo_open=True)
     if rate is None:
         return DEFAULT_RATE_HZ, 1
@@ -177,7 +177,7 @@ def _rate(info: SectionInfo, r: Any, path: P) -> tuple[float, int]:
     return rate, int(round(every))
 
 
-def parse_swarm(info: SectionInfo, node: Any, path: P) -> SwarmSpec | None:
+def parse_swarm(info: SectionContext, node: Any, path: P) -> SwarmSpec | None:
     """The ``SECTIONS`` parser of ``swarm:`` (see the module docstring)."""
     r = info.reader(node, path, ("rate_hz", "separation_warn_m", "stall_margin", "groups"))
     rate, every = _rate(info, r, path)

@@ -7,7 +7,3 @@ placeholders are the scenario language's (``cosim.scenario.placeholders``).
 It reuses ``sync.Run`` for every run and ``conspicuity`` for the
 measurements; it never touches a run's own outputs.
 """
-
-from cosim.sweep.spec import SweepSpec, parse_sweep, read_sweep
-
-__all__ = ["SweepSpec", "parse_sweep", "read_sweep"]

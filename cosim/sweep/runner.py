@@ -19,7 +19,6 @@ camera and target), ``manifest.csv`` (one row per clip) and ``sweep.json``
 
 from __future__ import annotations
 
-import importlib
 import json
 import logging
 import math
@@ -32,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from cosim import workers as worker_kit
+from cosim.core.section import scenario_sections
 from cosim.errors import ConfigError, CosimError
 from cosim.scenario.placeholders import Scalar, format_value
 from cosim.sweep.spec import SweepSpec, read_sweep
@@ -45,9 +45,6 @@ VISIBILITY_COLUMNS = ("speed_kt", "alt_agl_m", "target", "visible_s", "first_vis
 #: how far (fraction) the flown ground speed may be from a swept speed_kt before
 #: the cell is flagged (``speed_off``): the visible time scales with 1 / speed
 SPEED_TOLERANCE = 0.01
-#: tables other parts write from a finished sweep's runs ("module:function",
-#: called with the SweepResult and the SweepSpec; nothing written if not theirs)
-SWEEP_TABLES = ("cosim.search.sweep:write_table",)
 MANIFEST_COLUMNS = ("run", "vehicle", "camera", "video", "ground_truth", "frames", "rate_hz",
                     "width_px", "height_px", "hfov_deg", "vfov_deg")
 
@@ -74,18 +71,18 @@ class SweepResult:
 
 def load_point(scenario: str | Path, point: Mapping[str, Scalar], check_properties: bool = True
                ) -> Any:
-    """The scenario at one combination, ready for a sweep run: inline rendering."""
+    """The scenario at one combination, ready for a sweep run, which gets one
+    core: each section as it runs on one core (``Section.one_core``: the
+    cameras render inline)."""
     import dataclasses
 
     from cosim.scenario import load_scenario
 
     scn = load_scenario(scenario, check_properties=check_properties, sweep_point=dict(point))
-    cams = scn.sections.get("cameras")
-    if cams is not None and hasattr(cams, "render_workers"):
-        scn = dataclasses.replace(
-            scn, sections={**scn.sections,
-                           "cameras": dataclasses.replace(cams, render_workers=0)})
-    return scn
+    sections = scenario_sections()
+    return dataclasses.replace(scn, sections={
+        k: sections[k].one_core(v) if k in sections and v is not None else v
+        for k, v in scn.sections.items()})
 
 
 def _run_one(scenario: str, point: dict[str, Scalar], run_dir: str, log_path: str,
@@ -389,12 +386,13 @@ def write_tables(result: SweepResult, spec: SweepSpec) -> None:
               swept + [c for c in VISIBILITY_COLUMNS if c not in swept], vis)
     write_csv(out / "manifest.csv", swept + [c for c in MANIFEST_COLUMNS if c not in swept],
               man)
-    for target in SWEEP_TABLES:  # the tables other parts make of the runs
-        module, func = target.split(":")
-        try:
-            getattr(importlib.import_module(module), func)(result, spec)
-        except Exception as e:  # a table never loses the sweep
-            log.warning("%s: %s: %s", target, type(e).__name__, e)
+    for key, section in scenario_sections().items():  # the sections' own tables
+        for table in section.sweep_tables:
+            try:
+                table(result, spec)
+            except Exception as e:  # a table never loses the sweep
+                log.warning("%s: %s: %s: %s", key, getattr(table, "__name__", table),
+                            type(e).__name__, e)
     summary = {"scenario": spec.path, "runs": len(result.runs),
                "completed": sum(o.status == "completed" for o in result.runs),
                "wall_time_s": result.wall_s, "swept": {k: list(spec.values[k]) for k in swept},

@@ -31,13 +31,6 @@ from cosim.scenario.placeholders import (
     swept_names,
 )
 
-
-def parse_sweep(info: Any, node: Any, path: P) -> dict[str, Scalar]:
-    """The ``SECTIONS`` parser: after ``substitute`` the section holds the
-    combination in use (name -> value); that dict is ``Scenario.sections["sweep"]``."""
-    return dict(node) if isinstance(node, dict) else {}
-
-
 #: runs in one sweep (every combination of the swept values)
 MAX_SWEEP_RUNS = 10_000
 #: characters in a run's folder name (file systems allow 255 bytes)

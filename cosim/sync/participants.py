@@ -1,8 +1,9 @@
 """Participants: parts that run inside the lockstep loop beside the pool
 (the swarm controller, the cameras), each owned by its own package.
 
-A scenario section listed in ``PARTICIPANTS`` makes the runner build that
-part's participant with ``make_participant(scenario)``. Per run:
+A scenario section whose ``Section.participant(scenario)`` gives one
+(``cosim.core.section``) makes the runner run it, in the sections' order
+(each after the sections it reads). Per run:
 
 - ``prepare(ctx)`` (optional) once, before any participant starts: e.g. to
   add a tap on the camera frames (``ctx.frame_taps``);
@@ -37,7 +38,6 @@ must not depend on the backend or the worker count.
 
 from __future__ import annotations
 
-import importlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
@@ -62,17 +62,6 @@ class ParticipantFailed(CosimError):
 
     def __str__(self) -> str:
         return str(self.error)
-
-
-#: scenario section -> "module:factory" building its participant
-PARTICIPANTS: dict[str, str] = {
-    "swarm": "cosim.swarm:make_participant",
-    "cameras": "cosim.renderer:make_participant",
-    # after the cameras: it finishes once their last frames have reached it
-    "search": "cosim.search:make_participant",
-}
-#: the sections whose participants talk MAVLink (in process, as a ground station)
-TALKS_MAVLINK = ("swarm", "search")
 
 
 @dataclass
@@ -149,17 +138,32 @@ class Participant(Protocol):
 
 
 def needs_mavlink(scenario: Scenario) -> bool:
-    """True if a participant of the scenario talks MAVLink (the swarm
+    """True if a section of the scenario runs a MAVLink client (the swarm
     controller, the search's missions)."""
-    return any(key in scenario.sections for key in TALKS_MAVLINK)
+    return any(sec.talks_mavlink for sec in _sections_of(scenario))
 
 
-def build_participants(scenario: Scenario, skip: tuple[str, ...] = ()) -> list[Participant]:
-    """The participants the scenario's sections ask for, in ``PARTICIPANTS``
-    order, except those in ``skip`` (run elsewhere, e.g. an outside controller)."""
+def has_controller(scenario: Scenario) -> bool:
+    """True if a section of the scenario commands its vehicles as the run's
+    controller (what ``--external-controller`` runs in another process)."""
+    return any(sec.controller for sec in _sections_of(scenario))
+
+
+def build_participants(scenario: Scenario, external_controller: bool = False
+                       ) -> list[Participant]:
+    """The participants the scenario's sections run, in the sections' order;
+    with ``external_controller``, not the controller's (it runs elsewhere)."""
     out: list[Participant] = []
-    for key, target in PARTICIPANTS.items():
-        if key in scenario.sections and key not in skip:
-            module, func = target.split(":")
-            out.append(getattr(importlib.import_module(module), func)(scenario))
+    for sec in _sections_of(scenario):
+        if external_controller and sec.controller:
+            continue
+        part = sec.participant(scenario)
+        if part is not None:
+            out.append(part)
     return out
+
+
+def _sections_of(scenario: Scenario) -> list[Any]:
+    from cosim.core.section import scenario_sections
+
+    return [sec for key, sec in scenario_sections().items() if key in scenario.sections]

@@ -238,7 +238,7 @@ class Run:
         # the participants are made first (some ask for rows gathered inside
         # exchanges), but are the run's (finished at its end) only once the pool is
         wanted = build_participants(
-            scn, skip=("swarm",) if self.external_controller else ()) + self.extra_participants
+            scn, external_controller=self.external_controller) + self.extra_participants
         options = dict(self.backend_options)
         watch = watch_for(wanted, scn.rates.control_every)
         if watch is not None:

@@ -80,8 +80,8 @@ from typing import Any
 
 import numpy as np
 
+from cosim.core.limits import MAX_FILE_BYTES
 from cosim.errors import ConfigError
-from cosim.scenario.limits import MAX_FILE_BYTES
 from cosim.scenario.schema import _Ctx, _describe, _Reader
 from cosim.scenario.yaml_lines import (
     YamlProblem,

@@ -37,6 +37,7 @@ if TYPE_CHECKING:
     from cosim.core.state import StateField, VehicleSpec
     from cosim.guidance.commands import Command
     from cosim.guidance.safety import Limits
+    from cosim.world import World
 
 
 @dataclass(frozen=True)
@@ -177,10 +178,11 @@ class VehicleClass:
         """Problems with a vehicle's start (besides the common rules)."""
         return []
 
-    def with_world(self, spec: VehicleSpec, sections: Mapping[str, Any],
+    def with_world(self, spec: VehicleSpec, world: World, sections: Mapping[str, Any],
                    origin: tuple[float, float, float]) -> VehicleSpec:
-        """The vehicle given what of the world its class needs (the scenario's
-        parsed top-level ``sections``, e.g. ``obstacles``; ``origin``: the
+        """The vehicle given what of the scenario's ``world`` its class needs
+        (``cosim.world.World``: the ground, targets, obstacles) and of its
+        parsed ``sections`` (read only, e.g. ``cameras``; ``origin``: the
         scenario frame's lat, lon, ground altitude), usually in its
         ``class_params``; the workers see only the spec. Default: unchanged."""
         return spec

@@ -14,7 +14,7 @@ import logging
 from collections.abc import Sequence
 from functools import lru_cache
 
-from cosim import plugins
+from cosim.core import plugins
 from cosim.core.state import STATE_FIELDS, StateField, VehicleSpec
 from cosim.vehicles.base import VehicleClass
 

@@ -11,8 +11,8 @@ import pytest
 
 from cosim.cli import main
 from cosim.conspicuity import run_visibility
-from cosim.sweep import read_sweep
 from cosim.sweep.runner import load_point
+from cosim.sweep.spec import read_sweep
 from cosim.sync import Run
 
 REPO = Path(__file__).resolve().parents[2]

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from cosim.sweep import read_sweep
 from cosim.sweep.runner import load_point
+from cosim.sweep.spec import read_sweep
 from cosim.sync import Run
 
 REPO = Path(__file__).resolve().parents[2]

@@ -35,8 +35,8 @@ from cosim.cli import main
 from cosim.core.camera import CameraSpec, camera_pose
 from cosim.errors import ConfigError
 from cosim.renderer.frame import World, WorldSpec, render_frame
-from cosim.renderer.geotiff import GeoTiffError
 from cosim.scenario import load_scenario
+from cosim.world.geotiff import GeoTiffError
 from tests.renderer.test_geotiff import SCENARIO
 from tests.test_fuzz_scenarios import Hang, check_validate, watchdog
 

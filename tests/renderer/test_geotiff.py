@@ -17,10 +17,10 @@ from PIL import Image, TiffImagePlugin, TiffTags
 from cosim.core.camera import CameraSpec, camera_pose
 from cosim.core.geo import LocalFrame
 from cosim.errors import ConfigError
-from cosim.renderer import geotiff
-from cosim.renderer.config import GroundSpec
 from cosim.renderer.frame import World, WorldSpec, render_frame
 from cosim.scenario import parse_scenario
+from cosim.world import geotiff
+from cosim.world.ground import GroundSpec
 
 LAT0, LON0, GROUND_M = 37.0, -122.0, 10.0
 W, H = 128, 96  # the file's pixels: red 2 x column, green 2 x row (a position code)

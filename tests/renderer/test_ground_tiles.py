@@ -11,8 +11,8 @@ import pytest
 
 from cosim.core.geo import LocalFrame
 from cosim.renderer import ground
-from cosim.renderer.config import GroundSpec
 from cosim.renderer.ground import GroundTexture
+from cosim.world.ground import GroundSpec
 
 KEYS = [(0, 3, -2), (0, -4000, 3000), (1, -1, 0), (2, 0, -1), (2, 0, 0), (2, -1, -1),
         (2, 7, 5), (3, -2, 1), (4, 0, 0), (6, -1, 2), (8, 0, -1), (9, 1, 1)]

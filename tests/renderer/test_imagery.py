@@ -23,8 +23,8 @@ from affine import Affine
 from cosim.cli import main
 from cosim.core.geo import LocalFrame
 from cosim.errors import ConfigError
-from cosim.renderer.config import GroundSpec
 from cosim.renderer.ground import GroundTexture
+from cosim.world.ground import GroundSpec
 from tests.renderer.test_fuzz_rasters import Traps, _tiff_entries
 from tests.renderer.test_geotiff import SCENARIO
 
@@ -271,8 +271,8 @@ def test_image_folders_are_checked(site: Path, capsys) -> None:
 def test_gdal_reads_with_the_network_and_side_files_off(site: Path, server) -> None:
     """The second line of defence: GDAL itself, under geotiff's settings, sends no
     request for a VRT that names a URL (whatever the checks let through)."""
-    from cosim.renderer import geotiff as gt
-    from cosim.renderer import imagery
+    from cosim.world import geotiff as gt
+    from cosim.world import imagery
 
     port, seen = server
     vrt(site / "net.vrt", (f"/vsicurl/http://127.0.0.1:{port}/a.tif", "0"))

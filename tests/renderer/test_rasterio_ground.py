@@ -31,11 +31,11 @@ from rasterio.windows import Window
 from cosim.core.camera import CameraSpec, Pose, camera_pose, intrinsics, project, to_camera
 from cosim.core.geo import LocalFrame
 from cosim.errors import ConfigError
-from cosim.renderer import geotiff
-from cosim.renderer.config import GroundSpec
 from cosim.renderer.frame import World, WorldSpec, render_frame
 from cosim.renderer.ground import _GeoRasterLayer
 from cosim.scenario import parse_scenario
+from cosim.world import geotiff
+from cosim.world.ground import GroundSpec
 
 pyproj = pytest.importorskip("pyproj")  # the independent transform (the test extra)
 

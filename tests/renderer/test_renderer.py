@@ -19,9 +19,7 @@ from cosim.core.geo import LocalFrame
 from cosim.core.state import N_STATE, STATE_INDEX
 from cosim.errors import ConfigError
 from cosim.guidance.commands import Command
-from cosim.obstacles import Obstacle
 from cosim.renderer import video
-from cosim.renderer.config import TARGET_DEFAULTS, GroundSpec, TargetSpec
 from cosim.renderer.frame import OBSTACLE_RGB, World, WorldSpec, render_frame
 from cosim.renderer.ground import GroundTexture
 from cosim.renderer.participant import CameraParticipant
@@ -29,6 +27,9 @@ from cosim.renderer.targets import lambert
 from cosim.renderer.video import have_pyav
 from cosim.scenario import parse_scenario
 from cosim.sync.participants import RunContext
+from cosim.world.ground import GroundSpec
+from cosim.world.obstacles import Obstacle
+from cosim.world.targets import TARGET_DEFAULTS, TargetSpec
 
 LAT0, LON0, GROUND_M = 37.0, -122.0, 10.0
 

@@ -23,7 +23,6 @@ import pytest
 
 from cosim.core.camera import CameraSpec, camera_pose
 from cosim.core.geo import LocalFrame
-from cosim.renderer.config import TARGET_DEFAULTS, GroundSpec, TargetSpec
 from cosim.renderer.frame import World, WorldSpec, render_frame
 from cosim.search.image_detect import (
     BlobMatch,
@@ -34,6 +33,8 @@ from cosim.search.image_detect import (
     match_blobs,
     to_hsv,
 )
+from cosim.world.ground import GroundSpec
+from cosim.world.targets import TARGET_DEFAULTS, TargetSpec
 
 LAT0, LON0, GROUND_M = 37.0, -122.0, 10.0
 PHYSICS_HZ = 120.0

@@ -16,13 +16,14 @@ from shapely.geometry import Polygon, box
 
 from cosim.core.camera import CameraSpec, camera_pose, footprint
 from cosim.errors import ConfigError
-from cosim.renderer.config import GroundSpec, TargetSpec
 from cosim.renderer.frame import World, WorldSpec, probe_offsets, render_frame
 from cosim.renderer.targets import TargetSet
 from cosim.scenario import Scenario, load_scenario, parse_scenario
 from cosim.search import sensing
 from cosim.search.coverage_map import CoverageMap
 from cosim.sync import Run
+from cosim.world.ground import GroundSpec
+from cosim.world.targets import TargetSpec
 
 LAT0, LON0, GROUND = 37.4, -122.0, 0.0
 
@@ -290,9 +291,9 @@ search:
     from shapely.geometry import Point
 
     assert all(area.contains(Point(f.east_m, f.north_m)) for f in fires)
-    ids = [t.id for t in scn.sections["targets"]]
+    ids = [t.id for t in scn.world.targets]
     assert ids == ["truck1", "fire_target", "decoy1", "decoy2", "decoy3"]
-    assert scn.sections["targets"][1].growth_m_per_s == pytest.approx(2.0 / 60.0)
+    assert scn.world.targets[1].growth_m_per_s == pytest.approx(2.0 / 60.0)
     # the resolved scenario, parsed again, hides them in the same places
     import yaml
 

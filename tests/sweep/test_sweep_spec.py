@@ -13,7 +13,7 @@ import yaml
 from cosim.core.units import KT_TO_MPS
 from cosim.errors import ConfigError
 from cosim.scenario import load_scenario
-from cosim.sweep import read_sweep
+from cosim.sweep.spec import read_sweep
 
 BASE = """\
 schema_version: 1

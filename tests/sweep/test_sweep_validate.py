@@ -13,7 +13,7 @@ from cosim.cli import main
 from cosim.errors import ConfigError
 from cosim.scenario import load_scenario, schema
 from cosim.scenario.schema import Memo, check_scenario
-from cosim.sweep import read_sweep
+from cosim.sweep.spec import read_sweep
 
 REPO = Path(__file__).resolve().parent.parent.parent
 

@@ -15,9 +15,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cosim.core import limits
 from cosim.errors import ConfigError
 from cosim.logs import read_states
-from cosim.scenario import limits, parse_scenario
+from cosim.scenario import parse_scenario
 from cosim.sync import run_scenario
 from cosim.vehicles.registry import get_class
 

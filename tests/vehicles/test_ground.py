@@ -14,11 +14,11 @@ import pytest
 
 from cosim.errors import ConfigError
 from cosim.logs import read_states
-from cosim.obstacles import inflate, inside, plan_route, segment_clear
 from cosim.scenario import parse_scenario
 from cosim.sync import run_scenario
 from cosim.vehicles.ground.model import SPEED_CMD, STEER_CMD, BicycleModel
 from cosim.vehicles.registry import state_layout
+from cosim.world.obstacles import inflate, inside, plan_route, segment_clear
 from tests.helpers import same_states
 
 BARN = [[40, -20], [40, 15], [55, 15], [55, -20]]

@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 
 from cosim.logs import read_states
-from cosim.obstacles import inside
 from cosim.scenario import load_scenario
 from cosim.sync import run_scenario
+from cosim.world.obstacles import inside
 
 SCENARIO = Path(__file__).resolve().parent.parent.parent / "scenarios/hetero/quad_guides_car.yaml"
 

@@ -24,7 +24,7 @@ from __future__ import annotations
 import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -37,6 +37,9 @@ from cosim.vehicles.fixed_wing import FIXED_WING, LBF_TO_N, FixedWing
 from cosim.vehicles.fixed_wing.guidance import FixedWingGuidance
 from cosim.vehicles.fixed_wing_batched.model import PointMassModel
 from cosim.vehicles.registry import state_layout
+
+if TYPE_CHECKING:
+    from cosim.world import World
 
 #: sea-level density of the standard atmosphere (kg/m^3)
 RHO0 = 1.225
@@ -94,7 +97,7 @@ class FixedWingBatched(FixedWing):
                                  "is not a fixed-wing"))
         return choice
 
-    def with_world(self, spec: VehicleSpec, sections: Mapping[str, Any],
+    def with_world(self, spec: VehicleSpec, world: World, sections: Mapping[str, Any],
                    origin: tuple[float, float, float]) -> VehicleSpec:
         o = (float(origin[0]), float(origin[1]), float(origin[2]))
         return replace(spec, class_params=class_params(spec.model, spec.aircraft_dir,

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -35,11 +35,14 @@ from cosim.core.state import StateField, VehicleSpec
 from cosim.errors import ConfigError
 from cosim.guidance.commands import Command
 from cosim.guidance.safety import Limits
-from cosim.obstacles import Obstacle, inside
 from cosim.vehicles.base import ModelChoice, SwarmLimits, VehicleClass
 from cosim.vehicles.ground.guidance import GroundGuidance
 from cosim.vehicles.ground.mavlink import ArduRover
 from cosim.vehicles.ground.model import SPEED_CMD, STEER_CMD, BicycleModel
+from cosim.world.obstacles import Obstacle, inside
+
+if TYPE_CHECKING:
+    from cosim.world import World
 
 #: key -> (default, low, high)
 KEYS: dict[str, tuple[float, float, float]] = {
@@ -83,9 +86,9 @@ class Ground(VehicleClass):
         out["scout"] = entry.string("scout", None)
         return out
 
-    def with_world(self, spec: VehicleSpec, sections: Mapping[str, Any],
+    def with_world(self, spec: VehicleSpec, world: World, sections: Mapping[str, Any],
                    origin: tuple[float, float, float]) -> VehicleSpec:
-        obstacles: tuple[Obstacle, ...] = tuple(sections.get("obstacles") or ())
+        obstacles: tuple[Obstacle, ...] = world.obstacles
         frame = LocalFrame(*origin)
         n, e, _ = frame.geodetic_to_ned(spec.lat_deg, spec.lon_deg, spec.terrain_alt_m)
         known = spec.class_params.get("knows_obstacles", True)

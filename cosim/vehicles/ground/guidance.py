@@ -34,9 +34,9 @@ from cosim.core.camera import camera_pose, footprint
 from cosim.core.geo import LocalFrame
 from cosim.core.state import STATE_INDEX, VehicleSpec
 from cosim.guidance.commands import Command, Point
-from cosim.obstacles import inflate, inside, plan_route
 from cosim.vehicles.base import GuidanceEvent
 from cosim.vehicles.ground.model import SPEED_CMD, STEER_CMD
+from cosim.world.obstacles import inflate, inside, plan_route
 
 _S = STATE_INDEX
 #: within this of a route's end and stopped: arrived

@@ -32,7 +32,7 @@ import numpy as np
 
 from cosim.core.geo import LocalFrame
 from cosim.core.state import STATE_INDEX, VehicleSpec, VehicleStatus
-from cosim.obstacles import inside
+from cosim.world.obstacles import inside
 
 SPEED_CMD = "ground/speed-cmd-mps"
 STEER_CMD = "ground/steer-cmd-deg"

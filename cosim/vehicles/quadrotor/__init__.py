@@ -16,7 +16,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -38,6 +38,9 @@ from cosim.vehicles.quadrotor.guidance import (
 )
 from cosim.vehicles.quadrotor.mavlink import ARDUCOPTER
 
+if TYPE_CHECKING:
+    from cosim.world import World
+
 #: the fastest horizontal speed a command may ask for (m/s)
 MAX_SPEED_MPS = 15.0
 
@@ -56,7 +59,7 @@ class Quadrotor(VehicleClass):
     trims = False  # its own controller holds it from the first step
     mavlink = ARDUCOPTER
 
-    def with_world(self, spec: VehicleSpec, sections: Mapping[str, Any],
+    def with_world(self, spec: VehicleSpec, world: World, sections: Mapping[str, Any],
                    origin: tuple[float, float, float]) -> VehicleSpec:
         """Its controller starts holding where it starts (motors on in the
         air, stopped on the ground)."""

@@ -1,12 +1,14 @@
 """Extension points: what other packages may add to cosim, found by name.
 
-Two Python entry-point groups, each with cosim's own entries built in:
+Three Python entry-point groups, each with cosim's own entries built in:
 
 - ``cosim.backends``: pool backends (``cosim.fdm_pool.backends``; cosim's
   own are listed here, ``BUILTIN_BACKENDS``, so that ``cosim --help`` can
   name them without importing the pool package);
 - ``cosim.vehicles``: vehicle classes (``cosim.vehicles``; cosim's own are
-  listed by the vehicles package itself, ``cosim.vehicles.registry``).
+  listed by the vehicles package itself, ``cosim.vehicles.registry``);
+- ``cosim.sections``: scenario sections (``cosim.core.section``; cosim's own
+  are listed by the scenario package, ``cosim.scenario.sections``).
 
 A package adds an entry in its ``pyproject.toml``::
 
@@ -33,6 +35,7 @@ log = logging.getLogger(__name__)
 
 BACKENDS = "cosim.backends"
 VEHICLES = "cosim.vehicles"
+SECTIONS = "cosim.sections"
 #: the backend ``cosim run`` uses unless told otherwise
 DEFAULT_BACKEND = "process"
 

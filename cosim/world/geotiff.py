@@ -46,7 +46,7 @@ import cv2
 import numpy as np
 
 from cosim.core.geo import LocalFrame
-from cosim.renderer.imagery import GDAL_OPTIONS, ImageRefused, gdal_driver
+from cosim.world.imagery import GDAL_OPTIONS, ImageRefused, gdal_driver
 
 log = logging.getLogger(__name__)
 

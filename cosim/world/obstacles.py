@@ -9,7 +9,7 @@ frame (north/east metres from the origin)::
 A polygon is simple (its edges do not cross), 3 to ``MAX_VERTICES`` corners
 in either winding, at most ``MAX_OBSTACLES`` of them, each within
 ``MAX_DISTANCE_M`` of the origin. Vehicle classes that keep out of them read
-the section through ``VehicleClass.with_world``; everything here is plain
+them from the world through ``VehicleClass.with_world``; everything here is plain
 geometry on ``(n, 2)`` arrays, elementwise, so results never depend on how
 many points are tested together.
 """
@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from cosim.core.geo import MAX_DISTANCE_M
+from cosim.core.section import Section, SectionContext
 
 MAX_OBSTACLES = 1000
 MAX_VERTICES = 64
@@ -42,7 +43,8 @@ class Obstacle:
         return np.array(self.polygon, dtype=float)
 
 
-def parse_obstacles(info: Any, node: Any, path: tuple[Any, ...]) -> tuple[Obstacle, ...]:
+def parse_obstacles(info: SectionContext, node: Any, path: tuple[Any, ...]
+                    ) -> tuple[Obstacle, ...]:
     """The ``obstacles:`` section (see the module docstring); problems go to ``info``."""
     if not isinstance(node, list):
         info.err(path, f"expected a list of obstacles, got {node!r}")
@@ -214,3 +216,18 @@ def plan_route(start: np.ndarray, goal: np.ndarray, polys: Sequence[np.ndarray]
     while path[-1] != 0:
         path.append(prev[path[-1]])
     return [nodes[k] for k in reversed(path[:-1])]
+
+
+class ObstaclesSection(Section):
+    key = "obstacles"
+    description = "polygons on the ground that vehicles keep out of"
+
+    def parse(self, info: SectionContext, node: Any, path: tuple[Any, ...]
+              ) -> tuple[Obstacle, ...]:
+        return parse_obstacles(info, node, path)
+
+    def world(self, parsed: tuple[Obstacle, ...]) -> dict[str, tuple[Obstacle, ...]]:
+        return {"obstacles": parsed}
+
+
+OBSTACLES = ObstaclesSection()

@@ -50,7 +50,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from cosim.renderer.headers import Header, ImageRefused, header, sniff
+from cosim.world.headers import Header, ImageRefused, header, sniff
 
 #: a picture decoded whole: every render worker holds it as BGRA with its
 #: pyramid (64 Mpx: about 360 MB); larger ones belong in a tiled GeoTIFF

@@ -145,7 +145,7 @@ class ViewParticipant:
 
     def _static_world(self, scn: Any) -> None:
         rr = self.rr
-        targets = scn.sections.get("targets") or ()
+        targets = scn.world.targets
         if targets:
             where = []
             for t in targets:
@@ -156,7 +156,7 @@ class ViewParticipant:
                     where.append([t.east_m, t.north_m, 0.0])
             self.rec.log("world/targets", rr.Points3D(where, radii=3.0,
                 labels=[t.id for t in targets], colors=[[230, 60, 40]]), static=True)
-        obstacles = scn.sections.get("obstacles") or ()
+        obstacles = scn.world.obstacles
         if obstacles:
             strips = []
             for o in obstacles:

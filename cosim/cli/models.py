@@ -1,0 +1,73 @@
+"""``cosim models``: the usable aircraft models (which take commands), their
+JSBSim properties, or the vehicle classes."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+
+from cosim.cli.common import EXIT_FAIL, EXIT_OK
+from cosim.core.section import CliCommand
+from cosim.errors import CosimError
+
+log = logging.getLogger("cosim")
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--check", action="store_true", help="load each model to prove it works")
+    p.add_argument("--properties", metavar="MODEL",
+                   help="list the JSBSim properties of MODEL")
+    p.add_argument("--classes", action="store_true",
+                   help="list the vehicle classes instead (cosim's and installed packages')")
+
+
+def run(a: argparse.Namespace) -> int:
+    from cosim.jsb import find_model, list_models, new_fdm
+
+    if a.properties:
+        fdm = new_fdm(find_model(a.properties), 1 / 120)
+        print(fdm.query_property_catalog(""))
+        return EXIT_OK
+    if a.classes:
+        from cosim.vehicles import vehicle_classes
+
+        for name, cls in vehicle_classes().items():
+            print(f"{name:12s} {cls.model_kind:8s} {type(cls).__module__:28s} {cls.description}")
+        return EXIT_OK
+    from cosim.jsb import held_messages
+    from cosim.vehicles import DEFAULT_CLASS, vehicle_classes
+
+    classes = vehicle_classes()
+    failed: list[str] = []
+    models = list_models()
+    print(f"{'check   ' if a.check else ''}{'MODEL':18s} {'SOURCE':7s} {'CLASS':12s} "
+          f"{'COMMANDS':8s} DESCRIPTION")
+    for m in models:
+        status = ""
+        if a.check:  # JSBSim's own messages are held: a failure says its first error
+            with held_messages() as said:
+                try:
+                    new_fdm(m, 1 / 120)
+                    status = "ok      "
+                except CosimError as e:
+                    status = "FAILED  "
+                    errors = [t for level, t in said if level >= logging.ERROR]
+                    failed.append(f"{m.name}: {(errors or [str(e)])[0].splitlines()[0]}")
+            for _level, text in said:
+                log.debug("%s: %s", m.name, text)
+        name = str((m.profile or {}).get("class", DEFAULT_CLASS))
+        commands = "yes" if name in classes and classes[name].commandable else "no"
+        print(f"{status}{m.name:18s} {m.source:7s} {name:12s} {commands:8s} {m.description}")
+    print("COMMANDS yes: the model has a cosim profile (aircraft/profiles/, "
+          "aircraft/<model>/cosim.yaml) that makes it a vehicle class taking command:, "
+          "MAVLink commands, missions and the swarm; no: it flies open-loop, worked by set: "
+          "only (JSBSim properties).")
+    if a.check:
+        print(f"{len(models) - len(failed)} of {len(models)} models load"
+              + "".join(f"\n  {f}" for f in failed))
+    return EXIT_FAIL if failed else EXIT_OK
+
+
+COMMAND = CliCommand(
+    "models",
+    "list usable aircraft models",
+    add_arguments, run)

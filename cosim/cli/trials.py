@@ -1,0 +1,127 @@
+"""``cosim trials``: serve a study in the browser, export its responses,
+analyse them (conspicuity angles, the critical gap, recognition)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+from cosim.cli.common import EXIT_OK, Parser
+from cosim.core.section import CliCommand
+from cosim.errors import ConfigError
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    trs = p.add_subparsers(dest="trials_cmd", metavar="ACTION", parser_class=Parser)
+    ts = trs.add_parser("serve", help="serve a study: the experimenter's and the "
+                                      "participant's pages")
+    ts.add_argument("study", metavar="STUDY.yaml")
+    ts.add_argument("--host", default="127.0.0.1",
+                    help="address to listen on (default 127.0.0.1: this machine only)")
+    ts.add_argument("--port", type=int, default=8000, help="port (default 8000)")
+    ts.add_argument("--db", metavar="URL_OR_FILE",
+                    help="responses database: a SQLite file or a SQLAlchemy URL (default "
+                         "STUDY.sqlite beside the study)")
+    ts.add_argument("--public", action="store_true",
+                    help="allow listening on an address other machines reach")
+    te = trs.add_parser("export", help="the responses as CSV")
+    te.add_argument("db", metavar="DB", help="the study's database (file or URL)")
+    te.add_argument("--out", metavar="CSV", required=True)
+    ta = trs.add_parser("analyse", help="conspicuity angles and distances, the critical gap, "
+                                        "recognition against altitude, speed and conspicuity")
+    ta.add_argument("responses", metavar="DB_OR_CSV",
+                    help="the study's database, or a responses CSV (cosim trials export)")
+    ta.add_argument("--out", metavar="DIR", required=True, help="folder for the CSVs and PNGs")
+    ta.add_argument("--seed", type=int, default=0, help="bootstrap seed (default 0)")
+    ta.add_argument("--tolerance", type=float, default=0.1, metavar="SHARE",
+                    help="how far a critical gap may change and still count as constant, "
+                         "as a share of it (default 0.1: 10%%)")
+    ta.add_argument("--exclude-reshown", action="store_true",
+                    help="leave out trials shown a second time after the page was reloaded")
+
+
+def run(a: argparse.Namespace) -> int:
+    if a.trials_cmd == "serve":
+        from cosim.trials.server import serve
+
+        if not 0 < a.port < 65536:
+            raise ConfigError(f"--port must be 1..65535, got {a.port}")
+        serve(a.study, host=a.host, port=a.port, db_url=a.db, public=a.public)
+        return EXIT_OK
+    if a.trials_cmd == "export":
+        from cosim.trials.store import export_csv
+
+        _existing_db(a.db)
+        print(export_csv(a.db, a.out))
+        return EXIT_OK
+    if a.trials_cmd == "analyse":
+        import tempfile
+
+        from cosim.trials.analysis import analyse
+        from cosim.trials.figures import MAX_PANELS, shown_first
+        from cosim.trials.store import export_csv
+
+        src = Path(a.responses)
+        with tempfile.TemporaryDirectory() as tmp:
+            if src.suffix.lower() != ".csv":  # a database: its responses first
+                _existing_db(a.responses)
+                src = export_csv(a.responses, Path(tmp) / "responses.csv")
+            summary = analyse(src, a.out, seed=a.seed, exclude_reshown=a.exclude_reshown,
+                              tolerance=a.tolerance)
+        verdicts: dict[str, list[str]] = {}
+        for c in summary.get("critical_gap_check", []):
+            verdicts.setdefault(c["fit"], []).append(c["verdict"])
+        fits = summary.get("critical_gap", {})
+        labels = list(fits)
+        order = shown_first([fits[label].get("status", "") for label in labels])
+        for i in order[:MAX_PANELS]:  # those with a critical gap first, as in the figure
+            fit = fits[labels[i]]
+            print(f"critical gap, {labels[i]}: {_gap_summary(fit, verdicts.get(labels[i], []))}")
+        if len(order) > MAX_PANELS:
+            print(f"critical gap: {len(order) - MAX_PANELS} more of the {len(order)} fits in "
+                  f"critical_gap.csv (those above have a critical gap first)")
+        for which, columns in summary.get("binned_conditions", {}).items():
+            for column, bins in columns.items():
+                print(f"{column}: {sum(b['values'] for b in bins)} values in the {which} "
+                      f"responses, cut into {len(bins)} bins of about equal trials, each "
+                      f"analysed at its trials' mean (the bins in analysis.json)")
+        model = (summary.get("recognise") or {}).get("logistic") or {}
+        for name, c in (model.get("coefficients") or {}).items():
+            if name != "intercept":
+                print(f"recognition, {name}: {c['estimate']:+.2f} (95% CI {c['ci'][0]:+.2f} "
+                      f"to {c['ci'][1]:+.2f}) on the log-odds")
+        print(f"outputs in {a.out}/: " + ", ".join(Path(f).name for f in summary.get("files", [])))
+        return EXIT_OK
+    raise ConfigError("cosim trials: give serve, export or analyse (cosim trials --help)")
+
+
+def _gap_summary(fit: dict[str, Any], verdicts: list[str]) -> str:
+    """One line of ``cosim trials analyse``'s print-out for a critical-gap fit."""
+    u, sym = fit.get("unit"), "d" if fit.get("unit") == "mm" else "h"
+    if fit.get("cg") is None:
+        return f"{fit.get('status')} ({fit.get('detail')})"
+    lo, hi = fit["cg_ci"]
+    where = (f"from {sym}0 = {fit['threshold']:.0f} {u}" if fit["status"] == "plateau" else
+             f"constant from the lowest level tested ({fit['threshold']:g} {u}) on")
+    counts = {v: verdicts.count(v) for v in ("fails", "inconclusive", "untested")}
+    total = verdicts.count("holds") + sum(counts.values())
+    others = ", ".join(f"{k} at {n}" for k, n in counts.items() if n)
+    people = fit.get("participants") or 0
+    return (f"{fit['status']}: CG {fit['cg']:.3g} {u} (95% CI {lo:.3g}-{hi:.3g}, "
+            f"{fit.get('interval')}, {people} participant{'' if people == 1 else 's'}), "
+            f"{where}; the relation holds at {verdicts.count('holds')} of {total} plateau "
+            f"levels" + (f" ({others})" if others else ""))
+
+
+def _existing_db(db: str) -> None:
+    """A database file to read must be there (opening a mistyped path would
+    make an empty one; ``Store`` refuses one that is not a regular file)."""
+    if "://" not in db and not Path(db).exists():
+        raise ConfigError(f"{db}: no such trial database")
+
+
+COMMAND = CliCommand(
+    "trials",
+    "conspicuity trials with people: a browser trial runner, its responses, their analysis",
+    add_arguments, run)
