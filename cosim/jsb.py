@@ -26,6 +26,7 @@ from typing import Any
 import jsbsim
 import yaml
 
+from cosim.core.cache import cache_folder
 from cosim.errors import JSBSimError, ModelNotFound
 
 log = logging.getLogger(__name__)
@@ -213,15 +214,14 @@ def _wrapper_root(model: ModelInfo) -> Path:
     The model's own files are symlinked, its XML is copied with one
     ``<system file="cosim_autopilot"/>`` line added, and the autopilot file is
     placed in the wrapper's ``Systems/`` (which JSBSim searches first). Built
-    once per content hash under ``$COSIM_CACHE_DIR`` (default
-    ``~/.cache/cosim``), atomically, so concurrent workers agree.
+    once per content hash in the cache folder (``cosim.core.cache``:
+    ``wrapped/``), atomically, so concurrent workers agree.
     """
     src = Path(model.aircraft_dir) / model.name
     xml = (src / f"{model.name}.xml").read_text()
     ap = (SYSTEMS_DIR / f"{AUTOPILOT_SYSTEM}.xml").read_text()
     key = hashlib.sha256((str(src) + "\0" + xml + "\0" + ap).encode()).hexdigest()[:16]
-    cache = Path(os.environ.get("COSIM_CACHE_DIR") or Path.home() / ".cache" / "cosim")
-    root = cache / "wrapped" / f"{model.name}-{key}"
+    root = cache_folder("wrapped", f"{model.name}-{key}")
     if (root / model.name / f"{model.name}.xml").is_file():
         return root
     root.parent.mkdir(parents=True, exist_ok=True)

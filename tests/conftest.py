@@ -19,13 +19,11 @@ SCENARIOS = REPO / "scenarios"
 
 @pytest.fixture(autouse=True, scope="session")
 def _ground_cache(tmp_path_factory: pytest.TempPathFactory) -> None:
-    """Rendered tests keep their ground tiles (and the rest of cosim's cache)
-    in a temporary folder, never the user's ~/.cache/cosim (subprocesses
-    inherit the variables)."""
+    """Tests keep cosim's cache folder (ground tiles, wrapped aircraft, MAVLink
+    signing state) in a temporary folder, never the user's ~/.cache/cosim
+    (subprocesses inherit the variable)."""
     import os
 
-    os.environ.setdefault("COSIM_GROUND_CACHE", str(tmp_path_factory.mktemp("ground-cache")))
-    # MAVLink signing state too: tests never write into the user's cache folder
     os.environ.setdefault("COSIM_CACHE_DIR", str(tmp_path_factory.mktemp("cosim-cache")))
 
 

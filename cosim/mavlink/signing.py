@@ -32,7 +32,8 @@ with ``SigningStateError`` (replay protection needs it); if it fails later,
 the run goes on with what the process knows, said once in the log.
 
 The file is ``<folder>/<key id>.json``; the folder is
-``$COSIM_CACHE_DIR/signing`` (default ``~/.cache/cosim/signing``) unless the
+``signing/`` in the cache folder (``cosim.core.cache``: ``$COSIM_CACHE_DIR``,
+else ``$XDG_CACHE_HOME/cosim``, else ``~/.cache/cosim``) unless the
 run names another (``MavlinkConfig.signing_state_dir``). The key id is a
 one-way hash of the key: the file never holds the key or its passphrase.
 Readers and writers hold the lock (``<key id>.lock``). An unreadable file
@@ -53,6 +54,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, NamedTuple
 
+from cosim.core.cache import cache_folder
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.adapter import Stream
 from cosim.mavlink.errors import MavlinkError
@@ -72,9 +74,9 @@ class SigningStateError(MavlinkError):
 
 
 def default_folder() -> Path:
-    """Where signing state is kept unless a run says otherwise."""
-    cache = os.environ.get("COSIM_CACHE_DIR") or str(Path.home() / ".cache" / "cosim")
-    return Path(cache) / "signing"
+    """Where signing state is kept unless a run says otherwise: ``signing/`` in
+    the cache folder (``cosim.core.cache``)."""
+    return cache_folder("signing")
 
 
 def key_id(key: bytes) -> str:

@@ -41,6 +41,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from cosim.core.cache import cache_folder
 from cosim.core.geo import LocalFrame
 from cosim.world.ground import GroundSpec
 
@@ -56,7 +57,7 @@ MACRO_OVERSAMPLE = 2.0  # macro features sampled at most every this many pixels,
 #: bump whenever a tile's pixels change for the same seed and ground parameters
 #: (old cache folders are then ignored; delete ~/.cache/cosim/ground to reclaim the space)
 TEXTURE_VERSION = 6
-CACHE_ENV = "COSIM_GROUND_CACHE"  # a folder for the tile cache, or "off"
+CACHE_ENV = "COSIM_GROUND_CACHE"  # "off": no tile cache (its folder: cosim.core.cache)
 CACHE_MB_ENV, CACHE_MB = "COSIM_GROUND_CACHE_MB", 2048  # no more tiles written past this
 _CHUNK = 2 << 20  # new tiles are carved from 2 MB blocks of memory mapped in one call
 FIELD_N_M, FIELD_E_M = 160.0, 220.0  # field size
@@ -496,16 +497,14 @@ def _resize_plan(k: float, p0: int, T: int) -> tuple[int, int, int] | None:
 
 def ground_cache_dir(spec: GroundSpec, seed: int) -> Path | None:
     """The disk cache folder for the procedural tiles of ``seed`` and ``spec``, or
-    None if caching is off (``COSIM_GROUND_CACHE=off``). Default
-    ``$XDG_CACHE_HOME/cosim/ground`` (``~/.cache/cosim/ground``); one subfolder per
+    None if caching is off (``COSIM_GROUND_CACHE=off``): ``ground/`` in the cache
+    folder (``cosim.core.cache``), one subfolder per
     texture version, seed, base resolution, tile size and the numpy/OpenCV
     versions (their float maths makes the pixels), so a cached tile is the very
     tile this process would generate."""
-    env = os.environ.get(CACHE_ENV, "")
-    if env.lower() in ("off", "0", "no", "false"):
+    if os.environ.get(CACHE_ENV, "").lower() in ("off", "0", "no", "false"):
         return None
-    root = Path(env) if env else Path(os.environ.get("XDG_CACHE_HOME") or
-                                      Path.home() / ".cache") / "cosim" / "ground"
+    root = cache_folder("ground")
     key = f"{TEXTURE_VERSION}|{seed}|{spec.base_m_per_px!r}|{spec.tile_px}|{np.__version__}|" \
           f"{cv2.__version__}"
     return root / f"v{TEXTURE_VERSION}-{hashlib.sha1(key.encode()).hexdigest()[:16]}"

@@ -1,4 +1,5 @@
-"""Renderer tests keep the ground tile cache in their own temporary folder."""
+"""Renderer tests keep the ground tile cache (and the rest of cosim's cache
+folder) in their own temporary folder."""
 
 from __future__ import annotations
 
@@ -9,6 +10,6 @@ import pytest
 
 @pytest.fixture(autouse=True)
 def ground_cache(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
-    folder = tmp_path / "ground_cache"
-    monkeypatch.setenv("COSIM_GROUND_CACHE", str(folder))
-    return folder
+    monkeypatch.setenv("COSIM_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.delenv("COSIM_GROUND_CACHE", raising=False)
+    return tmp_path / "cache" / "ground"
