@@ -30,7 +30,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seconds", type=float, default=2.0, help="simulated per round")
     ap.add_argument("--rounds", type=int, default=3)
     a = ap.parse_args(argv)
-    from cosim.bench import bench_specs
+    from cosim.bench.fleet import bench_specs
     from cosim.fdm_pool.shard import Shard
 
     n = a.vehicles

@@ -20,7 +20,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seconds", type=float, default=2.0, help="simulated per round")
     ap.add_argument("--rounds", type=int, default=3)
     a = ap.parse_args(argv)
-    from cosim.bench_gym import compare
+    from cosim.bench.gym import compare
     from cosim.errors import ConfigError
 
     print("| aircraft | gymnasium AsyncVectorEnv (aircraft-steps/s) | cosim pool "

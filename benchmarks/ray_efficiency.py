@@ -37,7 +37,7 @@ def measure(n: int, control_hz: float, seconds: float, rounds: int,
             workers: int | None, configs: list[str] | None = None) -> dict[str, Any]:
     """``configs``: the names in ``CONFIGS`` to measure (default all; process
     always)."""
-    from cosim.bench import bench_specs
+    from cosim.bench.fleet import bench_specs
     from cosim.fdm_pool import make_pool
 
     k = round(120 / control_hz)

@@ -11,7 +11,7 @@ import json
 import sys
 from pathlib import Path
 
-from cosim.bench import plot_scaling
+from cosim.bench.plot import plot_scaling
 
 
 def main(argv: list[str] | None = None) -> int:

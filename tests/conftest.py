@@ -10,7 +10,7 @@ from typing import Any
 
 import pytest
 
-from cosim.bench import bench_specs
+from cosim.bench.fleet import bench_specs
 from cosim.fdm_pool import VehicleSpec
 
 REPO = Path(__file__).resolve().parent.parent

@@ -60,8 +60,8 @@ def test_the_gymnasium_reference_steps_the_same_aircraft_as_the_pool() -> None:
     pytest.importorskip("gymnasium")
     from gymnasium.vector import AsyncVectorEnv
 
-    from cosim.bench import bench_specs
-    from cosim.bench_gym import _make, compare
+    from cosim.bench.fleet import bench_specs
+    from cosim.bench.gym import _make, compare
     from cosim.fdm_pool import make_pool
 
     n, dt = 3, 1 / 120

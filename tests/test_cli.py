@@ -289,12 +289,12 @@ def test_validate_reports_every_file_even_after_a_jsbsim_error(tmp_path: Path,
 
 def test_bench_usage_errors_exit_2_before_running_anything(tmp_path: Path, capsys,
                                                            monkeypatch) -> None:
-    import cosim.bench
+    import cosim.bench.pool as bench_pool
 
     def must_not_run(*a, **k):
         raise AssertionError("the bench ran")
 
-    monkeypatch.setattr(cosim.bench, "bench_size", must_not_run)
+    monkeypatch.setattr(bench_pool, "bench_size", must_not_run)
     assert main(["bench", "--vehicles", "2", "--workers", "0"]) == 2
     assert "--workers must be >= 1, got 0" in capsys.readouterr().err
     assert main(["bench", "--vehicles", "2", "--json", "/nonexistent/dir/x.json"]) == 2
@@ -307,18 +307,18 @@ def test_bench_usage_errors_exit_2_before_running_anything(tmp_path: Path, capsy
 
 
 def test_a_bad_value_past_the_parser_is_exit_2(monkeypatch, capsys) -> None:
-    import cosim.bench
+    import cosim.bench.pool as bench_pool
 
     def bad(*a, **k):
         raise ValueError("repeat must be small")
 
-    monkeypatch.setattr(cosim.bench, "run_bench", bad)
+    monkeypatch.setattr(bench_pool, "run_bench", bad)
     assert main(["bench", "--vehicles", "2"]) == 2
     assert capsys.readouterr().err == "cosim bench: repeat must be small\n"
 
 
 def test_bench_closes_the_pool_when_the_baselines_fail(monkeypatch) -> None:
-    import cosim.bench as bench
+    import cosim.bench.pool as bench
 
     closed = []
     real = bench.make_pool
@@ -349,7 +349,8 @@ def test_a_dead_ceiling_process_is_an_error_not_a_hang() -> None:
     import threading
     import time
 
-    from cosim.bench import _Ceiling, bench_specs
+    from cosim.bench.fleet import bench_specs
+    from cosim.bench.pool import _Ceiling
     from cosim.errors import CosimError
 
     c = _Ceiling(bench_specs(2), 1 / 120, 8, 4, workers=2)

@@ -55,7 +55,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(a: argparse.Namespace) -> int:
-    from cosim.bench import check_rates, run_bench
+    from cosim.bench.fleet import check_rates
+    from cosim.bench.pool import run_bench
 
     if a.workers is not None and a.workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {a.workers}")
@@ -78,7 +79,7 @@ def run(a: argparse.Namespace) -> int:
 
         get_class(a.vehicle_class)  # an unknown class: ConfigError naming the known ones
     if a.gym:
-        from cosim.bench_gym import require_gymnasium
+        from cosim.bench.gym import require_gymnasium
 
         require_gymnasium()  # not installed: a usage error before anything runs
     if a.quick:

@@ -154,7 +154,7 @@ def _run_driver(tmp_path, ending: str, timeout: float) -> tuple[subprocess.Compl
     script = tmp_path / "driver.py"
     script.write_text(textwrap.dedent("""
         import os, signal, sys
-        from cosim.bench import bench_specs
+        from cosim.bench.fleet import bench_specs
         from cosim.fdm_pool import ProcessPool
         if __name__ == "__main__":
             pool = ProcessPool(bench_specs(4), 1 / 120, workers=3)
@@ -288,7 +288,7 @@ def test_workers_log_like_the_driver(tmp_path, verbosity: str, expect: bool) -> 
     """A child's records (its JSBSim output too) follow the driver's levels and format."""
     script = tmp_path / "driver.py"
     script.write_text(textwrap.dedent(f"""
-        from cosim.bench import bench_specs
+        from cosim.bench.fleet import bench_specs
         from cosim.cli import _setup_logging
         from cosim.fdm_pool import ProcessPool
         if __name__ == "__main__":

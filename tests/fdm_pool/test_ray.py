@@ -302,7 +302,7 @@ def test_nothing_is_left_running_when_the_driver_is_killed(tmp_path: Path) -> No
     script.write_text(textwrap.dedent("""
         import os, signal
         import ray
-        from cosim.bench import bench_specs
+        from cosim.bench.fleet import bench_specs
         from cosim.fdm_pool import make_pool
         if __name__ == "__main__":
             pool = make_pool(bench_specs(6), 1 / 120, (), "ray", 4, local_share=False)

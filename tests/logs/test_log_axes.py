@@ -48,7 +48,7 @@ def test_plain_numbers() -> None:
 def test_bench_efficiency_above_its_ceiling_is_drawn(tmp_path: Path) -> None:
     """A noisy size where the pool beat its ceiling (1.6) is inside the
     efficiency axis, not cut off at 1.2; both panels have legends."""
-    from cosim.bench import plot_scaling
+    from cosim.bench.plot import plot_scaling
 
     rows = [{"vehicles": n, "pool_rtf": 100 / n, "fraction_of_ceiling": e}
             for n, e in ((16, 0.8), (128, 1.6), (1024, 0.9))]
@@ -72,7 +72,7 @@ def test_bench_efficiency_above_its_ceiling_is_drawn(tmp_path: Path) -> None:
 
 
 def test_bench_says_what_its_columns_mean() -> None:
-    from cosim.bench import COLUMNS
+    from cosim.bench.pool import COLUMNS
 
     for col in ("start s", "KiB/ac", "pool st/s", "RTF", "ovh us", "serial st/s", "x serial",
                 "ceil st/s", "of ceil"):

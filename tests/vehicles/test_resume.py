@@ -11,7 +11,7 @@ from collections.abc import Callable
 import numpy as np
 import pytest
 
-from cosim.bench import bench_specs
+from cosim.bench.fleet import bench_specs
 from cosim.core.state import STATE_INDEX, VehicleSpec
 from cosim.fdm_pool.shard import Shard
 from cosim.vehicles.registry import state_layout

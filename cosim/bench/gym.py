@@ -36,7 +36,7 @@ def _make(index: int, n: int, dt_s: float, every: int) -> Callable[[], Any]:
     """An environment holding aircraft ``index`` of the bench's fleet of ``n``."""
     def make() -> Any:
         gym = require_gymnasium()
-        from cosim.bench import bench_specs
+        from cosim.bench.fleet import bench_specs
         from cosim.fdm_pool.shard import Shard
 
         env: Any = gym.Env
@@ -91,7 +91,7 @@ def gym_rate(n: int, ticks: int, every: int, dt_s: float) -> float:
 
 def pool_rate(n: int, ticks: int, every: int, dt_s: float, backend: str = "process",
               workers: int | None = None) -> float:
-    from cosim.bench import bench_specs
+    from cosim.bench.fleet import bench_specs
     from cosim.fdm_pool import make_pool
 
     with make_pool(bench_specs(n, "uav700"), dt_s, (), backend, workers) as pool:

@@ -43,44 +43,17 @@ from typing import Any
 import numpy as np
 
 from cosim import workers as worker_kit
-from cosim.core.geo import LocalFrame
+from cosim.bench.fleet import ORIGIN, bench_specs, check_rates
+from cosim.bench.plot import plot_scaling
 from cosim.core.state import VehicleSpec
-from cosim.core.units import KT_TO_MPS
 from cosim.errors import CosimError
 from cosim.fdm_pool import get_backend, make_pool
 from cosim.fdm_pool.process import default_workers, shard_bounds
 from cosim.fdm_pool.shard import Shard
 from cosim.jsb import find_model
-from cosim.scenario.formation import formation_offsets
 from cosim.vehicles import DEFAULT_CLASS
-from cosim.vehicles.registry import get_class
-from cosim.world import World
 
 log = logging.getLogger(__name__)
-
-
-#: where the benchmark's fleets fly
-ORIGIN = (37.4, -122.0, 0.0)
-
-
-def bench_specs(n: int, model: str = "c172p", spacing_m: float = 300.0,
-                vehicle_class: str | None = None) -> list[VehicleSpec]:
-    """N vehicles in a grid at 1000 m, 100 kt, heading north, of the model's
-    own class or ``vehicle_class`` (a batched class gets what of the world it
-    needs, as a scenario would give it)."""
-    m = find_model(model)
-    cls = vehicle_class or m.profile.get("class", DEFAULT_CLASS)
-    vc = get_class(cls)
-    if vc.model_kind == "batched":
-        vc.resolve_model(model, ())  # refuses a model the class cannot fly
-    north, east = formation_offsets("grid", n, spacing_m, 0.0)
-    lat, lon, _ = LocalFrame(*ORIGIN).ned_to_geodetic(north, east, 0.0)
-    specs = [VehicleSpec(id=f"b{i:04d}", model=m.name, aircraft_dir=m.aircraft_dir,
-                         model_source=m.source, lat_deg=float(lat[i]), lon_deg=float(lon[i]),
-                         alt_msl_m=1000.0, heading_deg=0.0, airspeed_mps=100 * KT_TO_MPS,
-                         random_seed=i, profile=m.profile, vehicle_class=cls)
-             for i in range(n)]
-    return [vc.with_world(v, World(), {}, ORIGIN) for v in specs]
 
 
 def _serial_loop(shard: Shard, ticks: int, k: int) -> float:
@@ -210,16 +183,6 @@ def _rss_kib(pid: int | str = "self", field: str = "VmRSS") -> int:
     return 0
 
 
-def check_rates(physics_hz: float, control_hz: float) -> int:
-    """Physics ticks per exchange; ``ValueError`` quoting both rates unless
-    ``control_hz`` divides ``physics_hz``."""
-    q = physics_hz / control_hz
-    if not (abs(q - round(q)) < 1e-9 and round(q) >= 1):
-        raise ValueError(f"control_hz {control_hz:g} must divide physics_hz {physics_hz:g} "
-                         f"(a whole number of physics ticks per exchange)")
-    return round(q)
-
-
 def bench_size(n: int, model: str, backend: str, workers: int | None, seconds: float,
                physics_hz: float, control_hz: float, baselines: bool = True,
                repeat: int = 3, vehicle_class: str | None = None) -> dict[str, Any]:
@@ -307,6 +270,7 @@ schedule:
   - {{at_s: 1, vehicles: "*", command: {{loiter: {{radius_m: 1500}}, alt_agl_m: 1000}}}}
 """
 
+
 #: how the tick loop's participants group in the bench's split (label prefix -> group)
 _SPLIT_GROUPS = (("pool:", "stepping"), ("Guidance.", "guidance"), ("Schedule.", "guidance"),
                  ("StateLogger.", "logging"))
@@ -353,6 +317,8 @@ columns: N aircraft; start s: building and trimming them all; KiB/ac: memory per
   busiest worker's stepping time (microseconds, median); serial st/s: one process stepping the
   same FDMs back to back, nothing else; x serial: pool / serial; ceil st/s: as many processes as
   workers stepping their share with no communication at all; of ceil: pool / ceiling"""
+
+
 WHOLE_COLUMNS = """
   run RTF: the real-time factor of a whole run (guidance, logging); step, guid, log, other: the
   share of its tick loop's time in each"""
@@ -425,7 +391,7 @@ def _gym_reference(seconds: float, repeat: int, physics_hz: float, control_hz: f
                    backend: str, workers: int | None) -> list[dict[str, Any]]:
     """gymnasium's AsyncVectorEnv (one uav700 per environment) against the
     pool at ``GYM_SIZES``, interleaved (``cosim.bench_gym``)."""
-    from cosim.bench_gym import compare
+    from cosim.bench.gym import compare
 
     every = check_rates(physics_hz, control_hz)
     print(f"reference: gymnasium AsyncVectorEnv, one uav700 per environment, "
@@ -438,50 +404,3 @@ def _gym_reference(seconds: float, repeat: int, physics_hz: float, control_hz: f
         print(f"{n:>6} {r['gym_steps_per_s']:>11.0f} {r['pool_steps_per_s']:>11.0f} "
               f"{r['pool_over_gym']:>8.1f}x", flush=True)
     return rows
-
-
-def plot_scaling(series: dict[str, list[dict[str, Any]]], path: str | Path,
-                 title: str = "") -> None:
-    """Real-time factor (left) and the fraction of the no-communication
-    ceiling (right) against the number of aircraft, one line per series,
-    log axes, the 1x line drawn."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from cosim.logs.figures import plain_log_axis
-
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.2))
-    top = 1.0
-    sizes: list[float] = []
-    rtfs: list[float] = [1.0]
-    for label, rows in series.items():
-        n = [r["vehicles"] for r in rows]
-        sizes += n
-        rtfs += [r["pool_rtf"] for r in rows]
-        ax1.plot(n, [r["pool_rtf"] for r in rows], "o-", label=label)
-        eff = [(r["vehicles"], r["fraction_of_ceiling"]) for r in rows
-               if "fraction_of_ceiling" in r]
-        if eff:
-            ax2.plot(*zip(*eff), "o-", label=label)
-            top = max(top, *(e for _, e in eff))
-    ax1.axhline(1.0, color="k", lw=1, ls="--", label="real time")
-    ax1.set(xscale="log", yscale="log", xlabel="aircraft",
-            ylabel="real-time factor (simulated s / wall s)", title="speed")
-    plain_log_axis(ax1.xaxis, sizes)
-    plain_log_axis(ax1.yaxis, rtfs, own_values=False)
-    ax2.axhline(1.0, color="k", lw=1, ls="--", label="the ceiling")
-    # above 1 the pool beat its ceiling (a noisy measurement): shown, not clipped
-    ax2.set(xscale="log", xlabel="aircraft", ylabel="pool / no-communication ceiling",
-            title="efficiency", ylim=(0, max(1.2, top * 1.1)))
-    plain_log_axis(ax2.xaxis, sizes)
-    ax1.legend(fontsize=8)
-    ax2.legend(fontsize=8)
-    ax1.grid(True, which="both", alpha=0.3)
-    ax2.grid(True, which="both", alpha=0.3)
-    if title:
-        fig.suptitle(title)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)

@@ -1,0 +1,55 @@
+"""The scaling figure: the real-time factor and the fraction of the
+no-communication ceiling against the number of aircraft (``cosim bench
+--plot``, ``benchmarks/scaling_plot.py``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+
+def plot_scaling(series: dict[str, list[dict[str, Any]]], path: str | Path,
+                 title: str = "") -> None:
+    """Real-time factor (left) and the fraction of the no-communication
+    ceiling (right) against the number of aircraft, one line per series,
+    log axes, the 1x line drawn."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from cosim.logs.figures import plain_log_axis
+
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4.2))
+    top = 1.0
+    sizes: list[float] = []
+    rtfs: list[float] = [1.0]
+    for label, rows in series.items():
+        n = [r["vehicles"] for r in rows]
+        sizes += n
+        rtfs += [r["pool_rtf"] for r in rows]
+        ax1.plot(n, [r["pool_rtf"] for r in rows], "o-", label=label)
+        eff = [(r["vehicles"], r["fraction_of_ceiling"]) for r in rows
+               if "fraction_of_ceiling" in r]
+        if eff:
+            ax2.plot(*zip(*eff), "o-", label=label)
+            top = max(top, *(e for _, e in eff))
+    ax1.axhline(1.0, color="k", lw=1, ls="--", label="real time")
+    ax1.set(xscale="log", yscale="log", xlabel="aircraft",
+            ylabel="real-time factor (simulated s / wall s)", title="speed")
+    plain_log_axis(ax1.xaxis, sizes)
+    plain_log_axis(ax1.yaxis, rtfs, own_values=False)
+    ax2.axhline(1.0, color="k", lw=1, ls="--", label="the ceiling")
+    # above 1 the pool beat its ceiling (a noisy measurement): shown, not clipped
+    ax2.set(xscale="log", xlabel="aircraft", ylabel="pool / no-communication ceiling",
+            title="efficiency", ylim=(0, max(1.2, top * 1.1)))
+    plain_log_axis(ax2.xaxis, sizes)
+    ax1.legend(fontsize=8)
+    ax2.legend(fontsize=8)
+    ax1.grid(True, which="both", alpha=0.3)
+    ax2.grid(True, which="both", alpha=0.3)
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
