@@ -13,12 +13,15 @@ import math
 from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any
 
+from cosim.core.state import STATE_INDEX as _S
 from cosim.mavlink import adapter as mav
+from cosim.mavlink import mission as mi
+from cosim.mavlink.mission import MissionItem, return_point
+from cosim.mavlink.outcome import CommandRequest, Outcome, as_int, text
 from cosim.mavlink.personality import CommandFn, Personality
-from cosim.mavlink.services.base import CommandRequest, Context, Outcome, as_int, text
+from cosim.mavlink.services.base import Context
 
 if TYPE_CHECKING:
-    from cosim.mavlink.mission import MissionItem
     from cosim.mavlink.vehicle import MavVehicle
 
 ModeVocab = Callable[["MavVehicle"], dict[str, Any]]
@@ -112,8 +115,6 @@ class ArduPilotLike(Personality):
             out.replies.extend(text("orbit: radius must be 1..10000 m (param1)"))
             return mav.MAV_RESULT_DENIED
         row = v.row_or_raise()
-        from cosim.core.state import STATE_INDEX as _S
-
         centre = req.location() or (float(row[_S["lat_deg"]]), float(row[_S["lon_deg"]]))
         lo: dict[str, Any] = {"center": {"lat_deg": centre[0], "lon_deg": centre[1]},
                               "radius_m": abs(radius), "direction": "ccw" if radius < 0 else "cw"}
@@ -129,8 +130,6 @@ class ArduPilotLike(Personality):
     # -- missions ------------------------------------------------------------------
     def rtl_vocab(self, ctx: Context, v: MavVehicle) -> dict[str, Any]:
         """What its RTL flies (the RTL mode's mapping, to the return point)."""
-        from cosim.mavlink.mission import return_point
-
         of = self.mode_vocab.get(self.rtl_mode) if self.rtl_mode is not None else None
         d = dict(of(v)) if of is not None else {}
         if "goto" in d:
@@ -139,8 +138,6 @@ class ArduPilotLike(Personality):
 
     def nav_vocab(self, ctx: Context, v: MavVehicle, item: MissionItem,
                   prev: tuple[float, float]) -> dict[str, Any] | str:
-        from cosim.mavlink import mission as mi
-
         c = item.command
         lat, lon = mi.point_of(v, item, prev)
         pt: dict[str, Any] = {"lat_deg": lat, "lon_deg": lon}

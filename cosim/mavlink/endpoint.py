@@ -101,8 +101,9 @@ from cosim.guidance.commands import Command
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.batch import BatchEncoder
 from cosim.mavlink.errors import EndpointClosed, LockstepTimeout
-from cosim.mavlink.handlers import Handler, Outcome, command_ack
+from cosim.mavlink.handlers import Handler
 from cosim.mavlink.link import DEFAULT_URL, NullLink, UdpLink
+from cosim.mavlink.outcome import Outcome, command_ack
 from cosim.mavlink.scenario import mavlink_rows
 from cosim.mavlink.signing import SharedSigning
 from cosim.mavlink.tlog import STAMP_LEN as TLOG_STAMP_LEN

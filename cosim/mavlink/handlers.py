@@ -10,20 +10,13 @@ from typing import Any
 
 from cosim.guidance.commands import Command
 from cosim.mavlink import adapter as mav
-from cosim.mavlink.services.base import (
-    CommandRequest,
-    Context,
-    Outcome,
-    Reply,
-    command_ack,
-)
+from cosim.mavlink.outcome import Outcome, Reply
+from cosim.mavlink.services.base import Context
 from cosim.mavlink.services.commands import CommandService
 from cosim.mavlink.services.missions import MissionService
 from cosim.mavlink.services.parameters import ParamService
 from cosim.mavlink.services.targets import TargetService
 from cosim.mavlink.vehicle import MavVehicle
-
-__all__ = ["CommandRequest", "Context", "Handler", "Outcome", "Reply", "command_ack"]
 
 
 class Handler:

@@ -23,8 +23,9 @@ from cosim.core.state import STATE_INDEX
 from cosim.guidance.commands import DEFAULT_BANK_LIMIT_DEG, Command
 from cosim.guidance.safety import Limits
 from cosim.mavlink import adapter as mav
+from cosim.mavlink.outcome import CommandRequest, Outcome, mission_ack, text
 from cosim.mavlink.params import SYSID_THISMAV, ParamDef
-from cosim.mavlink.services.base import CommandRequest, Context, Outcome, mission_ack, text
+from cosim.mavlink.services.base import Context
 
 if TYPE_CHECKING:
     from cosim.core.state import VehicleSpec

@@ -29,8 +29,9 @@ from cosim.errors import ConfigError
 from cosim.guidance.commands import Command
 from cosim.guidance.safety import Limits
 from cosim.mavlink import adapter as mav
+from cosim.mavlink.outcome import CommandRequest, Outcome, text, vocab
 from cosim.mavlink.personality import CommandFn, Personality
-from cosim.mavlink.services.base import CommandRequest, Context, Outcome, text, vocab
+from cosim.mavlink.services.base import Context
 from cosim.vehicles import GuidanceEvent, ModelChoice, VehicleClass
 
 SPEED_CMD = "toy_cart/speed-cmd-mps"  # the setpoint channel its guidance writes

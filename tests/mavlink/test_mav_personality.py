@@ -9,9 +9,10 @@ from mavtest import mavutil, of_type
 from test_mav_commands import heartbeat, long, one_ack
 
 from cosim.mavlink import adapter as mav
+from cosim.mavlink.outcome import CommandRequest, Outcome, vocab
 from cosim.mavlink.params import SYSID_THISMAV, ParamDef
 from cosim.mavlink.personality import Personality
-from cosim.mavlink.services.base import CommandRequest, Context, Outcome, vocab
+from cosim.mavlink.services.base import Context
 
 ML = mavutil.mavlink
 HOLD, CRUISE = 4, 7

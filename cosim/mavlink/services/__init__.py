@@ -11,8 +11,9 @@ are streamed by the endpoint. What a command, a mode, a mission item or a
 parameter *does* is the vehicle's personality's
 (``cosim.mavlink.personality``), supplied by its class. Every command ends as
 a mapping in the vocabulary a scenario schedule holds, parsed by
-``parse_command`` (``base.vocab``) and checked by the class's safety rule
-(``Context.unsafe``): one command path. ``cosim.mavlink.handlers.Handler``
-routes each message to its service; no service touches sockets: each
-returns an ``Outcome`` (replies to send, commands for guidance).
+``parse_command`` (``cosim.mavlink.outcome.vocab``) and checked by the
+class's safety rule (``base.Context.unsafe``): one command path.
+``cosim.mavlink.handlers.Handler`` routes each message to its service; no
+service touches sockets: each returns an ``Outcome`` (replies to send,
+commands for guidance; ``cosim.mavlink.outcome``).
 """

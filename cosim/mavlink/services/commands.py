@@ -28,14 +28,8 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from cosim.mavlink import adapter as mav
-from cosim.mavlink.services.base import (
-    CommandRequest,
-    Context,
-    Outcome,
-    as_int,
-    command_ack,
-    text,
-)
+from cosim.mavlink.outcome import CommandRequest, Outcome, as_int, command_ack, text
+from cosim.mavlink.services.base import Context
 from cosim.mavlink.vehicle import DEFAULT_RATES_HZ, STREAMABLE, MavVehicle, period_ticks
 
 if TYPE_CHECKING:

@@ -30,11 +30,12 @@ from cosim.mavlink.mission import (
     UPLOAD_RETRY_S,
     UPLOAD_TIMEOUT_S,
     MissionItem,
-    MissionRunner,
     Upload,
     result_name,
 )
-from cosim.mavlink.services.base import Context, Outcome, Reply, mission_ack, text
+from cosim.mavlink.mission_runner import MissionRunner
+from cosim.mavlink.outcome import Outcome, Reply, mission_ack, text
+from cosim.mavlink.services.base import Context
 from cosim.mavlink.vehicle import MavVehicle
 
 _MISSION = mav.MAV_MISSION_TYPE_MISSION

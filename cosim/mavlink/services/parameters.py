@@ -13,7 +13,8 @@ import struct
 
 from cosim.guidance.commands import Command
 from cosim.mavlink import adapter as mav
-from cosim.mavlink.services.base import Context, Outcome, Reply, text, vocab
+from cosim.mavlink.outcome import Outcome, Reply, text, vocab
+from cosim.mavlink.services.base import Context
 from cosim.mavlink.vehicle import MavVehicle
 
 # MAVLink FTP (https://mavlink.io/en/services/ftp.html)

@@ -15,7 +15,8 @@ from typing import Any
 from cosim.core.geo import LocalFrame
 from cosim.core.state import STATE_INDEX as _S
 from cosim.mavlink import adapter as mav
-from cosim.mavlink.services.base import Context, Outcome, text, vocab
+from cosim.mavlink.outcome import Outcome, text, vocab
+from cosim.mavlink.services.base import Context
 from cosim.mavlink.vehicle import MavVehicle
 
 log = logging.getLogger(__name__)

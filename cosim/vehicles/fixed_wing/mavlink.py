@@ -69,17 +69,10 @@ from cosim.guidance.safety import Limits
 from cosim.mavlink import adapter as mav
 from cosim.mavlink import mission as mi
 from cosim.mavlink.mission import COMMON_DO_ITEMS, MissionItem
+from cosim.mavlink.outcome import CommandRequest, Outcome, as_int, mission_ack, text, vocab
 from cosim.mavlink.params import SYSID_THISMAV, ParamDef
 from cosim.mavlink.personality import CommandFn, Personality, stopped
-from cosim.mavlink.services.base import (
-    CommandRequest,
-    Context,
-    Outcome,
-    as_int,
-    mission_ack,
-    text,
-    vocab,
-)
+from cosim.mavlink.services.base import Context
 
 if TYPE_CHECKING:
     from cosim.core.state import VehicleSpec

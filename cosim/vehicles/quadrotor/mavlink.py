@@ -24,9 +24,10 @@ from typing import Any
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.ardupilot import ArduPilotLike, home_goto
 from cosim.mavlink.mission import COMMON_DO_ITEMS
+from cosim.mavlink.outcome import CommandRequest, Outcome, text
 from cosim.mavlink.params import SYSID_THISMAV, ParamDef
 from cosim.mavlink.personality import CommandFn
-from cosim.mavlink.services.base import CommandRequest, Context, Outcome, text
+from cosim.mavlink.services.base import Context
 
 STABILIZE, AUTO, GUIDED, LOITER, RTL, CIRCLE, LAND = 0, 3, 4, 5, 6, 7, 9
 #: CIRCLE mode's radius round where it is (ArduCopter's CIRCLE_RADIUS default)
