@@ -33,16 +33,6 @@ log = logging.getLogger(__name__)
 MAX_DIST_PX = 3.0
 
 
-def cameras_for(sections: dict[str, Any], control_every: int, rows: tuple[int, ...]
-                ) -> list[Any]:
-    """The ``cameras:`` views the image detector can use: on search aircraft,
-    frames on exchanges (every ``control_every`` ticks), not on a gimbal."""
-    cams = sections.get("cameras")
-    return [c for c in (cams.views if cams is not None else ())
-            if set(c.vehicles) & set(rows) and c.frame_every % control_every == 0
-            and c.mount != "gimbal"]
-
-
 class ImageSearch:
     def __init__(self, part: Any, views: list[Any]) -> None:
         self.part = part  # the SearchParticipant (its fires, rows, frame)

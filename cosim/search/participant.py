@@ -70,7 +70,8 @@ class SearchParticipant:
 
     def prepare(self, ctx: RunContext) -> None:
         """With ``detection.image``: a tap on the cameras' frames (before they start)."""
-        from cosim.search.onboard import ImageSearch, cameras_for
+        from cosim.search.onboard import ImageSearch
+        from cosim.search.spec import cameras_for
 
         if self.spec.detection.image and ctx.frame_taps is not None:
             views = cameras_for(self.scn.sections, self.scn.rates.control_every,

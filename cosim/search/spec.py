@@ -405,8 +405,6 @@ def parse_search(info: Any, node: Any, path: P) -> SearchSpec | None:
             or area is None or not rows:
         return None
     if det.image:
-        from cosim.search.onboard import cameras_for
-
         if not cameras_for(info.sections, info.rates.control_every, tuple(rows)):
             info.err(path + ("detection", "image"),
                      "the image detector needs a camera (cameras:) on a search aircraft, "
@@ -481,3 +479,13 @@ def fire_targets(spec: SearchSpec) -> tuple[Any, ...]:
                             lat_deg=None, lon_deg=None, heading_deg=0.0, length_m=f.size_m,
                             width_m=f.size_m, height_m=f.height_m, color_rgb=color,
                             growth_m_per_s=f.growth_m_per_s) for f in spec.fires)
+
+
+def cameras_for(sections: dict[str, Any], control_every: int, rows: tuple[int, ...]
+                ) -> list[Any]:
+    """The ``cameras:`` views the image detector can use: on search aircraft,
+    frames on exchanges (every ``control_every`` ticks), not on a gimbal."""
+    cams = sections.get("cameras")
+    return [c for c in (cams.views if cams is not None else ())
+            if set(c.vehicles) & set(rows) and c.frame_every % control_every == 0
+            and c.mount != "gimbal"]
