@@ -17,7 +17,9 @@ import numpy as np
 import pytest
 
 from cosim.errors import ConfigError
-from cosim.export import body_to_ecef_quaternion, export_run, load_tracks
+from cosim.export import export_run
+from cosim.export.tracks import load_tracks
+from cosim.export.writers import body_to_ecef_quaternion
 from cosim.logs import read_states
 from tests.helpers import finished_run
 

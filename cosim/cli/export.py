@@ -12,8 +12,10 @@ from cosim.errors import ConfigError
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("run", metavar="RUN_DIR", help="a cosim run output folder")
-    p.add_argument("--format", required=True, choices=("acmi", "kml", "czml"),
-                   help="acmi: Tacview 2.2 text; kml: one gx:Track per vehicle; czml: Cesium")
+    from cosim.export import EXPORTERS
+
+    p.add_argument("--format", required=True, choices=list(EXPORTERS),
+                   help="; ".join(f"{e.name}: {e.description}" for e in EXPORTERS.values()))
     p.add_argument("--out", metavar="FILE",
                    help="output file (default RUN_DIR/track.<format>)")
     p.add_argument("--rate-hz", type=positive_float, default=10.0, metavar="HZ",
