@@ -43,18 +43,19 @@ from cosim.mavlink.endpoint import (
 )
 from cosim.mavlink.link import LinkUrl
 from cosim.mavlink.signing import SharedSigning
-from cosim.mavlink.vehicle import MavVehicleSpec, mav_specs
+from cosim.mavlink.vehicle import MavClass, MavVehicleSpec, mav_specs
 
 
-def link_specs(vehicles: Sequence[VehicleSpec], rows: Sequence[int] | None = None
-               ) -> list[list[MavVehicleSpec]]:
+def link_specs(vehicles: Sequence[VehicleSpec], classes: Callable[[str], MavClass],
+               rows: Sequence[int] | None = None) -> list[list[MavVehicleSpec]]:
     """The MAVLink identities of a run's vehicles (those of ``rows``; None:
-    all), one list per link: in vehicle order, system ids 1..240 on each link."""
+    all; ``classes``: what each class hands down, see ``mav_specs``), one list
+    per link: in vehicle order, system ids 1..240 on each link."""
     chosen = list(range(len(vehicles))) if rows is None else sorted(rows)
     out = []
     for a in range(0, len(chosen), MAX_VEHICLES_PER_LINK):
         part = chosen[a:a + MAX_VEHICLES_PER_LINK]
-        out.append(mav_specs([vehicles[r] for r in part], first_sysid=1, rows=part))
+        out.append(mav_specs([vehicles[r] for r in part], classes, first_sysid=1, rows=part))
     return out
 
 
@@ -71,12 +72,13 @@ def link_urls(url: str | None, n: int) -> list[str | None]:
 class MavlinkLinks:
     """Every vehicle of a run on as many links as it takes (see the module
     docstring); the interface of ``MavlinkEndpoint``, with the link index
-    where it matters."""
+    where it matters. ``classes``: what each vehicle class hands down (its
+    personality and safety rule, see ``mav_specs``)."""
 
-    def __init__(self, vehicles: Sequence[VehicleSpec], physics_hz: float,
-                 config: MavlinkConfig, tlog_dir: str | Path | None = None,
+    def __init__(self, vehicles: Sequence[VehicleSpec], classes: Callable[[str], MavClass],
+                 physics_hz: float, config: MavlinkConfig, tlog_dir: str | Path | None = None,
                  clock_anchor_unix_us: int | None = None) -> None:
-        self.specs = link_specs(vehicles, config.rows)
+        self.specs = link_specs(vehicles, classes, config.rows)
         if not self.specs:
             raise ConfigError("mavlink: vehicles selects no vehicle")
         #: the link of each vehicle on MAVLink, by state row

@@ -19,16 +19,17 @@ import math
 import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from cosim.core.state import STATE_INDEX, VehicleSpec, VehicleStatus
+from cosim.guidance.commands import Command
+from cosim.guidance.safety import Limits
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.mission import Mission
 from cosim.mavlink.params import ParamTable
 from cosim.mavlink.personality import Personality
-from cosim.vehicles.registry import DEFAULT_CLASS
 
 _S = STATE_INDEX
 
@@ -48,6 +49,24 @@ DEFAULT_RATES_HZ: Mapping[str, float] = {
 
 #: system ids a vehicle may take (0 is broadcast; 251..255 are left to ground stations)
 SYSID_RANGE = (1, 250)
+
+#: a class's command-safety rule (``cosim.guidance.safety``): why ``command``
+#: would fly the vehicle into the ground or ask for what it cannot do, given
+#: what it can fly now and who it is; empty: it may fly it
+SafetyRule = Callable[[Command, Limits, str], list[str]]
+
+
+class MavClass(Protocol):
+    """What a vehicle's class hands down to put its vehicles on MAVLink (the
+    classes of ``cosim.vehicles`` are such): how they look (``mavlink``, a
+    ``Personality``; None: the base one), how low above the ground a
+    command may send them, and the safety rule of their commands."""
+
+    mavlink: Personality | None
+
+    def min_alt_agl_m(self, profile: Mapping[str, Any]) -> float: ...
+
+    def safety_problems(self, cmd: Command, limits: Limits, who: str) -> list[str]: ...
 
 
 def check_rates(rates_hz: Mapping[str, float]) -> list[str]:
@@ -111,8 +130,8 @@ class MavVehicleSpec:
     personality: Personality | None = None
     #: the class minimum height above the ground commands may ask for
     min_alt_agl_m: float = 0.0
-    #: its vehicle class (the safety rule of its commands)
-    vehicle_class: str = DEFAULT_CLASS
+    #: its class's safety rule, asked of every command (None: none)
+    safety: SafetyRule | None = None
 
     @property
     def has_autopilot(self) -> bool:
@@ -120,17 +139,18 @@ class MavVehicleSpec:
         return self.personality is not None and self.personality.autopilot
 
 
-def mav_specs(vehicles: Sequence[VehicleSpec], first_sysid: int = 1,
-              first_row: int = 0, rows: Sequence[int] | None = None) -> list[MavVehicleSpec]:
+def mav_specs(vehicles: Sequence[VehicleSpec], classes: Callable[[str], MavClass],
+              first_sysid: int = 1, first_row: int = 0,
+              rows: Sequence[int] | None = None) -> list[MavVehicleSpec]:
     """MAVLink identities for scenario vehicles: system ids ``first_sysid``
-    upwards, each class's personality and command floor, the parameter
-    values its personality derives from the vehicle (e.g. airspeed limits);
-    their state rows ``first_row`` upwards, or ``rows``."""
-    from cosim.vehicles import get_class
-
+    upwards; from each vehicle's class (``classes``: class name -> what the
+    class hands down, e.g. ``cosim.vehicles.get_class``) its personality,
+    command floor and safety rule, and the parameter values its personality
+    derives from the vehicle (e.g. airspeed limits); their state rows
+    ``first_row`` upwards, or ``rows``."""
     out = []
     for k, v in enumerate(vehicles):
-        cls = get_class(v.vehicle_class)
+        cls = classes(v.vehicle_class)
         personality = cls.mavlink or Personality()
         params = personality.spec_params(v)
         out.append(MavVehicleSpec(row=first_row + k if rows is None else rows[k],
@@ -139,7 +159,7 @@ def mav_specs(vehicles: Sequence[VehicleSpec], first_sysid: int = 1,
                                   start_alt_msl_m=v.alt_msl_m, home_alt_msl_m=v.terrain_alt_m,
                                   params=params, personality=cls.mavlink,
                                   min_alt_agl_m=cls.min_alt_agl_m(v.profile),
-                                  vehicle_class=v.vehicle_class))
+                                  safety=cls.safety_problems))
     return out
 
 

@@ -110,7 +110,7 @@ class GroupState:
 
 class SwarmController:
     """See the module docstring. ``links``: the MAVLink identities per link (default:
-    one link, ``mav_specs(vehicles)``: system id = row + 1)."""
+    one link, ``mav_specs(vehicles, get_class)``: system id = row + 1)."""
 
     def __init__(self, spec: SwarmSpec, vehicles: Sequence[VehicleSpec], frame: LocalFrame,
                  physics_hz: float, links: Sequence[Sequence[MavVehicleSpec]] | None = None
@@ -119,7 +119,7 @@ class SwarmController:
         self.frame = frame
         self.physics_hz = float(physics_hz)
         if links is None:
-            links = [mav_specs(vehicles)]
+            links = [mav_specs(vehicles, get_class)]
         by_row = {ms.row: (li, ms) for li, specs in enumerate(links) for ms in specs}
         self.rows = np.array(spec.rows, dtype=np.intp)
         n = len(self.rows)

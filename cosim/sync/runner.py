@@ -46,7 +46,7 @@ from cosim.sync.participants import (
     watch_for,
 )
 from cosim.sync.parts import StateLogger, StatusEvents
-from cosim.vehicles.registry import state_layout
+from cosim.vehicles.registry import get_class, state_layout
 
 log = logging.getLogger(__name__)
 
@@ -409,7 +409,9 @@ class Run:
         if self.mavlink_config is not None:
             from cosim.mavlink import MavlinkLinks
 
-            self.mavlink = MavlinkLinks(scn.vehicles, hz, self.mavlink_config, tlog_dir=self.out)
+            # each vehicle's class hands mavlink its personality and safety rule
+            self.mavlink = MavlinkLinks(scn.vehicles, get_class, hz, self.mavlink_config,
+                                        tlog_dir=self.out)
             for url, specs, (host, port) in zip(self.mavlink.urls, self.mavlink.specs,
                                                  self.mavlink.local_addresses):
                 if url is not None:

@@ -61,7 +61,7 @@ def vehicle_specs(n: int, has_autopilot: bool = True, **kw: Any) -> list[MavVehi
     cls = FIXED_WING if has_autopilot else PLAIN
     kw.setdefault("min_alt_agl_m", DEFAULT_MIN_ALT_AGL_M)
     kw.setdefault("personality", cls.mavlink)
-    kw.setdefault("vehicle_class", cls.name)
+    kw.setdefault("safety", cls.safety_problems)
     return [MavVehicleSpec(row=i, sysid=i + 1, name=f"uav{i + 1}", start_lat_deg=start_of(i)[0],
                            start_lon_deg=start_of(i)[1], start_alt_msl_m=START_ALT_M,
                            home_alt_msl_m=HOME_ALT_M,

@@ -494,10 +494,11 @@ def test_every_class_reports_the_mode_of_what_it_was_told(rig, vehicle_class: st
     import importlib
 
     from cosim.guidance.commands import parse_command
+    from cosim.vehicles import get_class
 
     mod, name = personality.split(":")
     r = rig(1, personality=getattr(importlib.import_module(mod), name)(),
-            vehicle_class=vehicle_class)
+            safety=get_class(vehicle_class).safety_problems)
     for d, mode in kinds:
         c = parse_command(d, ("command",), lambda p, m: pytest.fail(m))
         r.ep.local_command(0, c)

@@ -9,6 +9,7 @@ from mavtest import S, mavutil, of_type, start_of
 from test_mav_commands import heartbeat, long, one_ack
 from test_mav_mission import ack_result, set_mode, upload
 
+from cosim.vehicles.quadrotor import QUADROTOR
 from cosim.vehicles.quadrotor.mavlink import ArduCopter
 
 ML = mavutil.mavlink
@@ -17,7 +18,7 @@ LAT0, LON0 = start_of(0)
 
 
 def test_copter_modes_takeoff_land_and_a_mission(rig) -> None:
-    r = rig(1, personality=ArduCopter(), vehicle_class="quadrotor")
+    r = rig(1, personality=ArduCopter(), safety=QUADROTOR.safety_problems)
     hb = heartbeat(r)
     assert (hb.type, hb.autopilot, hb.custom_mode) == (
         ML.MAV_TYPE_QUADROTOR, ML.MAV_AUTOPILOT_ARDUPILOTMEGA, 5)
@@ -63,7 +64,7 @@ def test_copter_modes_takeoff_land_and_a_mission(rig) -> None:
 
 
 def test_copter_orbits_in_circle_mode(rig) -> None:
-    r = rig(1, personality=ArduCopter(), vehicle_class="quadrotor")
+    r = rig(1, personality=ArduCopter(), safety=QUADROTOR.safety_problems)
     cmds, replies = r.request(lambda: r.gcs.mav.command_int_send(
         1, 1, ML.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, ML.MAV_CMD_DO_ORBIT, 0, 0, -25, 3, 0, 0,
         round((LAT0 + 0.001) * 1e7), round(LON0 * 1e7), 40.0))

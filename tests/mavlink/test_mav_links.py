@@ -13,6 +13,7 @@ from cosim.core.state import VehicleSpec
 from cosim.errors import ConfigError
 from cosim.mavlink import MavlinkConfig, MavlinkLinks, link_specs
 from cosim.mavlink.links import link_urls
+from cosim.vehicles import get_class
 
 
 def _vehicles(n: int) -> list[VehicleSpec]:
@@ -24,7 +25,7 @@ def _vehicles(n: int) -> list[VehicleSpec]:
 
 
 def test_specs_and_urls_per_link() -> None:
-    specs = link_specs(_vehicles(500))
+    specs = link_specs(_vehicles(500), get_class)
     assert [len(s) for s in specs] == [240, 240, 20]
     assert [(s[0].sysid, s[-1].sysid) for s in specs] == [(1, 240), (1, 240), (1, 20)]
     assert [(s[0].row, s[-1].row) for s in specs] == [(0, 239), (240, 479), (480, 499)]
@@ -38,7 +39,8 @@ def test_specs_and_urls_per_link() -> None:
 
 def test_second_link_serves_vehicles_241_on_with_their_own_system_ids(tmp_path: Path) -> None:
     n = 250
-    links = MavlinkLinks(_vehicles(n), PHYSICS_HZ, MavlinkConfig(url="udpin:127.0.0.1:0"),
+    links = MavlinkLinks(_vehicles(n), get_class, PHYSICS_HZ,
+                         MavlinkConfig(url="udpin:127.0.0.1:0"),
                          tlog_dir=tmp_path, clock_anchor_unix_us=ANCHOR_US)
     (_, p0), (_, p1) = links.local_addresses
     assert p0 != p1
@@ -75,7 +77,7 @@ def test_second_link_serves_vehicles_241_on_with_their_own_system_ids(tmp_path: 
 
 def test_an_outside_controller_drives_one_link_only() -> None:
     with pytest.raises(ConfigError, match="at most 240"):
-        MavlinkLinks(_vehicles(241), PHYSICS_HZ,
+        MavlinkLinks(_vehicles(241), get_class, PHYSICS_HZ,
                      MavlinkConfig(url="udpin:127.0.0.1:0", lockstep_sysid=245))
 
 
@@ -87,7 +89,7 @@ def test_only_the_vehicles_chosen_are_on_mavlink(tmp_path: Path) -> None:
 
     n = 1000
     rows = tuple(range(0, n, 4))
-    links = MavlinkLinks(_vehicles(n), PHYSICS_HZ,
+    links = MavlinkLinks(_vehicles(n), get_class, PHYSICS_HZ,
                          MavlinkConfig(url=None, rows=rows), tlog_dir=tmp_path,
                          clock_anchor_unix_us=ANCHOR_US)
     try:
@@ -105,7 +107,7 @@ def test_only_the_vehicles_chosen_are_on_mavlink(tmp_path: Path) -> None:
         links.close()
     assert len(list(tmp_path.glob("*.tlog"))) == 250
     with pytest.raises(ConfigError, match="selects no vehicle"):
-        MavlinkLinks(_vehicles(3), PHYSICS_HZ, MavlinkConfig(url=None, rows=()))
+        MavlinkLinks(_vehicles(3), get_class, PHYSICS_HZ, MavlinkConfig(url=None, rows=()))
 
 
 def test_the_scenario_chooses_its_mavlink_vehicles(tmp_path: Path) -> None:

@@ -30,6 +30,7 @@ from cosim.mavlink import (
     mav_specs,
 )
 from cosim.mavlink.adapter import Decoder, Packer
+from cosim.vehicles import get_class
 
 ML = mavutil.mavlink
 
@@ -310,7 +311,7 @@ def test_mav_specs_from_scenario_vehicles() -> None:
                     lat_deg=47.1, lon_deg=8.2, alt_msl_m=900, heading_deg=0,
                     airspeed_mps=51.4, terrain_alt_m=420,
                     profile={"airspeed_min_kt": 55, "airspeed_max_kt": 140})
-    s, = mav_specs([v], first_sysid=7, first_row=3)
+    s, = mav_specs([v], get_class, first_sysid=7, first_row=3)
     assert (s.sysid, s.row, s.name) == (7, 3, "a b")
     assert (s.start_lat_deg, s.start_lon_deg, s.start_alt_msl_m, s.home_alt_msl_m) == (
         47.1, 8.2, 900, 420)

@@ -8,6 +8,7 @@ from mavtest import S, mavutil, of_type, start_of
 from test_mav_commands import heartbeat
 from test_mav_mission import ack_result, set_mode, upload
 
+from cosim.vehicles.ground import GROUND
 from cosim.vehicles.ground.mavlink import ArduRover
 
 ML = mavutil.mavlink
@@ -17,7 +18,7 @@ LAT0, LON0 = start_of(0)
 
 
 def test_a_rover_drives_its_mission_in_auto_and_holds_in_hold(rig) -> None:
-    r = rig(1, personality=ArduRover(), vehicle_class="ground")
+    r = rig(1, personality=ArduRover(), safety=GROUND.safety_problems)
     hb = heartbeat(r)
     assert (hb.type, hb.autopilot, hb.custom_mode) == (
         ML.MAV_TYPE_GROUND_ROVER, ML.MAV_AUTOPILOT_ARDUPILOTMEGA, 4)

@@ -16,6 +16,7 @@ from test_mav_commands import cint, long, one_ack
 from cosim.errors import ConfigError
 from cosim.guidance.commands import min_turn_radius_m
 from cosim.scenario import parse_scenario
+from cosim.vehicles import get_class
 from cosim.vehicles.fixed_wing import DEFAULT_MIN_ALT_AGL_M
 
 ML = mavutil.mavlink
@@ -164,7 +165,7 @@ def test_a_profile_may_set_its_own_minimum(tmp_path) -> None:
     from cosim.mavlink import mav_specs
 
     scn = parse_scenario(SCHEDULE.replace("COMMAND", "{alt_agl_m: 30}"), "s.yaml")
-    assert mav_specs(scn.vehicles)[0].min_alt_agl_m == DEFAULT_MIN_ALT_AGL_M
+    assert mav_specs(scn.vehicles, get_class)[0].min_alt_agl_m == DEFAULT_MIN_ALT_AGL_M
     plane = tmp_path / "planes"
     src = scn.vehicles[0].aircraft_dir
     import shutil

@@ -20,6 +20,7 @@ from test_mav_signing import ENV, KEY, PASSPHRASE, URL, _deliver, _now_us, _rtl
 
 from cosim.mavlink import MavlinkConfig, MavlinkLinks
 from cosim.mavlink import adapter as mav
+from cosim.vehicles import get_class
 
 ML = mavutil.mavlink
 HERE = Path(__file__).resolve().parent
@@ -104,7 +105,7 @@ def test_a_packet_accepted_on_one_link_is_refused_on_the_others(keyed: None,
     RTL captured on link 0 (its station's link id) replayed to link 1 is
     refused; link 1's own station, another link id, is obeyed."""
     n = 245
-    links = MavlinkLinks(_vehicles(n), PHYSICS_HZ, _config(tmp_path / "signing"),
+    links = MavlinkLinks(_vehicles(n), get_class, PHYSICS_HZ, _config(tmp_path / "signing"),
                          clock_anchor_unix_us=_now_us())
     (_, p0), (_, p1) = links.local_addresses
     gcs0 = GroundStation(f"udpout:127.0.0.1:{p0}", KEY)

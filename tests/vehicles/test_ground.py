@@ -240,6 +240,7 @@ def test_it_is_an_ardurover_on_mavlink(tmp_path: Path) -> None:
     from cosim.core.state import N_STATE, STATE_INDEX
     from cosim.mavlink import MavlinkConfig, MavlinkEndpoint, mav_specs
     from cosim.mavlink.adapter import make_message
+    from cosim.vehicles import get_class
 
     ML = mavutil.mavlink
     body = """\
@@ -250,7 +251,7 @@ vehicles:
      airspeed_kt: 100}}
 """
     scn = _scenario(tmp_path, body, "mav")
-    ep = MavlinkEndpoint(mav_specs(scn.vehicles), 120.0, MavlinkConfig(url=None))
+    ep = MavlinkEndpoint(mav_specs(scn.vehicles, get_class), 120.0, MavlinkConfig(url=None))
     try:
         states = np.zeros((2, N_STATE))
         states[:, STATE_INDEX["lat_deg"]] = 47.0

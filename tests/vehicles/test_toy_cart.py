@@ -141,10 +141,11 @@ def test_its_personality_answers_its_own_command_and_refuses_the_planes(
     from cosim.core.state import N_STATE
     from cosim.mavlink import MavlinkConfig, MavlinkEndpoint, mav_specs
     from cosim.mavlink.adapter import make_message
+    from cosim.vehicles import get_class
 
     ML = mavutil.mavlink
     scn = load_scenario(_scenario(tmp_path))
-    ep = MavlinkEndpoint(mav_specs(scn.vehicles), 120.0, MavlinkConfig(url=None))
+    ep = MavlinkEndpoint(mav_specs(scn.vehicles, get_class), 120.0, MavlinkConfig(url=None))
     try:
         states = np.zeros((len(scn.vehicles), N_STATE))
 

@@ -42,12 +42,11 @@ class Context:
 
     def unsafe(self, v: MavVehicle, cmd: Command) -> str | None:
         """Why ``cmd`` would fly ``v`` into the ground or ask for a turn it
-        cannot make (its class's rule, ``cosim.guidance.safety``: the rule of
-        every command path), counted; None: it may fly it."""
-        from cosim.vehicles import get_class
-
-        problems = get_class(v.spec.vehicle_class).safety_problems(
-            cmd, v.personality.limits(v), "the vehicle")
+        cannot make (the rule its class handed down, ``MavVehicleSpec.safety``;
+        ``cosim.guidance.safety``: the rule of every command path), counted;
+        None: it may fly it."""
+        rule = v.spec.safety
+        problems = [] if rule is None else rule(cmd, v.personality.limits(v), "the vehicle")
         if not problems:
             return None
         self.counts["commands_unsafe"] += 1

@@ -18,7 +18,7 @@ and no other command carries a speed while disarmed. NAV_LAND (in GUIDED):
 land at the point, or straight ahead, down a 3-degree glide path at 1.1 x
 AIRSPEED_MIN, sliding to a stop on the airframe's skids.
 
-Missions (flown in AUTO item by item, ``cosim.mavlink.mission``):
+Missions (flown in AUTO item by item, ``cosim.mavlink.mission_runner``):
 NAV_WAYPOINT, NAV_LOITER_UNLIM, NAV_LOITER_TURNS, NAV_LOITER_TIME,
 NAV_LOITER_TO_ALT, NAV_TAKEOFF, NAV_RETURN_TO_LAUNCH, NAV_LAND (the leg to
 its point becomes the approach, then the glide path; reached once stopped
