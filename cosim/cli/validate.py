@@ -63,7 +63,8 @@ def _validate_file(f: str, deep: bool, workers: int | None) -> tuple[Scenario, i
     with ``deep``, build the vehicles of each distinct combination. Returns
     the first combination's scenario, the combinations checked and built."""
     from cosim.scenario import load_scenario
-    from cosim.scenario.schema import Memo, check_scenario
+    from cosim.scenario.memo import Memo
+    from cosim.scenario.schema import check_scenario
     from cosim.sweep.spec import read_sweep
 
     memo = Memo()  # the file parsed once; parts the same in two combinations checked once

@@ -82,7 +82,7 @@ import numpy as np
 
 from cosim.core.limits import MAX_FILE_BYTES
 from cosim.errors import ConfigError
-from cosim.scenario.schema import _Ctx, _describe, _Reader
+from cosim.scenario.reader import Problems, Reader, describe
 from cosim.scenario.yaml_lines import (
     YamlProblem,
     load_with_lines,
@@ -412,10 +412,10 @@ def parse_study(text: str, path: Path) -> Study:
         data, lines, dups = load_with_lines(text)
     except YamlProblem as e:
         raise ConfigError([f"{fname}:{ln}: {m}" for ln, m in e.problems]) from None
-    ctx = _Ctx(fname, lines)
+    ctx = Problems(fname, lines)
     for ln, m in dups:
         ctx.problems.append((ln, m))
-    top = _Reader(ctx, data, (), TOP_KEYS)
+    top = Reader(ctx, data, (), TOP_KEYS)
     version = top.integer("schema_version", 1)
     if version is not None and version != 1:
         ctx.err(("schema_version",), f"unsupported schema_version {version}; this cosim reads 1")
@@ -463,7 +463,7 @@ def parse_study(text: str, path: Path) -> Study:
                  practice_clips=tuple(practice_clips))
 
 
-def _clips_of(ctx: _Ctx, key: str, spec: Any, base: Path, roots: list[Path]) -> list[Clip]:
+def _clips_of(ctx: Problems, key: str, spec: Any, base: Path, roots: list[Path]) -> list[Clip]:
     """The clips of top-level ``key``: a list (like ``clips:``) or a sweep
     folder (like ``sweep:``); ``key`` names them in the messages."""
     listed = isinstance(spec, list) if key == "practice_clips" else key == "clips"
@@ -473,16 +473,16 @@ def _clips_of(ctx: _Ctx, key: str, spec: Any, base: Path, roots: list[Path]) -> 
     return _sweep_clips(ctx, spec, base, roots, key)
 
 
-def _check_ids(ctx: _Ctx, key: str, ids: list[str]) -> None:
+def _check_ids(ctx: Problems, key: str, ids: list[str]) -> None:
     if len(set(ids)) != len(ids):
         dup = sorted({i for i in ids if ids.count(i) > 1})
         ctx.err((key,), f"clip ids given twice: {', '.join(dup[:10])}")
 
 
-def _file(ctx: _Ctx, at: tuple[Any, ...], value: Any, base: Path, roots: tuple[Path, ...],
+def _file(ctx: Problems, at: tuple[Any, ...], value: Any, base: Path, roots: tuple[Path, ...],
           what: str) -> Path | None:
     if not isinstance(value, str) or not value or "\x00" in value:
-        ctx.err(at, f"expected the path of the {what}, got {_describe(value)}")
+        ctx.err(at, f"expected the path of the {what}, got {describe(value)}")
         return None
     p, instead = _inside(base / value, roots)
     if p is None:
@@ -491,7 +491,7 @@ def _file(ctx: _Ctx, at: tuple[Any, ...], value: Any, base: Path, roots: tuple[P
     return p
 
 
-def _clip_from(ctx: _Ctx, at: tuple[Any, ...], cid: str, video: Path, gt: Path,
+def _clip_from(ctx: Problems, at: tuple[Any, ...], cid: str, video: Path, gt: Path,
                target: str | None, run: str, rate: float | None, width: int | None,
                height: int | None, conditions: dict[str, str],
                hfov: float | None = None) -> Clip | None:
@@ -523,10 +523,10 @@ def _clip_from(ctx: _Ctx, at: tuple[Any, ...], cid: str, video: Path, gt: Path,
                 gt_sha256=gt_sha256, video_bytes=video_bytes)
 
 
-def _listed_clips(ctx: _Ctx, items: Any, base: Path, roots: tuple[Path, ...],
+def _listed_clips(ctx: Problems, items: Any, base: Path, roots: tuple[Path, ...],
                   key: str = "clips", id_prefix: str = "clip") -> list[Clip]:
     if not isinstance(items, list) or not items:
-        ctx.err((key,), f"expected a non-empty list of clips, got {_describe(items)}")
+        ctx.err((key,), f"expected a non-empty list of clips, got {describe(items)}")
         return []
     if len(items) > MAX_CLIPS:
         ctx.err((key,), f"{len(items)} clips; a study may have at most {MAX_CLIPS}")
@@ -534,7 +534,7 @@ def _listed_clips(ctx: _Ctx, items: Any, base: Path, roots: tuple[Path, ...],
     out = []
     for i, item in enumerate(items):
         at = (key, i)
-        r = _Reader(ctx, item, at, CLIP_KEYS)
+        r = Reader(ctx, item, at, CLIP_KEYS)
         before = len(ctx.problems)
         video = _file(ctx, at + ("video",), r.d.get("video"), base, roots, "video")
         gt = _file(ctx, at + ("ground_truth",), r.d.get("ground_truth"), base, roots,
@@ -549,12 +549,12 @@ def _listed_clips(ctx: _Ctx, items: Any, base: Path, roots: tuple[Path, ...],
         conds: dict[str, str] = {}
         cd = r.d.get("conditions", {})
         if not isinstance(cd, dict):
-            ctx.err(at + ("conditions",), f"expected a mapping, got {_describe(cd)}")
+            ctx.err(at + ("conditions",), f"expected a mapping, got {describe(cd)}")
         else:
             for k, v in list(cd.items())[:100]:
                 if isinstance(v, (dict, list)) or v is None or not isinstance(k, str):
                     ctx.err(at + ("conditions", k), f"expected a name: value, got "
-                                                    f"{_describe(v)}")
+                                                    f"{describe(v)}")
                 else:
                     conds[k] = _fmt_value(v)
         if len(ctx.problems) != before or video is None or gt is None:
@@ -574,24 +574,24 @@ def _fmt_value(v: Any) -> str:
     return str(v)
 
 
-def _sweep_clips(ctx: _Ctx, spec: Any, base: Path, roots: list[Path],
+def _sweep_clips(ctx: Problems, spec: Any, base: Path, roots: list[Path],
                  key: str = "sweep") -> list[Clip]:
     at: tuple[Any, ...] = (key,)
     where: Mapping[str, Any] = {}
     if isinstance(spec, dict):
-        r = _Reader(ctx, spec, at, ("folder", "where"))
+        r = Reader(ctx, spec, at, ("folder", "where"))
         folder = r.string("folder")
         w = spec.get("where", {})
         if not isinstance(w, dict):
             ctx.err(at + ("where",), f"expected a mapping of manifest column: value, got "
-                                     f"{_describe(w)}")
+                                     f"{describe(w)}")
         else:
             where = w
         at = at + ("folder",)
     else:
         folder = spec
     if not isinstance(folder, str) or not folder:
-        ctx.err(at, f"expected the path of a cosim sweep folder, got {_describe(folder)}")
+        ctx.err(at, f"expected the path of a cosim sweep folder, got {describe(folder)}")
         return []
     try:
         sweep = (base / folder).resolve(strict=True)

@@ -11,8 +11,9 @@ import pytest
 
 from cosim.cli import main
 from cosim.errors import ConfigError
-from cosim.scenario import load_scenario, schema
-from cosim.scenario.schema import Memo, check_scenario
+from cosim.scenario import load_scenario, memo, schema
+from cosim.scenario.memo import Memo
+from cosim.scenario.schema import check_scenario
 from cosim.sweep.spec import read_sweep
 
 REPO = Path(__file__).resolve().parent.parent.parent
@@ -48,20 +49,20 @@ def test_each_part_is_checked_once_per_distinct_input(tmp_path: Path, monkeypatc
     p.write_text(SWEEP)
     calls = {"vehicles": 0, "schedule": 0, "read": 0}
     for name in ("vehicles", "schedule"):
-        real = getattr(schema, f"_{name}")
+        real = getattr(schema, f"parse_{name}")
 
         def counted(*a, _real=real, _name=name, **k):
             calls[_name] += 1
             return _real(*a, **k)
 
-        monkeypatch.setattr(schema, f"_{name}", counted)
-    real_read = schema.read_scenario_text
+        monkeypatch.setattr(schema, f"parse_{name}", counted)
+    real_read = memo.read_scenario_text
 
     def read(path):
         calls["read"] += 1
         return real_read(path)
 
-    monkeypatch.setattr(schema, "read_scenario_text", read)
+    monkeypatch.setattr(memo, "read_scenario_text", read)
     assert main(["validate", str(p)]) == 0
     assert "all 240 sweep combinations" in capsys.readouterr().out
     # 5 distinct vehicle sets (alt_agl_m); the schedule also varies with the
