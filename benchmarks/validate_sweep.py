@@ -18,7 +18,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from cosim.cli import _validate_file
+from cosim.cli.validate import _validate_file
 from cosim.scenario import load_scenario
 from cosim.sweep.spec import read_sweep
 

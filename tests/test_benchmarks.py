@@ -20,7 +20,7 @@ def test_render_bench_parts_add_up(tmp_path: Path, monkeypatch: pytest.MonkeyPat
     import cv2
     import render_bench
 
-    from cosim.renderer.ground import CACHE_ENV
+    from cosim.renderer.tile_cache import CACHE_ENV
 
     monkeypatch.setenv(CACHE_ENV, "off")  # per_frame sets it: restored after the test
     monkeypatch.setattr(cv2, "setNumThreads", lambda n: None)  # and this, for the process

@@ -64,7 +64,7 @@ class ModelNumbers:
 def model_numbers(model: str) -> ModelNumbers:
     """Mass and wing area as JSBSim reads them from the model file; CL_max from
     the model's cosim profile."""
-    from cosim.jsb import find_model, new_fdm
+    from cosim.vehicles.jsb import find_model, new_fdm
 
     m = find_model(model)
     fdm = new_fdm(m, 1 / 120)

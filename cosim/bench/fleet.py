@@ -7,9 +7,9 @@ from __future__ import annotations
 from cosim.core.geo import LocalFrame
 from cosim.core.state import VehicleSpec
 from cosim.core.units import KT_TO_MPS
-from cosim.jsb import find_model
 from cosim.scenario.formation import formation_offsets
 from cosim.vehicles import DEFAULT_CLASS
+from cosim.vehicles.jsb import find_model
 from cosim.vehicles.registry import get_class
 from cosim.world import World
 

@@ -42,16 +42,16 @@ from typing import Any
 
 import numpy as np
 
-from cosim import workers as worker_kit
 from cosim.bench.fleet import ORIGIN, bench_specs, check_rates
 from cosim.bench.plot import plot_scaling
+from cosim.core import workers as worker_kit
 from cosim.core.state import VehicleSpec
 from cosim.errors import CosimError
 from cosim.fdm_pool import get_backend, make_pool
 from cosim.fdm_pool.process import default_workers, shard_bounds
 from cosim.fdm_pool.shard import Shard
-from cosim.jsb import find_model
 from cosim.vehicles import DEFAULT_CLASS
+from cosim.vehicles.jsb import find_model
 
 log = logging.getLogger(__name__)
 

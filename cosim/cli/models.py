@@ -21,7 +21,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(a: argparse.Namespace) -> int:
-    from cosim.jsb import find_model, list_models, new_fdm
+    from cosim.vehicles.jsb import find_model, list_models, new_fdm
 
     if a.properties:
         fdm = new_fdm(find_model(a.properties), 1 / 120)
@@ -33,8 +33,8 @@ def run(a: argparse.Namespace) -> int:
         for name, cls in vehicle_classes().items():
             print(f"{name:12s} {cls.model_kind:8s} {type(cls).__module__:28s} {cls.description}")
         return EXIT_OK
-    from cosim.jsb import held_messages
     from cosim.vehicles import DEFAULT_CLASS, vehicle_classes
+    from cosim.vehicles.jsb import held_messages
 
     classes = vehicle_classes()
     failed: list[str] = []

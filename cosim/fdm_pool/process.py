@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from cosim import workers as worker_kit
+from cosim.core import workers as worker_kit
 from cosim.core.state import StateField, VehicleSpec
 from cosim.errors import BuildError, WorkerDied, WorkerError, WorkerTimeout
 from cosim.fdm_pool.base import BuildProgress, Pool, Watch

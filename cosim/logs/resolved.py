@@ -35,8 +35,8 @@ def _kind(model: str, vehicle_class: str | None, cache: dict[tuple[str, str | No
     """The replay type (a class's ``display_type``) of a vehicle: its class's,
     else its model profile's class's; a name cosim cannot resolve (an older
     run's) gives the generic ``Air``."""
-    from cosim.jsb import find_model
     from cosim.vehicles import DEFAULT_CLASS, get_class
+    from cosim.vehicles.jsb import find_model
 
     key = (model, vehicle_class)
     if key not in cache:

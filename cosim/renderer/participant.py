@@ -55,7 +55,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from cosim import workers as worker_kit
+from cosim.core import workers as worker_kit
 from cosim.core.camera import CameraSpec, camera_pose
 from cosim.core.state import STATE_INDEX
 from cosim.errors import CosimError, how_it_ended

@@ -35,8 +35,8 @@ from urllib.parse import parse_qs, urlsplit
 
 import numpy as np
 
+from cosim.core.netaddr import is_loopback
 from cosim.errors import ConfigError, CosimError
-from cosim.netaddr import is_loopback
 from cosim.sync.participants import ParticipantFailed
 
 log = logging.getLogger(__name__)

@@ -13,12 +13,12 @@ from cosim.core import limits as lim
 from cosim.core.state import VehicleSpec
 from cosim.core.units import KT_TO_MPS
 from cosim.errors import ConfigError, CosimError
-from cosim.jsb import find_model
 from cosim.scenario.formation import FORMATIONS, formation_offsets
 from cosim.scenario.model import Origin
 from cosim.scenario.reader import ID, MISSING, P, Problems, Reader, clip, describe, prop_values
 from cosim.scenario.yaml_lines import format_path
 from cosim.vehicles import DEFAULT_CLASS, ModelChoice, VehicleClass, get_class
+from cosim.vehicles.jsb import find_model
 
 ALT_MIN_M, ALT_MAX_M = -500.0, 100_000.0  # every vehicle's resolved height must lie here
 

@@ -9,10 +9,10 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from cosim.core.state import VehicleSpec
-from cosim.jsb import has_property, is_writable, new_fdm
 from cosim.scenario.model import ScheduleItem
 from cosim.scenario.reader import P, Problems
 from cosim.vehicles import get_class
+from cosim.vehicles.jsb import has_property, is_writable, new_fdm
 
 
 def check_writes(ctx: Problems, vehicles: list[tuple[VehicleSpec, P]],
@@ -50,7 +50,7 @@ def check_property_names(ctx: Problems, vehicles: list[tuple[VehicleSpec, P]],
     def fdm_of(spec: VehicleSpec) -> Any:
         key = (spec.model, spec.aircraft_dir)
         if key not in fdms:
-            from cosim.jsb import ModelInfo
+            from cosim.vehicles.jsb import ModelInfo
 
             fdms[key] = new_fdm(ModelInfo(spec.model, spec.aircraft_dir, spec.model_source,
                                           profile=spec.profile), 0.01)

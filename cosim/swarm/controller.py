@@ -85,7 +85,7 @@ def stall_numbers(spec: VehicleSpec) -> StallNumbers:
     key = (spec.model, spec.aircraft_dir)
     if key not in _STALL_CACHE:
         from cosim.analysis.flight import LB_TO_KG, SQFT_TO_M2
-        from cosim.jsb import ModelInfo, new_fdm
+        from cosim.vehicles.jsb import ModelInfo, new_fdm
 
         fdm = new_fdm(ModelInfo(spec.model, spec.aircraft_dir, spec.model_source,
                                 profile=spec.profile), 1 / 120)

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from cosim import workers as worker_kit
+from cosim.core import workers as worker_kit
 from cosim.core.section import scenario_sections
 from cosim.errors import ConfigError, CosimError
 from cosim.scenario.placeholders import Scalar, format_value

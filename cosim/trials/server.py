@@ -56,8 +56,8 @@ from starlette.routing import Mount, Route
 from starlette.staticfiles import StaticFiles
 
 from cosim.core.display import DisplayProfile
+from cosim.core.netaddr import is_loopback
 from cosim.errors import ConfigError
-from cosim.netaddr import is_loopback
 from cosim.trials.files import file_kind
 from cosim.trials.limits import (
     MAX_BODY_BYTES,

@@ -1,7 +1,8 @@
-"""vehicles: the vehicle classes (an extension point) and what a vehicle is.
+"""vehicles: the vehicle classes (an extension point) and their models.
 
-Owns ``VehicleSpec`` and the state array's layout (``spec``), the class
-protocol (``base.VehicleClass``), the registry of classes (``registry``:
+Owns the class protocol (``base.VehicleClass``; a vehicle's spec and the
+state array's layout are the kernel's, ``cosim.core.state``), JSBSim's
+plumbing and the aircraft catalog (``jsb``), the registry of classes (``registry``:
 cosim's own and any a package registers in the ``cosim.vehicles`` entry-point
 group), the model kinds (JSBSim-backed: ``jsbsim_model``; batched:
 ``base.BatchedModel``) and cosim's classes: ``fixed_wing`` (an ArduPlane-like

@@ -158,7 +158,7 @@ class VehicleClass:
         a line-numbered problem) if there is none. JSBSim kinds: a JSBSim
         model on the aircraft search path."""
         from cosim.errors import ConfigError
-        from cosim.jsb import find_model
+        from cosim.vehicles.jsb import find_model
 
         if model is None:
             raise ConfigError("missing required key 'model'")

@@ -21,7 +21,7 @@ import numpy as np
 from cosim.core.state import STATE_FIELDS, StateField, VehicleSpec, VehicleStatus
 from cosim.core.units import FT_TO_M, KT_TO_MPS
 from cosim.errors import JSBSimError
-from cosim.jsb import ModelInfo, has_property, held_messages, new_fdm, release
+from cosim.vehicles.jsb import ModelInfo, has_property, held_messages, new_fdm, release
 
 _MPS_TO_FPS = 1.0 / FT_TO_M
 _IN_TO_M = FT_TO_M / 12.0

@@ -43,7 +43,7 @@ import numpy as np
 from cosim.core.state import STATE_INDEX, StateField, VehicleSpec
 from cosim.core.units import FT_TO_M
 from cosim.errors import JSBSimError
-from cosim.jsb import has_property
+from cosim.vehicles.jsb import has_property
 from cosim.vehicles.registry import get_class
 
 _get = jsbsim.FGPropertyNode.get_double_value

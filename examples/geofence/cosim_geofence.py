@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from cosim.core.args import EXIT_OK
-from cosim.core.section import P, CliCommand, Section, SectionContext
+from cosim.core.section import CliCommand, P, Section, SectionContext
 from cosim.core.state import STATE_INDEX
 from cosim.errors import ConfigError
 from cosim.world.obstacles import inside

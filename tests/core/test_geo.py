@@ -81,7 +81,7 @@ def test_ecef_point_lies_on_ellipsoid() -> None:
 
 @pytest.fixture(scope="module")
 def fdm():
-    from cosim.jsb import find_model, new_fdm
+    from cosim.vehicles.jsb import find_model, new_fdm
 
     return new_fdm(find_model("c172p"), 1 / 120)
 

@@ -23,7 +23,7 @@ from cosim.fdm_pool import (
     VehicleStatus,
 )
 from cosim.fdm_pool.process import shard_bounds
-from cosim.jsb import find_model, new_fdm
+from cosim.vehicles.jsb import find_model, new_fdm
 
 CH = ("fcs/throttle-cmd-norm", "fcs/aileron-cmd-norm")
 
@@ -289,10 +289,10 @@ def test_workers_log_like_the_driver(tmp_path, verbosity: str, expect: bool) -> 
     script = tmp_path / "driver.py"
     script.write_text(textwrap.dedent(f"""
         from cosim.bench.fleet import bench_specs
-        from cosim.cli import _setup_logging
+        from cosim.cli import setup_logging
         from cosim.fdm_pool import ProcessPool
         if __name__ == "__main__":
-            _setup_logging(verbose={verbosity.count("v")}, quiet={verbosity == "-q"})
+            setup_logging(verbose={verbosity.count("v")}, quiet={verbosity == "-q"})
             # every vehicle in the child: whatever is logged about them comes from it
             with ProcessPool(bench_specs(1), 1 / 120, workers=1, driver_steps=False) as pool:
                 pool.step(4)

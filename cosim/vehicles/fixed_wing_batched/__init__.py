@@ -53,7 +53,7 @@ def class_params(model: str, aircraft_dir: str, source: str,
     weight and wing area read once from a loaded FDM) and the scenario origin:
     one dict, shared by every vehicle of the model (a scenario may hold
     100,000 of them)."""
-    from cosim.jsb import find_model, new_fdm
+    from cosim.vehicles.jsb import find_model, new_fdm
 
     info = find_model(model, (aircraft_dir,) if source == "user" else ())
     fdm = new_fdm(info, 1 / 120)

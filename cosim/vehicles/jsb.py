@@ -32,7 +32,7 @@ from cosim.errors import JSBSimError, ModelNotFound
 log = logging.getLogger(__name__)
 
 #: the project's own aircraft (``aircraft/`` beside the package in a checkout)
-PROJECT_AIRCRAFT_DIR = Path(__file__).resolve().parent.parent / "aircraft"
+PROJECT_AIRCRAFT_DIR = Path(__file__).resolve().parents[2] / "aircraft"
 JSBSIM_ROOT = Path(jsbsim.get_default_root_dir())
 #: shared JSBSim systems (the cosim autopilot) and profiles of bundled models
 SYSTEMS_DIR = PROJECT_AIRCRAFT_DIR / "systems"

@@ -11,7 +11,7 @@ import signal
 import time
 from multiprocessing.connection import Connection
 
-from cosim import workers as worker_kit
+from cosim.core import workers as worker_kit
 from cosim.errors import how_it_ended
 
 
