@@ -1,5 +1,5 @@
 """Flight-test measurements from logged ground truth, against the equations
-of DESIGN.md 3.1.
+of docs/physics.md ("Fixed-wing aircraft").
 
 - turn radius of a steady level turn (least-squares circle through the
   ground track) vs ``R = v^2 / (g tan(phi))`` with the measured speed and bank

@@ -66,7 +66,7 @@ _TARGET_EXTRA = ("alt_msl_m", "alt_agl_m", "airspeed_kt", "airspeed_mps")
 
 
 def min_turn_radius_m(airspeed_mps: float, bank_limit_deg: float) -> float:
-    """R = v^2 / (g tan(phi)) at the bank limit (DESIGN.md 3.1)."""
+    """R = v^2 / (g tan(phi)) at the bank limit (docs/physics.md, Fixed-wing aircraft)."""
     return airspeed_mps ** 2 / (G_MPS2 * math.tan(math.radians(bank_limit_deg)))
 
 

@@ -387,7 +387,7 @@ class MavVehicle:
         return {"latitude": _i(lat * 1e7, -900_000_000, 900_000_000),
                 "longitude": _i(lon * 1e7, -1_800_000_000, 1_800_000_000),
                 "altitude": _i(alt * 1000.0, -2 ** 31, 2 ** 31 - 1),
-                # local frame = the vehicle's start (DESIGN.md 3.3): home is below it
+                # local frame = the vehicle's start (docs/physics.md, Coordinates): home is below it
                 "x": 0.0, "y": 0.0, "z": float(self.spec.start_alt_msl_m - alt),
                 "q": [1.0, 0.0, 0.0, 0.0], "approach_x": 0.0, "approach_y": 0.0,
                 "approach_z": 0.0, "time_usec": self.clock.sim_us(tick)}

@@ -1,4 +1,4 @@
-"""The consensus laws of DESIGN.md 3.4, pure numpy, vectorised over vehicles.
+"""The consensus laws of docs/physics.md ("Swarm consensus behaviours"), pure numpy, vectorised over vehicles.
 
 Positions are horizontal ``(n, 2)`` arrays of (north, east) metres in one
 local tangent frame (``cosim.core.geo.LocalFrame``: exact WGS-84, no flat-earth
@@ -60,8 +60,8 @@ def anti_rendezvous(p_ne_m: ArrayLike, mu: float, k_s: float, stall_mps: ArrayLi
     """Goals ``g_i = mu (c - p_i) + p_i`` (mu < 0: away from the centroid) and
     speeds ``max(s_s,i, k_s (max_j ||p_j - c|| - ||p_i - c||))``.
 
-    DESIGN.md 3.4 writes the speed without brackets; ``k_s`` (1/s) must
-    multiply the whole difference for the result to be a speed, so it does:
+    ``k_s`` (1/s) multiplies the whole difference, for the result to be a
+    speed:
     the vehicles nearest the centre fly fastest, the outermost at stall.
     """
     p = np.asarray(p_ne_m, dtype=np.float64)

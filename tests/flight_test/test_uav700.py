@@ -1,4 +1,4 @@
-"""Flight tests of the uav700 (DESIGN.md 3.1), flown from scenarios/flight_test/
+"""Flight tests of the uav700 (docs/physics.md, Fixed-wing aircraft), flown from scenarios/flight_test/
 and judged from the logged ground truth only, against the design equations."""
 
 from __future__ import annotations
@@ -47,7 +47,7 @@ def test_the_helpers_against_hand_computed_cases() -> None:
     assert circle_fit(3 + 250 * np.cos(a), -7 + 250 * np.sin(a)) == pytest.approx((3, -7, 250))
     assert float(isa_density(0.0)) == pytest.approx(1.225)
     assert float(isa_density(1000.0)) == pytest.approx(1.1117, abs=1e-4)
-    # DESIGN.md sizing: 40 kg, 1.2 m2, CL_max 1.3 -> about 39 kt at sea level
+    # the uav700's sizing: 40 kg, 1.2 m2, CL_max 1.3 -> about 39 kt at sea level
     assert level_stall_speed_mps(40, 1.2, 1.3, 1.225) / KT_TO_MPS == pytest.approx(39.4, abs=0.1)
     assert turn_radius_m(200 * KT_TO_MPS, 45) == pytest.approx(1079.5, abs=0.5)
 

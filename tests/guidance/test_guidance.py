@@ -200,5 +200,5 @@ def test_bad_commands_are_rejected_at_validation(vehicles: str, cmd: str, messag
 def test_min_turn_radius_is_the_design_equation() -> None:
     v = 200 * KT_TO_MPS
     assert min_turn_radius_m(v, 45) == pytest.approx(v * v / 9.80665)
-    assert min_turn_radius_m(v, 45) == pytest.approx(1079.5, abs=0.5)  # DESIGN.md: ~1.08 km
+    assert min_turn_radius_m(v, 45) == pytest.approx(1079.5, abs=0.5)  # docs/physics.md: ~1.08 km
     assert min_turn_radius_m(v, 30) == pytest.approx(v * v / (9.80665 * math.tan(math.pi / 6)))
