@@ -58,12 +58,6 @@ class Commander:
                 observe(r, cmd, source)
         if not cmd.flies:  # only gimbal angles: for the cameras (an observer)
             return
-        if len(self.guidance) == 1:
-            name, g = next(iter(self.guidance.items()))
-            mine = [r for r in rows if self.row_class[r] == name]
-            if mine:
-                g.command(mine, cmd, states, setpoints)
-            return
         for name, g in self.guidance.items():
             mine = [r for r in rows if self.row_class[r] == name]
             if mine:
