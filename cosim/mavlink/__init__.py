@@ -21,13 +21,12 @@ Entry point: ``MavlinkEndpoint`` (see ``cosim.mavlink.endpoint``).
 
 from __future__ import annotations
 
+from cosim.mavlink.config import MavlinkConfig, load_signing_key
 from cosim.mavlink.endpoint import (
     CONTROLLER_SYSID,
     MAX_VEHICLES_PER_LINK,
-    MavlinkConfig,
     MavlinkEndpoint,
     VehicleCommand,
-    load_signing_key,
 )
 from cosim.mavlink.errors import EndpointClosed, LinkError, LockstepTimeout, MavlinkError
 from cosim.mavlink.link import DEFAULT_URL, LinkUrl
