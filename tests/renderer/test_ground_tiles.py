@@ -1,5 +1,5 @@
 """Procedural ground tiles are a pure function of (seed, level, tile): the per-cell
-tables kept across tiles (ground._TABLES) and the order tiles are made in do not
+tables kept across tiles (noise.TABLES) and the order tiles are made in do not
 change a pixel."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from cosim.core.geo import LocalFrame
-from cosim.renderer import ground
+from cosim.renderer import noise, pyramid, tile_cache
 from cosim.renderer.ground import GroundTexture
 from cosim.world.ground import GroundSpec
 
@@ -24,8 +24,8 @@ def _tiles(keys: list[tuple[int, int, int]], seed: int = 7) -> dict[tuple[int, i
 
 
 def _forget(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(ground, "_TABLES", ground._Tables(ground._TABLES.max_bytes))
-    ground._WEIGHTS.clear()
+    monkeypatch.setattr(noise, "TABLES", noise.Tables(noise.TABLES.max_bytes))
+    noise.WEIGHTS.clear()
 
 
 def test_tiles_do_not_depend_on_the_kept_tables_or_the_order(
@@ -38,21 +38,21 @@ def test_tiles_do_not_depend_on_the_kept_tables_or_the_order(
     assert {k: _tiles([k])[k] for k in KEYS} == made  # each alone, from the start
     # no table kept at all: each made for exactly its tile's cells (tree cells: for
     # the candidate samples where a tile spans more cells than it has samples)
-    def own_only(self: ground._Tables, key: tuple[object, ...], i0: int, i1: int, j0: int,
+    def own_only(self: noise.Tables, key: tuple[object, ...], i0: int, i1: int, j0: int,
                  j1: int, size: int, make: Any, own: bool = True) -> Any:
         return (i0, i1 + 1, j0, j1 + 1, make(i0, i1 + 1, j0, j1 + 1)) if own else None
 
-    monkeypatch.setattr(ground._Tables, "cover", own_only)
+    monkeypatch.setattr(noise.Tables, "cover", own_only)
     _forget(monkeypatch)
     assert _tiles(KEYS) == made
 
 
 def test_kept_tables_are_bounded(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("COSIM_GROUND_CACHE", "off")
-    monkeypatch.setattr(ground, "_TABLES", ground._Tables(200_000))
+    monkeypatch.setattr(noise, "TABLES", noise.Tables(200_000))
     made = _tiles([(2, i, -i) for i in range(-20, 20, 3)])
-    assert 0 < ground._TABLES.nbytes <= 200_000
-    assert ground._TABLES.nbytes == sum(a.nbytes for t in ground._TABLES._held.values()
+    assert 0 < noise.TABLES.nbytes <= 200_000
+    assert noise.TABLES.nbytes == sum(a.nbytes for t in noise.TABLES._held.values()
                                         for a in t)
     assert all(np.frombuffer(t, np.uint8).reshape(256, 256, 4)[..., 3].min() == 255
                for t in made.values())
@@ -63,12 +63,17 @@ def test_each_slot_keeps_its_own_patch_within_the_bound(monkeypatch: pytest.Monk
     """Two streams looking at different ground keep their patches apart (no
     reassembly when they take turns), a patch is the tiles it covers, and no more
     than PATCH_MB of patches is kept."""
-    monkeypatch.setenv(ground.CACHE_ENV, "off")
+    monkeypatch.setenv(tile_cache.CACHE_ENV, "off")
     tex = GroundTexture(GroundSpec(), LocalFrame(37.0, -122.0, 10.0), 7)
     T = tex.tile_px
     made = []
     tile = tex.tile
-    monkeypatch.setattr(tex, "tile", lambda *k: made.append(k) or tile(*k))
+
+    def counted(*k: int) -> np.ndarray:
+        made.append(k)
+        return tile(*k)
+
+    monkeypatch.setattr(tex, "tile", counted)
     a = tex.patch(2, 10, 300, 20, 200, slot="a")
     b = tex.patch(2, 5000, 5200, 7000, 7300, slot="b")
     assert np.array_equal(a[:T - 10], tile(2, 0, 0)[10:, 20:200])
@@ -79,12 +84,12 @@ def test_each_slot_keeps_its_own_patch_within_the_bound(monkeypatch: pytest.Monk
         assert np.array_equal(tex.patch(2, 10, 300, 20, 200, slot="a"), a)
         assert np.array_equal(tex.patch(2, 5000, 5200, 7000, 7300, slot="b"), b)
     assert len(made) == n
-    monkeypatch.setattr(ground, "PATCH_MB", 1)  # one 2 x 2 tile patch is 1 MB
+    monkeypatch.setattr(pyramid, "PATCH_MB", 1)  # one 2 x 2 tile patch is 1 MB
     for s in range(5):
         tex.patch(2, 0, 300, 0, 300, slot=s)
     assert len(tex._patches) == 1
     # the oldest slot moving onto more tiles, over the bound: its new patch is kept
-    monkeypatch.setattr(ground, "PATCH_MB", 2)
+    monkeypatch.setattr(pyramid, "PATCH_MB", 2)
     tex.patch(2, 0, 300, 0, 300, slot="x")
     tex.patch(2, 0, 300, 0, 300, slot="y")
     assert list(tex._patches) == [("x", 2), ("y", 2)]

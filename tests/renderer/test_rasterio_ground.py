@@ -32,7 +32,7 @@ from cosim.core.camera import CameraSpec, Pose, camera_pose, intrinsics, project
 from cosim.core.geo import LocalFrame
 from cosim.errors import ConfigError
 from cosim.renderer.frame import World, WorldSpec, render_frame
-from cosim.renderer.ground import _GeoRasterLayer
+from cosim.renderer.image_layers import GeoRasterLayer
 from cosim.scenario import parse_scenario
 from cosim.world import geotiff
 from cosim.world.ground import GroundSpec
@@ -118,7 +118,7 @@ def _world(path: Path) -> World:
 def _src(world: World) -> geotiff.GeoRaster:
     """The world's georeferenced ground source."""
     layer = world.ground.image
-    assert isinstance(layer, _GeoRasterLayer)
+    assert isinstance(layer, GeoRasterLayer)
     return layer.src
 
 
