@@ -36,12 +36,13 @@ class MavlinkConfig:
     newline is ignored); the key is its SHA-256, as MAVProxy derives it. The
     config holds where the key is, never the key, so scenario text cannot
     carry it. ``signing_link_id`` (0..255) is the link id in outgoing
-    signatures. See ``MavlinkEndpoint`` for what signing changes.
+    signatures. What signing changes: ``cosim.mavlink.inbox`` (what is
+    received) and ``cosim.mavlink.endpoint`` (what is sent).
 
     ``url=None``: no socket; vehicles talk only to in-process clients
     (``MavlinkEndpoint.inject`` and ``subscribe``). ``lockstep_sysid``: an
     outside controller with this system id is kept in lockstep with the
-    simulation (see ``MavlinkEndpoint``), silent for at most
+    simulation (``cosim.mavlink.lockstep``), silent for at most
     ``lockstep_timeout_s``.
     """
 
@@ -57,7 +58,7 @@ class MavlinkConfig:
     #: where the signing timestamps are shared with other runs using the key
     #: (None: the cache folder, ``cosim.mavlink.signing.default_folder()``)
     signing_state_dir: str | Path | None = None
-    #: lockstep with an outside controller of this system id (see ``MavlinkEndpoint``)
+    #: lockstep with an outside controller of this system id (``cosim.mavlink.lockstep``)
     lockstep_sysid: int | None = None
     lockstep_timeout_s: float = 30.0
 

@@ -35,8 +35,9 @@ from cosim.errors import ConfigError
 from cosim.guidance.commands import Command
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.config import MavlinkConfig, load_signing_key
-from cosim.mavlink.endpoint import MAX_VEHICLES_PER_LINK, MavlinkEndpoint, VehicleCommand
+from cosim.mavlink.endpoint import MAX_VEHICLES_PER_LINK, MavlinkEndpoint
 from cosim.mavlink.link import LinkUrl
+from cosim.mavlink.router import VehicleCommand
 from cosim.mavlink.signing import SharedSigning
 from cosim.mavlink.vehicle import MavClass, MavVehicleSpec, mav_specs
 

@@ -8,7 +8,7 @@ a past wall-clock instant (``SimClock.unix_us``), so a run's tlogs do not
 depend on how fast it ran.
 
 Records are buffered and written with one unbuffered ``write`` at
-``flush()`` (the endpoint flushes at least every ``TLOG_FLUSH_S`` of wall
+``flush()`` (the outbox flushes at least every ``TLOG_FLUSH_S`` of wall
 time and at close): a hard crash loses at most that much.
 """
 

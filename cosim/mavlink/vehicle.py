@@ -204,12 +204,27 @@ class StateFrame:
         self.rows: np.ndarray | None = None
         self._rates: np.ndarray | Callable[[], np.ndarray] | None = None
         self.version = 0
+        self._attitude: np.ndarray | None = None  # the previous exchange's
+        self._tick: int | None = None
 
     def update(self, rows: np.ndarray,
                rates: np.ndarray | Callable[[], np.ndarray]) -> None:
         """New rows; ``rates`` may be a function computing them on first use."""
         self.rows, self._rates = rows, rates
         self.version += 1
+
+    def observe(self, rows: np.ndarray, tick: int, physics_hz: float) -> None:
+        """The rows of the exchange at ``tick``, with the body rates from the
+        attitude change since the previous exchange's (computed on first
+        use); at the first exchange, or the same tick again, the rates stand."""
+        att = rows[:, ATTITUDE_COLUMNS]
+        prev_att, prev_tick = self._attitude, self._tick
+        self._attitude, self._tick = att, tick
+        if prev_att is not None and prev_tick is not None and tick > prev_tick:
+            dt_s = (tick - prev_tick) / physics_hz
+            self.update(rows, lambda: body_rates(prev_att, att, dt_s))
+        else:
+            self.update(rows, self.latest_rates(len(rows)))
 
     @property
     def rates(self) -> np.ndarray | None:
@@ -218,12 +233,18 @@ class StateFrame:
             r = self._rates = r()
         return r
 
+    def latest_rates(self, n: int) -> np.ndarray:
+        """The body rates of the latest rows (zeros for ``n`` vehicles before
+        the second exchange)."""
+        r = self.rates
+        return np.zeros((n, 3)) if r is None else r
+
 
 class MavVehicle:
     """Mutable MAVLink-side state of one vehicle.
 
     ``frame``/``index``: where its state row comes from (an endpoint's shared
-    ``StateFrame``); without them it has its own, fed by ``observe``.
+    ``StateFrame``); without them it has its own.
     """
 
     def __init__(self, spec: MavVehicleSpec, clock: SimClock,

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from mavtest import ANCHOR_US, PHYSICS_HZ, mavutil
 
-from cosim.mavlink.endpoint import TLOG_FLUSH_S
+from cosim.mavlink.outbox import TLOG_FLUSH_S
 
 ML = mavutil.mavlink
 
