@@ -154,7 +154,7 @@ def _mavlink(scn: Scenario, url: str | None, key_file: str | None, key_env: str 
         if cfg is None and scn.mavlink is None:
             raise ConfigError(f"{n['signing']} needs MAVLink: pass {n['mavlink_url']} or give "
                               f"the scenario a mavlink: section")
-        cfg = cfg or MavlinkConfig.of_scenario(scn.mavlink)
+        cfg = cfg or MavlinkConfig.of_scenario(scn.mavlink, [v.id for v in scn.vehicles])
         assert cfg is not None
         cfg = dataclasses.replace(cfg, signing_key_file=key_file, signing_key_env=key_env,
                                   signing_link_id=link_id)

@@ -64,7 +64,7 @@ class MavlinkConfig:
 
     @classmethod
     def of_scenario(cls, section: Mapping[str, Any] | None,
-                    ids: Sequence[str] = ()) -> MavlinkConfig | None:
+                    ids: Sequence[str]) -> MavlinkConfig | None:
         """The config a scenario's ``mavlink:`` section asks for (None: no
         section); ``ids``: the scenario's vehicle ids, for its ``vehicles``
         patterns."""

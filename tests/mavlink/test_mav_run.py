@@ -312,3 +312,21 @@ def test_fuzzing_a_live_run_leaves_the_vehicles_flying_and_answering(tmp_path: P
     # its own REQUEST_MESSAGEs of odd ids are answered to 255 as DENIED)
     assert any(a.result == ML.MAV_RESULT_ACCEPTED for a in acks), (
         [a.result for a in acks], c)
+
+
+def test_a_signed_run_keeps_the_vehicles_its_scenario_puts_on_mavlink(tmp_path: Path) -> None:
+    """The signing options alone (no --mavlink) keep the scenario's own link,
+    its mavlink.vehicles included: only those are on MAVLink."""
+    from cosim.cli import main
+
+    keyfile = tmp_path / "key"
+    keyfile.write_text("correct-horse\n")
+    keyfile.chmod(0o600)
+    scn = tmp_path / "mav3.yaml"
+    scn.write_text(SCENARIO.replace("duration_s: 600", "duration_s: 1")
+                   + "mavlink: {url: 'udpin:127.0.0.1:0', vehicles: [uav1]}\n")
+    out = tmp_path / "o"
+    assert main(["run", str(scn), "--out", str(out), "--no-progress",
+                 "--mavlink-signing-key-file", str(keyfile)]) == 0
+    assert sorted(p.name for p in out.glob("*.tlog")) == ["uav1.tlog"]
+    assert json.loads((out / "summary.json").read_text())["mavlink"]["counters"]["links"] == 1
