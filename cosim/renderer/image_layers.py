@@ -19,48 +19,27 @@ import math
 from collections import OrderedDict
 from collections.abc import Hashable
 
-import cv2
 import numpy as np
 
 from cosim.core.geo import LocalFrame
-from cosim.world.ground import GroundSpec
+from cosim.world.geotiff import GeoRaster
+from cosim.world.ground import GroundSpec, open_image
+from cosim.world.picture import Picture
 
 MAX_WINDOW_PX = 4096  # a georeferenced file's window a band draws, at most (a side)
 WINDOW_MB = 96  # a georeferenced file's assembled windows kept per process
 
 
 class PictureLayer:
-    """A user's north-up picture placed by ``origin`` and ``m_per_px``, with its
-    pyramid (BGRA uint8, opaque, like the frames). A georeferenced file is a
+    """A picture placed by hand (``cosim.world.picture.Picture``), drawn from its
+    whole levels (BGRA uint8, opaque, like the frames). A georeferenced file is a
     ``GeoRasterLayer`` instead (the same four calls: ``level_for``, ``levels[k]``,
     ``ne_to_px(k)``, ``coverage(k)``)."""
 
-    def __init__(self, spec: GroundSpec, frame: LocalFrame) -> None:
-        from cosim.errors import ConfigError
-        from cosim.world.imagery import ImageRefused, check_picture
-
-        assert spec.image is not None
-        try:  # its declared size within what a render worker may hold, before decoding
-            check_picture(spec.image, spec.image_roots())
-        except ImageRefused as err:
-            raise ConfigError(f"ground.image: {err}") from None
-        bgr = cv2.imread(spec.image, cv2.IMREAD_COLOR)
-        if bgr is None:
-            raise ConfigError(f"ground.image: cannot read {spec.image} as an image")
-        img = cv2.cvtColor(bgr, cv2.COLOR_BGR2BGRA)
-        if spec.origin_latlon_deg is not None:
-            la, lo = spec.origin_latlon_deg
-            n, e, _ = frame.geodetic_to_ned(la, lo, frame.alt_m)
-            self.n0, self.e0 = float(n), float(e)
-        else:
-            self.n0, self.e0 = spec.origin_ne_m or (0.0, 0.0)
-        self.mpp = spec.m_per_px
-        self.levels = [img]
-        while min(self.levels[-1].shape[:2]) >= 8:
-            self.levels.append(cv2.resize(self.levels[-1], None, fx=0.5, fy=0.5,
-                                          interpolation=cv2.INTER_AREA))
-        h, w = img.shape[:2]
-        self.bounds_ne = (self.n0 - h * self.mpp, self.n0, self.e0, self.e0 + w * self.mpp)
+    def __init__(self, src: Picture) -> None:
+        self.src = src
+        self.levels = src.levels
+        self.bounds_ne = src.bounds_ne
         self._coverage: dict[int, np.ndarray] = {}
 
     def focus(self, n_lo: float, n_hi: float, e_lo: float, e_hi: float,
@@ -68,8 +47,7 @@ class PictureLayer:
         """The ground about to be drawn (nothing to do: the picture is all in memory)."""
 
     def level_for(self, gsd_m: float) -> int:
-        k = math.floor(math.log2(max(gsd_m, 1e-9) / self.mpp) + 0.3)
-        return min(max(k, 0), len(self.levels) - 1)
+        return self.src.level_for(gsd_m)
 
     def coverage(self, level: int) -> np.ndarray:
         """255 where ``level`` has data, else 0: all of it; made once per level."""
@@ -79,10 +57,7 @@ class PictureLayer:
 
     def ne_to_px(self, level: int) -> np.ndarray:
         """3x3: scenario (north, east, 1) -> pixel (col, row, 1) of ``level``."""
-        m = self.mpp * 2 ** level
-        return np.array([[0.0, 1.0 / m, -self.e0 / m - 0.5],
-                         [-1.0 / m, 0.0, self.n0 / m - 0.5],
-                         [0.0, 0.0, 1.0]])
+        return self.src.ne_to_px(level)
 
 
 class _FocusedLevels:
@@ -110,19 +85,9 @@ class GeoRasterLayer:
     larger. Windows are kept per slot (a camera stream) and level, at most
     ``WINDOW_MB`` of them; tiles in the raster's own LRU."""
 
-    def __init__(self, spec: GroundSpec, frame: LocalFrame) -> None:
-        from cosim.errors import ConfigError
-        from cosim.world import geotiff
-        from cosim.world.imagery import ImageRefused, check_georeferenced
-
-        assert spec.image is not None
-        try:  # what validation checked, again where it is opened
-            check_georeferenced(spec.image, spec.image_roots())
-            self.src = geotiff.GeoRaster(spec.image, frame)
-        except (geotiff.GeoTiffError, ImageRefused) as err:
-            raise ConfigError(f"ground.image: {err}") from err
-        self.mpp, self.n0, self.e0 = self.src.m_per_px, self.src.n0, self.src.e0
-        self.bounds_ne = self.src.bounds_ne
+    def __init__(self, src: GeoRaster) -> None:
+        self.src = src
+        self.bounds_ne = src.bounds_ne
         self.levels = _FocusedLevels(self)
         self._focus: tuple[float, float, float, float] | None = None
         self._slot: Hashable = None
@@ -147,8 +112,9 @@ class GeoRasterLayer:
             r0, r1, c0, c1 = 0, rows, 0, cols
         else:
             n_lo, n_hi, e_lo, e_hi = self._focus
-            r0, r1 = math.floor((self.n0 - n_hi) / m) - 1, math.ceil((self.n0 - n_lo) / m) + 1
-            c0, c1 = math.floor((e_lo - self.e0) / m) - 1, math.ceil((e_hi - self.e0) / m) + 1
+            n0, e0 = self.src.n0, self.src.e0
+            r0, r1 = math.floor((n0 - n_hi) / m) - 1, math.ceil((n0 - n_lo) / m) + 1
+            c0, c1 = math.floor((e_lo - e0) / m) - 1, math.ceil((e_hi - e0) / m) + 1
             r0, r1, c0, c1 = max(r0, 0), min(r1, rows), max(c0, 0), min(c1, cols)
         if r0 >= r1 or c0 >= c1:
             return (0, 0, 0, 0)
@@ -204,15 +170,14 @@ class GeoRasterLayer:
         """3x3: scenario (north, east, 1) -> pixel (col, row, 1) of ``levels[level]``
         (the window in focus)."""
         (ta, _, tc, _), _, _ = self.held(level)
-        m, T = self.src.mpp(level), self.src.tile_px
-        return np.array([[0.0, 1.0 / m, -self.e0 / m - 0.5 - tc * T],
-                         [-1.0 / m, 0.0, self.n0 / m - 0.5 - ta * T],
-                         [0.0, 0.0, 1.0]])
+        T = self.src.tile_px
+        return self.src.ne_to_px(level, ta * T, tc * T)
 
 
 def image_layer(spec: GroundSpec, frame: LocalFrame) -> PictureLayer | GeoRasterLayer | None:
-    """The layer of the ground's image, if it has one (ConfigError if it cannot
-    be read)."""
+    """The layer of the ground's image, if it has one (``open_image``: ConfigError
+    if it cannot be read)."""
     if spec.kind != "image":
         return None
-    return GeoRasterLayer(spec, frame) if spec.geotiff else PictureLayer(spec, frame)
+    src = open_image(spec, frame)
+    return GeoRasterLayer(src) if isinstance(src, GeoRaster) else PictureLayer(src)

@@ -4,7 +4,8 @@ patch of whole tiles it last drew from (``patch``, at most ``PATCH_MB``).
 
 Level ``l`` has ``base_m_per_px * 2**l`` metres per pixel; its pixel
 ``(row, col)`` is centred at ``east = (col + 0.5) * mpp``,
-``north = -(row + 0.5) * mpp`` in the scenario frame. A frame picks the level
+``north = -(row + 0.5) * mpp`` in the scenario frame (the image grid of
+``cosim.world.image_grid`` with its corner at the origin). A frame picks the level
 from its ground sample distance (``level_for``: no blur low, no aliasing high).
 
 Owns the tiles in memory only: a subclass makes them (``_make_tile``; the
@@ -19,6 +20,8 @@ from collections import OrderedDict
 from collections.abc import Hashable
 
 import numpy as np
+
+from cosim.world.image_grid import ne_to_px
 
 MAX_TILES = 384  # LRU size per process (256 px BGRA tiles: ~100 MB)
 PATCH_MB = 256  # assembled patches kept per process (TilePyramid.patch)
@@ -81,10 +84,8 @@ class TilePyramid:
         """3x3: scenario (north, east, 1) -> global pixel (col, row, 1) of ``level``
         (read-only)."""
         P = self._ne_to_px.get(level)
-        if P is None:
-            m = self.mpp(level)
-            P = self._ne_to_px[level] = np.array([[0.0, 1.0 / m, -0.5], [-1.0 / m, 0.0, -0.5],
-                                                  [0.0, 0.0, 1.0]])
+        if P is None:  # the grid whose top-left corner is the origin
+            P = self._ne_to_px[level] = ne_to_px(0.0, 0.0, self.mpp(level))
             P.flags.writeable = False
         return P
 

@@ -9,10 +9,10 @@ system, transform, size and overviews. ``check_crs(ref)`` says why positions
 cannot be converted to its coordinate system, if they cannot; ``probe(path)``
 why its pixels cannot be read, if they cannot.
 
-``GeoRaster(path, frame)`` is the file on the scenario frame's north-up grid:
-square pixels of ``m_per_px`` (the file's own pixel size at its centre) whose
-top-left corner is at (``n0``, ``e0``); level ``k`` has pixels ``2**k`` times
-larger. A level is cut into ``TILE_PX`` tiles, each made when first asked for:
+``GeoRaster(path, frame)`` is the file on the scenario frame's north-up grid
+(``image_grid``): square pixels of ``m_per_px`` (the file's own pixel size at
+its centre) whose top-left corner is at (``n0``, ``e0``); level ``k`` has
+pixels ``2**k`` times larger. A level is cut into ``TILE_PX`` tiles, each made when first asked for:
 the window of the file under the tile is read (``DatasetReader.read`` with a
 window) from the overview whose pixels are the coarsest not coarser than the
 tile's, decimated further by GDAL where the file has no overview that coarse
@@ -46,6 +46,7 @@ import cv2
 import numpy as np
 
 from cosim.core.geo import LocalFrame
+from cosim.world.image_grid import ImageGrid
 from cosim.world.imagery import GDAL_OPTIONS, ImageRefused, gdal_driver
 
 log = logging.getLogger(__name__)
@@ -101,7 +102,7 @@ class GeoRef:
 
 def _env() -> Any:
     """The GDAL settings every read runs under: its block cache bounded, and
-    cosim.renderer.imagery's ``GDAL_OPTIONS`` (no network, no side files that
+    cosim.world.imagery's ``GDAL_OPTIONS`` (no network, no side files that
     name other paths, no Python or raw VRT bands)."""
     import rasterio
 
@@ -223,11 +224,11 @@ class _Crs:
 Tile = tuple[np.ndarray, np.ndarray]  # (BGRA uint8 opaque, mask uint8 0/255)
 
 
-class GeoRaster:
+class GeoRaster(ImageGrid):
     """A georeferenced raster on the scenario frame's north-up grid, read a tile at
     a time (see the module docstring). Level ``k``'s pixel ``(row, col)`` is centred
     at ``north = n0 - (row + 1/2) m``, ``east = e0 + (col + 1/2) m`` with
-    ``m = m_per_px * 2**k``; it has ``shape(k)`` pixels. Opening reads metadata
+    ``m = m_per_px * 2**k`` (``ImageGrid``); it has ``shape(k)`` pixels. Opening reads metadata
     only; GeoTiffError if the file cannot be placed."""
 
     def __init__(self, path: str, frame: LocalFrame, cache_mb: float = CACHE_MB,
@@ -347,13 +348,6 @@ class GeoRaster:
         """(rows, cols) of ``level``."""
         k = 1 << level
         return -(-self.rows // k), -(-self.cols // k)
-
-    def mpp(self, level: int) -> float:
-        return float(self.m_per_px * 2 ** level)
-
-    def level_for(self, gsd_m: float) -> int:
-        k = math.floor(math.log2(max(gsd_m, 1e-9) / self.m_per_px) + 0.3)
-        return min(max(k, 0), self.n_levels - 1)
 
     # -- tiles ---------------------------------------------------------------------
     def tile(self, level: int, ti: int, tj: int) -> Tile | None:

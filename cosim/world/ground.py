@@ -2,18 +2,25 @@
 a procedural texture drawn from the scenario's seed, or an image (a north-up
 picture placed by ``origin`` and ``m_per_px``, or a georeferenced GeoTIFF or
 VRT placed by its own tags) with the procedural ground around it. Every file
-an image names is checked before anything opens it (``imagery``).
+an image names is checked before anything opens it (``imagery``), when the
+scenario is read and again when the image is opened to be drawn
+(``open_image``: a ``picture.Picture`` or a ``geotiff.GeoRaster``).
 """
 
 from __future__ import annotations
 
 import os
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from cosim.core.geo import MAX_DISTANCE_M
+from cosim.core.geo import MAX_DISTANCE_M, LocalFrame
 from cosim.core.section import Section, SectionContext
+from cosim.errors import ConfigError
 from cosim.world import imagery
+
+if TYPE_CHECKING:
+    from cosim.world.geotiff import GeoRaster
+    from cosim.world.picture import Picture
 
 P = tuple[Any, ...]
 
@@ -42,6 +49,26 @@ class GroundSpec:
         """The folders the image and the files it names may be read from."""
         assert self.image is not None
         return self.image_folders or imagery.folders(os.path.dirname(self.image))
+
+
+def open_image(spec: GroundSpec, frame: LocalFrame) -> Picture | GeoRaster:
+    """The ground's image, read to be drawn: a georeferenced file (``spec.geotiff``)
+    opened by windows, or a picture decoded whole, each placed on the scenario
+    ``frame``; what it may read is checked again first (the files may have
+    changed since the scenario was read). ConfigError naming ``ground.image``
+    if it cannot be."""
+    from cosim.world import geotiff
+    from cosim.world.picture import Picture
+
+    assert spec.image is not None
+    try:
+        if spec.geotiff:
+            imagery.check_georeferenced(spec.image, spec.image_roots())
+            return geotiff.GeoRaster(spec.image, frame)
+        return Picture(spec.image, spec.image_roots(), frame, spec.m_per_px, spec.origin_ne_m,
+                       spec.origin_latlon_deg)
+    except (geotiff.GeoTiffError, imagery.ImageRefused) as err:
+        raise ConfigError(f"ground.image: {err}") from err
 
 
 def parse_ground(info: SectionContext, node: Any, path: P) -> GroundSpec:

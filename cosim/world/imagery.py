@@ -33,9 +33,9 @@ file (a VRT's line) and why:
   with overviews (a COG) is read by windows and is fine at any size within
   that.
 
-Only headers are read (cosim/renderer/headers.py): nothing is decoded.
+Only headers are read (cosim/world/headers.py): nothing is decoded.
 ``GDAL_OPTIONS`` are the settings every
-GDAL read runs under (cosim/renderer/geotiff.py), a second line of defence:
+GDAL read runs under (cosim/world/geotiff.py), a second line of defence:
 no network (``/vsicurl/`` and the cloud file systems see no file as
 existing), no ``.aux.xml`` side files (their ``OVERVIEW_FILE`` may name any
 path), no Python pixel functions, no raw VRT bands.
