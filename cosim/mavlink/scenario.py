@@ -2,39 +2,28 @@
 it puts on MAVLink.
 
 The scenario loader calls these with its own problem reporting (``report``
-a problem at a path, a ``reader`` of one mapping, ``select`` vehicle rows by
-'all', ids and patterns), so that this part needs nothing of the loader.
+a problem at a path, a ``reader`` of one mapping as sections get them,
+``cosim.core.section.Reader``, ``select`` vehicle rows by 'all', ids and
+patterns), so that this part needs nothing of the loader.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from fnmatch import fnmatchcase
-from typing import Any, Protocol
+from typing import Any
 
+from cosim.core.section import P, Reader
 from cosim.errors import ConfigError
 from cosim.mavlink.link import DEFAULT_URL, LinkUrl
 from cosim.mavlink.vehicle import check_rates
-
-#: a place in the scenario file: keys and list indices from the top
-Path_ = tuple[Any, ...]
 
 #: the keys of the section
 KEYS = ("url", "rates_hz", "vehicles")
 
 
-class Reader(Protocol):
-    """Typed access to one mapping of the file, reporting with lines."""
-
-    d: dict[Any, Any]
-
-    def has(self, key: str) -> bool: ...
-
-    def string(self, key: str, default: Any = ...) -> Any: ...
-
-
-def parse_mavlink(node: Any, report: Callable[[Path_, str], None],
-                  reader: Callable[[Any, Path_, tuple[str, ...]], Reader]
+def parse_mavlink(node: Any, report: Callable[[P, str], None],
+                  reader: Callable[[Any, P, tuple[str, ...]], Reader]
                   ) -> dict[str, Any] | None:
     """``mavlink: true`` or ``mavlink: {url: udpout:HOST:PORT, rates_hz: {MSG: Hz},
     vehicles: PATTERNS}`` -> ``{"url", "rates_hz"[, "vehicles"]}`` (None:
@@ -64,7 +53,7 @@ def parse_mavlink(node: Any, report: Callable[[Path_, str], None],
     return out
 
 
-def check_vehicles(section: dict[str, Any], select: Callable[[Any, Path_], list[int]]
+def check_vehicles(section: dict[str, Any], select: Callable[[Any, P], list[int]]
                    ) -> None:
     """``mavlink.vehicles``: which vehicles are on MAVLink ('all', an id, a
     pattern or a list of them; default all), checked by ``select`` against
