@@ -35,7 +35,7 @@ import cv2
 import numpy as np
 import render_bench
 
-from cosim.renderer import participant
+from cosim.renderer import outputs
 from cosim.renderer import video as video_mod
 
 #: name -> (FFmpeg encoder, its options, codec-context settings, file extension)
@@ -67,13 +67,13 @@ def frames_of(n: int) -> list[np.ndarray]:
         def release(self) -> None:
             pass
 
-    opened = participant.open_video  # the stream writers' (render_bench times it)
-    participant.open_video = lambda *a: Keep()
+    opened = outputs.open_video  # the stream writers' (render_bench times it)
+    outputs.open_video = lambda *a: Keep()
     try:
         with tempfile.TemporaryDirectory() as cache:
             render_bench.per_frame(n, cache)
     finally:
-        participant.open_video = opened
+        outputs.open_video = opened
     return got
 
 

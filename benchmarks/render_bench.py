@@ -36,7 +36,8 @@ import cv2
 
 from cosim.core.camera import CameraSpec
 from cosim.core.geo import LocalFrame
-from cosim.renderer.participant import RenderWorker, Stream
+from cosim.renderer.outputs import Stream
+from cosim.renderer.render_pool import RenderWorker
 from cosim.renderer.tile_cache import CACHE_ENV
 from cosim.renderer.video import EXTENSIONS
 from cosim.scenario import load_scenario, parse_scenario

@@ -25,7 +25,7 @@ from cosim.renderer.video import open_video
 
 if TYPE_CHECKING:
     from cosim.renderer.frame import WorldSpec
-    from cosim.renderer.participant import Stream
+    from cosim.renderer.outputs import Stream
     from cosim.sync.participants import RunContext
 
 _LAT, _LON = STATE_INDEX["lat_deg"], STATE_INDEX["lon_deg"]
