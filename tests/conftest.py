@@ -1,8 +1,18 @@
-"""Shared fixtures: small vehicle sets and scenario files."""
+"""Shared fixtures (small vehicle sets and scenario files, a Ray cluster, the
+browser) and the test tiers.
+
+Tiers, by marker: ``fast`` (the default of ``python -m pytest``: everyday
+work), ``integration`` (a Ray cluster, a browser, ground stations, benchmark
+scripts, long flights: anything past a few seconds), both together being what
+CI runs (``-m "fast or integration"``), and ``slow`` and ``bench`` on
+request. A test is ``integration`` when it uses a fixture of
+``INTEGRATION_FIXTURES`` or runs on a cluster backend, or is marked so by its
+module or itself; ``fast`` when it is in no other tier."""
 
 from __future__ import annotations
 
 import dataclasses
+import os
 import textwrap
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -12,9 +22,59 @@ import pytest
 
 from cosim.bench.fleet import bench_specs
 from cosim.fdm_pool import VehicleSpec
+from tests.helpers import CLUSTER_BACKENDS
 
 REPO = Path(__file__).resolve().parent.parent
 SCENARIOS = REPO / "scenarios"
+#: Debian's Chromium, which the browser tests drive through Playwright
+#: (nothing downloads a browser build)
+CHROMIUM = "/usr/bin/chromium"
+
+#: the tiers after ``fast``, each a marker
+OTHER_TIERS = ("integration", "slow", "bench")
+#: a test using one of these fixtures is an integration test wherever it is
+INTEGRATION_FIXTURES = frozenset({"chromium", *CLUSTER_BACKENDS.values()})
+#: a fast test that took longer than this (set-up included) is named at the end
+#: of the run: it belongs in the integration tier
+FAST_LIMIT_S = 5.0
+
+
+@pytest.hookimpl(tryfirst=True)  # before ``-m`` and pytest-xdist read the markers
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Every test gets the marker of its one tier, and its group for
+    ``pytest -n N --dist loadgroup``: the tests that start Ray in one (one
+    cluster, on one worker), each other file's in its own (a module fixture
+    made once)."""
+    for item in items:
+        tiers = [tier for tier in OTHER_TIERS if item.get_closest_marker(tier)]
+        if len(tiers) > 1:
+            raise pytest.UsageError(f"{item.nodeid} is marked {' and '.join(tiers)}: "
+                                    "a test is in one tier")
+        fixtures = set(getattr(item, "fixturenames", ()))
+        callspec = getattr(item, "callspec", None)
+        on_cluster = bool(fixtures.intersection(CLUSTER_BACKENDS.values())) or (
+            callspec is not None and callspec.params.get("backend") in CLUSTER_BACKENDS)
+        if not tiers and (on_cluster or fixtures.intersection(INTEGRATION_FIXTURES)):
+            tiers.append("integration")
+        item.add_marker(tiers[0] if tiers else "fast")
+        if not item.get_closest_marker("xdist_group"):
+            item.add_marker(pytest.mark.xdist_group(
+                "ray" if on_cluster else item.nodeid.split("::")[0]))
+
+
+def pytest_terminal_summary(terminalreporter: Any) -> None:
+    """Name the fast tests that were not fast (set-up, call and tear-down)."""
+    took: dict[str, float] = {}
+    for reports in terminalreporter.stats.values():
+        for rep in reports:
+            if isinstance(rep, pytest.TestReport) and "fast" in rep.keywords:
+                took[rep.nodeid] = took.get(rep.nodeid, 0.0) + rep.duration
+    slow = sorted(((s, n) for n, s in took.items() if s > FAST_LIMIT_S), reverse=True)
+    if slow:
+        terminalreporter.write_sep("=", f"fast tests that took more than {FAST_LIMIT_S:g} s "
+                                   "(mark them integration if they always do)", yellow=True)
+        for s, n in slow:
+            terminalreporter.write_line(f"{s:6.1f} s  {n}")
 
 
 @pytest.fixture(autouse=True, scope="session")
@@ -83,6 +143,15 @@ schedule:
 @pytest.fixture
 def mixed_scenario(write_scenario: Callable[[str, str], Path]) -> Path:
     return write_scenario(MIXED, "mixed.yaml")
+
+
+@pytest.fixture(scope="session")
+def chromium() -> str:
+    """The browser's path; skipped where it is absent. A test using it is in
+    the integration tier."""
+    if not os.path.exists(CHROMIUM):
+        pytest.skip(f"{CHROMIUM} is absent (apt-get install chromium); the browser tests need it")
+    return CHROMIUM
 
 
 @pytest.fixture(scope="session")

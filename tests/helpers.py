@@ -42,11 +42,16 @@ def install_out_of_tree(folder: Path, name: str, modules: dict[str, str],
     return site
 
 
+#: the backends that run on a cluster, and the fixture that starts it for a
+#: test (a test on one is in the integration tier: tests/conftest.py)
+CLUSTER_BACKENDS = {"ray": "ray_cluster"}
+
+
 def backend_ready(request: Any, name: str) -> None:
     """Whatever backend ``name`` needs to run, started for the test (``ray``:
     the session's cluster)."""
-    if name == "ray":
-        request.getfixturevalue("ray_cluster")
+    if name in CLUSTER_BACKENDS:
+        request.getfixturevalue(CLUSTER_BACKENDS[name])
 
 
 def same_states(a: Any, b: Any) -> bool:

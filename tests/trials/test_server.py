@@ -28,7 +28,6 @@ from cosim.trials.limits import uvicorn_settings
 from cosim.trials.server import make_app, serve
 from cosim.trials.store import Store
 
-CHROMIUM = "/usr/bin/chromium"
 W, H, RATE_HZ, FRAMES = 320, 240, 10.0, 20  # each clip: 2 s of 320 x 240 at 10 Hz
 HALF_X, HALF_Y = 10, 6  # the target's half size (camera px)
 # the participant's display: an 800 x 500 px window, 400 x 250 mm, eye 600 mm away
@@ -218,11 +217,6 @@ def live_server(study_path: Path, **limits: Any) -> Iterator[LiveServer]:
 def server(study_file: Path) -> Iterator[LiveServer]:
     with live_server(study_file) as s:
         yield s
-
-
-def needs_chromium() -> None:
-    if not os.path.exists(CHROMIUM):
-        pytest.skip(f"{CHROMIUM} is absent (apt-get install chromium); the browser tests need it")
 
 
 def expected(clip: str, frame: int, page_px: tuple[int, int] | None = None
@@ -593,8 +587,8 @@ PICTURES_LOADED = ("[...document.querySelectorAll('#message img.target')]"
 
 
 @pytest.fixture(scope="module")
-def browser_run(server: LiveServer, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
-    needs_chromium()
+def browser_run(server: LiveServer, tmp_path_factory: pytest.TempPathFactory,
+                chromium: str) -> dict[str, Any]:
     from playwright.sync_api import sync_playwright
 
     s = _session(server, "p01")
@@ -604,7 +598,7 @@ def browser_run(server: LiveServer, tmp_path_factory: pytest.TempPathFactory) ->
     run: dict[str, Any] = {"session": s, "phases": [], "console": [], "witness": {},
                            "state": {}, "shots": shots}
     with sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=CHROMIUM,
+        browser = pw.chromium.launch(executable_path=chromium,
                                      args=["--autoplay-policy=no-user-gesture-required"])
         try:
             page = browser.new_page(viewport={"width": 800, "height": 500},
@@ -802,15 +796,15 @@ def one_clip_study(study_file: Path, name: str, head: str) -> Iterator[
 
 
 @contextlib.contextmanager
-def participant_page(server: LiveServer, session: dict[str, Any], *scripts: str,
+def participant_page(server: LiveServer, session: dict[str, Any], *scripts: str, chromium: str,
                      size_px: tuple[int, int] = (800, 500)) -> Iterator[Any]:
-    """Chromium showing ``session``'s participant page, ``size_px`` large,
-    at its first screen; ``scripts`` run in it before the page's own."""
-    needs_chromium()
+    """Chromium (the ``chromium`` fixture's) showing ``session``'s participant
+    page, ``size_px`` large, at its first screen; ``scripts`` run in it before
+    the page's own."""
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=CHROMIUM,
+        browser = pw.chromium.launch(executable_path=chromium,
                                      args=["--autoplay-policy=no-user-gesture-required"])
         try:
             page = browser.new_page(viewport={"width": size_px[0], "height": size_px[1]},
@@ -825,14 +819,14 @@ def participant_page(server: LiveServer, session: dict[str, Any], *scripts: str,
             browser.close()
 
 
-def test_recognise_protocol(study_file: Path, tmp_path: Path) -> None:
+def test_recognise_protocol(study_file: Path, tmp_path: Path, chromium: str) -> None:
     """Press to start the sub-trial, press on recognising, answer yes. The
     page is narrower than the profile: the participant sees no warning of it,
     the experimenter's session list does, and the measures follow the page."""
     page_px = (700, 500)
     with one_clip_study(study_file, "recognise", "protocol: recognise\norder: latin_square\n"
                         ) as (server, s):
-        with participant_page(server, s, WITNESS, size_px=page_px) as page:
+        with participant_page(server, s, WITNESS, chromium=chromium, size_px=page_px) as page:
             page.keyboard.press("Space")
             page.wait_for_function("document.body.dataset.phase === 'start'")
             page.keyboard.press("Space")
@@ -869,12 +863,12 @@ HTMLVideoElement.prototype.requestVideoFrameCallback = function (cb) {
 """
 
 
-def test_a_press_before_the_clips_onset_is_sent_as_0_ms(study_file: Path) -> None:
+def test_a_press_before_the_clips_onset_is_sent_as_0_ms(study_file: Path, chromium: str) -> None:
     """The page takes the clip's onset from when its first frame is expected
     on screen, which is after that frame's callback: a press in between gives
     a negative time, which the page must send as 0 (the server refuses it)."""
     with one_clip_study(study_file, "early", "protocol: disappear\n") as (server, s):
-        with participant_page(server, s, FRAMES_DUE_LATE) as page:
+        with participant_page(server, s, FRAMES_DUE_LATE, chromium=chromium) as page:
             page.keyboard.press("Space")
             page.wait_for_function("document.body.dataset.phase === 'playing' && "
                                    "Number(document.body.dataset.frame) >= 2", polling=5)
@@ -922,14 +916,14 @@ def busy_page(frame: int, hold_frames: float, report_next: bool) -> str:
     ids=["reported late", "not reported", "the last frame"])
 def test_a_busy_page_stores_the_frame_on_screen_at_the_press(
         study_file: Path, frame: int, hold_frames: float, report_next: bool,
-        on_screen: int) -> None:
+        on_screen: int, chromium: str) -> None:
     """Frame 6 was on screen at the press, but the page heard of it only after
     the key event (or never): the page had stored frame 5, the last it knew.
     A press on the last frame, which no frame follows, is kept at the end."""
     with one_clip_study(study_file, f"busy{frame}{int(report_next)}", "protocol: disappear\n"
                         ) as (server, s):
         script = busy_page(frame, hold_frames, report_next)
-        with participant_page(server, s, WITNESS, script) as page:
+        with participant_page(server, s, WITNESS, script, chromium=chromium) as page:
             page.keyboard.press("Space")  # (the script presses during the clip)
             page.wait_for_function("['finished', 'error'].includes(document.body.dataset.phase)")
             seen = shown_at_press(page.evaluate("window.witness"), 0)
@@ -938,16 +932,15 @@ def test_a_busy_page_stores_the_frame_on_screen_at_the_press(
     assert (r["key"], r["frame"]) == ("space", on_screen), (r, seen)
 
 
-def test_experimenter_page(server: LiveServer) -> None:
+def test_experimenter_page(server: LiveServer, chromium: str) -> None:
     """Create a session from the form, start it, pause it; the size its
     participant's page reports, with a warning as it is not the profile's;
     no script errors."""
-    needs_chromium()
     from playwright.sync_api import sync_playwright
 
     errors: list[str] = []
     with sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=CHROMIUM)
+        browser = pw.chromium.launch(executable_path=chromium)
         try:
             page = browser.new_page()
             page.set_default_timeout(10_000)
@@ -1047,13 +1040,12 @@ def test_a_page_smaller_than_the_profile_is_measured_as_drawn(server: LiveServer
     assert status == 400 and "window_width_px" in r["error"]
 
 
-def test_track_protocol(study_file: Path) -> None:
+def test_track_protocol(study_file: Path, chromium: str) -> None:
     """The clip still at the frame where its target is nearest the centre; per
     direction a press starts the dot leaving the target, a press later stops
     it: the stored conspicuity angle is the target's from where the dot was
     then (computed here from the geometry and the stored time), the dot was
     drawn there, and a reload mid-trial resumes at the next direction."""
-    needs_chromium()
     from playwright.sync_api import sync_playwright
 
     from cosim.core.display import angle_between_deg
@@ -1067,7 +1059,7 @@ def test_track_protocol(study_file: Path) -> None:
         assert sorted(t0["directions"]) == ["down", "left", "right", "up"]
         drawn: list[tuple[float, float]] = []
         with sync_playwright() as pw:
-            browser = pw.chromium.launch(executable_path=CHROMIUM)
+            browser = pw.chromium.launch(executable_path=chromium)
             try:
                 page = browser.new_page(viewport={"width": 800, "height": 500},
                                         device_scale_factor=1)
