@@ -28,6 +28,7 @@ def test_run_returns_the_result_and_refuses_to_overwrite(tmp_path: Path) -> None
     assert again.summary["sim_time_s"] == pytest.approx(1.0)
 
 
+@pytest.mark.integration
 def test_the_example_script_runs() -> None:
     r = subprocess.run([sys.executable, str(REPO / "examples" / "run_from_python.py")],
                        capture_output=True, text=True, timeout=300)

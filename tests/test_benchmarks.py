@@ -16,6 +16,9 @@ sys.path.insert(0, str(REPO / "benchmarks"))
 pytest.importorskip("av")
 
 
+pytestmark = pytest.mark.integration  # the benchmark scripts
+
+
 def test_render_bench_parts_add_up(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     import cv2
     import render_bench

@@ -140,6 +140,7 @@ def test_models_properties(capsys) -> None:
 
 
 @pytest.mark.parametrize("path", SCENARIOS, ids=[p.name for p in SCENARIOS])
+@pytest.mark.integration
 def test_every_bundled_scenario_validates_and_runs(path: Path, tmp_path: Path) -> None:
     assert main(["validate", str(path)]) == 0
     assert main(["run", str(path), "--out", str(tmp_path / "o"), "--duration-s", "1",
@@ -166,6 +167,7 @@ def test_bench_whole_run_says_where_the_tick_loop_time_goes(tmp_path: Path, caps
     assert "run RTF" in capsys.readouterr().out
 
 
+@pytest.mark.integration
 def test_bench_reports_ratios_measured_in_the_same_run(tmp_path: Path, capsys) -> None:
     out = tmp_path / "b.json"
     assert main(["bench", "--vehicles", "4", "--seconds", "0.5", "--workers", "2", "--repeat", "2",
@@ -184,6 +186,7 @@ def test_bench_reports_ratios_measured_in_the_same_run(tmp_path: Path, capsys) -
     assert r["vehicles"] == 4 and r["ticks"] == 60
 
 
+@pytest.mark.integration
 def test_bench_flies_the_batched_tier_and_draws_the_scaling_plot(tmp_path: Path,
                                                                  capsys) -> None:
     """--class fixed_wing_batched benches the point-mass tier (its baselines

@@ -265,6 +265,7 @@ def fuzz(tmp_path: Path, capsys: pytest.CaptureFixture[str], seed: int, scale: i
     return stats
 
 
+@pytest.mark.integration
 def test_mutated_scenarios_validate_and_run_cleanly(tmp_path: Path, capsys) -> None:
     scale = int(os.environ.get("COSIM_FUZZ_SCALE", "1"))
     stats = fuzz(tmp_path, capsys, seed=13, scale=scale)

@@ -20,6 +20,9 @@ HERE = golden.environment()
 RECORD = golden.matching(HERE)
 
 
+pytestmark = pytest.mark.integration  # every bundled scenario flown to its end
+
+
 @pytest.mark.parametrize("path", golden.scenarios(), ids=golden.key)
 def test_a_bundled_scenario_does_what_it_did(path: Path, tmp_path: Path) -> None:
     if RECORD is None:

@@ -29,6 +29,9 @@ REPO = Path(__file__).resolve().parent.parent
 FLYOVER = REPO / "scenarios" / "cameras" / "flyover.yaml"
 
 
+pytestmark = pytest.mark.integration  # runs recorded and verified with Rerun
+
+
 def _rerun_cli() -> list[str]:
     exe = shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.which("rerun")
     if exe is None:

@@ -18,6 +18,9 @@ SCENARIO = Path(__file__).resolve().parent.parent.parent / \
     "scenarios/conspicuity/four_direction_pass.yaml"
 
 
+pytestmark = pytest.mark.integration  # rendered passes
+
+
 @pytest.mark.parametrize("heading,way", [(0, "down"), (90, "left"), (180, "up"),
                                          (270, "right")])
 def test_the_target_crosses_the_screen_in_the_passes_direction(tmp_path: Path, heading: int,

@@ -42,6 +42,7 @@ def test_straight_pass_visible_s_matches_formula(tmp_path: Path, speed_kt: int,
     assert tv.first_visible_s == pytest.approx(1.0, abs=tv.frame_period_s + 1e-9)
 
 
+@pytest.mark.integration
 def test_sweep_with_cameras_2x2(tmp_path: Path, capsys) -> None:
     scn = tmp_path / "exp2_small.yaml"
     text = EXP2.read_text()

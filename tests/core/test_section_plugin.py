@@ -63,6 +63,7 @@ def test_without_the_package_the_key_is_unknown(tmp_path: Path) -> None:
         load_scenario(_scenario(tmp_path))
 
 
+@pytest.mark.integration
 def test_its_problems_carry_their_lines(geofence: Path, tmp_path: Path, capsys) -> None:
     p = _scenario(tmp_path)
     p.write_text(p.read_text().replace("[1500, -1500]]", "[1500, x]]").replace(
@@ -74,6 +75,7 @@ def test_its_problems_carry_their_lines(geofence: Path, tmp_path: Path, capsys) 
     assert "geofence.vehicles: 'nobody' matches no vehicle" in err
 
 
+@pytest.mark.integration
 def test_its_participant_runs_in_the_loop_on_every_backend(geofence: Path,
                                                            tmp_path: Path) -> None:
     scn = load_scenario(_scenario(tmp_path))

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pyarrow.parquet as pq
+import pytest
 from shapely.geometry import LineString
 from shapely.ops import unary_union
 
@@ -18,6 +19,9 @@ from cosim.scenario import load_scenario
 from cosim.sync import Run
 
 LAT0, LON0 = 37.4, -122.0
+
+
+pytestmark = pytest.mark.integration  # a plan flown to its end
 
 
 def test_two_aircraft_flying_their_plans_cover_the_area(tmp_path: Path) -> None:

@@ -264,6 +264,7 @@ def test_zones_that_leave_nothing_reachable_or_are_too_many_are_refused() -> Non
         plan([LineString([(0, 0), (1, 1)])])
 
 
+@pytest.mark.integration
 def test_min_fleet_is_the_smallest_that_finishes_before_the_deadline() -> None:
     from cosim.coverage import completion_s, min_fleet
 

@@ -32,6 +32,7 @@ def test_the_builtin_backends_are_found_by_name(specs) -> None:
         make_pool(specs(1), 1 / 120, backend="gpu")
 
 
+@pytest.mark.integration
 def test_an_out_of_tree_backend_registers_runs_and_passes_the_conformance_suite(
         tmp_path: Path) -> None:
     """The example package (``examples/traced_backend``, a thin wrapper over

@@ -166,6 +166,7 @@ def _run_driver(tmp_path, ending: str, timeout: float) -> tuple[subprocess.Compl
     return proc, [int(p) for p in proc.stdout.split()]
 
 
+@pytest.mark.integration
 def test_workers_exit_when_the_driver_is_killed(tmp_path) -> None:
     """No orphans: children notice their parent is gone and exit by themselves."""
     _, pids = _run_driver(tmp_path, "os.kill(os.getpid(), signal.SIGKILL)", 60)
@@ -186,6 +187,7 @@ def test_jsbsim_console_is_silenced_in_workers(specs, capfd) -> None:
     assert "JSBSim" not in out and "JSBSim" not in err
 
 
+@pytest.mark.integration
 def test_stopped_worker_becomes_workertimeout_not_a_hang(specs) -> None:
     from cosim.errors import WorkerTimeout
 
@@ -321,6 +323,7 @@ def test_worker_errors_list_at_most_ten_vehicles() -> None:
     assert str(WorkerDied(1, 99, -9, ids[:2], 40)).endswith("its vehicles: v00, v01")
 
 
+@pytest.mark.integration
 def test_a_pool_left_open_does_not_hang_the_interpreter_exit(tmp_path) -> None:
     """Children ignore SIGTERM, so multiprocessing's exit handler (terminate,
     then join) alone would wait for them forever: the pool closes itself first."""

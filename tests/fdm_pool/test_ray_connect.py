@@ -22,8 +22,10 @@ from pathlib import Path
 
 import pytest
 
-pytestmark = pytest.mark.skipif(importlib.util.find_spec("ray") is None,
-                                reason="the ray backend needs Ray (pip install -e '.[test]')")
+pytestmark = [pytest.mark.integration,  # cosim run starting or joining Ray
+              pytest.mark.xdist_group("ray"),  # beside the cluster's tests, not at once
+              pytest.mark.skipif(importlib.util.find_spec("ray") is None,
+                                 reason="the ray backend needs Ray (pip install -e '.[test]')")]
 
 SCENARIO = Path(__file__).resolve().parents[2] / "scenarios" / "quickstart.yaml"
 HOST = "127.0.0.2"  # loopback, as the test clusters use

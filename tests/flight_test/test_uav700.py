@@ -1,5 +1,6 @@
-"""Flight tests of the uav700 (docs/physics.md, Fixed-wing aircraft), flown from scenarios/flight_test/
-and judged from the logged ground truth only, against the design equations."""
+"""Flight tests of the uav700 (docs/physics.md, Fixed-wing aircraft), flown from
+scenarios/flight_test/ and judged from the logged ground truth only, against the
+design equations."""
 
 from __future__ import annotations
 
@@ -24,6 +25,9 @@ from cosim.scenario import load_scenario
 from cosim.sync import run_scenario
 
 FT = Path(__file__).resolve().parents[2] / "scenarios" / "flight_test"
+
+
+pytestmark = pytest.mark.integration  # long flights
 
 
 @pytest.fixture(scope="module")

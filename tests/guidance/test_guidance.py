@@ -51,6 +51,7 @@ def _veh(t, vid: str) -> dict[str, np.ndarray]:
     return cols
 
 
+@pytest.mark.integration
 def test_goto_5_km_is_reached_then_loitered(write_scenario, tmp_path: Path) -> None:
     t, ev = _fly(write_scenario, tmp_path, """
   - at_s: 0
@@ -73,6 +74,7 @@ def test_goto_5_km_is_reached_then_loitered(write_scenario, tmp_path: Path) -> N
     assert set(b["ap_engaged"]) == {0} and set(a["ap_engaged"][1:]) == {1}
 
 
+@pytest.mark.integration
 def test_waypoint_square_flown_in_order(write_scenario, tmp_path: Path) -> None:
     pts = [(2000, 3000), (2000, 5000), (0, 5000), (0, 3000)]
     wps = ", ".join(f"{{north_m: {n}, east_m: {e}}}" for n, e in pts)
@@ -96,6 +98,7 @@ def test_waypoint_square_flown_in_order(write_scenario, tmp_path: Path) -> None:
     assert closest == sorted(closest)
 
 
+@pytest.mark.integration
 def test_heading_altitude_speed_holds_and_bank_limit(write_scenario, tmp_path: Path) -> None:
     t, _ = _fly(write_scenario, tmp_path, """
   - at_s: 0
@@ -117,6 +120,7 @@ def test_heading_altitude_speed_holds_and_bank_limit(write_scenario, tmp_path: P
     assert np.all(np.abs(((b["yaw_deg"][late] - 180 + 180) % 360) - 180) < 1.0)
 
 
+@pytest.mark.integration
 def test_goto_relative_to_each_start(write_scenario, tmp_path: Path) -> None:
     t, ev = _fly(write_scenario, tmp_path, """
   - at_s: 0
@@ -129,6 +133,7 @@ def test_goto_relative_to_each_start(write_scenario, tmp_path: Path) -> None:
     assert goals["b"] == pytest.approx((2500, 3000), abs=0.05)  # b started 3000 m east
 
 
+@pytest.mark.integration
 def test_guided_flight_is_deterministic_across_backends(write_scenario, tmp_path: Path
                                                         ) -> None:
     sched = """

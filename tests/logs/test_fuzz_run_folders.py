@@ -44,6 +44,9 @@ JSON_NUMBERS = ["1e400", "-1e400", "NaN", "Infinity", "1" + "0" * 5000, "-1", "0
 BAD_VALUES = [float("nan"), float("inf"), -float("inf"), 1e12, -1.0, 1e300, 95.0, -200.0]
 
 
+pytestmark = pytest.mark.integration  # fuzzing: hundreds of commands
+
+
 # -- mutations: each changes the copy ``run``; ``outside`` is a folder beside it --------
 def _plain(p: Path) -> Path:
     """``p`` if it is a regular file (not one an earlier mutation made a

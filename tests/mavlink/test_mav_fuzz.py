@@ -208,6 +208,7 @@ def fuzz(tmp_path: Any, count: int, seed: int) -> dict[str, int]:
     return stats
 
 
+@pytest.mark.integration
 def test_random_extreme_messages_of_every_handled_type(tmp_path) -> None:
     scale = int(os.environ.get("COSIM_FUZZ_SCALE", "1"))
     stats = fuzz(tmp_path, MESSAGES * scale, seed=13)

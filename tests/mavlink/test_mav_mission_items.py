@@ -72,6 +72,7 @@ def circle_point(lat0: float, lon0: float, radius_m: float, deg: float) -> tuple
     return lat0 + n / 111_319.49, lon0 + e / (111_319.49 * math.cos(math.radians(lat0)))
 
 
+@pytest.mark.integration
 def test_loiter_turns_ends_after_its_turns_round_the_centre(rig) -> None:
     r = rig(1)
     centre = (LAT0 + 0.01, LON0)

@@ -28,6 +28,7 @@ def _section(title: str) -> str:
     return README[start:README.index("\n## ", start + 1)]
 
 
+@pytest.mark.integration
 def test_the_readme_pymavlink_script_prints_the_repositions_ack(tmp_path: Path) -> None:
     text = _section("Ground stations")
     script = re.search(r"\*\*pymavlink script\*\*:\n\n```python\n(.*?)```", text, re.S)

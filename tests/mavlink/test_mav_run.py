@@ -29,6 +29,9 @@ vehicles:
 """
 
 
+pytestmark = pytest.mark.integration  # live runs with ground stations
+
+
 def _dist_m(lat1: float, lon1: float, lat2: float, lon2: float) -> float:
     dn = math.radians(lat2 - lat1) * 6371000.0
     de = math.radians(lon2 - lon1) * 6371000.0 * math.cos(math.radians(lat1))

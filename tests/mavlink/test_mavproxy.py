@@ -37,6 +37,9 @@ LOITER, AUTO, GUIDED = 12, 10, 15  # ArduPlane custom modes
 SQUARE = Path(__file__).resolve().parents[2] / "examples" / "square.txt"
 
 
+pytestmark = pytest.mark.integration  # MAVProxy against a live run
+
+
 class MavProxy:
     """``mavproxy.py`` headless: commands written to its stdin, its console
     lines collected by a thread (``lines``)."""

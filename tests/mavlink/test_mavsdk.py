@@ -54,6 +54,9 @@ TYPES = {1: ML.MAV_TYPE_FIXED_WING, 2: ML.MAV_TYPE_QUADROTOR, 3: ML.MAV_TYPE_GRO
 REL = ML.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT
 
 
+pytestmark = pytest.mark.integration  # MAVSDK against a live run
+
+
 def _at(lat: float, lon: float, north_m: float, east_m: float) -> tuple[int, int]:
     return (round((lat + north_m / 111_319.49) * 1e7),
             round((lon + east_m / (111_319.49 * math.cos(math.radians(lat)))) * 1e7))

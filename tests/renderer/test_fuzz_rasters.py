@@ -53,6 +53,9 @@ PLACE = "m_per_px: 0.5, origin: {north_m: 20, east_m: -20}"
 
 # --- traps ------------------------------------------------------------------------------
 
+pytestmark = pytest.mark.integration  # fuzzing: many renders and runs
+
+
 class Traps:
     """FIFOs that report being opened (a thread opens each for writing without
     blocking, which succeeds only while a reader has it open, then writes a

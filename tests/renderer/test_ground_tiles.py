@@ -28,6 +28,7 @@ def _forget(monkeypatch: pytest.MonkeyPatch) -> None:
     noise.WEIGHTS.clear()
 
 
+@pytest.mark.integration
 def test_tiles_do_not_depend_on_the_kept_tables_or_the_order(
         monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("COSIM_GROUND_CACHE", "off")

@@ -275,6 +275,7 @@ def _measure(path: str, lat: float, lon: float, small: str) -> dict[str, object]
 
 
 @pytest.mark.parametrize("kind", ["vrt", "sparse"])
+@pytest.mark.integration
 def test_32km_raster_is_read_by_windows(tmp_path: Path, big: Big,
                                         kind: str) -> None:
     path = big.vrt if kind == "vrt" else big.sparse

@@ -257,6 +257,7 @@ def test_contrast_is_the_weber_contrast_of_relative_luminance() -> None:
     assert row["contrast"] < 0
 
 
+@pytest.mark.integration
 def test_frames_identical_whatever_the_render_worker_count(tmp_path: Path) -> None:
     # three streams (nadir, forward, a -45 deg gimbal), so 2 and 3 workers really
     # split them (a worker count is capped at the number of streams)
@@ -471,6 +472,7 @@ def _fly_gimbal(tmp_path: Path, name: str, mount: str, turn_at: int | None
         return [r for r in csv.DictReader(f) if r["target"] == "truck1"], events
 
 
+@pytest.mark.integration
 def test_a_gimbal_command_turns_the_camera_from_that_frame_on(tmp_path: Path) -> None:
     """Turned 90 deg right, a nadir gimbal sees what was ahead (image up) on
     the image's left; the frames after the command are those of a camera
@@ -499,6 +501,7 @@ def test_a_gimbal_command_turns_the_camera_from_that_frame_on(tmp_path: Path) ->
                          "yaw_deg": 90.0, "source": "schedule"})]
 
 
+@pytest.mark.integration
 def test_a_fixed_mount_ignores_gimbal_commands(tmp_path: Path) -> None:
     fixed, _ = _fly_gimbal(tmp_path, "nadir", "nadir", None)
     cmd, events = _fly_gimbal(tmp_path, "cmd", "nadir", 240)

@@ -118,6 +118,7 @@ def test_distance_triggering_spaces_stills_by_the_distance(tmp_path: Path) -> No
     assert max(s["time_s"] for s in stills) < 6.0 + 0.1  # stopped
 
 
+@pytest.mark.integration
 def test_stills_never_change_the_states(tmp_path: Path, interval_run: Path) -> None:
     plain = _run(tmp_path, "  - {at_s: 4, vehicles: uav1, command: {camera: {stop: true}}}\n"
                            "  - {at_s: 2, vehicles: uav2, command: {camera: {stop: true}}}",

@@ -44,6 +44,7 @@ def _sim(tmp_path: Path, video: str, seconds: float = 3.0,
                           capture_output=True, text=True, timeout=120)
 
 
+@pytest.mark.integration
 def test_rtp_decodes_to_the_cameras_frames(tmp_path: Path) -> None:
     port = _port()
     (tmp_path / "rx.sdp").write_text(sdp(VideoTarget(1, None, "127.0.0.1", port, "rtp"), "rx"))
@@ -74,6 +75,7 @@ def test_rtp_decodes_to_the_cameras_frames(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("family, host", [(socket.AF_INET, "127.0.0.1"),
                                           (socket.AF_INET6, "::1")], ids=["ipv4", "ipv6"])
+@pytest.mark.integration
 def test_mpegts_decodes_too(tmp_path: Path, family: socket.AddressFamily, host: str) -> None:
     sock = socket.socket(family, socket.SOCK_DGRAM)
     sock.bind((host, 0))
@@ -110,6 +112,7 @@ def test_an_ipv6_destination_is_written_in_brackets() -> None:
         parse_target("1=udp://[2001:db8::7]:5600")
 
 
+@pytest.mark.integration
 def test_a_stream_that_fails_fails_the_run(tmp_path: Path) -> None:
     """Sending to the broadcast address without permission: FFmpeg cannot
     send a frame (nothing leaves the machine); the run says which stream

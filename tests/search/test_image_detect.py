@@ -278,6 +278,7 @@ def test_params_are_checked(changes: dict[str, Any], what: str) -> None:
 
 
 @pytest.mark.parametrize("w,h", [(640, 480), (1280, 720)])
+@pytest.mark.integration
 def test_speed(w: int, h: int, capsys: pytest.CaptureFixture[str]) -> None:
     """Milliseconds a frame (best of 5 runs of 50; the budget is 3 ms, the
     bound asserted is loose: the test machine's cores are shared)."""

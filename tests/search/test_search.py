@@ -179,6 +179,7 @@ def _predicted_detection_s(run: Path, fire_ne: tuple[float, float], size0: float
     return None
 
 
+@pytest.mark.integration
 def test_a_fire_on_the_track_is_detected_when_predicted_and_one_beside_it_never(
         tmp_path: Path) -> None:
     growth = 3.0  # m/min
@@ -214,6 +215,7 @@ def test_a_fire_on_the_track_is_detected_when_predicted_and_one_beside_it_never(
         assert (tmp_path / "run" / "search" / name).stat().st_size > 0
 
 
+@pytest.mark.integration
 def test_navigation_errors_move_the_reported_position_by_their_size(tmp_path: Path) -> None:
     fires = "{target: {north_m: 1000, east_m: 0}, size_m: 8}"
     f = _strip_scenario(tmp_path, fires, duration=60.0)
@@ -311,6 +313,7 @@ def test_the_altitude_follows_the_detection_requirement() -> None:
                                                        / 8.0)
 
 
+@pytest.mark.integration
 def test_search_plan_reports_the_minimum_fleet_and_its_change_with_altitude(capsys) -> None:
     from cosim.cli import main
 
@@ -326,6 +329,7 @@ def test_search_plan_reports_the_minimum_fleet_and_its_change_with_altitude(caps
 
 
 @pytest.mark.parametrize("render_workers", [None, 0])
+@pytest.mark.integration
 def test_the_image_detector_finds_the_fire_in_the_raw_frames_and_a_decoy_like_it(
         tmp_path: Path, render_workers: int | None) -> None:
     """A rendered nadir camera on the aircraft, its raw frames searched by the
@@ -362,6 +366,7 @@ def test_the_image_detector_needs_a_camera_on_a_search_aircraft() -> None:
                "  detection: {image: true}\n")
 
 
+@pytest.mark.integration
 def test_two_aircraft_search_an_area_round_a_no_fly_zone_to_its_end(tmp_path: Path) -> None:
     """The whole chain on a small area: two JSBSim aircraft from a formation
     beside the base, a zone cut out of the area, their plans flown as

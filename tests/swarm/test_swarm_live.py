@@ -27,6 +27,9 @@ from tests.mavlink.mavtest import free_udp_port
 ORIGIN = "origin: {lat_deg: 36.95, lon_deg: -116.05, ground_alt_m: 1000}\n"
 
 
+pytestmark = pytest.mark.integration  # swarms flown for minutes of simulated time
+
+
 def _scenario(tmp: Path, name: str, duration_s: float, vehicles: str, swarm: str) -> Path:
     p = tmp / f"{name}.yaml"
     p.write_text(f"schema_version: 1\nname: {name}\n{ORIGIN}duration_s: {duration_s}\n"

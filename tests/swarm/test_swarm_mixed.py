@@ -9,6 +9,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from cosim.logs import read_states
 from cosim.scenario import parse_scenario
@@ -34,6 +35,9 @@ swarm:
       phases:
         - {behaviour: rendezvous, mu: 1.0, k_s: 0.05, radius_m: 20, timeout_s: 55}
 """
+
+
+pytestmark = pytest.mark.integration  # a long mixed flight
 
 
 def test_a_mixed_group_closes_on_its_centroid_each_class_its_own_way(tmp_path: Path) -> None:

@@ -39,6 +39,7 @@ def _rows(p: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(f))
 
 
+@pytest.mark.integration
 def test_sweep_2x2_runs_every_combination(tmp_path: Path, capsys) -> None:
     scn = tmp_path / "sweep.yaml"
     scn.write_text(SCENARIO)

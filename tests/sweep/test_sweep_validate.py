@@ -73,6 +73,7 @@ def test_each_part_is_checked_once_per_distinct_input(tmp_path: Path, monkeypatc
 @pytest.mark.parametrize("scenario", [
     "conspicuity/altitude_speed.yaml", "conspicuity/four_direction_pass.yaml",
     "xprize/fleet_sweep.yaml"])
+@pytest.mark.integration
 def test_shared_work_gives_what_a_fresh_load_gives(scenario: str, tmp_path: Path) -> None:
     """Bundled sweeps (with targets, cameras and the search's fires): each
     combination loaded through one shared ``Memo`` equals a fresh load."""

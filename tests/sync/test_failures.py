@@ -69,6 +69,7 @@ def _flyover(tmp_path: Path, render_workers: int) -> Path:
 # --- cameras --------------------------------------------------------------------------
 
 @pytest.mark.parametrize("render_workers", [0, 1])
+@pytest.mark.integration
 def test_a_camera_that_cannot_write_fails_the_run_naming_it(tmp_path: Path, capsys,
                                                             render_workers: int) -> None:
     out = tmp_path / "run"
@@ -118,6 +119,7 @@ def _render_worker_signalled(tmp_path: Path, sig: signal.Signals, *args: str
     return p, out, workers[0], noticed, err
 
 
+@pytest.mark.integration
 def test_a_killed_render_worker_is_noticed_within_a_second_and_named(tmp_path: Path) -> None:
     p, out, worker, noticed, err = _render_worker_signalled(tmp_path, signal.SIGKILL)
     assert noticed is not None and noticed < 1.0, noticed
@@ -130,6 +132,7 @@ def test_a_killed_render_worker_is_noticed_within_a_second_and_named(tmp_path: P
     assert s["stop_reason"] == "error" and "RenderWorkerDied" in s["error"]
 
 
+@pytest.mark.integration
 def test_a_stopped_render_worker_fails_the_run_within_the_step_timeout(tmp_path: Path) -> None:
     """A render worker that stops (SIGSTOP) is alive but silent: the run ends
     within --step-timeout-s of its last frame with an error naming it, the frame
@@ -187,6 +190,7 @@ def small_disk(tmp_path: Path):
         subprocess.run(["umount", "-l", str(mnt)], check=False)
 
 
+@pytest.mark.integration
 def test_a_full_disk_keeps_the_summary_one_error_and_every_logged_tick(
         tmp_path: Path, small_disk: Path, capsys) -> None:
     scn = tmp_path / "fill.yaml"
@@ -207,6 +211,7 @@ def test_a_full_disk_keeps_the_summary_one_error_and_every_logged_tick(
     assert s["complete"] is True
 
 
+@pytest.mark.integration
 def test_when_the_last_part_cannot_be_written_the_summary_says_incomplete(
         tmp_path: Path, monkeypatch, capsys) -> None:
     import cosim.logs.writers as w
@@ -334,6 +339,7 @@ def test_event_log_keeps_lines_it_could_not_write_and_writes_them_later(tmp_path
 
 # --- cosim recover --------------------------------------------------------------------
 
+@pytest.mark.integration
 def test_recover_turns_a_killed_run_into_readable_output(tmp_path: Path, capsys) -> None:
     scn = tmp_path / "fill.yaml"
     scn.write_text(textwrap.dedent(FILLER).replace("count: 60", "count: 20"))

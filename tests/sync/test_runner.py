@@ -108,6 +108,7 @@ def test_ground_impact_and_divergence_are_events_and_the_rest_fly_on(
     assert s["events"]["ground_impact"] == 1 and s["events"]["divergence"] == 1
 
 
+@pytest.mark.integration
 def test_same_seed_bit_identical_across_backends_and_worker_counts(
         mixed_scenario: Path, tmp_path: Path) -> None:
     scn = load_scenario(mixed_scenario)
@@ -161,6 +162,7 @@ def test_realtime_pacing_holds_sim_time_to_the_wall_clock(mixed_scenario: Path,
     assert rt["lateness_ms_p50"] <= rt["lateness_ms_p99"] <= rt["lateness_ms_max"]
 
 
+@pytest.mark.integration
 def test_stop_request_stops_cleanly_with_logs_flushed(mixed_scenario: Path,
                                                       tmp_path: Path) -> None:
     scn = load_scenario(mixed_scenario)
@@ -195,6 +197,7 @@ def _wait_for_rows(out: Path, timeout: float = 60.0) -> None:
     raise AssertionError("the run did not get going")
 
 
+@pytest.mark.integration
 def test_ctrl_c_stops_cleanly_exit_130(mixed_scenario: Path, tmp_path: Path) -> None:
     out = tmp_path / "c"
     p = _cosim("run", str(mixed_scenario), "--out", str(out), "--realtime", "1",
@@ -210,6 +213,7 @@ def test_ctrl_c_stops_cleanly_exit_130(mixed_scenario: Path, tmp_path: Path) -> 
     assert _events(out)[-1]["reason"] == "interrupted"
 
 
+@pytest.mark.integration
 def test_worker_killed_mid_run_exit_1_within_5_s_logs_intact(mixed_scenario: Path,
                                                               tmp_path: Path) -> None:
     from tests.fdm_pool.test_pool import _children
@@ -241,6 +245,7 @@ def test_worker_killed_mid_run_exit_1_within_5_s_logs_intact(mixed_scenario: Pat
     assert not [w for w in workers if os.path.exists(f"/proc/{w}")], "orphan workers"
 
 
+@pytest.mark.integration
 def test_stopped_worker_ends_the_run_with_worker_failure(mixed_scenario: Path,
                                                           tmp_path: Path) -> None:
     scn = load_scenario(mixed_scenario)
@@ -492,6 +497,7 @@ def _wait_for(path: Path, timeout: float = 30.0) -> None:
 
 
 @pytest.mark.parametrize("delay_s", [0.0, 0.05, 0.2, 1.0])
+@pytest.mark.integration
 def test_sigterm_to_the_process_group_is_a_clean_stop(mixed_scenario: Path, tmp_path: Path,
                                                       delay_s: float) -> None:
     """What `timeout`, systemd and Ctrl-C in a terminal do: the signal reaches
@@ -516,6 +522,7 @@ def test_sigterm_to_the_process_group_is_a_clean_stop(mixed_scenario: Path, tmp_
     assert ev[-1]["reason"] == "terminated"
 
 
+@pytest.mark.integration
 def test_ctrl_c_during_the_build_aborts_it_promptly(tmp_path: Path) -> None:
     """1000 vehicles take seconds to build: Ctrl-C stops the build, not after it."""
     out = tmp_path / "b"

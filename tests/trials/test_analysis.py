@@ -861,6 +861,7 @@ def _continuous_rows(rows: int, seed: int = 3) -> list[dict[str, Any]]:
     return out
 
 
+@pytest.mark.integration
 def test_a_continuous_held_altitude_is_binned_and_the_figure_stays_readable(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """An altitude that changes every few trials, held in the screen fits: it

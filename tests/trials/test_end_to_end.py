@@ -27,6 +27,9 @@ PROFILE = {"screen_width_px": 1920, "screen_height_px": 1080, "screen_width_mm":
            "screen_height_mm": 299.0, "viewing_distance_mm": 600.0}
 
 
+pytestmark = pytest.mark.integration  # a sweep rendered, then a trial analysed
+
+
 @pytest.fixture(scope="module")
 def sweep(tmp_path_factory: pytest.TempPathFactory) -> Path:
     from cosim.sweep.runner import run_sweep

@@ -46,6 +46,9 @@ EXTREME_NUMBERS = ["1e308", "-1e308", "1e-320", "0", "-0", "9" * 400, "nan", "Na
 FORMULAS = ["=1+1", "@SUM(A1)", "+cmd|' /C calc'!A0", "-2+3", "\t=x", "=HYPERLINK(\"x\")"]
 
 
+pytestmark = pytest.mark.integration  # fuzzing: many analyses
+
+
 def _corpus(tmp: Path) -> list[str]:
     """Valid responses files: both experiments; altitudes seen from the
     camera (the optional columns); a trial server's export."""

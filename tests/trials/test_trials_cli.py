@@ -16,6 +16,7 @@ from cosim.cli import main
 REPO = Path(__file__).resolve().parents[2]
 
 
+@pytest.mark.integration
 def test_analyse_finds_the_critical_gaps_the_responses_were_made_with(tmp_path: Path,
                                                                     capsys) -> None:
     csv_path = tmp_path / "responses.csv"
@@ -52,6 +53,7 @@ def test_serve_refuses_other_machines_without_public(tmp_path: Path, capsys) -> 
     assert "--public" in capsys.readouterr().err
 
 
+@pytest.mark.integration
 def test_tracked_dot_responses_are_conspicuity_angles_too(tmp_path: Path, capsys) -> None:
     """The "track" protocol's angles (from the dot the eyes follow) are
     analysed as the fixation protocol's: the same gaps come out."""

@@ -83,6 +83,7 @@ def _speed_t63(c: dict[str, np.ndarray]) -> float:
     return float((c["time_s"][m] - 45)[np.argmax(s >= goal)])
 
 
+@pytest.mark.integration
 def test_a_banked_turn_is_the_coordinated_circle(side_by_side) -> None:
     """At the 45-degree bank limit the turn rate is g tan(45) / v."""
     c = side_by_side[0]["pm"]
@@ -94,6 +95,7 @@ def test_a_banked_turn_is_the_coordinated_circle(side_by_side) -> None:
     assert np.median(rate / want) == pytest.approx(1.0, abs=0.01)
 
 
+@pytest.mark.integration
 def test_it_follows_jsbsim_on_the_same_commands(side_by_side) -> None:
     """Heading and speed changes within 10% of JSBSim's times (the measured
     envelope, benchmarks/batched_fidelity.py, is within about 6%); the
@@ -130,6 +132,7 @@ schedule:
     assert v == pytest.approx(want, rel=0.01)
 
 
+@pytest.mark.integration
 def test_states_are_bit_identical_on_every_backend_and_worker_count(tmp_path) -> None:
     body = """duration_s: 8
 vehicles:
@@ -149,6 +152,7 @@ schedule:
                 assert np.array_equal(ref[v][k], got[v][k]), (workers, v, k)
 
 
+@pytest.mark.integration
 def test_it_lands_with_the_fixed_wing_guidance(tmp_path) -> None:
     body = """duration_s: 130
 vehicles:
@@ -181,6 +185,7 @@ vehicles:
     assert f"must be <= {limits.MAX_VEHICLES}" in "\n".join(ei.value.problems)
 
 
+@pytest.mark.integration
 def test_the_swarm_flies_it_as_it_flies_jsbsim(tmp_path) -> None:
     """The bundled rendezvous (eight uav700s on a 4 km circle, converge within
     300 m): as batched point masses it converges too, in a time within 15% of

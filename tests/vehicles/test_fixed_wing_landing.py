@@ -43,6 +43,9 @@ POINTS = {"goto": (3000.0, 500.0), "route": (3000.0, -2000.0), "cessna": (3000.0
 ALL = ["goto", "ahead", "route", "cessna"]
 
 
+pytestmark = pytest.mark.integration  # landings flown to the ground
+
+
 @pytest.fixture(scope="module")
 def landed(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict, list[dict]]:
     out = tmp_path_factory.mktemp("land") / "run"

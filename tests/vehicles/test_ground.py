@@ -178,6 +178,7 @@ def test_routes_keep_clear_of_grown_obstacles() -> None:
     assert plan_route(np.array([0.0, 0.0]), np.array([47.0, 0.0]), polys) is None
 
 
+@pytest.mark.integration
 def test_the_mixed_world_is_identical_on_every_backend(tmp_path: Path) -> None:
     """Cars, quadrotors and a fixed-wing in one clock: the same states, bit for
     bit, inline and on 2 or 3 worker processes."""

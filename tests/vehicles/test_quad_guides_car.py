@@ -10,6 +10,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from cosim.logs import read_states
 from cosim.scenario import load_scenario
@@ -17,6 +18,9 @@ from cosim.sync import run_scenario
 from cosim.world.obstacles import inside
 
 SCENARIO = Path(__file__).resolve().parent.parent.parent / "scenarios/hetero/quad_guides_car.yaml"
+
+
+pytestmark = pytest.mark.integration  # a long mixed flight
 
 
 def test_the_scout_finds_the_obstacles_and_the_car_reaches_its_goal(tmp_path: Path) -> None:

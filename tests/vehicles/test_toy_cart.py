@@ -25,6 +25,9 @@ REPO = Path(__file__).resolve().parent.parent.parent
 EXAMPLE = REPO / "examples" / "toy_cart"
 
 
+pytestmark = pytest.mark.integration  # an out-of-tree package installed, flown on every backend
+
+
 def _forget_plugins() -> None:
     import cosim.vehicles.registry as reg
 
