@@ -38,7 +38,7 @@ from cosim.core.camera import CameraSpec
 from cosim.core.geo import LocalFrame
 from cosim.renderer.outputs import Stream
 from cosim.renderer.render_pool import RenderWorker
-from cosim.renderer.tile_cache import CACHE_ENV
+from cosim.core.cache import CACHE_ENV  # the whole cache folder (ground tiles: ground/)
 from cosim.renderer.video import EXTENSIONS
 from cosim.scenario import load_scenario, parse_scenario
 from cosim.sync.runner import run_scenario
@@ -80,7 +80,8 @@ class _Encoder:
 
 
 def per_frame(frames: int, cache_dir: str, codec: str = "mp4v") -> dict[str, float]:
-    """One camera's frames; ground tiles cached in ``cache_dir``."""
+    """One camera's frames; cosim's cache folder (its ground tiles in
+    ``ground/``) in ``cache_dir``."""
     os.environ[CACHE_ENV] = cache_dir
     cv2.setNumThreads(1)
     scn = load_scenario(REPO / "scenarios/cameras/flyover.yaml", check_properties=False)
@@ -142,7 +143,7 @@ def swarm(n: int, duration_s: float, backend: str, workers: int | None,
     scn = parse_scenario(text, str(REPO / "scenarios/cameras/bench.yaml")).with_duration(
         duration_s)
     with tempfile.TemporaryDirectory() as d:
-        os.environ[CACHE_ENV] = str(Path(d) / "ground_cache")  # empty: every tile generated
+        os.environ[CACHE_ENV] = str(Path(d) / "cache")  # empty: every tile generated
         cpu0, wall0 = _cpu_s(), time.perf_counter()
         r = run_scenario(scn, d, backend=backend, workers=workers)
         wall = time.perf_counter() - wall0
