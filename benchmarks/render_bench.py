@@ -34,11 +34,11 @@ from typing import Any
 
 import cv2
 
+from cosim.core.cache import CACHE_ENV  # the whole cache folder (ground tiles: ground/)
 from cosim.core.camera import CameraSpec
 from cosim.core.geo import LocalFrame
 from cosim.renderer.outputs import Stream
 from cosim.renderer.render_pool import RenderWorker
-from cosim.core.cache import CACHE_ENV  # the whole cache folder (ground tiles: ground/)
 from cosim.renderer.video import EXTENSIONS
 from cosim.scenario import load_scenario, parse_scenario
 from cosim.sync.runner import run_scenario
