@@ -1,4 +1,5 @@
-"""The consensus laws of docs/physics.md ("Swarm consensus behaviours"), pure numpy, vectorised over vehicles.
+"""The consensus laws of docs/physics.md ("Swarm consensus behaviours"), pure
+numpy, vectorised over vehicles.
 
 Positions are horizontal ``(n, 2)`` arrays of (north, east) metres in one
 local tangent frame (``cosim.core.geo.LocalFrame``: exact WGS-84, no flat-earth
