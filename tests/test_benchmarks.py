@@ -23,9 +23,11 @@ def test_render_bench_parts_add_up(tmp_path: Path, monkeypatch: pytest.MonkeyPat
     import cv2
     import render_bench
 
-    from cosim.renderer.tile_cache import CACHE_ENV
+    from cosim.core.cache import CACHE_ENV
+    from cosim.renderer import tile_cache
 
-    monkeypatch.setenv(CACHE_ENV, "off")  # per_frame sets it: restored after the test
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path))  # per_frame sets it: restored after the test
+    monkeypatch.delenv(tile_cache.CACHE_ENV, raising=False)  # the tile cache on
     monkeypatch.setattr(cv2, "setNumThreads", lambda n: None)  # and this, for the process
     f = render_bench.per_frame(6, str(tmp_path / "ground"))
     assert f["tiles_generated"] > 0 and f["tiles_from_disk"] == 0
