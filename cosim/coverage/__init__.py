@@ -1,9 +1,10 @@
 """coverage: planning the search of an area by a fixed-wing fleet.
 
 ``planner`` splits a search area among the aircraft and lays out each one's
-lawnmower lanes, turns no tighter than the aircraft can fly (``dubins``)
-and its transit from the base, detouring around no-fly zones. Geometry
-only: it owns no simulation state and sends nothing.
+lawnmower lanes (``lanes``), turns no tighter than the aircraft can fly
+(``dubins``) and its transit from the base, detouring around no-fly zones
+(``airspace``). Geometry only: it owns no simulation state and sends
+nothing.
 """
 
 from cosim.coverage.dubins import DubinsChain, DubinsPath, Flight, candidates, shortest
