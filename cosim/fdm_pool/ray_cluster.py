@@ -22,22 +22,8 @@ share cores unknowingly; the driver's own share reserves none (it runs in
 the driver's process, outside Ray's accounting). States do not depend on
 any of this.
 
-Connecting: ``address`` (``HOST:PORT`` of a cluster started with ``ray start
---head``; else ``RAY_ADDRESS``; else a local Ray is started for this
-process and stopped with it). Joining an address takes at most
-``connect_timeout_s`` (default ``CONNECT_TIMEOUT_S``): first a plain TCP
-connection to it (nothing listening there is said at once), then
-``ray.init``, which Ray would retry for many minutes in native code, deaf to
-signals. That runs in a thread of its own while this one waits, so Ctrl-C
-and SIGTERM act at once (and Ray does not replace the process's SIGTERM
-handler); an attempt given up on is left to end with the process (or,
-should it still succeed, is shut down). A local Ray is started from the
-calling thread (its processes die with the thread that starts them), with
-no timeout. A failure is a ``ClusterUnreachable`` naming the address and
-what to check. A
-cluster with token authentication (``RAY_AUTH_MODE=token``) needs the same
-token in this process's environment (``RAY_AUTH_TOKEN`` or
-``RAY_AUTH_TOKEN_PATH``), as every Ray client does.
+Joining the cluster (bounded, interruptible) is ``ray_connect``'s; the agent
+each machine runs is ``ray_agent``'s.
 
 Faults: a lost agent (its process killed, its machine gone) is killed for
 good (it may only be unreachable) and replaced, and so is one of whose
@@ -66,241 +52,40 @@ from __future__ import annotations
 import dataclasses
 import logging
 import os
-import signal
 import socket
-import sys
-import threading
 import time
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
-from cosim.core.state import STATE_INDEX, StateField, VehicleSpec, VehicleStatus
+from cosim.core.state import STATE_INDEX, VehicleSpec, VehicleStatus
 from cosim.errors import (
     AgentLost,
     BuildError,
-    ClusterUnreachable,
     ConfigError,
-    CosimError,
     MachineWorkerDied,
     WorkerDied,
     WorkerTimeout,
     how_it_ended,
-    install_extra,
 )
 from cosim.fdm_pool.base import Pool, Watch
 from cosim.fdm_pool.process import ProcessPool, default_workers, shard_bounds
+from cosim.fdm_pool.ray_agent import Agent, remote_cause, why_lost
+from cosim.fdm_pool.ray_connect import (
+    CONNECT_TIMEOUT_S,
+    Node,
+    connect,
+    import_ray,
+    live_nodes,
+)
 from cosim.vehicles.resume import FIELDS as RESUME_FIELDS
 from cosim.vehicles.resume import NOT_RESTORED, RESTORED, resume_spec
 
 log = logging.getLogger(__name__)
 
-#: a local Ray started by this backend keeps its object store this small (the
-#: states and setpoints of an exchange are a few megabytes at most)
-_LOCAL_OBJECT_STORE_BYTES = 128 * 1024 * 1024
 _STOP_TIMEOUT_S = 10.0
 _PATIENCE_S = 30.0  # a build this long on an agent is logged
-#: how long joining a cluster may take unless told (``connect``, ``--connect-timeout-s``)
-CONNECT_TIMEOUT_S = 30.0
-#: a private local Ray's address: on the loopback net (on Linux Ray replaces
-#: 127.0.0.1 itself by the machine's routable address, but keeps 127.0.0.2)
-LOCAL_NODE_IP = "127.0.0.2" if sys.platform.startswith("linux") else "127.0.0.1"
-
-
-def _ray() -> Any:
-    try:
-        import ray
-    except ImportError:
-        raise ConfigError(f"the ray backend needs Ray: {install_extra('ray')}") from None
-    return ray
-
-
-def connect(address: str | None = None, timeout_s: float = CONNECT_TIMEOUT_S) -> str:
-    """Join the Ray cluster at ``address`` (else ``RAY_ADDRESS``, else start a
-    local one) within ``timeout_s``, unless this process already has; returns
-    where it is. ``ClusterUnreachable`` says why not (``ConfigError``: an
-    address that is not ``HOST:PORT``)."""
-    ray = _ray()
-    if not timeout_s > 0:
-        raise ConfigError(f"the connect timeout must be > 0 s, got {timeout_s}")
-    if ray.is_initialized():
-        here = str(ray.get_runtime_context().gcs_address)
-        if address and address.split("://")[-1] != here:
-            raise ConfigError(f"this process has already joined the Ray cluster at {here}; "
-                              f"it cannot also join {address}")
-        return here
-    target = address or os.environ.get("RAY_ADDRESS") or None
-    kw: dict[str, Any] = {"logging_level": logging.WARNING, "log_to_driver": True,
-                          "configure_logging": False}
-    if target is None:  # a private local Ray, as many CPUs as this machine has
-        kw.update(num_cpus=default_workers(), include_dashboard=False,
-                  _node_ip_address=LOCAL_NODE_IP,
-                  object_store_memory=_LOCAL_OBJECT_STORE_BYTES)
-    ctx = _Joining(ray, target, kw, timeout_s).join()
-    log.info("ray backend: joined %s (%s)", target or "a local Ray",
-             ctx.address_info.get("gcs_address", "?"))
-    return str(ray.get_runtime_context().gcs_address)
-
-
-def host_port(address: str) -> tuple[str, int]:
-    """``(host, port)`` of ``HOST:PORT`` (``[IPv6]:PORT``, ``ray://HOST:PORT``);
-    ``ConfigError`` otherwise."""
-    rest = address.split("://", 1)[-1].rstrip("/")
-    host, sep, port = rest.rpartition(":")
-    host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
-    if not sep or not host or not port.isdigit() or not 0 < int(port) < 65536:
-        raise ConfigError(f"the Ray cluster's address {address!r} is not HOST:PORT (the "
-                          f"head's address and port, as 'ray start --head' printed them, "
-                          f"e.g. 10.0.0.5:6379)")
-    return host, int(port)
-
-
-class _QuietThreadWarning(logging.Filter):
-    """Drops Ray's warning that ``ray.init`` outside the main thread sets no
-    SIGTERM handler: not setting one is why it runs there."""
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        return not record.getMessage().startswith("SIGTERM handler is not set")
-
-
-_QUIET = _QuietThreadWarning()
-#: an attempt to join given up on, still running (``_Joining``)
-_abandoned: threading.Thread | None = None
-
-
-class _Joining:
-    """One attempt to join a cluster, in a thread, waited for here within a
-    deadline and interruptibly (a signal handler that raises ends the wait)."""
-
-    def __init__(self, ray: Any, target: str | None, kw: dict[str, Any],
-                 timeout_s: float) -> None:
-        self.ray, self.target, self.kw, self.timeout_s = ray, target, kw, timeout_s
-        self.where = None if target in (None, "auto") else host_port(target)
-        self.ctx: Any = None
-        self.error: BaseException | None = None
-        self.reached = False  # the TCP probe got through
-        self.given_up = False
-        self.lock = threading.Lock()
-        self.done = threading.Event()
-
-    def _attempt(self) -> None:
-        try:
-            if self.where is not None:  # nothing listening: said at once, not after retries
-                with socket.create_connection(self.where, timeout=self.timeout_s):
-                    self.reached = True
-            ctx = self.ray.init(address=self.target, **self.kw)
-            with self.lock:
-                if self.given_up:  # too late: nobody uses it
-                    self.ray.shutdown()
-                    return
-                self.ctx = ctx
-        except BaseException as e:  # reported by join()
-            self.error = e
-        finally:
-            self.done.set()
-
-    def join(self) -> Any:
-        global _abandoned
-        if self.target is None:
-            return self._start_here()
-        if _abandoned is not None and _abandoned.is_alive():
-            raise ClusterUnreachable("an earlier attempt of this process to join a Ray "
-                                     "cluster, given up on, has not ended yet; start a new "
-                                     "process to try again")
-        logging.getLogger("ray._private.worker").addFilter(_QUIET)
-        thread = threading.Thread(target=self._attempt, name="cosim-ray-join", daemon=True)
-        deadline = time.monotonic() + self.timeout_s
-        thread.start()
-        try:
-            while not self.done.wait(max(0.0, min(0.1, deadline - time.monotonic()))):
-                if time.monotonic() >= deadline:
-                    break
-        finally:
-            with self.lock:
-                if self.ctx is None:  # interrupted, or out of time: left to end with us
-                    self.given_up = True
-                    _abandoned = thread
-        if self.ctx is not None:
-            return self.ctx
-        raise ClusterUnreachable(self._why())
-
-    def _start_here(self) -> Any:
-        """A private local Ray, started from this thread: the processes Ray
-        starts die with the thread that started them (PR_SET_PDEATHSIG), so
-        not from a thread that ends. Ray's own SIGTERM handler (it exits the
-        process) is undone."""
-        main = threading.current_thread() is threading.main_thread()
-        before = signal.getsignal(signal.SIGTERM) if main else None
-        try:
-            return self.ray.init(address=None, **self.kw)
-        except Exception as e:
-            self.error = e
-            raise ClusterUnreachable(self._why()) from None
-        finally:
-            if main and before is not None:
-                signal.signal(signal.SIGTERM, before)
-
-    def _why(self) -> str:
-        version = getattr(self.ray, "__version__", "?")
-        if self.target is None:
-            assert self.error is not None
-            return f"a local Ray for this run could not be started: {_one_line(self.error)}"
-        head = f"cannot join the Ray cluster at {self.target}"
-        token = ("and that RAY_AUTH_TOKEN (or RAY_AUTH_TOKEN_PATH) holds its token if it "
-                 "uses token authentication")
-        if self.where is None:  # 'auto': Ray looks for a cluster on this machine
-            return (f"{head}: {_one_line(self.error) if self.error else 'no answer'} (is a "
-                    f"Ray cluster started on this machine with 'ray start --head'?)")
-        host, port = self.where
-        e = self.error
-        if isinstance(e, ConnectionRefusedError):
-            return (f"{head}: nothing listens there (connection refused). Check that the "
-                    f"cluster's head is started on {host} ('ray start --head --port {port}') "
-                    f"and that {host}:{port} is the address it printed")
-        if isinstance(e, socket.gaierror):
-            return (f"{head}: {host!r} is not a host name this machine knows "
-                    f"({e.strerror or e}). Check the address: the head's IP address or name "
-                    f"and the port 'ray start --head' printed")
-        if e is None or isinstance(e, TimeoutError):
-            if not self.reached:
-                return (f"{head}: no answer within {self.timeout_s:g} s (--connect-timeout-s). "
-                        f"Check that {host} is up and reachable from this machine on port "
-                        f"{port} (a wrong address, a firewall that drops packets)")
-            return (f"{head}: something listens there but did not take this process into a "
-                    f"Ray cluster within {self.timeout_s:g} s (--connect-timeout-s). Check "
-                    f"that it is a Ray head's port ('ray start --head --port {port}'), that "
-                    f"the head runs Ray {version} as this machine does, {token}")
-        if isinstance(e, OSError):
-            return (f"{head}: {e.strerror or e}. Check that this machine reaches {host} "
-                    f"(its network, routes and firewall)")
-        return (f"{head}: {_one_line(e)}. Check that it is a Ray head ('ray start --head') "
-                f"running Ray {version} as this machine does, {token}")
-
-
-def _one_line(e: BaseException) -> str:
-    text = " ".join(str(e).split())
-    return (text[:300] + " ...") if len(text) > 300 else (text or type(e).__name__)
-
-
-@dataclasses.dataclass(frozen=True)
-class Node:
-    """A live machine of the cluster."""
-
-    id: str
-    ip: str
-    cpus: int
-    head: bool
-
-
-def live_nodes() -> list[Node]:
-    """The cluster's live machines with CPUs: the head first, then by node id."""
-    ray = _ray()
-    out = [Node(n["NodeID"], n["NodeManagerAddress"], int(n["Resources"].get("CPU", 0)),
-                "node:__internal_head__" in n["Resources"])
-           for n in ray.nodes() if n["Alive"]]
-    out = [n for n in out if n.cpus > 0]
-    return sorted(out, key=lambda n: (not n.head, n.id))
 
 
 def plan(nodes: Sequence[Node], n: int, workers: int) -> list[tuple[Node, int, int, int]]:
@@ -323,49 +108,6 @@ def plan(nodes: Sequence[Node], n: int, workers: int) -> list[tuple[Node, int, i
             out.append((node, c, bounds[w0][0], bounds[w0 + c - 1][1]))
             w0 += c
     return out
-
-
-class Agent:
-    """One machine's share: a ``process`` pool in the agent's own process
-    (a Ray actor), stepped on the driver's call."""
-
-    def __init__(self) -> None:
-        self.pool: ProcessPool | None = None
-
-    def build(self, specs: list[VehicleSpec], dt_s: float, channels: tuple[str, ...],
-              workers: int, layout: tuple[StateField, ...], tick: int,
-              setpoints: np.ndarray | None,
-              watch: Watch | None = None) -> tuple[np.ndarray, int, str]:
-        """Build ``specs`` (trimmed, or as they were: ``VehicleSpec.resume``);
-        ``setpoints`` (a rebuild): written before the first exchange. Returns
-        the states, this process's pid and host."""
-        self.pool = ProcessPool(specs, dt_s, channels, workers=workers, driver_steps=True,
-                                layout=layout, watch=watch)
-        self.pool.tick = tick
-        if setpoints is not None:
-            self.pool.setpoints[:] = setpoints
-        return self.pool.states.copy(), os.getpid(), socket.gethostname()
-
-    def step(self, setpoints: np.ndarray | None, nsub: int
-             ) -> tuple[np.ndarray, list[float], np.ndarray | None]:
-        """One exchange: the states, each worker's busy time, the watched rows."""
-        assert self.pool is not None
-        if setpoints is not None:
-            keep = np.isnan(setpoints)  # NaN leaves a value written at a rebuild
-            self.pool.setpoints[~keep] = setpoints[~keep]
-        states = self.pool.step(nsub)
-        watched = (self.pool.watched[:self.pool.watched_count].copy()
-                   if self.pool.watch is not None else None)
-        return states.copy(), self.pool.busy_s(), watched
-
-    def worker_pids(self) -> list[int]:
-        assert self.pool is not None
-        return list(self.pool.pids.values())
-
-    def stop(self) -> None:
-        if self.pool is not None:
-            self.pool.close()  # its worker processes stopped and reaped
-            self.pool = None
 
 
 @dataclasses.dataclass
@@ -402,7 +144,7 @@ class RayPool(Pool):
 
     @classmethod
     def available(cls) -> None:
-        _ray()
+        import_ray()
 
     def __init__(self, specs: Sequence[VehicleSpec], dt_s: float, channels: Sequence[str] = (),
                  workers: int | None = None, address: str | None = None,
@@ -410,7 +152,7 @@ class RayPool(Pool):
                  start_timeout_s: float | None = None, watch: Watch | None = None,
                  connect_timeout_s: float | None = None) -> None:
         super().__init__(specs, dt_s, channels, watch=watch)
-        ray = _ray()
+        ray = import_ray()
         if workers is not None and int(workers) < 1:
             raise ValueError(f"workers must be >= 1, got {workers}")
         self.strict = bool(strict)
@@ -507,7 +249,7 @@ class RayPool(Pool):
             self._local.send(nsub)
 
     def _wait(self, timeout_s: float | None) -> None:
-        ray = _ray()
+        ray = import_ray()
         k = len(self.layout)
         m = self._nsub // self.watch.every if self.watch is not None else 0
         if self._local is not None:  # the agents step theirs meanwhile
@@ -533,14 +275,14 @@ class RayPool(Pool):
             try:
                 block, s.busy, watched = ray.get(ref)
             except ray.exceptions.RayTaskError as e:
-                cause = _cause(e)
+                cause = remote_cause(e)
                 if type(cause) is not WorkerDied:  # a vehicle's failure, not the machine's
                     raise cause from None
                 block, watched = self._replace(i, self._worker_fault(s, cause))
                 s = self._shares[i]
             except ray.exceptions.RayActorError as e:
                 block, watched = self._replace(i, AgentLost(
-                    i, s.node.ip, s.node.id, s.pid, self._ids_of(s), self.tick, _reason(e)))
+                    i, s.node.ip, s.node.id, s.pid, self._ids_of(s), self.tick, why_lost(e)))
                 s = self._shares[i]  # its replacement, holding the survivors' rows
             self.states[s.rows] = block[:, :k]
             self._resume[s.rows] = block[:, k:]
@@ -561,7 +303,7 @@ class RayPool(Pool):
             self._local = None
         if not self._shares:
             return
-        ray = _ray()
+        ray = import_ray()
         stops = [s.handle.stop.remote() for s in self._shares if s.handle is not None]
         try:
             ray.wait(stops, num_returns=len(stops), timeout=_STOP_TIMEOUT_S)
@@ -608,7 +350,7 @@ class RayPool(Pool):
         """Build every job's vehicles on its agent, and ``local``'s (node,
         workers, rows) in this process meanwhile; every vehicle that cannot
         be built, on any machine, is in one ``BuildError``."""
-        ray = _ray()
+        ray = import_ray()
         layout = tuple(self.layout)
         k = len(layout)
         refs = [s.handle.build.remote(list(specs), self.dt_s, self.channels, s.workers,
@@ -642,7 +384,7 @@ class RayPool(Pool):
             try:
                 block, s.pid, s.host = ray.get(ref)
             except ray.exceptions.RayTaskError as e:
-                cause = _cause(e)
+                cause = remote_cause(e)
                 if type(cause) is WorkerDied:
                     raise self._worker_fault(s, cause) from None
                 if not isinstance(cause, BuildError):
@@ -651,7 +393,7 @@ class RayPool(Pool):
                 continue
             except ray.exceptions.RayActorError as e:
                 raise AgentLost(self._shares.index(s), s.node.ip, s.node.id, s.pid,
-                                [v.id for v in specs], self.tick, _reason(e)) from None
+                                [v.id for v in specs], self.tick, why_lost(e)) from None
             self.states[s.rows] = block[:, :k]
             self._resume[s.rows] = block[:, k:]
         if failures:
@@ -676,7 +418,7 @@ class RayPool(Pool):
             self._frozen[frozen] = True
             self._frozen_rows = np.flatnonzero(self._frozen)
             self._frozen_states = self.states[self._frozen_rows].copy()
-        ray = _ray()
+        ray = import_ray()
         if isinstance(fault, MachineWorkerDied):  # the agent lives: its other workers first
             try:
                 ray.get(old.handle.stop.remote(), timeout=_STOP_TIMEOUT_S)
@@ -726,12 +468,12 @@ class RayPool(Pool):
             block, share.busy, watched = ray.get(share.handle.step.remote(None, self._nsub),
                                                  timeout=self._timeout_s)
         except ray.exceptions.RayTaskError as err:
-            cause = _cause(err)
+            cause = remote_cause(err)
             raise (self._worker_fault(share, cause) if type(cause) is WorkerDied
                    else cause) from None
         except ray.exceptions.RayActorError as err:
             raise AgentLost(i, node.ip, node.id, share.pid, self._ids_of(share), self.tick,
-                            f"its replacement was lost too: {_reason(err)}") from None
+                            f"its replacement was lost too: {why_lost(err)}") from None
         except ray.exceptions.GetTimeoutError:
             raise WorkerTimeout(i, share.pid, self._ids_of(share), self.tick, self._timeout_s,
                                 f"finish tick {self.tick + self._nsub} on {node.ip} after "
@@ -759,20 +501,3 @@ class RayPool(Pool):
                 except (ProcessLookupError, PermissionError):
                     break
                 time.sleep(0.02)
-
-
-def _cause(e: Any) -> BaseException:
-    """The exception raised inside an agent (a ``CosimError`` as it was)."""
-    cause = getattr(e, "cause", None)
-    if isinstance(cause, CosimError):
-        return cause
-    return CosimError(f"the ray backend's agent failed: {e}")
-
-
-def _reason(e: Exception) -> str:
-    """Ray's word on why an actor is gone, in one line."""
-    text = str(e)
-    for key in ("Worker exit detail:", "The actor is dead because"):
-        if key in text:
-            return text.split(key, 1)[1].strip().split(". ")[0]
-    return text.strip().splitlines()[0] if text.strip() else type(e).__name__

@@ -251,7 +251,7 @@ def test_close_leaves_nothing_running_on_any_machine(specs) -> None:
 def test_options_reach_the_backend_that_takes_them(specs) -> None:
     with pytest.raises(ConfigError, match=r"process backend takes no option 'address'"):
         make_pool(specs(2), DT, (), "process", address="127.0.0.1:1")
-    from cosim.fdm_pool.ray_cluster import connect
+    from cosim.fdm_pool.ray_connect import connect
 
     connect()  # the session's cluster (RAY_ADDRESS)
     with pytest.raises(ConfigError, match=r"already joined the Ray cluster at .*cannot also "
