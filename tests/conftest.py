@@ -54,9 +54,9 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
         callspec = getattr(item, "callspec", None)
         on_cluster = bool(fixtures.intersection(CLUSTER_BACKENDS.values())) or (
             callspec is not None and callspec.params.get("backend") in CLUSTER_BACKENDS)
-        if not tiers and (on_cluster or fixtures.intersection(INTEGRATION_FIXTURES)):
-            tiers.append("integration")
-        item.add_marker(tiers[0] if tiers else "fast")
+        if not tiers:  # the tier its fixtures or backend give, else fast
+            item.add_marker("integration" if on_cluster
+                            or fixtures.intersection(INTEGRATION_FIXTURES) else "fast")
         if not item.get_closest_marker("xdist_group"):
             item.add_marker(pytest.mark.xdist_group(
                 "ray" if on_cluster else item.nodeid.split("::")[0]))

@@ -1,0 +1,94 @@
+"""The test tiers (tests/conftest.py): each test lands in one, by the
+fixtures it uses, the backend it runs on or its markers; two tier markers on
+one test are a usage error."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+
+SUITE = '''
+import pytest
+
+
+def test_plain():
+    pass
+
+
+def test_in_a_browser(chromium):
+    pass
+
+
+@pytest.fixture(params=["inline", "ray"])
+def backend(request):
+    return request.param
+
+
+def test_on_every_backend(backend):
+    pass
+
+
+@pytest.mark.slow
+def test_long_on_request():
+    pass
+
+
+@pytest.mark.integration
+def test_marked():
+    pass
+'''
+
+#: a plugin that prints each collected test's tier and xdist group
+DUMP = '''
+def pytest_collection_finish(session):
+    for item in session.items:
+        tier = [m.name for m in item.iter_markers() if m.name in
+                ("fast", "integration", "slow", "bench")]
+        group = item.get_closest_marker("xdist_group").args[0]
+        print("TIER", item.name, ",".join(tier), group.rsplit("/", 1)[-1])
+'''
+
+
+def _collect(folder: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    """``pytest --collect-only`` of ``folder``'s tests with this conftest as a plugin."""
+    return subprocess.run([sys.executable, "-m", "pytest", "-p", "tests.conftest", "-p", "dump",
+                           "--collect-only", "-q", "-p", "no:cacheprovider", "--rootdir",
+                           str(folder), "-c", str(folder / "pytest.ini"), *args, str(folder)],
+                          cwd=REPO, capture_output=True, text=True, timeout=120,
+                          env={**os.environ, "PYTHONPATH": f"{folder}{os.pathsep}{REPO}"})
+
+
+def test_every_test_lands_in_one_tier(tmp_path: Path) -> None:
+    (tmp_path / "pytest.ini").write_text("[pytest]\n")
+    (tmp_path / "dump.py").write_text(DUMP)
+    (tmp_path / "test_suite.py").write_text(textwrap.dedent(SUITE))
+    r = _collect(tmp_path)
+    assert r.returncode == 0, r.stdout + r.stderr
+    tiers = {line.split()[1]: line.split()[2:] for line in r.stdout.splitlines()
+             if line.startswith("TIER ")}
+    assert tiers == {
+        "test_plain": ["fast", "test_suite.py"],
+        "test_in_a_browser": ["integration", "test_suite.py"],
+        "test_on_every_backend[inline]": ["fast", "test_suite.py"],
+        "test_on_every_backend[ray]": ["integration", "ray"],  # with the other Ray tests
+        "test_long_on_request": ["slow", "test_suite.py"],
+        "test_marked": ["integration", "test_suite.py"]}
+    r = _collect(tmp_path, "-m", "fast or integration")
+    assert "test_long_on_request" not in r.stdout and "test_marked" in r.stdout
+
+
+def test_two_tiers_on_one_test_are_a_usage_error(tmp_path: Path) -> None:
+    (tmp_path / "pytest.ini").write_text("[pytest]\n")
+    (tmp_path / "dump.py").write_text("")
+    (tmp_path / "test_suite.py").write_text(
+        "import pytest\n\n\n@pytest.mark.integration\n@pytest.mark.slow\n"
+        "def test_both():\n    pass\n")
+    r = _collect(tmp_path)
+    assert r.returncode == 4, r.stdout + r.stderr
+    assert "test_suite.py::test_both is marked integration and slow: a test is in one tier" in (
+        r.stdout + r.stderr)
