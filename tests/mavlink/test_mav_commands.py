@@ -12,7 +12,7 @@ from mavtest import HOME_ALT_M, START_ALT_M, S, mavutil, of_type, start_of, stat
 from cosim.core.geo import LocalFrame
 from cosim.mavlink.adapter import make_message
 from cosim.vehicles.fixed_wing.guidance import AP_CHANNELS, FixedWingGuidance
-from cosim.vehicles.fixed_wing.mavlink import PlaneMode
+from cosim.vehicles.fixed_wing.mav_modes import PlaneMode
 
 ML = mavutil.mavlink
 ACCEPTED, DENIED, UNSUPPORTED, FAILED = (ML.MAV_RESULT_ACCEPTED, ML.MAV_RESULT_DENIED,

@@ -32,7 +32,8 @@ from cosim.mavlink import MavlinkConfig, MavlinkEndpoint
 from cosim.mavlink import adapter as mav
 from cosim.mavlink.handlers import Handler
 from cosim.vehicles.fixed_wing.guidance import AP_CHANNELS, FixedWingGuidance
-from cosim.vehicles.fixed_wing.mavlink import ARDUPLANE, ARDUPLANE_PARAMS
+from cosim.vehicles.fixed_wing.mav_params import ARDUPLANE_PARAMS
+from cosim.vehicles.fixed_wing.mavlink import ARDUPLANE
 
 ML = mavutil.mavlink
 MESSAGES = 3000  # random ones, after the sweep of every field's extremes

@@ -9,7 +9,7 @@ from typing import Any
 import pytest
 from mavtest import HOME_ALT_M, PHYSICS_HZ, S, mavutil, of_type, start_of
 
-from cosim.vehicles.fixed_wing.mavlink import PlaneMode
+from cosim.vehicles.fixed_wing.mav_modes import PlaneMode
 
 ML = mavutil.mavlink
 REL = ML.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT

@@ -26,7 +26,7 @@ from test_mav_mission import (
 )
 
 from cosim.mavlink.mission import flat_ne
-from cosim.vehicles.fixed_wing.mavlink import PlaneMode
+from cosim.vehicles.fixed_wing.mav_modes import PlaneMode
 
 ML = mavutil.mavlink
 LAT0, LON0 = start_of(0)

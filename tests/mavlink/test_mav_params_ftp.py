@@ -8,7 +8,7 @@ import pytest
 from mavtest import mavutil, of_type
 
 from cosim.mavlink.params import ParamTable
-from cosim.vehicles.fixed_wing.mavlink import ARDUPLANE_PARAMS as PARAM_DEFS
+from cosim.vehicles.fixed_wing.mav_params import ARDUPLANE_PARAMS as PARAM_DEFS
 
 ML = mavutil.mavlink
 NAMES = [p.name for p in PARAM_DEFS]

@@ -21,7 +21,7 @@ from mavtest import (
 
 from cosim.mavlink import DEFAULT_RATES_HZ, MavlinkConfig, MavlinkEndpoint
 from cosim.mavlink.vehicle import MavVehicle, SimClock
-from cosim.vehicles.fixed_wing.mavlink import PlaneMode
+from cosim.vehicles.fixed_wing.mav_modes import PlaneMode
 
 ML = mavutil.mavlink
 
