@@ -100,6 +100,15 @@ def test_an_extra_is_installed_the_way_cosim_was(monkeypatch: pytest.MonkeyPatch
     assert errors.install_extra("view") == "pip install 'cosim[view]'"
 
 
+def test_help_lists_every_command_in_its_rank_order(capsys) -> None:
+    """The sections' commands (sweep, search-plan, swarm) sit among the
+    CLI's own where their ranks put them, as they always have."""
+    assert main(["--help"]) == 0
+    listed = re.findall(r"^    (\S+)  ", capsys.readouterr().out, flags=re.M)
+    assert listed == ["run", "validate", "models", "plot", "export", "recover", "sweep",
+                      "visibility", "search-plan", "trials", "swarm", "bench"]
+
+
 def test_models_lists_bundled_aircraft(capsys) -> None:
     assert main(["models"]) == 0
     out = capsys.readouterr().out

@@ -30,15 +30,15 @@ from cosim.errors import ConfigError, CosimError
 
 __all__ = ["EXIT_FAIL", "EXIT_INTERRUPTED", "EXIT_OK", "EXIT_USAGE", "main"]
 
-#: the CLI's own commands, in the order ``cosim --help`` lists them; the
-#: sections' follow (``commands``)
+#: the CLI's own commands (``cosim --help`` lists them and the sections' by rank)
 OWN = (run.COMMAND, validate.COMMAND, models.COMMAND, plot.COMMAND, export.COMMAND,
        recover.COMMAND, visibility.COMMAND, trials.COMMAND, bench.COMMAND)
 
 
 def commands() -> dict[str, CliCommand]:
-    """Every subcommand by name: the CLI's own, then each section's (a
-    section's command whose name is taken is left out with a warning)."""
+    """Every subcommand by name, the CLI's own and each section's, in the
+    order of their ranks (a section's command whose name is taken is left
+    out with a warning)."""
     out = {c.name: c for c in OWN}
     for key, section in scenario_sections().items():
         for c in section.commands:
@@ -47,7 +47,7 @@ def commands() -> dict[str, CliCommand]:
                     "section %r brings a command %r, which exists: ignored", key, c.name)
                 continue
             out[c.name] = c
-    return out
+    return {c.name: c for c in sorted(out.values(), key=lambda c: c.rank)}
 
 
 def build_parser(cmds: dict[str, CliCommand]) -> Parser:

@@ -95,6 +95,6 @@ def run(a: argparse.Namespace) -> int:
 COMMAND = CliCommand(
     "bench",
     "measure pool throughput against the serial loop",
-    add_arguments, run,
+    add_arguments, run, rank=120,
     epilog="One row per fleet size; what each column means is printed under the table (and in "
            "benchmarks/README.md).")

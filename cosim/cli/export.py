@@ -47,4 +47,4 @@ def run(a: argparse.Namespace) -> int:
 COMMAND = CliCommand(
     "export",
     "write a run's tracks for Tacview (ACMI), Google Earth (KML) or Cesium (CZML)",
-    add_arguments, run)
+    add_arguments, run, rank=50)

@@ -70,4 +70,4 @@ def run(a: argparse.Namespace) -> int:
 COMMAND = CliCommand(
     "models",
     "list usable aircraft models",
-    add_arguments, run)
+    add_arguments, run, rank=30)

@@ -34,4 +34,4 @@ def run(a: argparse.Namespace) -> int:
 COMMAND = CliCommand(
     "plot",
     "plot a run's ground tracks, the aircraft's altitude and the ground vehicles' speed (PNG)",
-    add_arguments, run)
+    add_arguments, run, rank=40)

@@ -29,4 +29,4 @@ def run(a: argparse.Namespace) -> int:
 COMMAND = CliCommand(
     "recover",
     "make what a killed or failed run left readable (journalled ticks into Parquet, a summary)",
-    add_arguments, run)
+    add_arguments, run, rank=60)

@@ -167,4 +167,4 @@ def _outputs(out: Path) -> str:
 COMMAND = CliCommand(
     "run",
     "run a scenario",
-    add_arguments, run)
+    add_arguments, run, rank=10)

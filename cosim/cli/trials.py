@@ -124,4 +124,4 @@ def _existing_db(db: str) -> None:
 COMMAND = CliCommand(
     "trials",
     "conspicuity trials with people: a browser trial runner, its responses, their analysis",
-    add_arguments, run)
+    add_arguments, run, rank=100)

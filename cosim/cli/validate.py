@@ -176,4 +176,4 @@ def _build_all(scn: Scenario, fname: str, workers: int | None) -> None:
 COMMAND = CliCommand(
     "validate",
     "check scenario files and report every problem",
-    add_arguments, run)
+    add_arguments, run, rank=20)

@@ -50,4 +50,4 @@ def run(a: argparse.Namespace) -> int:
 COMMAND = CliCommand(
     "visibility",
     "how long each target is in view, pass by pass (a run or a sweep folder)",
-    add_arguments, run)
+    add_arguments, run, rank=80)

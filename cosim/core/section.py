@@ -113,13 +113,16 @@ class CliCommand:
     code`` does it (0 ok, 1 runtime failure, 2 usage or config error; a
     ``ConfigError`` it raises is printed and gives 2, another ``CosimError``
     or an ``OSError`` 1). Its module imports what the command needs inside
-    ``run``, so ``cosim --help`` stays quick."""
+    ``run``, so ``cosim --help`` stays quick. ``rank`` places it in ``cosim
+    --help`` (ascending; the CLI's own run from 10 to 120 in steps of 10, a
+    command without one comes last)."""
 
     name: str
     help: str
     add_arguments: Callable[[argparse.ArgumentParser], None]
     run: Callable[[argparse.Namespace], int]
     epilog: str = ""
+    rank: int = 1000
 
 
 class Section:

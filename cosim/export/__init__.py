@@ -48,8 +48,8 @@ class Exporter:
 #: every format, by name
 EXPORTERS: dict[str, Exporter] = {e.name: e for e in (
     Exporter("acmi", "Tacview 2.2 text", "cosim.export.writers:write_acmi"),
-    Exporter("kml", "one gx:Track per vehicle (Google Earth)", "cosim.export.writers:write_kml"),
-    Exporter("czml", "Cesium's JSON", "cosim.export.writers:write_czml"),
+    Exporter("kml", "one gx:Track per vehicle", "cosim.export.writers:write_kml"),
+    Exporter("czml", "Cesium", "cosim.export.writers:write_czml"),
 )}
 DEFAULT_EPOCH = datetime(2000, 1, 1, tzinfo=timezone.utc)
 DEFAULT_RATE_HZ = 10.0

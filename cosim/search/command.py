@@ -36,4 +36,4 @@ COMMAND = CliCommand(
     "search-plan",
     "a scenario's search: its plan, the smallest fleet for a deadline, and how it changes with "
     "altitude",
-    add_arguments, run)
+    add_arguments, run, rank=90)

@@ -42,4 +42,4 @@ COMMAND = CliCommand(
     "swarm",
     "run a scenario's swarm controller in this process, connected to "
     "`cosim run --external-controller`",
-    add_arguments, run)
+    add_arguments, run, rank=110)
