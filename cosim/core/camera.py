@@ -1,7 +1,7 @@
 """The camera model: a camera's spec (``CameraSpec``), pinhole intrinsics,
-mounts, the pose at a frame tick, projection and the ground footprint. Kernel
-geometry: the renderer draws with it, the ground vehicles' guidance and the
-search reason with it.
+mounts, the pose at a frame tick, projection (and clipping to the near plane)
+and the ground footprint. Kernel geometry: the renderer draws with it, the
+ground vehicles' guidance and the search reason with it.
 
 Frames (all right-handed):
 
@@ -147,6 +147,21 @@ def project(K: np.ndarray, pts_c: np.ndarray) -> np.ndarray:
     u = K[0, 0] * pts_c[:, 0] / z + K[0, 2]
     v = K[1, 1] * pts_c[:, 1] / z + K[1, 2]
     return np.stack([u, v], axis=1)
+
+
+def clip_near(poly_c: np.ndarray) -> np.ndarray:
+    """Clip a polygon (n x 3, camera axes) to z >= NEAR_M (Sutherland-Hodgman)."""
+    out = []
+    n = len(poly_c)
+    for i in range(n):
+        a, b = poly_c[i], poly_c[(i + 1) % n]
+        ina, inb = a[2] >= NEAR_M, b[2] >= NEAR_M
+        if ina:
+            out.append(a)
+        if ina != inb:
+            t = (NEAR_M - a[2]) / (b[2] - a[2])
+            out.append(a + t * (b - a))
+    return np.array(out) if out else np.zeros((0, 3))
 
 
 def ground_homography(K_inv: np.ndarray, pose: Pose) -> np.ndarray:

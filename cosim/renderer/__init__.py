@@ -5,9 +5,10 @@ Owns the ``cameras:`` section (``section``, parsed by ``config``), the ground
 a frame draws (``ground``: the procedural texture ``texture`` and its
 ``noise``, its tiles in memory ``pyramid`` and on disk ``tile_cache``, the
 imagery drawn over it ``image_layers``), target drawing and ground truth
-(``targets``), one frame (``frame``), the operator view (``operator``), video
-(``video``, ``stream``), the render pool (``render_pool``), what the cameras
-write (``outputs``) and the loop's hooks (``participant``). What it draws is
+(``targets``), one frame (``frame``) and its ground truth (``truth``), the
+operator view (``operator``), video (``video``, ``stream``), the render pool
+(``render_pool``), what the cameras write (``outputs``) and the loop's hooks
+(``participant``). What it draws is
 the scenario's world (``cosim.world``, which reads and places the ground
 imagery) seen through the kernel's camera model (``cosim.core.camera``). It
 reads the loop's state array at exchange ticks and never touches the FDM pool,

@@ -1,24 +1,12 @@
-"""One camera frame: ground, targets, sky, and the per-target ground truth.
+"""One camera frame: ground, targets, sky.
 
 ``World`` holds everything a frame depends on besides the pose and the
 tick (ground texture, targets, seed); a render worker builds it once from a
 picklable ``WorldSpec``. ``render_frame`` is a pure function of
 (world, camera, pose, tick): the same inputs give the same pixels in any
-process.
-
-Ground truth (one row per target): ``in_view`` any part of the target's box
-projects into the image; ``fully_in_view`` all of it does; ``bbox`` the
-projected box's bounding rectangle (not clipped to the image); ``center``
-the projected box centre; ``eccentricity_px`` its distance from the image
-centre and ``eccentricity_deg`` its angle off the optical axis;
-``angular_size_deg`` the largest angle between two corners of the box seen
-from the camera; ``pixels_on_target`` the target's visible (unoccluded)
-pixels; ``range_m`` camera to box centre; ``contrast`` the Weber luminance
-contrast ``(Y_t - Y_b) / Y_b`` of the target's visible pixels against a ring
-of background pixels around its bounding rectangle (the rectangle grown by
-half its size, at least 4 px, minus the rectangle and any target's pixels),
-with Y the relative luminance of linearised sRGB (Rec. 709 weights). Values
-that do not exist (a target behind the camera, no visible pixels) are empty.
+process. It draws the frame and its target-id image and hands them, with the
+targets' boxes, to ``truth``, which owns the ground-truth columns and their
+values.
 """
 
 from __future__ import annotations
@@ -35,6 +23,7 @@ from cosim.core.camera import (
     NEAR_M,
     CameraSpec,
     Pose,
+    clip_near,
     ground_homography,
     intrinsics,
     project,
@@ -55,14 +44,11 @@ from cosim.renderer.targets import (
     smoke_puffs,
     to_local,
 )
+from cosim.renderer.truth import ground_truth
 from cosim.world.ground import GroundSpec
 from cosim.world.obstacles import signed_area
 from cosim.world.targets import TargetSpec
 
-GT_COLUMNS = ("frame", "time_s", "vehicle", "camera", "target", "in_view", "fully_in_view",
-              "bbox_x0_px", "bbox_y0_px", "bbox_x1_px", "bbox_y1_px", "center_x_px",
-              "center_y_px", "eccentricity_px", "eccentricity_deg", "angular_size_deg",
-              "pixels_on_target", "range_m", "contrast")
 SKY_TOP_BGR = np.array([225, 170, 120], dtype=np.float32)
 SKY_HORIZON_BGR = np.array([235, 220, 205], dtype=np.float32)
 MAX_PATCH_PX = 3000
@@ -70,8 +56,6 @@ STRIPS = 8  # bands of rows, each drawn from one ground level
 _SMOKE_BGR = np.array([150.0, 150.0, 155.0])
 OPAQUE = 255  # the frame's alpha channel: frames are BGRA (see render_frame)
 SHIFT = 4  # sub-pixel bits for polygon filling
-_LIN = ((np.arange(256) / 255.0) ** 2.2).astype(np.float32)  # sRGB -> linear (approx.)
-_LIN_BGRA = np.repeat(_LIN[None, :, None], 4, axis=2)  # cv2.LUT's table for BGRA pixels
 
 
 @dataclass(frozen=True)
@@ -380,21 +364,6 @@ def _draw_band(world: World, H: np.ndarray, A: np.ndarray, max_r: float, y0: int
         np.copyto(out, over, where=(inside > 0)[..., None])
 
 
-def _clip_near(poly_c: np.ndarray) -> np.ndarray:
-    """Clip a polygon (n x 3, camera axes) to z >= NEAR_M (Sutherland-Hodgman)."""
-    out = []
-    n = len(poly_c)
-    for i in range(n):
-        a, b = poly_c[i], poly_c[(i + 1) % n]
-        ina, inb = a[2] >= NEAR_M, b[2] >= NEAR_M
-        if ina:
-            out.append(a)
-        if ina != inb:
-            t = (NEAR_M - a[2]) / (b[2] - a[2])
-            out.append(a + t * (b - a))
-    return np.array(out) if out else np.zeros((0, 3))
-
-
 def _fixed(uv: np.ndarray) -> np.ndarray:
     return np.round(uv * (1 << SHIFT)).astype(np.int32)
 
@@ -434,7 +403,7 @@ def _target_faces(pose: Pose, t: TargetSpec, origin_l: np.ndarray, time_s: float
     for pi, fi in zip(*np.nonzero(front)):
         v_c = faces_c[pi, fi]
         if v_c[:, 2].min() < NEAR_M:
-            v_c = _clip_near(v_c)
+            v_c = clip_near(v_c)
             if len(v_c) < 3:
                 continue
         c, k = parts[pi].color_rgb, shade[fi]
@@ -492,7 +461,7 @@ def _obstacle_faces(world: World, pose: Pose
                 continue  # faces away
             v_c = (f_l - pose.c_l) @ pose.R_cl.T
             if v_c[:, 2].min() < NEAR_M:
-                v_c = _clip_near(v_c)
+                v_c = clip_near(v_c)
                 if len(v_c) < 3:
                     continue
             kk = lambert(normal)
@@ -508,7 +477,8 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
                  ) -> tuple[np.ndarray, list[dict[str, Any]]]:
     """The frame (h x w x 4 uint8, BGRA, alpha 255 everywhere: the ground is warped
     from four-channel tiles, OpenCV's fast path, and the video encoder takes BGRA
-    as it is) and one ground-truth dict per target (without frame/vehicle/camera).
+    as it is) and one ground-truth dict per target (without frame/vehicle/camera;
+    ``truth.ground_truth``).
 
     ``out`` (h x w x 4 uint8, C-contiguous), if given, receives the frame and is
     returned (a caller rendering many frames reuses one buffer). ``stream`` names
@@ -554,105 +524,5 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
     for k, t in enumerate(specs):
         if visible[k] and t.kind == "fire":
             _draw_smoke(K, pose, t, origins[k], time_s, seed + k, img)
-    rows = _ground_truth(view, cam, box_c, img, ids, visible)
+    rows = ground_truth(K, view.image_quad, cam, box_c, img, ids, visible)
     return img, rows
-
-
-def _mean_luminance(bgra: np.ndarray, mask: np.ndarray) -> float:
-    """Mean relative luminance of the BGRA pixels where ``mask`` (uint8) is set:
-    the Rec. 709 weights applied to the mean linearised channels (equal to the
-    mean of the pixels' luminances)."""
-    b, g, r, _ = cv2.mean(cv2.LUT(bgra, _LIN_BGRA), mask)
-    return 0.0722 * b + 0.7152 * g + 0.2126 * r
-
-
-def _ground_truth(view: _View, cam: CameraSpec, box_c: np.ndarray, img: np.ndarray,
-                  ids: np.ndarray, visible: np.ndarray) -> list[dict[str, Any]]:
-    """One row per target from its box corners ``box_c`` (T x 8 x 3, camera axes):
-    the geometry of all targets at once, then the pixels of those in view."""
-    K = view.K
-    w_img, h_img = cam.width_px, cam.height_px
-    f, cx, cy = K[0, 0], K[0, 2], K[1, 2]
-    centre = box_c.sum(axis=1)
-    centre *= 0.125  # the mean of the 8 corners (exactly: a power of two)
-    rng_m = np.sqrt((centre * centre).sum(axis=1))
-    ecc_deg = np.degrees(np.arctan2(np.hypot(centre[:, 0], centre[:, 1]), centre[:, 2]))
-    dirs = box_c / np.sqrt((box_c * box_c).sum(axis=2, keepdims=True))
-    cos_min = np.einsum("tik,tjk->tij", dirs, dirs).min(axis=(1, 2))
-    ang_deg = np.degrees(np.arccos(np.clip(cos_min, -1.0, 1.0)))
-    z = box_c[:, :, 2]
-    front = np.asarray((z >= NEAR_M).all(axis=1))
-    with np.errstate(divide="ignore", invalid="ignore"):  # u = f x / z + cx, v = f y / z + cy
-        c_xy = np.array([cx, cy])
-        uv_all = box_c[:, :, :2] * f
-        uv_all /= z[:, :, None]
-        uv_all += c_xy
-        c_uv = centre[:, :2] * f
-        c_uv /= centre[:, 2:]
-        c_uv += c_xy
-    # the per-target work below on Python floats (a handful of targets: numpy's
-    # per-call cost would dominate); the values are numpy's, converted once
-    ecc_l, ang_l, rng_l = ecc_deg.tolist(), ang_deg.tolist(), rng_m.tolist()
-    front_l, vis_l, cz_l = front.tolist(), visible.tolist(), centre[:, 2].tolist()
-    c_uv_l, uv_l = c_uv.tolist(), uv_all.tolist()
-    fcx, fcy = float(cx), float(cy)
-    xmax, ymax = w_img - 0.5, h_img - 0.5
-    rows = []
-    for k in range(len(box_c)):
-        row: dict[str, Any] = {"in_view": 0, "fully_in_view": 0, "bbox_x0_px": None,
-                               "bbox_y0_px": None, "bbox_x1_px": None, "bbox_y1_px": None,
-                               "center_x_px": None, "center_y_px": None,
-                               "eccentricity_px": None, "eccentricity_deg": ecc_l[k],
-                               "angular_size_deg": ang_l[k], "pixels_on_target": 0,
-                               "range_m": rng_l[k], "contrast": None}
-        rows.append(row)
-        if front_l[k]:
-            uv = uv_all[k]
-            us, vs = [p[0] for p in uv_l[k]], [p[1] for p in uv_l[k]]
-            x0, y0, x1, y1 = min(us), min(vs), max(us), max(vs)
-        else:  # the box crosses the near plane: its faces clipped to it
-            pts = [project(K, fc) for v in box_c[k][FACE_IDX]
-                   if len(fc := _clip_near(v)) >= 3]
-            if not pts:
-                continue
-            uv = np.concatenate(pts)
-            x0, y0 = (float(a) for a in uv.min(axis=0))
-            x1, y1 = (float(a) for a in uv.max(axis=0))
-        row.update(bbox_x0_px=x0, bbox_y0_px=y0, bbox_x1_px=x1, bbox_y1_px=y1)
-        if cz_l[k] >= NEAR_M:
-            cu, cv = c_uv_l[k]
-            row.update(center_x_px=cu, center_y_px=cv,
-                       eccentricity_px=math.hypot(cu - fcx, cv - fcy))
-        if vis_l[k] and x1 >= -0.5 and y1 >= -0.5 and x0 <= xmax and y0 <= ymax:
-            inside_bbox = x0 >= -0.5 and y0 >= -0.5 and x1 <= xmax and y1 <= ymax
-            if inside_bbox:
-                row["in_view"] = 1
-            else:  # does the projected box's hull overlap the image?
-                hull = cv2.convexHull(uv.astype(np.float32))
-                area, _ = cv2.intersectConvexConvex(hull, view.image_quad)
-                row["in_view"] = int(area > 0)
-            row["fully_in_view"] = int(inside_bbox and front_l[k])
-        if row["in_view"]:
-            _pixels(row, img, ids, k + 1, x0, y0, x1, y1)
-    return rows
-
-
-def _pixels(row: dict[str, Any], img: np.ndarray, ids: np.ndarray, tid: int, x0: float,
-            y0: float, x1: float, y1: float) -> None:
-    """``pixels_on_target`` and ``contrast`` of target ``tid`` (bbox x0..y1)."""
-    h_img, w_img = ids.shape
-    bx0, by0 = max(0, math.floor(x0)), max(0, math.floor(y0))
-    bx1, by1 = min(w_img, math.ceil(x1) + 1), min(h_img, math.ceil(y1) + 1)
-    sub = (ids[by0:by1, bx0:bx1] == tid).view(np.uint8)
-    n_px = cv2.countNonZero(sub)
-    row["pixels_on_target"] = n_px
-    if n_px:
-        m = max(4, int(0.5 * max(bx1 - bx0, by1 - by0)))
-        rx0, ry0 = max(0, bx0 - m), max(0, by0 - m)
-        rx1, ry1 = min(w_img, bx1 + m), min(h_img, by1 + m)
-        ring = (ids[ry0:ry1, rx0:rx1] == 0).view(np.uint8)
-        ring[by0 - ry0:by1 - ry0, bx0 - rx0:bx1 - rx0] = 0
-        if cv2.countNonZero(ring):
-            y_t = _mean_luminance(img[by0:by1, bx0:bx1], sub)
-            y_b = _mean_luminance(img[ry0:ry1, rx0:rx1], ring)
-            row["contrast"] = (y_t - y_b) / y_b if y_b > 0 else None

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from cosim.core.camera import CameraSpec
-from cosim.renderer.frame import GT_COLUMNS
+from cosim.renderer.truth import GT_COLUMNS
 from cosim.renderer.video import open_video
 
 log = logging.getLogger(__name__)

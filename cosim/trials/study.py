@@ -6,7 +6,7 @@ each clip's per-frame ground truth for its target, the protocol, practice
 trials, breaks and the order of the trials in each session. It does not
 serve, store or measure anything (``server``, ``store``, ``measures``).
 
-A ground-truth file is the renderer's ``.gt.csv`` (``cosim.renderer.frame``)
+A ground-truth file is the renderer's ``.gt.csv`` (``cosim.renderer.truth``)
 or one made by hand with at least its frame, time, target, in-view, box and
 centre columns. Its ``range_m`` and ``eccentricity_deg``, when present and
 not empty, give each frame's ``GtFrame.depth_m``: the target centre's

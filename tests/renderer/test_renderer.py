@@ -220,11 +220,11 @@ def test_level_pass_time_in_view_matches_the_field_of_view(tmp_path: Path) -> No
 
 
 def test_contrast_is_the_weber_contrast_of_relative_luminance() -> None:
-    """pixels_on_target and contrast (frame module docstring) against the definition
+    """pixels_on_target and contrast (truth module docstring) against the definition
     written out: target pixels vs a ring around the box (the box grown by half its
     size, at least 4 px) without the box and without other targets' pixels; Y from
     linearised sRGB (gamma 2.2) with Rec. 709 weights."""
-    from cosim.renderer.frame import _pixels
+    from cosim.renderer.truth import _pixels
 
     rng = np.random.default_rng(5)
     img = rng.integers(0, 256, (120, 160, 4), np.uint8)

@@ -424,7 +424,8 @@ def test_camera_gap_is_the_renderers_angle_and_the_ground_distance(
     height above the target's centre, and tan(gap) * target_depth_m is the
     target's distance on the ground from the point under the camera."""
     from cosim.core.camera import CameraSpec, camera_pose
-    from cosim.renderer.frame import GT_COLUMNS, World, WorldSpec, render_frame
+    from cosim.renderer.frame import World, WorldSpec, render_frame
+    from cosim.renderer.truth import GT_COLUMNS
     from cosim.trials.study import Clip, read_clip_truth
     from cosim.world.ground import GroundSpec
     from cosim.world.targets import TARGET_DEFAULTS, TargetSpec

@@ -1,0 +1,142 @@
+"""The per-target ground truth of a camera frame, read from the frame as drawn.
+
+Owns the ground-truth columns (``GT_COLUMNS``) and their values; the frame,
+its target-id image and the targets' boxes in camera axes are ``frame``'s
+(``render_frame`` calls ``ground_truth`` once a frame is drawn), writing the
+rows ``outputs``'.
+
+Ground truth (one row per target): ``in_view`` any part of the target's box
+projects into the image; ``fully_in_view`` all of it does; ``bbox`` the
+projected box's bounding rectangle (not clipped to the image); ``center``
+the projected box centre; ``eccentricity_px`` its distance from the image
+centre and ``eccentricity_deg`` its angle off the optical axis;
+``angular_size_deg`` the largest angle between two corners of the box seen
+from the camera; ``pixels_on_target`` the target's visible (unoccluded)
+pixels; ``range_m`` camera to box centre; ``contrast`` the Weber luminance
+contrast ``(Y_t - Y_b) / Y_b`` of the target's visible pixels against a ring
+of background pixels around its bounding rectangle (the rectangle grown by
+half its size, at least 4 px, minus the rectangle and any target's pixels),
+with Y the relative luminance of linearised sRGB (Rec. 709 weights). Values
+that do not exist (a target behind the camera, no visible pixels) are empty.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import cv2
+import numpy as np
+
+from cosim.core.camera import NEAR_M, CameraSpec, clip_near, project
+from cosim.renderer.targets import FACE_IDX
+
+GT_COLUMNS = ("frame", "time_s", "vehicle", "camera", "target", "in_view", "fully_in_view",
+              "bbox_x0_px", "bbox_y0_px", "bbox_x1_px", "bbox_y1_px", "center_x_px",
+              "center_y_px", "eccentricity_px", "eccentricity_deg", "angular_size_deg",
+              "pixels_on_target", "range_m", "contrast")
+_LIN = ((np.arange(256) / 255.0) ** 2.2).astype(np.float32)  # sRGB -> linear (approx.)
+_LIN_BGRA = np.repeat(_LIN[None, :, None], 4, axis=2)  # cv2.LUT's table for BGRA pixels
+
+
+def _mean_luminance(bgra: np.ndarray, mask: np.ndarray) -> float:
+    """Mean relative luminance of the BGRA pixels where ``mask`` (uint8) is set:
+    the Rec. 709 weights applied to the mean linearised channels (equal to the
+    mean of the pixels' luminances)."""
+    b, g, r, _ = cv2.mean(cv2.LUT(bgra, _LIN_BGRA), mask)
+    return 0.0722 * b + 0.7152 * g + 0.2126 * r
+
+
+def ground_truth(K: np.ndarray, image_quad: np.ndarray, cam: CameraSpec, box_c: np.ndarray,
+                 img: np.ndarray, ids: np.ndarray, visible: np.ndarray
+                 ) -> list[dict[str, Any]]:
+    """One row per target (without frame/vehicle/camera) from its box corners
+    ``box_c`` (T x 8 x 3, camera axes), the drawn frame ``img`` (BGRA), its
+    target-id image ``ids`` and which targets were drawn (``visible``): the
+    geometry of all targets at once, then the pixels of those in view. ``K``
+    the intrinsics, ``image_quad`` the image's outline (4 x 2, float32)."""
+    w_img, h_img = cam.width_px, cam.height_px
+    f, cx, cy = K[0, 0], K[0, 2], K[1, 2]
+    centre = box_c.sum(axis=1)
+    centre *= 0.125  # the mean of the 8 corners (exactly: a power of two)
+    rng_m = np.sqrt((centre * centre).sum(axis=1))
+    ecc_deg = np.degrees(np.arctan2(np.hypot(centre[:, 0], centre[:, 1]), centre[:, 2]))
+    dirs = box_c / np.sqrt((box_c * box_c).sum(axis=2, keepdims=True))
+    cos_min = np.einsum("tik,tjk->tij", dirs, dirs).min(axis=(1, 2))
+    ang_deg = np.degrees(np.arccos(np.clip(cos_min, -1.0, 1.0)))
+    z = box_c[:, :, 2]
+    front = np.asarray((z >= NEAR_M).all(axis=1))
+    with np.errstate(divide="ignore", invalid="ignore"):  # u = f x / z + cx, v = f y / z + cy
+        c_xy = np.array([cx, cy])
+        uv_all = box_c[:, :, :2] * f
+        uv_all /= z[:, :, None]
+        uv_all += c_xy
+        c_uv = centre[:, :2] * f
+        c_uv /= centre[:, 2:]
+        c_uv += c_xy
+    # the per-target work below on Python floats (a handful of targets: numpy's
+    # per-call cost would dominate); the values are numpy's, converted once
+    ecc_l, ang_l, rng_l = ecc_deg.tolist(), ang_deg.tolist(), rng_m.tolist()
+    front_l, vis_l, cz_l = front.tolist(), visible.tolist(), centre[:, 2].tolist()
+    c_uv_l, uv_l = c_uv.tolist(), uv_all.tolist()
+    fcx, fcy = float(cx), float(cy)
+    xmax, ymax = w_img - 0.5, h_img - 0.5
+    rows = []
+    for k in range(len(box_c)):
+        row: dict[str, Any] = {"in_view": 0, "fully_in_view": 0, "bbox_x0_px": None,
+                               "bbox_y0_px": None, "bbox_x1_px": None, "bbox_y1_px": None,
+                               "center_x_px": None, "center_y_px": None,
+                               "eccentricity_px": None, "eccentricity_deg": ecc_l[k],
+                               "angular_size_deg": ang_l[k], "pixels_on_target": 0,
+                               "range_m": rng_l[k], "contrast": None}
+        rows.append(row)
+        if front_l[k]:
+            uv = uv_all[k]
+            us, vs = [p[0] for p in uv_l[k]], [p[1] for p in uv_l[k]]
+            x0, y0, x1, y1 = min(us), min(vs), max(us), max(vs)
+        else:  # the box crosses the near plane: its faces clipped to it
+            pts = [project(K, fc) for v in box_c[k][FACE_IDX]
+                   if len(fc := clip_near(v)) >= 3]
+            if not pts:
+                continue
+            uv = np.concatenate(pts)
+            x0, y0 = (float(a) for a in uv.min(axis=0))
+            x1, y1 = (float(a) for a in uv.max(axis=0))
+        row.update(bbox_x0_px=x0, bbox_y0_px=y0, bbox_x1_px=x1, bbox_y1_px=y1)
+        if cz_l[k] >= NEAR_M:
+            cu, cv = c_uv_l[k]
+            row.update(center_x_px=cu, center_y_px=cv,
+                       eccentricity_px=math.hypot(cu - fcx, cv - fcy))
+        if vis_l[k] and x1 >= -0.5 and y1 >= -0.5 and x0 <= xmax and y0 <= ymax:
+            inside_bbox = x0 >= -0.5 and y0 >= -0.5 and x1 <= xmax and y1 <= ymax
+            if inside_bbox:
+                row["in_view"] = 1
+            else:  # does the projected box's hull overlap the image?
+                hull = cv2.convexHull(uv.astype(np.float32))
+                area, _ = cv2.intersectConvexConvex(hull, image_quad)
+                row["in_view"] = int(area > 0)
+            row["fully_in_view"] = int(inside_bbox and front_l[k])
+        if row["in_view"]:
+            _pixels(row, img, ids, k + 1, x0, y0, x1, y1)
+    return rows
+
+
+def _pixels(row: dict[str, Any], img: np.ndarray, ids: np.ndarray, tid: int, x0: float,
+            y0: float, x1: float, y1: float) -> None:
+    """``pixels_on_target`` and ``contrast`` of target ``tid`` (bbox x0..y1)."""
+    h_img, w_img = ids.shape
+    bx0, by0 = max(0, math.floor(x0)), max(0, math.floor(y0))
+    bx1, by1 = min(w_img, math.ceil(x1) + 1), min(h_img, math.ceil(y1) + 1)
+    sub = (ids[by0:by1, bx0:bx1] == tid).view(np.uint8)
+    n_px = cv2.countNonZero(sub)
+    row["pixels_on_target"] = n_px
+    if n_px:
+        m = max(4, int(0.5 * max(bx1 - bx0, by1 - by0)))
+        rx0, ry0 = max(0, bx0 - m), max(0, by0 - m)
+        rx1, ry1 = min(w_img, bx1 + m), min(h_img, by1 + m)
+        ring = (ids[ry0:ry1, rx0:rx1] == 0).view(np.uint8)
+        ring[by0 - ry0:by1 - ry0, bx0 - rx0:bx1 - rx0] = 0
+        if cv2.countNonZero(ring):
+            y_t = _mean_luminance(img[by0:by1, bx0:bx1], sub)
+            y_b = _mean_luminance(img[ry0:ry1, rx0:rx1], ring)
+            row["contrast"] = (y_t - y_b) / y_b if y_b > 0 else None
