@@ -2,15 +2,10 @@
 
 Owns reading and checking the study: its clips (a ``cosim sweep`` folder
 through its ``manifest.csv``, or an explicit list of video + ground truth),
-each clip's per-frame ground truth for its target, the protocol, practice
-trials, breaks and the order of the trials in each session. It does not
-serve, store or measure anything (``server``, ``store``, ``measures``).
-
-A ground-truth file is the renderer's ``.gt.csv`` (``cosim.renderer.truth``)
-or one made by hand with at least its frame, time, target, in-view, box and
-centre columns. Its ``range_m`` and ``eccentricity_deg``, when present and
-not empty, give each frame's ``GtFrame.depth_m``: the target centre's
-distance along the optical axis, ``range_m * cos(eccentricity_deg)``.
+the protocol, practice trials, breaks and the order of the trials in each
+session. A clip's files, its per-frame ground truth for its target and its
+video, are read by ``clips``. It does not serve, store or measure anything
+(``server``, ``store``, ``measures``).
 
 The file and everything it names are untrusted: the YAML goes through the
 scenario loader's limits (``cosim.scenario.yaml_lines``), every problem is
@@ -67,12 +62,7 @@ clip (``server`` refuses such a session).
 
 from __future__ import annotations
 
-import csv
-import hashlib
-import io
 import math
-import os
-import stat
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -88,16 +78,13 @@ from cosim.scenario.yaml_lines import (
     load_with_lines,
     read_text_bounded,
 )
-from cosim.trials.files import file_kind, open_regular
+from cosim.trials.clips import GtFrame, csv_rows, inside, probe_video, read_bounded, read_clip_truth
 
 #: clips in one study (after ``repeats``: trials in one session)
 MAX_CLIPS = 5000
 MAX_TRIALS = 20_000
-#: bytes of a manifest.csv / a ground-truth file read for a study
+#: bytes of a manifest.csv read for a study
 MAX_MANIFEST_BYTES = 16 * 1024 * 1024
-MAX_GT_BYTES = 64 * 1024 * 1024
-#: a CSV field (the csv module's own default is 128 KiB)
-MAX_FIELD_CHARS = 4096
 MAX_PRACTICE = 100
 MAX_REPEATS = 100
 PROTOCOLS = ("disappear", "recognise", "track")
@@ -111,28 +98,11 @@ PRACTICE_STREAM = 1_000_003
 #: the manifest columns that describe the clip, not the condition (cosim.sweep.runner)
 MANIFEST_COLUMNS = ("run", "vehicle", "camera", "video", "ground_truth", "frames", "rate_hz",
                     "width_px", "height_px", "hfov_deg", "vfov_deg")
-GT_REQUIRED = ("frame", "time_s", "target", "in_view", "bbox_x0_px", "bbox_y0_px",
-               "bbox_x1_px", "bbox_y1_px", "center_x_px", "center_y_px")
 TOP_KEYS = ("schema_version", "name", "description", "protocol", "arrow_speed_deg_s", "sweep",
             "clips", "practice", "practice_clips",
             "break_every", "repeats", "order", "seed")
 CLIP_KEYS = ("id", "video", "ground_truth", "target", "rate_hz", "width_px", "height_px",
              "hfov_deg", "conditions", "run")
-
-
-@dataclass(frozen=True)
-class GtFrame:
-    """The clip's target in one video frame (camera pixels, centres at integers)."""
-
-    frame: int
-    time_s: float
-    in_view: bool
-    bbox_px: tuple[float, float, float, float] | None  # x0, y0, x1, y1
-    center_px: tuple[float, float] | None
-    #: the target centre's distance along the camera's optical axis, ``range_m *
-    #: cos(eccentricity_deg)`` of the ground truth (for a level nadir camera: its
-    #: height above the target's centre); None: not known (a column absent or empty)
-    depth_m: float | None = None
 
 
 @dataclass(frozen=True)
@@ -267,138 +237,6 @@ def williams_row(n: int, row: int) -> list[int]:
     return seq[::-1] if r >= n else seq
 
 
-# --- reading ---------------------------------------------------------------
-
-def _read_bounded(p: Path, limit: int, what: str) -> str:
-    """The UTF-8 text of a regular file of at most ``limit`` bytes."""
-    return read_text_bounded(p, limit, what, f"a {what}")
-
-
-def _csv_rows(text: str, p: Path, what: str, required: tuple[str, ...]
-              ) -> list[tuple[int, dict[str, str]]]:
-    """(line, row) of a CSV text with a header holding ``required``."""
-    reader = csv.DictReader(io.StringIO(text, newline=""))
-    old = csv.field_size_limit(MAX_FIELD_CHARS)
-    try:
-        header = reader.fieldnames or []
-        missing = [c for c in required if c not in header]
-        if missing:
-            raise ConfigError(f"{p}:1: not a {what}: missing column(s) {', '.join(missing)}")
-        out = []
-        for row in reader:
-            if None in row or any(v is None for v in row.values()):
-                raise ConfigError(f"{p}:{reader.line_num}: {what}: wrong number of fields")
-            out.append((reader.line_num, row))
-        return out
-    except csv.Error as e:
-        raise ConfigError(f"{p}:{reader.line_num}: {what}: {e}") from None
-    finally:
-        csv.field_size_limit(old)
-
-
-def _inside(p: Path, roots: tuple[Path, ...]) -> tuple[Path | None, str]:
-    """(``p`` resolved, symlinks followed, "") if it is a regular file inside
-    one of ``roots``; else (None, what it is instead, for a message: "" if it
-    is missing or outside)."""
-    try:
-        r = p.resolve(strict=True)
-        mode = r.stat().st_mode
-    except (OSError, RuntimeError):
-        return None, ""
-    if not any(r.is_relative_to(root) for root in roots):
-        return None, ""
-    if not stat.S_ISREG(mode):
-        return None, f"; it is {file_kind(mode)}, not a regular file"
-    return r, ""
-
-
-def _num(text: str, p: Path, line: int, col: str) -> float:
-    if text == "":
-        return math.nan
-    try:
-        v = float(text)
-    except ValueError:
-        raise ConfigError(f"{p}:{line}: {col}: expected a number, got {text[:40]!r}") from None
-    return v
-
-
-def _depth_m(r: dict[str, str], p: Path, line: int) -> float | None:
-    """``range_m * cos(eccentricity_deg)`` of a ground-truth row; None when
-    either is absent or empty. Each value given is checked."""
-    rng = r.get("range_m", "")
-    ecc = r.get("eccentricity_deg", "")
-    rng_m = _num(rng, p, line, "range_m")
-    ecc_deg = _num(ecc, p, line, "eccentricity_deg")
-    if rng and not (math.isfinite(rng_m) and rng_m >= 0):
-        raise ConfigError(f"{p}:{line}: range_m: expected a distance >= 0, got {rng[:40]!r}")
-    if ecc and not (math.isfinite(ecc_deg) and 0 <= ecc_deg <= 180):
-        raise ConfigError(f"{p}:{line}: eccentricity_deg: expected an angle in [0, 180], "
-                          f"got {ecc[:40]!r}")
-    if not (rng and ecc):
-        return None
-    return rng_m * math.cos(math.radians(ecc_deg))
-
-
-def read_clip_truth(p: Path, target: str | None) -> tuple[str, tuple[GtFrame, ...], str]:
-    """The rows of one target of a ground-truth CSV, in frame order, and the
-    file's SHA-256 (hex); ``target`` None: the file's only target."""
-    text = _read_bounded(p, MAX_GT_BYTES, "ground-truth file")
-    # the file's own bytes: it was read as strict UTF-8, which encodes back exactly
-    digest = hashlib.sha256(text.encode("utf-8")).hexdigest()
-    rows = _csv_rows(text, p, "ground-truth file", GT_REQUIRED)
-    targets = sorted({r["target"] for _, r in rows})
-    if target is None:
-        if len(targets) != 1:
-            raise ConfigError(f"{p}: ground truth has {len(targets)} targets "
-                              f"({', '.join(targets[:10])}); name one with `target:`")
-        target = targets[0]
-    elif target not in targets:
-        raise ConfigError(f"{p}: no target {target!r} in the ground truth (it has: "
-                          f"{', '.join(targets[:10]) or 'none'})")
-    frames: dict[int, GtFrame] = {}
-    for line, r in rows:
-        if r["target"] != target:
-            continue
-        try:
-            fno = int(r["frame"])
-        except ValueError:
-            raise ConfigError(f"{p}:{line}: frame: expected a whole number, "
-                              f"got {r['frame'][:40]!r}") from None
-        if fno in frames:
-            raise ConfigError(f"{p}:{line}: frame {fno} of target {target!r} given twice")
-        vals = [_num(r[c], p, line, c) for c in GT_REQUIRED[4:]]
-        in_view = _num(r["in_view"], p, line, "in_view")
-        bbox = tuple(vals[:4]) if all(math.isfinite(v) for v in vals[:4]) else None
-        centre = tuple(vals[4:]) if all(math.isfinite(v) for v in vals[4:]) else None
-        frames[fno] = GtFrame(frame=fno, time_s=_num(r["time_s"], p, line, "time_s"),
-                              in_view=in_view == 1.0, bbox_px=bbox,  # type: ignore[arg-type]
-                              center_px=centre,  # type: ignore[arg-type]
-                              depth_m=_depth_m(r, p, line))
-    return target, tuple(frames[k] for k in sorted(frames)), digest
-
-
-def _probe_video(p: Path) -> tuple[float, int, int, str, int, int]:
-    """(rate_hz, width_px, height_px, codec, frames: 0 if the file does not
-    say, size in bytes) of a video file, read by PyAV."""
-    f = open_regular(p)
-    try:
-        import av
-
-        size = os.fstat(f.fileno()).st_size
-        with av.open(f) as c:
-            s = c.streams.video[0]
-            rate = s.average_rate or s.guessed_rate
-            if not rate:
-                raise ValueError("no frame rate")
-            cc = s.codec_context
-            return (float(rate), int(cc.width), int(cc.height), str(cc.name),
-                    int(s.frames or 0), size)
-    except Exception as e:  # noqa: BLE001 - any failure is "cannot read this video"
-        raise ConfigError(f"{p}: cannot read it as a video ({e})") from None
-    finally:
-        f.close()
-
-
 def load_study(path: str | Path) -> Study:
     """Read and check a study file; ``ConfigError`` lists every problem found."""
     p = Path(path)
@@ -484,7 +322,7 @@ def _file(ctx: Problems, at: tuple[Any, ...], value: Any, base: Path, roots: tup
     if not isinstance(value, str) or not value or "\x00" in value:
         ctx.err(at, f"expected the path of the {what}, got {describe(value)}")
         return None
-    p, instead = _inside(base / value, roots)
+    p, instead = inside(base / value, roots)
     if p is None:
         ctx.err(at, f"{value[:200]!r}: the {what} must be an existing file inside the study's "
                     f"folders ({', '.join(str(r) for r in roots)}){instead}")
@@ -497,7 +335,7 @@ def _clip_from(ctx: Problems, at: tuple[Any, ...], cid: str, video: Path, gt: Pa
                hfov: float | None = None) -> Clip | None:
     try:
         target, frames, gt_sha256 = read_clip_truth(gt, target)
-        r2, w2, h2, codec, n2, video_bytes = _probe_video(video)
+        r2, w2, h2, codec, n2, video_bytes = probe_video(video)
         if codec not in BROWSER_CODECS:
             raise ConfigError(f"{video}: codec {codec} does not play in browsers; render the "
                               f"clips with `cameras: {{codec: h264, views: [...]}}`")
@@ -606,8 +444,8 @@ def _sweep_clips(ctx: Problems, spec: Any, base: Path, roots: list[Path],
     if sweep not in roots:
         roots.append(sweep)
     try:
-        rows = _csv_rows(_read_bounded(manifest, MAX_MANIFEST_BYTES, "manifest"), manifest,
-                         "sweep manifest", MANIFEST_COLUMNS)
+        rows = csv_rows(read_bounded(manifest, MAX_MANIFEST_BYTES, "manifest"), manifest,
+                        "sweep manifest", MANIFEST_COLUMNS)
     except ConfigError as e:
         for m in e.problems:
             ctx.err(at, m)
@@ -624,9 +462,9 @@ def _sweep_clips(ctx: Problems, spec: Any, base: Path, roots: list[Path],
             continue
         where_at = f"{manifest}:{line}"
         sroots = (sweep,)
-        video, v_instead = _inside(sweep / row["video"], sroots) if row["video"] else (None, "")
-        gt, g_instead = (_inside(sweep / row["ground_truth"], sroots) if row["ground_truth"]
-                         else (None, ""))
+        video, v_instead = inside(sweep / row["video"], sroots) if row["video"] else (None, "")
+        gt, g_instead = (inside(sweep / row["ground_truth"], sroots) if row["ground_truth"]
+                        else (None, ""))
         if video is None or gt is None:
             bad, instead = ("video", v_instead) if video is None else ("ground_truth", g_instead)
             ctx.err(at, f"{where_at}: {bad} {row[bad][:200]!r} must be an existing file inside "

@@ -15,9 +15,10 @@ import pytest
 from cosim.core.display import DisplayProfile
 from cosim.errors import ConfigError
 from cosim.renderer.video import open_video
+from cosim.trials.clips import GT_REQUIRED
 from cosim.trials.measures import measures_at, participant_display
 from cosim.trials.store import EXPORT_COLUMNS, Store, export_csv
-from cosim.trials.study import GT_REQUIRED, load_study, williams_row
+from cosim.trials.study import load_study, williams_row
 
 GT_HEADER = ("frame,time_s,vehicle,camera,target,in_view,fully_in_view,bbox_x0_px,bbox_y0_px,"
              "bbox_x1_px,bbox_y1_px,center_x_px,center_y_px,eccentricity_px,eccentricity_deg,"
@@ -426,7 +427,8 @@ def test_camera_gap_is_the_renderers_angle_and_the_ground_distance(
     from cosim.core.camera import CameraSpec, camera_pose
     from cosim.renderer.frame import World, WorldSpec, render_frame
     from cosim.renderer.truth import GT_COLUMNS
-    from cosim.trials.study import Clip, read_clip_truth
+    from cosim.trials.clips import read_clip_truth
+    from cosim.trials.study import Clip
     from cosim.world.ground import GroundSpec
     from cosim.world.targets import TARGET_DEFAULTS, TargetSpec
 

@@ -147,9 +147,9 @@ def test_a_fifo_among_the_study_files_is_refused_not_waited_on(tmp_path: Path, f
 def test_a_video_made_a_fifo_after_its_check_is_refused_not_waited_on(tmp_path: Path) -> None:
     """The video's probe checks the file it opened: a FIFO put in place of a
     video after the study's path check is refused, not waited on."""
-    from cosim.trials.study import _probe_video
+    from cosim.trials.clips import probe_video
 
     f = _fifo(tmp_path / "v.mp4")
-    e = _raised_within(lambda: _probe_video(f), [f])
+    e = _raised_within(lambda: probe_video(f), [f])
     assert isinstance(e, ConfigError), e
     assert str(e) == f"{f}: it is a FIFO, not a regular file"

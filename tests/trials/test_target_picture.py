@@ -5,7 +5,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from cosim.trials.study import Clip, GtFrame
+from cosim.trials.clips import GtFrame
+from cosim.trials.study import Clip
 from cosim.trials.target_picture import choose_still
 
 
