@@ -11,7 +11,7 @@ from cosim.scenario.formation import formation_offsets
 from cosim.vehicles import DEFAULT_CLASS
 from cosim.vehicles.jsb import find_model
 from cosim.vehicles.registry import get_class
-from cosim.world import World
+from cosim.world.model import World
 
 #: where the benchmark's fleets fly
 ORIGIN = (37.4, -122.0, 0.0)

@@ -169,11 +169,11 @@ class Section:
 #: entry points a package declares)
 BUILTIN_SECTIONS: dict[str, str] = {
     "swarm": "cosim.swarm.section:SWARM",
-    "ground": "cosim.world.ground:GROUND",
-    "targets": "cosim.world.targets:TARGETS",
+    "ground": "cosim.world.sections:GROUND",
+    "targets": "cosim.world.sections:TARGETS",
     "cameras": "cosim.renderer.section:CAMERAS",
     "sweep": "cosim.sweep.section:SWEEP",
-    "obstacles": "cosim.world.obstacles:OBSTACLES",
+    "obstacles": "cosim.world.sections:OBSTACLES",
     "search": "cosim.search.section:SEARCH",
 }
 

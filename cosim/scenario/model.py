@@ -14,7 +14,7 @@ from cosim.core.geo import LocalFrame
 from cosim.core.state import VehicleSpec
 from cosim.guidance import Command
 from cosim.vehicles import get_class
-from cosim.world import World
+from cosim.world.model import World
 
 SCHEMA_VERSION = 1
 

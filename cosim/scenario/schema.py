@@ -28,7 +28,7 @@ from cosim.scenario.vehicles import derive_seeds, parse_vehicles
 from cosim.scenario.writes import check_property_names, check_writes
 from cosim.scenario.yaml_lines import read_scenario_text
 from cosim.vehicles import get_class
-from cosim.world import World
+from cosim.world.model import World
 
 #: what a scenario name may not hold (it names the run's folder)
 _NAME_UNSAFE = re.compile(r"[/\\\x00-\x1f\x7f]")

@@ -37,7 +37,7 @@ if TYPE_CHECKING:
     from cosim.core.state import StateField, VehicleSpec
     from cosim.guidance.commands import Command
     from cosim.guidance.safety import Limits
-    from cosim.world import World
+    from cosim.world.model import World
 
 
 @dataclass(frozen=True)
@@ -181,7 +181,7 @@ class VehicleClass:
     def with_world(self, spec: VehicleSpec, world: World, sections: Mapping[str, Any],
                    origin: tuple[float, float, float]) -> VehicleSpec:
         """The vehicle given what of the scenario's ``world`` its class needs
-        (``cosim.world.World``: the ground, targets, obstacles) and of its
+        (``cosim.world.model.World``: the ground, targets, obstacles) and of its
         parsed ``sections`` (read only, e.g. ``cameras``; ``origin``: the
         scenario frame's lat, lon, ground altitude), usually in its
         ``class_params``; the workers see only the spec. Default: unchanged."""

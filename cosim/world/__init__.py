@@ -5,71 +5,11 @@ read and placed on the grid of ``image_grid``: a picture by ``picture``, a
 georeferenced file by ``geotiff``), the targets (``targets``), the obstacles
 (``obstacles``).
 
-Its three sections (``ground:``, ``targets:``, ``obstacles:``) add to the
-world, and so may any other section (``Section.world``: the search adds its
-fires as targets); ``World.assemble`` makes the one world every part reads
+Its three sections (``ground:``, ``targets:``, ``obstacles:``, in
+``sections``) add to the world, and so may any other section
+(``Section.world``: the search adds its fires as targets);
+``World.assemble`` (``model``) makes the one world every part reads
 (``Scenario.world``): the renderer draws it, the vehicle classes read what
 they need of it (``VehicleClass.with_world``), the search scores against it.
 This part imports only the kernel (``cosim.core``) and ``cosim.errors``.
 """
-
-from __future__ import annotations
-
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
-from typing import Any
-
-from cosim.world.ground import GroundSpec
-from cosim.world.obstacles import Obstacle
-from cosim.world.targets import TargetSpec
-
-#: the kinds of things a section may add to the world
-KINDS = ("ground", "targets", "obstacles")
-
-
-@dataclass(frozen=True)
-class World:
-    """The scenario's world, assembled from what its sections add."""
-
-    ground: GroundSpec = field(default_factory=GroundSpec)
-    targets: tuple[TargetSpec, ...] = ()
-    obstacles: tuple[Obstacle, ...] = ()
-
-    @staticmethod
-    def assemble(adds: Sequence[tuple[str, Mapping[str, Sequence[Any]]]]
-                 ) -> tuple[World, list[tuple[str, str]]]:
-        """The world from ``(section key, what it adds)`` in section order,
-        and the problems found putting it together ``(section key, message)``:
-        an unknown kind, a second ground, an id two of them give."""
-        grounds: list[GroundSpec] = []
-        targets: list[TargetSpec] = []
-        obstacles: list[Obstacle] = []
-        problems: list[tuple[str, str]] = []
-        owner: dict[tuple[str, str], str] = {}
-        for key, add in adds:
-            for kind, items in add.items():
-                if kind not in KINDS:
-                    problems.append((key, f"adds {kind!r} to the world; it holds "
-                                          f"{', '.join(KINDS)}"))
-                    continue
-                for item in items:
-                    if kind == "ground":
-                        grounds.append(item)
-                        continue
-                    ident = (kind, item.id)
-                    if ident in owner:
-                        was = owner[ident]
-                        problems.append((key, f"a {kind[:-1]} called {item.id!r} is "
-                                              f"already in the world (from {was}:)"))
-                        continue
-                    owner[ident] = key
-                    (targets if kind == "targets" else obstacles).append(item)
-        if len(grounds) > 1:
-            problems.append((adds[-1][0], "the world has one ground; another section gives "
-                                          "one too"))
-        world = World(ground=grounds[0] if grounds else GroundSpec(), targets=tuple(targets),
-                      obstacles=tuple(obstacles))
-        return world, problems
-
-
-__all__ = ["KINDS", "GroundSpec", "Obstacle", "TargetSpec", "World"]

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from cosim.core.geo import MAX_DISTANCE_M, LocalFrame
-from cosim.core.section import Section, SectionContext
+from cosim.core.section import SectionContext
 from cosim.errors import ConfigError
 from cosim.world import imagery
 
@@ -195,17 +195,3 @@ def _check_geotiff(info: SectionContext, image: str, geotiff: bool, path: P) -> 
     why = gt.check_crs(ref) or gt.probe(image)
     if why is not None:
         info.err(path + ("image",), f"{image}: {why}")
-
-
-class GroundSection(Section):
-    key = "ground"
-    description = "the ground's texture: procedural, or a picture or GeoTIFF placed in the frame"
-
-    def parse(self, info: SectionContext, node: Any, path: P) -> GroundSpec:
-        return parse_ground(info, node, path)
-
-    def world(self, parsed: GroundSpec) -> dict[str, tuple[GroundSpec, ...]]:
-        return {"ground": (parsed,)}
-
-
-GROUND = GroundSection()

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from cosim.core.geo import MAX_DISTANCE_M
-from cosim.core.section import Section, SectionContext
+from cosim.core.section import SectionContext
 
 MAX_OBSTACLES = 1000
 MAX_VERTICES = 64
@@ -216,18 +216,3 @@ def plan_route(start: np.ndarray, goal: np.ndarray, polys: Sequence[np.ndarray]
     while path[-1] != 0:
         path.append(prev[path[-1]])
     return [nodes[k] for k in reversed(path[:-1])]
-
-
-class ObstaclesSection(Section):
-    key = "obstacles"
-    description = "polygons on the ground that vehicles keep out of"
-
-    def parse(self, info: SectionContext, node: Any, path: tuple[Any, ...]
-              ) -> tuple[Obstacle, ...]:
-        return parse_obstacles(info, node, path)
-
-    def world(self, parsed: tuple[Obstacle, ...]) -> dict[str, tuple[Obstacle, ...]]:
-        return {"obstacles": parsed}
-
-
-OBSTACLES = ObstaclesSection()

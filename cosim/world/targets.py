@@ -22,7 +22,7 @@ from typing import Any
 
 from cosim.core.geo import MAX_DISTANCE_M
 from cosim.core.limits import MAX_NAME_CHARS
-from cosim.core.section import Section, SectionContext
+from cosim.core.section import SectionContext
 
 P = tuple[Any, ...]
 #: target ids (and camera names) become parts of file names, as vehicle ids
@@ -115,17 +115,3 @@ def parse_targets(info: SectionContext, node: Any, path: P) -> tuple[TargetSpec,
         if out[-1].growth_m_per_s and out[-1].kind != "fire":
             info.err(p + ("growth_m_per_min",), "only a fire grows")
     return tuple(out)
-
-
-class TargetsSection(Section):
-    key = "targets"
-    description = "targets on the ground (trucks, cars, people, fires), drawn by the cameras"
-
-    def parse(self, info: SectionContext, node: Any, path: P) -> tuple[TargetSpec, ...]:
-        return parse_targets(info, node, path)
-
-    def world(self, parsed: tuple[TargetSpec, ...]) -> dict[str, tuple[TargetSpec, ...]]:
-        return {"targets": parsed}
-
-
-TARGETS = TargetsSection()

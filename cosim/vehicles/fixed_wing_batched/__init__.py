@@ -39,7 +39,7 @@ from cosim.vehicles.fixed_wing_batched.model import PointMassModel
 from cosim.vehicles.registry import state_layout
 
 if TYPE_CHECKING:
-    from cosim.world import World
+    from cosim.world.model import World
 
 #: sea-level density of the standard atmosphere (kg/m^3)
 RHO0 = 1.225

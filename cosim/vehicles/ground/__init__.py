@@ -42,7 +42,7 @@ from cosim.vehicles.ground.model import SPEED_CMD, STEER_CMD, BicycleModel
 from cosim.world.obstacles import Obstacle, inside
 
 if TYPE_CHECKING:
-    from cosim.world import World
+    from cosim.world.model import World
 
 #: key -> (default, low, high)
 KEYS: dict[str, tuple[float, float, float]] = {

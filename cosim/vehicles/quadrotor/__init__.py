@@ -39,7 +39,7 @@ from cosim.vehicles.quadrotor.guidance import (
 from cosim.vehicles.quadrotor.mavlink import ARDUCOPTER
 
 if TYPE_CHECKING:
-    from cosim.world import World
+    from cosim.world.model import World
 
 #: the fastest horizontal speed a command may ask for (m/s)
 MAX_SPEED_MPS = 15.0

@@ -1,0 +1,60 @@
+"""The world's three scenario sections: ``ground:``, ``targets:`` and
+``obstacles:``. Each parses its key (with ``ground``, ``targets`` and
+``obstacles``) and adds what it parsed to the world. The parsers are
+imported when a scenario is read, not when the section table is, so that
+``cosim --help`` does not load numpy."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+from cosim.core.section import P, Section, SectionContext
+
+if TYPE_CHECKING:
+    from cosim.world.ground import GroundSpec
+    from cosim.world.obstacles import Obstacle
+    from cosim.world.targets import TargetSpec
+
+
+class GroundSection(Section):
+    key = "ground"
+    description = "the ground's texture: procedural, or a picture or GeoTIFF placed in the frame"
+
+    def parse(self, info: SectionContext, node: Any, path: P) -> GroundSpec:
+        from cosim.world.ground import parse_ground
+
+        return parse_ground(info, node, path)
+
+    def world(self, parsed: GroundSpec) -> dict[str, tuple[GroundSpec, ...]]:
+        return {"ground": (parsed,)}
+
+
+class TargetsSection(Section):
+    key = "targets"
+    description = "targets on the ground (trucks, cars, people, fires), drawn by the cameras"
+
+    def parse(self, info: SectionContext, node: Any, path: P) -> tuple[TargetSpec, ...]:
+        from cosim.world.targets import parse_targets
+
+        return parse_targets(info, node, path)
+
+    def world(self, parsed: tuple[TargetSpec, ...]) -> dict[str, tuple[TargetSpec, ...]]:
+        return {"targets": parsed}
+
+
+class ObstaclesSection(Section):
+    key = "obstacles"
+    description = "polygons on the ground that vehicles keep out of"
+
+    def parse(self, info: SectionContext, node: Any, path: P) -> tuple[Obstacle, ...]:
+        from cosim.world.obstacles import parse_obstacles
+
+        return parse_obstacles(info, node, path)
+
+    def world(self, parsed: tuple[Obstacle, ...]) -> dict[str, tuple[Obstacle, ...]]:
+        return {"obstacles": parsed}
+
+
+GROUND = GroundSection()
+TARGETS = TargetsSection()
+OBSTACLES = ObstaclesSection()
