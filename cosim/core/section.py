@@ -174,6 +174,7 @@ BUILTIN_SECTIONS: dict[str, str] = {
     "cameras": "cosim.renderer.section:CAMERAS",
     "sweep": "cosim.sweep.section:SWEEP",
     "obstacles": "cosim.world.sections:OBSTACLES",
+    "sun": "cosim.world.sections:SUN",
     "search": "cosim.search.section:SEARCH",
 }
 

@@ -47,6 +47,8 @@ from cosim.renderer.targets import (
 from cosim.renderer.truth import ground_truth
 from cosim.world.ground import GroundSpec
 from cosim.world.obstacles import signed_area
+from cosim.world.sun import DEFAULT as DEFAULT_SUN
+from cosim.world.sun import SunSpec
 from cosim.world.targets import TargetSpec
 
 SKY_TOP_BGR = np.array([225, 170, 120], dtype=np.float32)
@@ -71,6 +73,8 @@ class WorldSpec:
     targets: tuple[TargetSpec, ...]
     #: the scenario's obstacles (``cosim.obstacles.Obstacle``): drawn as prisms
     obstacles: tuple[Any, ...] = ()
+    #: where the sun stands: it shades every target's and obstacle's faces
+    sun: SunSpec = DEFAULT_SUN
 
 
 #: obstacles' colour (RGB): concrete grey
@@ -113,6 +117,9 @@ class World:
         #: per obstacle, its corners (k, 2) in the scenario frame and its height
         self.obstacles = [(np.array(o.polygon, dtype=float), float(o.height_m))
                           for o in spec.obstacles]
+        #: unit vector toward the sun, north-east-down (a frame's local axes turn
+        #: against the origin's by 0.01 deg a km: far below a shade step)
+        self.sun_l = spec.sun.to_sun_ned()
 
     def view(self, cam: CameraSpec) -> _View:
         """What every frame of ``cam`` shares, built once."""
@@ -386,7 +393,8 @@ def _sky_image(world: World, h: int, w: int) -> np.ndarray:
 
 
 def _target_faces(pose: Pose, t: TargetSpec, origin_l: np.ndarray, time_s: float, seed: int,
-                  tid: int) -> list[tuple[float, np.ndarray, tuple[int, int, int, int], int]]:
+                  tid: int, sun_l: np.ndarray
+                  ) -> list[tuple[float, np.ndarray, tuple[int, int, int, int], int]]:
     """The front faces of a target's boxes: (depth, camera-axis polygon, BGRA, id)."""
     parts = parts_of(t, time_s, seed)
     lo = np.array([p.lo for p in parts])[:, None, :]
@@ -398,7 +406,7 @@ def _target_faces(pose: Pose, t: TargetSpec, origin_l: np.ndarray, time_s: float
     cent = faces_l.mean(axis=2)
     front = np.einsum("pfk,fk->pf", cent - pose.c_l, normals) < 0
     faces_c = (faces_l - pose.c_l) @ pose.R_cl.T
-    shade = [lambert(n) for n in normals]
+    shade = [lambert(n, sun_l) for n in normals]
     out = []
     for pi, fi in zip(*np.nonzero(front)):
         v_c = faces_c[pi, fi]
@@ -464,7 +472,7 @@ def _obstacle_faces(world: World, pose: Pose
                 v_c = clip_near(v_c)
                 if len(v_c) < 3:
                     continue
-            kk = lambert(normal)
+            kk = lambert(normal, world.sun_l)
             c = OBSTACLE_RGB
             bgra = (min(255, int(c[2] * kk)), min(255, int(c[1] * kk)),
                     min(255, int(c[0] * kk)), OPAQUE)
@@ -506,7 +514,8 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
     box_c = probe_c[:, :8]
     visible = ~_culled(view.planes, probe_c)
     for k in np.flatnonzero(visible).tolist():
-        faces.extend(_target_faces(pose, specs[k], origins[k], time_s, seed + k, k + 1))
+        faces.extend(_target_faces(pose, specs[k], origins[k], time_s, seed + k, k + 1,
+                                   world.sun_l))
     faces.extend(_obstacle_faces(world, pose))
     faces.sort(key=lambda f: -f[0])  # painter's order: far to near
     for _, v_c, bgra, tid in faces:

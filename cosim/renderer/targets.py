@@ -1,5 +1,5 @@
-"""Targets: 3-D boxes on the ground, drawn with flat shading from a fixed sun
-in painter's order, and each target's ground truth.
+"""Targets: 3-D boxes on the ground, drawn with flat shading from the sun
+(``cosim.world.sun``) in painter's order, and each target's ground truth.
 
 A target is a set of boxes in its own frame (x along its heading, y right,
 z down, origin on the ground under its centre). Its ground-truth box is the
@@ -17,12 +17,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from cosim.core.geo import LocalFrame, geodetic_to_ecef
+from cosim.world.sun import DEFAULT as DEFAULT_SUN
 from cosim.world.targets import TargetSpec
 
-SUN_ELEVATION_DEG, SUN_AZIMUTH_DEG = 50.0, 135.0  # from the south-east
-_el, _az = math.radians(SUN_ELEVATION_DEG), math.radians(SUN_AZIMUTH_DEG)
-SUN_TO_L = np.array([math.cos(_el) * math.cos(_az), math.cos(_el) * math.sin(_az),
-                     -math.sin(_el)])  # unit vector toward the sun (NED)
+#: unit vector toward the sun without a ``sun:`` section (NED)
+SUN_TO_L = DEFAULT_SUN.to_sun_ned()
 AMBIENT = 0.45
 
 # unit box corners (x, y, z in 0..1) and faces (outward, counter-clockwise seen from outside)
@@ -169,5 +168,7 @@ def to_local(t: TargetSpec, origin_l: np.ndarray, pts_t: np.ndarray) -> np.ndarr
     return out
 
 
-def lambert(normal_l: np.ndarray) -> float:
-    return AMBIENT + (1.0 - AMBIENT) * max(0.0, float(np.dot(normal_l, SUN_TO_L)))
+def lambert(normal_l: np.ndarray, sun_l: np.ndarray = SUN_TO_L) -> float:
+    """A face's brightness (0..1 of its colour): the ambient share plus the
+    direct share times the cosine of the sun's angle to the face's normal."""
+    return AMBIENT + (1.0 - AMBIENT) * max(0.0, float(np.dot(normal_l, sun_l)))

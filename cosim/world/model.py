@@ -1,5 +1,5 @@
-"""The world (``World``): the ground, targets and obstacles every part
-reads, put together from what the scenario's sections add
+"""The world (``World``): the ground, targets, obstacles and sun every
+part reads, put together from what the scenario's sections add
 (``World.assemble``)."""
 
 from __future__ import annotations
@@ -10,10 +10,14 @@ from typing import Any
 
 from cosim.world.ground import GroundSpec
 from cosim.world.obstacles import Obstacle
+from cosim.world.sun import DEFAULT as DEFAULT_SUN
+from cosim.world.sun import SunSpec
 from cosim.world.targets import TargetSpec
 
 #: the kinds of things a section may add to the world
-KINDS = ("ground", "targets", "obstacles")
+KINDS = ("ground", "targets", "obstacles", "sun")
+#: the kinds a world holds one of (the others are lists of things with ids)
+SINGLE = ("ground", "sun")
 
 
 @dataclass(frozen=True)
@@ -23,14 +27,15 @@ class World:
     ground: GroundSpec = field(default_factory=GroundSpec)
     targets: tuple[TargetSpec, ...] = ()
     obstacles: tuple[Obstacle, ...] = ()
+    sun: SunSpec = DEFAULT_SUN
 
     @staticmethod
     def assemble(adds: Sequence[tuple[str, Mapping[str, Sequence[Any]]]]
                  ) -> tuple[World, list[tuple[str, str]]]:
         """The world from ``(section key, what it adds)`` in section order,
         and the problems found putting it together ``(section key, message)``:
-        an unknown kind, a second ground, an id two of them give."""
-        grounds: list[GroundSpec] = []
+        an unknown kind, a second ground or sun, an id two of them give."""
+        single: dict[str, list[Any]] = {kind: [] for kind in SINGLE}
         targets: list[TargetSpec] = []
         obstacles: list[Obstacle] = []
         problems: list[tuple[str, str]] = []
@@ -42,8 +47,8 @@ class World:
                                           f"{', '.join(KINDS)}"))
                     continue
                 for item in items:
-                    if kind == "ground":
-                        grounds.append(item)
+                    if kind in single:
+                        single[kind].append(item)
                         continue
                     ident = (kind, item.id)
                     if ident in owner:
@@ -53,10 +58,12 @@ class World:
                         continue
                     owner[ident] = key
                     (targets if kind == "targets" else obstacles).append(item)
-        if len(grounds) > 1:
-            problems.append((adds[-1][0], "the world has one ground; another section gives "
-                                          "one too"))
+        for kind, items in single.items():
+            if len(items) > 1:
+                problems.append((adds[-1][0], f"the world has one {kind}; another section "
+                                              "gives one too"))
+        grounds, suns = single["ground"], single["sun"]
         world = World(ground=grounds[0] if grounds else GroundSpec(), targets=tuple(targets),
-                      obstacles=tuple(obstacles))
+                      obstacles=tuple(obstacles), sun=suns[0] if suns else DEFAULT_SUN)
         return world, problems
 

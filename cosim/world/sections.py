@@ -1,6 +1,6 @@
-"""The world's three scenario sections: ``ground:``, ``targets:`` and
-``obstacles:``. Each parses its key (with ``ground``, ``targets`` and
-``obstacles``) and adds what it parsed to the world. The parsers are
+"""The world's scenario sections: ``ground:``, ``targets:``, ``obstacles:``
+and ``sun:``. Each parses its key (with ``ground``, ``targets``,
+``obstacles`` and ``sun``) and adds what it parsed to the world. The parsers are
 imported when a scenario is read, not when the section table is, so that
 ``cosim --help`` does not load numpy."""
 
@@ -13,6 +13,7 @@ from cosim.core.section import P, Section, SectionContext
 if TYPE_CHECKING:
     from cosim.world.ground import GroundSpec
     from cosim.world.obstacles import Obstacle
+    from cosim.world.sun import SunSpec
     from cosim.world.targets import TargetSpec
 
 
@@ -55,6 +56,20 @@ class ObstaclesSection(Section):
         return {"obstacles": parsed}
 
 
+class SunSection(Section):
+    key = "sun"
+    description = "where the sun stands: from a date and time at the origin, or given"
+
+    def parse(self, info: SectionContext, node: Any, path: P) -> SunSpec:
+        from cosim.world.sun import parse_sun
+
+        return parse_sun(info, node, path)
+
+    def world(self, parsed: SunSpec) -> dict[str, tuple[SunSpec, ...]]:
+        return {"sun": (parsed,)}
+
+
 GROUND = GroundSection()
 TARGETS = TargetsSection()
 OBSTACLES = ObstaclesSection()
+SUN = SunSection()
