@@ -110,3 +110,17 @@ def test_trials_analyse_speed_writes_what_it_analyses(tmp_path: Path) -> None:
     s = analyse(src, tmp_path / "out", n_boot=20, plots=False)
     assert s["rows"] == 600
     assert len(s["binned_conditions"]["conspicuity"]["condition_alt_agl_m"]) == MAX_LEVELS
+
+
+def test_realism_measures_each_camera(tmp_path: Path) -> None:
+    import json
+
+    out = tmp_path / "a.json"
+    proc = subprocess.run([sys.executable, str(REPO / "benchmarks/realism.py"), "--frames", "2",
+                           "--max-s", "1", "--json", str(out), "scenarios/cameras/flyover.yaml"],
+                          cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert "scenarios/cameras/flyover.yaml" in proc.stdout and "uav1/belly" in proc.stdout
+    assert "goal: 1.6 to 2.6" in proc.stdout
+    got = json.loads(out.read_text())["scenarios/cameras/flyover.yaml:uav1/belly"]
+    assert len(got["exponent"]) == 2 and all(1.0 < a < 4.0 for a in got["exponent"])
