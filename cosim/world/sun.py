@@ -3,8 +3,9 @@
 Either from a date and time at the scenario's origin (``time``: ISO 8601 with
 its UTC offset, e.g. ``2026-06-21T14:30:00+02:00``) or given directly
 (``azimuth_deg``, clockwise from true north, and ``elevation_deg`` above the
-horizon). Without the section the sun stands where cosim has always put it:
-50 deg up in the south-east (``DEFAULT``).
+horizon); ``shadows`` (default true) lets the targets cast shadows on the
+ground. Without the section the sun stands where cosim has always put it,
+50 deg up in the south-east, and casts no shadow (``DEFAULT``).
 
 The position is geometric (no refraction, which lifts the sun by less than
 0.1 deg above 10 deg of elevation), from the low-precision solar coordinates
@@ -41,6 +42,7 @@ class SunSpec:
     azimuth_deg: float  # clockwise from true north
     elevation_deg: float  # above the horizon
     time: str = ""  # the ISO time it was computed from, if any
+    shadows: bool = False  # targets cast shadows on the ground
 
     def to_sun_ned(self) -> np.ndarray:
         """The unit vector toward the sun in north-east-down axes."""
@@ -96,7 +98,8 @@ def solar_position(when: datetime, lat_deg: float, lon_deg: float) -> tuple[floa
 
 def parse_sun(info: SectionContext, node: Any, path: P) -> SunSpec:
     """The ``sun:`` section: ``{time: ISO}`` or ``{azimuth_deg, elevation_deg}``."""
-    r = info.reader(node, path, ("time", "azimuth_deg", "elevation_deg"))
+    r = info.reader(node, path, ("time", "azimuth_deg", "elevation_deg", "shadows"))
+    shadows = r.boolean("shadows", True)
     if r.has("time"):
         if r.has("azimuth_deg") or r.has("elevation_deg"):
             info.err(path, "give time, or azimuth_deg and elevation_deg, not both")
@@ -123,7 +126,7 @@ def parse_sun(info: SectionContext, node: Any, path: P) -> SunSpec:
                                        f"the origin; cosim draws daylight (at least "
                                        f"{MIN_ELEVATION_DEG:g} deg)")
             return DEFAULT
-        return SunSpec(round(az, 6), round(el, 6), text)
+        return SunSpec(round(az, 6), round(el, 6), text, shadows)
     if not (r.has("azimuth_deg") and r.has("elevation_deg")):
         info.err(path, "expected time, or azimuth_deg and elevation_deg")
         return DEFAULT
@@ -131,4 +134,4 @@ def parse_sun(info: SectionContext, node: Any, path: P) -> SunSpec:
     el = r.num("elevation_deg", lo=MIN_ELEVATION_DEG, hi=90.0)
     if az is None or el is None:
         return DEFAULT
-    return SunSpec(float(az), float(el))
+    return SunSpec(float(az), float(el), "", shadows)

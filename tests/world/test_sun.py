@@ -4,6 +4,7 @@ it in rendered frames."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import textwrap
 from datetime import datetime, timedelta, timezone
@@ -15,7 +16,7 @@ import pytest
 from cosim.core.camera import CameraSpec, camera_pose
 from cosim.errors import ConfigError
 from cosim.renderer.frame import World, WorldSpec, render_frame
-from cosim.renderer.targets import AMBIENT
+from cosim.renderer.targets import AMBIENT, box_corners, parts_of
 from cosim.scenario import load_scenario
 from cosim.world.ground import GroundSpec
 from cosim.world.sun import DEFAULT, SunSpec, solar_position
@@ -105,7 +106,9 @@ def test_a_time_puts_the_sun_where_it_stands_at_the_origin(tmp_path: Path) -> No
     assert (sun.azimuth_deg, sun.elevation_deg) == (pytest.approx(az), pytest.approx(el))
     assert 180 < sun.azimuth_deg < 240 and 55 < sun.elevation_deg < 66  # early afternoon
     scn = _load(tmp_path, "sun: {azimuth_deg: 270, elevation_deg: 20}\n")
-    assert scn.world.sun == SunSpec(270.0, 20.0)  # type: ignore[attr-defined]
+    assert scn.world.sun == SunSpec(270.0, 20.0, "", True)  # type: ignore[attr-defined]
+    scn = _load(tmp_path, "sun: {azimuth_deg: 270, elevation_deg: 20, shadows: false}\n")
+    assert not scn.world.sun.shadows  # type: ignore[attr-defined]
     assert _load(tmp_path, "").world.sun == DEFAULT  # type: ignore[attr-defined]
 
 
@@ -146,3 +149,52 @@ def test_a_face_is_as_bright_as_the_sun_on_it() -> None:
         k = AMBIENT + (1 - AMBIENT) * math.sin(math.radians(el))
         want = int(int(200 * 0.7) * k)
         assert np.all(np.abs(top - want) <= 1), (el, top, want)
+
+
+BLOCK = TargetSpec("b", "car", 0.0, 0.0, None, None, 0.0, 2.0, 2.0, 1.0, (90, 90, 90))
+
+
+def _shadow_mask(az_deg: float, el_deg: float, height_m: float) -> tuple[np.ndarray, float]:
+    """Pixels a 2 m x 2 m car ``height_m`` tall darkens on the ground, seen
+    by a nadir camera 100 m above it (image up = north, right = east), and
+    the ground metres per pixel."""
+    t = dataclasses.replace(BLOCK, height_m=height_m)
+    cam = CameraSpec("c", (0,), "gimbal", -90.0, False, 60.0, 46.8, 400, 300, 10.0, 12)
+    pose = camera_pose(cam, 47.0, 8.0, 500.0, 0.0, 0.0, 0.0, ground_alt_m=400.0)
+    frames = []
+    for shadows in (False, True):
+        ws = WorldSpec(47.0, 8.0, 400.0, 1, 120.0, GroundSpec(), (t,), (),
+                       SunSpec(az_deg, el_deg, "", shadows))
+        frames.append(render_frame(World(ws), cam, pose, 0)[0][..., :3].astype(int))
+    darker = (frames[1] < frames[0]).any(axis=2)
+    assert not (frames[1] > frames[0]).any()  # shade only darkens
+    f_px = 200 / math.tan(math.radians(30))
+    return darker, 100.0 / f_px
+
+
+@pytest.mark.parametrize("az,el,h", [(90.0, 45.0, 20.0), (90.0, 30.0, 20.0),
+                                     (225.0, 40.0, 25.0), (0.0, 60.0, 30.0)])
+def test_a_shadow_falls_away_from_the_sun_h_over_tan_elevation_long(az: float, el: float,
+                                                                    h: float) -> None:
+    """The shadow's farthest pixel from the car's centre lies opposite the
+    sun's azimuth, as far as its farthest box corner reaches: the corner's
+    own offset plus its height h over tan(elevation), within two pixels."""
+    darker, m_per_px = _shadow_mask(az, el, h)
+    ys, xs = np.nonzero(darker)
+    assert len(xs) > 20
+    cx, cy = (darker.shape[1] - 1) / 2, (darker.shape[0] - 1) / 2
+    east_px, north_px = xs - cx, cy - ys
+    away = math.radians(az + 180.0)
+    along = (north_px * math.cos(away) + east_px * math.sin(away)) * m_per_px
+    across = (-north_px * math.sin(away) + east_px * math.cos(away)) * m_per_px
+    reach = [c[0] * math.cos(away) + c[1] * math.sin(away) - c[2] / math.tan(math.radians(el))
+             for p in parts_of(dataclasses.replace(BLOCK, height_m=h))
+             for c in box_corners(p.lo, p.hi)]  # corners: x north, y east, z down
+    assert along.max() == pytest.approx(max(reach), abs=2 * m_per_px)
+    tip = along > along.max() - 1.0
+    assert abs(float(np.median(across[tip]))) < 2 * m_per_px  # straight away from the sun
+    assert along.min() > -2 * m_per_px  # nothing toward the sun
+
+
+def test_without_a_sun_section_nothing_casts_a_shadow() -> None:
+    assert not DEFAULT.shadows

@@ -1,0 +1,94 @@
+"""Shadows on the ground: each target's boxes cast along the sun.
+
+A box point at height h above the ground lands ``h / tan(elevation)`` from its
+foot, away from the sun's azimuth; a box's shadow is the convex hull of its
+foot and its top corners so moved (exact for a box on flat ground). A fire's
+flames give light, not shade, and cast none. Shadowed ground keeps only the
+sky's ambient light: in linear light it is scaled by
+``AMBIENT / (AMBIENT + (1 - AMBIENT) sin(elevation))``, the ratio of a
+horizontal surface's shade to its sunlit brightness (``targets.lambert``).
+
+Drawn onto the ground before the targets (which hide their own shadow's
+foot); the ground-truth id buffer is untouched. The frame module calls
+``draw_shadows``; nothing here knows how the ground is drawn.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import cv2
+import numpy as np
+
+from cosim.core.camera import NEAR_M, Pose, clip_near, project
+from cosim.renderer.targets import AMBIENT, UNIT_CORNERS, heading_rotation, parts_of
+from cosim.world.targets import TargetSpec
+
+SHIFT = 4  # sub-pixel bits, as the frame's polygons
+
+
+def shade_table(elevation_deg: float) -> np.ndarray:
+    """cv2.LUT's table (256 x 1 x 4, uint8) darkening sRGB ground to its shade
+    (alpha kept): a value's linear light (gamma 2.2, as the ground truth's
+    luminance) times the shade ratio."""
+    s = float(np.sin(np.radians(elevation_deg)))
+    ratio = AMBIENT / (AMBIENT + (1.0 - AMBIENT) * s)
+    v = np.arange(256, dtype=np.float64)
+    dark = np.clip(np.round(v * ratio ** (1 / 2.2)), 0, 255).astype(np.uint8)
+    table = np.repeat(dark[None, :, None], 4, axis=2)
+    table[0, :, 3] = np.arange(256, dtype=np.uint8)
+    return table
+
+
+def hulls_on_ground(t: TargetSpec, origin_l: np.ndarray, sun_l: np.ndarray, time_s: float,
+                    seed: int) -> list[np.ndarray]:
+    """Each of target ``t``'s parts' shadow on the ground plane through its
+    foot (``origin_l``, in L): a convex polygon (k x 3, L) per part."""
+    if t.kind == "fire" or sun_l[2] >= 0:
+        return []
+    away = -sun_l[:2] / -sun_l[2]  # ground shift per metre of height
+    parts = parts_of(t, time_s, seed)
+    lo = np.array([p.lo for p in parts])[:, None, :]
+    hi = np.array([p.hi for p in parts])[:, None, :]
+    corners = origin_l + (lo + UNIT_CORNERS * (hi - lo)) @ heading_rotation(t).T  # (P, 8, 3)
+    height = origin_l[2] - corners[..., 2]  # above the foot's ground level
+    ground = (corners[..., :2] + height[..., None] * away).astype(np.float32)
+    out = []
+    for g in ground:
+        hull = cv2.convexHull(g).reshape(-1, 2).astype(np.float64)
+        out.append(np.column_stack([hull, np.full(len(hull), origin_l[2])]))
+    return out
+
+
+def draw_shadows(K: np.ndarray, pose: Pose, specs: Sequence[TargetSpec], origins: np.ndarray,
+                 sun_l: np.ndarray, time_s: float, seed: int, img: np.ndarray,
+                 table: np.ndarray) -> None:
+    """Darken the ground under every target's shadow in ``img`` (BGRA)."""
+    h_img, w_img = img.shape[:2]
+    polys = []
+    for k, t in enumerate(specs):
+        for poly_l in hulls_on_ground(t, origins[k], sun_l, time_s, seed + k):
+            v_c = (poly_l - pose.c_l) @ pose.R_cl.T
+            if v_c[:, 2].max() < NEAR_M:
+                continue
+            if v_c[:, 2].min() < NEAR_M:
+                v_c = clip_near(v_c)
+                if len(v_c) < 3:
+                    continue
+            uv = project(K, v_c)
+            lo, hi = uv.min(axis=0), uv.max(axis=0)
+            if hi[0] >= 0 and hi[1] >= 0 and lo[0] < w_img and lo[1] < h_img:
+                polys.append(uv)
+    if not polys:
+        return
+    every = np.concatenate(polys)
+    x0, y0 = (max(0, int(v)) for v in every.min(axis=0))
+    x1, y1 = min(w_img, int(every[:, 0].max()) + 2), min(h_img, int(every[:, 1].max()) + 2)
+    if x1 <= x0 or y1 <= y0:
+        return
+    mask = np.zeros((y1 - y0, x1 - x0), np.uint8)  # the shadows' bounding box only
+    for uv in polys:
+        pts = np.round((uv - (x0, y0)) * (1 << SHIFT)).astype(np.int32)
+        cv2.fillConvexPoly(mask, pts, 1, cv2.LINE_8, SHIFT)
+    roi = img[y0:y1, x0:x1]
+    np.copyto(roi, cv2.LUT(roi, table), where=mask[..., None].astype(bool))
