@@ -17,12 +17,13 @@
 
     python benchmarks/render_bench.py [--frames 200] [--repeat 1] [--vehicles 20]
         [--duration-s 10] [--backend process|inline] [--workers N] [--render-workers N]
-        [--codec mp4v|h264|mjpg]
+        [--codec mp4v|h264|mjpg] [--sensor YAML]
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import resource
@@ -35,7 +36,7 @@ from typing import Any
 import cv2
 
 from cosim.core.cache import CACHE_ENV  # the whole cache folder (ground tiles: ground/)
-from cosim.core.camera import CameraSpec
+from cosim.core.camera import CameraSpec, SensorSpec
 from cosim.core.geo import LocalFrame
 from cosim.renderer.outputs import Stream
 from cosim.renderer.render_pool import RenderWorker
@@ -79,9 +80,11 @@ class _Encoder:
         self.encode = _Timed(stream.encode)
 
 
-def per_frame(frames: int, cache_dir: str, codec: str = "mp4v") -> dict[str, float]:
+def per_frame(frames: int, cache_dir: str, codec: str = "mp4v",
+              sensor: SensorSpec | None = None) -> dict[str, float]:
     """One camera's frames; cosim's cache folder (its ground tiles in
-    ``ground/``) in ``cache_dir``."""
+    ``ground/``) in ``cache_dir``; ``sensor``: the camera's sensor and lens
+    (their cost timed apart)."""
     os.environ[CACHE_ENV] = cache_dir
     cv2.setNumThreads(1)
     scn = load_scenario(REPO / "scenarios/cameras/flyover.yaml", check_properties=False)
@@ -89,7 +92,7 @@ def per_frame(frames: int, cache_dir: str, codec: str = "mp4v") -> dict[str, flo
 
     ws = WorldSpec(scn.origin.lat_deg, scn.origin.lon_deg, scn.origin.ground_alt_m, scn.seed,
                    120.0, scn.world.ground, scn.world.targets)
-    cam: CameraSpec = scn.sections["cameras"].views[0]
+    cam: CameraSpec = dataclasses.replace(scn.sections["cameras"].views[0], sensor=sensor)
     frame = LocalFrame(scn.origin.lat_deg, scn.origin.lon_deg, scn.origin.ground_alt_m)
     poses = []
     for i in range(frames):
@@ -103,6 +106,9 @@ def per_frame(frames: int, cache_dir: str, codec: str = "mp4v") -> dict[str, flo
         video = _Video(w.writers[0].video)
         w.writers[0].video = video
         ground = w.world.ground
+        sensor_fn = _Timed(w.sensors[0].apply) if w.sensors else None
+        if sensor_fn is not None:
+            w.sensors[0].apply = sensor_fn  # type: ignore[method-assign]
         tiles = _Timed(ground._make_tile)
         ground._make_tile = tiles  # type: ignore[method-assign]
         warp_fn = cv2.warpPerspective
@@ -121,8 +127,19 @@ def per_frame(frames: int, cache_dir: str, codec: str = "mp4v") -> dict[str, flo
             "encode_ms": video.write.cpu_s / frames * 1000,
             "codec_ms": codec_s / frames * 1000, "warp_ms": warp.cpu_s / frames * 1000,
             "tiles_ms": tiles.cpu_s / frames * 1000, "tiles": tiles.calls,
+            "sensor_ms": sensor_fn.cpu_s / frames * 1000 if sensor_fn else 0.0,
             "tile_ms": tiles.cpu_s / max(tiles.calls, 1) * 1000,
             "tiles_generated": ground.tiles_made, "tiles_from_disk": ground.tiles_loaded}
+
+
+def _sensor(text: str) -> SensorSpec:
+    """A ``sensor:`` mapping read as a scenario's camera would read it."""
+    scn = (REPO / "scenarios/cameras/flyover.yaml").read_text()
+    scn = scn.replace("  views:\n    - {", f"  views:\n    - {{sensor: {text}, ", 1)
+    cam: CameraSpec = parse_scenario(scn, "--sensor", check_properties=False
+                                     ).sections["cameras"].views[0]
+    assert cam.sensor is not None
+    return cam.sensor
 
 
 def _cpu_s() -> float:
@@ -171,13 +188,18 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=1,
                     help="per-frame cost: this many runs (each new ground, then cached); "
                          "prints the median and range")
+    ap.add_argument("--sensor", default=None, metavar="YAML",
+                    help="per-frame cost with this camera sensor (the cameras: section's "
+                         "sensor: mapping, e.g. '{vignetting: cos4, snr_db: 30}'); its part "
+                         "is printed apart")
     a = ap.parse_args()
+    sensor = _sensor(a.sensor) if a.sensor else None
     if a.frames:
         runs: dict[str, list[dict[str, float]]] = {"tiles generated": [], "tiles from disk": []}
         for _ in range(a.repeat):  # each repeat: a new empty tile cache, then the same again
             with tempfile.TemporaryDirectory() as cache:
                 for label, got in runs.items():
-                    f = per_frame(a.frames, cache, a.codec)
+                    f = per_frame(a.frames, cache, a.codec, sensor)
                     got.append(f)
                     rest = f["cpu_ms"] - f["encode_ms"] - f["warp_ms"] - f["tiles_ms"]
                     print(f"640x480 nadir frame incl. ground truth + {a.codec}, {label}: "
@@ -187,7 +209,8 @@ def main() -> None:
                           f"{f['codec_ms']:.2f} ms), the ground's warp {f['warp_ms']:.2f} ms, "
                           f"new ground tiles {f['tiles_ms']:.2f} ms ({f['tiles']:.0f} tiles, "
                           f"{f['tile_ms']:.2f} ms each: {f['tiles_generated']} generated, "
-                          f"{f['tiles_from_disk']} read), the rest {rest:.2f} ms", flush=True)
+                          f"{f['tiles_from_disk']} read), the sensor {f['sensor_ms']:.2f} ms, "
+                          f"the rest {rest - f['sensor_ms']:.2f} ms", flush=True)
         if a.repeat > 1:
             for label, got in runs.items():
                 ms = sorted(f["cpu_ms"] for f in got)

@@ -39,6 +39,23 @@ def test_render_bench_parts_add_up(tmp_path: Path, monkeypatch: pytest.MonkeyPat
     assert again["tiles_generated"] == 0 and again["tiles_from_disk"] == f["tiles_generated"]
 
 
+def test_render_bench_times_the_sensor_apart(tmp_path: Path,
+                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    import cv2
+    import render_bench
+
+    from cosim.core.cache import CACHE_ENV
+    from cosim.core.camera import SensorSpec
+
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path))
+    monkeypatch.setattr(cv2, "setNumThreads", lambda n: None)
+    sensor = render_bench._sensor("{vignetting: cos4, snr_db: 30}")
+    assert sensor == SensorSpec(vignetting=1.0, snr_db=30.0)
+    f = render_bench.per_frame(3, str(tmp_path / "ground"), sensor=sensor)
+    assert 0 < f["sensor_ms"] < f["cpu_ms"]
+    assert render_bench.per_frame(3, str(tmp_path / "ground"))["sensor_ms"] == 0
+
+
 def test_floor_bench_runs() -> None:
     proc = subprocess.run([sys.executable, str(REPO / "benchmarks/floor_bench.py"),
                            "--frames", "4", "--rounds", "1"], cwd=REPO, capture_output=True,

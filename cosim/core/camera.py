@@ -37,6 +37,31 @@ from cosim.core.geo import LocalFrame, geodetic_to_ecef
 
 
 @dataclass(frozen=True)
+class SensorSpec:
+    """A camera's sensor and lens (``cosim.renderer.sensor`` applies it):
+    vignetting ``cos^(4 vignetting)`` of the off-axis angle (0: none) and the
+    signal-to-noise ratio at mid-grey ``snr_db`` (None: no noise)."""
+
+    vignetting: float = 0.0
+    snr_db: float | None = None
+
+
+@dataclass(frozen=True)
+class DatalinkSpec:
+    """What a camera's downlink delivers (``cosim.renderer.datalink`` encodes
+    it): ``codec`` at ``bitrate_kbps`` (constant bit rate), ``rate_hz`` frames
+    a second (every ``every``-th rendered frame), a key frame every ``gop``
+    delivered frames, each delivered ``latency_ms`` after it was rendered."""
+
+    codec: str
+    bitrate_kbps: float
+    rate_hz: float
+    every: int
+    gop: int
+    latency_ms: float
+
+
+@dataclass(frozen=True)
 class CameraSpec:
     name: str
     vehicles: tuple[int, ...]  # rows of Scenario.vehicles carrying this camera
@@ -50,6 +75,10 @@ class CameraSpec:
     rate_hz: float
     frame_every: int  # physics ticks per frame
     yaw_deg: float = 0.0  # the mount's yaw from the nose (positive: right); a gimbal's at start
+    #: the sensor and lens effects applied to its frames (None: the ideal pinhole's pixels)
+    sensor: SensorSpec | None = None
+    #: the downlink its video is delivered through (None: the rendered frames as they are)
+    datalink: DatalinkSpec | None = None
 
     @property
     def fx_px(self) -> float:

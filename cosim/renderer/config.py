@@ -13,7 +13,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from cosim.core.camera import CameraSpec
+from cosim.core.camera import CameraSpec, SensorSpec
 from cosim.core.limits import MIN_EXCHANGE_HZ
 from cosim.core.section import SectionContext
 from cosim.guidance.commands import GIMBAL_PITCH_DEG, GIMBAL_YAW_DEG
@@ -30,6 +30,11 @@ MAX_IN_FLIGHT = 1024
 MAX_RENDER_WORKERS = 64
 MOUNTS = ("nadir", "forward", "gimbal")  # gimbal: starts at nadir, commands point it
 CODECS = ("mp4v", "h264", "mjpg")
+#: sensor limits: vignetting's power of cos^4, the signal-to-noise ratio at
+#: mid-grey and the ISO setting (40 dB at ISO 100, 3 dB less per doubling)
+MAX_VIGNETTING = 4.0
+MAX_SNR_DB = 80.0
+MIN_ISO, MAX_ISO = 25.0, 102400.0
 @dataclass(frozen=True)
 class CamerasSpec:
     views: tuple[CameraSpec, ...]
@@ -69,7 +74,7 @@ def parse_camera(info: SectionContext, d: Any, p: P, i: int) -> CameraSpec | Non
     """One camera's node (a view of ``cameras:``, or a section's own camera such
     as the search's), ``i``-th of its list; None if a problem was reported."""
     r = info.reader(d, p, ("name", "vehicles", "mount", "stabilised", "hfov_deg", "vfov_deg",
-                           "width_px", "height_px", "rate_hz"))
+                           "width_px", "height_px", "rate_hz", "sensor"))
     name = r.string("name", f"cam{i}", pattern=NAME)
     rows = info.select(r.d.get("vehicles", "all"), p + ("vehicles",))
     mount_raw = r.d.get("mount")
@@ -114,11 +119,45 @@ def parse_camera(info: SectionContext, d: Any, p: P, i: int) -> CameraSpec | Non
     rate = r.num("rate_hz", 10.0, lo=MIN_EXCHANGE_HZ, hi=info.rates.physics_hz)
     every = _frame_every(info, rate, p + ("rate_hz",)) if rate is not None else 0
     stab = r.boolean("stabilised", False)
+    sensor = None
+    if r.d.get("sensor") is not None:
+        sensor = parse_sensor(info, r.d["sensor"], p + ("sensor",))
     if None in (name, w, h, rate) or not every:
         return None
     return CameraSpec(name=name, vehicles=tuple(rows), mount=mount, pitch_deg=pitch,
                       yaw_deg=yaw, stabilised=stab, hfov_deg=hfov, vfov_deg=vfov, width_px=w,
-                      height_px=h, rate_hz=rate, frame_every=every)
+                      height_px=h, rate_hz=rate, frame_every=every, sensor=sensor)
+
+
+def parse_sensor(info: SectionContext, d: Any, p: P) -> SensorSpec | None:
+    """A camera's ``sensor:`` (every key optional; ``sensor.SensorSpec``); None
+    if a problem was reported."""
+    from cosim.renderer.sensor import snr_of_iso
+
+    r = info.reader(d, p, ("vignetting", "snr_db", "iso"))
+    vig_raw = r.d.get("vignetting", 0.0)
+    vig: float | None = 0.0
+    if vig_raw == "cos4" or vig_raw is True:
+        vig = 1.0
+    elif vig_raw is False:
+        vig = 0.0
+    elif not isinstance(vig_raw, str):
+        vig = r.num("vignetting", 0.0, lo=0.0, hi=MAX_VIGNETTING)
+    else:
+        info.err(p + ("vignetting",), f"expected cos4, true, false or a strength 0 to "
+                                      f"{MAX_VIGNETTING:g} (the power of cos^4), "
+                                      f"got {vig_raw!r}")
+        vig = None
+    snr: float | None = None
+    which = r.one_of("snr_db", "iso")
+    if which == "iso":
+        iso = r.num("iso", None, lo=MIN_ISO, hi=MAX_ISO)
+        snr = snr_of_iso(iso) if iso is not None else None
+    elif which == "snr_db":
+        snr = r.num("snr_db", None, lo=0.0, hi=MAX_SNR_DB)
+    if vig is None or (which and snr is None):
+        return None
+    return SensorSpec(vignetting=vig, snr_db=snr)
 
 
 def parse_cameras(info: SectionContext, node: Any, path: P) -> CamerasSpec:

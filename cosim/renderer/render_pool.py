@@ -51,6 +51,7 @@ from cosim.core.camera import camera_pose
 from cosim.errors import CosimError, how_it_ended
 from cosim.renderer.frame import World, WorldSpec, render_frame
 from cosim.renderer.outputs import Stream, StreamWriter
+from cosim.renderer.sensor import Sensor
 
 #: while waiting for frames, how often the render workers' liveness is checked
 _POLL_S = 0.2
@@ -138,6 +139,8 @@ class RenderWorker:
         self.target_ids = [t.id for t in world_spec.targets]
         self.frames = {s.index: np.empty((s.camera.height_px, s.camera.width_px, 4), np.uint8)
                        for s in streams}  # one reused (BGRA) frame buffer per stream
+        self.sensors = {s.index: Sensor(s.camera, s.camera.sensor, world_spec.seed, s.row)
+                        for s in streams if s.camera.sensor is not None}
 
     def render(self, stream: int, frame_no: int, tick: int, pose6: tuple[float, ...],
                gimbal: tuple[float, float] | None = None, still: str | None = None
@@ -152,6 +155,8 @@ class RenderWorker:
         pose = camera_pose(s.camera, la, lo, alt, roll, pitch, yaw, self.world.spec.ground_alt_m,
                            gimbal)
         img, rows = render_frame(self.world, s.camera, pose, tick, self.frames[stream], stream)
+        if stream in self.sensors:  # the camera's sensor and lens; truth from the clean render
+            img = self.sensors[stream].apply(img, frame_no)
         self.writers[stream].write(frame_no, tick / self.world.spec.physics_hz, img, rows,
                                    self.target_ids)
         truth = None

@@ -331,6 +331,9 @@ def parse_search(info: Any, node: Any, path: P) -> SearchSpec | None:
         if "mount" in cam_node:
             info.err(path + ("camera", "mount"), "the search camera looks straight down "
                                                  "(nadir): leave out mount")
+        if "sensor" in cam_node:
+            info.err(path + ("camera", "sensor"), "the search camera sees by geometry, not "
+                                                  "pixels: give sensor: to a view of cameras:")
         cam_node = {"name": "search", "width_px": 1280, "height_px": 720, "rate_hz": 2.0,
                     "stabilised": True, **cam_node, "mount": "nadir",
                     "vehicles": "all"}
