@@ -175,6 +175,7 @@ BUILTIN_SECTIONS: dict[str, str] = {
     "sweep": "cosim.sweep.section:SWEEP",
     "obstacles": "cosim.world.sections:OBSTACLES",
     "sun": "cosim.world.sections:SUN",
+    "atmosphere": "cosim.world.sections:ATMOSPHERE",
     "search": "cosim.search.section:SEARCH",
 }
 

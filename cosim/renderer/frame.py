@@ -31,6 +31,8 @@ from cosim.core.camera import (
 )
 from cosim.core.geo import LocalFrame, geodetic_to_ecef
 from cosim.renderer.ground import GroundTexture
+from cosim.renderer.haze import Haze
+from cosim.renderer.shadows import draw_shadows, shade_table
 from cosim.renderer.targets import (
     FACE_IDX,
     FACE_NORMALS,
@@ -45,6 +47,7 @@ from cosim.renderer.targets import (
     to_local,
 )
 from cosim.renderer.truth import ground_truth
+from cosim.world.atmosphere import AtmosphereSpec
 from cosim.world.ground import GroundSpec
 from cosim.world.obstacles import signed_area
 from cosim.world.sun import DEFAULT as DEFAULT_SUN
@@ -75,6 +78,8 @@ class WorldSpec:
     obstacles: tuple[Any, ...] = ()
     #: where the sun stands: it shades every target's and obstacle's faces
     sun: SunSpec = DEFAULT_SUN
+    #: the haze between the camera and what it sees (None: clear air)
+    atmosphere: AtmosphereSpec | None = None
 
 
 #: obstacles' colour (RGB): concrete grey
@@ -120,6 +125,9 @@ class World:
         #: unit vector toward the sun, north-east-down (a frame's local axes turn
         #: against the origin's by 0.01 deg a km: far below a shade step)
         self.sun_l = spec.sun.to_sun_ned()
+        self.haze = Haze(spec.atmosphere) if spec.atmosphere is not None else None
+        #: the ground's darkening in shade (cv2.LUT), if the targets cast shadows
+        self.shade_table = shade_table(spec.sun.elevation_deg) if spec.sun.shadows else None
 
     def view(self, cam: CameraSpec) -> _View:
         """What every frame of ``cam`` shares, built once."""
@@ -141,6 +149,10 @@ class World:
             ids[y0:y1, x0:x1] = 0
         dirty[:] = [w, h, 0, 0]
         return ids, dirty
+
+    def last_ids(self, h: int, w: int) -> np.ndarray:
+        """The target-id image of the last h x w frame drawn (valid until the next)."""
+        return self._ids[(h, w)][0]
 
     def pixel_grid(self, y0: int, y1: int, w: int, rows: int) -> np.ndarray:
         """3 x (rows * 9) homogeneous image points: 9 columns across the width
@@ -231,8 +243,11 @@ def _sky(h: int, w: int) -> np.ndarray:
 
 
 def _draw_ground(world: World, cam: CameraSpec, pose: Pose, view: _View,
-                 img: np.ndarray, slot: Hashable) -> None:
-    """Draw the sky and the ground into ``img`` (every pixel is written)."""
+                 img: np.ndarray, slot: Hashable
+                 ) -> tuple[np.ndarray, list[tuple[int, int]], np.ndarray | None]:
+    """Draw the sky and the ground into ``img`` (every pixel is written); return
+    the image -> L ground homography, the bands of rows ``[y0, y1)`` holding
+    ground and the ground mask (None: all of them ground) for the haze."""
     h_img, w_img = cam.height_px, cam.width_px
     H = ground_homography(view.K_inv, pose)
     max_r = world.spec.ground.max_range_m
@@ -244,7 +259,7 @@ def _draw_ground(world: World, cam: CameraSpec, pose: Pose, view: _View,
     near_ok = (wq > 1e-9) & (horiz <= max_r * np.maximum(wq, 1e-12) + 1e-9)
     if not near_ok.any():
         np.copyto(img, _sky_image(world, h_img, w_img))  # all sky
-        return
+        return H, [], None
     A = _l_to_scenario_ne(world, pose)
     all_ground = bool(near_ok.all())
     mask = None
@@ -260,6 +275,7 @@ def _draw_ground(world: World, cam: CameraSpec, pose: Pose, view: _View,
     levels = [level_for(g) if math.isfinite(g) else -1
               for g in np.minimum(gsd_rows[:-1], gsd_rows[1:]).tolist()]
     ground = img if mask is None else world.scratch("ground", h_img, w_img, 4)
+    rows: list[tuple[int, int]] = []  # the bands of rows with ground
     s = 0
     while s < STRIPS:
         e = s
@@ -268,11 +284,30 @@ def _draw_ground(world: World, cam: CameraSpec, pose: Pose, view: _View,
         y0, y1 = bounds[s], bounds[e + 1]
         if levels[s] >= 0:
             _draw_band(world, H, A, max_r, y0, y1, w_img, levels[s], ground[y0:y1], slot)
+            rows.append((y0, y1))
         else:  # no ground in the band (sky where the mask has none)
             ground[y0:y1] = _sky_image(world, h_img, w_img)[y0:y1]
         s = e + 1
     if mask is not None:
         cv2.copyTo(ground, mask, img)
+    return H, rows, mask
+
+
+def _haze_ground(world: World, haze: Haze, pose: Pose, img: np.ndarray, H: np.ndarray,
+                 bands: list[tuple[int, int]], mask: np.ndarray | None) -> None:
+    """Haze the ground of ``img`` (``_draw_ground``'s bands and mask; the sky
+    stays as it is), once it is drawn and shaded, before the targets."""
+    max_r = world.spec.ground.max_range_m
+    if mask is None:
+        haze.ground(img, H, pose, max_r, bands)
+        return
+    h_img, w_img = img.shape[:2]
+    hazy = world.scratch("hazy", h_img, w_img, 4)
+    for y0, y1 in bands:
+        hazy[y0:y1] = img[y0:y1]
+    haze.ground(hazy, H, pose, max_r, bands)
+    for y0, y1 in bands:
+        cv2.copyTo(hazy[y0:y1], mask[y0:y1], img[y0:y1])
 
 
 def _ground_mask(world: World, H: np.ndarray, max_r: float, h_img: int, w_img: int
@@ -421,7 +456,7 @@ def _target_faces(pose: Pose, t: TargetSpec, origin_l: np.ndarray, time_s: float
 
 
 def _draw_smoke(K: np.ndarray, pose: Pose, t: TargetSpec, origin_l: np.ndarray, time_s: float,
-                seed: int, img: np.ndarray) -> None:
+                seed: int, img: np.ndarray, haze: Haze | None = None) -> None:
     h_img, w_img = img.shape[:2]
     for centre_t, radius, alpha in smoke_puffs(t, time_s, seed):
         c_c = to_camera(pose, to_local(t, origin_l, centre_t[None, :]))[0]
@@ -439,7 +474,8 @@ def _draw_smoke(K: np.ndarray, pose: Pose, t: TargetSpec, origin_l: np.ndarray, 
                    int(round(r_px * 16)), 1, -1, cv2.LINE_8, SHIFT)
         m = disc.astype(bool)
         bgr = roi[..., :3]  # the alpha channel stays opaque
-        bgr[m] = (bgr[m] * (1.0 - alpha) + _SMOKE_BGR * alpha).astype(np.uint8)
+        smoke = _SMOKE_BGR if haze is None else haze.colour(_SMOKE_BGR, float(np.linalg.norm(c_c)))
+        bgr[m] = (bgr[m] * (1.0 - alpha) + smoke * alpha).astype(np.uint8)
 
 
 def _obstacle_faces(world: World, pose: Pose
@@ -498,7 +534,7 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
     if out is None:
         out = np.empty((h_img, w_img, 4), dtype=np.uint8)
     img = out
-    _draw_ground(world, cam, pose, view, img, stream)
+    H, ground_rows, ground_mask = _draw_ground(world, cam, pose, view, img, stream)
     ids, dirty = world.ids_buffer(h_img, w_img)
     time_s = tick / world.spec.physics_hz
     seed = world.spec.seed
@@ -510,6 +546,12 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
         specs = tuple(t.at(time_s) for t in specs)
         offsets = offsets.copy()
         offsets[world.growing] = probe_offsets([specs[k] for k in world.growing])
+    if world.shade_table is not None and len(specs):
+        draw_shadows(K, pose, specs, origins, world.sun_l, time_s, seed, img,
+                     world.shade_table)
+    haze = world.haze
+    if haze is not None and ground_rows:  # the shaded ground, before the targets
+        _haze_ground(world, haze, pose, img, H, ground_rows, ground_mask)
     probe_c = (origins[:, None, :] + offsets - pose.c_l) @ pose.R_cl.T  # (T, 9, 3)
     box_c = probe_c[:, :8]
     visible = ~_culled(view.planes, probe_c)
@@ -518,7 +560,9 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
                                    world.sun_l))
     faces.extend(_obstacle_faces(world, pose))
     faces.sort(key=lambda f: -f[0])  # painter's order: far to near
-    for _, v_c, bgra, tid in faces:
+    for depth_m, v_c, bgra, tid in faces:
+        if haze is not None:  # a flat face: hazed at its centre's distance
+            bgra = haze.bgra(bgra, depth_m)
         pts = _fixed(project(K, v_c))
         if tid:
             cv2.fillConvexPoly(img, pts, bgra, cv2.LINE_8, SHIFT)
@@ -532,6 +576,6 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
                     min(h_img, max(dirty[3], int(hi_px[1])))]
     for k, t in enumerate(specs):
         if visible[k] and t.kind == "fire":
-            _draw_smoke(K, pose, t, origins[k], time_s, seed + k, img)
+            _draw_smoke(K, pose, t, origins[k], time_s, seed + k, img, haze)
     rows = ground_truth(K, view.image_quad, cam, box_c, img, ids, visible)
     return img, rows

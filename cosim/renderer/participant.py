@@ -115,7 +115,8 @@ class CameraParticipant:
         scn = ctx.scenario
         ws = WorldSpec(scn.origin.lat_deg, scn.origin.lon_deg, scn.origin.ground_alt_m,
                        int(scn.seed), float(ctx.physics_hz), scn.world.ground,
-                       scn.world.targets, scn.world.obstacles, scn.world.sun)
+                       scn.world.targets, scn.world.obstacles, scn.world.sun,
+                       atmosphere=scn.world.atmosphere)
         n = self.spec.render_workers
         if n is None:
             n = min(len(self.streams), os.cpu_count() or 1)

@@ -1,5 +1,5 @@
-"""The world (``World``): the ground, targets, obstacles and sun every
-part reads, put together from what the scenario's sections add
+"""The world (``World``): the ground, targets, obstacles, sun and
+atmosphere every part reads, put together from what the scenario's sections add
 (``World.assemble``)."""
 
 from __future__ import annotations
@@ -8,6 +8,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from cosim.world.atmosphere import AtmosphereSpec
 from cosim.world.ground import GroundSpec
 from cosim.world.obstacles import Obstacle
 from cosim.world.sun import DEFAULT as DEFAULT_SUN
@@ -15,9 +16,9 @@ from cosim.world.sun import SunSpec
 from cosim.world.targets import TargetSpec
 
 #: the kinds of things a section may add to the world
-KINDS = ("ground", "targets", "obstacles", "sun")
+KINDS = ("ground", "targets", "obstacles", "sun", "atmosphere")
 #: the kinds a world holds one of (the others are lists of things with ids)
-SINGLE = ("ground", "sun")
+SINGLE = ("ground", "sun", "atmosphere")
 
 
 @dataclass(frozen=True)
@@ -28,6 +29,8 @@ class World:
     targets: tuple[TargetSpec, ...] = ()
     obstacles: tuple[Obstacle, ...] = ()
     sun: SunSpec = DEFAULT_SUN
+    #: the haze (None: clear air)
+    atmosphere: AtmosphereSpec | None = None
 
     @staticmethod
     def assemble(adds: Sequence[tuple[str, Mapping[str, Sequence[Any]]]]
@@ -62,8 +65,9 @@ class World:
             if len(items) > 1:
                 problems.append((adds[-1][0], f"the world has one {kind}; another section "
                                               "gives one too"))
-        grounds, suns = single["ground"], single["sun"]
+        grounds, suns, airs = single["ground"], single["sun"], single["atmosphere"]
         world = World(ground=grounds[0] if grounds else GroundSpec(), targets=tuple(targets),
-                      obstacles=tuple(obstacles), sun=suns[0] if suns else DEFAULT_SUN)
+                      obstacles=tuple(obstacles), sun=suns[0] if suns else DEFAULT_SUN,
+                      atmosphere=airs[0] if airs else None)
         return world, problems
 

@@ -1,8 +1,8 @@
-"""The world's scenario sections: ``ground:``, ``targets:``, ``obstacles:``
-and ``sun:``. Each parses its key (with ``ground``, ``targets``,
-``obstacles`` and ``sun``) and adds what it parsed to the world. The parsers are
-imported when a scenario is read, not when the section table is, so that
-``cosim --help`` does not load numpy."""
+"""The world's scenario sections: ``ground:``, ``targets:``, ``obstacles:``,
+``sun:`` and ``atmosphere:``. Each parses its key (with ``ground``,
+``targets``, ``obstacles``, ``sun`` and ``atmosphere``) and adds what it
+parsed to the world. The parsers are imported when a scenario is read, not
+when the section table is, so that ``cosim --help`` does not load numpy."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 from cosim.core.section import P, Section, SectionContext
 
 if TYPE_CHECKING:
+    from cosim.world.atmosphere import AtmosphereSpec
     from cosim.world.ground import GroundSpec
     from cosim.world.obstacles import Obstacle
     from cosim.world.sun import SunSpec
@@ -69,7 +70,21 @@ class SunSection(Section):
         return {"sun": (parsed,)}
 
 
+class AtmosphereSection(Section):
+    key = "atmosphere"
+    description = "haze: the cameras see through air of a given visibility"
+
+    def parse(self, info: SectionContext, node: Any, path: P) -> AtmosphereSpec | None:
+        from cosim.world.atmosphere import parse_atmosphere
+
+        return parse_atmosphere(info, node, path)
+
+    def world(self, parsed: AtmosphereSpec) -> dict[str, tuple[AtmosphereSpec, ...]]:
+        return {"atmosphere": (parsed,)}
+
+
 GROUND = GroundSection()
 TARGETS = TargetsSection()
 OBSTACLES = ObstaclesSection()
 SUN = SunSection()
+ATMOSPHERE = AtmosphereSection()

@@ -1,0 +1,126 @@
+"""Haze in camera frames: the atmosphere's law (``cosim.world.atmosphere``)
+applied to each drawn pixel at its distance from the camera, in linear light.
+
+A colour ``L0`` (sRGB linearised as the ground truth's contrast does it,
+``(v / 255) ** 2.2``) seen at distance ``d`` becomes ``L = L0 t + A (1 - t)``,
+``t = exp(-3.912 d / V)``, ``A`` the airlight. Targets' and obstacles' faces
+are flat, so each face's colour is hazed once at its own distance (its
+centre's, the one that orders the faces) before it is filled; smoke puffs
+likewise at theirs. The ground is hazed where it is drawn, before anything
+is drawn over it, in tiles of ``TILE_ROWS x TILE_COLS`` pixels, each with the
+transmittance of the ray through its centre to the ground plane (a ray that
+misses the ground, or meets it beyond the ground's range, counts at that
+range) rounded to one of ``LEVELS`` steps: one table lookup (``cv2.LUT``) per
+run of tiles of one step along a row of tiles. ``tile_transmittance`` gives
+those values; the tests hold them to the exact per-pixel ones. The sky is
+left as it is.
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+
+from cosim.core.camera import Pose
+from cosim.world.atmosphere import EXTINCTION, AtmosphereSpec
+
+#: sRGB's linearisation as the ground truth's contrast does it (truth.py)
+GAMMA = 2.2
+#: transmittance steps of the ground's tables: step k holds t from k / LEVELS
+#: to (k + 1) / LEVELS and hazes with their middle, within 1 / (2 LEVELS)
+LEVELS = 128
+#: the ground's tiles (pixels), each hazed with one transmittance
+TILE_ROWS, TILE_COLS = 4, 32
+
+
+class Haze:
+    """The per-process tables of one atmosphere (built once, ~40 ms)."""
+
+    def __init__(self, spec: AtmosphereSpec) -> None:
+        self.spec = spec
+        self.k_per_m = EXTINCTION / (1000.0 * spec.visibility_km)
+        self.air_bgr = (np.array(spec.color_rgb[::-1], dtype=float) / 255.0) ** GAMMA
+        lin = (np.arange(256) / 255.0) ** GAMMA
+        t = (np.arange(LEVELS) + 0.5) / LEVELS
+        hazy = t[:, None, None] * lin[None, :, None] + (1.0 - t)[:, None, None] * self.air_bgr
+        tables = np.empty((LEVELS, 1, 256, 4), np.uint8)
+        tables[:, 0, :, :3] = np.rint(255.0 * hazy ** (1.0 / GAMMA))
+        tables[..., 3] = np.arange(256)  # alpha stays as it is
+        self.tables = tables
+
+    def colour(self, bgr: tuple[float, ...] | np.ndarray, distance_m: float) -> np.ndarray:
+        """A BGR colour (0-255, floats) seen through ``distance_m`` of haze."""
+        t = math.exp(-self.k_per_m * distance_m)
+        lin = (np.asarray(bgr[:3], dtype=float) / 255.0) ** GAMMA
+        out: np.ndarray = 255.0 * (lin * t + self.air_bgr * (1.0 - t)) ** (1.0 / GAMMA)
+        return out
+
+    def bgra(self, bgra: tuple[int, int, int, int], distance_m: float
+             ) -> tuple[int, int, int, int]:
+        """A face's fill colour (BGRA) seen through ``distance_m`` of haze."""
+        b, g, r = (int(c) for c in np.rint(self.colour(bgra, distance_m)))
+        return b, g, r, bgra[3]
+
+    def ground(self, img: np.ndarray, H: np.ndarray, pose: Pose, max_r_m: float,
+               bands: list[tuple[int, int]]) -> None:
+        """Haze the ground drawn in ``img`` (BGRA) in the rows of ``bands``
+        (``[y0, y1)`` each), in place. ``H``: image -> L ground (north, east)
+        (``cosim.core.camera.ground_homography``), ``max_r_m`` the ground's range."""
+        tables = self.tables
+        for y0, y1, x0, x1, level in self.pieces(H, pose, max_r_m, bands, img.shape[1]):
+            roi = img[y0:y1, x0:x1]
+            cv2.LUT(roi, tables[level], dst=roi)
+
+    def pieces(self, H: np.ndarray, pose: Pose, max_r_m: float, bands: list[tuple[int, int]],
+               w: int) -> list[tuple[int, int, int, int, int]]:
+        """The ground's rectangles ``(y0, y1, x0, x1, level)`` each hazed with
+        one transmittance ``(level + 0.5) / LEVELS``: runs of tiles of one level
+        along a row of tiles, joined with the row above when it has the same
+        runs."""
+        rows = [(y, min(y + TILE_ROWS, y1)) for y0, y1 in bands
+                for y in range(y0, y1, TILE_ROWS)]
+        if not rows:
+            return []
+        t = tile_transmittance(self.k_per_m, H, pose, max_r_m, rows, w)
+        levels = np.minimum((t * LEVELS).astype(np.int64), LEVELS - 1)
+        n_r, n_c = levels.shape
+        cut = np.ones((n_r, n_c + 1), bool)  # a run starts (or the row ends) here
+        cut[:, 1:-1] = levels[:, 1:] != levels[:, :-1]
+        edges = [min(c * TILE_COLS, w) for c in range(n_c + 1)]
+        out: list[tuple[int, int, int, int, int]] = []
+        above: dict[tuple[int, int, int], int] = {}  # the previous row's runs: place in out
+        for (y0, y1), starts, lv in zip(rows, cut.tolist(), levels.tolist()):
+            at = [c for c, s in enumerate(starts) if s]
+            here = {}
+            for c0, c1 in zip(at, at[1:]):
+                run = (edges[c0], edges[c1], lv[c0])
+                k = above.get(run)
+                if k is not None and out[k][1] == y0:  # the same run above: grow it
+                    out[k] = (out[k][0], y1) + run
+                else:
+                    k = len(out)
+                    out.append((y0, y1) + run)
+                here[run] = k
+            above = here
+        return out
+
+
+def tile_transmittance(k_per_m: float, H: np.ndarray, pose: Pose, max_r_m: float,
+                       rows: list[tuple[int, int]], w: int) -> np.ndarray:
+    """(len(rows), tiles across) transmittance ``exp(-k d)`` of the ground at
+    each tile's centre: rows ``[y0, y1)`` of tiles, ``TILE_COLS`` wide across
+    an image ``w`` pixels wide (the last tile may be narrower)."""
+    xs = np.array([(x + min(x + TILE_COLS, w) - 1) / 2.0 for x in range(0, w, TILE_COLS)])
+    ys = np.array([(y0 + y1 - 1) / 2.0 for y0, y1 in rows])
+    gx, gy = np.meshgrid(xs, ys)
+    q = H @ np.stack([gx.ravel(), gy.ravel(), np.ones(gx.size)])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ne = q[:2] / q[2]
+    far = (q[2] <= 1e-12) | ~(np.hypot(ne[0], ne[1]) <= max_r_m)
+    c = pose.c_l
+    rho = np.where(far, max_r_m, np.hypot(ne[0] - c[0], ne[1] - c[1]))
+    d = np.sqrt(rho * rho + pose.height_m ** 2)
+    out: np.ndarray = np.exp(-k_per_m * d).reshape(gx.shape)
+    return out
