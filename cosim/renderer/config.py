@@ -74,7 +74,7 @@ def parse_camera(info: SectionContext, d: Any, p: P, i: int) -> CameraSpec | Non
     """One camera's node (a view of ``cameras:``, or a section's own camera such
     as the search's), ``i``-th of its list; None if a problem was reported."""
     r = info.reader(d, p, ("name", "vehicles", "mount", "stabilised", "hfov_deg", "vfov_deg",
-                           "width_px", "height_px", "rate_hz", "sensor"))
+                           "width_px", "height_px", "rate_hz", "sensor", "datalink"))
     name = r.string("name", f"cam{i}", pattern=NAME)
     rows = info.select(r.d.get("vehicles", "all"), p + ("vehicles",))
     mount_raw = r.d.get("mount")
@@ -122,11 +122,19 @@ def parse_camera(info: SectionContext, d: Any, p: P, i: int) -> CameraSpec | Non
     sensor = None
     if r.d.get("sensor") is not None:
         sensor = parse_sensor(info, r.d["sensor"], p + ("sensor",))
+    link = None
+    if r.d.get("datalink") is not None:
+        from cosim.renderer.datalink import parse_datalink
+
+        link = parse_datalink(info, r.d["datalink"], p + ("datalink",), rate if every else None)
+        if link is None:
+            return None
     if None in (name, w, h, rate) or not every:
         return None
     return CameraSpec(name=name, vehicles=tuple(rows), mount=mount, pitch_deg=pitch,
                       yaw_deg=yaw, stabilised=stab, hfov_deg=hfov, vfov_deg=vfov, width_px=w,
-                      height_px=h, rate_hz=rate, frame_every=every, sensor=sensor)
+                      height_px=h, rate_hz=rate, frame_every=every, sensor=sensor,
+                      datalink=link)
 
 
 def parse_sensor(info: SectionContext, d: Any, p: P) -> SensorSpec | None:

@@ -29,7 +29,8 @@ from typing import Any
 import numpy as np
 
 from cosim.core.camera import CameraSpec
-from cosim.renderer.truth import GT_COLUMNS
+from cosim.renderer.datalink import DELIVERED_COLUMNS, Downlink
+from cosim.renderer.truth import GT_COLUMNS, delivered
 from cosim.renderer.video import open_video
 
 log = logging.getLogger(__name__)
@@ -65,30 +66,60 @@ class StreamWriter:
     def __init__(self, out_dir: Path, stream: Stream, codec: str, digest: bool) -> None:
         self.s = stream
         cam = stream.camera
-        self.video = open_video(str(out_dir / stream.video), codec, cam.rate_hz, cam.width_px,
-                                cam.height_px)
+        self.link = None  # the camera's downlink, if any: it writes the video
+        if cam.datalink is not None:
+            self.link = Downlink(str(out_dir / stream.video), cam.datalink, cam.width_px,
+                                 cam.height_px)
+        else:
+            self.video = open_video(str(out_dir / stream.video), codec, cam.rate_hz,
+                                    cam.width_px, cam.height_px)
         self.gt_file = open(out_dir / stream.ground_truth, "w", newline="")  # noqa: SIM115
         self.gt = csv.writer(self.gt_file)
-        self.gt.writerow(GT_COLUMNS)
+        self.gt.writerow(GT_COLUMNS + (DELIVERED_COLUMNS if self.link else ()))
         self.gt_file.flush()
         self.frames = 0
         self.hash = hashlib.sha256() if digest else None
 
     def write(self, frame_no: int, time_s: float, img: np.ndarray,
-              rows: list[dict[str, Any]], target_ids: list[str]) -> None:
-        self.video.write(img)
+              rows: list[dict[str, Any]], target_ids: list[str],
+              ids: np.ndarray | None = None) -> None:
+        """One frame and its ground truth; ``ids`` (the frame's target-id image)
+        is needed with a downlink, which measures the delivered frame with it."""
         if self.hash is not None:
             self.hash.update(img.tobytes())
         head = [frame_no, f"{time_s:.6f}", self.s.vehicle, self.s.camera.name]
-        self.gt.writerows([*head, tid, *[_fmt(r[c]) for c in _GT_VALUES]]
-                          for tid, r in zip(target_ids, rows))
+        if self.link is None:
+            self.video.write(img)
+            self.gt.writerows([*head, tid, *[_fmt(r[c]) for c in _GT_VALUES]]
+                              for tid, r in zip(target_ids, rows))
+        else:
+            self._deliver(frame_no, time_s, img, rows, target_ids, ids, head)
         self.gt_file.flush()
         self.frames += 1
 
+    def _deliver(self, frame_no: int, time_s: float, img: np.ndarray,
+                 rows: list[dict[str, Any]], target_ids: list[str], ids: np.ndarray | None,
+                 head: list[Any]) -> None:
+        """Through the downlink: every ``every``-th frame encoded, decoded and
+        measured; the others' delivered columns empty."""
+        link = self.s.camera.datalink
+        assert self.link is not None and link is not None
+        extra: list[list[str]] = [["", "", ""]] * len(rows)
+        if frame_no % link.every == 0:
+            if ids is None:
+                raise ValueError("a downlink's frame needs its target-id image")
+            got = self.link.send(img)
+            at = f"{time_s + link.latency_ms / 1000:.6f}"
+            extra = [[at, str(n), _fmt(c)] for n, c in delivered(rows, img, got, ids)]
+        self.gt.writerows([*head, tid, *[_fmt(r[c]) for c in _GT_VALUES], *x]
+                          for tid, r, x in zip(target_ids, rows, extra))
+
     def close(self) -> dict[str, Any]:
-        self.video.release()
+        link = self.link.close() if self.link is not None else {}
+        if self.link is None:
+            self.video.release()
         self.gt_file.close()
-        return {"frames": self.frames,
+        return {"frames": self.frames, **link,
                 **({"frames_sha256": self.hash.hexdigest()} if self.hash is not None else {})}
 
 

@@ -157,8 +157,9 @@ class RenderWorker:
         img, rows = render_frame(self.world, s.camera, pose, tick, self.frames[stream], stream)
         if stream in self.sensors:  # the camera's sensor and lens; truth from the clean render
             img = self.sensors[stream].apply(img, frame_no)
+        ids = None if s.camera.datalink is None else self.world.last_ids(*img.shape[:2])
         self.writers[stream].write(frame_no, tick / self.world.spec.physics_hz, img, rows,
-                                   self.target_ids)
+                                   self.target_ids, ids)
         truth = None
         if still is not None:
             if not cv2.imwrite(str(self.out_dir / still), cv2.cvtColor(img, cv2.COLOR_BGRA2BGR)):

@@ -29,6 +29,7 @@ import cv2
 import numpy as np
 
 from cosim.core.camera import NEAR_M, CameraSpec, clip_near, project
+from cosim.renderer.sensor import distort_truth
 from cosim.renderer.targets import FACE_IDX
 
 GT_COLUMNS = ("frame", "time_s", "vehicle", "camera", "target", "in_view", "fully_in_view",
@@ -37,6 +38,7 @@ GT_COLUMNS = ("frame", "time_s", "vehicle", "camera", "target", "in_view", "full
               "pixels_on_target", "range_m", "contrast")
 _LIN = ((np.arange(256) / 255.0) ** 2.2).astype(np.float32)  # sRGB -> linear (approx.)
 _LIN_BGRA = np.repeat(_LIN[None, :, None], 4, axis=2)  # cv2.LUT's table for BGRA pixels
+_REC709_BGRA = np.array([[0.0722, 0.7152, 0.2126, 0.0]], np.float32)  # linear BGRA -> Y
 
 
 def _mean_luminance(bgra: np.ndarray, mask: np.ndarray) -> float:
@@ -118,25 +120,64 @@ def ground_truth(K: np.ndarray, image_quad: np.ndarray, cam: CameraSpec, box_c: 
             row["fully_in_view"] = int(inside_bbox and front_l[k])
         if row["in_view"]:
             _pixels(row, img, ids, k + 1, x0, y0, x1, y1)
+    if cam.sensor is not None and (cam.sensor.k1 or cam.sensor.k2):  # where the lens puts it
+        distort_truth(rows, cam, uv_all, front, image_quad)
     return rows
+
+
+def _regions(ids: np.ndarray, tid: int, x0: float, y0: float, x1: float, y1: float
+             ) -> tuple[tuple[slice, slice], np.ndarray, tuple[slice, slice], np.ndarray]:
+    """Target ``tid``'s bounding rectangle (bbox x0..y1 clipped to the image) and
+    its pixels there (uint8 mask), and the background ring's rectangle and mask
+    (the rectangle grown by half its size, at least 4 px, minus the rectangle
+    and any target's pixels)."""
+    h_img, w_img = ids.shape
+    bx0, by0 = max(0, math.floor(x0)), max(0, math.floor(y0))
+    bx1, by1 = min(w_img, math.ceil(x1) + 1), min(h_img, math.ceil(y1) + 1)
+    sub = (ids[by0:by1, bx0:bx1] == tid).view(np.uint8)
+    m = max(4, int(0.5 * max(bx1 - bx0, by1 - by0)))
+    rx0, ry0 = max(0, bx0 - m), max(0, by0 - m)
+    rx1, ry1 = min(w_img, bx1 + m), min(h_img, by1 + m)
+    ring = (ids[ry0:ry1, rx0:rx1] == 0).view(np.uint8)
+    ring[by0 - ry0:by1 - ry0, bx0 - rx0:bx1 - rx0] = 0
+    return (slice(by0, by1), slice(bx0, bx1)), sub, (slice(ry0, ry1), slice(rx0, rx1)), ring
 
 
 def _pixels(row: dict[str, Any], img: np.ndarray, ids: np.ndarray, tid: int, x0: float,
             y0: float, x1: float, y1: float) -> None:
     """``pixels_on_target`` and ``contrast`` of target ``tid`` (bbox x0..y1)."""
-    h_img, w_img = ids.shape
-    bx0, by0 = max(0, math.floor(x0)), max(0, math.floor(y0))
-    bx1, by1 = min(w_img, math.ceil(x1) + 1), min(h_img, math.ceil(y1) + 1)
-    sub = (ids[by0:by1, bx0:bx1] == tid).view(np.uint8)
+    box, sub, around, ring = _regions(ids, tid, x0, y0, x1, y1)
     n_px = cv2.countNonZero(sub)
     row["pixels_on_target"] = n_px
-    if n_px:
-        m = max(4, int(0.5 * max(bx1 - bx0, by1 - by0)))
-        rx0, ry0 = max(0, bx0 - m), max(0, by0 - m)
-        rx1, ry1 = min(w_img, bx1 + m), min(h_img, by1 + m)
-        ring = (ids[ry0:ry1, rx0:rx1] == 0).view(np.uint8)
-        ring[by0 - ry0:by1 - ry0, bx0 - rx0:bx1 - rx0] = 0
-        if cv2.countNonZero(ring):
-            y_t = _mean_luminance(img[by0:by1, bx0:bx1], sub)
-            y_b = _mean_luminance(img[ry0:ry1, rx0:rx1], ring)
-            row["contrast"] = (y_t - y_b) / y_b if y_b > 0 else None
+    if n_px and cv2.countNonZero(ring):
+        y_t = _mean_luminance(img[box], sub)
+        y_b = _mean_luminance(img[around], ring)
+        row["contrast"] = (y_t - y_b) / y_b if y_b > 0 else None
+
+
+def delivered(rows: list[dict[str, Any]], sent: np.ndarray, got: np.ndarray, ids: np.ndarray
+              ) -> list[tuple[int, float | None]]:
+    """Per target (``rows``: the frame's ground truth): ``pixels_on_target`` and
+    ``contrast`` measured on ``got``, the frame as the downlink delivered it
+    (BGRA), with the target's pixels and ring of the frame as drawn (``ids``).
+    A delivered pixel counts as the target's if its luminance is nearer the
+    mean luminance of the target's pixels in ``sent`` (the frame handed to the
+    encoder) than that of its ring there; the contrast is ``contrast``'s
+    formula on ``got``'s pixels. Targets out of view: 0 and None."""
+    out: list[tuple[int, float | None]] = []
+    for k, row in enumerate(rows):
+        if not row["in_view"] or not row["pixels_on_target"]:
+            out.append((0, None))
+            continue
+        box, sub, around, ring = _regions(ids, k + 1, row["bbox_x0_px"], row["bbox_y0_px"],
+                                          row["bbox_x1_px"], row["bbox_y1_px"])
+        if not cv2.countNonZero(ring):
+            out.append((0, None))
+            continue
+        y_t, y_b = _mean_luminance(sent[box], sub), _mean_luminance(sent[around], ring)
+        g_t, g_b = _mean_luminance(got[box], sub), _mean_luminance(got[around], ring)
+        lum = cv2.transform(cv2.LUT(got[box], _LIN_BGRA), _REC709_BGRA)
+        nearer = np.abs(lum - y_t) < np.abs(lum - y_b)
+        out.append((int(np.count_nonzero(nearer & sub.view(bool))),
+                    (g_t - g_b) / g_b if g_b > 0 else None))
+    return out
