@@ -4,8 +4,8 @@ Writes docs/images/sensor_off_on.png:
 
     python examples/sensor_frames.py [OUT.png] [--sensor YAML]
 
-``--sensor`` is the camera's ``sensor:`` mapping (default: natural cos^4
-vignetting and 20 dB at mid-grey, on an 80 degree lens).
+``--sensor`` is the camera's ``sensor:`` mapping (default: barrel distortion,
+natural cos^4 vignetting and 20 dB at mid-grey, on an 80 degree lens).
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from cosim.scenario import parse_scenario
 
 REPO = Path(__file__).resolve().parent.parent
 SCENARIO = REPO / "scenarios/cameras/flyover.yaml"
-DEFAULT = "{vignetting: cos4, snr_db: 20}"
+DEFAULT = "{distortion: {k1: -0.15}, vignetting: cos4, snr_db: 20}"
 
 
 def camera(sensor_yaml: str) -> tuple[CameraSpec, object]:

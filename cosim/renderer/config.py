@@ -35,6 +35,8 @@ CODECS = ("mp4v", "h264", "mjpg")
 MAX_VIGNETTING = 4.0
 MAX_SNR_DB = 80.0
 MIN_ISO, MAX_ISO = 25.0, 102400.0
+#: radial distortion's k1, k2 at most this in size (and never folding the image)
+MAX_K = 1.0
 @dataclass(frozen=True)
 class CamerasSpec:
     views: tuple[CameraSpec, ...]
@@ -121,7 +123,8 @@ def parse_camera(info: SectionContext, d: Any, p: P, i: int) -> CameraSpec | Non
     stab = r.boolean("stabilised", False)
     sensor = None
     if r.d.get("sensor") is not None:
-        sensor = parse_sensor(info, r.d["sensor"], p + ("sensor",))
+        r_max = math.hypot(math.tan(math.radians(hfov) / 2), math.tan(math.radians(vfov) / 2))
+        sensor = parse_sensor(info, r.d["sensor"], p + ("sensor",), r_max)
     link = None
     if r.d.get("datalink") is not None:
         from cosim.renderer.datalink import parse_datalink
@@ -137,12 +140,26 @@ def parse_camera(info: SectionContext, d: Any, p: P, i: int) -> CameraSpec | Non
                       datalink=link)
 
 
-def parse_sensor(info: SectionContext, d: Any, p: P) -> SensorSpec | None:
-    """A camera's ``sensor:`` (every key optional; ``sensor.SensorSpec``); None
-    if a problem was reported."""
-    from cosim.renderer.sensor import snr_of_iso
+def parse_sensor(info: SectionContext, d: Any, p: P, r_max: float) -> SensorSpec | None:
+    """A camera's ``sensor:`` (every key optional; ``sensor.SensorSpec``), for an
+    image whose corner lies ``r_max`` from its centre in normalised
+    coordinates; None if a problem was reported."""
+    from cosim.renderer.sensor import folds_at, snr_of_iso
 
-    r = info.reader(d, p, ("vignetting", "snr_db", "iso"))
+    r = info.reader(d, p, ("vignetting", "snr_db", "iso", "distortion"))
+    k1: float | None = 0.0
+    k2: float | None = 0.0
+    if r.has("distortion"):
+        dr = info.reader(r.d["distortion"], p + ("distortion",), ("k1", "k2"))
+        k1 = dr.num("k1", 0.0, lo=-MAX_K, hi=MAX_K)
+        k2 = dr.num("k2", 0.0, lo=-MAX_K, hi=MAX_K)
+        if k1 is not None and k2 is not None and (r_fold := folds_at(k1, k2, r_max)):
+            info.err(p + ("distortion",),
+                     f"k1 {k1:g}, k2 {k2:g} fold the image: the distorted radius stops growing "
+                     f"at r = {r_fold:.3f}, inside the image's corner at r = {r_max:.3f} "
+                     f"(normalised; 1 + 3 k1 r^2 + 5 k2 r^4 must stay above 0 up to it); "
+                     f"use smaller k1, k2")
+            k1 = None
     vig_raw = r.d.get("vignetting", 0.0)
     vig: float | None = 0.0
     if vig_raw == "cos4" or vig_raw is True:
@@ -163,9 +180,9 @@ def parse_sensor(info: SectionContext, d: Any, p: P) -> SensorSpec | None:
         snr = snr_of_iso(iso) if iso is not None else None
     elif which == "snr_db":
         snr = r.num("snr_db", None, lo=0.0, hi=MAX_SNR_DB)
-    if vig is None or (which and snr is None):
+    if vig is None or (which and snr is None) or k1 is None or k2 is None:
         return None
-    return SensorSpec(vignetting=vig, snr_db=snr)
+    return SensorSpec(vignetting=vig, snr_db=snr, k1=k1, k2=k2)
 
 
 def parse_cameras(info: SectionContext, node: Any, path: P) -> CamerasSpec:

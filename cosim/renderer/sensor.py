@@ -3,10 +3,16 @@
 ``render_frame`` draws what an ideal pinhole camera sees; ``Sensor.apply``
 turns it into what the camera records, in this order:
 
-1. vignetting: linear light times ``cos^(4 s)(theta)``, ``theta`` the pixel's
-   off-axis angle (``s = 1``: natural cos^4 falloff for the camera's own field
-   of view);
-2. noise: in linear light ``L`` (0 black, 1 full scale), a shot noise of
+1. lens distortion: Brown radial distortion, ``x_d = x (1 + k1 r^2 + k2 r^4)``
+   in normalised coordinates (``x = (u - cx) / f``, ``r^2 = x^2 + y^2``): each
+   recorded pixel is read, bilinearly, from the render at the undistorted
+   point (maps made once per stream, the radius found by Newton's method);
+   what falls outside the render is black. The ground truth's geometry in
+   pixels is distorted the same way (``distort_truth``);
+2. vignetting: linear light times ``cos^(4 s)(theta)``, ``theta`` the angle off
+   the optical axis of the ray a pixel sees (``s = 1``: natural cos^4 falloff
+   for the camera's own field of view);
+3. noise: in linear light ``L`` (0 black, 1 full scale), a shot noise of
    variance ``b L`` and a read noise of variance ``a = b L_r`` (``L_r`` =
    ``READ_SIGNAL``: read noise equals shot noise at 1 % of full scale), ``b``
    set by the signal-to-noise ratio ``snr_db`` at mid-grey ``L_m`` =
@@ -36,6 +42,7 @@ from __future__ import annotations
 import math
 import sys
 import zlib
+from typing import Any
 
 import cv2
 import numpy as np
@@ -52,6 +59,9 @@ READ_SIGNAL = 0.01
 #: ``iso`` -> ``snr_db``: 40 dB at ISO 100, 3 dB less (half the light) per doubling
 ISO_REF, SNR_AT_ISO_REF_DB = 100.0, 40.0
 
+#: the 12 edges of a box as pairs of its corners (``targets.UNIT_CORNERS``' order:
+#: corner 4 x + 2 y + z, so an edge joins corners one bit apart)
+_EDGES = np.array([(i, i ^ bit) for i in range(8) for bit in (1, 2, 4) if i < i ^ bit])
 #: the byte of a uint16 that holds its high 8 bits
 _HIGH = 1 if sys.byteorder == "little" else 0
 
@@ -69,14 +79,136 @@ def noise_model(snr_db: float) -> tuple[float, float]:
     return b * READ_SIGNAL, b
 
 
-def off_axis_cos(cam: CameraSpec) -> np.ndarray:
-    """(h, w) cosine of each pixel centre's angle off the optical axis."""
+def _normalised(cam: CameraSpec) -> tuple[np.ndarray, np.ndarray]:
+    """(h, w) normalised coordinates x, y of the pixel centres."""
     f = cam.fx_px
     x = (np.arange(cam.width_px) - (cam.width_px - 1) / 2.0) / f
     y = (np.arange(cam.height_px) - (cam.height_px - 1) / 2.0) / f
-    r2 = x[None, :] ** 2 + y[:, None] ** 2
-    out: np.ndarray = 1.0 / np.sqrt(1.0 + r2)
+    return np.broadcast_to(x[None, :], (cam.height_px, cam.width_px)), \
+        np.broadcast_to(y[:, None], (cam.height_px, cam.width_px))
+
+
+def corner_radius(cam: CameraSpec) -> float:
+    """The image corner's distance from the centre in normalised coordinates."""
+    return math.hypot(math.tan(math.radians(cam.hfov_deg) / 2),
+                      math.tan(math.radians(cam.vfov_deg) / 2))
+
+
+def radial(k1: float, k2: float, r: np.ndarray) -> np.ndarray:
+    """Brown's radial factor ``1 + k1 r^2 + k2 r^4``."""
+    r2 = r * r
+    out: np.ndarray = 1.0 + k1 * r2 + k2 * r2 * r2
     return out
+
+
+def folds_at(k1: float, k2: float, r_max: float) -> float | None:
+    """The smallest radius up to ``r_max`` where ``r (1 + k1 r^2 + k2 r^4)`` stops
+    growing (its derivative ``1 + 3 k1 r^2 + 5 k2 r^4`` reaches 0), or None."""
+    r = np.linspace(0.0, r_max, 2001)
+    bad = np.flatnonzero(1.0 + 3 * k1 * r ** 2 + 5 * k2 * r ** 4 <= 0.0)
+    return float(r[bad[0]]) if len(bad) else None
+
+
+def undistort_radius(k1: float, k2: float, r_d: np.ndarray, r_max: float) -> np.ndarray:
+    """The undistorted radius ``r`` in [0, r_max] with ``r (1 + k1 r^2 + k2 r^4) =
+    r_d`` (Newton's method; monotonic there), NaN where ``r_d`` lies beyond
+    the image of ``r_max``."""
+    r = r_d.copy()
+    for _ in range(30):
+        r2 = r * r
+        g = r * (1.0 + k1 * r2 + k2 * r2 * r2) - r_d
+        r -= g / (1.0 + 3 * k1 * r2 + 5 * k2 * r2 * r2)
+        np.clip(r, 0.0, r_max, out=r)
+    g_max = r_max * (1.0 + k1 * r_max ** 2 + k2 * r_max ** 4)
+    out: np.ndarray = np.where(r_d <= g_max + 1e-12, r, np.nan)
+    return out
+
+
+def distort_px(cam: CameraSpec, k1: float, k2: float, uv: np.ndarray) -> np.ndarray:
+    """(..., 2) pixel coordinates of the ideal pinhole -> where the lens puts them.
+    Beyond the image's corner radius, where the polynomial is no lens's (it may
+    fold back), the radius goes on growing at its rate at the corner."""
+    f = cam.fx_px
+    c = np.array([(cam.width_px - 1) / 2.0, (cam.height_px - 1) / 2.0])
+    x = (uv - c) / f
+    r = np.hypot(x[..., 0], x[..., 1])
+    r_max = corner_radius(cam)
+    factor = radial(k1, k2, r)
+    beyond = r > r_max
+    if np.any(beyond):
+        slope = 1.0 + 3 * k1 * r_max ** 2 + 5 * k2 * r_max ** 4
+        g = r_max * float(radial(k1, k2, np.array(r_max))) + slope * (r - r_max)
+        factor = np.where(beyond, g / np.where(beyond, r, 1.0), factor)
+    out: np.ndarray = c + x * (f * factor)[..., None]
+    return out
+
+
+def off_axis_cos(cam: CameraSpec, k1: float = 0.0, k2: float = 0.0) -> np.ndarray:
+    """(h, w) cosine of the off-axis angle of the ray each pixel centre sees
+    (through a lens of distortion ``k1``, ``k2``; NaN where it sees none)."""
+    x, y = _normalised(cam)
+    r = np.hypot(x, y)
+    if k1 or k2:
+        r = undistort_radius(k1, k2, r, corner_radius(cam))
+    out: np.ndarray = 1.0 / np.sqrt(1.0 + r * r)
+    return out
+
+
+def distortion_maps(cam: CameraSpec, k1: float, k2: float) -> tuple[np.ndarray, np.ndarray]:
+    """cv2.remap's maps (fixed point) from each recorded pixel to the render's
+    pixel it sees; far outside the image where it sees beyond the render."""
+    x, y = _normalised(cam)
+    r_d = np.hypot(x, y)
+    r = undistort_radius(k1, k2, r_d, corner_radius(cam))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        scale = np.where(r_d > 0, r / r_d, 1.0)
+    f = cam.fx_px
+    map_x = (x * scale * f + (cam.width_px - 1) / 2.0).astype(np.float32)
+    map_y = (y * scale * f + (cam.height_px - 1) / 2.0).astype(np.float32)
+    outside = ~np.isfinite(map_x) | ~np.isfinite(map_y)
+    map_x[outside] = map_y[outside] = -1000.0
+    m1, m2 = cv2.convertMaps(map_x, map_y, cv2.CV_16SC2)
+    return m1, m2
+
+
+def distort_truth(rows: list[dict[str, Any]], cam: CameraSpec, box_uv: np.ndarray,
+                  front: np.ndarray, image_quad: np.ndarray) -> None:
+    """The ground truth's pixel geometry (``bbox``, ``center``,
+    ``eccentricity_px``, ``in_view``, ``fully_in_view``) where the lens puts it:
+    each box's edges (``box_uv``: T x 8 x 2, the ideal projection of its
+    corners; ``front``: all corners in front of the camera) sampled at 17
+    points and distorted, the bounding rectangle taken. A box crossing the
+    near plane keeps its ideal geometry. ``pixels_on_target`` and ``contrast``
+    stay those of the ideal render."""
+    s = cam.sensor
+    assert s is not None
+    t = np.linspace(0.0, 1.0, 17)[:, None]
+    a, b = _EDGES[:, 0], _EDGES[:, 1]
+    cx, cy = (cam.width_px - 1) / 2.0, (cam.height_px - 1) / 2.0
+    xmax, ymax = cam.width_px - 0.5, cam.height_px - 0.5
+    for k, row in enumerate(rows):
+        if row["center_x_px"] is not None:
+            cu, cv_ = distort_px(cam, s.k1, s.k2, np.array([row["center_x_px"],
+                                                           row["center_y_px"]]))
+            row.update(center_x_px=float(cu), center_y_px=float(cv_),
+                       eccentricity_px=math.hypot(cu - cx, cv_ - cy))
+        if not front[k] or row["bbox_x0_px"] is None:
+            continue
+        uv = box_uv[k]
+        pts = distort_px(cam, s.k1, s.k2, (uv[a][:, None, :] * (1 - t) + uv[b][:, None, :] * t
+                                           ).reshape(-1, 2))
+        x0, y0 = (float(v) for v in pts.min(axis=0))
+        x1, y1 = (float(v) for v in pts.max(axis=0))
+        row.update(bbox_x0_px=x0, bbox_y0_px=y0, bbox_x1_px=x1, bbox_y1_px=y1)
+        inside = x0 >= -0.5 and y0 >= -0.5 and x1 <= xmax and y1 <= ymax
+        if inside:
+            row["in_view"] = 1
+        elif x1 < -0.5 or y1 < -0.5 or x0 > xmax or y0 > ymax:
+            row["in_view"] = 0
+        else:
+            hull = cv2.convexHull(pts.astype(np.float32))
+            row["in_view"] = int(cv2.intersectConvexConvex(hull, image_quad)[0] > 0)
+        row["fully_in_view"] = int(inside)
 
 
 def frame_rng(seed: int, vehicle_row: int, camera: str, frame_no: int) -> np.random.Generator:
@@ -118,14 +250,21 @@ class Sensor:
         #: makes linear light times g the 8-bit value times g^(1/GAMMA)
         self.gain: np.ndarray | None = None
         if spec.vignetting:
-            v = (off_axis_cos(cam) ** (4.0 * spec.vignetting / GAMMA)).astype(np.float32)
+            cos = np.nan_to_num(off_axis_cos(cam, spec.k1, spec.k2), nan=1.0)
+            v = (cos ** (4.0 * spec.vignetting / GAMMA)).astype(np.float32)
             self.gain = np.dstack([v, v, v, np.ones_like(v)])
+        self.maps = distortion_maps(cam, spec.k1, spec.k2) if spec.k1 or spec.k2 else None
+        self.warped = np.empty((h, w, 4), np.uint8)
         self.table = noise_table(spec.snr_db) if spec.snr_db is not None else None
         self.bgr = np.empty((h, w, 3), np.uint8)
 
     def apply(self, img: np.ndarray, frame_no: int) -> np.ndarray:
         """The recorded frame from the render ``img`` (h x w x 4 BGRA uint8,
-        changed in place and returned) of frame ``frame_no``."""
+        changed in place and returned, or a buffer of the sensor's when distorted)
+        of frame ``frame_no``."""
+        if self.maps is not None:
+            img = cv2.remap(img, *self.maps, cv2.INTER_LINEAR, dst=self.warped,
+                            borderMode=cv2.BORDER_CONSTANT, borderValue=(0, 0, 0, 255))
         if self.gain is not None:
             cv2.multiply(img, self.gain, dst=img, dtype=cv2.CV_8U)
         if self.table is not None:

@@ -118,6 +118,9 @@ def test_sensor_keys_parse() -> None:
     scn = parse_scenario(SCENARIO % "{vignetting: 0.5, snr_db: 30}", "s.yaml",
                          check_properties=False)
     assert scn.sections["cameras"].views[0].sensor == SensorSpec(vignetting=0.5, snr_db=30.0)
+    scn = parse_scenario(SCENARIO % "{distortion: {k1: -0.2, k2: 0.05}}", "s.yaml",
+                         check_properties=False)
+    assert scn.sections["cameras"].views[0].sensor == SensorSpec(k1=-0.2, k2=0.05)
     plain = parse_scenario(SCENARIO.replace("      sensor: %s\n", ""), "s.yaml",
                            check_properties=False)
     assert plain.sections["cameras"].views[0].sensor is None
@@ -133,6 +136,13 @@ def test_sensor_keys_parse() -> None:
     ("{vignetting: 5}", r"s.yaml:10: cameras.views\[0\].sensor.vignetting: must be <= 4"),
     ("{grain: 1}", r"s.yaml:10: cameras.views\[0\].sensor.grain: unknown key 'grain'"),
     ("[1, 2]", r"s.yaml:10: cameras.views\[0\].sensor: expected a mapping"),
+    ("{distortion: {k1: -0.9}}", r"s.yaml:10: cameras.views\[0\].sensor.distortion: k1 -0.9, "
+                                 r"k2 0 fold the image: the distorted radius stops growing at "
+                                 r"r = 0.60\d, inside the image's corner at r = 0.722"),
+    ("{distortion: {k1: 0.1, k2: 1.5}}", r"s.yaml:10: cameras.views\[0\].sensor.distortion.k2: "
+                                         r"must be <= 1, got 1.5"),
+    ("{distortion: {k3: 0.1}}", r"s.yaml:10: cameras.views\[0\].sensor.distortion.k3: unknown "
+                                r"key 'k3'"),
 ])
 def test_bad_sensor_keys_are_refused_with_their_place(sensor: str, message: str) -> None:
     with pytest.raises(ConfigError, match=message):
@@ -171,3 +181,85 @@ def test_the_search_camera_refuses_a_sensor() -> None:
                                           r"camera sees by geometry"):
         parse_scenario(text, str(path), check_properties=False)
 
+
+
+# --- lens distortion -------------------------------------------------------------------
+
+
+def _brown(cam: CameraSpec, k1: float, k2: float, u: np.ndarray, v: np.ndarray
+           ) -> tuple[np.ndarray, np.ndarray]:
+    """The formula written out: x_d = x (1 + k1 r^2 + k2 r^4), normalised by f."""
+    f, cx, cy = cam.fx_px, (cam.width_px - 1) / 2, (cam.height_px - 1) / 2
+    x, y = (u - cx) / f, (v - cy) / f
+    r2 = x * x + y * y
+    g = 1 + k1 * r2 + k2 * r2 * r2
+    return cx + f * x * g, cy + f * y * g
+
+
+@pytest.mark.parametrize("k1, k2", [(-0.2, 0.05), (0.15, 0.0)])
+def test_a_straight_line_bends_as_brown_distortion_says(k1: float, k2: float) -> None:
+    cam = _cam(w=320, h=240, hfov=60.0, k1=k1, k2=k2)
+    s = cam.sensor
+    assert s is not None
+    img = _flat(cam, 0)
+    u0 = 300
+    img[:, u0, :3] = 255  # a vertical line, one pixel wide
+    out = Sensor(cam, s, 1, 0).apply(img, 0)
+    # where the formula puts the line, row by row of the recorded image
+    v_src = np.linspace(-40.0, cam.height_px + 40.0, 20001)
+    u_d, v_d = _brown(cam, k1, k2, np.full_like(v_src, u0), v_src)
+    rows = np.arange(cam.height_px)
+    seen = np.interp(rows, v_d, v_src)  # the rows whose line the render holds
+    rows = rows[(seen >= 1) & (seen <= cam.height_px - 2)]
+    assert len(rows) > 0.9 * cam.height_px
+    want = np.interp(rows, v_d, u_d)
+    lum = out[rows, :, 0].astype(np.float64)
+    cols = np.arange(cam.width_px)
+    near = np.abs(cols[None, :] - want[:, None]) < 4
+    got = (lum * near * cols).sum(axis=1) / (lum * near).sum(axis=1)
+    assert np.abs(got - want).max() < 0.25, np.abs(got - want).max()
+    assert np.ptp(want) > 3  # it does bend: a straight line would not pass
+
+
+def test_ground_truth_box_and_centre_are_where_the_distorted_frame_shows_the_target() -> None:
+    """A truck off the image centre, rendered with and without it: the pixels
+    that change in the distorted frames lie within the ground truth's box
+    (within a pixel), and the truth's centre is the ideal one through the
+    formula."""
+    from cosim.core.camera import camera_pose
+    from cosim.core.geo import LocalFrame
+    from cosim.renderer.frame import World, WorldSpec, render_frame
+    from cosim.world.ground import GroundSpec
+    from cosim.world.targets import TARGET_DEFAULTS, TargetSpec
+
+    k1, k2 = -0.25, 0.04
+    lat, lon, g_m = 37.0, -122.0, 10.0
+    length, width, height, colour = TARGET_DEFAULTS["truck"]
+    truck = TargetSpec("t", "truck", 14.0, 20.0, None, None, 30.0, length, width, height, colour)
+    cam = _cam(w=320, h=240, hfov=60.0, k1=k1, k2=k2)
+    ideal = _cam(w=320, h=240, hfov=60.0)
+    ideal = CameraSpec(**{**ideal.__dict__, "sensor": None})
+    la, lo = LocalFrame(lat, lon, g_m).place(0.0, 0.0, g_m + 60)
+    pose = camera_pose(cam, float(la), float(lo), g_m + 60, 0.0, 0.0, 0.0, g_m)
+    frames, rows = [], []
+    for targets in ((truck,), ()):
+        world = World(WorldSpec(lat, lon, g_m, 1, 120.0, GroundSpec(), targets))
+        img, got = render_frame(world, cam, pose, 0)
+        rows.append(got)
+        s = cam.sensor
+        assert s is not None
+        frames.append(Sensor(cam, s, 1, 0).apply(img.copy(), 0).astype(int))
+    changed = np.argwhere(np.abs(frames[0] - frames[1]).max(axis=2) > 0)
+    (fy0, fx0), (fy1, fx1) = changed.min(axis=0), changed.max(axis=0)
+    r = rows[0][0]
+    assert r["in_view"] == 1 and r["fully_in_view"] == 1
+    box = np.array([r["bbox_x0_px"], r["bbox_y0_px"], r["bbox_x1_px"], r["bbox_y1_px"]])
+    assert np.abs(box - [fx0, fy0, fx1, fy1]).max() <= 1.0, (box, (fx0, fy0, fx1, fy1))
+    world = World(WorldSpec(lat, lon, g_m, 1, 120.0, GroundSpec(), (truck,)))
+    _, [plain] = render_frame(world, ideal, pose, 0)
+    cu, cv = _brown(cam, k1, k2, np.array(plain["center_x_px"]), np.array(plain["center_y_px"]))
+    assert (r["center_x_px"], r["center_y_px"]) == pytest.approx((float(cu), float(cv)))
+    # far enough off centre for the lens to move it: an undistorted truth would fail
+    assert math.hypot(cu - plain["center_x_px"], cv - plain["center_y_px"]) > 3
+    assert plain["bbox_x1_px"] - box[2] > 3
+    assert r["pixels_on_target"] == plain["pixels_on_target"]  # measured on the ideal frame
