@@ -17,7 +17,11 @@
 
     python benchmarks/render_bench.py [--frames 200] [--repeat 1] [--vehicles 20]
         [--duration-s 10] [--backend process|inline] [--workers N] [--render-workers N]
-        [--codec mp4v|h264|mjpg] [--sensor YAML]
+        [--codec mp4v|h264|mjpg] [--sensor YAML] [--datalink YAML]
+
+With ``--datalink`` the camera runs at 15 Hz and its frames go through that
+downlink (encoded, decoded back and measured, in place of the video writer):
+its part is printed apart.
 """
 
 from __future__ import annotations
@@ -36,7 +40,7 @@ from typing import Any
 import cv2
 
 from cosim.core.cache import CACHE_ENV  # the whole cache folder (ground tiles: ground/)
-from cosim.core.camera import CameraSpec, SensorSpec
+from cosim.core.camera import CameraSpec, DatalinkSpec, SensorSpec
 from cosim.core.geo import LocalFrame
 from cosim.renderer.outputs import Stream
 from cosim.renderer.render_pool import RenderWorker
@@ -81,10 +85,11 @@ class _Encoder:
 
 
 def per_frame(frames: int, cache_dir: str, codec: str = "mp4v",
-              sensor: SensorSpec | None = None) -> dict[str, float]:
+              sensor: SensorSpec | None = None, datalink: DatalinkSpec | None = None
+              ) -> dict[str, float]:
     """One camera's frames; cosim's cache folder (its ground tiles in
-    ``ground/``) in ``cache_dir``; ``sensor``: the camera's sensor and lens
-    (their cost timed apart)."""
+    ``ground/``) in ``cache_dir``; ``sensor``: the camera's sensor and lens,
+    ``datalink`` its downlink (each's cost timed apart)."""
     os.environ[CACHE_ENV] = cache_dir
     cv2.setNumThreads(1)
     scn = load_scenario(REPO / "scenarios/cameras/flyover.yaml", check_properties=False)
@@ -92,7 +97,8 @@ def per_frame(frames: int, cache_dir: str, codec: str = "mp4v",
 
     ws = WorldSpec(scn.origin.lat_deg, scn.origin.lon_deg, scn.origin.ground_alt_m, scn.seed,
                    120.0, scn.world.ground, scn.world.targets)
-    cam: CameraSpec = dataclasses.replace(scn.sections["cameras"].views[0], sensor=sensor)
+    cam: CameraSpec = dataclasses.replace(scn.sections["cameras"].views[0], sensor=sensor,
+                                          datalink=datalink)
     frame = LocalFrame(scn.origin.lat_deg, scn.origin.lon_deg, scn.origin.ground_alt_m)
     poses = []
     for i in range(frames):
@@ -103,8 +109,13 @@ def per_frame(frames: int, cache_dir: str, codec: str = "mp4v",
         (Path(d) / "cameras").mkdir()
         s = Stream(0, "uav1", 0, cam, f"cameras/b.{EXTENSIONS[codec]}", "cameras/b.gt.csv", None)
         w = RenderWorker(ws, [s], Path(d), codec, False)
-        video = _Video(w.writers[0].video)
-        w.writers[0].video = video
+        link = w.writers[0].link
+        link_fn = _Timed(link.send) if link is not None else None
+        if link is not None:  # the downlink writes the video
+            link.send = link_fn  # type: ignore[method-assign,assignment]
+        else:
+            video = _Video(w.writers[0].video)
+            w.writers[0].video = video
         ground = w.world.ground
         sensor_fn = _Timed(w.sensors[0].apply) if w.sensors else None
         if sensor_fn is not None:
@@ -122,9 +133,11 @@ def per_frame(frames: int, cache_dir: str, codec: str = "mp4v",
         finally:
             cv2.warpPerspective = warp_fn
         w.close()
-    codec_s = video.codec.encode.cpu_s if video.codec else float("nan")
+    codec_s = video.codec.encode.cpu_s if link is None and video.codec else float("nan")
+    encode_s = video.write.cpu_s if link is None else 0.0
     return {"cpu_ms": cpu / frames * 1000, "wall_ms": wall / frames * 1000,
-            "encode_ms": video.write.cpu_s / frames * 1000,
+            "encode_ms": encode_s / frames * 1000,
+            "datalink_ms": link_fn.cpu_s / frames * 1000 if link_fn else 0.0,
             "codec_ms": codec_s / frames * 1000, "warp_ms": warp.cpu_s / frames * 1000,
             "tiles_ms": tiles.cpu_s / frames * 1000, "tiles": tiles.calls,
             "sensor_ms": sensor_fn.cpu_s / frames * 1000 if sensor_fn else 0.0,
@@ -132,14 +145,22 @@ def per_frame(frames: int, cache_dir: str, codec: str = "mp4v",
             "tiles_generated": ground.tiles_made, "tiles_from_disk": ground.tiles_loaded}
 
 
+def _camera(key: str, text: str, rate_hz: float = 10.0) -> CameraSpec:
+    """The flyover's camera at ``rate_hz`` with ``key: text`` (a mapping), read
+    as a scenario's camera would read it."""
+    scn = (REPO / "scenarios/cameras/flyover.yaml").read_text()
+    scn = scn.replace("  views:\n    - {", f"  views:\n    - {{{key}: {text}, ", 1)
+    scn = scn.replace("\n       rate_hz: 10}", f"\n       rate_hz: {rate_hz:g}}}", 1)
+    cam: CameraSpec = parse_scenario(scn, f"--{key}", check_properties=False
+                                     ).sections["cameras"].views[0]
+    return cam
+
+
 def _sensor(text: str) -> SensorSpec:
     """A ``sensor:`` mapping read as a scenario's camera would read it."""
-    scn = (REPO / "scenarios/cameras/flyover.yaml").read_text()
-    scn = scn.replace("  views:\n    - {", f"  views:\n    - {{sensor: {text}, ", 1)
-    cam: CameraSpec = parse_scenario(scn, "--sensor", check_properties=False
-                                     ).sections["cameras"].views[0]
-    assert cam.sensor is not None
-    return cam.sensor
+    sensor = _camera("sensor", text).sensor
+    assert sensor is not None
+    return sensor
 
 
 def _cpu_s() -> float:
@@ -192,17 +213,24 @@ def main() -> None:
                     help="per-frame cost with this camera sensor (the cameras: section's "
                          "sensor: mapping, e.g. '{vignetting: cos4, snr_db: 30}'); its part "
                          "is printed apart")
+    ap.add_argument("--datalink", default=None, metavar="YAML",
+                    help="per-frame cost through this downlink, the camera at 15 Hz (the "
+                         "cameras: section's datalink: mapping, e.g. '{bitrate_kbps: 1000}'); "
+                         "its part is printed apart")
     a = ap.parse_args()
     sensor = _sensor(a.sensor) if a.sensor else None
+    datalink = _camera("datalink", a.datalink, 15.0).datalink if a.datalink else None
     if a.frames:
         runs: dict[str, list[dict[str, float]]] = {"tiles generated": [], "tiles from disk": []}
         for _ in range(a.repeat):  # each repeat: a new empty tile cache, then the same again
             with tempfile.TemporaryDirectory() as cache:
                 for label, got in runs.items():
-                    f = per_frame(a.frames, cache, a.codec, sensor)
+                    f = per_frame(a.frames, cache, a.codec, sensor, datalink)
                     got.append(f)
                     rest = f["cpu_ms"] - f["encode_ms"] - f["warp_ms"] - f["tiles_ms"]
-                    print(f"640x480 nadir frame incl. ground truth + {a.codec}, {label}: "
+                    what = f"a {datalink.bitrate_kbps:g} kbit/s datalink" if datalink \
+                        else a.codec
+                    print(f"640x480 nadir frame incl. ground truth + {what}, {label}: "
                           f"{f['cpu_ms']:.2f} ms CPU ({f['wall_ms']:.2f} ms wall), "
                           f"{1000 / f['cpu_ms']:.0f} frames/s per core; of which {a.codec} "
                           f"encoding {f['encode_ms']:.2f} ms (the codec itself "
@@ -210,7 +238,9 @@ def main() -> None:
                           f"new ground tiles {f['tiles_ms']:.2f} ms ({f['tiles']:.0f} tiles, "
                           f"{f['tile_ms']:.2f} ms each: {f['tiles_generated']} generated, "
                           f"{f['tiles_from_disk']} read), the sensor {f['sensor_ms']:.2f} ms, "
-                          f"the rest {rest - f['sensor_ms']:.2f} ms", flush=True)
+                          f"the datalink {f['datalink_ms']:.2f} ms, "
+                          f"the rest {rest - f['sensor_ms'] - f['datalink_ms']:.2f} ms",
+                          flush=True)
         if a.repeat > 1:
             for label, got in runs.items():
                 ms = sorted(f["cpu_ms"] for f in got)

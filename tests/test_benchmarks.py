@@ -56,6 +56,21 @@ def test_render_bench_times_the_sensor_apart(tmp_path: Path,
     assert render_bench.per_frame(3, str(tmp_path / "ground"))["sensor_ms"] == 0
 
 
+def test_render_bench_times_the_datalink_apart(tmp_path: Path,
+                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    import cv2
+    import render_bench
+
+    from cosim.core.cache import CACHE_ENV
+
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path))
+    monkeypatch.setattr(cv2, "setNumThreads", lambda n: None)
+    link = render_bench._camera("datalink", "{bitrate_kbps: 1000}", 15.0).datalink
+    assert link is not None and link.rate_hz == 15.0 and link.every == 1
+    f = render_bench.per_frame(3, str(tmp_path / "ground"), datalink=link)
+    assert 0 < f["datalink_ms"] < f["cpu_ms"] and f["encode_ms"] == 0
+
+
 def test_floor_bench_runs() -> None:
     proc = subprocess.run([sys.executable, str(REPO / "benchmarks/floor_bench.py"),
                            "--frames", "4", "--rounds", "1"], cwd=REPO, capture_output=True,
