@@ -17,7 +17,7 @@
 
     python benchmarks/render_bench.py [--frames 200] [--repeat 1] [--vehicles 20]
         [--duration-s 10] [--backend process|inline] [--workers N] [--render-workers N]
-        [--codec mp4v|h264|mjpg] [--sensor YAML] [--datalink YAML]
+        [--codec mp4v|h264|mjpg] [--sensor YAML] [--datalink YAML] [--haze-km V]
 
 With ``--datalink`` the camera runs at 15 Hz and its frames go through that
 downlink (encoded, decoded back and measured, in place of the video writer):
@@ -47,6 +47,7 @@ from cosim.renderer.render_pool import RenderWorker
 from cosim.renderer.video import EXTENSIONS
 from cosim.scenario import load_scenario, parse_scenario
 from cosim.sync.runner import run_scenario
+from cosim.world.atmosphere import AtmosphereSpec
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -85,18 +86,20 @@ class _Encoder:
 
 
 def per_frame(frames: int, cache_dir: str, codec: str = "mp4v",
-              sensor: SensorSpec | None = None, datalink: DatalinkSpec | None = None
-              ) -> dict[str, float]:
+              sensor: SensorSpec | None = None, datalink: DatalinkSpec | None = None,
+              haze_km: float | None = None) -> dict[str, float]:
     """One camera's frames; cosim's cache folder (its ground tiles in
     ``ground/``) in ``cache_dir``; ``sensor``: the camera's sensor and lens,
-    ``datalink`` its downlink (each's cost timed apart)."""
+    ``datalink`` its downlink, ``haze_km`` the atmosphere's visibility (each's
+    cost timed apart; the haze's: the ground's, the faces' is in the rest)."""
     os.environ[CACHE_ENV] = cache_dir
     cv2.setNumThreads(1)
     scn = load_scenario(REPO / "scenarios/cameras/flyover.yaml", check_properties=False)
     from cosim.renderer.frame import WorldSpec
 
+    air = AtmosphereSpec(haze_km) if haze_km else None
     ws = WorldSpec(scn.origin.lat_deg, scn.origin.lon_deg, scn.origin.ground_alt_m, scn.seed,
-                   120.0, scn.world.ground, scn.world.targets)
+                   120.0, scn.world.ground, scn.world.targets, atmosphere=air)
     cam: CameraSpec = dataclasses.replace(scn.sections["cameras"].views[0], sensor=sensor,
                                           datalink=datalink)
     frame = LocalFrame(scn.origin.lat_deg, scn.origin.lon_deg, scn.origin.ground_alt_m)
@@ -120,6 +123,10 @@ def per_frame(frames: int, cache_dir: str, codec: str = "mp4v",
         sensor_fn = _Timed(w.sensors[0].apply) if w.sensors else None
         if sensor_fn is not None:
             w.sensors[0].apply = sensor_fn  # type: ignore[method-assign]
+        haze = w.world.haze
+        haze_fn = _Timed(haze.ground) if haze is not None else None
+        if haze is not None:
+            haze.ground = haze_fn  # type: ignore[method-assign,assignment]
         tiles = _Timed(ground._make_tile)
         ground._make_tile = tiles  # type: ignore[method-assign]
         warp_fn = cv2.warpPerspective
@@ -127,7 +134,7 @@ def per_frame(frames: int, cache_dir: str, codec: str = "mp4v",
         try:
             cpu0, wall0 = time.process_time(), time.perf_counter()
             for i, pose in enumerate(poses):
-                w.render(0, i, i * 12, pose)
+                w.render(0, i, i * 12, pose, motion=(51.4, 0.0, 0.0, 0.0, 0.0, 0.0))
             cpu = time.process_time() - cpu0
             wall = time.perf_counter() - wall0
         finally:
@@ -141,6 +148,7 @@ def per_frame(frames: int, cache_dir: str, codec: str = "mp4v",
             "codec_ms": codec_s / frames * 1000, "warp_ms": warp.cpu_s / frames * 1000,
             "tiles_ms": tiles.cpu_s / frames * 1000, "tiles": tiles.calls,
             "sensor_ms": sensor_fn.cpu_s / frames * 1000 if sensor_fn else 0.0,
+            "haze_ms": haze_fn.cpu_s / frames * 1000 if haze_fn else 0.0,
             "tile_ms": tiles.cpu_s / max(tiles.calls, 1) * 1000,
             "tiles_generated": ground.tiles_made, "tiles_from_disk": ground.tiles_loaded}
 
@@ -217,6 +225,10 @@ def main() -> None:
                     help="per-frame cost through this downlink, the camera at 15 Hz (the "
                          "cameras: section's datalink: mapping, e.g. '{bitrate_kbps: 1000}'); "
                          "its part is printed apart")
+    ap.add_argument("--haze-km", type=float, default=None, metavar="V",
+                    help="per-frame cost also through haze of this visibility (km; the "
+                         "atmosphere: section), each pass run without it, then with it; the "
+                         "ground's haze is printed apart")
     a = ap.parse_args()
     sensor = _sensor(a.sensor) if a.sensor else None
     datalink = _camera("datalink", a.datalink, 15.0).datalink if a.datalink else None
@@ -224,12 +236,17 @@ def main() -> None:
         runs: dict[str, list[dict[str, float]]] = {"tiles generated": [], "tiles from disk": []}
         for _ in range(a.repeat):  # each repeat: a new empty tile cache, then the same again
             with tempfile.TemporaryDirectory() as cache:
-                for label, got in runs.items():
-                    f = per_frame(a.frames, cache, a.codec, sensor, datalink)
-                    got.append(f)
-                    rest = f["cpu_ms"] - f["encode_ms"] - f["warp_ms"] - f["tiles_ms"]
+                for (label, got), km in ((lk, km) for lk in runs.items()
+                                         for km in (None, a.haze_km)[:1 + bool(a.haze_km)]):
+                    f = per_frame(a.frames, cache, a.codec, sensor, datalink, km)
+                    if km is None:
+                        got.append(f)
+                    rest = f["cpu_ms"] - f["encode_ms"] - f["warp_ms"] - f["tiles_ms"] \
+                        - f["haze_ms"]
                     what = f"a {datalink.bitrate_kbps:g} kbit/s datalink" if datalink \
                         else a.codec
+                    if km:
+                        what += f", haze of {km:g} km (the ground's {f['haze_ms']:.2f} ms)"
                     print(f"640x480 nadir frame incl. ground truth + {what}, {label}: "
                           f"{f['cpu_ms']:.2f} ms CPU ({f['wall_ms']:.2f} ms wall), "
                           f"{1000 / f['cpu_ms']:.0f} frames/s per core; of which {a.codec} "

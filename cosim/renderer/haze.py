@@ -88,22 +88,23 @@ class Haze:
         n_r, n_c = levels.shape
         cut = np.ones((n_r, n_c + 1), bool)  # a run starts (or the row ends) here
         cut[:, 1:-1] = levels[:, 1:] != levels[:, :-1]
-        edges = [min(c * TILE_COLS, w) for c in range(n_c + 1)]
-        out: list[tuple[int, int, int, int, int]] = []
-        above: dict[tuple[int, int, int], int] = {}  # the previous row's runs: place in out
-        for (y0, y1), starts, lv in zip(rows, cut.tolist(), levels.tolist()):
-            at = [c for c, s in enumerate(starts) if s]
-            here = {}
-            for c0, c1 in zip(at, at[1:]):
-                run = (edges[c0], edges[c1], lv[c0])
-                k = above.get(run)
-                if k is not None and out[k][1] == y0:  # the same run above: grow it
-                    out[k] = (out[k][0], y1) + run
-                else:
-                    k = len(out)
-                    out.append((y0, y1) + run)
-                here[run] = k
-            above = here
+        rr, cc = np.nonzero(cut)
+        first = np.flatnonzero(cc < n_c)  # each run: its row, first and end tile
+        r, c0, c1 = rr[first], cc[first], cc[first + 1]
+        lv = levels[r, c0]
+        # a run continues the same run (columns and level) of the row above
+        order = np.lexsort((r, lv, c1, c0))
+        r, c0, c1, lv = r[order], c0[order], c1[order], lv[order]
+        y0 = np.array([a for a, _ in rows])[r]
+        y1 = np.array([b for _, b in rows])[r]
+        goes_on = np.zeros(len(r), bool)
+        goes_on[1:] = ((c0[1:] == c0[:-1]) & (c1[1:] == c1[:-1]) & (lv[1:] == lv[:-1])
+                       & (r[1:] == r[:-1] + 1) & (y0[1:] == y1[:-1]))
+        starts = np.flatnonzero(~goes_on)
+        ends = np.append(starts[1:], len(r)) - 1
+        edges = np.minimum(np.arange(n_c + 1) * TILE_COLS, w)
+        out = list(zip(y0[starts].tolist(), y1[ends].tolist(), edges[c0[starts]].tolist(),
+                       edges[c1[starts]].tolist(), lv[starts].tolist()))
         return out
 
 
