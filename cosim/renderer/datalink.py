@@ -96,7 +96,7 @@ class Downlink:
         self.decoder.thread_count = 1
         self.time_base = 1 / rate
         self.yuv = np.empty((height_px * 3 // 2, width_px), np.uint8)
-        self.got = np.empty((height_px, width_px, 4), np.uint8)
+        self.got = np.zeros((height_px, width_px, 4), np.uint8)  # black until a delivery
         self.n = 0
         self.bytes = 0
 

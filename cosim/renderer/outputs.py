@@ -97,6 +97,11 @@ class StreamWriter:
         self.gt_file.flush()
         self.frames += 1
 
+    def shown(self, img: np.ndarray) -> np.ndarray:
+        """What an operator sees of the frame just written (``img``): with a
+        downlink, the last frame it delivered (held between deliveries)."""
+        return img if self.link is None else self.link.got
+
     def _deliver(self, frame_no: int, time_s: float, img: np.ndarray,
                  rows: list[dict[str, Any]], target_ids: list[str], ids: np.ndarray | None,
                  head: list[Any]) -> None:

@@ -167,7 +167,9 @@ class RenderWorker:
             truth = [{"target": tid, **r} for tid, r in zip(self.target_ids, rows)]
         if s.thumb_px is None:
             return None, truth
-        thumb: np.ndarray = cv2.cvtColor(cv2.resize(img, s.thumb_px, interpolation=cv2.INTER_AREA),
+        shown = self.writers[stream].shown(img)  # with a downlink: what it delivered
+        thumb: np.ndarray = cv2.cvtColor(cv2.resize(shown, s.thumb_px,
+                                                    interpolation=cv2.INTER_AREA),
                                          cv2.COLOR_BGRA2BGR)
         return thumb, truth
 

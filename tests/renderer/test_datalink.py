@@ -179,3 +179,50 @@ def test_a_run_writes_the_delivered_video_and_ground_truth(tmp_path: Path) -> No
             assert r["delivered_contrast"] != ""
     with open(out / "cameras/u1_belly.gt.csv") as f:  # the plain camera: as before
         assert "delivered_contrast" not in f.readline()
+
+
+def test_the_operator_sees_the_delivered_frames(tmp_path: Path) -> None:
+    """The thumbnail the operator view and the --video taps get is the frame as
+    delivered (held between deliveries), not the render."""
+    from cosim.renderer.frame import WorldSpec
+    from cosim.renderer.outputs import Stream
+    from cosim.renderer.render_pool import RenderWorker
+
+    repo = Path(__file__).resolve().parents[2]
+    path = repo / "scenarios/cameras/flyover.yaml"
+    text = path.read_text().replace("rate_hz: 10}", "rate_hz: 10, datalink: {bitrate_kbps: 30, "
+                                                    "rate_hz: 5}}")
+    scn = parse_scenario(text, str(path), check_properties=False)
+    cam = scn.sections["cameras"].views[0]
+    o = scn.origin
+    ws = WorldSpec(o.lat_deg, o.lon_deg, o.ground_alt_m, scn.seed, 120.0, scn.world.ground,
+                   scn.world.targets)
+    (tmp_path / "cameras").mkdir()
+    s = Stream(0, "uav1", 0, cam, "cameras/b.mp4", "cameras/b.gt.csv", (160, 120))
+    w = RenderWorker(ws, [s], tmp_path, "mp4v", False)
+    thumbs, renders = [], []
+    for i in range(3):
+        la, lo = (float(v) for v in o.frame.place(-20.0 + 5 * i, 0.0, o.ground_alt_m + 100))
+        pose6 = (la, lo, o.ground_alt_m + 100, 0.0, 0.0, 0.0)
+        thumb, _ = w.render(0, i, i * 12, pose6)
+        assert thumb is not None
+        thumbs.append(thumb)
+        renders.append(w.frames[0].copy())
+    w.close()
+
+    def small(img: np.ndarray) -> np.ndarray:
+        return cv2.cvtColor(cv2.resize(img, (160, 120), interpolation=cv2.INTER_AREA),
+                            cv2.COLOR_BGRA2BGR)
+
+    assert not np.array_equal(thumbs[0], small(renders[0]))  # 30 kbit/s: far from the render
+    assert np.array_equal(thumbs[1], thumbs[0])  # frame 1 is not delivered: held
+    assert not np.array_equal(thumbs[2], thumbs[0])
+    with av.open(str(tmp_path / "cameras/b.mp4")) as c:
+        got = [f.to_ndarray(format="bgr24") for f in c.decode(c.streams.video[0])]
+    assert len(got) == 2
+    # the file's second frame (FFmpeg's colour conversion: a level or two from OpenCV's),
+    # not the render
+    d_file = np.abs(small(cv2.cvtColor(got[1], cv2.COLOR_BGR2BGRA)).astype(int) - thumbs[2])
+    d_render = np.abs(small(renders[2]).astype(int) - thumbs[2])
+    assert d_file.max() <= 4 and d_file.mean() < 2 < d_render.mean(), (d_file.mean(),
+                                                                         d_render.mean())
