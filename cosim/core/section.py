@@ -151,7 +151,8 @@ class Section:
 
     def world(self, parsed: Any) -> Mapping[str, Sequence[Any]]:
         """What the section adds to the world: kind (``targets``,
-        ``obstacles``, ``ground``) -> items. Default: nothing."""
+        ``obstacles``, ``ground``, ``sun``, ``atmosphere``) -> items. Default:
+        nothing."""
         return {}
 
     def participant(self, scenario: Any) -> Any | None:
