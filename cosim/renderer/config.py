@@ -129,7 +129,8 @@ def parse_camera(info: SectionContext, d: Any, p: P, i: int) -> CameraSpec | Non
     if r.d.get("datalink") is not None:
         from cosim.renderer.datalink import parse_datalink
 
-        link = parse_datalink(info, r.d["datalink"], p + ("datalink",), rate if every else None)
+        link = parse_datalink(info, r.d["datalink"], p + ("datalink",), rate if every else None,
+                              (w, h))
         if link is None:
             return None
     if None in (name, w, h, rate) or not every:

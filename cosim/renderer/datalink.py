@@ -40,17 +40,21 @@ BUFFER_S = 1.0
 DELIVERED_COLUMNS = ("delivered_time_s", "delivered_pixels_on_target", "delivered_contrast")
 
 
-def parse_datalink(info: SectionContext, d: Any, p: P, camera_rate_hz: float | None
+def parse_datalink(info: SectionContext, d: Any, p: P, camera_rate_hz: float | None,
+                   size_px: tuple[int | None, int | None] = (None, None)
                    ) -> DatalinkSpec | None:
     """A camera's ``datalink:`` (every key optional); None if a problem was
-    reported. ``camera_rate_hz``: the camera's frame rate (None: not known,
-    its problem reported already)."""
+    reported. ``camera_rate_hz``, ``size_px``: the camera's frame rate and
+    (width, height) (None: not known, its problem reported already)."""
     r = info.reader(d, p, ("codec", "bitrate_kbps", "rate_hz", "keyframe_s", "latency_ms"))
     codec = r.string("codec", "h264", choices=DATALINK_CODECS)
     from cosim.renderer.video import have_pyav
 
     if not have_pyav():
         info.err(p, "a datalink needs PyAV (pip install av) for its H.264 encoder")
+    if any(n is not None and n % 2 for n in size_px):
+        info.err(p, f"a datalink's H.264 (4:2:0) needs an even frame size; the camera's is "
+                    f"{size_px[0]}x{size_px[1]}")
     kbps = r.num("bitrate_kbps", 1000.0, lo=MIN_KBPS, hi=MAX_KBPS)
     latency = r.num("latency_ms", 0.0, lo=0.0, hi=MAX_LATENCY_MS)
     keyframe = r.num("keyframe_s", 1.0, lo=MIN_KEYFRAME_S, hi=MAX_KEYFRAME_S)

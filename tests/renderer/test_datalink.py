@@ -144,6 +144,8 @@ def test_datalink_keys_parse() -> None:
                      r"got .vp9."),
     ("{fec: true}", r"s.yaml:11: cameras.views\[0\].datalink.fec: unknown key 'fec'"),
     ("300", r"s.yaml:11: cameras.views\[0\].datalink: expected a mapping"),
+    ("{}\n      width_px: 161", r"s.yaml:11: cameras.views\[0\].datalink: a datalink's H.264 "
+                               r"\(4:2:0\) needs an even frame size; the camera's is 161x480"),
 ])
 def test_bad_datalink_keys_are_refused_with_their_place(link: str, message: str) -> None:
     with pytest.raises(ConfigError, match=message):
@@ -226,3 +228,20 @@ def test_the_operator_sees_the_delivered_frames(tmp_path: Path) -> None:
     d_render = np.abs(small(renders[2]).astype(int) - thumbs[2])
     assert d_file.max() <= 4 and d_file.mean() < 2 < d_render.mean(), (d_file.mean(),
                                                                          d_render.mean())
+
+
+def _link_run(tmp_path: Path, name: str, workers: int) -> tuple[bytes, bytes]:
+    """The delivered video and ground truth of a datalink camera beside a plain one."""
+    from tests.renderer.test_renderer import _fly
+
+    more = textwrap.indent("- {name: link, vehicles: u1, mount: nadir, vfov_deg: 40, "
+                           "width_px: 160, height_px: 120, rate_hz: 10, datalink: "
+                           "{bitrate_kbps: 100, rate_hz: 5, latency_ms: 80}}\n", "    ")
+    _, out = _fly(tmp_path, name, rate=10.0, dur=1.0, more=more, workers=workers)
+    return ((out / "cameras/u1_link.mp4").read_bytes(),
+            (out / "cameras/u1_link.gt.csv").read_bytes())
+
+
+@pytest.mark.integration
+def test_delivered_frames_are_the_same_for_any_render_worker_count(tmp_path: Path) -> None:
+    assert _link_run(tmp_path, "w0", 0) == _link_run(tmp_path, "w2", 2)
