@@ -10,10 +10,11 @@ likewise at theirs. The ground is hazed where it is drawn, before anything
 is drawn over it, in tiles of ``TILE_ROWS x TILE_COLS`` pixels, each with the
 transmittance of the ray through its centre to the ground plane (a ray that
 misses the ground, or meets it beyond the ground's range, counts at that
-range) rounded to one of ``LEVELS`` steps: one table lookup (``cv2.LUT``) per
-run of tiles of one step along a row of tiles. ``tile_transmittance`` gives
-those values; the tests hold them to the exact per-pixel ones. The sky is
-left as it is.
+range) in steps of ``1 / LEVELS``, each hazed with its step's middle: one
+table look-up (``cv2.LUT``) per run of tiles of one step along a row of
+tiles, joined with the same run of the rows below. ``tile_transmittance``
+gives those values; the tests hold them to the exact per-pixel ones. The sky
+is left as it is.
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ TILE_ROWS, TILE_COLS = 4, 32
 
 
 class Haze:
-    """The per-process tables of one atmosphere (built once, ~40 ms)."""
+    """The per-process tables of one atmosphere (built once, about 20 ms)."""
 
     def __init__(self, spec: AtmosphereSpec) -> None:
         self.spec = spec
