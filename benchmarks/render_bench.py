@@ -134,7 +134,7 @@ def per_frame(frames: int, cache_dir: str, codec: str = "mp4v",
         try:
             cpu0, wall0 = time.process_time(), time.perf_counter()
             for i, pose in enumerate(poses):
-                w.render(0, i, i * 12, pose)
+                w.render(0, i, i * 12, pose, motion=(51.4, 0.0, 0.0, 0.0, 0.0, 0.0))
             cpu = time.process_time() - cpu0
             wall = time.perf_counter() - wall0
         finally:

@@ -40,13 +40,15 @@ from cosim.core.geo import LocalFrame, geodetic_to_ecef
 class SensorSpec:
     """A camera's sensor and lens (``cosim.renderer.sensor`` applies it):
     vignetting ``cos^(4 vignetting)`` of the off-axis angle (0: none), the
-    signal-to-noise ratio at mid-grey ``snr_db`` (None: no noise) and Brown's
-    radial distortion ``k1``, ``k2`` (normalised coordinates; 0: none)."""
+    signal-to-noise ratio at mid-grey ``snr_db`` (None: no noise), Brown's
+    radial distortion ``k1``, ``k2`` (normalised coordinates; 0: none) and the
+    exposure time ``exposure_ms`` (motion blur; 0: none)."""
 
     vignetting: float = 0.0
     snr_db: float | None = None
     k1: float = 0.0
     k2: float = 0.0
+    exposure_ms: float = 0.0
 
 
 @dataclass(frozen=True)

@@ -37,6 +37,8 @@ MAX_SNR_DB = 80.0
 MIN_ISO, MAX_ISO = 25.0, 102400.0
 #: radial distortion's k1, k2 at most this in size (and never folding the image)
 MAX_K = 1.0
+#: the longest exposure (motion blur), ms
+MAX_EXPOSURE_MS = 100.0
 @dataclass(frozen=True)
 class CamerasSpec:
     views: tuple[CameraSpec, ...]
@@ -147,7 +149,8 @@ def parse_sensor(info: SectionContext, d: Any, p: P, r_max: float) -> SensorSpec
     coordinates; None if a problem was reported."""
     from cosim.renderer.sensor import folds_at, snr_of_iso
 
-    r = info.reader(d, p, ("vignetting", "snr_db", "iso", "distortion"))
+    r = info.reader(d, p, ("vignetting", "snr_db", "iso", "distortion", "exposure_ms"))
+    exposure = r.num("exposure_ms", 0.0, lo=0.0, hi=MAX_EXPOSURE_MS)
     k1: float | None = 0.0
     k2: float | None = 0.0
     if r.has("distortion"):
@@ -181,9 +184,9 @@ def parse_sensor(info: SectionContext, d: Any, p: P, r_max: float) -> SensorSpec
         snr = snr_of_iso(iso) if iso is not None else None
     elif which == "snr_db":
         snr = r.num("snr_db", None, lo=0.0, hi=MAX_SNR_DB)
-    if vig is None or (which and snr is None) or k1 is None or k2 is None:
+    if vig is None or (which and snr is None) or k1 is None or k2 is None or exposure is None:
         return None
-    return SensorSpec(vignetting=vig, snr_db=snr, k1=k1, k2=k2)
+    return SensorSpec(vignetting=vig, snr_db=snr, k1=k1, k2=k2, exposure_ms=exposure)
 
 
 def parse_cameras(info: SectionContext, node: Any, path: P) -> CamerasSpec:

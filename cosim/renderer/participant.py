@@ -43,6 +43,8 @@ log = logging.getLogger(__name__)
 
 _POSE_COLS = [STATE_INDEX[c] for c in ("lat_deg", "lon_deg", "alt_msl_m", "roll_deg",
                                        "pitch_deg", "yaw_deg")]
+_ATT_COLS = [STATE_INDEX[c] for c in ("roll_deg", "pitch_deg", "yaw_deg")]
+_VEL_COLS = [STATE_INDEX[c] for c in ("vn_mps", "ve_mps", "vd_mps")]
 
 
 @dataclass
@@ -84,6 +86,8 @@ class CameraParticipant:
         #: whose next frame is a still (stream index -> the command's source)
         self.triggers: dict[int, _Trigger] = {}
         self.still_due: dict[int, str] = {}
+        #: per stream whose sensor has an exposure: its last frame's tick and attitude
+        self.last_attitude: dict[int, tuple[int, np.ndarray]] = {}
         self.stills: Stills | None = None
 
     # --- lifecycle -------------------------------------------------------------------
@@ -279,7 +283,23 @@ class CameraParticipant:
         frame_no = tick // every
         still = self.stills.name(s, frame_no, tick, pose6, gimbal, self.still_due.pop(s.index)) \
             if stills and s.index in self.still_due else None
-        self.pool.submit(s, frame_no, tick, pose6, gimbal, still)
+        sensor = s.camera.sensor
+        motion = self._motion(s, tick, row) if sensor is not None and sensor.exposure_ms else None
+        self.pool.submit(s, frame_no, tick, pose6, gimbal, still, motion)
+
+    def _motion(self, s: Stream, tick: int, row: np.ndarray) -> tuple[float, ...]:
+        """What the exposure of stream ``s``'s frame at ``tick`` sees move: the
+        vehicle's velocity (north, east, down, m/s) from its state ``row`` and
+        its attitude's rates (roll, pitch, yaw, deg/s) since the stream's last
+        frame (0 at its first)."""
+        att = row[_ATT_COLS].astype(float)
+        before = self.last_attitude.get(s.index)
+        self.last_attitude[s.index] = (tick, att)
+        rates = np.zeros(3)
+        if before is not None and tick > before[0]:
+            d = (att - before[1] + 180.0) % 360.0 - 180.0  # the short way round
+            rates = d * self.ctx.physics_hz / (tick - before[0])
+        return tuple(float(x) for x in row[_VEL_COLS]) + tuple(float(x) for x in rates)
 
     def _rendered(self, stream: int, frame_no: int, thumb: np.ndarray | None,
                   still: tuple[str, Any] | None) -> None:

@@ -143,11 +143,14 @@ class RenderWorker:
                         for s in streams if s.camera.sensor is not None}
 
     def render(self, stream: int, frame_no: int, tick: int, pose6: tuple[float, ...],
-               gimbal: tuple[float, float] | None = None, still: str | None = None
+               gimbal: tuple[float, float] | None = None, still: str | None = None,
+               motion: tuple[float, ...] | None = None
                ) -> tuple[np.ndarray | None, list[dict[str, Any]] | None]:
         """One frame of ``stream`` from the vehicle's pose (lat, lon, alt, roll,
         pitch, yaw) and its gimbal's angles (None: the mount's); with ``still``
         (a path in the run folder) the frame is also written there as a still.
+        ``motion`` (north, east, down velocity m/s; roll, pitch, yaw rates deg/s)
+        is what a sensor's exposure smears the frame by (None: at rest).
         Returns the operator view's thumbnail (if any) and, for a still, the
         frame's ground truth (one dict per target, with its id)."""
         s = self.streams[stream]
@@ -156,7 +159,9 @@ class RenderWorker:
                            gimbal)
         img, rows = render_frame(self.world, s.camera, pose, tick, self.frames[stream], stream)
         if stream in self.sensors:  # the camera's sensor and lens; truth from the clean render
-            img = self.sensors[stream].apply(img, frame_no)
+            sensor = self.sensors[stream]
+            smear = sensor.smear_px(pose6, motion, gimbal, pose, self.world.spec.ground_alt_m)
+            img = sensor.apply(img, frame_no, smear)
         ids = None if s.camera.datalink is None else self.world.last_ids(*img.shape[:2])
         self.writers[stream].write(frame_no, tick / self.world.spec.physics_hz, img, rows,
                                    self.target_ids, ids)
@@ -223,9 +228,9 @@ def _worker_main(world_spec: WorldSpec, streams: list[Stream], out_dir: str, cod
                 continue
             if job is None:
                 break
-            stream, frame_no, tick, pose6, gimbal, still = job
+            stream, frame_no, tick, pose6, gimbal, still, motion = job
             try:
-                thumb, truth = w.render(stream, frame_no, tick, pose6, gimbal, still)
+                thumb, truth = w.render(stream, frame_no, tick, pose6, gimbal, still, motion)
             except BaseException:
                 results.send(("error", stream, tick, worker_kit.remote_traceback()))
                 break
@@ -251,10 +256,12 @@ class InlinePool:
             raise self.failed from None
 
     def submit(self, s: Stream, frame_no: int, tick: int, pose6: tuple[float, ...],
-               gimbal: tuple[float, float] | None, still: str | None) -> None:
+               gimbal: tuple[float, float] | None, still: str | None,
+               motion: tuple[float, ...] | None = None) -> None:
         """Render and write ``s``'s frame now (RenderError if that fails)."""
         try:
-            thumb, truth = self.worker.render(s.index, frame_no, tick, pose6, gimbal, still)
+            thumb, truth = self.worker.render(s.index, frame_no, tick, pose6, gimbal, still,
+                                              motion)
         except Exception:
             self.failed = RenderError(s.vehicle, s.camera.name, tick, traceback.format_exc())
             raise self.failed from None
@@ -326,11 +333,12 @@ class RenderPool:
             self.heard.append(time.monotonic())
 
     def submit(self, s: Stream, frame_no: int, tick: int, pose6: tuple[float, ...],
-               gimbal: tuple[float, float] | None, still: str | None) -> None:
+               gimbal: tuple[float, float] | None, still: str | None,
+               motion: tuple[float, ...] | None = None) -> None:
         """Queue ``s``'s frame for its worker; wait for results while that worker
         has ``max_in_flight`` frames queued."""
         k = s.index % len(self.procs)
-        self._give(k, (s.index, frame_no, tick, pose6, gimbal, still))
+        self._give(k, (s.index, frame_no, tick, pose6, gimbal, still, motion))
         self.pending[k].append((s.index, tick))
         while self.in_flight[k] >= self.max_in_flight:
             self.collect(block=True)

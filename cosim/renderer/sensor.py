@@ -12,7 +12,16 @@ turns it into what the camera records, in this order:
 2. vignetting: linear light times ``cos^(4 s)(theta)``, ``theta`` the angle off
    the optical axis of the ray a pixel sees (``s = 1``: natural cos^4 falloff
    for the camera's own field of view);
-3. noise: in linear light ``L`` (0 black, 1 full scale), a shot noise of
+3. motion blur: an exposure of ``T`` = ``exposure_ms`` ending at the frame's
+   tick sees the scene move; the pose one exposure earlier is the vehicle's
+   position less velocity x ``T`` and its attitude less its rates x ``T``
+   (``smear_px``). One kernel blurs the whole frame: the segment from where
+   the ground point at the image centre was at the shutter's opening to where
+   it is now (for a nadir camera in level flight ``v T / GSD`` pixels along
+   the flight, plus about ``f`` x angular rate x ``T`` from pitch and roll;
+   a rotation about the optical axis, which leaves the centre in place, is not
+   modelled). The blur averages 8-bit values;
+4. noise: in linear light ``L`` (0 black, 1 full scale), a shot noise of
    variance ``b L`` and a read noise of variance ``a = b L_r`` (``L_r`` =
    ``READ_SIGNAL``: read noise equals shot noise at 1 % of full scale), ``b``
    set by the signal-to-noise ratio ``snr_db`` at mid-grey ``L_m`` =
@@ -39,6 +48,7 @@ Owns the sensor's pixels only: what is drawn is ``frame``'s, where frames go
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import sys
 import zlib
@@ -48,8 +58,20 @@ import cv2
 import numpy as np
 from scipy.special import ndtri
 
-from cosim.core.camera import CameraSpec, SensorSpec
+from cosim.core.camera import (
+    CameraSpec,
+    Pose,
+    SensorSpec,
+    camera_pose,
+    ground_homography,
+    intrinsics,
+    project,
+    to_camera,
+)
 
+#: how far along the image centre's ray motion blur looks when it meets no
+#: ground nearer (a forward camera at the horizon)
+SMEAR_RANGE_M = 5000.0
 #: the power law between a frame's 8-bit values and linear light
 GAMMA = 2.2
 #: the linear signal at which ``snr_db`` is given (18 % grey)
@@ -217,6 +239,29 @@ def frame_rng(seed: int, vehicle_row: int, camera: str, frame_no: int) -> np.ran
     return np.random.Generator(np.random.PCG64(np.random.SeedSequence(key)))
 
 
+def line_kernel(dx_px: float, dy_px: float) -> tuple[np.ndarray, tuple[int, int]]:
+    """cv2.filter2D's kernel (and anchor) averaging the image along the segment
+    from each pixel to ``(dx, dy)`` away: a point now at ``p`` that was at
+    ``p - (dx, dy)`` when the shutter opened is smeared back over that
+    segment. Samples every quarter pixel, spread bilinearly; sums to 1."""
+    r = math.ceil(max(abs(dx_px), abs(dy_px))) + 1
+    k = np.zeros((2 * r + 1, 2 * r + 1), np.float32)
+    n = max(2, math.ceil(4 * math.hypot(dx_px, dy_px)))
+    lam = (np.arange(n) + 0.5) / n
+    x, y = r + lam * dx_px, r + lam * dy_px
+    x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
+    fx, fy = (x - x0).astype(np.float32), (y - y0).astype(np.float32)
+    for ox, oy, wgt in ((0, 0, (1 - fx) * (1 - fy)), (1, 0, fx * (1 - fy)),
+                        (0, 1, (1 - fx) * fy), (1, 1, fx * fy)):
+        np.add.at(k, (y0 + oy, x0 + ox), wgt)
+    k /= k.sum()
+    rows, cols = np.flatnonzero(k.any(axis=1)), np.flatnonzero(k.any(axis=0))
+    y_lo, y_hi, x_lo, x_hi = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
+    # cropped to the segment's box: a smear along the image's rows or columns
+    # costs filter2D a few columns or rows, not a square
+    return np.ascontiguousarray(k[y_lo:y_hi, x_lo:x_hi]), (int(r - x_lo), int(r - y_lo))
+
+
 def normal_levels(n: int = 256) -> np.ndarray:
     """``n`` equiprobable values standing for a standard normal: the mean of each
     of ``n`` equal-probability bins, scaled to a variance of exactly 1."""
@@ -258,15 +303,52 @@ class Sensor:
         self.table = noise_table(spec.snr_db) if spec.snr_db is not None else None
         self.bgr = np.empty((h, w, 3), np.uint8)
 
-    def apply(self, img: np.ndarray, frame_no: int) -> np.ndarray:
+    def smear_px(self, pose6: tuple[float, ...], motion: tuple[float, ...] | None,
+                 gimbal: tuple[float, float] | None, pose: Pose, ground_alt_m: float
+                 ) -> tuple[float, float] | None:
+        """How far (pixels, x and y) the ground point at the image centre moved
+        during the exposure ending at the frame of vehicle pose ``pose6`` and
+        camera ``pose``; ``motion`` the vehicle's velocity (north, east, down,
+        m/s) and attitude rates (roll, pitch, yaw, deg/s). None: no exposure,
+        or no motion given."""
+        if not self.spec.exposure_ms or motion is None:
+            return None
+        t_s = self.spec.exposure_ms / 1000.0
+        la, lo, alt, roll, pitch, yaw = pose6
+        vn, ve, vd, roll_dps, pitch_dps, yaw_dps = motion
+        before = camera_pose(self.cam, la, lo, alt, roll - roll_dps * t_s,
+                             pitch - pitch_dps * t_s, yaw - yaw_dps * t_s, ground_alt_m, gimbal)
+        moved = np.array([vn, ve, vd]) * t_s
+        before = dataclasses.replace(before, c_l=pose.c_l - moved,
+                                     height_m=pose.height_m + moved[2])
+        K = intrinsics(self.cam)
+        centre = np.array([K[0, 2], K[1, 2], 1.0])
+        ray = pose.R_cl.T @ (np.linalg.inv(K) @ centre)  # in L
+        ray /= np.linalg.norm(ray)
+        hit = ground_homography(np.linalg.inv(K), pose) @ centre
+        reach_m = SMEAR_RANGE_M
+        if hit[2] > 1e-12:  # the ground, if it is nearer than that
+            reach_m = min(reach_m, float(np.linalg.norm(np.append(hit[:2] / hit[2], 0.0)
+                                                        - pose.c_l)))
+        seen = to_camera(before, (pose.c_l + ray * reach_m)[None, :])
+        if seen[0, 2] <= 0:
+            return None
+        u, v = project(K, seen)[0]
+        return float(K[0, 2] - u), float(K[1, 2] - v)
+
+    def apply(self, img: np.ndarray, frame_no: int,
+              smear: tuple[float, float] | None = None) -> np.ndarray:
         """The recorded frame from the render ``img`` (h x w x 4 BGRA uint8,
         changed in place and returned, or a buffer of the sensor's when distorted)
-        of frame ``frame_no``."""
+        of frame ``frame_no``, smeared by ``smear`` (``smear_px``; None: none)."""
         if self.maps is not None:
             img = cv2.remap(img, *self.maps, cv2.INTER_LINEAR, dst=self.warped,
                             borderMode=cv2.BORDER_CONSTANT, borderValue=(0, 0, 0, 255))
         if self.gain is not None:
             cv2.multiply(img, self.gain, dst=img, dtype=cv2.CV_8U)
+        if smear is not None:
+            kernel, anchor = line_kernel(*smear)
+            cv2.filter2D(img, -1, kernel, dst=img, anchor=anchor, borderType=cv2.BORDER_REPLICATE)
         if self.table is not None:
             bgr = cv2.cvtColor(img, cv2.COLOR_BGRA2BGR, dst=self.bgr)
             rng = frame_rng(self.seed, self.row, self.cam.name, frame_no)

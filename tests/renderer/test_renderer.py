@@ -194,6 +194,7 @@ def _fly(tmp_path: Path, name: str, *, workers: int = 0, rate: float = 30.0, dur
         la, lo = frame.place(north, 0.0, GROUND_M + alt_agl_m)
         states[0, STATE_INDEX["lat_deg"]], states[0, STATE_INDEX["lon_deg"]] = la, lo
         states[0, STATE_INDEX["alt_msl_m"]] = GROUND_M + alt_agl_m
+        states[0, STATE_INDEX["vn_mps"]] = v_mps
         part.on_exchange(tick, states)
     summary = part.finish(scn.total_ticks, "completed")
     assert summary is not None
