@@ -49,17 +49,58 @@ def derive(h: np.ndarray, *k: float) -> Iterator[np.ndarray]:
 
 def value_noise(x: np.ndarray, y: np.ndarray, seed: int, period: int = 0) -> np.ndarray:
     """Smooth value noise in [0, 1) on the unit lattice (periodic if ``period``)."""
-    xi, yi = np.floor(x), np.floor(y)
-    fx, fy = (x - xi).astype(np.float32), (y - yi).astype(np.float32)
-    fx, fy = fx * fx * (3 - 2 * fx), fy * fy * (3 - 2 * fy)
+    xi, yi, fx, fy = _cells(x, y)
     xi, yi = xi.astype(np.int64), yi.astype(np.int64)
     x1, y1 = xi + 1, yi + 1
     if period:
         xi, yi, x1, y1 = xi % period, yi % period, x1 % period, y1 % period
     a, b = uniform_hash(xi, yi, seed), uniform_hash(x1, yi, seed)
     c, d = uniform_hash(xi, y1, seed), uniform_hash(x1, y1, seed)
+    return _blend(a, b, c, d, fx, fy)
+
+
+def value_noise_at(x: np.ndarray, y: np.ndarray, *seeds: int) -> list[np.ndarray]:
+    """``value_noise`` (not periodic) of each seed at scattered points, the same
+    values: their lattice corners hashed once over the corners' span and gathered
+    (points many to a corner cost a gather instead of four hashes)."""
+    xi, yi, fx, fy = _cells(x, y)
+    out = []
+    for seed in seeds:
+        k, tab, nj = hash_table(xi, yi, seed, 1)
+        out.append(_blend(tab.take(k), tab.take(k + nj), tab.take(k + 1),
+                          tab.take(k + nj + 1), fx, fy))
+    return out
+
+
+def hash_table(i: np.ndarray, j: np.ndarray, seed: int, more: int = 0
+               ) -> tuple[np.ndarray, np.ndarray, int]:
+    """``uniform_hash`` over the lattice corners ``i.min() .. i.max() + more`` x
+    ``j.min() .. j.max() + more`` (whole numbers, as floats or ints): ``(k, table,
+    nj)``, the flat ``table`` with rows of ``nj`` and the index ``k`` of each
+    ``(i, j)`` in it (``k + nj``: the next ``i``, ``k + 1``: the next ``j``)."""
+    i0, j0 = int(i.min()), int(j.min())
+    ni, nj = int(i.max()) - i0 + 1 + more, int(j.max()) - j0 + 1 + more
+    tab = uniform_hash(np.arange(i0, i0 + ni)[:, None], np.arange(j0, j0 + nj)[None, :],
+                       seed).ravel()
+    k = (i - i0).astype(np.intp)
+    k *= nj
+    k += (j - j0).astype(np.intp)
+    return k, tab, nj
+
+
+def _cells(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The lattice cell of each point and its smoothstepped place in it."""
+    xi, yi = np.floor(x), np.floor(y)
+    fx, fy = (x - xi).astype(np.float32), (y - yi).astype(np.float32)
+    return xi, yi, fx * fx * (3 - 2 * fx), fy * fy * (3 - 2 * fy)
+
+
+def _blend(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray, fx: np.ndarray,
+           fy: np.ndarray) -> np.ndarray:
+    """Corner values ``a`` (x, y), ``b`` (x + 1, y), ``c`` (x, y + 1), ``d`` interpolated."""
     top = a + (b - a) * fx
-    return top + ((c + (d - c) * fx) - top) * fy
+    out: np.ndarray = top + ((c + (d - c) * fx) - top) * fy
+    return out
 
 
 WEIGHTS: OrderedDict[bytes, list[tuple[int, np.ndarray]]] = OrderedDict()

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable
 
 import cv2
 import numpy as np
@@ -26,12 +27,14 @@ import numpy as np
 from cosim.renderer import noise
 from cosim.renderer.noise import (
     derive,
+    hash_table,
     lattice,
     noise_on_grid,
     noise_weights,
     product,
     uniform_hash,
     value_noise,
+    value_noise_at,
 )
 
 MACRO_STEP_M = 0.5  # macro features (fields, roads, trees) sampled at least this fine
@@ -39,9 +42,13 @@ DETAIL_PX = 512  # the tileable detail texture's size at the base level
 MACRO_OVERSAMPLE = 2.0  # macro features sampled at most every this many pixels, then upsampled
 #: bump whenever a tile's pixels change for the same seed and ground parameters
 #: (old cache folders are then ignored; delete ~/.cache/cosim/ground to reclaim the space)
-TEXTURE_VERSION = 6
+TEXTURE_VERSION = 8
 FIELD_N_M, FIELD_E_M = 160.0, 220.0  # field size
+WARP_M = 15.0  # the field grid's warp, at most this many metres
 TREE_M = 7.0  # one tree at most per cell of this size, at a random place in its middle half
+TREE_R_M = (1.6, 2.8)  # a tree crown's radius, from .. to
+WOODS = 0.76  # woods where the 500 m value noise is above this
+HEDGE_M = (4.0, 9.0)  # a hedgerow's trees stand this far inside a field that has one
 
 # field palette, RGB: crops, pasture, wheat, ploughed soil, dry grass, dark crop
 _FIELDS = np.array([[96, 128, 58], [118, 140, 72], [176, 160, 96], [122, 98, 72],
@@ -61,14 +68,13 @@ def _field_cells(seed: int, step_m: float, a0: int, a1: int, b0: int,
                  b1: int) -> tuple[np.ndarray, ...]:
     """What depends only on a field: for the cells ``[a0, a1) x [b0, b1)`` of the
     field grid (flat, row-major) its colour (3 x cells), crop-row amplitude and
-    cycles per field unit along u and v, whether it has a hedgerow; and whether the
-    grid lines ``a0 .. a1 - 1`` (north) and ``b0 .. b1 - 1`` (east) are roads (a
-    road's half width, or -1000)."""
+    cycles per field unit along u and v; and whether the grid lines ``a0 .. a1 - 1``
+    (north) and ``b0 .. b1 - 1`` (east) are roads (a road's half width, or -1000)."""
     ki = np.arange(a0, a1, dtype=np.float64)
     kj = np.arange(b0, b1, dtype=np.float64)
     hf = uniform_hash(ki[:, None], kj[None, :], seed + 3).ravel()
     kind = np.minimum((hf * len(_FIELDS)).astype(np.int64), len(_FIELDS) - 1)
-    shade, rows, across, hedge = derive(hf, 613.37, 2713.91, 97.13, 31.77)
+    shade, rows, across, _ = derive(hf, 613.37, 2713.91, 97.13, 31.77)  # _: _tree_cells' hedge
     colour = (_FIELDS[kind] * (0.88 + 0.24 * shade)[..., None]).T.copy()
     # crop rows: 2.5-4 m apart, along or across the field, only where resolvable
     period = 2.5 + 1.5 * rows
@@ -81,19 +87,144 @@ def _field_cells(seed: int, step_m: float, a0: int, a1: int, b0: int,
                       -1e3).astype(np.float32)
     road_e = np.where(uniform_hash(np.zeros_like(kj), kj, seed + 9) < 0.3, 3.0,
                       -1e3).astype(np.float32)
-    return colour, amp, cu, cv, hedge < 0.5, road_n, road_e
+    return colour, amp, cu, cv, road_n, road_e
 
 
 def _tree_cells(kn: np.ndarray, ke: np.ndarray, seed: int) -> tuple[np.ndarray, ...]:
     """What depends only on a tree cell (``TREE_M`` square; ``kn``, ``ke`` its
     row and column, broadcast together), flat: whether a tree stands there in a
-    wood, or on a hedgerow; its centre north and east; its radius and shade."""
+    wood, or on a hedgerow; its centre north and east; its radius and shade.
+
+    Whether it stands is decided at its centre, so a tree is drawn whole or not
+    at all, across the edges of its wood, hedgerow band, field, cell and tile: in
+    a wood where the woods' value noise there is above ``WOODS``; on a hedgerow
+    where the centre is ``HEDGE_M`` inside a field that has one (the centre's
+    field and distances to the field grid's lines, warped as ``macro_rgb``'s;
+    the warp's noise at the centre itself, not on a grid)."""
     ht = uniform_hash(kn, ke, seed + 12)
     d = derive(ht, 43.9, 71.3, 577.31, 1291.7, 3343.1)  # taken in this order
-    return ((next(d) < 0.9).ravel(), (next(d) < 0.7).ravel(),
-            ((kn + 0.25 + 0.5 * ht) * TREE_M).ravel(),
-            ((ke + 0.25 + 0.5 * next(d)) * TREE_M).ravel(), (1.6 + 1.2 * next(d)).ravel(),
-            (0.75 + 0.5 * next(d)).ravel())
+    in_wood, on_hedge = (next(d) < 0.9).ravel(), (next(d) < 0.7).ravel()
+    tn = ((kn + 0.25 + 0.5 * ht) * TREE_M).ravel()
+    te = ((ke + 0.25 + 0.5 * next(d)) * TREE_M).ravel()
+    lo, hi = TREE_R_M
+    radius = (lo + (hi - lo) * next(d)).ravel()
+    tone = (0.75 + 0.5 * next(d)).ravel()
+    in_wood &= value_noise_at(tn / 500.0, te / 500.0, seed + 10)[0] > WOODS
+    u32, v32 = value_noise_at(tn / 230.0, te / 230.0, seed + 1, seed + 2)
+    u = u32.astype(np.float64)
+    u -= 0.5
+    u *= 2 * WARP_M / FIELD_N_M
+    u += tn / FIELD_N_M
+    v = v32.astype(np.float64)
+    v -= 0.5
+    v *= 2 * WARP_M / FIELD_E_M
+    v += te / FIELD_E_M
+    fu, fv = np.floor(u), np.floor(v)
+    k, fields, _ = hash_table(fu, fv, seed + 3)
+    hedge = (next(derive(fields, 31.77)) < 0.5).take(k)  # _field_cells' hedgerow
+    u -= fu
+    v -= fv
+    edge = np.minimum(np.minimum(u, 1.0 - u) * FIELD_N_M, np.minimum(v, 1.0 - v) * FIELD_E_M)
+    on_hedge &= hedge & (edge > HEDGE_M[0]) & (edge < HEDGE_M[1])
+    return in_wood, on_hedge, tn, te, radius, tone
+
+
+#: how far a sample's woods noise and field-edge distance (metres) may be from
+#: those at the centre of its cell's tree, at most 7.5 m away (the middle half of
+#: a 7 m cell): the noise's slope is at most 1.5 per wavelength along each axis
+#: (smoothstep), 0.032 over 5.25 m + 5.25 m at 500 m; the warp's is 30 m x 1.5 /
+#: 230 m, so an edge distance moves by at most 5.25 m + 0.2 x 10.5 m, 7.3 m
+_NEAR_WOODS = 0.05
+_NEAR_EDGE_M = 10.0
+
+
+def _trees(nv: np.ndarray, ev: np.ndarray, step_m: float, seed: int,
+           edge_m: Callable[[], np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The trees over the grid ``nv`` x ``ev`` (monotonic, either way): the flat
+    indices ``at`` of the samples they cover, their coverage ``cov`` and shade
+    (coverage x tone), or None where no tree stands.
+
+    A tree's disc reaches ``TREE_R_M[1] + step_m / 2`` past its centre, beyond its
+    cell: every tree cell that reaches the grid is drawn, each tree over its own
+    box of samples (a wood's edge, a hedgerow band, a field, a cell and a tile cut
+    none). Overlapping crowns are laid one over another in a fixed order, the
+    trees of cells ``q`` apart at a time (their boxes never overlap), so a sample's
+    colour does not depend on which tile or call drew it. Where a grid spans more
+    tree cells than it has samples (a tree is then smaller than a sample; the
+    tables of every cell would cost more than the tile) each sample takes the
+    tree of its own cell only, looked up where one may stand: near a wood (the
+    woods' noise at the sample within ``_NEAR_WOODS`` of ``WOODS``) or a field's
+    edge (``edge_m()``, the sample's distance to the nearest line of the warped
+    field grid, within ``_NEAR_EDGE_M`` of a hedgerow band)."""
+    R, C = len(nv), len(ev)
+    reach = TREE_R_M[1] + 0.5 * step_m
+    kn0, kn1 = math.floor((nv.min() - reach) / TREE_M), math.floor((nv.max() + reach) / TREE_M)
+    ke0, ke1 = math.floor((ev.min() - reach) / TREE_M), math.floor((ev.max() + reach) / TREE_M)
+
+    def make(a0: int, a1: int, b0: int, b1: int) -> tuple[np.ndarray, ...]:
+        return _tree_cells(np.arange(a0, a1, dtype=np.float64)[:, None],
+                           np.arange(b0, b1, dtype=np.float64)[None, :], seed)
+
+    got = noise.TABLES.cover(("tree", seed), kn0, kn1, ke0, ke1, 32, make,
+                             own=(kn1 - kn0 + 1) * (ke1 - ke0 + 1) <= R * C)
+    if got is None:  # each sample its own cell's tree, where one may stand
+        woods = noise_on_grid(noise_weights(nv, [500.0])[0], noise_weights(ev, [500.0])[0],
+                              seed + 10)
+        maybe = np.flatnonzero((woods > WOODS - _NEAR_WOODS)
+                               | (edge_m() < HEDGE_M[1] + _NEAR_EDGE_M))
+        r, c = np.divmod(maybe, C)
+        wood, hedge, tn, te, radius, tone = _tree_cells(np.floor(nv.take(r) / TREE_M),
+                                                        np.floor(ev.take(c) / TREE_M), seed)
+        stand = np.flatnonzero(wood | hedge)
+        at, r, c = maybe.take(stand), r.take(stand), c.take(stand)
+        dtn, dte = nv.take(r) - tn.take(stand), ev.take(c) - te.take(stand)
+        cov = _coverage(radius.take(stand) - np.sqrt(dtn * dtn + dte * dte), step_m)
+        return (at, cov, cov * tone.take(stand)) if len(at) else None
+    a0, a1, b0, b1, (wood, hedge, tn, te, radius, tone) = got
+    nb = b1 - b0
+    stands = (wood | hedge).reshape(-1, nb)[kn0 - a0:kn1 + 1 - a0, ke0 - b0:ke1 + 1 - b0]
+    kn, ke = np.nonzero(stands)
+    if not len(kn):
+        return None
+    kn += kn0
+    ke += ke0
+    t = (kn - a0) * nb + (ke - b0)  # in the tables
+    tn, te, radius, tone = tn.take(t), te.take(t), radius.take(t), tone.take(t)
+    # each tree's box of samples: |nv - tn| and |ev - te| < its reach
+    ext = radius + 0.5 * step_m
+    sn = 1.0 if nv[-1] >= nv[0] else -1.0  # nv * sn ascending
+    se = 1.0 if ev[-1] >= ev[0] else -1.0
+    i0 = np.searchsorted(nv * sn, tn * sn - ext, "right")
+    i1 = np.searchsorted(nv * sn, tn * sn + ext, "left")
+    j0 = np.searchsorted(ev * se, te * se - ext, "right")
+    j1 = np.searchsorted(ev * se, te * se + ext, "left")
+    rows, cols = np.maximum(i1 - i0, 0), np.maximum(j1 - j0, 0)
+    # laid in order of the cells' (row mod q, column mod q): within one such class
+    # trees are at least q TREE_M - TREE_M / 2 apart along a row or column, more
+    # than two reaches
+    q = math.floor((2 * reach + TREE_M / 2) / TREE_M) + 1
+    order = np.argsort((kn % q) * q + ke % q, kind="stable")
+    cls = ((kn % q) * q + ke % q)[order]
+    count = (rows * cols)[order]
+    tree = np.repeat(order, count)  # one entry per (tree, sample of its box)
+    first = np.cumsum(count) - count
+    k = np.arange(len(tree)) - np.repeat(first, count)
+    wide = cols.take(tree)
+    r = i0.take(tree) + k // wide
+    c = j0.take(tree) + k % wide
+    dtn, dte = nv.take(r) - tn.take(tree), ev.take(c) - te.take(tree)
+    cov = _coverage(radius.take(tree) - np.sqrt(dtn * dtn + dte * dte), step_m)
+    flat = r * C + c
+    alpha = np.zeros(R * C, np.float32)
+    shade = np.zeros(R * C, np.float32)
+    ends = np.searchsorted(np.repeat(cls, count), np.arange(q * q + 1), "left")
+    tone_of = tone.take(tree)
+    for lo, hi in zip(ends[:-1], ends[1:]):  # a class's samples are each covered once
+        at, a = flat[lo:hi], cov[lo:hi]
+        shade[at] = shade[at] * (1.0 - a) + a * tone_of[lo:hi]
+        alpha[at] = alpha[at] + a - alpha[at] * a
+    at = np.flatnonzero(alpha)
+    return at, alpha.take(at), shade.take(at)
 
 
 def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int) -> np.ndarray:
@@ -107,13 +238,12 @@ def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int) -> np.ndar
     nv, ev = n.ravel().astype(np.float64), e.ravel().astype(np.float64)
     R, C = len(nv), len(ev)
     f32 = np.float32
-    fn, fe = FIELD_N_M, FIELD_E_M
-    warp = 15.0  # the field grid's warp, at most this many metres
-    # value noise weights: field-grid warp, woods, brightness octaves (finer than
-    # two samples left out)
+    fn, fe, warp = FIELD_N_M, FIELD_E_M, WARP_M
+    # value noise weights: field-grid warp, brightness octaves (finer than two
+    # samples left out)
     octaves = [wl for wl in (60.0, 30.0, 15.0, 7.5) if wl >= 2 * step_m]
-    wts_n = noise_weights(nv, [230.0, 500.0] + octaves)
-    wts_e = noise_weights(ev, [230.0, 500.0] + octaves)
+    wts_n = noise_weights(nv, [230.0] + octaves)
+    wts_e = noise_weights(ev, [230.0] + octaves)
     # warped coordinates in field units: u = (north + warp) / fn, v = (east + warp) / fe
     u = noise_on_grid(wts_n[0], wts_e[0], seed + 1, 2 * warp / fn, -0.5)
     u += (nv / fn).astype(np.float32)[:, None]
@@ -129,7 +259,7 @@ def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int) -> np.ndar
     got = noise.TABLES.cover(("field", seed, step_m), ci0, ci1, cj0, cj1, 8,
                         functools.partial(_field_cells, seed, step_m))
     assert got is not None
-    a0, a1, b0, b1, (colour, amp, cu, cv, hedge_cell, road_n, road_e) = got
+    a0, a1, b0, b1, (colour, amp, cu, cv, road_n, road_e) = got
     nj = b1 - b0
     here = (slice(ci0 - a0, ci1 + 1 - a0), slice(cj0 - b0, cj1 + 1 - b0))  # of a table
     fu, fv = np.floor(u), np.floor(v)
@@ -152,9 +282,9 @@ def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int) -> np.ndar
         factor = np.ones((R, C), np.float32)
     # brightness variation within fields (soil moisture, growth)
     if octaves:
-        left = [wts_n[2 + k][1] @ lattice(wts_n[2 + k], wts_e[2 + k], seed + 7 + 17 * k,
+        left = [wts_n[1 + k][1] @ lattice(wts_n[1 + k], wts_e[1 + k], seed + 7 + 17 * k,
                                            -0.5, 0.35 * 0.5**k) for k in range(len(octaves))]
-        bright = product(np.hstack(left), np.hstack([w for _, w in wts_e[2:]]).T)
+        bright = product(np.hstack(left), np.hstack([w for _, w in wts_e[1:]]).T)
         bright += f32(1.0)
     else:
         bright = np.ones((R, C), np.float32)
@@ -180,75 +310,14 @@ def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int) -> np.ndar
         line += f32(0.5)
         np.clip(line, 0.0, 1.0, out=line)
         road = line if road is None else np.maximum(road, line, out=road)
-    # trees: woods where low-frequency noise is high, hedgerows on field edges
-    woods = noise_on_grid(wts_n[1], wts_e[1], seed + 10) > 0.76
-    edge = np.minimum(du, dv)
-    edge -= f32(6.5)  # exact here (Sterbenz): |edge - 6.5| < 2.5 is 4 < edge < 9
-    band = np.abs(edge, out=edge) < f32(2.5)  # hedgerows where the field has one
-    maybe = np.flatnonzero(woods | band)
-    # a tree's coverage and shade: over the whole grid (tree, tone) where most of it
-    # may have trees, else at the flat indices ``at`` only (cov, shade; zero elsewhere)
-    tree: np.ndarray | None = None
-    at: np.ndarray | None = None
-    if len(maybe):
-        # the tree cells' tables (_tree_cells): kept for whole blocks of 32 x 32 cells,
-        # made for this grid's cells, or (more cells than samples) for the candidates'
-        cn, ce = np.floor(nv / TREE_M), np.floor(ev / TREE_M)
-        kn0, kn1 = int(min(cn[0], cn[-1])), int(max(cn[0], cn[-1]))
-        ke0, ke1 = int(min(ce[0], ce[-1])), int(max(ce[0], ce[-1]))
-
-        def trees(a0: int, a1: int, b0: int, b1: int) -> tuple[np.ndarray, ...]:
-            return _tree_cells(np.arange(a0, a1, dtype=np.float64)[:, None],
-                               np.arange(b0, b1, dtype=np.float64)[None, :], seed)
-
-        got = noise.TABLES.cover(("tree", seed), kn0, kn1, ke0, ke1, 32, trees,
-                            own=(kn1 - kn0 + 1) * (ke1 - ke0 + 1) <= R * C)
-        if got is None:
-            r, c = np.divmod(maybe, C)
-            cells = _tree_cells(cn.take(r), ce.take(c), seed)
-            tc = np.arange(len(maybe))
-        else:
-            a0, _, b0, b1, cells = got
-            tc_row = (cn - a0).astype(np.intp) * (b1 - b0)
-            tc_col = (ce - b0).astype(np.intp)
-            if len(maybe) > R * C // 4:  # the same values, in fewer whole-grid passes
-                tc = tc_row[:, None] + tc_col[None, :]
-            else:
-                r, c = np.divmod(maybe, C)
-                tc = tc_row.take(r) + tc_col.take(c)
-        in_wood, on_hedge, tn_cell, te_cell, radius_cell, tone_cell = cells
-        if tc.ndim == 2:
-            present = woods & in_wood.take(tc)
-            present |= band & hedge_cell.take(cell) & on_hedge.take(tc)
-            dist = tn_cell.take(tc)  # in place: fewer large float64 temporaries
-            np.subtract(nv[:, None], dist, out=dist)
-            dist *= dist
-            dte = te_cell.take(tc)
-            np.subtract(ev[None, :], dte, out=dte)
-            dte *= dte
-            dist += dte
-            np.sqrt(dist, out=dist)
-            cov = _coverage(np.subtract(radius_cell.take(tc), dist, out=dist), step_m)
-            tree = np.where(present, cov, f32(0.0))
-            tone = tree * tone_cell.take(tc)
-        else:
-            hedge = band.ravel().take(maybe) & hedge_cell.take(cell.ravel().take(maybe))
-            present = ((woods.ravel().take(maybe) & in_wood.take(tc))
-                       | (hedge & on_hedge.take(tc)))
-            at, r, c, tc = maybe[present], r[present], c[present], tc[present]
-            dtn, dte = nv.take(r) - tn_cell.take(tc), ev.take(c) - te_cell.take(tc)
-            cov = _coverage(radius_cell.take(tc) - np.sqrt(dtn * dtn + dte * dte), step_m)
-            shade = cov * tone_cell.take(tc)
-    # blend: field colour x factor, then road, then tree over it (where a tree's
-    # coverage is zero, x 1 and + 0 leave the values as they are)
+    # trees: whole discs over the fields and roads (_tree_cells, _trees)
+    trees = _trees(nv, ev, step_m, seed, lambda: np.minimum(du, dv))
+    # blend: field colour x factor, then road, then trees over it
     keep = factor
     if road is not None:
         keep *= 1.0 - road
-    if tree is not None:
-        keep *= 1.0 - tree
-        if road is not None:
-            road *= 1.0 - tree
-    elif at is not None:
+    if trees is not None:
+        at, cov, shade = trees
         clear = 1.0 - cov
         keep.reshape(-1)[at] *= clear
         if road is not None:
@@ -259,9 +328,7 @@ def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int) -> np.ndar
         p *= keep
         if road is not None:
             p += road_ch * road
-        if tree is not None:
-            p += tree_ch * tone
-        elif at is not None:
+        if trees is not None:
             p.reshape(-1)[at] += tree_ch * shade
     return rgb
 
