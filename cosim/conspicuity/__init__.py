@@ -3,7 +3,8 @@
 Owns the analysis of the renderer's per-frame ground truth (how long each
 target is visible, pass by pass) and the critical-gap relation between a
 conspicuity angle measured at a viewing distance and the angle at a flight
-altitude. The display profile (on-screen distance <-> visual angle) is the
+altitude; and how natural a frame is, the spectral exponent of its luminance
+(``spectrum``). The display profile (on-screen distance <-> visual angle) is the
 kernel's, ``cosim.core.display``, and part of this package's API. It reads
 run folders; it never renders, steps an FDM or writes into a run's own files
 (``cosim visibility`` adds ``visibility.csv``).
