@@ -5,13 +5,15 @@ Writes docs/images/sensor_off_on.png:
     python examples/sensor_frames.py [OUT.png] [--sensor YAML]
 
 ``--sensor`` is the camera's ``sensor:`` mapping (default: barrel distortion,
-natural cos^4 vignetting and 20 dB at mid-grey, on an 80 degree lens).
+natural cos^4 vignetting, a 20 ms exposure of the flyover's 51.4 m/s and 20 dB
+at mid-grey, on an 80 degree lens).
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import textwrap
 from pathlib import Path
 
 import cv2
@@ -24,7 +26,9 @@ from cosim.scenario import parse_scenario
 
 REPO = Path(__file__).resolve().parent.parent
 SCENARIO = REPO / "scenarios/cameras/flyover.yaml"
-DEFAULT = "{distortion: {k1: -0.15}, vignetting: cos4, snr_db: 20}"
+DEFAULT = "{distortion: {k1: -0.15}, vignetting: cos4, exposure_ms: 20, snr_db: 20}"
+#: the flyover's flight: north at 51.4 m/s (100 kt), level
+MOTION = (51.4, 0.0, 0.0, 0.0, 0.0, 0.0)
 
 
 def camera(sensor_yaml: str) -> tuple[CameraSpec, object]:
@@ -48,15 +52,20 @@ def main() -> None:
                    120.0, scn.world.ground, scn.world.targets)  # type: ignore[attr-defined]
     world = World(ws)
     la, lo = o.frame.place(-20.0, 0.0, o.ground_alt_m + 60)  # 20 m short of the truck
-    pose = camera_pose(cam, la, lo, o.ground_alt_m + 60, 0.0, 0.0, 0.0, o.ground_alt_m)
+    pose6 = (float(la), float(lo), o.ground_alt_m + 60, 0.0, 0.0, 0.0)
+    pose = camera_pose(cam, *pose6, o.ground_alt_m)
     plain = dataclasses.replace(cam, sensor=None)
     off, _ = render_frame(world, plain, pose, 0)
-    on = Sensor(cam, cam.sensor, ws.seed, 0).apply(off.copy(), 0)
+    sensor = Sensor(cam, cam.sensor, ws.seed, 0)
+    smear = sensor.smear_px(pose6, MOTION, None, pose, o.ground_alt_m)
+    on = sensor.apply(off.copy(), 0, smear)
     panels = []
     for img, label in ((off, "sensor off"), (on, f"sensor: {a.sensor}")):
         bgr = cv2.cvtColor(img, cv2.COLOR_BGRA2BGR)
-        cv2.putText(bgr, label, (6, 232), cv2.FONT_HERSHEY_SIMPLEX, 0.38, (255, 255, 255), 1,
-                    cv2.LINE_AA)
+        lines = textwrap.wrap(label, 48)  # 48 characters fit 320 px
+        for j, text in enumerate(lines):
+            cv2.putText(bgr, text, (6, 232 - 13 * (len(lines) - 1 - j)),
+                        cv2.FONT_HERSHEY_SIMPLEX, 0.38, (255, 255, 255), 1, cv2.LINE_AA)
         panels.append(bgr)
     gap = np.full((240, 4, 3), 255, np.uint8)
     if not cv2.imwrite(a.out, np.hstack([panels[0], gap, panels[1]])):
