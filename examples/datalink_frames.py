@@ -52,7 +52,8 @@ def main() -> None:
             la, lo = (float(v) for v in o.frame.place(north_m, 0.0, o.ground_alt_m + 100))
             pose = camera_pose(cam, la, lo, o.ground_alt_m + 100, 0.0, 0.0, 0.0, o.ground_alt_m)
             clean, _ = render_frame(world, cam, pose, i * 8)
-            got = link.send(clean)
+            link.send(clean)
+        got = link.latest()
         link.close()
     x, y, w, h = CROP
     panels = []

@@ -6,10 +6,17 @@ for zero latency: no B-frames, no look-ahead) at a constant bit rate
 (``bitrate_kbps``, HRD-conformant CBR with a one-second buffer), every
 ``every``-th rendered frame (``rate_hz``), a key frame every ``gop``
 delivered frames. ``Downlink`` writes the encoded packets as the camera's
-video file and decodes each one back at once, so the ground truth can be
+video file and decodes them back (below), so the ground truth can be
 measured on the frame as delivered (``truth.delivered``); the rendered frame
 is not kept. Each delivered frame arrives ``latency_ms`` after it was
 rendered (``delivered_time_s`` of the ground truth).
+
+Decoding waits until a delivered frame is looked at (``latest``: a target in
+view to measure, an operator view or ``--video`` tap to feed): the packets
+since the last decoded one, or since the last key frame, are decoded then, in
+order, so each frame decodes exactly as a receiver decoding every packet would
+have it, and a stretch of frames with nothing to measure and nobody watching
+costs no decoding.
 
 Owns the ``datalink:`` keys and the encoder and decoder; the files are
 ``outputs``'.
@@ -75,8 +82,9 @@ def parse_datalink(info: SectionContext, d: Any, p: P, camera_rate_hz: float | N
 
 class Downlink:
     """One camera's encoded video, written to ``path`` and decoded back:
-    ``send(frame)`` encodes a rendered frame (BGRA uint8) and returns it as
-    the far end decodes it (BGRA). ``close()`` finishes the file."""
+    ``send(frame)`` encodes a rendered frame (BGRA uint8), ``latest()`` is the
+    last one sent as the far end decodes it (BGRA). ``close()`` finishes the
+    file."""
 
     def __init__(self, path: str, spec: DatalinkSpec, width_px: int, height_px: int) -> None:
         import av
@@ -103,27 +111,45 @@ class Downlink:
         self.got = np.zeros((height_px, width_px, 4), np.uint8)  # black until a delivery
         self.n = 0
         self.bytes = 0
+        #: the packets sent and not yet decoded (from the last key frame at most)
+        self.pending: list[bytes] = []
 
-    def send(self, img: np.ndarray) -> np.ndarray:
-        """Encode ``img`` (BGRA) and return the frame decoded from its packet
-        (BGRA, a buffer reused by the next call)."""
+    def send(self, img: np.ndarray) -> None:
+        """Encode ``img`` (BGRA) into the file; its decoding waits for ``latest``."""
         import av
 
         cv2.cvtColor(img, cv2.COLOR_BGRA2YUV_I420, dst=self.yuv)
         f = av.VideoFrame.from_ndarray(self.yuv, format="yuv420p")
         f.pts, f.time_base = self.n, self.time_base
         self.n += 1
+        packets = self.stream.encode(f)
+        if len(packets) != 1:  # zero-latency x264: one frame in, one packet out
+            raise CosimError(f"the datalink's encoder gave {len(packets)} packets for frame "
+                             f"{self.n - 1}, expected 1")
+        packet = packets[0]
+        self.bytes += packet.size
+        if packet.is_keyframe:  # what came before it is never needed again
+            self.pending.clear()
+        self.pending.append(bytes(packet))  # muxing takes the packet's data
+        self.container.mux(packet)
+
+    def latest(self) -> np.ndarray:
+        """The last frame sent as the far end decodes it (BGRA, black before
+        any; a buffer the next decode reuses)."""
+        if not self.pending:
+            return self.got
+        import av
+
+        if self.decoder.extradata is None:  # mp4's out-of-band parameter sets
+            self.decoder.extradata = self.stream.codec_context.extradata
         decoded = []
-        for packet in self.stream.encode(f):
-            self.bytes += packet.size
-            if self.decoder.extradata is None:  # mp4's out-of-band parameter sets
-                self.decoder.extradata = self.stream.codec_context.extradata
-            decoded.extend(self.decoder.decode(packet))
-            self.container.mux(packet)
-        if len(decoded) != 1:  # zero-latency x264 and FFmpeg's decoder: one in, one out
-            raise CosimError(f"the datalink's encoder and decoder gave {len(decoded)} frames "
-                             f"for frame {self.n - 1}, expected 1")
-        cv2.cvtColor(decoded[0].to_ndarray(format="yuv420p"), cv2.COLOR_YUV2BGRA_I420,
+        for data in self.pending:
+            decoded.extend(self.decoder.decode(av.Packet(data)))
+        if len(decoded) != len(self.pending):  # FFmpeg's decoder: one in, one out
+            raise CosimError(f"the datalink's decoder gave {len(decoded)} frames for "
+                             f"{len(self.pending)} packets up to frame {self.n - 1}")
+        self.pending.clear()
+        cv2.cvtColor(decoded[-1].to_ndarray(format="yuv420p"), cv2.COLOR_YUV2BGRA_I420,
                      dst=self.got)
         return self.got
 

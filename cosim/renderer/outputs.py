@@ -100,7 +100,7 @@ class StreamWriter:
     def shown(self, img: np.ndarray) -> np.ndarray:
         """What an operator sees of the frame just written (``img``): with a
         downlink, the last frame it delivered (held between deliveries)."""
-        return img if self.link is None else self.link.got
+        return img if self.link is None else self.link.latest()
 
     def _deliver(self, frame_no: int, time_s: float, img: np.ndarray,
                  rows: list[dict[str, Any]], target_ids: list[str], ids: np.ndarray | None,
@@ -113,9 +113,12 @@ class StreamWriter:
         if frame_no % link.every == 0:
             if ids is None:
                 raise ValueError("a downlink's frame needs its target-id image")
-            got = self.link.send(img)
+            self.link.send(img)
             at = f"{time_s + link.latency_ms / 1000:.6f}"
-            extra = [[at, str(n), _fmt(c)] for n, c in delivered(rows, img, got, ids)]
+            seen = any(r["in_view"] and r["pixels_on_target"] for r in rows)  # else 0, None
+            measures = delivered(rows, img, self.link.latest(), ids) if seen else \
+                [(0, None)] * len(rows)
+            extra = [[at, str(n), _fmt(c)] for n, c in measures]
         self.gt.writerows([*head, tid, *[_fmt(r[c]) for c in _GT_VALUES], *x]
                           for tid, r, x in zip(target_ids, rows, extra))
 

@@ -90,7 +90,8 @@ def test_a_small_target_fades_at_a_low_bit_rate_and_keeps_at_a_high_one(tmp_path
     for kbps in (30.0, 20000.0):
         link = Downlink(str(tmp_path / f"{kbps}.mp4"), _link(kbps), W, H)
         for img in frames:
-            got = link.send(img)
+            link.send(img)
+        got = link.latest()
         link.close()
         out[kbps] = delivered([clean], frames[-1], got, ids)[0]
     n_hi, c_hi = out[20000.0]
@@ -99,6 +100,28 @@ def test_a_small_target_fades_at_a_low_bit_rate_and_keeps_at_a_high_one(tmp_path
     assert n_hi == 36
     assert c_lo is not None and abs(c_lo - clean["contrast"]) > 0.25 * clean["contrast"]
     assert n_lo < 36
+
+
+def test_frames_decode_as_a_receiver_decoding_every_packet_would(tmp_path: Path) -> None:
+    """Decoding waits until a frame is looked at (the packets since the last
+    decoded one or key frame, then): each frame looked at equals the file's
+    frame decoded in order, whatever was skipped before it, across key frames."""
+    path = tmp_path / "v.mp4"
+    link = Downlink(str(path), _link(200.0, gop=5), W, H)
+    assert not link.latest().any()  # black before anything is sent
+    looked: dict[int, np.ndarray] = {}
+    for i, img in enumerate(_scene(14)):
+        link.send(img)
+        if i in (0, 3, 4, 8, 13):  # 8 after 5 and 6 skipped past the key frame at 5
+            looked[i] = link.latest().copy()
+    link.close()
+    with av.open(str(path)) as c:
+        every = [cv2.cvtColor(f.to_ndarray(format="yuv420p"), cv2.COLOR_YUV2BGRA_I420)
+                 for f in c.decode(c.streams.video[0])]
+    assert len(every) == 14
+    for i, img in looked.items():
+        assert np.array_equal(img, every[i]), i
+    assert not np.array_equal(looked[3], looked[4])
 
 
 def test_delivered_is_contrasts_formula_on_the_delivered_pixels() -> None:
