@@ -92,6 +92,7 @@ class Downlink:
         if width_px % 2 or height_px % 2:
             raise CosimError(f"{path}: a datalink's {spec.codec} needs an even frame size, got "
                              f"{width_px}x{height_px}")
+        self.spec = spec
         kbps = spec.bitrate_kbps
         rate = Fraction(spec.rate_hz).limit_denominator(1001)
         self.container: Any = av.open(path, "w")
@@ -154,11 +155,16 @@ class Downlink:
         return self.got
 
     def close(self) -> dict[str, Any]:
-        """Finish the file; the frames sent and the mean bit rate they took."""
+        """Finish the file; the link's settings, the frames sent and the mean
+        bit rate they took (for the stream's entry in summary.json)."""
         if self.container is not None:
             self.container.mux(self.stream.encode(None))
             self.container.close()
             self.container = None
         secs = self.n * float(self.time_base)
-        return {"delivered_frames": self.n,
+        sp = self.spec
+        return {"datalink": {"codec": sp.codec, "bitrate_kbps": sp.bitrate_kbps,
+                             "rate_hz": sp.rate_hz, "keyframe_every": sp.gop,
+                             "latency_ms": sp.latency_ms},
+                "delivered_frames": self.n,
                 "delivered_kbps": round(self.bytes * 8 / secs / 1000, 1) if secs else None}

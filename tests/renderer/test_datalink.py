@@ -187,6 +187,8 @@ def test_a_run_writes_the_delivered_video_and_ground_truth(tmp_path: Path) -> No
     summary, out = _fly(tmp_path, "link", rate=30.0, dur=2.0, more=more)
     st = summary["streams"][1]
     assert st["frames"] == 60 and st["delivered_frames"] == 20
+    assert st["datalink"] == {"codec": "h264", "bitrate_kbps": 200.0, "rate_hz": 10.0,
+                              "keyframe_every": 10, "latency_ms": 250.0}
     with av.open(str(out / "cameras/u1_link.mp4")) as c:
         v = c.streams.video[0]
         assert float(v.average_rate) == pytest.approx(10.0)
