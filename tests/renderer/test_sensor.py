@@ -338,3 +338,31 @@ def test_a_run_blurs_frames_by_the_vehicle_s_motion(tmp_path: Path) -> None:
     assert sharp[0] == sharp[1]
     blurred = run("blurred", "{exposure_ms: 20}")
     assert blurred[0] == sharp[0] and blurred[1] != sharp[1]
+
+
+@pytest.mark.parametrize("dx, dy", [(13.5, 13.5), (-20.3, 7.1), (4.0, -30.0), (0.0, 13.5)])
+def test_a_long_diagonal_smear_in_pieces_is_the_whole_kernel(dx: float, dy: float) -> None:
+    """smear_frame cuts a kernel too big for OpenCV's tap-by-tap filter into
+    pieces: the pieces sum to the whole kernel, and the frame equals one
+    filter2D with it within one 8-bit step, away from the image's edges."""
+    import cv2
+
+    from cosim.renderer.sensor import line_kernel, smear_frame
+
+    whole, (ax, ay) = line_kernel(dx, dy)
+    assert float(whole.sum()) == pytest.approx(1.0, abs=1e-5)
+    r = math.ceil(max(abs(dx), abs(dy))) + 1
+    total = np.zeros((2 * r + 1, 2 * r + 1))
+    for i in range(3):
+        part, (px, py) = line_kernel(dx, dy, i, 3)
+        total[r - py:r - py + part.shape[0], r - px:r - px + part.shape[1]] += part
+    placed = np.zeros_like(total)
+    placed[r - ay:r - ay + whole.shape[0], r - ax:r - ax + whole.shape[1]] = whole
+    assert np.allclose(total, placed, atol=1e-6)
+    img = np.random.default_rng(2).integers(0, 256, (120, 160, 4), np.uint8)
+    img[..., 3] = 255
+    want = cv2.filter2D(img, -1, whole, anchor=(ax, ay), borderType=cv2.BORDER_REPLICATE)
+    got = smear_frame(img.copy(), dx, dy)
+    m = r + 1
+    assert np.abs(got.astype(int) - want.astype(int))[m:-m, m:-m].max() <= 1
+    assert (got[..., 3] == 255).all()
