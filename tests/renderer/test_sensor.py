@@ -366,3 +366,51 @@ def test_a_long_diagonal_smear_in_pieces_is_the_whole_kernel(dx: float, dy: floa
     m = r + 1
     assert np.abs(got.astype(int) - want.astype(int))[m:-m, m:-m].max() <= 1
     assert (got[..., 3] == 255).all()
+
+
+def test_a_rendered_bright_square_is_smeared_by_v_t_over_gsd(tmp_path: Path) -> None:
+    """The render worker's whole path: a 0.8 m white square on a black picture
+    ground, seen from 60 m by a nadir camera flying north at 40 m/s with a 40
+    ms exposure (a still, lossless): against the same frame without the
+    exposure, its light moves v T / GSD / 2 toward the image top (the smear
+    trails behind it), not sideways, and its streak is v T / GSD longer."""
+    import cv2
+
+    from cosim.core.geo import LocalFrame
+    from cosim.renderer.frame import WorldSpec
+    from cosim.renderer.outputs import Stream
+    from cosim.renderer.render_pool import RenderWorker
+    from cosim.world.ground import GroundSpec
+
+    picture = np.zeros((800, 800, 3), np.uint8)
+    picture[396:404, 396:404] = 255  # 0.8 m at 0.1 m/px, at the origin
+    cv2.imwrite(str(tmp_path / "ground.png"), picture)
+    ground = GroundSpec(kind="image", image=str(tmp_path / "ground.png"),
+                        origin_ne_m=(40.0, -40.0), m_per_px=0.1)
+    lat, lon, g_m, h_m, v_mps, t_ms = 37.0, -122.0, 10.0, 60.0, 40.0, 40.0
+    ws = WorldSpec(lat, lon, g_m, 1, 120.0, ground, ())
+    la, lo = LocalFrame(lat, lon, g_m).place(0.0, 0.0, g_m + h_m)
+    pose6 = (float(la), float(lo), g_m + h_m, 0.0, 0.0, 0.0)
+    light = []
+    for exposure in (0.0, t_ms):
+        cam = _cam(w=320, h=240, hfov=50.0, exposure_ms=exposure)
+        out = tmp_path / f"e{exposure:g}"
+        (out / "cameras").mkdir(parents=True)
+        s = Stream(0, "u1", 0, cam, "cameras/b.avi", "cameras/b.gt.csv", None)
+        w = RenderWorker(ws, [s], out, "mjpg", False)
+        w.render(0, 0, 0, pose6, None, "still.png", (v_mps, 0.0, 0.0, 0.0, 0.0, 0.0))
+        w.close()
+        light.append(cv2.imread(str(out / "still.png"))[..., 1].astype(np.float64))
+    want_px = v_mps * t_ms / 1000 / (h_m / _cam(w=320, h=240, hfov=50.0).fx_px)
+    assert want_px > 8
+
+    def centroid(img: np.ndarray) -> tuple[float, float]:
+        ys, xs = np.nonzero(img)
+        return float((img[ys, xs] * xs).sum() / img.sum()), float((img[ys, xs] * ys).sum()
+                                                                  / img.sum())
+
+    (x0, y0), (x1, y1) = centroid(light[0]), centroid(light[1])
+    assert x1 - x0 == pytest.approx(0.0, abs=0.2)
+    assert y1 - y0 == pytest.approx(-want_px / 2, abs=0.3)
+    rows = [np.flatnonzero(img.max(axis=1) > 0) for img in light]
+    assert len(rows[1]) - len(rows[0]) == pytest.approx(want_px, abs=1.0)
