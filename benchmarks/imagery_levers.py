@@ -1,0 +1,159 @@
+"""The camera pipeline's levers, each timed A against B in the same run (not a test).
+
+For a 640x480 frame, each variant of a step runs in turn on the same frame,
+round after round, so the machine's load falls on A and B alike; the median
+of each is printed (ms, wall clock; the datalink's also in process CPU time,
+which counts every encoder thread):
+
+- noise: ``Sensor.apply`` with ``snr_db`` as committed (np.take in pieces of
+  ``sensor._TAKE_CHUNK`` values) against one np.take over the whole frame;
+  the two frames are checked to be the same bytes;
+- vignetting: cv2.multiply of the BGRA frame by the float32 gain (committed)
+  against the same on three channels after a colour conversion, and numpy
+  in float32;
+- datalink: ``Downlink.send`` (x264 ultrafast) with one encoder thread
+  (committed) against two.
+
+    python benchmarks/imagery_levers.py [--rounds 60]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import tempfile
+import time
+from collections.abc import Callable, Mapping
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from cosim.core.camera import CameraSpec, DatalinkSpec, SensorSpec
+from cosim.renderer import sensor as sensor_mod
+from cosim.renderer.datalink import Downlink
+from cosim.renderer.sensor import Sensor
+
+W, H = 640, 480
+
+
+def _frame(shift_px: int = 0) -> np.ndarray:
+    """A BGRA frame of smooth texture (a ground-like spectrum), moved ``shift_px``
+    down."""
+    rng = np.random.default_rng(0)
+    big = rng.integers(0, 256, (H + 64, W, 4), dtype=np.uint8)
+    big = np.asarray(cv2.GaussianBlur(big, (7, 7), 0), np.uint8)
+    out = np.ascontiguousarray(big[32 - shift_px % 32:32 - shift_px % 32 + H])
+    out[..., 3] = 255
+    return out
+
+
+def _cam(sensor: SensorSpec) -> CameraSpec:
+    """A 640x480 nadir camera with an 80 deg lens and ``sensor``."""
+    return CameraSpec(name="c", vehicles=(0,), mount="nadir", pitch_deg=-90.0,
+                      stabilised=True, hfov_deg=80.0, vfov_deg=64.0, width_px=W,
+                      height_px=H, rate_hz=15.0, frame_every=4, sensor=sensor)
+
+
+def _ab(variants: Mapping[str, Callable[[int], object]], rounds: int,
+        clock: Callable[[], float] = time.perf_counter) -> dict[str, float]:
+    """Median ms of each variant, called in turn ``rounds`` times (with the round)."""
+    times: dict[str, list[float]] = {k: [] for k in variants}
+    for i in range(rounds):
+        for name, fn in variants.items():
+            t = clock()
+            fn(i)
+            times[name].append(clock() - t)
+    return {k: 1e3 * statistics.median(v) for k, v in times.items()}
+
+
+def noise(rounds: int) -> dict[str, float]:
+    cam = _cam(SensorSpec(snr_db=40.0))
+    assert cam.sensor is not None
+    sensor = Sensor(cam, cam.sensor, seed=1, vehicle_row=0)
+    base = _frame()
+    chunk = sensor_mod._TAKE_CHUNK
+
+    def run(whole: bool, i: int) -> bytes:
+        sensor_mod._TAKE_CHUNK = W * H * 3 if whole else chunk
+        try:
+            return sensor.apply(base.copy(), i).tobytes()
+        finally:
+            sensor_mod._TAKE_CHUNK = chunk
+
+    if run(True, 5) != run(False, 5):
+        raise SystemExit("noise: the frame taken in pieces differs from the whole take")
+    return _ab({"noise, take in pieces (committed)": lambda i: run(False, i),
+                "noise, one take of the frame": lambda i: run(True, i)}, rounds)
+
+
+def vignetting(rounds: int) -> dict[str, float]:
+    cam = _cam(SensorSpec(vignetting=1.0))
+    assert cam.sensor is not None
+    gain4 = Sensor(cam, cam.sensor, seed=1, vehicle_row=0).gain
+    assert gain4 is not None
+    gain3 = np.ascontiguousarray(gain4[..., :3])
+    base = _frame()
+    bgr = np.empty((H, W, 3), np.uint8)
+
+    def bgra(_: int) -> None:
+        img = base.copy()
+        cv2.multiply(img, gain4, dst=img, dtype=cv2.CV_8U)
+
+    def three(_: int) -> None:
+        img = base.copy()
+        cv2.cvtColor(img, cv2.COLOR_BGRA2BGR, dst=bgr)
+        cv2.multiply(bgr, gain3, dst=bgr, dtype=cv2.CV_8U)
+
+    def in_numpy(_: int) -> None:
+        img = base.copy()
+        f = img.astype(np.float32)
+        f *= gain4
+        img[:] = np.rint(f)
+
+    return _ab({"vignetting, cv2.multiply BGRA (committed)": bgra,
+                "vignetting, BGR after cvtColor": three,
+                "vignetting, numpy float32": in_numpy}, rounds)
+
+
+def _sender(link: Downlink, frames: list[np.ndarray]) -> Callable[[int], None]:
+    """Sends the round's frame through ``link``."""
+    return lambda i: link.send(frames[i % len(frames)])
+
+
+def datalink(rounds: int) -> dict[str, float]:
+    frames = [_frame(3 * k) for k in range(32)]
+    spec = DatalinkSpec(codec="h264", bitrate_kbps=1000.0, rate_hz=15.0, every=1, gop=15,
+                        latency_ms=0.0)
+    out: dict[str, float] = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        links = {}
+        for threads in (1, 2):
+            link = Downlink(str(Path(tmp) / f"t{threads}.mp4"), spec, W, H)
+            link.stream.codec_context.thread_count = threads  # before the first frame opens it
+            links[threads] = link
+        variants = {f"datalink send, x264 {t} thread{'s' if t > 1 else ''}"
+                    f"{' (committed)' if t == 1 else ''}": _sender(lk, frames)
+                    for t, lk in links.items()}
+        wall = _ab(variants, rounds)
+        cpu = _ab(variants, rounds, time.process_time)
+        for link in links.values():
+            link.close()
+    for k in wall:
+        out[f"{k}, wall"] = wall[k]
+        out[f"{k}, CPU"] = cpu[k]
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rounds", type=int, default=60)
+    args = ap.parse_args(argv)
+    for part in (noise, vignetting, datalink):
+        for name, ms in part(args.rounds).items():
+            print(f"{name:55s} {ms:6.2f} ms")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
