@@ -5,9 +5,11 @@ round after round, so the machine's load falls on A and B alike; the median
 of each is printed (ms, wall clock; the datalink's also in process CPU time,
 which counts every encoder thread):
 
-- noise: ``Sensor.apply`` with ``snr_db`` as committed (np.take in pieces of
-  ``sensor._TAKE_CHUNK`` values) against one np.take over the whole frame;
-  the two frames are checked to be the same bytes;
+- noise: ``Sensor.apply`` with ``snr_db`` as committed (a level a random byte,
+  interleaved with the values by cv2.merge, np.take in pieces of
+  ``sensor._TAKE_CHUNK`` values) against one np.take over the whole frame
+  (the two frames are checked to be the same bytes) and against 16 random
+  bits a value written into by a strided copy (the draw before 8-bit levels);
 - vignetting: cv2.multiply of the BGRA frame by the float32 gain (committed)
   against the same on three channels after a colour conversion, and numpy
   in float32;
@@ -32,7 +34,7 @@ import numpy as np
 from cosim.core.camera import CameraSpec, DatalinkSpec, SensorSpec
 from cosim.renderer import sensor as sensor_mod
 from cosim.renderer.datalink import Downlink
-from cosim.renderer.sensor import Sensor
+from cosim.renderer.sensor import Sensor, frame_rng
 
 W, H = 640, 480
 
@@ -67,6 +69,22 @@ def _ab(variants: Mapping[str, Callable[[int], object]], rounds: int,
     return {k: 1e3 * statistics.median(v) for k, v in times.items()}
 
 
+def _noise_quarters(sensor: Sensor, img: np.ndarray, frame_no: int) -> None:
+    """The noise as drawn before 8-bit levels: 16 random bits a value (the raw
+    words cut four ways), the value written into each quarter's high byte."""
+    assert sensor.table is not None
+    bgr = cv2.cvtColor(img, cv2.COLOR_BGRA2BGR, dst=sensor.bgr)
+    rng = frame_rng(sensor.seed, sensor.row, sensor.cam.name, frame_no)
+    n = bgr.size
+    idx = rng.bit_generator.random_raw(-(-n // 4)).view(np.uint16)[:n]
+    flat = bgr.reshape(-1)
+    idx.view(np.uint8)[sensor_mod._HIGH::2] = flat
+    for i in range(0, n, sensor_mod._TAKE_CHUNK):
+        np.take(sensor.table, idx[i:i + sensor_mod._TAKE_CHUNK],
+                out=flat[i:i + sensor_mod._TAKE_CHUNK])
+    cv2.cvtColor(bgr, cv2.COLOR_BGR2BGRA, dst=img)
+
+
 def noise(rounds: int) -> dict[str, float]:
     cam = _cam(SensorSpec(snr_db=40.0))
     assert cam.sensor is not None
@@ -83,8 +101,10 @@ def noise(rounds: int) -> dict[str, float]:
 
     if run(True, 5) != run(False, 5):
         raise SystemExit("noise: the frame taken in pieces differs from the whole take")
-    return _ab({"noise, take in pieces (committed)": lambda i: run(False, i),
-                "noise, one take of the frame": lambda i: run(True, i)}, rounds)
+    return _ab({"noise, 8-bit levels, take in pieces (committed)": lambda i: run(False, i),
+                "noise, 8-bit levels, one take of the frame": lambda i: run(True, i),
+                "noise, 16-bit draws, take in pieces": lambda i: _noise_quarters(
+                    sensor, base.copy(), i)}, rounds)
 
 
 def vignetting(rounds: int) -> dict[str, float]:

@@ -34,8 +34,9 @@ ground truth's contrast uses (``truth.py``); each step writes 8-bit values
 times ``g^(1/2.2)``: vignetting is one multiplication. Noise is one table
 look-up per value (``noise_table``: for each 8-bit value and each of 256
 equiprobable normal levels, ``normal_levels``, the value recorded), the level
-drawn from numpy's PCG64 seeded by (scenario seed, vehicle row, camera name,
-frame number): the same frame for any backend or number of render workers.
+one byte of the raw 64-bit words of numpy's PCG64 seeded by (scenario seed,
+vehicle row, camera name, frame number): the same frame for any backend or
+number of render workers.
 The 256 levels are the means of 256 equal-probability bins of the normal
 distribution, scaled to unit variance (the largest 3.0 sigma); the table
 gives exactly what adding ``sigma z`` in floating point and rounding would.
@@ -341,6 +342,9 @@ class Sensor:
         self.warped = np.empty((h, w, 4), np.uint8)
         self.table = noise_table(spec.snr_db) if spec.snr_db is not None else None
         self.bgr = np.empty((h, w, 3), np.uint8)
+        #: the noise's table indices as byte pairs (a buffer: made anew, its pages
+        #: cost more than the merge)
+        self.pairs = np.empty((h, w * 3, 2), np.uint8)
 
     def smear_px(self, pose6: tuple[float, ...], motion: tuple[float, ...] | None,
                  gimbal: tuple[float, float] | None, pose: Pose, ground_alt_m: float
@@ -390,12 +394,15 @@ class Sensor:
         if self.table is not None:
             bgr = cv2.cvtColor(img, cv2.COLOR_BGRA2BGR, dst=self.bgr)
             rng = frame_rng(self.seed, self.row, self.cam.name, frame_no)
-            # the generator's raw 64-bit words, 4 levels each (in the low bytes
-            # of their 16-bit quarters): a third of the cost of integers()
+            # the generator's raw 64-bit words, 8 levels each (a level a byte),
+            # interleaved with the values into the table's uint16 indices
+            # (the value the high byte) by one cv2.merge
             n = bgr.size
-            idx = rng.bit_generator.random_raw(-(-n // 4)).view(np.uint16)[:n]
+            levels = rng.bit_generator.random_raw(-(-n // 8)).view(np.uint8)[:n]
             flat = bgr.reshape(-1)
-            idx.view(np.uint8)[_HIGH::2] = flat  # high byte: the value
+            pair = [flat.reshape(bgr.shape[0], -1), levels.reshape(bgr.shape[0], -1)]
+            cv2.merge(pair[::-1] if _HIGH else pair, dst=self.pairs)
+            idx = self.pairs.view(np.uint16).reshape(-1)
             # take converts its indices to intp: in pieces they stay in the cache
             for i in range(0, n, _TAKE_CHUNK):
                 np.take(self.table, idx[i:i + _TAKE_CHUNK], out=flat[i:i + _TAKE_CHUNK])
