@@ -41,6 +41,7 @@ from cosim.renderer.targets import (
     bounding_part,
     box_corners,
     heading_rotation,
+    hidden_faces,
     lambert,
     parts_of,
     smoke_puffs,
@@ -429,8 +430,11 @@ def _sky_image(world: World, h: int, w: int) -> np.ndarray:
 
 def _target_faces(pose: Pose, t: TargetSpec, origin_l: np.ndarray, time_s: float, seed: int,
                   tid: int, sun_l: np.ndarray
-                  ) -> list[tuple[float, np.ndarray, tuple[int, int, int, int], int]]:
-    """The front faces of a target's boxes: (depth, camera-axis polygon, BGRA, id)."""
+                  ) -> list[tuple[float, float, np.ndarray, tuple[int, int, int, int], int]]:
+    """The front faces of a target's boxes: (painter's depth, depth, camera-axis
+    polygon, BGRA, id). The faces of a part under another (an axle under the
+    body, legs under the torso) are painted first, at the target's farthest
+    depth: seen from above the part's top, the part never hides the other."""
     parts = parts_of(t, time_s, seed)
     lo = np.array([p.lo for p in parts])[:, None, :]
     hi = np.array([p.hi for p in parts])[:, None, :]
@@ -440,9 +444,15 @@ def _target_faces(pose: Pose, t: TargetSpec, origin_l: np.ndarray, time_s: float
     faces_l = corners_l[:, FACE_IDX]  # (P, 6, 4, 3)
     cent = faces_l.mean(axis=2)
     front = np.einsum("pfk,fk->pf", cent - pose.c_l, normals) < 0
+    under = np.zeros(len(parts), dtype=bool)
+    if t.kind != "fire":  # a fire's flames change every frame and touch nothing
+        hidden = hidden_faces(tuple(parts))
+        front &= ~hidden
+        under = hidden[:, 4]  # its top lies against another part
     faces_c = (faces_l - pose.c_l) @ pose.R_cl.T
     shade = [lambert(n, sun_l) for n in normals]
-    out = []
+    out: list[tuple[float, float, np.ndarray, tuple[int, int, int, int], int]] = []
+    from_part = []
     for pi, fi in zip(*np.nonzero(front)):
         v_c = faces_c[pi, fi]
         if v_c[:, 2].min() < NEAR_M:
@@ -451,7 +461,12 @@ def _target_faces(pose: Pose, t: TargetSpec, origin_l: np.ndarray, time_s: float
                 continue
         c, k = parts[pi].color_rgb, shade[fi]
         bgra = (min(255, int(c[2] * k)), min(255, int(c[1] * k)), min(255, int(c[0] * k)), OPAQUE)
-        out.append((float(np.linalg.norm(v_c.mean(axis=0))), v_c, bgra, tid))
+        depth_m = float(np.linalg.norm(v_c.mean(axis=0)))
+        out.append((depth_m, depth_m, v_c, bgra, tid))
+        from_part.append(pi)
+    if under.any() and out:
+        far_m = max(f[0] for f in out)
+        out = [(far_m, *f[1:]) if under[pi] else f for f, pi in zip(out, from_part)]
     return out
 
 
@@ -479,7 +494,7 @@ def _draw_smoke(K: np.ndarray, pose: Pose, t: TargetSpec, origin_l: np.ndarray, 
 
 
 def _obstacle_faces(world: World, pose: Pose
-                    ) -> list[tuple[float, np.ndarray, tuple[int, int, int, int], int]]:
+                    ) -> list[tuple[float, float, np.ndarray, tuple[int, int, int, int], int]]:
     """The front faces of every obstacle's prism (walls and roof), as
     ``_target_faces`` gives them; their id is 0: they hide targets but are
     none."""
@@ -512,7 +527,8 @@ def _obstacle_faces(world: World, pose: Pose
             c = OBSTACLE_RGB
             bgra = (min(255, int(c[2] * kk)), min(255, int(c[1] * kk)),
                     min(255, int(c[0] * kk)), OPAQUE)
-            out.append((float(np.linalg.norm(v_c.mean(axis=0))), v_c, bgra, 0))
+            depth_m = float(np.linalg.norm(v_c.mean(axis=0)))
+            out.append((depth_m, depth_m, v_c, bgra, 0))
     return out
 
 
@@ -540,7 +556,7 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
     seed = world.spec.seed
     targets = world.targets
     origins = targets.origins_in(pose.local, pose.local_ecef_m)
-    faces: list[tuple[float, np.ndarray, tuple[int, int, int, int], int]] = []
+    faces: list[tuple[float, float, np.ndarray, tuple[int, int, int, int], int]] = []
     specs, offsets = targets.specs, world.probe_offsets
     if world.growing:  # growing fires: their size at this frame
         specs = tuple(t.at(time_s) for t in specs)
@@ -560,7 +576,7 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
                                    world.sun_l))
     faces.extend(_obstacle_faces(world, pose))
     faces.sort(key=lambda f: -f[0])  # painter's order: far to near
-    for depth_m, v_c, bgra, tid in faces:
+    for _, depth_m, v_c, bgra, tid in faces:
         if haze is not None:  # a flat face: hazed at its centre's distance
             bgra = haze.bgra(bgra, depth_m)
         pts = _fixed(project(K, v_c))

@@ -11,6 +11,7 @@ frame's local plane ``L`` (see ``camera``).
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -43,30 +44,60 @@ def _shade(c: tuple[int, int, int], k: float) -> tuple[int, int, int]:
     return (int(min(255, c[0] * k)), int(min(255, c[1] * k)), int(min(255, c[2] * k)))
 
 
+#: wheels and tyres (a vehicle's axles), a person's skin and hair
+WHEEL_RGB = (28, 28, 30)
+SKIN_RGB = (190, 150, 120)
+HAIR_RGB = (60, 45, 35)
+
+
+def _axles(L: float, W: float, clear_m: float, centres_x: tuple[float, ...],
+           wheel_m: float) -> list[Part]:
+    """One dark box per axle: its wheels' lower parts below the body (``clear_m``
+    high, ``wheel_m`` long), across the width inset by 4 % a side."""
+    hw = 0.46 * W
+    return [Part((x - wheel_m / 2, -hw, -clear_m), (x + wheel_m / 2, hw, 0.0), WHEEL_RGB)
+            for x in centres_x]
+
+
 def parts_of(t: TargetSpec, time_s: float = 0.0, seed: int = 0) -> list[Part]:
-    """The boxes of target ``t`` (a fire's flames depend on time and seed)."""
+    """The boxes of target ``t`` (a fire's flames depend on time and seed).
+
+    Vehicles stand on their axles (dark boxes below the body, seen from the
+    side and obliquely); a person has legs, torso, arms and a head. All lie
+    inside ``bounding_part``."""
     L, W, H, c = t.length_m, t.width_m, t.height_m, t.color_rgb
     hl, hw = L / 2, W / 2
-    if t.kind == "truck":
-        cab = 0.2 * L
-        return [Part((hl - cab, -hw, -0.8 * H), (hl, hw, 0.0), _shade(c, 0.8)),
-                Part((-hl, -hw, -H), (hl - cab - 0.2, hw, -0.25 * H), c),
-                Part((-hl, -0.45 * W, -0.25 * H), (hl - cab, 0.45 * W, 0.0), (40, 40, 40))]
-    if t.kind == "fire_truck":  # red body, lime-yellow roof band, white ladder
-        return [Part((-hl, -hw, -0.9 * H), (hl, hw, 0.0), c),
+    if t.kind == "truck":  # cab ahead of a box load, three axles
+        cab, clear = 0.2 * L, 0.25 * H
+        return [*_axles(L, W, clear, (0.38 * L, -0.17 * L, -0.28 * L), 0.1 * L),
+                Part((hl - cab, -hw, -0.8 * H), (hl, hw, -clear), _shade(c, 0.8)),
+                Part((-hl, -hw, -H), (hl - cab - 0.02 * L, hw, -clear), c)]
+    if t.kind == "fire_truck":  # red body on two axles, lime-yellow roof band, white ladder
+        clear = 0.25 * H
+        return [*_axles(L, W, clear, (0.33 * L, -0.25 * L), 0.1 * L),
+                Part((-hl, -hw, -0.9 * H), (hl, hw, -clear), c),
                 Part((-0.4 * L, -0.32 * W, -H), (0.3 * L, 0.32 * W, -0.9 * H), (200, 230, 20)),
                 Part((-0.45 * L, -0.1 * W, -1.06 * H), (0.35 * L, 0.1 * W, -H),
                      (235, 235, 235))]
-    if t.kind == "car":
-        return [Part((-hl, -hw, -0.55 * H), (hl, hw, 0.0), c),
-                Part((-0.25 * L, -0.42 * W, -H), (0.2 * L, 0.42 * W, -0.55 * H),
+    if t.kind == "car":  # body on two axles, a darker cabin (its windows) on top
+        clear = 0.22 * H
+        return [*_axles(L, W, clear, (0.31 * L, -0.31 * L), 0.14 * L),
+                Part((-hl, -hw, -0.58 * H), (hl, hw, -clear), c),
+                Part((-0.25 * L, -0.42 * W, -H), (0.2 * L, 0.42 * W, -0.58 * H),
                      _shade(c, 0.7))]
-    if t.kind == "person":
-        return [Part((-hl, -hw, -0.87 * H), (hl, hw, 0.0), c),
-                Part((-0.22 * L, -0.3 * W, -H), (0.22 * L, 0.3 * W, -0.87 * H),
-                     (190, 150, 120))]
+    if t.kind == "person":  # trousers a darker shade of the clothing, skin and hair fixed
+        legs, sleeves = _shade(c, 0.55), _shade(c, 0.9)
+        return [Part((-0.2 * L, -0.3 * W, -0.47 * H), (0.2 * L, -0.04 * W, 0.0), legs),
+                Part((-0.2 * L, 0.04 * W, -0.47 * H), (0.2 * L, 0.3 * W, 0.0), legs),
+                Part((-0.25 * L, -0.32 * W, -0.82 * H), (0.25 * L, 0.32 * W, -0.47 * H), c),
+                Part((-0.15 * L, -hw, -0.81 * H), (0.15 * L, -0.34 * W, -0.45 * H), sleeves),
+                Part((-0.15 * L, 0.34 * W, -0.81 * H), (0.15 * L, hw, -0.45 * H), sleeves),
+                Part((-0.22 * L, -0.22 * W, -0.95 * H), (0.22 * L, 0.22 * W, -0.82 * H),
+                     SKIN_RGB),
+                Part((-0.24 * L, -0.24 * W, -H), (0.22 * L, 0.24 * W, -0.95 * H), HAIR_RGB)]
     # fire: a charred patch and flickering flames (deterministic from seed and time)
-    out = [Part((-hl, -hw, -0.05), (hl, hw, 0.0), (35, 30, 28))]
+    char = min(0.05, 0.1 * H)  # the patch's thickness (5 cm, less for a fire under 0.5 m)
+    out = [Part((-hl, -hw, -char), (hl, hw, 0.0), (35, 30, 28))]
     rng = np.random.default_rng([seed, 4242])
     n = 6
     xs, ys = rng.uniform(-0.35, 0.35, n) * L, rng.uniform(-0.35, 0.35, n) * W
@@ -75,7 +106,33 @@ def parts_of(t: TargetSpec, time_s: float = 0.0, seed: int = 0) -> list[Part]:
         h = H * (0.45 + 0.55 * abs(math.sin(fr[i] * time_s + ph[i])))
         s = 0.12 * min(L, W) * (1.0 + 0.3 * math.sin(1.7 * fr[i] * time_s + ph[i]))
         col = (255, 200, 40) if i % 2 else c
-        out.append(Part((xs[i] - s, ys[i] - s, -h), (xs[i] + s, ys[i] + s, -0.05), col))
+        out.append(Part((max(-hl, xs[i] - s), max(-hw, ys[i] - s), -h),
+                        (min(hl, xs[i] + s), min(hw, ys[i] + s), -char), col))  # inside the patch
+    return out
+
+
+@functools.lru_cache(maxsize=256)
+def hidden_faces(parts: tuple[Part, ...]) -> np.ndarray:
+    """(P, 6) bool, in ``FACE_IDX`` order: the faces of ``parts`` that lie flat
+    against another part's opposite face and inside it (an axle's top under
+    the body, a leg's under the torso). Never seen, they are not drawn: the
+    painter's order, by each face's centre, could otherwise put one over the
+    part it touches."""
+    lo = np.array([p.lo for p in parts])
+    hi = np.array([p.hi for p in parts])
+    out = np.zeros((len(parts), 6), dtype=bool)
+    for f in range(6):
+        axis, outward = f // 2, f % 2  # FACE_NORMALS: -x, +x, -y, +y, -z, +z
+        plane = (hi if outward else lo)[:, axis]
+        other_plane = (lo if outward else hi)[:, axis]
+        across = [a for a in range(3) if a != axis]
+        for p in range(len(parts)):
+            touching = np.isclose(other_plane, plane[p], rtol=0.0, atol=1e-9)
+            touching[p] = False
+            covers = (touching & (lo[:, across] <= lo[p, across] + 1e-9).all(axis=1)
+                      & (hi[:, across] >= hi[p, across] - 1e-9).all(axis=1))
+            out[p, f] = bool(covers.any())
+    out.flags.writeable = False
     return out
 
 
