@@ -117,10 +117,8 @@ class Downlink:
 
     def send(self, img: np.ndarray) -> None:
         """Encode ``img`` (BGRA) into the file; its decoding waits for ``latest``."""
-        import av
-
         cv2.cvtColor(img, cv2.COLOR_BGRA2YUV_I420, dst=self.yuv)
-        f = av.VideoFrame.from_ndarray(self.yuv, format="yuv420p")
+        f = self.picture()
         f.pts, f.time_base = self.n, self.time_base
         self.n += 1
         packets = self.stream.encode(f)
@@ -133,6 +131,14 @@ class Downlink:
             self.pending.clear()
         self.pending.append(bytes(packet))  # muxing takes the packet's data
         self.container.mux(packet)
+
+    def picture(self) -> Any:
+        """The frame to encode (an av.VideoFrame) over the converted buffer itself,
+        not a copy: x264 copies its input picture before encode returns, so the
+        next frame may overwrite the buffer."""
+        import av
+
+        return av.VideoFrame.from_numpy_buffer(self.yuv, format="yuv420p")
 
     def latest(self) -> np.ndarray:
         """The last frame sent as the far end decodes it (BGRA, black before
