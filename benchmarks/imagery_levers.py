@@ -15,6 +15,10 @@ which counts every encoder thread):
   in float32;
 - distortion: cv2.remap with float32 maps (committed) against OpenCV's
   fixed-point maps;
+- motion blur (3.4 px down the columns): cv2.filter2D (committed) against
+  cv2.sepFilter2D;
+- haze: cv2.LUT with a four-channel table (committed) against one table for
+  every channel and three channels after a colour conversion;
 - datalink: ``Downlink.send`` (x264 ultrafast, one encoder thread, the frame
   handed over as a view of the converted buffer: committed) against a copy of
   it (from_ndarray; the two videos are checked to be the same bytes) and
@@ -39,7 +43,7 @@ import numpy as np
 from cosim.core.camera import CameraSpec, DatalinkSpec, SensorSpec
 from cosim.renderer import sensor as sensor_mod
 from cosim.renderer.datalink import Downlink
-from cosim.renderer.sensor import Sensor, distortion_maps, frame_rng
+from cosim.renderer.sensor import Sensor, distortion_maps, frame_rng, line_kernel
 
 W, H = 640, 480
 
@@ -155,6 +159,55 @@ def distortion(rounds: int) -> dict[str, float]:
     return _ab({f"distortion, cv2.remap, {k} maps": remap(m) for k, m in maps.items()}, rounds)
 
 
+def blur(rounds: int) -> dict[str, float]:
+    kernel, anchor = line_kernel(0.0, 3.4)  # 10 ms at 51.4 m/s, 100 m up: down the columns
+    base = _frame()
+    column = np.ones((1, 1), np.float32)
+
+    def full(_: int) -> None:
+        img = base.copy()
+        cv2.filter2D(img, -1, kernel, dst=img, anchor=anchor, borderType=cv2.BORDER_REPLICATE)
+
+    def separable(_: int) -> None:
+        img = base.copy()
+        cv2.sepFilter2D(img, -1, column, kernel.reshape(-1, 1), dst=img, anchor=anchor,
+                        borderType=cv2.BORDER_REPLICATE)
+
+    return _ab({"motion blur, cv2.filter2D (committed)": full,
+                "motion blur, cv2.sepFilter2D": separable}, rounds)
+
+
+def haze_lut(rounds: int) -> dict[str, float]:
+    """The haze's table look-up over a whole frame: its four-channel table
+    (committed: the airlight's colour differs by channel) against one table
+    shared by the channels (what a grey airlight would allow) and three
+    channels after a colour conversion."""
+    base = _frame()
+    ramp = np.arange(256) // 2
+    table4 = np.dstack([ramp + 10, ramp + 20, ramp + 30, np.arange(256)]).astype(np.uint8)
+    table3 = np.ascontiguousarray(table4[..., :3])
+    table1 = (ramp + 20).astype(np.uint8)
+    bgr = np.empty((H, W, 3), np.uint8)
+
+    def four(_: int) -> None:
+        img = base.copy()
+        cv2.LUT(img, table4, dst=img)
+
+    def shared(_: int) -> None:
+        flat = base.copy().reshape(H, -1)
+        cv2.LUT(flat, table1, dst=flat)
+
+    def three(_: int) -> None:
+        img = base.copy()
+        cv2.cvtColor(img, cv2.COLOR_BGRA2BGR, dst=bgr)
+        cv2.LUT(bgr, table3, dst=bgr)
+        cv2.cvtColor(bgr, cv2.COLOR_BGR2BGRA, dst=img)
+
+    return _ab({"haze, cv2.LUT four-channel table (committed)": four,
+                "haze, cv2.LUT one table for all channels": shared,
+                "haze, cv2.LUT three channels after cvtColor": three}, rounds)
+
+
 class _CopyingDownlink(Downlink):
     """``Downlink`` handing x264 a copy of the converted frame (from_ndarray), as
     before the frame was made over the buffer itself."""
@@ -196,7 +249,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rounds", type=int, default=60)
     args = ap.parse_args(argv)
     cv2.setNumThreads(1)  # one core, as the render workers
-    for part in (noise, distortion, vignetting, datalink):
+    for part in (noise, distortion, vignetting, blur, haze_lut, datalink):
         for name, ms in part(args.rounds).items():
             print(f"{name:72s} {ms:6.2f} ms")
     return 0
