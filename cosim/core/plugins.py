@@ -88,6 +88,22 @@ def load_plugins(group: str, builtin: Mapping[str, str]) -> dict[str, Plugin]:
     return out
 
 
+def load_instances(group: str, builtin: Mapping[str, str], kind: type[T]
+                   ) -> dict[str, tuple[T, str]]:
+    """``load_plugins``' entries that are a ``kind`` (a subclass of it is
+    instantiated), each with where it came from; any other is skipped with a
+    warning."""
+    out: dict[str, tuple[T, str]] = {}
+    for name, p in load_plugins(group, builtin).items():
+        obj = p.obj() if isinstance(p.obj, type) else p.obj
+        if not isinstance(obj, kind):
+            log.warning("%s entry %r (%s) is not a %s: ignored", group, name, p.source,
+                        kind.__name__)
+            continue
+        out[name] = (obj, p.source)
+    return out
+
+
 def pick(group: str, loaded: Mapping[str, T], name: str, what: tuple[str, str]) -> T:
     """The entry ``name`` of ``loaded`` (``group``'s entries as the part using
     them made them); ``ConfigError`` naming the others if there is none.

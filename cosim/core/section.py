@@ -187,11 +187,8 @@ def scenario_sections() -> dict[str, Section]:
     reading one that does not exist, or a circle of them, is left out with a
     warning: a broken plug-in must not stop cosim)."""
     found: dict[str, Section] = {}
-    for key, p in plugins.load_plugins(plugins.SECTIONS, BUILTIN_SECTIONS).items():
-        obj = p.obj() if isinstance(p.obj, type) else p.obj
-        if not isinstance(obj, Section):
-            log.warning("cosim.sections entry %r (%s) is not a Section: ignored", key, p.source)
-            continue
+    for key, (obj, _) in plugins.load_instances(plugins.SECTIONS, BUILTIN_SECTIONS,
+                                                Section).items():
         if obj.key != key:
             log.warning("cosim.sections entry %r is section %r: ignored", key, obj.key)
             continue

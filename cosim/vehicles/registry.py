@@ -37,12 +37,8 @@ BUILTIN_CLASSES: dict[str, str] = {
 def vehicle_classes() -> dict[str, VehicleClass]:
     """Every class by name, cosim's first."""
     out: dict[str, VehicleClass] = {}
-    for name, p in plugins.load_plugins(plugins.VEHICLES, BUILTIN_CLASSES).items():
-        obj = p.obj() if isinstance(p.obj, type) else p.obj
-        if not isinstance(obj, VehicleClass):
-            log.warning("cosim.vehicles entry %r (%s) is not a VehicleClass: ignored", name,
-                        p.source)
-            continue
+    for name, (obj, _) in plugins.load_instances(plugins.VEHICLES, BUILTIN_CLASSES,
+                                                 VehicleClass).items():
         if obj.name != name:
             log.warning("cosim.vehicles entry %r names class %r: registered as %r", name,
                         obj.name, name)
