@@ -105,15 +105,22 @@ class Reader:
     def has(self, key: str) -> bool:
         return key in self.d
 
+    def _absent(self, key: str, default: Any) -> tuple[bool, Any]:
+        """(True, what to return) when ``key`` is not given: its default, or
+        None once a required key is reported missing; (False, None) when it is."""
+        if key in self.d:
+            return False, None
+        if default is MISSING:
+            self.ctx.err(self.path, f"missing required key {key!r}")
+            return True, None
+        return True, default
+
     def num(self, key: str, default: Any = MISSING, lo: float | None = None,
             hi: float | None = None, lo_open: bool = False) -> Any:
-        p = self.path + (key,)
-        if key not in self.d:
-            if default is MISSING:
-                self.ctx.err(self.path, f"missing required key {key!r}")
-                return None
-            return default
-        v = self.d[key]
+        absent, out = self._absent(key, default)
+        if absent:
+            return out
+        p, v = self.path + (key,), self.d[key]
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
             self.ctx.err(p, f"expected a number, got {describe(v)}")
             return None
@@ -131,13 +138,10 @@ class Reader:
 
     def integer(self, key: str, default: Any = MISSING, lo: int | None = None,
                 hi: int | None = None) -> Any:
-        p = self.path + (key,)
-        if key not in self.d:
-            if default is MISSING:
-                self.ctx.err(self.path, f"missing required key {key!r}")
-                return None
-            return default
-        v = self.d[key]
+        absent, out = self._absent(key, default)
+        if absent:
+            return out
+        p, v = self.path + (key,), self.d[key]
         if isinstance(v, bool) or not isinstance(v, int):
             self.ctx.err(p, f"expected a whole number, got {describe(v)}")
             return None
@@ -151,13 +155,10 @@ class Reader:
 
     def string(self, key: str, default: Any = MISSING, pattern: re.Pattern[str] | None = None,
                choices: tuple[str, ...] | None = None) -> Any:
-        p = self.path + (key,)
-        if key not in self.d:
-            if default is MISSING:
-                self.ctx.err(self.path, f"missing required key {key!r}")
-                return None
-            return default
-        v = self.d[key]
+        absent, out = self._absent(key, default)
+        if absent:
+            return out
+        p, v = self.path + (key,), self.d[key]
         if not isinstance(v, str):
             self.ctx.err(p, f"expected a string, got {describe(v)}")
             return None
