@@ -183,6 +183,16 @@ def project(K: np.ndarray, pts_c: np.ndarray) -> np.ndarray:
     return np.stack([u, v], axis=1)
 
 
+#: sub-pixel bits of the polygon vertices OpenCV fills (its ``shift`` argument)
+SHIFT = 4
+
+
+def fixed(uv: np.ndarray) -> np.ndarray:
+    """(n, 2) pixel coordinates -> OpenCV's fixed-point vertices (``SHIFT`` bits)."""
+    out: np.ndarray = np.round(uv * (1 << SHIFT)).astype(np.int32)
+    return out
+
+
 def clip_near(poly_c: np.ndarray) -> np.ndarray:
     """Clip a polygon (n x 3, camera axes) to z >= NEAR_M (Sutherland-Hodgman)."""
     out = []

@@ -21,9 +21,11 @@ import numpy as np
 
 from cosim.core.camera import (
     NEAR_M,
+    SHIFT,
     CameraSpec,
     Pose,
     clip_near,
+    fixed,
     ground_homography,
     intrinsics,
     project,
@@ -61,7 +63,6 @@ MAX_PATCH_PX = 3000
 STRIPS = 8  # bands of rows, each drawn from one ground level
 _SMOKE_BGR = np.array([150.0, 150.0, 155.0])
 OPAQUE = 255  # the frame's alpha channel: frames are BGRA (see render_frame)
-SHIFT = 4  # sub-pixel bits for polygon filling
 
 
 @dataclass(frozen=True)
@@ -407,10 +408,6 @@ def _draw_band(world: World, H: np.ndarray, A: np.ndarray, max_r: float, y0: int
         np.copyto(out, over, where=(inside > 0)[..., None])
 
 
-def _fixed(uv: np.ndarray) -> np.ndarray:
-    return np.round(uv * (1 << SHIFT)).astype(np.int32)
-
-
 def _culled(planes: np.ndarray, pts_c: np.ndarray) -> np.ndarray:
     """(T,) True where every one of a target's points (T x n x 3, camera axes)
     lies outside one of the view frustum's ``planes`` (_View.planes)."""
@@ -485,8 +482,8 @@ def _draw_smoke(K: np.ndarray, pose: Pose, t: TargetSpec, origin_l: np.ndarray, 
             continue
         roi = img[y0:y1, x0:x1]
         disc = np.zeros(roi.shape[:2], dtype=np.uint8)
-        cv2.circle(disc, (int(round((uv[0] - x0) * 16)), int(round((uv[1] - y0) * 16))),
-                   int(round(r_px * 16)), 1, -1, cv2.LINE_8, SHIFT)
+        (cx, cy), (r,) = fixed(uv - (x0, y0)), fixed(np.array([r_px]))
+        cv2.circle(disc, (int(cx), int(cy)), int(r), 1, -1, cv2.LINE_8, SHIFT)
         m = disc.astype(bool)
         bgr = roi[..., :3]  # the alpha channel stays opaque
         smoke = _SMOKE_BGR if haze is None else haze.colour(_SMOKE_BGR, float(np.linalg.norm(c_c)))
@@ -579,7 +576,7 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
     for _, depth_m, v_c, bgra, tid in faces:
         if haze is not None:  # a flat face: hazed at its centre's distance
             bgra = haze.bgra(bgra, depth_m)
-        pts = _fixed(project(K, v_c))
+        pts = fixed(project(K, v_c))
         if tid:
             cv2.fillConvexPoly(img, pts, bgra, cv2.LINE_8, SHIFT)
             cv2.fillConvexPoly(ids, pts, tid, cv2.LINE_8, SHIFT)

@@ -20,11 +20,9 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
-from cosim.core.camera import NEAR_M, Pose, clip_near, project
+from cosim.core.camera import NEAR_M, SHIFT, Pose, clip_near, fixed, project
 from cosim.renderer.targets import AMBIENT, UNIT_CORNERS, heading_rotation, parts_of
 from cosim.world.targets import TargetSpec
-
-SHIFT = 4  # sub-pixel bits, as the frame's polygons
 
 
 def shade_table(elevation_deg: float) -> np.ndarray:
@@ -88,7 +86,7 @@ def draw_shadows(K: np.ndarray, pose: Pose, specs: Sequence[TargetSpec], origins
         return
     mask = np.zeros((y1 - y0, x1 - x0), np.uint8)  # the shadows' bounding box only
     for uv in polys:
-        pts = np.round((uv - (x0, y0)) * (1 << SHIFT)).astype(np.int32)
+        pts = fixed(uv - (x0, y0))
         cv2.fillConvexPoly(mask, pts, 1, cv2.LINE_8, SHIFT)
     roi = img[y0:y1, x0:x1]
     np.copyto(roi, cv2.LUT(roi, table), where=mask[..., None].astype(bool))
