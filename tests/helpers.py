@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
+import importlib
 import subprocess
 import sys
 import textwrap
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -45,6 +48,23 @@ def install_out_of_tree(folder: Path, name: str, modules: dict[str, str],
 #: the backends that run on a cluster, and the fixture that starts it for a
 #: test (a test on one is in the integration tier: tests/conftest.py)
 CLUSTER_BACKENDS = {"ray": "ray_cluster"}
+
+
+@contextlib.contextmanager
+def plugged_in(site: Path, module: str, forget: Callable[[], None]) -> Iterator[Path]:
+    """``install_out_of_tree``'s folder on ``sys.path`` (spawned workers
+    inherit it) while inside, its ``module`` forgotten after; ``forget``
+    clears the cached plug-in table it joins, on the way in and out."""
+    sys.path.insert(0, str(site))
+    importlib.invalidate_caches()
+    forget()
+    try:
+        yield site
+    finally:
+        sys.path.remove(str(site))
+        sys.modules.pop(module, None)
+        importlib.invalidate_caches()
+        forget()
 
 
 def backend_ready(request: Any, name: str) -> None:

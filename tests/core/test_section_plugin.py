@@ -8,9 +8,7 @@ change to cosim. Without the package, the key is unknown."""
 from __future__ import annotations
 
 import csv
-import importlib
 import json
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -20,7 +18,7 @@ from cosim.cli import main
 from cosim.errors import ConfigError
 from cosim.scenario import load_scenario
 from cosim.sync import run_scenario
-from tests.helpers import install_out_of_tree
+from tests.helpers import install_out_of_tree, plugged_in
 
 REPO = Path(__file__).resolve().parent.parent.parent
 EXAMPLE = REPO / "examples" / "geofence"
@@ -29,7 +27,6 @@ EXAMPLE = REPO / "examples" / "geofence"
 def _forget_plugins() -> None:
     from cosim.core.section import scenario_sections
 
-    importlib.invalidate_caches()
     scenario_sections.cache_clear()
 
 
@@ -41,14 +38,8 @@ def geofence(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
     code = (EXAMPLE / "cosim_geofence.py").read_text()
     site = install_out_of_tree(folder, "cosim-geofence", {"cosim_geofence": code},
                                {"cosim.sections": {"geofence": "cosim_geofence:GEOFENCE"}})
-    sys.path.insert(0, str(site))
-    _forget_plugins()
-    try:
+    with plugged_in(site, "cosim_geofence", _forget_plugins):
         yield site
-    finally:
-        sys.path.remove(str(site))
-        sys.modules.pop("cosim_geofence", None)
-        _forget_plugins()
 
 
 def _scenario(tmp_path: Path, duration_s: int = 40) -> Path:

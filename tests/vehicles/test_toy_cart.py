@@ -7,9 +7,7 @@ personality all reach the run's outputs."""
 
 from __future__ import annotations
 
-import importlib
 import json
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -19,7 +17,7 @@ import pytest
 from cosim.logs import read_states
 from cosim.scenario import load_scenario
 from cosim.sync import run_scenario
-from tests.helpers import install_out_of_tree, same_states
+from tests.helpers import install_out_of_tree, plugged_in, same_states
 
 REPO = Path(__file__).resolve().parent.parent.parent
 EXAMPLE = REPO / "examples" / "toy_cart"
@@ -31,7 +29,6 @@ pytestmark = pytest.mark.integration  # an out-of-tree package installed, flown 
 def _forget_plugins() -> None:
     import cosim.vehicles.registry as reg
 
-    importlib.invalidate_caches()
     reg.vehicle_classes.cache_clear()
 
 
@@ -43,14 +40,8 @@ def toy_cart(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
     code = (EXAMPLE / "cosim_toycart.py").read_text()
     site = install_out_of_tree(folder, "cosim-toycart", {"cosim_toycart": code},
                                {"cosim.vehicles": {"toy_cart": "cosim_toycart:TOY_CART"}})
-    sys.path.insert(0, str(site))
-    _forget_plugins()
-    try:
+    with plugged_in(site, "cosim_toycart", _forget_plugins):
         yield site
-    finally:
-        sys.path.remove(str(site))
-        sys.modules.pop("cosim_toycart", None)
-        _forget_plugins()
 
 
 def _scenario(tmp_path: Path) -> Path:
