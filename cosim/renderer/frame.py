@@ -35,6 +35,7 @@ from cosim.core.geo import LocalFrame, geodetic_to_ecef
 from cosim.renderer.ground import GroundTexture
 from cosim.renderer.haze import Haze
 from cosim.renderer.shadows import draw_shadows, shade_table
+from cosim.renderer.sky import Sky, horizon_rgb
 from cosim.renderer.targets import (
     FACE_IDX,
     FACE_NORMALS,
@@ -57,8 +58,6 @@ from cosim.world.sun import DEFAULT as DEFAULT_SUN
 from cosim.world.sun import SunSpec
 from cosim.world.targets import TargetSpec
 
-SKY_TOP_BGR = np.array([225, 170, 120], dtype=np.float32)
-SKY_HORIZON_BGR = np.array([235, 220, 205], dtype=np.float32)
 MAX_PATCH_PX = 3000
 STRIPS = 8  # bands of rows, each drawn from one ground level
 _SMOKE_BGR = np.array([150.0, 150.0, 155.0])
@@ -113,7 +112,8 @@ class World:
         self.probe_offsets = probe_offsets(spec.targets)
         #: the targets that change size (growing fires): their boxes per frame
         self.growing = [k for k, t in enumerate(spec.targets) if t.growth_m_per_s]
-        self.sky: dict[tuple[int, int], np.ndarray] = {}
+        #: the sky's colours under the scenario's sun
+        self.sky = Sky(spec.sun)
         self.ecef_to_ned = _ecef_to_ned(self.frame)
         self.origin_ecef = np.array(geodetic_to_ecef(spec.origin_lat_deg, spec.origin_lon_deg,
                                                      spec.ground_alt_m))
@@ -127,7 +127,8 @@ class World:
         #: unit vector toward the sun, north-east-down (a frame's local axes turn
         #: against the origin's by 0.01 deg a km: far below a shade step)
         self.sun_l = spec.sun.to_sun_ned()
-        self.haze = Haze(spec.atmosphere) if spec.atmosphere is not None else None
+        self.haze = Haze(spec.atmosphere, horizon_rgb(spec.sun)) \
+            if spec.atmosphere is not None else None
         #: the ground's darkening in shade (cv2.LUT), if the targets cast shadows
         self.shade_table = shade_table(spec.sun.elevation_deg) if spec.sun.shadows else None
 
@@ -234,16 +235,6 @@ def _ecef_to_ned(frame: LocalFrame) -> np.ndarray:
     return np.array([[-sl * co, -sl * so, cl], [-so, co, 0.0], [-cl * co, -cl * so, -sl]])
 
 
-def _sky(h: int, w: int) -> np.ndarray:
-    """A vertical sky gradient (BGRA uint8, opaque) for an image of h x w."""
-    t = np.clip(np.arange(h, dtype=np.float32) / max(h - 1, 1), 0, 1)[:, None]
-    rows = SKY_TOP_BGR + (SKY_HORIZON_BGR - SKY_TOP_BGR) * t
-    out = np.empty((h, w, 4), np.uint8)
-    out[..., :3] = np.broadcast_to(rows[:, None, :], (h, w, 3)).astype(np.uint8)
-    out[..., 3] = OPAQUE
-    return out
-
-
 def _draw_ground(world: World, cam: CameraSpec, pose: Pose, view: _View,
                  img: np.ndarray, slot: Hashable
                  ) -> tuple[np.ndarray, list[tuple[int, int]], np.ndarray | None]:
@@ -260,14 +251,14 @@ def _draw_ground(world: World, cam: CameraSpec, pose: Pose, view: _View,
     horiz = np.hypot(q[0], q[1])
     near_ok = (wq > 1e-9) & (horiz <= max_r * np.maximum(wq, 1e-12) + 1e-9)
     if not near_ok.any():
-        np.copyto(img, _sky_image(world, h_img, w_img))  # all sky
+        world.sky.draw(view.K_inv, pose.R_cl, img)  # all sky
         return H, [], None
     A = _l_to_scenario_ne(world, pose)
     all_ground = bool(near_ok.all())
     mask = None
     if not all_ground:  # per-pixel ground mask (w and range are linear/quadratic in u, v)
         mask = _ground_mask(world, H, max_r, h_img, w_img)
-        np.copyto(img, _sky_image(world, h_img, w_img))
+        world.sky.draw(view.K_inv, pose.R_cl, img)
     # ground sample distance at the grid points (m per pixel, geometric mean)
     gsd = _gsd(q_all)
     gsd_rows = np.where(near_ok, gsd, np.inf).reshape(9, 9).min(axis=1)
@@ -288,7 +279,7 @@ def _draw_ground(world: World, cam: CameraSpec, pose: Pose, view: _View,
             _draw_band(world, H, A, max_r, y0, y1, w_img, levels[s], ground[y0:y1], slot)
             rows.append((y0, y1))
         else:  # no ground in the band (sky where the mask has none)
-            ground[y0:y1] = _sky_image(world, h_img, w_img)[y0:y1]
+            ground[y0:y1] = img[y0:y1]
         s = e + 1
     if mask is not None:
         cv2.copyTo(ground, mask, img)
@@ -415,14 +406,6 @@ def _culled(planes: np.ndarray, pts_c: np.ndarray) -> np.ndarray:
     side[..., 0] -= NEAR_M
     out: np.ndarray = (side < 0).all(axis=1).any(axis=1)
     return out
-
-
-def _sky_image(world: World, h: int, w: int) -> np.ndarray:
-    """The sky gradient for h x w (shared: do not modify)."""
-    key = (h, w)
-    if key not in world.sky:
-        world.sky[key] = _sky(h, w)
-    return world.sky[key]
 
 
 def _target_faces(pose: Pose, t: TargetSpec, origin_l: np.ndarray, time_s: float, seed: int,

@@ -14,7 +14,7 @@ range) in steps of ``1 / LEVELS``, each hazed with its step's middle: one
 table look-up (``cv2.LUT``) per run of tiles of one step along a row of
 tiles, joined with the same run of the rows below. ``tile_transmittance``
 gives those values; the tests hold them to the exact per-pixel ones. The sky
-is left as it is.
+is left as it is (its horizon is the default airlight: ``cosim.renderer.sky``).
 """
 
 from __future__ import annotations
@@ -37,12 +37,14 @@ TILE_ROWS, TILE_COLS = 4, 32
 
 
 class Haze:
-    """The per-process tables of one atmosphere (built once, about 20 ms)."""
+    """The per-process tables of one atmosphere (built once, about 20 ms);
+    ``horizon_rgb`` is the airlight where the atmosphere gives no colour."""
 
-    def __init__(self, spec: AtmosphereSpec) -> None:
+    def __init__(self, spec: AtmosphereSpec, horizon_rgb: tuple[int, int, int]) -> None:
         self.spec = spec
         self.k_per_m = EXTINCTION / (1000.0 * spec.visibility_km)
-        self.air_bgr = (np.array(spec.color_rgb[::-1], dtype=float) / 255.0) ** GAMMA
+        air = spec.color_rgb if spec.color_rgb is not None else horizon_rgb
+        self.air_bgr = (np.array(air[::-1], dtype=float) / 255.0) ** GAMMA
         lin = (np.arange(256) / 255.0) ** GAMMA
         t = (np.arange(LEVELS) + 0.5) / LEVELS
         hazy = t[:, None, None] * lin[None, :, None] + (1.0 - t)[:, None, None] * self.air_bgr

@@ -7,7 +7,7 @@ the meteorological range (``visibility_km``: the distance at which a black
 object's contrast has fallen to 2 %, ``ln 50 = 3.912``). A pixel's colour in
 linear light becomes ``L = L0 t + A (1 - t)`` with ``t = exp(-3.912 d / V)``
 its transmittance and ``A`` the airlight, the horizon's colour (``color``,
-default the renderer's horizon sky). Without the section there is no haze.
+default the renderer's horizon sky under the scenario's sun). Without the section there is no haze.
 The renderer applies it (``cosim.renderer.haze``); this module owns the
 section's keys and the law.
 """
@@ -27,16 +27,15 @@ EXTINCTION = 3.912
 #: the meteorological range's limits (km): 50 m is dense fog, 1000 km beyond
 #: any real air (the clearest is about 300 km)
 VISIBILITY_KM = (0.05, 1000.0)
-#: the airlight's default colour (RGB): the renderer's horizon sky
-HORIZON_RGB = (205, 220, 235)
 
 
 @dataclass(frozen=True)
 class AtmosphereSpec:
-    """Haze of meteorological range ``visibility_km`` and airlight ``color_rgb``."""
+    """Haze of meteorological range ``visibility_km`` and airlight ``color_rgb``
+    (None: the renderer's horizon sky under the scenario's sun)."""
 
     visibility_km: float
-    color_rgb: tuple[int, int, int] = HORIZON_RGB
+    color_rgb: tuple[int, int, int] | None = None
 
     def transmittance(self, distance_m: float) -> float:
         """``t = exp(-3.912 d / V)``: the fraction of an object's contrast left at
@@ -52,7 +51,7 @@ def parse_atmosphere(info: SectionContext, node: Any, path: P) -> AtmosphereSpec
     r = info.reader(node, path, ("visibility_km", "color"))
     lo, hi = VISIBILITY_KM
     v = r.num("visibility_km", lo=lo, hi=hi)
-    color = rgb(info, r.d["color"], path + ("color",)) if r.has("color") else HORIZON_RGB
-    if v is None or color is None:
+    color = rgb(info, r.d["color"], path + ("color",)) if r.has("color") else None
+    if v is None or (color is None and r.has("color")):
         return None
     return AtmosphereSpec(float(v), color)
