@@ -32,6 +32,7 @@ from cosim.core.camera import (
     to_camera,
 )
 from cosim.core.geo import LocalFrame, geodetic_to_ecef
+from cosim.renderer.buildings import building
 from cosim.renderer.ground import GroundTexture
 from cosim.renderer.haze import Haze
 from cosim.renderer.shadows import draw_shadows, shade_table
@@ -53,7 +54,7 @@ from cosim.renderer.targets import (
 from cosim.renderer.truth import ground_truth
 from cosim.world.atmosphere import AtmosphereSpec
 from cosim.world.ground import GroundSpec
-from cosim.world.obstacles import signed_area
+from cosim.world.obstacles import WALL_RGB
 from cosim.world.sun import DEFAULT as DEFAULT_SUN
 from cosim.world.sun import SunSpec
 from cosim.world.targets import TargetSpec
@@ -83,8 +84,8 @@ class WorldSpec:
     atmosphere: AtmosphereSpec | None = None
 
 
-#: obstacles' colour (RGB): concrete grey
-OBSTACLE_RGB = (150, 148, 140)
+#: obstacles' colour (RGB) unless the scenario gives theirs: concrete grey
+OBSTACLE_RGB = WALL_RGB
 
 
 def probe_offsets(targets: Sequence[TargetSpec]) -> np.ndarray:
@@ -121,9 +122,8 @@ class World:
         self._grids: dict[tuple[int, int, int], np.ndarray] = {}
         self._ids: dict[tuple[int, int], tuple[np.ndarray, list[int]]] = {}
         self._views: dict[CameraSpec, _View] = {}
-        #: per obstacle, its corners (k, 2) in the scenario frame and its height
-        self.obstacles = [(np.array(o.polygon, dtype=float), float(o.height_m))
-                          for o in spec.obstacles]
+        #: per obstacle, its walls and roof in the scenario frame
+        self.buildings = [building(o) for o in spec.obstacles]
         #: unit vector toward the sun, north-east-down (a frame's local axes turn
         #: against the origin's by 0.01 deg a km: far below a shade step)
         self.sun_l = spec.sun.to_sun_ned()
@@ -475,27 +475,19 @@ def _draw_smoke(K: np.ndarray, pose: Pose, t: TargetSpec, origin_l: np.ndarray, 
 
 def _obstacle_faces(world: World, pose: Pose
                     ) -> list[tuple[float, float, np.ndarray, tuple[int, int, int, int], int]]:
-    """The front faces of every obstacle's prism (walls and roof), as
-    ``_target_faces`` gives them; their id is 0: they hide targets but are
-    none."""
-    if not world.obstacles:
+    """The front faces of every obstacle's building (walls and roof,
+    ``buildings``), as ``_target_faces`` gives them; their id is 0: they hide
+    targets but are none."""
+    if not world.buildings:
         return []
     r_l = _ecef_to_ned(pose.local)
     rot = r_l @ world.ecef_to_ned.T  # scenario NED -> L axes
     shift = r_l @ (world.origin_ecef - pose.local_ecef_m)
     out = []
-    for poly, height in world.obstacles:
-        k = len(poly)
-        ccw = poly if signed_area(poly) > 0 else poly[::-1]
-        base = np.column_stack([ccw, np.zeros(k)]) @ rot.T + shift
-        top = np.column_stack([ccw, np.full(k, -height)]) @ rot.T + shift
-        faces = [(top, rot @ np.array([0.0, 0.0, -1.0]))]
-        for i in range(k):
-            j = (i + 1) % k
-            d = ccw[j] - ccw[i]
-            n_s = np.array([d[1], -d[0], 0.0]) / math.hypot(d[0], d[1])  # outward
-            faces.append((np.array([base[i], base[j], top[j], top[i]]), rot @ n_s))
-        for f_l, normal in faces:
+    for b in world.buildings:
+        pts_l = b.points @ rot.T + shift
+        for idx, normal_s, c in b.faces:
+            f_l, normal = pts_l[idx], rot @ normal_s
             if np.dot(f_l.mean(axis=0) - pose.c_l, normal) >= 0:
                 continue  # faces away
             v_c = (f_l - pose.c_l) @ pose.R_cl.T
@@ -504,7 +496,6 @@ def _obstacle_faces(world: World, pose: Pose
                 if len(v_c) < 3:
                     continue
             kk = lambert(normal, world.sun_l)
-            c = OBSTACLE_RGB
             bgra = (min(255, int(c[2] * kk)), min(255, int(c[1] * kk)),
                     min(255, int(c[0] * kk)), OPAQUE)
             depth_m = float(np.linalg.norm(v_c.mean(axis=0)))

@@ -8,7 +8,11 @@ frame (north/east metres from the origin)::
 
 A polygon is simple (its edges do not cross), 3 to ``MAX_VERTICES`` corners
 in either winding, at most ``MAX_OBSTACLES`` of them, each within
-``MAX_DISTANCE_M`` of the origin. Vehicle classes that keep out of them read
+``MAX_DISTANCE_M`` of the origin. Cameras see them as buildings: walls of
+``color`` (concrete grey) and a ``roof`` (``flat``, the default, or, over a
+convex polygon of 4 corners, ``gable`` or ``hip``, ``roof_height_m`` high
+with ``height_m`` its top, so what vehicles keep out of does not depend on
+the look) of ``roof_color`` (the walls' unless given). Vehicle classes that keep out of them read
 them from the world through ``VehicleClass.with_world``; everything here is plain
 geometry on ``(n, 2)`` arrays, elementwise, so results never depend on how
 many points are tested together.
@@ -26,17 +30,26 @@ import numpy as np
 
 from cosim.core.geo import MAX_DISTANCE_M
 from cosim.core.section import SectionContext
+from cosim.world.targets import rgb
 
 MAX_OBSTACLES = 1000
 MAX_VERTICES = 64
 MAX_HEIGHT_M = 500.0
+#: the roofs a building may have (gable and hip: over a convex polygon of 4 corners)
+ROOFS = ("flat", "gable", "hip")
+#: walls' (and, unless given, roofs') colour (RGB): concrete grey
+WALL_RGB = (150, 148, 140)
 
 
 @dataclass(frozen=True)
 class Obstacle:
     id: str
     polygon: tuple[tuple[float, float], ...]  # (north_m, east_m) corners in order
-    height_m: float
+    height_m: float  # its top: the roof's ridge, or its flat roof
+    roof: str = "flat"
+    roof_height_m: float = 0.0  # ridge above the walls' top (0: flat)
+    color_rgb: tuple[int, int, int] = WALL_RGB  # walls (and gable ends)
+    roof_rgb: tuple[int, int, int] = WALL_RGB
 
     @property
     def array(self) -> np.ndarray:
@@ -56,16 +69,57 @@ def parse_obstacles(info: SectionContext, node: Any, path: tuple[Any, ...]
     seen: set[str] = set()
     for i, d in enumerate(node):
         p = path + (i,)
-        r = info.reader(d, p, ("id", "polygon", "height_m"))
+        r = info.reader(d, p, ("id", "polygon", "height_m", "roof", "roof_height_m", "color",
+                               "roof_color"))
         oid = r.string("id", f"obstacle{i}")
         if oid in seen:
             info.err(p + ("id",), f"id {oid!r} repeats an earlier obstacle's")
         seen.add(oid)
         height = r.num("height_m", 3.0, lo=0.0, lo_open=True, hi=MAX_HEIGHT_M)
         poly = _polygon(info, r.d.get("polygon"), p + ("polygon",))
-        if oid is not None and height is not None and poly is not None:
-            out.append(Obstacle(oid, poly, height))
+        roof = r.string("roof", "flat", choices=ROOFS)
+        roof_h = _roof_height(info, r, p, roof, height)
+        if roof in ("gable", "hip") and poly is not None and not _convex_quad(np.array(poly)):
+            info.err(p + ("roof",), f"a {roof} roof needs a convex polygon of 4 corners, got "
+                                    f"{len(poly)} corners{'' if len(poly) != 4 else ' not convex'}"
+                                    "; give roof: flat")
+            roof = None
+        wall = rgb(info, r.d["color"], p + ("color",)) if r.has("color") else WALL_RGB
+        top = rgb(info, r.d["roof_color"], p + ("roof_color",)) if r.has("roof_color") else wall
+        if (oid is not None and height is not None and poly is not None and roof is not None
+                and roof_h is not None and wall is not None and top is not None):
+            out.append(Obstacle(oid, poly, height, roof, roof_h, wall, top))
     return tuple(out)
+
+
+def _roof_height(info: SectionContext, r: Any, p: tuple[Any, ...], roof: str | None,
+                 height_m: float | None) -> float | None:
+    """``roof_height_m``: 0 for a flat roof (refused if given), else below
+    ``height_m`` (the walls keep some height), half of it by default."""
+    if roof != "flat":
+        h = r.num("roof_height_m", None, lo=0.0, lo_open=True, hi=MAX_HEIGHT_M)
+        if height_m is None or roof is None:
+            return h
+        if h is None:
+            return None if r.has("roof_height_m") else height_m / 2
+        if h >= height_m:
+            info.err(p + ("roof_height_m",), f"must be below height_m ({height_m:g}, the "
+                                             f"roof's top: the walls end at height_m - "
+                                             f"roof_height_m), got {h:g}")
+            return None
+        return float(h)
+    if r.has("roof_height_m"):
+        info.err(p + ("roof_height_m",), "a flat roof has no height: give roof: gable or hip")
+        return None
+    return 0.0
+
+
+def _convex_quad(a: np.ndarray) -> bool:
+    """Whether ``a`` has 4 corners and turns the same way at each."""
+    if len(a) != 4:
+        return False
+    turns = [_orient(a[i - 1], a[i], a[(i + 1) % 4]) for i in range(4)]
+    return all(t > 0 for t in turns) or all(t < 0 for t in turns)
 
 
 def _polygon(info: Any, raw: Any, p: tuple[Any, ...]) -> tuple[tuple[float, float], ...] | None:

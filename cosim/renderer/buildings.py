@@ -1,0 +1,148 @@
+"""Buildings: the scenario's obstacles as walls and roofs, and their shadows.
+
+An obstacle (``cosim.world.obstacles.Obstacle``) stands on the ground plane
+of the scenario frame: walls up to ``height_m - roof_height_m`` and a roof
+whose top is ``height_m``. A flat roof is the polygon itself (it may be
+concave); a gable roof over a convex quadrilateral runs its ridge between
+the midpoints of the two shorter opposite edges (the gable ends, wall
+triangles, take the walls' colour); a hip roof's ridge is that line cut
+short by half the mean short edge at each end, so that every slope rises
+``roof_height_m`` over the same run on a rectangle (a square's ridge is a
+point: a pyramid). A roof slope that is not planar (a quadrilateral not a
+rectangle) is drawn as two triangles. Every face carries its outward normal
+for the sun's shading.
+
+A building's shadow on the ground is the convex hull of its base and of its
+points above the ground moved ``h / tan(elevation)`` away from the sun: exact
+for a convex building on flat ground, which a gable or hip house is; the hull
+of a concave flat-roofed one covers its courtyards too.
+
+Everything here is in the scenario frame (north, east, down metres); the
+frame module moves it into each frame's axes. Nothing here draws.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from cosim.world.obstacles import Obstacle, signed_area
+
+
+@dataclass(frozen=True)
+class Building:
+    """An obstacle's points (m x 3, scenario NED: its base's corners counter-
+    clockwise in (north, east), the walls' tops, then the roof's own points)
+    and its faces: (indices into the points, outward unit normal, RGB)."""
+
+    points: np.ndarray
+    faces: tuple[tuple[np.ndarray, np.ndarray, tuple[int, int, int]], ...]
+
+
+def building(o: Obstacle) -> Building:
+    """The walls and roof of obstacle ``o`` (see the module docstring). A flat
+    roof comes first, then the walls in order: the faces the renderer drew
+    before roofs had kinds, in the same order."""
+    poly = np.array(o.polygon, dtype=float)
+    ccw = poly if signed_area(poly) > 0 else poly[::-1]
+    k = len(ccw)
+    wall_top_m = o.height_m - o.roof_height_m
+    pts = [np.column_stack([ccw, np.zeros(k)]), np.column_stack([ccw, np.full(k, -wall_top_m)])]
+    faces: list[tuple[tuple[int, ...], np.ndarray, tuple[int, int, int]]] = []
+    if o.roof == "flat":
+        faces.append((tuple(range(k, 2 * k)), np.array([0.0, 0.0, -1.0]), o.roof_rgb))
+    walls = []
+    for i in range(k):
+        j = (i + 1) % k
+        walls.append(((i, j, k + j, k + i), _wall_normal(ccw[i], ccw[j]), o.color_rgb))
+    faces.extend(walls)
+    if o.roof != "flat":
+        ridge, roof_faces = _pitched(o, ccw, k)
+        pts.append(ridge)
+        every = np.concatenate(pts)
+        for idx, rgb_, wall in roof_faces:
+            if wall >= 0:  # a gable end: upright, facing as its wall
+                faces.append((idx, walls[wall][1], rgb_))
+            else:
+                faces.extend(_planar_pieces(every, idx, rgb_))
+        pts = [every]
+    points = np.concatenate(pts)
+    points.flags.writeable = False
+    return Building(points, tuple((np.array(idx, dtype=np.intp), n, c) for idx, n, c in faces))
+
+
+def _wall_normal(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """The outward unit normal (NED) of the wall on edge pq of a counter-clockwise polygon."""
+    d = q - p
+    return np.array([d[1], -d[0], 0.0]) / math.hypot(d[0], d[1])
+
+
+def _pitched(o: Obstacle, ccw: np.ndarray, k: int
+             ) -> tuple[np.ndarray, list[tuple[tuple[int, ...], tuple[int, int, int], int]]]:
+    """A gable or hip roof over 4 corners: its ridge's two points (2 x 3, NED)
+    and its faces as (indices into base, wall tops, ridge; RGB; the wall a
+    gable end stands on, else -1)."""
+    lengths = np.hypot(*(np.roll(ccw, -1, axis=0) - ccw).T)
+    s = 0 if lengths[0] + lengths[2] <= lengths[1] + lengths[3] else 1  # a short edge
+    mid_a = (ccw[s] + ccw[s + 1]) / 2
+    mid_b = (ccw[s + 2] + ccw[(s + 3) % 4]) / 2
+    if o.roof == "hip":  # the ridge cut short by half the mean short edge at each end
+        run = float(np.hypot(*(mid_b - mid_a)))
+        t = 0.5 if run <= 0 else min(0.5, (lengths[s] + lengths[s + 2]) / 4 / run)
+        mid_a, mid_b = mid_a + t * (mid_b - mid_a), mid_b + t * (mid_a - mid_b)
+    ridge = np.array([[*mid_a, -o.height_m], [*mid_b, -o.height_m]])
+    a, b = 2 * k, 2 * k + 1  # the ridge's points
+    top = [k + (s + n) % 4 for n in range(4)]  # wall tops from the short edge s on
+    ends: list[tuple[tuple[int, ...], tuple[int, int, int], int]]
+    if o.roof == "hip":  # the ends are slopes too
+        ends = [((top[0], top[1], a), o.roof_rgb, -1), ((top[2], top[3], b), o.roof_rgb, -1)]
+    else:  # gable ends: upright triangles on the short edges' walls
+        ends = [((top[0], top[1], a), o.color_rgb, s),
+                ((top[2], top[3], b), o.color_rgb, (s + 2) % 4)]
+    return ridge, ends + [((top[1], top[2], b, a), o.roof_rgb, -1),
+                          ((top[3], top[0], a, b), o.roof_rgb, -1)]
+
+
+def _planar_pieces(points: np.ndarray, idx: tuple[int, ...], rgb_: tuple[int, int, int]
+                   ) -> list[tuple[tuple[int, ...], np.ndarray, tuple[int, int, int]]]:
+    """A roof slope as planar faces with their upward unit normals: the face
+    itself if its corners lie in one plane (within 1 mm), else two triangles;
+    pieces without area are left out, corners repeated (a hip roof's ridge
+    over a square, a point) taken once."""
+    idx = tuple(i for n, i in enumerate(idx)
+                if np.abs(points[i] - points[idx[n - 1]]).max() > 1e-9)
+    v = points[list(idx)]
+    if len(v) < 3:
+        return []
+    if len(v) == 4:
+        n = _upward_normal(v[0], v[1], v[2])
+        if n is None or abs(float(np.dot(v[3] - v[0], n))) > 1e-3:
+            return (_planar_pieces(points, (idx[0], idx[1], idx[2]), rgb_)
+                    + _planar_pieces(points, (idx[0], idx[2], idx[3]), rgb_))
+        return [(idx, n, rgb_)]
+    n = _upward_normal(v[0], v[1], v[2])
+    return [] if n is None else [(idx, n, rgb_)]
+
+
+def _upward_normal(p: np.ndarray, q: np.ndarray, r: np.ndarray) -> np.ndarray | None:
+    """The unit normal of the plane through p, q, r pointing up (down < 0), or
+    None if they lie on a line."""
+    n = np.cross(q - p, r - p)
+    size = float(np.linalg.norm(n))
+    if size < 1e-9:
+        return None
+    return n / size if n[2] < 0 else -n / size
+
+
+def shadow_on_ground(b: Building, away_ne: np.ndarray) -> np.ndarray:
+    """The building's shadow on the ground (k x 2, scenario north/east, convex):
+    the hull of every point moved ``height * away_ne`` (``away_ne``: the
+    ground shift per metre of height, away from the sun)."""
+    ground = b.points[:, :2] - b.points[:, 2:3] * away_ne
+    at = ground[0]  # float32 hull on offsets: metres from the origin lose centimetres
+    hull = cv2.convexHull((ground - at).astype(np.float32)).reshape(-1, 2)
+    out: np.ndarray = hull.astype(np.float64) + at
+    return out
