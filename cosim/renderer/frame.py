@@ -32,7 +32,7 @@ from cosim.core.camera import (
     to_camera,
 )
 from cosim.core.geo import LocalFrame, geodetic_to_ecef
-from cosim.renderer.buildings import building
+from cosim.renderer.buildings import building, shadow_on_ground
 from cosim.renderer.ground import GroundTexture
 from cosim.renderer.haze import Haze
 from cosim.renderer.shadows import draw_shadows, shade_table
@@ -131,6 +131,10 @@ class World:
             if spec.atmosphere is not None else None
         #: the ground's darkening in shade (cv2.LUT), if the targets cast shadows
         self.shade_table = shade_table(spec.sun.elevation_deg) if spec.sun.shadows else None
+        #: each building's shadow on the ground, if they cast them (k x 3, scenario NED)
+        self.building_shadows = [] if self.shade_table is None else [
+            np.column_stack([g, np.zeros(len(g))]) for g in
+            (shadow_on_ground(b, -self.sun_l[:2] / -self.sun_l[2]) for b in self.buildings)]
 
     def view(self, cam: CameraSpec) -> _View:
         """What every frame of ``cam`` shares, built once."""
@@ -473,6 +477,13 @@ def _draw_smoke(K: np.ndarray, pose: Pose, t: TargetSpec, origin_l: np.ndarray, 
         bgr[m] = (bgr[m] * (1.0 - alpha) + smoke * alpha).astype(np.uint8)
 
 
+def _scenario_to_l(world: World, pose: Pose) -> tuple[np.ndarray, np.ndarray]:
+    """The rotation and shift taking scenario NED points to the frame's L:
+    ``p_l = p @ rot.T + shift``."""
+    r_l = _ecef_to_ned(pose.local)
+    return r_l @ world.ecef_to_ned.T, r_l @ (world.origin_ecef - pose.local_ecef_m)
+
+
 def _obstacle_faces(world: World, pose: Pose
                     ) -> list[tuple[float, float, np.ndarray, tuple[int, int, int, int], int]]:
     """The front faces of every obstacle's building (walls and roof,
@@ -480,9 +491,7 @@ def _obstacle_faces(world: World, pose: Pose
     targets but are none."""
     if not world.buildings:
         return []
-    r_l = _ecef_to_ned(pose.local)
-    rot = r_l @ world.ecef_to_ned.T  # scenario NED -> L axes
-    shift = r_l @ (world.origin_ecef - pose.local_ecef_m)
+    rot, shift = _scenario_to_l(world, pose)
     out = []
     for b in world.buildings:
         pts_l = b.points @ rot.T + shift
@@ -533,9 +542,10 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
         specs = tuple(t.at(time_s) for t in specs)
         offsets = offsets.copy()
         offsets[world.growing] = probe_offsets([specs[k] for k in world.growing])
-    if world.shade_table is not None and len(specs):
+    if world.shade_table is not None and (len(specs) or world.building_shadows):
+        rot, shift = _scenario_to_l(world, pose)
         draw_shadows(K, pose, specs, origins, world.sun_l, time_s, seed, img,
-                     world.shade_table)
+                     world.shade_table, [g @ rot.T + shift for g in world.building_shadows])
     haze = world.haze
     if haze is not None and ground_rows:  # the shaded ground, before the targets
         _haze_ground(world, haze, pose, img, H, ground_rows, ground_mask)

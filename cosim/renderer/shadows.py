@@ -1,9 +1,10 @@
-"""Shadows on the ground: each target's boxes cast along the sun.
+"""Shadows on the ground: each target's boxes and each building cast along the sun.
 
 A box point at height h above the ground lands ``h / tan(elevation)`` from its
 foot, away from the sun's azimuth; a box's shadow is the convex hull of its
-foot and its top corners so moved (exact for a box on flat ground). A fire's
-flames give light, not shade, and cast none. Shadowed ground keeps only the
+foot and its top corners so moved (exact for a box on flat ground). A
+building's shadow is made the same way, once (``buildings.shadow_on_ground``).
+A fire's flames give light, not shade, and cast none. Shadowed ground keeps only the
 sky's ambient light: in linear light it is scaled by
 ``AMBIENT / (AMBIENT + (1 - AMBIENT) sin(elevation))``, the ratio of a
 horizontal surface's shade to its sunlit brightness (``targets.lambert``).
@@ -60,23 +61,25 @@ def hulls_on_ground(t: TargetSpec, origin_l: np.ndarray, sun_l: np.ndarray, time
 
 def draw_shadows(K: np.ndarray, pose: Pose, specs: Sequence[TargetSpec], origins: np.ndarray,
                  sun_l: np.ndarray, time_s: float, seed: int, img: np.ndarray,
-                 table: np.ndarray) -> None:
-    """Darken the ground under every target's shadow in ``img`` (BGRA)."""
+                 table: np.ndarray, more_l: Sequence[np.ndarray] = ()) -> None:
+    """Darken the ground under every target's shadow in ``img`` (BGRA), and
+    under ``more_l``: other shadows on the ground (convex, k x 3, in L)."""
     h_img, w_img = img.shape[:2]
     polys = []
-    for k, t in enumerate(specs):
-        for poly_l in hulls_on_ground(t, origins[k], sun_l, time_s, seed + k):
-            v_c = (poly_l - pose.c_l) @ pose.R_cl.T
-            if v_c[:, 2].max() < NEAR_M:
+    hulls = [h for k, t in enumerate(specs)
+             for h in hulls_on_ground(t, origins[k], sun_l, time_s, seed + k)]
+    for poly_l in (*hulls, *more_l):
+        v_c = (poly_l - pose.c_l) @ pose.R_cl.T
+        if v_c[:, 2].max() < NEAR_M:
+            continue
+        if v_c[:, 2].min() < NEAR_M:
+            v_c = clip_near(v_c)
+            if len(v_c) < 3:
                 continue
-            if v_c[:, 2].min() < NEAR_M:
-                v_c = clip_near(v_c)
-                if len(v_c) < 3:
-                    continue
-            uv = project(K, v_c)
-            lo, hi = uv.min(axis=0), uv.max(axis=0)
-            if hi[0] >= 0 and hi[1] >= 0 and lo[0] < w_img and lo[1] < h_img:
-                polys.append(uv)
+        uv = project(K, v_c)
+        lo, hi = uv.min(axis=0), uv.max(axis=0)
+        if hi[0] >= 0 and hi[1] >= 0 and lo[0] < w_img and lo[1] < h_img:
+            polys.append(uv)
     if not polys:
         return
     every = np.concatenate(polys)

@@ -167,3 +167,30 @@ def test_a_gable_roof_seen_from_above_is_where_the_pinhole_puts_it_and_sun_shade
     assert east.max() == pytest.approx(cx + half_px, abs=1.5)
     assert west.min() == pytest.approx(cx - half_px, abs=1.5)
     assert len(east) + len(west) == pytest.approx(2 * half_px, abs=2.0)
+
+
+@pytest.mark.parametrize("roof,roof_h,far_e_m", [
+    ("flat", 0.0, -5.0 - 9.0 / math.tan(math.radians(30.0))),  # the roof's west edge, 9 m up
+    ("gable", 4.0, -9.0 / math.tan(math.radians(30.0))),  # the ridge over e = 0, 9 m up
+])
+def test_a_buildings_shadow_reaches_as_far_as_h_over_tan_elevation(roof: str, roof_h: float,
+                                                                  far_e_m: float) -> None:
+    """The sun 30 deg up in the east; a nadir camera 100 m over the house: the
+    ground the shadow darkens (against the same frame without shadows) ends
+    west of the house where its highest point lands, h / tan(30 deg) west of
+    it, within a pixel or two; there is no shadow east of it."""
+    o = Obstacle("h", HOUSE, 9.0, roof, roof_h)
+    cam = _cam()
+    pose = camera_pose(cam, LAT0, LON0, GROUND_M + 100.0, 0.0, 0.0, 0.0, ground_alt_m=GROUND_M)
+    frames = []
+    for shadows in (False, True):
+        sun = SunSpec(azimuth_deg=90.0, elevation_deg=30.0, shadows=shadows)
+        world = World(WorldSpec(LAT0, LON0, GROUND_M, 1, 120.0, GroundSpec(), (), (o,), sun))
+        frames.append(render_frame(world, cam, pose, 0)[0].copy())
+    dark = (frames[0] != frames[1]).any(axis=2)
+    cx = (320 - 1) / 2
+    for r in (110, 120, 130):  # rows a few metres either side of the middle
+        cols = np.flatnonzero(dark[r])
+        want = cx + cam.fx_px * far_e_m / 100.0
+        assert abs(cols.min() - want) <= 2.0, (r, cols.min(), want)
+        assert cols.max() <= cx - cam.fx_px * 5.0 / (100.0 - 9.0 + roof_h) + 2  # under the eaves
