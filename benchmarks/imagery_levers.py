@@ -5,14 +5,14 @@ round after round, so the machine's load falls on A and B alike; the median
 of each is printed (ms, wall clock; the datalink's also in process CPU time,
 which counts every encoder thread):
 
-- noise: ``Sensor.apply`` with ``snr_db`` as committed (a level a random byte,
-  interleaved with the values by cv2.merge, np.take in pieces of
-  ``sensor._TAKE_CHUNK`` values) against one np.take over the whole frame
-  (the two frames are checked to be the same bytes) and against 16 random
-  bits a value written into by a strided copy (the draw before 8-bit levels);
-- vignetting: cv2.multiply of the BGRA frame by the float32 gain (committed)
-  against the same on three channels after a colour conversion, and numpy
-  in float32;
+- vignetting and noise: ``Sensor.apply`` with ``vignetting`` and ``snr_db``
+  (committed: one compiled pass, ``sensor_pass``, its levels from splitmix64)
+  against the OpenCV and numpy passes before it (cv2.multiply of the BGRA
+  frame by a float32 gain, a colour conversion, PCG64's raw words as levels,
+  interleaved with the values by cv2.merge, np.take in pieces of 65,536
+  values, the conversion back), each effect alone and both;
+- vignetting: cv2.multiply of the BGRA frame by the float32 gain against the
+  same on three channels after a colour conversion, and numpy in float32;
 - distortion: cv2.remap with float32 maps (committed) against OpenCV's
   fixed-point maps;
 - motion blur (3.4 px down the columns): cv2.filter2D (committed) against
@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import argparse
 import statistics
+import sys
 import tempfile
 import time
 from collections.abc import Callable, Mapping
@@ -41,9 +42,16 @@ import cv2
 import numpy as np
 
 from cosim.core.camera import CameraSpec, DatalinkSpec, SensorSpec
-from cosim.renderer import sensor as sensor_mod
 from cosim.renderer.datalink import Downlink
-from cosim.renderer.sensor import Sensor, distortion_maps, frame_rng, line_kernel
+from cosim.renderer.sensor import (
+    GAMMA,
+    Sensor,
+    distortion_maps,
+    frame_rng,
+    line_kernel,
+    noise_table,
+    off_axis_cos,
+)
 
 W, H = 640, 480
 
@@ -78,49 +86,71 @@ def _ab(variants: Mapping[str, Callable[[int], object]], rounds: int,
     return {k: 1e3 * statistics.median(v) for k, v in times.items()}
 
 
-def _noise_quarters(sensor: Sensor, img: np.ndarray, frame_no: int) -> None:
-    """The noise as drawn before 8-bit levels: 16 random bits a value (the raw
-    words cut four ways), the value written into each quarter's high byte."""
-    assert sensor.table is not None
-    bgr = cv2.cvtColor(img, cv2.COLOR_BGRA2BGR, dst=sensor.bgr)
-    rng = frame_rng(sensor.seed, sensor.row, sensor.cam.name, frame_no)
-    n = bgr.size
-    idx = rng.bit_generator.random_raw(-(-n // 4)).view(np.uint16)[:n]
-    flat = bgr.reshape(-1)
-    idx.view(np.uint8)[sensor_mod._HIGH::2] = flat
-    for i in range(0, n, sensor_mod._TAKE_CHUNK):
-        np.take(sensor.table, idx[i:i + sensor_mod._TAKE_CHUNK],
-                out=flat[i:i + sensor_mod._TAKE_CHUNK])
-    cv2.cvtColor(bgr, cv2.COLOR_BGR2BGRA, dst=img)
+_TAKE_CHUNK = 65536
+_HIGH = 1 if sys.byteorder == "little" else 0
+
+
+def _gain4(cam: CameraSpec) -> np.ndarray:
+    """The vignetting's float32 BGRA gain (alpha 1), as cv2.multiply takes it."""
+    assert cam.sensor is not None
+    v = (off_axis_cos(cam) ** (4.0 * cam.sensor.vignetting / GAMMA)).astype(np.float32)
+    return np.dstack([v, v, v, np.ones_like(v)])
+
+
+class _OpenCVSensor:
+    """Vignetting and noise as OpenCV and numpy passes (before ``sensor_pass``):
+    cv2.multiply, a colour conversion, PCG64's raw words as levels interleaved
+    with the values by cv2.merge, np.take in pieces, the conversion back."""
+
+    def __init__(self, cam: CameraSpec) -> None:
+        assert cam.sensor is not None
+        self.cam, self.spec = cam, cam.sensor
+        self.gain = _gain4(cam) if self.spec.vignetting else None
+        self.table = noise_table(self.spec.snr_db) if self.spec.snr_db is not None else None
+        self.bgr = np.empty((H, W, 3), np.uint8)
+        self.pairs = np.empty((H, W * 3, 2), np.uint8)
+
+    def apply(self, img: np.ndarray, frame_no: int) -> np.ndarray:
+        if self.gain is not None:
+            cv2.multiply(img, self.gain, dst=img, dtype=cv2.CV_8U)
+        if self.table is not None:
+            bgr = cv2.cvtColor(img, cv2.COLOR_BGRA2BGR, dst=self.bgr)
+            rng = frame_rng(1, 0, self.cam.name, frame_no)
+            n = bgr.size
+            levels = rng.bit_generator.random_raw(-(-n // 8)).view(np.uint8)[:n]
+            flat = bgr.reshape(-1)
+            pair = [flat.reshape(H, -1), levels.reshape(H, -1)]
+            cv2.merge(pair[::-1] if _HIGH else pair, dst=self.pairs)
+            idx = self.pairs.view(np.uint16).reshape(-1)
+            for i in range(0, n, _TAKE_CHUNK):
+                np.take(self.table, idx[i:i + _TAKE_CHUNK], out=flat[i:i + _TAKE_CHUNK])
+            cv2.cvtColor(bgr, cv2.COLOR_BGR2BGRA, dst=img)
+        return img
 
 
 def noise(rounds: int) -> dict[str, float]:
-    cam = _cam(SensorSpec(snr_db=40.0))
-    assert cam.sensor is not None
-    sensor = Sensor(cam, cam.sensor, seed=1, vehicle_row=0)
     base = _frame()
-    chunk = sensor_mod._TAKE_CHUNK
+    out: dict[str, float] = {}
+    for what, spec in (("vignetting", SensorSpec(vignetting=1.0)),
+                       ("noise", SensorSpec(snr_db=40.0)),
+                       ("vignetting + noise", SensorSpec(vignetting=1.0, snr_db=40.0))):
+        cam = _cam(spec)
+        fused, old = Sensor(cam, spec, seed=1, vehicle_row=0), _OpenCVSensor(cam)
+        fused.apply(base.copy(), 0)  # numba compiles (or loads) it
+        out.update(_ab({f"{what}, one compiled pass (committed)": _on(fused.apply, base),
+                        f"{what}, OpenCV and numpy passes": _on(old.apply, base)}, rounds))
+    return out
 
-    def run(whole: bool, i: int) -> bytes:
-        sensor_mod._TAKE_CHUNK = W * H * 3 if whole else chunk
-        try:
-            return sensor.apply(base.copy(), i).tobytes()
-        finally:
-            sensor_mod._TAKE_CHUNK = chunk
 
-    if run(True, 5) != run(False, 5):
-        raise SystemExit("noise: the frame taken in pieces differs from the whole take")
-    return _ab({"noise, 8-bit levels, take in pieces (committed)": lambda i: run(False, i),
-                "noise, 8-bit levels, one take of the frame": lambda i: run(True, i),
-                "noise, 16-bit draws, take in pieces": lambda i: _noise_quarters(
-                    sensor, base.copy(), i)}, rounds)
+def _on(apply: Callable[[np.ndarray, int], np.ndarray], base: np.ndarray
+        ) -> Callable[[int], object]:
+    """A round's call of ``apply`` on a copy of ``base``."""
+    return lambda i: apply(base.copy(), i)
 
 
 def vignetting(rounds: int) -> dict[str, float]:
     cam = _cam(SensorSpec(vignetting=1.0))
-    assert cam.sensor is not None
-    gain4 = Sensor(cam, cam.sensor, seed=1, vehicle_row=0).gain
-    assert gain4 is not None
+    gain4 = _gain4(cam)
     gain3 = np.ascontiguousarray(gain4[..., :3])
     base = _frame()
     bgr = np.empty((H, W, 3), np.uint8)
@@ -140,7 +170,7 @@ def vignetting(rounds: int) -> dict[str, float]:
         f *= gain4
         img[:] = np.rint(f)
 
-    return _ab({"vignetting, cv2.multiply BGRA (committed)": bgra,
+    return _ab({"vignetting, cv2.multiply BGRA": bgra,
                 "vignetting, BGR after cvtColor": three,
                 "vignetting, numpy float32": in_numpy}, rounds)
 
@@ -247,9 +277,16 @@ def datalink(rounds: int) -> dict[str, float]:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rounds", type=int, default=60)
+    parts = {f.__name__: f for f in (noise, distortion, vignetting, blur, haze_lut, datalink)}
+    ap.add_argument("--parts", default=",".join(parts),
+                    help=f"comma-separated, of {', '.join(parts)} (default: all)")
     args = ap.parse_args(argv)
+    unknown = set(args.parts.split(",")) - set(parts)
+    if unknown:
+        ap.error(f"--parts: unknown {', '.join(sorted(unknown))}; expected some of "
+                 f"{', '.join(parts)}")
     cv2.setNumThreads(1)  # one core, as the render workers
-    for part in (noise, distortion, vignetting, blur, haze_lut, datalink):
+    for part in (parts[k] for k in args.parts.split(",")):
         for name, ms in part(args.rounds).items():
             print(f"{name:72s} {ms:6.2f} ms")
     return 0

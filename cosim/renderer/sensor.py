@@ -9,10 +9,7 @@ turns it into what the camera records, in this order:
    point (float32 maps made once per stream, the radius found by Newton's method);
    what falls outside the render is black. The ground truth's geometry in
    pixels is distorted the same way (``distort_truth``);
-2. vignetting: linear light times ``cos^(4 s)(theta)``, ``theta`` the angle off
-   the optical axis of the ray a pixel sees (``s = 1``: natural cos^4 falloff
-   for the camera's own field of view);
-3. motion blur: an exposure of ``T`` = ``exposure_ms`` ending at the frame's
+2. motion blur: an exposure of ``T`` = ``exposure_ms`` ending at the frame's
    tick sees the scene move; the pose one exposure earlier is the vehicle's
    position less velocity x ``T`` and its attitude less its rates x ``T``
    (``smear_px``). One kernel blurs the whole frame: the segment from where
@@ -21,6 +18,10 @@ turns it into what the camera records, in this order:
    the flight, plus about ``f`` x angular rate x ``T`` from pitch and roll;
    a rotation about the optical axis, which leaves the centre in place, is not
    modelled). The blur averages 8-bit values;
+3. vignetting: linear light times ``cos^(4 s)(theta)``, ``theta`` the angle off
+   the optical axis of the ray a pixel sees (``s = 1``: natural cos^4 falloff
+   for the camera's own field of view); after the blur, as on a sensor, whose
+   pixels keep their place while the scene's image moves over them;
 4. noise: in linear light ``L`` (0 black, 1 full scale), a shot noise of
    variance ``b L`` and a read noise of variance ``a = b L_r`` (``L_r`` =
    ``READ_SIGNAL``: read noise equals shot noise at 1 % of full scale), ``b``
@@ -34,9 +35,10 @@ ground truth's contrast uses (``truth.py``); each step writes 8-bit values
 times ``g^(1/2.2)``: vignetting is one multiplication. Noise is one table
 look-up per value (``noise_table``: for each 8-bit value and each of 256
 equiprobable normal levels, ``normal_levels``, the value recorded), the level
-one byte of the raw 64-bit words of numpy's PCG64 seeded by (scenario seed,
-vehicle row, camera name, frame number): the same frame for any backend or
-number of render workers.
+one random byte: the bytes of a splitmix64 stream keyed by the first raw word
+of numpy's PCG64 seeded by (scenario seed, vehicle row, camera name, frame
+number): the same frame for any backend or number of render workers.
+Vignetting and noise are one compiled pass over the frame (``sensor_pass``).
 The 256 levels are the means of 256 equal-probability bins of the normal
 distribution, scaled to unit variance (the largest 3.0 sigma); the table
 gives exactly what adding ``sigma z`` in floating point and rounding would.
@@ -51,7 +53,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import sys
 import zlib
 from typing import Any
 
@@ -87,10 +88,6 @@ ISO_REF, SNR_AT_ISO_REF_DB = 100.0, 40.0
 #: the 12 edges of a box as pairs of its corners (``targets.UNIT_CORNERS``' order:
 #: corner 4 x + 2 y + z, so an edge joins corners one bit apart)
 _EDGES = np.array([(i, i ^ bit) for i in range(8) for bit in (1, 2, 4) if i < i ^ bit])
-#: the byte of a uint16 that holds its high 8 bits
-_HIGH = 1 if sys.byteorder == "little" else 0
-#: values the noise looks up per np.take (a whole frame's at once: a quarter slower)
-_TAKE_CHUNK = 65536
 
 
 def snr_of_iso(iso: float) -> float:
@@ -336,20 +333,22 @@ class Sensor:
         self.cam, self.spec = cam, spec
         self.seed, self.row = seed, vehicle_row
         h, w = cam.height_px, cam.width_px
-        #: (h, w, 4) float32 factor of the 8-bit values (alpha 1): the power law
-        #: makes linear light times g the 8-bit value times g^(1/GAMMA)
+        #: (h * w,) fixed-point factor of the 8-bit values (``sensor_pass.gain_fixed``):
+        #: the power law makes linear light times g the 8-bit value times g^(1/GAMMA)
         self.gain: np.ndarray | None = None
+        self.compiled: Any = None  # sensor_pass, imported (numba: 0.3 s) only when needed
+        if spec.vignetting or spec.snr_db is not None:
+            from cosim.renderer import sensor_pass
+
+            self.compiled = sensor_pass
         if spec.vignetting:
             cos = np.nan_to_num(off_axis_cos(cam, spec.k1, spec.k2), nan=1.0)
-            v = (cos ** (4.0 * spec.vignetting / GAMMA)).astype(np.float32)
-            self.gain = np.dstack([v, v, v, np.ones_like(v)])
+            self.gain = self.compiled.gain_fixed(cos ** (4.0 * spec.vignetting / GAMMA))
         self.maps = distortion_maps(cam, spec.k1, spec.k2) if spec.k1 or spec.k2 else None
         self.warped = np.empty((h, w, 4), np.uint8)
         self.table = noise_table(spec.snr_db) if spec.snr_db is not None else None
-        self.bgr = np.empty((h, w, 3), np.uint8)
-        #: the noise's table indices as byte pairs (a buffer: made anew, its pages
-        #: cost more than the merge)
-        self.pairs = np.empty((h, w * 3, 2), np.uint8)
+        #: the noise's random words, 8 levels each (a buffer kept: a new one's pages cost)
+        self.words = np.empty(-(-h * w * 3 // 8), np.uint64)
 
     def smear_px(self, pose6: tuple[float, ...], motion: tuple[float, ...] | None,
                  gimbal: tuple[float, float] | None, pose: Pose, ground_alt_m: float
@@ -392,24 +391,15 @@ class Sensor:
         if self.maps is not None:
             img = cv2.remap(img, *self.maps, cv2.INTER_LINEAR, dst=self.warped,
                             borderMode=cv2.BORDER_CONSTANT, borderValue=(0, 0, 0, 255))
-        if self.gain is not None:
-            cv2.multiply(img, self.gain, dst=img, dtype=cv2.CV_8U)
         if smear is not None:
             img = smear_frame(img, *smear)
+        if self.compiled is None:
+            return img
+        levels = None
         if self.table is not None:
-            bgr = cv2.cvtColor(img, cv2.COLOR_BGRA2BGR, dst=self.bgr)
-            rng = frame_rng(self.seed, self.row, self.cam.name, frame_no)
-            # the generator's raw 64-bit words, 8 levels each (a level a byte),
-            # interleaved with the values into the table's uint16 indices
-            # (the value the high byte) by one cv2.merge
-            n = bgr.size
-            levels = rng.bit_generator.random_raw(-(-n // 8)).view(np.uint8)[:n]
-            flat = bgr.reshape(-1)
-            pair = [flat.reshape(bgr.shape[0], -1), levels.reshape(bgr.shape[0], -1)]
-            cv2.merge(pair[::-1] if _HIGH else pair, dst=self.pairs)
-            idx = self.pairs.view(np.uint16).reshape(-1)
-            # take converts its indices to intp: in pieces they stay in the cache
-            for i in range(0, n, _TAKE_CHUNK):
-                np.take(self.table, idx[i:i + _TAKE_CHUNK], out=flat[i:i + _TAKE_CHUNK])
-            cv2.cvtColor(bgr, cv2.COLOR_BGR2BGRA, dst=img)
-        return img
+            key = int(frame_rng(self.seed, self.row, self.cam.name, frame_no)
+                      .bit_generator.random_raw())
+            levels = self.compiled.fill_levels(self.words, key)
+        out: np.ndarray = self.compiled.gain_noise(np.ascontiguousarray(img), self.gain,
+                                                   self.table, levels)
+        return out

@@ -90,6 +90,38 @@ def test_noise_is_a_function_of_seed_vehicle_camera_and_frame() -> None:
     assert len({frame(3, 0, 5), frame(4, 0, 5), frame(3, 1, 5), frame(3, 0, 6)}) == 4
 
 
+def test_the_compiled_pass_is_gain_then_table_look_up_per_value() -> None:
+    """sensor_pass against numpy: each colour value times its pixel's gain
+    (fixed point, rounded half up, clipped), then the table at value * 256 +
+    its level; alpha kept; the levels splitmix64's bytes (a plain Python
+    splitmix64 here)."""
+    from cosim.renderer.sensor_pass import GAIN_BITS, fill_levels, gain_fixed, gain_noise
+
+    rng = np.random.default_rng(3)
+    img = rng.integers(0, 256, (6, 10, 4), dtype=np.uint8)
+    gain = gain_fixed(rng.uniform(0.3, 1.6, (6, 10)))  # above 1 too: the clip
+    table = rng.integers(0, 256, 65536, dtype=np.uint8)
+    key, mask = 0xDEADBEEF12345, (1 << 64) - 1
+    want_words = []
+    for j in range(1, 24):
+        z = (key + j * 0x9E3779B97F4A7C15) & mask
+        z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & mask
+        z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & mask
+        want_words.append(z ^ (z >> 31))
+    levels = fill_levels(np.empty(23, np.uint64), key)
+    assert levels.view(np.uint64).tolist() == want_words
+    v = img[..., :3].astype(np.int64)
+    g = gain.reshape(6, 10, 1).astype(np.int64)
+    lit = np.minimum((v * g + (1 << (GAIN_BITS - 1))) >> GAIN_BITS, 255)
+    want = img.copy()
+    want[..., :3] = table[lit * 256 + levels[:180].reshape(6, 10, 3)]
+    got = gain_noise(img.copy(), gain, table, levels)
+    assert np.array_equal(got, want)
+    assert np.array_equal(gain_noise(img.copy(), gain, None, None)[..., :3], lit)
+    with pytest.raises(ValueError, match="a level for each colour value"):
+        gain_noise(img.copy(), None, table, levels[:179])
+
+
 def test_iso_maps_to_3_db_less_per_doubling() -> None:
     assert snr_of_iso(100) == pytest.approx(40.0)
     assert snr_of_iso(200) == pytest.approx(40.0 - 10 * math.log10(2))
