@@ -29,7 +29,6 @@ from cosim.core.camera import (
     ground_homography,
     intrinsics,
     project,
-    to_camera,
 )
 from cosim.core.geo import LocalFrame, geodetic_to_ecef
 from cosim.renderer.buildings import building, shadow_on_ground
@@ -37,6 +36,7 @@ from cosim.renderer.ground import GroundTexture
 from cosim.renderer.haze import Haze
 from cosim.renderer.shadows import draw_shadows, shade_table
 from cosim.renderer.sky import Sky, horizon_rgb
+from cosim.renderer.smoke import draw_smoke, draw_smoke_shadows
 from cosim.renderer.targets import (
     FACE_IDX,
     FACE_NORMALS,
@@ -48,8 +48,6 @@ from cosim.renderer.targets import (
     hidden_faces,
     lambert,
     parts_of,
-    smoke_puffs,
-    to_local,
 )
 from cosim.renderer.truth import ground_truth
 from cosim.world.atmosphere import AtmosphereSpec
@@ -61,7 +59,6 @@ from cosim.world.targets import TargetSpec
 
 MAX_PATCH_PX = 3000
 STRIPS = 8  # bands of rows, each drawn from one ground level
-_SMOKE_BGR = np.array([150.0, 150.0, 155.0])
 OPAQUE = 255  # the frame's alpha channel: frames are BGRA (see render_frame)
 
 
@@ -454,29 +451,6 @@ def _target_faces(pose: Pose, t: TargetSpec, origin_l: np.ndarray, time_s: float
     return out
 
 
-def _draw_smoke(K: np.ndarray, pose: Pose, t: TargetSpec, origin_l: np.ndarray, time_s: float,
-                seed: int, img: np.ndarray, haze: Haze | None = None) -> None:
-    h_img, w_img = img.shape[:2]
-    for centre_t, radius, alpha in smoke_puffs(t, time_s, seed):
-        c_c = to_camera(pose, to_local(t, origin_l, centre_t[None, :]))[0]
-        if c_c[2] < NEAR_M + radius:
-            continue
-        uv = project(K, c_c[None, :])[0]
-        r_px = K[0, 0] * radius / c_c[2]
-        x0, y0 = int(max(0, uv[0] - r_px - 1)), int(max(0, uv[1] - r_px - 1))
-        x1, y1 = int(min(w_img, uv[0] + r_px + 2)), int(min(h_img, uv[1] + r_px + 2))
-        if x1 <= x0 or y1 <= y0:
-            continue
-        roi = img[y0:y1, x0:x1]
-        disc = np.zeros(roi.shape[:2], dtype=np.uint8)
-        (cx, cy), (r,) = fixed(uv - (x0, y0)), fixed(np.array([r_px]))
-        cv2.circle(disc, (int(cx), int(cy)), int(r), 1, -1, cv2.LINE_8, SHIFT)
-        m = disc.astype(bool)
-        bgr = roi[..., :3]  # the alpha channel stays opaque
-        smoke = _SMOKE_BGR if haze is None else haze.colour(_SMOKE_BGR, float(np.linalg.norm(c_c)))
-        bgr[m] = (bgr[m] * (1.0 - alpha) + smoke * alpha).astype(np.uint8)
-
-
 def _scenario_to_l(world: World, pose: Pose) -> tuple[np.ndarray, np.ndarray]:
     """The rotation and shift taking scenario NED points to the frame's L:
     ``p_l = p @ rot.T + shift``."""
@@ -546,6 +520,8 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
         rot, shift = _scenario_to_l(world, pose)
         draw_shadows(K, pose, specs, origins, world.sun_l, time_s, seed, img,
                      world.shade_table, [g @ rot.T + shift for g in world.building_shadows])
+        draw_smoke_shadows(K, pose, specs, origins, world.sun_l, time_s, seed, img,
+                           world.shade_table)
     haze = world.haze
     if haze is not None and ground_rows:  # the shaded ground, before the targets
         _haze_ground(world, haze, pose, img, H, ground_rows, ground_mask)
@@ -573,6 +549,6 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
                     min(h_img, max(dirty[3], int(hi_px[1])))]
     for k, t in enumerate(specs):
         if visible[k] and t.kind == "fire":
-            _draw_smoke(K, pose, t, origins[k], time_s, seed + k, img, haze)
+            draw_smoke(K, pose, t, origins[k], time_s, seed + k, img, world.sun_l, haze)
     rows = ground_truth(K, view.image_quad, cam, box_c, img, ids, visible)
     return img, rows
