@@ -118,6 +118,7 @@ class World:
         self._scratch: dict[tuple[str, int, int], np.ndarray] = {}
         self._grids: dict[tuple[int, int, int], np.ndarray] = {}
         self._ids: dict[tuple[int, int], tuple[np.ndarray, list[int]]] = {}
+        self._zeros: dict[tuple[int, int], np.ndarray] = {}
         self._views: dict[CameraSpec, _View] = {}
         #: per obstacle, its walls and roof in the scenario frame
         self.buildings = [building(o) for o in spec.obstacles]
@@ -153,6 +154,13 @@ class World:
             ids[y0:y1, x0:x1] = 0
         dirty[:] = [w, h, 0, 0]
         return ids, dirty
+
+    def zeros(self, h: int, w: int) -> np.ndarray:
+        """An h x w uint8 buffer, all zero, for whoever leaves it so (reused across frames)."""
+        buf = self._zeros.get((h, w))
+        if buf is None:
+            buf = self._zeros[(h, w)] = np.zeros((h, w), np.uint8)
+        return buf
 
     def last_ids(self, h: int, w: int) -> np.ndarray:
         """The target-id image of the last h x w frame drawn (valid until the next)."""
@@ -533,6 +541,7 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
                                    world.sun_l))
     faces.extend(_obstacle_faces(world, pose))
     faces.sort(key=lambda f: -f[0])  # painter's order: far to near
+    outlines: dict[int, list[np.ndarray]] = {}  # per target id, its faces as filled
     for _, depth_m, v_c, bgra, tid in faces:
         if haze is not None:  # a flat face: hazed at its centre's distance
             bgra = haze.bgra(bgra, depth_m)
@@ -540,6 +549,7 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
         if tid:
             cv2.fillConvexPoly(img, pts, bgra, cv2.LINE_8, SHIFT)
             cv2.fillConvexPoly(ids, pts, tid, cv2.LINE_8, SHIFT)
+            outlines.setdefault(tid, []).append(pts)
         else:  # an obstacle's face (a roof may be concave): hides what is behind it
             cv2.fillPoly(img, [pts], bgra, cv2.LINE_8, SHIFT)
             cv2.fillPoly(ids, [pts], 0, cv2.LINE_8, SHIFT)
@@ -550,5 +560,6 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
     for k, t in enumerate(specs):
         if visible[k] and t.kind == "fire":
             draw_smoke(K, pose, t, origins[k], time_s, seed + k, img, world.sun_l, haze)
-    rows = ground_truth(K, view.image_quad, cam, box_c, img, ids, visible)
+    rows = ground_truth(K, view.image_quad, cam, box_c, img, ids, visible, outlines,
+                        world.zeros(h_img, w_img))
     return img, rows

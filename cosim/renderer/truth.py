@@ -16,26 +16,30 @@ pixels; ``range_m`` camera to box centre; ``contrast`` the Weber luminance
 contrast ``(Y_t - Y_b) / Y_b`` of the target's visible pixels against a ring
 of background pixels around its bounding rectangle (the rectangle grown by
 half its size, at least 4 px, minus the rectangle and any target's pixels),
-with Y the relative luminance of linearised sRGB (Rec. 709 weights). Values
-that do not exist (a target behind the camera, no visible pixels) are empty.
+with Y the relative luminance of linearised sRGB (Rec. 709 weights);
+``visible_fraction`` its visible pixels over those its drawn faces cover
+with nothing in front of them (within the image: what lies outside it is
+not hidden, only out of view). Values that do not exist (a target behind
+the camera, no visible pixels) are empty.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import cv2
 import numpy as np
 
-from cosim.core.camera import NEAR_M, CameraSpec, clip_near, project
+from cosim.core.camera import NEAR_M, SHIFT, CameraSpec, clip_near, project
 from cosim.renderer.sensor import distort_truth
 from cosim.renderer.targets import FACE_IDX
 
 GT_COLUMNS = ("frame", "time_s", "vehicle", "camera", "target", "in_view", "fully_in_view",
               "bbox_x0_px", "bbox_y0_px", "bbox_x1_px", "bbox_y1_px", "center_x_px",
               "center_y_px", "eccentricity_px", "eccentricity_deg", "angular_size_deg",
-              "pixels_on_target", "range_m", "contrast")
+              "pixels_on_target", "range_m", "contrast", "visible_fraction")
 _LIN = ((np.arange(256) / 255.0) ** 2.2).astype(np.float32)  # sRGB -> linear (approx.)
 _LIN_BGRA = np.repeat(_LIN[None, :, None], 4, axis=2)  # cv2.LUT's table for BGRA pixels
 _REC709_BGRA = np.array([[0.0722, 0.7152, 0.2126, 0.0]], np.float32)  # linear BGRA -> Y
@@ -50,13 +54,17 @@ def _mean_luminance(bgra: np.ndarray, mask: np.ndarray) -> float:
 
 
 def ground_truth(K: np.ndarray, image_quad: np.ndarray, cam: CameraSpec, box_c: np.ndarray,
-                 img: np.ndarray, ids: np.ndarray, visible: np.ndarray
-                 ) -> list[dict[str, Any]]:
+                 img: np.ndarray, ids: np.ndarray, visible: np.ndarray,
+                 outlines: Mapping[int, Sequence[np.ndarray]] | None = None,
+                 mask: np.ndarray | None = None) -> list[dict[str, Any]]:
     """One row per target (without frame/vehicle/camera) from its box corners
     ``box_c`` (T x 8 x 3, camera axes), the drawn frame ``img`` (BGRA), its
     target-id image ``ids`` and which targets were drawn (``visible``): the
     geometry of all targets at once, then the pixels of those in view. ``K``
-    the intrinsics, ``image_quad`` the image's outline (4 x 2, float32)."""
+    the intrinsics, ``image_quad`` the image's outline (4 x 2, float32);
+    ``outlines``: per target id, the convex polygons its faces were filled
+    with into ``ids`` (fixed point, ``camera.SHIFT``), and ``mask``, a uint8
+    buffer of ``ids``' shape, all zero (left so), for ``visible_fraction``."""
     w_img, h_img = cam.width_px, cam.height_px
     f, cx, cy = K[0, 0], K[0, 2], K[1, 2]
     centre = box_c.sum(axis=1)
@@ -90,7 +98,8 @@ def ground_truth(K: np.ndarray, image_quad: np.ndarray, cam: CameraSpec, box_c: 
                                "center_x_px": None, "center_y_px": None,
                                "eccentricity_px": None, "eccentricity_deg": ecc_l[k],
                                "angular_size_deg": ang_l[k], "pixels_on_target": 0,
-                               "range_m": rng_l[k], "contrast": None}
+                               "range_m": rng_l[k], "contrast": None,
+                               "visible_fraction": None}
         rows.append(row)
         if front_l[k]:
             uv = uv_all[k]
@@ -120,9 +129,33 @@ def ground_truth(K: np.ndarray, image_quad: np.ndarray, cam: CameraSpec, box_c: 
             row["fully_in_view"] = int(inside_bbox and front_l[k])
         if row["in_view"]:
             _pixels(row, img, ids, k + 1, x0, y0, x1, y1)
+            drawn = outlines.get(k + 1) if outlines is not None else None
+            n_px = unoccluded_pixels(drawn, mask) if drawn and mask is not None else 0
+            if n_px:
+                row["visible_fraction"] = row["pixels_on_target"] / n_px
     if cam.sensor is not None and (cam.sensor.k1 or cam.sensor.k2):  # where the lens puts it
         distort_truth(rows, cam, uv_all, front, image_quad)
     return rows
+
+
+def unoccluded_pixels(polys: Sequence[np.ndarray], mask: np.ndarray) -> int:
+    """The pixels of the image that convex polygons ``polys`` (k x 2 int32,
+    fixed point) cover, each counted once: the polygons filled as the frame
+    fills them into ``mask`` (uint8, the image's shape, all zero), counted
+    over their bounding rectangle and cleared there again."""
+    h_img, w_img = mask.shape
+    every = np.concatenate(polys)
+    x0, y0 = (max(0, int(v) >> SHIFT) for v in every.min(axis=0))
+    x1 = min(w_img, (int(every[:, 0].max()) >> SHIFT) + 2)
+    y1 = min(h_img, (int(every[:, 1].max()) >> SHIFT) + 2)
+    if x1 <= x0 or y1 <= y0:
+        return 0
+    for pts in polys:
+        cv2.fillConvexPoly(mask, pts, 1, cv2.LINE_8, SHIFT)
+    roi = mask[y0:y1, x0:x1]
+    n_px = int(cv2.countNonZero(roi))
+    roi[:] = 0
+    return n_px
 
 
 def _regions(ids: np.ndarray, tid: int, x0: float, y0: float, x1: float, y1: float
