@@ -299,17 +299,7 @@ def _haze_ground(world: World, haze: Haze, pose: Pose, img: np.ndarray, H: np.nd
                  bands: list[tuple[int, int]], mask: np.ndarray | None) -> None:
     """Haze the ground of ``img`` (``_draw_ground``'s bands and mask; the sky
     stays as it is), once it is drawn and shaded, before the targets."""
-    max_r = world.spec.ground.max_range_m
-    if mask is None:
-        haze.ground(img, H, pose, max_r, bands)
-        return
-    h_img, w_img = img.shape[:2]
-    hazy = world.scratch("hazy", h_img, w_img, 4)
-    for y0, y1 in bands:
-        hazy[y0:y1] = img[y0:y1]
-    haze.ground(hazy, H, pose, max_r, bands)
-    for y0, y1 in bands:
-        cv2.copyTo(hazy[y0:y1], mask[y0:y1], img[y0:y1])
+    haze.ground(img, H, pose, world.spec.ground.max_range_m, bands, mask)
 
 
 def _ground_mask(world: World, H: np.ndarray, max_r: float, h_img: int, w_img: int

@@ -11,8 +11,9 @@ is drawn over it, in tiles of ``TILE_ROWS x TILE_COLS`` pixels, each with the
 transmittance of the ray through its centre to the ground plane (a ray that
 misses the ground, or meets it beyond the ground's range, counts at that
 range) in steps of ``1 / LEVELS``, each hazed with its step's middle: one
-table look-up (``cv2.LUT``) per run of tiles of one step along a row of
-tiles, joined with the same run of the rows below. ``tile_transmittance``
+table look-up per value, each tile through its step's table, in one compiled
+sweep (``haze_pass``; the same bytes as a ``cv2.LUT`` per run of tiles of one
+step, ``Haze.pieces``, at a third of the cost). ``tile_transmittance``
 gives those values; the tests hold them to the exact per-pixel ones. The sky
 is left as it is (its horizon is the default airlight: ``cosim.renderer.sky``).
 """
@@ -20,8 +21,9 @@ is left as it is (its horizon is the default airlight: ``cosim.renderer.sky``).
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
+from typing import Any
 
-import cv2
 import numpy as np
 
 from cosim.core.camera import Pose
@@ -52,6 +54,10 @@ class Haze:
         tables[:, 0, :, :3] = np.rint(255.0 * hazy ** (1.0 / GAMMA))
         tables[..., 3] = np.arange(256)  # alpha stays as it is
         self.tables = tables
+        self.tables3 = np.ascontiguousarray(tables[:, 0])  # (LEVELS, 256, 4): haze_pass's
+        from cosim.renderer import haze_pass  # numba (0.3 s to import): only when hazy
+
+        self.compiled: Any = haze_pass
 
     def colour(self, bgr: tuple[float, ...] | np.ndarray, distance_m: float) -> np.ndarray:
         """A BGR colour (0-255, floats) seen through ``distance_m`` of haze."""
@@ -67,14 +73,25 @@ class Haze:
         return b, g, r, bgra[3]
 
     def ground(self, img: np.ndarray, H: np.ndarray, pose: Pose, max_r_m: float,
-               bands: list[tuple[int, int]]) -> None:
+               bands: list[tuple[int, int]], mask: np.ndarray | None = None) -> None:
         """Haze the ground drawn in ``img`` (BGRA) in the rows of ``bands``
-        (``[y0, y1)`` each), in place. ``H``: image -> L ground (north, east)
+        (``[y0, y1)`` each), in place; with ``mask`` (h x w uint8) only the
+        pixels it marks. ``H``: image -> L ground (north, east)
         (``cosim.core.camera.ground_homography``), ``max_r_m`` the ground's range."""
-        tables = self.tables
-        for y0, y1, x0, x1, level in self.pieces(H, pose, max_r_m, bands, img.shape[1]):
-            roi = img[y0:y1, x0:x1]
-            cv2.LUT(roi, tables[level], dst=roi)
+        rows, levels = self.tile_levels(H, pose, max_r_m, bands, img.shape[1])
+        if len(rows):
+            self.compiled.haze_tiles(img, rows, levels, self.tables3, TILE_COLS, mask)
+
+    def tile_levels(self, H: np.ndarray, pose: Pose, max_r_m: float,
+                    bands: list[tuple[int, int]], w: int) -> tuple[np.ndarray, np.ndarray]:
+        """The ground's rows of tiles (n x 2: ``[y0, y1)``) and each tile's
+        step (n x tiles across): it hazes with ``(level + 0.5) / LEVELS``."""
+        rows = np.array([(y, min(y + TILE_ROWS, y1)) for y0, y1 in bands
+                         for y in range(y0, y1, TILE_ROWS)], np.int64).reshape(-1, 2)
+        if not len(rows):
+            return rows, np.zeros((0, 0), np.int64)
+        t = tile_transmittance(self.k_per_m, H, pose, max_r_m, rows.tolist(), w)
+        return rows, np.minimum((t * LEVELS).astype(np.int64), LEVELS - 1)
 
     def pieces(self, H: np.ndarray, pose: Pose, max_r_m: float, bands: list[tuple[int, int]],
                w: int) -> list[tuple[int, int, int, int, int]]:
@@ -82,12 +99,10 @@ class Haze:
         one transmittance ``(level + 0.5) / LEVELS``: runs of tiles of one level
         along a row of tiles, joined with the row above when it has the same
         runs."""
-        rows = [(y, min(y + TILE_ROWS, y1)) for y0, y1 in bands
-                for y in range(y0, y1, TILE_ROWS)]
-        if not rows:
+        rows_a, levels = self.tile_levels(H, pose, max_r_m, bands, w)
+        if not len(rows_a):
             return []
-        t = tile_transmittance(self.k_per_m, H, pose, max_r_m, rows, w)
-        levels = np.minimum((t * LEVELS).astype(np.int64), LEVELS - 1)
+        rows = rows_a.tolist()
         n_r, n_c = levels.shape
         cut = np.ones((n_r, n_c + 1), bool)  # a run starts (or the row ends) here
         cut[:, 1:-1] = levels[:, 1:] != levels[:, :-1]
@@ -112,7 +127,7 @@ class Haze:
 
 
 def tile_transmittance(k_per_m: float, H: np.ndarray, pose: Pose, max_r_m: float,
-                       rows: list[tuple[int, int]], w: int) -> np.ndarray:
+                       rows: Sequence[Sequence[int]], w: int) -> np.ndarray:
     """(len(rows), tiles across) transmittance ``exp(-k d)`` of the ground at
     each tile's centre: rows ``[y0, y1)`` of tiles, ``TILE_COLS`` wide across
     an image ``w`` pixels wide (the last tile may be narrower)."""

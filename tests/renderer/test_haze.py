@@ -116,6 +116,38 @@ def test_ground_tiles_hold_the_per_pixel_transmittance(mount: str, pitch: float,
     assert ground.any() and err.max() < 0.03, float(err.max())
 
 
+@pytest.mark.parametrize("masked", [False, True])
+def test_the_compiled_ground_haze_is_each_piece_through_its_table(masked: bool) -> None:
+    """Haze.ground (one compiled sweep) gives the same bytes as cv2.LUT over
+    each of Haze.pieces with its step's table; with a mask, only the pixels
+    it marks change. An oblique view whose bands stop short of the image."""
+    import cv2
+
+    world = World(WorldSpec(LAT0, LON0, GROUND_M, 1, 120.0, GroundSpec(), (),
+                            atmosphere=AtmosphereSpec(2.0)))
+    haze = world.haze
+    assert haze is not None
+    cam = _cam("gimbal", -20.0, 320, 240, 60.0)
+    pose = camera_pose(cam, LAT0, LON0, GROUND_M + 300.0, 2.0, 3.0, 30.0, GROUND_M)
+    H = ground_homography(world.view(cam).K_inv, pose)
+    max_r = world.spec.ground.max_range_m
+    rng = np.random.default_rng(5)
+    img = rng.integers(0, 256, (240, 320, 4), dtype=np.uint8)
+    bands = [(10, 101), (130, 238)]
+    mask = (rng.random((240, 320)) < 0.7).astype(np.uint8) * 255 if masked else None
+    want = img.copy()
+    for y0, y1, x0, x1, level in haze.pieces(H, pose, max_r, bands, 320):
+        roi = want[y0:y1, x0:x1]
+        cv2.LUT(roi, haze.tables[level], dst=roi)
+    if mask is not None:
+        want = np.where(mask[..., None] > 0, want, img)
+    got = img.copy()
+    haze.ground(got, H, pose, max_r, bands, mask)
+    assert len({level for *_, level in haze.pieces(H, pose, max_r, bands, 320)}) > 5
+    assert np.array_equal(got, want)
+    assert not np.array_equal(got, img)
+
+
 SCENARIO = """\
 schema_version: 1
 origin: {{lat_deg: 37, lon_deg: -122}}
