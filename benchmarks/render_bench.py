@@ -18,6 +18,7 @@
     python benchmarks/render_bench.py [--frames 200] [--repeat 1] [--vehicles 20]
         [--duration-s 10] [--backend process|inline] [--workers N] [--render-workers N]
         [--codec mp4v|h264|mjpg] [--sensor YAML] [--datalink YAML] [--haze-km V]
+        [--trees flat|3d|none]
 
 With ``--datalink`` the camera runs at 15 Hz and its frames go through that
 downlink (encoded, decoded back where a target is in view, measured, in place
@@ -87,11 +88,12 @@ class _Encoder:
 
 def per_frame(frames: int, cache_dir: str, codec: str = "mp4v",
               sensor: SensorSpec | None = None, datalink: DatalinkSpec | None = None,
-              haze_km: float | None = None) -> dict[str, float]:
+              haze_km: float | None = None, trees: str = "flat") -> dict[str, float]:
     """One camera's frames; cosim's cache folder (its ground tiles in
     ``ground/``) in ``cache_dir``; ``sensor``: the camera's sensor and lens,
     ``datalink`` its downlink, ``haze_km`` the atmosphere's visibility (each's
-    cost timed apart; the haze's: the ground's, the faces' is in the rest)."""
+    cost timed apart; the haze's: the ground's, the faces' is in the rest);
+    ``trees``: the procedural ground's (``ground: {trees: ...}``)."""
     os.environ[CACHE_ENV] = cache_dir
     cv2.setNumThreads(1)
     scn = load_scenario(REPO / "scenarios/cameras/flyover.yaml", check_properties=False)
@@ -99,7 +101,8 @@ def per_frame(frames: int, cache_dir: str, codec: str = "mp4v",
 
     air = AtmosphereSpec(haze_km) if haze_km else None
     ws = WorldSpec(scn.origin.lat_deg, scn.origin.lon_deg, scn.origin.ground_alt_m, scn.seed,
-                   120.0, scn.world.ground, scn.world.targets, atmosphere=air)
+                   120.0, dataclasses.replace(scn.world.ground, trees=trees), scn.world.targets,
+                   atmosphere=air)
     cam: CameraSpec = dataclasses.replace(scn.sections["cameras"].views[0], sensor=sensor,
                                           datalink=datalink)
     frame = LocalFrame(scn.origin.lat_deg, scn.origin.lon_deg, scn.origin.ground_alt_m)
@@ -232,6 +235,9 @@ def main() -> None:
                     help="per-frame cost also through haze of this visibility (km; the "
                          "atmosphere: section), each pass run without it, then with it; the "
                          "ground's haze is printed apart")
+    ap.add_argument("--trees", default="flat", choices=("flat", "3d", "none"),
+                    help="the procedural ground's trees (ground: {trees: ...}) for the "
+                         "per-frame cost")
     a = ap.parse_args()
     sensor = _sensor(a.sensor) if a.sensor else None
     datalink = _camera("datalink", a.datalink, 15.0).datalink if a.datalink else None
@@ -241,7 +247,7 @@ def main() -> None:
             with tempfile.TemporaryDirectory() as cache:
                 for (label, got), km in ((lk, km) for lk in runs.items()
                                          for km in (None, a.haze_km)[:1 + bool(a.haze_km)]):
-                    f = per_frame(a.frames, cache, a.codec, sensor, datalink, km)
+                    f = per_frame(a.frames, cache, a.codec, sensor, datalink, km, a.trees)
                     if km is None:
                         got.append(f)
                     rest = f["cpu_ms"] - f["encode_ms"] - f["warp_ms"] - f["tiles_ms"] \

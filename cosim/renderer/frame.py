@@ -31,6 +31,7 @@ from cosim.core.camera import (
     project,
 )
 from cosim.core.geo import LocalFrame, geodetic_to_ecef
+from cosim.renderer import canopy
 from cosim.renderer.buildings import building, shadow_on_ground
 from cosim.renderer.ground import GroundTexture
 from cosim.renderer.haze import Haze
@@ -127,6 +128,8 @@ class World:
         self.sun_l = spec.sun.to_sun_ned()
         self.haze = Haze(spec.atmosphere, horizon_rgb(spec.sun)) \
             if spec.atmosphere is not None else None
+        #: the procedural ground's trees are drawn in 3-D (``canopy``)
+        self.trees_3d = spec.ground.trees == "3d"
         #: the ground's darkening in shade (cv2.LUT), if the targets cast shadows
         self.shade_table = shade_table(spec.sun.elevation_deg) if spec.sun.shadows else None
         #: each building's shadow on the ground, if they cast them (k x 3, scenario NED)
@@ -246,10 +249,11 @@ def _ecef_to_ned(frame: LocalFrame) -> np.ndarray:
 
 def _draw_ground(world: World, cam: CameraSpec, pose: Pose, view: _View,
                  img: np.ndarray, slot: Hashable
-                 ) -> tuple[np.ndarray, list[tuple[int, int]], np.ndarray | None]:
+                 ) -> tuple[np.ndarray, list[tuple[int, int]], np.ndarray | None, list[int]]:
     """Draw the sky and the ground into ``img`` (every pixel is written); return
     the image -> L ground homography, the bands of rows ``[y0, y1)`` holding
-    ground and the ground mask (None: all of them ground) for the haze."""
+    ground and the ground mask (None: all of them ground) for the haze, and the
+    ground level each of the ``STRIPS`` bands of ``view.bounds`` drew (-1: none)."""
     h_img, w_img = cam.height_px, cam.width_px
     H = ground_homography(view.K_inv, pose)
     max_r = world.spec.ground.max_range_m
@@ -261,7 +265,7 @@ def _draw_ground(world: World, cam: CameraSpec, pose: Pose, view: _View,
     near_ok = (wq > 1e-9) & (horiz <= max_r * np.maximum(wq, 1e-12) + 1e-9)
     if not near_ok.any():
         world.sky.draw(view.K_inv, pose.R_cl, img)  # all sky
-        return H, [], None
+        return H, [], None, [-1] * STRIPS
     A = _l_to_scenario_ne(world, pose)
     all_ground = bool(near_ok.all())
     mask = None
@@ -292,7 +296,7 @@ def _draw_ground(world: World, cam: CameraSpec, pose: Pose, view: _View,
         s = e + 1
     if mask is not None:
         cv2.copyTo(ground, mask, img)
-    return H, rows, mask
+    return H, rows, mask, levels
 
 
 def _haze_ground(world: World, haze: Haze, pose: Pose, img: np.ndarray, H: np.ndarray,
@@ -484,6 +488,27 @@ def _obstacle_faces(world: World, pose: Pose
     return out
 
 
+def _trees_in_view(world: World, pose: Pose, view: _View, H: np.ndarray, levels: list[int],
+                   w_img: int) -> canopy.Trees:
+    """The trees drawn in 3-D (``canopy.in_view``) over the bands of rows whose
+    ground ``levels`` (``_draw_ground``) show none."""
+    max_r = world.spec.ground.max_range_m
+    bounds = view.bounds
+    extents = []
+    s = 0
+    while s < len(levels):  # each run of bands whose ground shows no trees, at once
+        e = s
+        while e < len(levels) and 0 <= levels[e] < canopy.FLAT_FROM_LEVEL:
+            e += 1
+        if e > s:
+            extents.append(_band_extent(world, H, bounds[s], bounds[e], w_img, max_r))
+        s = e + 1
+    if not extents:
+        return canopy.standing(world.spec.seed, 0.0, 0.0, 0.0, 0.0)
+    return canopy.in_view(world.spec.seed, view.K, pose, _l_to_scenario_ne(world, pose),
+                          bounds, levels, extents, max_r)
+
+
 def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
                  out: np.ndarray | None = None, stream: Hashable = None
                  ) -> tuple[np.ndarray, list[dict[str, Any]]]:
@@ -502,8 +527,10 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
     if out is None:
         out = np.empty((h_img, w_img, 4), dtype=np.uint8)
     img = out
-    H, ground_rows, ground_mask = _draw_ground(world, cam, pose, view, img, stream)
+    H, ground_rows, ground_mask, levels = _draw_ground(world, cam, pose, view, img, stream)
     ids, dirty = world.ids_buffer(h_img, w_img)
+    trees = _trees_in_view(world, pose, view, H, levels, w_img) \
+        if world.trees_3d and ground_rows else None
     time_s = tick / world.spec.physics_hz
     seed = world.spec.seed
     targets = world.targets
@@ -514,10 +541,13 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
         specs = tuple(t.at(time_s) for t in specs)
         offsets = offsets.copy()
         offsets[world.growing] = probe_offsets([specs[k] for k in world.growing])
-    if world.shade_table is not None and (len(specs) or world.building_shadows):
+    tree_shadows = canopy.shadows_l(trees, world.sun_l) \
+        if trees is not None and world.shade_table is not None else []
+    if world.shade_table is not None and (len(specs) or world.building_shadows or tree_shadows):
         rot, shift = _scenario_to_l(world, pose)
         draw_shadows(K, pose, specs, origins, world.sun_l, time_s, seed, img,
-                     world.shade_table, [g @ rot.T + shift for g in world.building_shadows])
+                     world.shade_table, [g @ rot.T + shift for g in world.building_shadows]
+                     + tree_shadows)
         draw_smoke_shadows(K, pose, specs, origins, world.sun_l, time_s, seed, img,
                            world.shade_table)
     haze = world.haze
@@ -530,11 +560,18 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
         faces.extend(_target_faces(pose, specs[k], origins[k], time_s, seed + k, k + 1,
                                    world.sun_l))
     faces.extend(_obstacle_faces(world, pose))
+    if trees is not None:
+        faces.extend(canopy.faces(trees, K, pose, world.sun_l, w_img, h_img, view.planes))
     faces.sort(key=lambda f: -f[0])  # painter's order: far to near
     outlines: dict[int, list[np.ndarray]] = {}  # per target id, its faces as filled
     for _, depth_m, v_c, bgra, tid in faces:
         if haze is not None:  # a flat face: hazed at its centre's distance
             bgra = haze.bgra(bgra, depth_m)
+        if tid < 0:  # a tree's outline, in pixels: hides what is behind it
+            cv2.fillConvexPoly(img, v_c, bgra, cv2.LINE_8, SHIFT)
+            if dirty[2] > dirty[0]:  # a target may be behind it
+                cv2.fillConvexPoly(ids, v_c, 0, cv2.LINE_8, SHIFT)
+            continue
         pts = fixed(project(K, v_c))
         if tid:
             cv2.fillConvexPoly(img, pts, bgra, cv2.LINE_8, SHIFT)

@@ -21,11 +21,19 @@ import cv2
 import numpy as np
 
 from cosim.core.geo import LocalFrame
+from cosim.renderer.canopy import FLAT_FROM_LEVEL
 from cosim.renderer.image_layers import GeoRasterLayer, PictureLayer, image_layer
 from cosim.renderer.pyramid import TilePyramid
 from cosim.renderer.texture import ProceduralTiles
 from cosim.renderer.tile_cache import TileCache, ground_cache_dir
 from cosim.world.ground import GroundSpec
+
+
+def trees_from_level(trees: str) -> int:
+    """The finest ground level whose tiles show flat trees: every level for
+    ``flat``, the coarse ones for ``3d`` (finer ones: drawn in 3-D), none for
+    ``none``."""
+    return {"flat": 0, "3d": FLAT_FROM_LEVEL}.get(trees, 1 << 20)
 
 
 class GroundTexture(TilePyramid):
@@ -36,7 +44,8 @@ class GroundTexture(TilePyramid):
         super().__init__(spec.base_m_per_px, spec.tile_px)
         self.spec = spec
         self.seed = int(seed)
-        self.procedural = ProceduralTiles(self.seed, spec.base_m_per_px, spec.tile_px)
+        self.procedural = ProceduralTiles(self.seed, spec.base_m_per_px, spec.tile_px,
+                                          trees_from_level(spec.trees))
         self.image: PictureLayer | GeoRasterLayer | None = image_layer(spec, frame)
         self.tiles_made = 0
         self.tiles_loaded = 0

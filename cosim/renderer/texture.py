@@ -49,6 +49,10 @@ TREE_M = 7.0  # one tree at most per cell of this size, at a random place in its
 TREE_R_M = (1.6, 2.8)  # a tree crown's radius, from .. to
 WOODS = 0.76  # woods where the 500 m value noise is above this
 HEDGE_M = (4.0, 9.0)  # a hedgerow's trees stand this far inside a field that has one
+#: a wood's tree: its crown's lowest point from .. to, its top from .. to (metres
+#: above the ground); a hedgerow's trees are lower
+WOOD_CROWN_M, WOOD_TOP_M = (3.0, 5.0), (8.0, 16.0)
+HEDGE_CROWN_M, HEDGE_TOP_M = (2.5, 4.0), (6.0, 10.0)
 
 # field palette, RGB: crops, pasture, wheat, ploughed soil, dry grass, dark crop
 _FIELDS = np.array([[96, 128, 58], [118, 140, 72], [176, 160, 96], [122, 98, 72],
@@ -93,7 +97,8 @@ def _field_cells(seed: int, step_m: float, a0: int, a1: int, b0: int,
 def _tree_cells(kn: np.ndarray, ke: np.ndarray, seed: int) -> tuple[np.ndarray, ...]:
     """What depends only on a tree cell (``TREE_M`` square; ``kn``, ``ke`` its
     row and column, broadcast together), flat: whether a tree stands there in a
-    wood, or on a hedgerow; its centre north and east; its radius and shade.
+    wood, or on a hedgerow; its centre north and east; its radius and shade; the
+    height of its crown's lowest point and of its top (``WOOD_CROWN_M`` ..).
 
     Whether it stands is decided at its centre, so a tree is drawn whole or not
     at all, across the edges of its wood, hedgerow band, field, cell and tile: in
@@ -102,14 +107,19 @@ def _tree_cells(kn: np.ndarray, ke: np.ndarray, seed: int) -> tuple[np.ndarray, 
     field and distances to the field grid's lines, warped as ``macro_rgb``'s;
     the warp's noise at the centre itself, not on a grid)."""
     ht = uniform_hash(kn, ke, seed + 12)
-    d = derive(ht, 43.9, 71.3, 577.31, 1291.7, 3343.1)  # taken in this order
+    d = derive(ht, 43.9, 71.3, 577.31, 1291.7, 3343.1, 5003.7, 7919.3)  # in this order
     in_wood, on_hedge = (next(d) < 0.9).ravel(), (next(d) < 0.7).ravel()
     tn = ((kn + 0.25 + 0.5 * ht) * TREE_M).ravel()
     te = ((ke + 0.25 + 0.5 * next(d)) * TREE_M).ravel()
     lo, hi = TREE_R_M
     radius = (lo + (hi - lo) * next(d)).ravel()
     tone = (0.75 + 0.5 * next(d)).ravel()
+    crown_u, top_u = next(d).ravel(), next(d).ravel()
     in_wood &= value_noise_at(tn / 500.0, te / 500.0, seed + 10)[0] > WOODS
+    (c0, c1), (t0, t1) = WOOD_CROWN_M, WOOD_TOP_M
+    (h0, h1), (s0, s1) = HEDGE_CROWN_M, HEDGE_TOP_M
+    crown_m = np.where(in_wood, c0 + (c1 - c0) * crown_u, h0 + (h1 - h0) * crown_u)
+    top_m = np.where(in_wood, t0 + (t1 - t0) * top_u, s0 + (s1 - s0) * top_u)
     u32, v32 = value_noise_at(tn / 230.0, te / 230.0, seed + 1, seed + 2)
     u = u32.astype(np.float64)
     u -= 0.5
@@ -126,7 +136,20 @@ def _tree_cells(kn: np.ndarray, ke: np.ndarray, seed: int) -> tuple[np.ndarray, 
     v -= fv
     edge = np.minimum(np.minimum(u, 1.0 - u) * FIELD_N_M, np.minimum(v, 1.0 - v) * FIELD_E_M)
     on_hedge &= hedge & (edge > HEDGE_M[0]) & (edge < HEDGE_M[1])
-    return in_wood, on_hedge, tn, te, radius, tone
+    return in_wood, on_hedge, tn, te, radius, tone, crown_m, top_m
+
+
+def tree_tables(seed: int, kn0: int, kn1: int, ke0: int, ke1: int, own: bool = True
+                ) -> tuple[int, int, int, int, tuple[np.ndarray, ...]] | None:
+    """``_tree_cells`` of the tree cells ``kn0 .. kn1`` x ``ke0 .. ke1`` (inclusive),
+    kept by whole blocks (``noise.TABLES.cover``): ``(a0, a1, b0, b1, tables)``, the
+    tables of the cells ``[a0, a1) x [b0, b1)`` (flat, rows of ``b1 - b0``)."""
+
+    def make(a0: int, a1: int, b0: int, b1: int) -> tuple[np.ndarray, ...]:
+        return _tree_cells(np.arange(a0, a1, dtype=np.float64)[:, None],
+                           np.arange(b0, b1, dtype=np.float64)[None, :], seed)
+
+    return noise.TABLES.cover(("tree", seed), kn0, kn1, ke0, ke1, 32, make, own=own)
 
 
 #: how far a sample's woods noise and field-edge distance (metres) may be from
@@ -160,27 +183,21 @@ def _trees(nv: np.ndarray, ev: np.ndarray, step_m: float, seed: int,
     reach = TREE_R_M[1] + 0.5 * step_m
     kn0, kn1 = math.floor((nv.min() - reach) / TREE_M), math.floor((nv.max() + reach) / TREE_M)
     ke0, ke1 = math.floor((ev.min() - reach) / TREE_M), math.floor((ev.max() + reach) / TREE_M)
-
-    def make(a0: int, a1: int, b0: int, b1: int) -> tuple[np.ndarray, ...]:
-        return _tree_cells(np.arange(a0, a1, dtype=np.float64)[:, None],
-                           np.arange(b0, b1, dtype=np.float64)[None, :], seed)
-
-    got = noise.TABLES.cover(("tree", seed), kn0, kn1, ke0, ke1, 32, make,
-                             own=(kn1 - kn0 + 1) * (ke1 - ke0 + 1) <= R * C)
+    got = tree_tables(seed, kn0, kn1, ke0, ke1, own=(kn1 - kn0 + 1) * (ke1 - ke0 + 1) <= R * C)
     if got is None:  # each sample its own cell's tree, where one may stand
         woods = noise_on_grid(noise_weights(nv, [500.0])[0], noise_weights(ev, [500.0])[0],
                               seed + 10)
         maybe = np.flatnonzero((woods > WOODS - _NEAR_WOODS)
                                | (edge_m() < HEDGE_M[1] + _NEAR_EDGE_M))
         r, c = np.divmod(maybe, C)
-        wood, hedge, tn, te, radius, tone = _tree_cells(np.floor(nv.take(r) / TREE_M),
-                                                        np.floor(ev.take(c) / TREE_M), seed)
+        wood, hedge, tn, te, radius, tone, *_ = _tree_cells(np.floor(nv.take(r) / TREE_M),
+                                                            np.floor(ev.take(c) / TREE_M), seed)
         stand = np.flatnonzero(wood | hedge)
         at, r, c = maybe.take(stand), r.take(stand), c.take(stand)
         dtn, dte = nv.take(r) - tn.take(stand), ev.take(c) - te.take(stand)
         cov = _coverage(radius.take(stand) - np.sqrt(dtn * dtn + dte * dte), step_m)
         return (at, cov, cov * tone.take(stand)) if len(at) else None
-    a0, a1, b0, b1, (wood, hedge, tn, te, radius, tone) = got
+    a0, a1, b0, b1, (wood, hedge, tn, te, radius, tone, *_) = got
     nb = b1 - b0
     stands = (wood | hedge).reshape(-1, nb)[kn0 - a0:kn1 + 1 - a0, ke0 - b0:ke1 + 1 - b0]
     kn, ke = np.nonzero(stands)
@@ -227,14 +244,15 @@ def _trees(nv: np.ndarray, ev: np.ndarray, step_m: float, seed: int,
     return at, alpha.take(at), shade.take(at)
 
 
-def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int) -> np.ndarray:
+def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int,
+              with_trees: bool = True) -> np.ndarray:
     """The procedural ground's colour as float32 planes (3, R, C), RGB about 0..255
     (not clipped), at the scenario-frame grid ``n`` (R x 1) x ``e`` (1 x C), drawn
     for a sample spacing of ``step_m``. Smooth fields (field-grid warp, woods,
     brightness) are value noise evaluated as small matrix products; what depends
     only on a field, a grid line, a tree cell or a noise lattice corner is computed
     once per cell, kept across calls (``noise.TABLES``) and gathered; trees are drawn
-    only where some may stand."""
+    only where some may stand (none without ``with_trees``: the ground under them)."""
     nv, ev = n.ravel().astype(np.float64), e.ravel().astype(np.float64)
     R, C = len(nv), len(ev)
     f32 = np.float32
@@ -311,7 +329,7 @@ def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int) -> np.ndar
         np.clip(line, 0.0, 1.0, out=line)
         road = line if road is None else np.maximum(road, line, out=road)
     # trees: whole discs over the fields and roads (_tree_cells, _trees)
-    trees = _trees(nv, ev, step_m, seed, lambda: np.minimum(du, dv))
+    trees = _trees(nv, ev, step_m, seed, lambda: np.minimum(du, dv)) if with_trees else None
     # blend: field colour x factor, then road, then trees over it
     keep = factor
     if road is not None:
@@ -379,12 +397,17 @@ def _resize_plan(k: float, p0: int, T: int) -> tuple[int, int, int] | None:
 
 class ProceduralTiles:
     """The tiles of the procedural ground for one seed, ``tile_px`` a side, level
-    0 at ``base_m_per_px`` (``make``); keeps the detail texture's levels and the
-    float buffers a tile is made in (no fresh ~1 MB temporaries, whose pages the
-    kernel would fault in again for every tile)."""
+    0 at ``base_m_per_px`` (``make``), flat trees from ``trees_from_level`` on;
+    keeps the detail texture's levels and the float buffers a tile is made in (no
+    fresh ~1 MB temporaries, whose pages the kernel would fault in again for every
+    tile)."""
 
-    def __init__(self, seed: int, base_m_per_px: float, tile_px: int) -> None:
+    def __init__(self, seed: int, base_m_per_px: float, tile_px: int,
+                 trees_from_level: int = 0) -> None:
         self.seed, self.base_mpp, self.tile_px = int(seed), base_m_per_px, tile_px
+        #: the finest level whose tiles show the trees (flat); finer ones show the
+        #: ground under them (their trees are drawn in 3-D: ``canopy``)
+        self.trees_from_level = trees_from_level
         self.detail = _detail_pyramid(self.seed)
         T = tile_px
         self._slabs: dict[tuple[int, int, int], np.ndarray] = {}
@@ -433,10 +456,12 @@ class ProceduralTiles:
         rows = np.arange(ti * T, ti * T + T, dtype=np.float64)
         cols = np.arange(tj * T, tj * T + T, dtype=np.float64)
         step = max(m * MACRO_OVERSAMPLE, MACRO_STEP_M)
+        macro = functools.partial(macro_rgb, seed=self.seed,
+                                  with_trees=level >= self.trees_from_level)
         if step <= m * 1.0001:
             n = -(rows[:, None] + 0.5) * m
             e = (cols[None, :] + 0.5) * m
-            bgra = _bgra(macro_rgb(n, e, m, self.seed), self._warp_buf)
+            bgra = _bgra(macro(n, e, m), self._warp_buf)
         elif (pr := _resize_plan(m / step, ti * T, T)) and \
                 (pc := _resize_plan(m / step, tj * T, T)):
             # the macro colour on the coarser global lattice of points at (K + 1/2) step
@@ -445,7 +470,7 @@ class ProceduralTiles:
             (y0, ka, na), (x0, kb, nb) = pr, pc
             gn = -(np.arange(ka, ka + na, dtype=np.float64) + 0.5) * step
             ge = (np.arange(kb, kb + nb, dtype=np.float64) + 0.5) * step
-            coarse = macro_rgb(gn[:, None], ge[None, :], step, self.seed)
+            coarse = macro(gn[:, None], ge[None, :], step)
             up = step / m  # the resize's size is its own rounding of na x up, nb x up
             big = cv2.resize(_bgra(coarse, self._coarse(na, nb)), None, fx=up, fy=up,
                              dst=self._big_buf(level, round(na * up), round(nb * up)),
@@ -458,7 +483,7 @@ class ProceduralTiles:
             kb0, kb1 = math.floor(e0 / step), math.ceil(e1 / step)
             gn = np.arange(ka1, ka0 - 1, -1, dtype=np.float64) * step  # north descending
             ge = np.arange(kb0, kb1 + 1, dtype=np.float64) * step
-            coarse = macro_rgb(gn[:, None], ge[None, :], step, self.seed)
+            coarse = macro(gn[:, None], ge[None, :], step)
             # lattice position of tile pixel (r, c): an axis-aligned affine map; four
             # float channels warp 2.7x faster than three
             k = m / step

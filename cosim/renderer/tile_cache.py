@@ -37,14 +37,16 @@ def ground_cache_dir(spec: GroundSpec, seed: int) -> Path | None:
     """The disk cache folder for the procedural tiles of ``seed`` and ``spec``, or
     None if caching is off (``COSIM_GROUND_CACHE=off``): ``ground/`` in the cache
     folder (``cosim.core.cache``), one subfolder per
-    texture version, seed, base resolution, tile size and the numpy/OpenCV
-    versions (their float maths makes the pixels), so a cached tile is the very
-    tile this process would generate."""
+    texture version, seed, base resolution, tile size, trees (flat, 3d or none)
+    and the numpy/OpenCV versions (their float maths makes the pixels), so a
+    cached tile is the very tile this process would generate."""
     if os.environ.get(CACHE_ENV, "").lower() in ("off", "0", "no", "false"):
         return None
     root = cache_folder("ground")
     key = f"{TEXTURE_VERSION}|{seed}|{spec.base_m_per_px!r}|{spec.tile_px}|{np.__version__}|" \
           f"{cv2.__version__}"
+    if spec.trees != "flat":  # its finer levels show the ground under the trees, or none
+        key += f"|trees={spec.trees}"
     return root / f"v{TEXTURE_VERSION}-{hashlib.sha1(key.encode()).hexdigest()[:16]}"
 
 

@@ -23,6 +23,8 @@ if TYPE_CHECKING:
     from cosim.world.picture import Picture
 
 P = tuple[Any, ...]
+#: the ``trees`` a procedural ground may have
+TREES = ("flat", "3d", "none")
 
 
 @dataclass(frozen=True)
@@ -41,6 +43,9 @@ class GroundSpec:
     base_m_per_px: float = 0.05  # finest procedural level (no blur at 30 m)
     tile_px: int = 256
     max_range_m: float = 5000.0  # ground farther than this is drawn as haze/sky
+    #: the procedural ground's trees: "flat" (crowns in the texture), "3d" (crowns
+    #: with height, drawn in perspective, hiding what is under them), "none"
+    trees: str = "flat"
     #: the folders the image and the files it names must lie in (resolved); empty:
     #: the image's own folder
     image_folders: tuple[str, ...] = ()
@@ -73,12 +78,13 @@ def open_image(spec: GroundSpec, frame: LocalFrame) -> Picture | GeoRaster:
 
 def parse_ground(info: SectionContext, node: Any, path: P) -> GroundSpec:
     r = info.reader(node, path, ("texture", "image", "image_folders", "origin", "m_per_px",
-                                 "base_m_per_px", "tile_px", "max_range_m"))
+                                 "base_m_per_px", "tile_px", "max_range_m", "trees"))
     kind = r.string("texture", "image" if r.has("image") else "procedural",
                     choices=("procedural", "image"))
     base = r.num("base_m_per_px", 0.05, lo=0.005, hi=10.0)
     tile = r.integer("tile_px", 256, lo=32, hi=4096)
     max_range = r.num("max_range_m", 5000.0, lo=100.0, hi=MAX_DISTANCE_M)
+    trees = r.string("trees", "flat", choices=TREES)
     image: str | None = None
     o_ne: tuple[float, float] | None = None
     o_ll: tuple[float, float] | None = None
@@ -110,7 +116,7 @@ def parse_ground(info: SectionContext, node: Any, path: P) -> GroundSpec:
     return GroundSpec(kind=kind or "procedural", image=image, origin_ne_m=o_ne,
                       origin_latlon_deg=o_ll, m_per_px=mpp, geotiff=geotiff,
                       base_m_per_px=base or 0.05,
-                      tile_px=tile or 256, max_range_m=max_range or 5000.0,
+                      tile_px=tile or 256, max_range_m=max_range or 5000.0, trees=trees or "flat",
                       image_folders=imagery.folders(info.path.resolve().parent, listed))
 
 
