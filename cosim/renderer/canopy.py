@@ -43,7 +43,7 @@ REACH_M = 600.0  # trees drawn in 3-D at most this far from the camera's ground 
 SIDES = 20  # an outline's vertices
 LIT = 0.35  # the sunlit cap: the unit sphere shrunk by this, moved this far sunward
 TRUNK_M = 0.35  # a trunk's width
-TRUNK_RGB = np.array([78, 62, 48], np.float32)
+TRUNK_RGB = np.array([62, 50, 40], np.float32)
 _BLOCK = 32  # tree cells a table block holds (texture.tree_tables)
 
 _ANGLES = np.linspace(0.0, 2.0 * math.pi, SIDES, endpoint=False)
