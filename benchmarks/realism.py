@@ -11,8 +11,8 @@ from 4 cycles per image to a quarter of Nyquist (the scene; above it the
 rendering's interpolation takes over), and again up to Nyquist (the scene and
 the rendering's fall-off together). Prints one row per camera (the exponent's
 median and range over its frames, the fit's median R^2, the exponent to
-Nyquist) and the natural scenes' range. Exit 0 whatever the exponents: a
-measurement.
+Nyquist, whether the median is within the goal) and the natural scenes' range.
+Exit 0 whatever the exponents: a measurement.
 
     python benchmarks/realism.py [--frames 8] [--max-s 20] [--set alt_agl_m=500]
         [--png DIR] [--json FILE] [SCENARIO ...]
@@ -84,6 +84,13 @@ def frames_of(path: Path, frames: int, max_s: float, point: dict[str, Any]
     return got
 
 
+def within(a: float) -> str:
+    """Whether an exponent is within the goal: 'met', or how it misses it."""
+    if GOAL[0] <= a <= GOAL[1]:
+        return "met"
+    return "too flat" if a < GOAL[0] else "too steep" if a > GOAL[1] else "no fit (flat image)"
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("scenarios", nargs="*", type=Path,
@@ -125,10 +132,11 @@ def main(argv: list[str] | None = None) -> int:
     print(f"spectral exponent a of P(f) ~ f^-a, luminance (Rec. 709, linear sRGB), Hann "
           f"window, {LO_CPI:g} cycles/image to {HI_NYQUIST:g} x Nyquist (and, last, to Nyquist)")
     print(f"{'scenario':46} {'camera':16} {'frames':>6} {'median':>6} {'range':>11} "
-          f"{'R^2':>5} | {'to Nyq.':>7} {'range':>11}")
+          f"{'R^2':>5} | {'to Nyq.':>7} {'range':>11} | goal")
     for r in rows:
         print(f"{r[0]:46} {r[1]:16} {r[2]:6d} {r[3]:6.2f} {r[4]:5.2f}-{r[5]:<5.2f} {r[6]:5.2f} | "
-              f"{r[7]:7.2f} {r[8]:5.2f}-{r[9]:<5.2f}")
+              f"{r[7]:7.2f} {r[8]:5.2f}-{r[9]:<5.2f} | {within(r[3])}")
+    print(f"{sum(within(r[3]) == 'met' for r in rows)} of {len(rows)} cameras within the goal")
     print(f"goal: {GOAL[0]:g} to {GOAL[1]:g} (natural scenes about 2: Field 1987; "
           f"van der Schaaf and van Hateren 1996, 1.88 +- 0.43)")
     if args.json:

@@ -3,7 +3,8 @@ position, drawn a tile at a time (``ProceduralTiles.make``).
 
 Fields in a gently warped grid (crop colours, crop rows), hedgerows and woods
 of individual tree crowns, roads (``macro_rgb``), and a tileable fine-detail
-texture down to the base level (5 cm/px by default). Every feature is
+texture down to the base level (5 cm/px by default: clods, stones, leaf litter
+and tufts, ``detail``). Every feature is
 band-limited to the level it is drawn at (crop rows and noise octaves finer
 than two pixels are left out, roads and tree crowns are drawn with their pixel
 coverage). A tile costs about 1 to 2 ms to make. Level ``l`` has
@@ -25,6 +26,7 @@ import cv2
 import numpy as np
 
 from cosim.renderer import noise
+from cosim.renderer.detail import detail_pyramid
 from cosim.renderer.noise import (
     derive,
     hash_table,
@@ -33,22 +35,25 @@ from cosim.renderer.noise import (
     noise_weights,
     product,
     uniform_hash,
-    value_noise,
     value_noise_at,
 )
 
 MACRO_STEP_M = 0.5  # macro features (fields, roads, trees) sampled at least this fine
-DETAIL_PX = 512  # the tileable detail texture's size at the base level
 MACRO_OVERSAMPLE = 2.0  # macro features sampled at most every this many pixels, then upsampled
 #: bump whenever a tile's pixels change for the same seed and ground parameters
 #: (old cache folders are then ignored; delete ~/.cache/cosim/ground to reclaim the space)
-TEXTURE_VERSION = 8
+TEXTURE_VERSION = 9
 FIELD_N_M, FIELD_E_M = 160.0, 220.0  # field size
 WARP_M = 15.0  # the field grid's warp, at most this many metres
 TREE_M = 7.0  # one tree at most per cell of this size, at a random place in its middle half
 TREE_R_M = (1.6, 2.8)  # a tree crown's radius, from .. to
 WOODS = 0.76  # woods where the 500 m value noise is above this
 HEDGE_M = (4.0, 9.0)  # a hedgerow's trees stand this far inside a field that has one
+#: brightness within fields (soil moisture, growth): value-noise octaves of these
+#: wavelengths and amplitudes (equal from 30 m down: the f**-2 law natural ground
+#: follows, continued below 3 m by the fine detail, ``detail``)
+BRIGHT_M = (60.0, 30.0, 15.0, 7.5, 3.75)
+BRIGHT_AMP = (0.35, 0.25, 0.25, 0.25, 0.25)
 #: a wood's tree: its crown's lowest point from .. to, its top from .. to (metres
 #: above the ground); a hedgerow's trees are lower
 WOOD_CROWN_M, WOOD_TOP_M = (3.0, 5.0), (8.0, 16.0)
@@ -259,7 +264,7 @@ def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int,
     fn, fe, warp = FIELD_N_M, FIELD_E_M, WARP_M
     # value noise weights: field-grid warp, brightness octaves (finer than two
     # samples left out)
-    octaves = [wl for wl in (60.0, 30.0, 15.0, 7.5) if wl >= 2 * step_m]
+    octaves = [wl for wl in BRIGHT_M if wl >= 2 * step_m]
     wts_n = noise_weights(nv, [230.0] + octaves)
     wts_e = noise_weights(ev, [230.0] + octaves)
     # warped coordinates in field units: u = (north + warp) / fn, v = (east + warp) / fe
@@ -301,7 +306,7 @@ def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int,
     # brightness variation within fields (soil moisture, growth)
     if octaves:
         left = [wts_n[1 + k][1] @ lattice(wts_n[1 + k], wts_e[1 + k], seed + 7 + 17 * k,
-                                           -0.5, 0.35 * 0.5**k) for k in range(len(octaves))]
+                                           -0.5, BRIGHT_AMP[k]) for k in range(len(octaves))]
         bright = product(np.hstack(left), np.hstack([w for _, w in wts_e[1:]]).T)
         bright += f32(1.0)
     else:
@@ -362,23 +367,6 @@ def _bgra(rgb: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     return res
 
 
-def _detail_pyramid(seed: int) -> list[np.ndarray]:
-    """A tileable fine-detail multiplier (around 1) at the base level and its
-    2x2-averaged levels down to 1 px."""
-    y, x = np.mgrid[0:DETAIL_PX, 0:DETAIL_PX].astype(np.float64)
-    d = np.zeros((DETAIL_PX, DETAIL_PX), dtype=np.float32)
-    amp = 0.5
-    for k, cells in enumerate((8, 32, 64, 128, 256)):
-        d += amp * (value_noise(x * cells / DETAIL_PX, y * cells / DETAIL_PX, seed + 31 + k,
-                                period=cells) - 0.5)
-        amp *= 0.8
-    levels = [1.0 + 0.6 * d]
-    while levels[-1].shape[0] > 1:
-        a = levels[-1]
-        levels.append(0.25 * (a[0::2, 0::2] + a[1::2, 0::2] + a[0::2, 1::2] + a[1::2, 1::2]))
-    return [lv.astype(np.float32) for lv in levels]
-
-
 def _resize_plan(k: float, p0: int, T: int) -> tuple[int, int, int] | None:
     """How a bilinear resize by ``1 / k`` of lattice samples makes the pixels
     ``p0 .. p0 + T - 1`` along one axis (``k`` = lattice points per pixel, lattice
@@ -408,12 +396,17 @@ class ProceduralTiles:
         #: the finest level whose tiles show the trees (flat); finer ones show the
         #: ground under them (their trees are drawn in 3-D: ``canopy``)
         self.trees_from_level = trees_from_level
-        self.detail = _detail_pyramid(self.seed)
         T = tile_px
         self._slabs: dict[tuple[int, int, int], np.ndarray] = {}
         self._warp_buf = np.empty((T, T, 4), np.float32)
         self._coarse_buf = np.empty((0, 0, 4), np.float32)
         self._big_bufs: dict[int, np.ndarray] = {}  # resized lattice, by level
+
+    @property
+    def detail(self) -> tuple[np.ndarray, ...]:
+        """The fine detail's levels (``detail.detail_pyramid``): made for the first
+        tile made, not for tiles read from the cache."""
+        return detail_pyramid(self.seed)
 
     def _detail_slab(self, level: int, r0: int, c0: int) -> np.ndarray:
         """The fine-detail multiplier over one tile's pixels (T x T x 4 float32: the
