@@ -58,7 +58,8 @@ def main() -> None:
     off, _ = render_frame(world, plain, pose, 0)
     sensor = Sensor(cam, cam.sensor, ws.seed, 0)
     smear = sensor.smear_px(pose6, MOTION, None, pose, o.ground_alt_m)
-    on = sensor.apply(off.copy(), 0, smear)
+    wide, _ = render_frame(world, sensor.source, pose, 0)  # what the lens sees, past the pinhole
+    on = sensor.apply(wide, 0, smear)
     panels = []
     for img, label in ((off, "sensor off"), (on, f"sensor: {a.sensor}")):
         bgr = cv2.cvtColor(img, cv2.COLOR_BGRA2BGR)

@@ -42,13 +42,16 @@ class SensorSpec:
     vignetting ``cos^(4 vignetting)`` of the off-axis angle (0: none), the
     signal-to-noise ratio at mid-grey ``snr_db`` (None: no noise), Brown's
     radial distortion ``k1``, ``k2`` (normalised coordinates; 0: none) and the
-    exposure time ``exposure_ms`` (motion blur; 0: none)."""
+    exposure time ``exposure_ms`` (motion blur; 0: none). ``margin_px`` is not
+    a scenario key: the pixels (x, y) a barrel lens's render reaches beyond the
+    recorded frame on each side (``sensor.source_camera``)."""
 
     vignetting: float = 0.0
     snr_db: float | None = None
     k1: float = 0.0
     k2: float = 0.0
     exposure_ms: float = 0.0
+    margin_px: tuple[int, int] = (0, 0)
 
 
 @dataclass(frozen=True)

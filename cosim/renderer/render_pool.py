@@ -137,10 +137,13 @@ class RenderWorker:
                 self.close()
                 raise StreamFailed(s.index, worker_kit.remote_traceback()) from e
         self.target_ids = [t.id for t in world_spec.targets]
-        self.frames = {s.index: np.empty((s.camera.height_px, s.camera.width_px, 4), np.uint8)
-                       for s in streams}  # one reused (BGRA) frame buffer per stream
         self.sensors = {s.index: Sensor(s.camera, s.camera.sensor, world_spec.seed, s.row)
                         for s in streams if s.camera.sensor is not None}
+        #: the camera each stream renders (a barrel lens's is wider: ``Sensor.source``)
+        self.sources = {s.index: self.sensors[s.index].source if s.index in self.sensors
+                        else s.camera for s in streams}
+        self.frames = {i: np.empty((c.height_px, c.width_px, 4), np.uint8)
+                       for i, c in self.sources.items()}  # one reused (BGRA) buffer a stream
 
     def render(self, stream: int, frame_no: int, tick: int, pose6: tuple[float, ...],
                gimbal: tuple[float, float] | None = None, still: str | None = None,
@@ -157,12 +160,17 @@ class RenderWorker:
         la, lo, alt, roll, pitch, yaw = pose6
         pose = camera_pose(s.camera, la, lo, alt, roll, pitch, yaw, self.world.spec.ground_alt_m,
                            gimbal)
-        img, rows = render_frame(self.world, s.camera, pose, tick, self.frames[stream], stream)
+        src = self.sources[stream]
+        img, rows = render_frame(self.world, src, pose, tick, self.frames[stream], stream)
         if stream in self.sensors:  # the camera's sensor and lens; truth from the clean render
             sensor = self.sensors[stream]
             smear = sensor.smear_px(pose6, motion, gimbal, pose, self.world.spec.ground_alt_m)
             img = sensor.apply(img, frame_no, smear)
-        ids = None if s.camera.datalink is None else self.world.last_ids(*img.shape[:2])
+        ids = None
+        if s.camera.datalink is not None:  # the recorded frame's part of the render's
+            ids = self.world.last_ids(src.height_px, src.width_px)
+            mx, my = (src.width_px - img.shape[1]) // 2, (src.height_px - img.shape[0]) // 2
+            ids = ids[my:my + img.shape[0], mx:mx + img.shape[1]]
         self.writers[stream].write(frame_no, tick / self.world.spec.physics_hz, img, rows,
                                    self.target_ids, ids)
         truth = None

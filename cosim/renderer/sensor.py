@@ -6,9 +6,14 @@ turns it into what the camera records, in this order:
 1. lens distortion: Brown radial distortion, ``x_d = x (1 + k1 r^2 + k2 r^4)``
    in normalised coordinates (``x = (u - cx) / f``, ``r^2 = x^2 + y^2``): each
    recorded pixel is read, bilinearly, from the render at the undistorted
-   point (float32 maps made once per stream, the radius found by Newton's method);
-   what falls outside the render is black. The ground truth's geometry in
-   pixels is distorted the same way (``distort_truth``);
+   point (float32 maps made once per stream, the radius found by Newton's method).
+   Beyond the image's corner radius, where the polynomial is no lens's (it
+   may fold back), the lens goes on at its rate at the corner. A barrel lens
+   (``k1 < 0``) sees beyond the pinhole's field at the frame's edges and
+   corners, so its stream renders a larger frame (``Sensor.source``: the same
+   focal length and centre, ``margin_px`` more on each side), nothing black.
+   The ground truth's geometry in pixels is distorted the same way and given
+   in the recorded frame (``distort_truth``);
 2. motion blur: an exposure of ``T`` = ``exposure_ms`` ending at the frame's
    tick sees the scene move; the pose one exposure earlier is the vehicle's
    position less velocity x ``T`` and its attitude less its rates x ``T``
@@ -133,10 +138,12 @@ def folds_at(k1: float, k2: float, r_max: float) -> float | None:
     return float(r[bad[0]]) if len(bad) else None
 
 
-def undistort_radius(k1: float, k2: float, r_d: np.ndarray, r_max: float) -> np.ndarray:
+def undistort_radius(k1: float, k2: float, r_d: np.ndarray, r_max: float,
+                     extend: bool = False) -> np.ndarray:
     """The undistorted radius ``r`` in [0, r_max] with ``r (1 + k1 r^2 + k2 r^4) =
-    r_d`` (Newton's method; monotonic there), NaN where ``r_d`` lies beyond
-    the image of ``r_max``."""
+    r_d`` (Newton's method; monotonic there); where ``r_d`` lies beyond the
+    image of ``r_max``: NaN, or with ``extend`` the lens going on at its rate
+    at ``r_max`` (as ``distort_px``)."""
     r = r_d.copy()
     for _ in range(30):
         r2 = r * r
@@ -144,7 +151,10 @@ def undistort_radius(k1: float, k2: float, r_d: np.ndarray, r_max: float) -> np.
         r -= g / (1.0 + 3 * k1 * r2 + 5 * k2 * r2 * r2)
         np.clip(r, 0.0, r_max, out=r)
     g_max = r_max * (1.0 + k1 * r_max ** 2 + k2 * r_max ** 4)
-    out: np.ndarray = np.where(r_d <= g_max + 1e-12, r, np.nan)
+    past: float | np.ndarray = np.nan
+    if extend:
+        past = r_max + (r_d - g_max) / (1.0 + 3 * k1 * r_max ** 2 + 5 * k2 * r_max ** 4)
+    out: np.ndarray = np.where(r_d <= g_max + 1e-12, r, past)
     return out
 
 
@@ -167,31 +177,56 @@ def distort_px(cam: CameraSpec, k1: float, k2: float, uv: np.ndarray) -> np.ndar
     return out
 
 
+def source_camera(cam: CameraSpec, margin_px: tuple[int, int]) -> CameraSpec:
+    """``cam`` widened by ``margin_px`` (x, y) pixels on each side, its focal
+    length and centre kept; its sensor notes the margin (``distort_truth``)."""
+    mx, my = margin_px
+    f = cam.fx_px
+    w, h = cam.width_px + 2 * mx, cam.height_px + 2 * my
+    assert cam.sensor is not None
+    return dataclasses.replace(cam, width_px=w, height_px=h,
+                               hfov_deg=math.degrees(2 * math.atan(w / 2.0 / f)),
+                               vfov_deg=math.degrees(2 * math.atan(h / 2.0 / f)),
+                               sensor=dataclasses.replace(cam.sensor, margin_px=margin_px))
+
+
+def recorded_camera(cam: CameraSpec) -> CameraSpec:
+    """The camera whose frames a ``source_camera`` renders for (itself if none)."""
+    s = cam.sensor
+    if s is None or s.margin_px == (0, 0):
+        return cam
+    mx, my = s.margin_px
+    return source_camera(cam, (-mx, -my))
+
+
 def off_axis_cos(cam: CameraSpec, k1: float = 0.0, k2: float = 0.0) -> np.ndarray:
     """(h, w) cosine of the off-axis angle of the ray each pixel centre sees
-    (through a lens of distortion ``k1``, ``k2``; NaN where it sees none)."""
+    (through a lens of distortion ``k1``, ``k2``, going on past the image's
+    corner radius at its rate there)."""
     x, y = _normalised(cam)
     r = np.hypot(x, y)
     if k1 or k2:
-        r = undistort_radius(k1, k2, r, corner_radius(cam))
+        r = undistort_radius(k1, k2, r, corner_radius(cam), extend=True)
     out: np.ndarray = 1.0 / np.sqrt(1.0 + r * r)
     return out
 
 
-def distortion_maps(cam: CameraSpec, k1: float, k2: float, fixed: bool = False
+def distortion_maps(cam: CameraSpec, k1: float, k2: float, fixed: bool = False,
+                    margin_px: tuple[int, int] = (0, 0), extend: bool = False
                     ) -> tuple[np.ndarray, np.ndarray]:
     """cv2.remap's maps (x and y, float32; ``fixed``: OpenCV's fixed-point pair,
     which remaps a 640x480 BGRA frame about a quarter slower on one thread) from
-    each recorded pixel to the render's pixel it sees; far outside the image
-    where it sees beyond the render."""
+    each recorded pixel to the pixel it sees of a render ``margin_px`` larger
+    on each side; far outside the image where it sees past the image's corner
+    radius (with ``extend``: the lens going on at its rate there)."""
     x, y = _normalised(cam)
     r_d = np.hypot(x, y)
-    r = undistort_radius(k1, k2, r_d, corner_radius(cam))
+    r = undistort_radius(k1, k2, r_d, corner_radius(cam), extend)
     with np.errstate(invalid="ignore", divide="ignore"):
         scale = np.where(r_d > 0, r / r_d, 1.0)
     f = cam.fx_px
-    map_x = (x * scale * f + (cam.width_px - 1) / 2.0).astype(np.float32)
-    map_y = (y * scale * f + (cam.height_px - 1) / 2.0).astype(np.float32)
+    map_x = (x * scale * f + (cam.width_px - 1) / 2.0 + margin_px[0]).astype(np.float32)
+    map_y = (y * scale * f + (cam.height_px - 1) / 2.0 + margin_px[1]).astype(np.float32)
     outside = ~np.isfinite(map_x) | ~np.isfinite(map_y)
     map_x[outside] = map_y[outside] = -1000.0
     if not fixed:
@@ -208,9 +243,23 @@ def distort_truth(rows: list[dict[str, Any]], cam: CameraSpec, box_uv: np.ndarra
     corners; ``front``: all corners in front of the camera) sampled at 17
     points and distorted, the bounding rectangle taken. A box crossing the
     near plane keeps its ideal geometry. ``pixels_on_target`` and ``contrast``
-    stay those of the ideal render."""
+    stay those of the ideal render. ``cam`` may be a ``source_camera``: the
+    geometry is then given in the recorded frame (the margin taken off), and a
+    target the recorded frame does not show has no pixels or contrast."""
     s = cam.sensor
     assert s is not None
+    mx, my = s.margin_px
+    if (mx, my) != (0, 0):
+        cam = recorded_camera(cam)
+        box_uv = box_uv - np.array([mx, my], float)
+        w, h = cam.width_px, cam.height_px
+        image_quad = np.array([[-0.5, -0.5], [w - 0.5, -0.5], [w - 0.5, h - 0.5],
+                               [-0.5, h - 0.5]], np.float32)
+        for row in rows:
+            for key, m in (("center_x_px", mx), ("center_y_px", my), ("bbox_x0_px", mx),
+                           ("bbox_y0_px", my), ("bbox_x1_px", mx), ("bbox_y1_px", my)):
+                if row[key] is not None:
+                    row[key] -= m
     t = np.linspace(0.0, 1.0, 17)[:, None]
     a, b = _EDGES[:, 0], _EDGES[:, 1]
     cx, cy = (cam.width_px - 1) / 2.0, (cam.height_px - 1) / 2.0
@@ -221,7 +270,14 @@ def distort_truth(rows: list[dict[str, Any]], cam: CameraSpec, box_uv: np.ndarra
                                                            row["center_y_px"]]))
             row.update(center_x_px=float(cu), center_y_px=float(cv_),
                        eccentricity_px=math.hypot(cu - cx, cv_ - cy))
-        if not front[k] or row["bbox_x0_px"] is None:
+        if row["bbox_x0_px"] is None:
+            continue
+        if not front[k]:  # its ideal geometry: in view if its box meets the frame
+            if (mx, my) != (0, 0):
+                row["in_view"] = int(row["in_view"] and row["bbox_x1_px"] >= -0.5
+                                     and row["bbox_y1_px"] >= -0.5 and row["bbox_x0_px"] <= xmax
+                                     and row["bbox_y0_px"] <= ymax)
+                _unseen(row)
             continue
         uv = box_uv[k]
         pts = distort_px(cam, s.k1, s.k2, (uv[a][:, None, :] * (1 - t) + uv[b][:, None, :] * t
@@ -238,6 +294,15 @@ def distort_truth(rows: list[dict[str, Any]], cam: CameraSpec, box_uv: np.ndarra
             hull = cv2.convexHull(pts.astype(np.float32))
             row["in_view"] = int(cv2.intersectConvexConvex(hull, image_quad)[0] > 0)
         row["fully_in_view"] = int(inside)
+        if (mx, my) != (0, 0):
+            _unseen(row)
+
+
+def _unseen(row: dict[str, Any]) -> None:
+    """A target out of the recorded frame has no pixels in it (its margin's
+    pixels were measured on the larger render)."""
+    if not row["in_view"]:
+        row.update(pixels_on_target=0, contrast=None, visible_fraction=None)
 
 
 def frame_rng(seed: int, vehicle_row: int, camera: str, frame_no: int) -> np.random.Generator:
@@ -344,7 +409,19 @@ class Sensor:
         if spec.vignetting:
             cos = np.nan_to_num(off_axis_cos(cam, spec.k1, spec.k2), nan=1.0)
             self.gain = self.compiled.gain_fixed(cos ** (4.0 * spec.vignetting / GAMMA))
-        self.maps = distortion_maps(cam, spec.k1, spec.k2) if spec.k1 or spec.k2 else None
+        #: the camera to render (``cam`` widened where a barrel lens sees past it)
+        self.source = cam
+        self.maps: tuple[np.ndarray, np.ndarray] | None = None
+        if spec.k1 or spec.k2:
+            self.maps = distortion_maps(cam, spec.k1, spec.k2, extend=True)
+            margin = tuple(max(0, math.ceil(max(-float(v.min()), float(v.max()) - (n - 1))) + 1)
+                           for v, n in zip(self.maps, (w, h)))
+            if margin != (0, 0):
+                mx, my = margin
+                self.source = source_camera(cam, (mx, my))
+                self.maps = distortion_maps(cam, spec.k1, spec.k2, margin_px=(mx, my),
+                                            extend=True)
+        self.plain_maps: tuple[np.ndarray, np.ndarray] | None = None  # for a frame of cam's size
         self.warped = np.empty((h, w, 4), np.uint8)
         self.table = noise_table(spec.snr_db) if spec.snr_db is not None else None
         #: the noise's random words, 8 levels each (a buffer kept: a new one's pages cost)
@@ -385,11 +462,18 @@ class Sensor:
 
     def apply(self, img: np.ndarray, frame_no: int,
               smear: tuple[float, float] | None = None) -> np.ndarray:
-        """The recorded frame from the render ``img`` (h x w x 4 BGRA uint8,
-        changed in place and returned, or a buffer of the sensor's when distorted)
-        of frame ``frame_no``, smeared by ``smear`` (``smear_px``; None: none)."""
+        """The recorded frame from the render ``img`` of ``source`` (h x w x 4
+        BGRA uint8, changed in place and returned, or a buffer of the sensor's
+        when distorted) of frame ``frame_no``, smeared by ``smear`` (``smear_px``;
+        None: none). A render of the camera's own size is read as far as it
+        goes (black beyond)."""
         if self.maps is not None:
-            img = cv2.remap(img, *self.maps, cv2.INTER_LINEAR, dst=self.warped,
+            maps = self.maps
+            if img.shape[:2] != (self.source.height_px, self.source.width_px):
+                if self.plain_maps is None:
+                    self.plain_maps = distortion_maps(self.cam, self.spec.k1, self.spec.k2)
+                maps = self.plain_maps
+            img = cv2.remap(img, *maps, cv2.INTER_LINEAR, dst=self.warped,
                             borderMode=cv2.BORDER_CONSTANT, borderValue=(0, 0, 0, 255))
         if smear is not None:
             img = smear_frame(img, *smear)

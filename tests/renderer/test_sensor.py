@@ -300,6 +300,54 @@ def test_ground_truth_box_and_centre_are_where_the_distorted_frame_shows_the_tar
     assert r["pixels_on_target"] == plain["pixels_on_target"]  # measured on the ideal frame
 
 
+def test_a_barrel_lens_sees_scene_in_its_corners_and_its_truth_box_holds(tmp_path: Path
+                                                                         ) -> None:
+    """Through the render worker, a barrel lens (k1 -0.25, k2 0.04) records
+    ground in its corners (the rays there pass outside the pinhole's field:
+    they were black), and a truck near a corner, partly outside the pinhole's
+    field, is drawn whole: the pixels it changes lie within its ground truth's
+    box (within a pixel), fully in view."""
+    import cv2
+
+    from cosim.core.geo import LocalFrame
+    from cosim.renderer.frame import WorldSpec
+    from cosim.renderer.outputs import Stream
+    from cosim.renderer.render_pool import RenderWorker
+    from cosim.world.ground import GroundSpec
+    from cosim.world.targets import TARGET_DEFAULTS, TargetSpec
+
+    lat, lon, g_m = 37.0, -122.0, 10.0
+    length, width, height, colour = TARGET_DEFAULTS["truck"]
+    truck = TargetSpec("t", "truck", 22.0, -30.0, None, None, 30.0, length, width, height,
+                       colour)
+    cam = _cam(w=320, h=240, hfov=60.0, k1=-0.25, k2=0.04)
+    la, lo = LocalFrame(lat, lon, g_m).place(0.0, 0.0, g_m + 60)
+    pose6 = (float(la), float(lo), g_m + 60, 0.0, 0.0, 0.0)
+    frames, rows = [], []
+    for k, targets in enumerate(((truck,), ())):
+        out = tmp_path / str(k)
+        out.mkdir()
+        stream = Stream(0, "u1", 0, cam, "v.avi", "v.gt.csv", None)
+        worker = RenderWorker(WorldSpec(lat, lon, g_m, 1, 120.0, GroundSpec(), targets),
+                              [stream], out, "mjpg", False)
+        _, truth = worker.render(0, 0, 0, pose6, still="still.png")
+        worker.close()
+        frames.append(cv2.imread(str(out / "still.png")).astype(int))
+        rows.append(truth)
+    ground = frames[1]
+    for y, x in ((0, 0), (0, 319), (239, 0), (239, 319)):
+        assert ground[max(y - 2, 0):y + 3, max(x - 2, 0):x + 3].sum(axis=2).min() > 30, (y, x)
+    changed = np.argwhere(np.abs(frames[0] - frames[1]).max(axis=2) > 0)
+    (fy0, fx0), (fy1, fx1) = changed.min(axis=0), changed.max(axis=0)
+    first = rows[0]
+    assert first is not None
+    r = first[0]
+    assert r["in_view"] == 1 and r["fully_in_view"] == 1 and r["pixels_on_target"] > 0
+    box = np.array([r["bbox_x0_px"], r["bbox_y0_px"], r["bbox_x1_px"], r["bbox_y1_px"]])
+    assert np.abs(box - [fx0, fy0, fx1, fy1]).max() <= 1.0, (box, (fx0, fy0, fx1, fy1))
+    assert box[1] < 3  # its top: the pinhole's field reaches row 11 there, black above
+
+
 # --- motion blur -----------------------------------------------------------------------
 
 
