@@ -52,8 +52,8 @@ HEDGE_M = (4.0, 9.0)  # a hedgerow's trees stand this far inside a field that ha
 #: brightness within fields (soil moisture, growth): value-noise octaves of these
 #: wavelengths and amplitudes (equal from 30 m down: the f**-2 law natural ground
 #: follows, continued below 3 m by the fine detail, ``detail``)
-BRIGHT_M = (60.0, 30.0, 15.0, 7.5, 3.75)
-BRIGHT_AMP = (0.35, 0.25, 0.25, 0.25, 0.25)
+BRIGHT_M: tuple[float, ...] = (60.0, 30.0, 15.0, 7.5, 3.75)
+BRIGHT_AMP: tuple[float, ...] = (0.35, 0.25, 0.25, 0.25, 0.25)
 #: a wood's tree: its crown's lowest point from .. to, its top from .. to (metres
 #: above the ground); a hedgerow's trees are lower
 WOOD_CROWN_M, WOOD_TOP_M = (3.0, 5.0), (8.0, 16.0)
