@@ -17,19 +17,28 @@ points above the ground moved ``h / tan(elevation)`` away from the sun: exact
 for a convex building on flat ground, which a gable or hip house is; the hull
 of a concave flat-roofed one covers its courtyards too.
 
-Everything here is in the scenario frame (north, east, down metres); the
-frame module moves it into each frame's axes. Nothing here draws.
+Buildings are made in the scenario frame (north, east, down metres), once;
+``BuildingSet`` moves those in view into each frame's axes (the rotation and
+shift the frame module gives) as faces for the frame's painter. Nothing here
+draws.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
+from cosim.core.camera import NEAR_M, Pose, clip_near
+from cosim.renderer.targets import lambert
 from cosim.world.obstacles import Obstacle, signed_area
+
+#: a face for the frame's painter: (painter's depth, depth, camera-axis
+#: polygon, BGRA, target id: 0, a building being no target)
+Face = tuple[float, float, np.ndarray, tuple[int, int, int, int], int]
 
 
 @dataclass(frozen=True)
@@ -40,6 +49,16 @@ class Building:
 
     points: np.ndarray
     faces: tuple[tuple[np.ndarray, np.ndarray, tuple[int, int, int]], ...]
+
+    @property
+    def normals(self) -> np.ndarray:
+        """The faces' outward unit normals (F x 3)."""
+        return np.array([n for _, n, _ in self.faces])
+
+    @property
+    def centres(self) -> np.ndarray:
+        """The faces' centres, the mean of their corners (F x 3)."""
+        return np.array([self.points[idx].mean(axis=0) for idx, _, _ in self.faces])
 
 
 def building(o: Obstacle) -> Building:
@@ -146,3 +165,72 @@ def shadow_on_ground(b: Building, away_ne: np.ndarray) -> np.ndarray:
     hull = cv2.convexHull((ground - at).astype(np.float32)).reshape(-1, 2)
     out: np.ndarray = hull.astype(np.float64) + at
     return out
+
+
+class BuildingSet:
+    """The scenario's obstacles as buildings (``building``), their shadows on
+    the ground if the sun casts them, and, for culling, a sphere around each
+    building with its shadow."""
+
+    def __init__(self, obstacles: Sequence[Obstacle], sun_ned: np.ndarray, shadows: bool) -> None:
+        self.buildings = [building(o) for o in obstacles]
+        away = -sun_ned[:2] / -sun_ned[2]
+        #: each building's shadow on the ground (k x 3, scenario NED), if they cast them
+        self.shadows = [np.column_stack([g, np.zeros(len(g))])
+                        for g in (shadow_on_ground(b, away) for b in self.buildings)] \
+            if shadows else []
+        #: per building, its faces' normals and centres (F x 3 each)
+        self.face_normals = [b.normals for b in self.buildings]
+        self.face_centres = [b.centres for b in self.buildings]
+        self.centres = np.zeros((len(self.buildings), 3))
+        self.radii = np.zeros(len(self.buildings))
+        for i, b in enumerate(self.buildings):
+            pts = np.concatenate([b.points, self.shadows[i]]) if shadows else b.points
+            self.centres[i] = (pts.min(axis=0) + pts.max(axis=0)) / 2
+            self.radii[i] = float(np.sqrt(((pts - self.centres[i]) ** 2).sum(axis=1)).max())
+
+    def __len__(self) -> int:
+        return len(self.buildings)
+
+    def in_view(self, rot: np.ndarray, shift: np.ndarray, pose: Pose, planes: np.ndarray
+                ) -> list[int]:
+        """The buildings whose sphere (with their shadow) is not wholly outside
+        one of the view frustum's ``planes`` (the frame's: near, left, right,
+        top, bottom, through the camera); ``rot``, ``shift``: scenario NED -> L."""
+        if not self.buildings:
+            return []
+        c_c = ((self.centres @ rot.T + shift) - pose.c_l) @ pose.R_cl.T
+        side = c_c @ (planes / np.linalg.norm(planes, axis=1)[:, None]).T
+        side[:, 0] -= NEAR_M
+        out: list[int] = np.flatnonzero((side >= -self.radii[:, None]).all(axis=1)).tolist()
+        return out
+
+    def shadows_l(self, rot: np.ndarray, shift: np.ndarray, which: Sequence[int]
+                  ) -> list[np.ndarray]:
+        """The shadows of buildings ``which`` in L (k x 3 each; none without shadows)."""
+        return [self.shadows[i] @ rot.T + shift for i in which] if self.shadows else []
+
+    def faces(self, rot: np.ndarray, shift: np.ndarray, pose: Pose, sun_l: np.ndarray,
+              which: Sequence[int]) -> list[Face]:
+        """The front faces of buildings ``which``, flat-shaded by the sun
+        (``sun_l``, in L), clipped to the near plane."""
+        out: list[Face] = []
+        for i in which:
+            b = self.buildings[i]
+            pts_c = (b.points @ rot.T + shift - pose.c_l) @ pose.R_cl.T
+            normals = self.face_normals[i] @ rot.T
+            # the camera on the outer side of a face's plane: the face is seen
+            toward = ((self.face_centres[i] @ rot.T + shift - pose.c_l) * normals).sum(axis=1)
+            for f in np.flatnonzero(toward < 0).tolist():
+                idx, _, c = b.faces[f]
+                v_c = pts_c[idx]
+                if v_c[:, 2].min() < NEAR_M:
+                    v_c = clip_near(v_c)
+                    if len(v_c) < 3:
+                        continue
+                k = lambert(normals[f], sun_l)
+                bgra = (min(255, int(c[2] * k)), min(255, int(c[1] * k)),
+                        min(255, int(c[0] * k)), 255)
+                depth_m = float(np.linalg.norm(v_c.mean(axis=0)))
+                out.append((depth_m, depth_m, v_c, bgra, 0))
+        return out

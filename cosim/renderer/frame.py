@@ -32,7 +32,7 @@ from cosim.core.camera import (
 )
 from cosim.core.geo import LocalFrame, geodetic_to_ecef
 from cosim.renderer import canopy
-from cosim.renderer.buildings import building, shadow_on_ground
+from cosim.renderer.buildings import BuildingSet
 from cosim.renderer.ground import GroundTexture
 from cosim.renderer.haze import Haze
 from cosim.renderer.shadows import draw_shadows, shade_table
@@ -121,8 +121,6 @@ class World:
         self._ids: dict[tuple[int, int], tuple[np.ndarray, list[int]]] = {}
         self._zeros: dict[tuple[int, int], np.ndarray] = {}
         self._views: dict[CameraSpec, _View] = {}
-        #: per obstacle, its walls and roof in the scenario frame
-        self.buildings = [building(o) for o in spec.obstacles]
         #: unit vector toward the sun, north-east-down (a frame's local axes turn
         #: against the origin's by 0.01 deg a km: far below a shade step)
         self.sun_l = spec.sun.to_sun_ned()
@@ -132,10 +130,8 @@ class World:
         self.trees_3d = spec.ground.trees == "3d"
         #: the ground's darkening in shade (cv2.LUT), if the targets cast shadows
         self.shade_table = shade_table(spec.sun.elevation_deg) if spec.sun.shadows else None
-        #: each building's shadow on the ground, if they cast them (k x 3, scenario NED)
-        self.building_shadows = [] if self.shade_table is None else [
-            np.column_stack([g, np.zeros(len(g))]) for g in
-            (shadow_on_ground(b, -self.sun_l[:2] / -self.sun_l[2]) for b in self.buildings)]
+        #: the obstacles as buildings, and their shadows if the sun casts them
+        self.buildings = BuildingSet(spec.obstacles, self.sun_l, self.shade_table is not None)
 
     def view(self, cam: CameraSpec) -> _View:
         """What every frame of ``cam`` shares, built once."""
@@ -460,34 +456,6 @@ def _scenario_to_l(world: World, pose: Pose) -> tuple[np.ndarray, np.ndarray]:
     return r_l @ world.ecef_to_ned.T, r_l @ (world.origin_ecef - pose.local_ecef_m)
 
 
-def _obstacle_faces(world: World, pose: Pose
-                    ) -> list[tuple[float, float, np.ndarray, tuple[int, int, int, int], int]]:
-    """The front faces of every obstacle's building (walls and roof,
-    ``buildings``), as ``_target_faces`` gives them; their id is 0: they hide
-    targets but are none."""
-    if not world.buildings:
-        return []
-    rot, shift = _scenario_to_l(world, pose)
-    out = []
-    for b in world.buildings:
-        pts_l = b.points @ rot.T + shift
-        for idx, normal_s, c in b.faces:
-            f_l, normal = pts_l[idx], rot @ normal_s
-            if np.dot(f_l.mean(axis=0) - pose.c_l, normal) >= 0:
-                continue  # faces away
-            v_c = (f_l - pose.c_l) @ pose.R_cl.T
-            if v_c[:, 2].min() < NEAR_M:
-                v_c = clip_near(v_c)
-                if len(v_c) < 3:
-                    continue
-            kk = lambert(normal, world.sun_l)
-            bgra = (min(255, int(c[2] * kk)), min(255, int(c[1] * kk)),
-                    min(255, int(c[0] * kk)), OPAQUE)
-            depth_m = float(np.linalg.norm(v_c.mean(axis=0)))
-            out.append((depth_m, depth_m, v_c, bgra, 0))
-    return out
-
-
 def _trees_in_view(world: World, pose: Pose, view: _View, H: np.ndarray, levels: list[int],
                    w_img: int) -> canopy.Trees:
     """The trees drawn in 3-D (``canopy.in_view``) over the bands of rows whose
@@ -537,16 +505,17 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
     origins = targets.origins_in(pose.local, pose.local_ecef_m)
     faces: list[tuple[float, float, np.ndarray, tuple[int, int, int, int], int]] = []
     specs, offsets = targets.specs, world.probe_offsets
+    rot, shift = _scenario_to_l(world, pose)  # the buildings' frame -> L
+    near = world.buildings.in_view(rot, shift, pose, view.planes)  # buildings in view
     if world.growing:  # growing fires: their size at this frame
         specs = tuple(t.at(time_s) for t in specs)
         offsets = offsets.copy()
         offsets[world.growing] = probe_offsets([specs[k] for k in world.growing])
     tree_shadows = canopy.shadows_l(trees, world.sun_l) \
         if trees is not None and world.shade_table is not None else []
-    if world.shade_table is not None and (len(specs) or world.building_shadows or tree_shadows):
-        rot, shift = _scenario_to_l(world, pose)
+    if world.shade_table is not None and (len(specs) or near or tree_shadows):
         draw_shadows(K, pose, specs, origins, world.sun_l, time_s, seed, img,
-                     world.shade_table, [g @ rot.T + shift for g in world.building_shadows]
+                     world.shade_table, world.buildings.shadows_l(rot, shift, near)
                      + tree_shadows)
         draw_smoke_shadows(K, pose, specs, origins, world.sun_l, time_s, seed, img,
                            world.shade_table)
@@ -559,7 +528,7 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
     for k in np.flatnonzero(visible).tolist():
         faces.extend(_target_faces(pose, specs[k], origins[k], time_s, seed + k, k + 1,
                                    world.sun_l))
-    faces.extend(_obstacle_faces(world, pose))
+    faces.extend(world.buildings.faces(rot, shift, pose, world.sun_l, near))
     if trees is not None:
         faces.extend(canopy.faces(trees, K, pose, world.sun_l, w_img, h_img, view.planes))
     faces.sort(key=lambda f: -f[0])  # painter's order: far to near
@@ -579,7 +548,8 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
             outlines.setdefault(tid, []).append(pts)
         else:  # an obstacle's face (a roof may be concave): hides what is behind it
             cv2.fillPoly(img, [pts], bgra, cv2.LINE_8, SHIFT)
-            cv2.fillPoly(ids, [pts], 0, cv2.LINE_8, SHIFT)
+            if outlines:  # a target drawn before it may be behind it
+                cv2.fillPoly(ids, [pts], 0, cv2.LINE_8, SHIFT)
         lo_px, hi_px = pts.min(axis=0) >> SHIFT, (pts.max(axis=0) >> SHIFT) + 2
         dirty[:] = [max(0, min(dirty[0], int(lo_px[0]))), max(0, min(dirty[1], int(lo_px[1]))),
                     min(w_img, max(dirty[2], int(hi_px[0]))),

