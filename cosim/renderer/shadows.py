@@ -22,7 +22,13 @@ import cv2
 import numpy as np
 
 from cosim.core.camera import NEAR_M, SHIFT, Pose, clip_near, fixed, project
-from cosim.renderer.targets import AMBIENT, UNIT_CORNERS, heading_rotation, parts_of
+from cosim.renderer.targets import (
+    AMBIENT,
+    UNIT_CORNERS,
+    bounding_part,
+    heading_rotation,
+    parts_of,
+)
 from cosim.world.targets import TargetSpec
 
 
@@ -63,10 +69,12 @@ def draw_shadows(K: np.ndarray, pose: Pose, specs: Sequence[TargetSpec], origins
                  sun_l: np.ndarray, time_s: float, seed: int, img: np.ndarray,
                  table: np.ndarray, more_l: Sequence[np.ndarray] = ()) -> None:
     """Darken the ground under every target's shadow in ``img`` (BGRA), and
-    under ``more_l``: other shadows on the ground (convex, k x 3, in L)."""
+    under ``more_l``: other shadows on the ground (convex, k x 3, in L). A
+    target whose shadow cannot reach the view (``may_reach_view``) is skipped."""
     h_img, w_img = img.shape[:2]
     polys = []
     hulls = [h for k, t in enumerate(specs)
+             if may_reach_view(t, origins[k], sun_l, K, pose, w_img, h_img)
              for h in hulls_on_ground(t, origins[k], sun_l, time_s, seed + k)]
     for poly_l in (*hulls, *more_l):
         v_c = (poly_l - pose.c_l) @ pose.R_cl.T
@@ -92,6 +100,25 @@ def draw_shadows(K: np.ndarray, pose: Pose, specs: Sequence[TargetSpec], origins
             cv2.fillConvexPoly(mask, fixed(uv - (x0, y0)), (1, 1, 1, 0), cv2.LINE_8, SHIFT)
         roi = img[y0:y1, x0:x1]
         cv2.copyTo(cv2.LUT(roi, dark), mask, roi)
+
+
+def may_reach_view(t: TargetSpec, origin_l: np.ndarray, sun_l: np.ndarray, K: np.ndarray,
+                   pose: Pose, w_img: int, h_img: int) -> bool:
+    """Whether target ``t``'s shadow (foot at ``origin_l``, in L) may fall in the
+    view of a ``w_img`` x ``h_img`` image: a ball round its foot holding every
+    shadow point (the box's half-diagonal on the ground plus its top's shift,
+    ``height / tan(elevation)``) not wholly outside one of the view's planes."""
+    if t.kind == "fire" or sun_l[2] >= 0:
+        return False
+    (lo_x, lo_y, lo_z), (hi_x, hi_y, _) = bounding_part(t)
+    reach_m = (max(abs(lo_x), abs(hi_x)) ** 2 + max(abs(lo_y), abs(hi_y)) ** 2) ** 0.5 \
+        + abs(lo_z) * float(np.hypot(sun_l[0], sun_l[1])) / -float(sun_l[2])
+    c = pose.R_cl @ (origin_l - pose.c_l)
+    f, cx, cy = K[0, 0], K[0, 2], K[1, 2]
+    # the view's planes through the camera (near, left, right, top, bottom), inside >= 0
+    planes = np.array([[0.0, 0.0, 1.0], [f, 0.0, cx + 0.5], [-f, 0.0, w_img - 0.5 - cx],
+                       [0.0, f, cy + 0.5], [0.0, -f, h_img - 0.5 - cy]])
+    return bool(((planes @ c) >= -reach_m * np.linalg.norm(planes, axis=1)).all())
 
 
 def _groups(polys: list[np.ndarray], w_img: int, h_img: int
