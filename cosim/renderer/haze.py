@@ -58,6 +58,9 @@ class Haze:
         from cosim.renderer import haze_pass  # numba (0.3 s to import): only when hazy
 
         self.compiled: Any = haze_pass
+        #: per (bands, width): the rows of tiles and their centres (``tile_centres``)
+        self.grids: dict[tuple[tuple[tuple[int, int], ...], int],
+                         tuple[np.ndarray, np.ndarray]] = {}
 
     def colour(self, bgr: tuple[float, ...] | np.ndarray, distance_m: float) -> np.ndarray:
         """A BGR colour (0-255, floats) seen through ``distance_m`` of haze."""
@@ -86,11 +89,18 @@ class Haze:
                     bands: list[tuple[int, int]], w: int) -> tuple[np.ndarray, np.ndarray]:
         """The ground's rows of tiles (n x 2: ``[y0, y1)``) and each tile's
         step (n x tiles across): it hazes with ``(level + 0.5) / LEVELS``."""
-        rows = np.array([(y, min(y + TILE_ROWS, y1)) for y0, y1 in bands
-                         for y in range(y0, y1, TILE_ROWS)], np.int64).reshape(-1, 2)
+        key = (tuple(bands), w)
+        grid = self.grids.get(key)
+        if grid is None:  # the tiles of these bands, once (a frame's bands repeat)
+            rows = np.array([(y, min(y + TILE_ROWS, y1)) for y0, y1 in bands
+                             for y in range(y0, y1, TILE_ROWS)], np.int64).reshape(-1, 2)
+            if len(self.grids) > 64:
+                self.grids.clear()
+            grid = self.grids[key] = (rows, tile_centres(rows.tolist(), w))
+        rows, centres = grid
         if not len(rows):
             return rows, np.zeros((0, 0), np.int64)
-        t = tile_transmittance(self.k_per_m, H, pose, max_r_m, rows.tolist(), w)
+        t = transmittance_at(self.k_per_m, H, pose, max_r_m, centres).reshape(len(rows), -1)
         return rows, np.minimum((t * LEVELS).astype(np.int64), LEVELS - 1)
 
     def pieces(self, H: np.ndarray, pose: Pose, max_r_m: float, bands: list[tuple[int, int]],
@@ -131,15 +141,30 @@ def tile_transmittance(k_per_m: float, H: np.ndarray, pose: Pose, max_r_m: float
     """(len(rows), tiles across) transmittance ``exp(-k d)`` of the ground at
     each tile's centre: rows ``[y0, y1)`` of tiles, ``TILE_COLS`` wide across
     an image ``w`` pixels wide (the last tile may be narrower)."""
+    centres = tile_centres(rows, w)
+    return transmittance_at(k_per_m, H, pose, max_r_m, centres).reshape(len(rows), -1)
+
+
+def tile_centres(rows: Sequence[Sequence[int]], w: int) -> np.ndarray:
+    """(3, n) homogeneous pixel centres of the tiles of ``rows`` (row by row),
+    ``TILE_COLS`` wide across an image ``w`` pixels wide."""
     xs = np.array([(x + min(x + TILE_COLS, w) - 1) / 2.0 for x in range(0, w, TILE_COLS)])
     ys = np.array([(y0 + y1 - 1) / 2.0 for y0, y1 in rows])
     gx, gy = np.meshgrid(xs, ys)
-    q = H @ np.stack([gx.ravel(), gy.ravel(), np.ones(gx.size)])
+    out: np.ndarray = np.stack([gx.ravel(), gy.ravel(), np.ones(gx.size)])
+    return out
+
+
+def transmittance_at(k_per_m: float, H: np.ndarray, pose: Pose, max_r_m: float,
+                     centres: np.ndarray) -> np.ndarray:
+    """(n,) transmittance ``exp(-k d)`` of the ground seen through the pixels
+    ``centres`` (3 x n, homogeneous)."""
+    q = H @ centres
     with np.errstate(divide="ignore", invalid="ignore"):
         ne = q[:2] / q[2]
     far = (q[2] <= 1e-12) | ~(np.hypot(ne[0], ne[1]) <= max_r_m)
     c = pose.c_l
     rho = np.where(far, max_r_m, np.hypot(ne[0] - c[0], ne[1] - c[1]))
     d = np.sqrt(rho * rho + pose.height_m ** 2)
-    out: np.ndarray = np.exp(-k_per_m * d).reshape(gx.shape)
+    out: np.ndarray = np.exp(-k_per_m * d)
     return out
