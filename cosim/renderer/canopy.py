@@ -31,7 +31,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cosim.core.camera import NEAR_M, Pose, clip_near, fixed, project
+from cosim.core.camera import NEAR_M, Pose, clip_near, project
+from cosim.renderer.haze import Haze
 from cosim.renderer.targets import AMBIENT
 from cosim.renderer.texture import _TREE, TREE_M, TREE_R_M, WOOD_TOP_M, tree_tables
 
@@ -237,68 +238,96 @@ def in_view(seed: int, K: np.ndarray, pose: Pose, A: np.ndarray, bounds: tuple[i
                  trees.top_m[keep], trees.tone[keep])
 
 
-Item = tuple[float, float, np.ndarray, tuple[int, int, int, int], int]
+@dataclass(frozen=True)
+class Drawn:
+    """The trees of a frame as outlines to fill (``canopy_pass``), the farthest
+    first: tree ``i`` (crown centre ``depth_m[i]`` from the camera) is the
+    polygons ``first[i] .. first[i + 1] - 1``: its trunk (unless its crown hides
+    it), its crown and its sunlit cap, each ``polys[m, :counts[m]]`` in pixels,
+    in colour ``bgr[m]``, hiding targets behind it where ``clear[m]``."""
+
+    depth_m: np.ndarray
+    first: np.ndarray
+    polys: np.ndarray
+    counts: np.ndarray
+    bgr: np.ndarray
+    clear: np.ndarray
+
+    def draw_to(self, depth_m: float, done: int, img: np.ndarray, ids: np.ndarray) -> int:
+        """Fill the trees from ``done`` on that lie farther than ``depth_m`` (all
+        of them for -inf) into ``img`` and ``ids``; return the next tree to draw."""
+        k = int(np.searchsorted(-self.depth_m, -depth_m, "left"))
+        if k > done:
+            from cosim.renderer.canopy_pass import fill_polygons  # numba: only when drawn
+
+            fill_polygons(img, ids, self.polys, self.counts, self.bgr, self.clear,
+                          int(self.first[done]), int(self.first[k]))
+        return max(k, done)
 
 
-def faces(trees: Trees, K: np.ndarray, pose: Pose, sun_l: np.ndarray, w_img: int,
-          h_img: int, planes: np.ndarray) -> list[Item]:
-    """The trees seen, as the frame's painter's list takes them: (depth, depth,
-    outline in fixed-point pixels, BGRA, -1) for each one's trunk (unless the
-    crown hides it), crown and sunlit cap in that order, at the crown centre's
-    depth. ``planes``: the view frustum's (x, y, z coefficients a row; a tree
-    wholly outside one is left out)."""
+_K = SIDES + 2  # a polygon's vertices at most (an outline clipped to the near plane)
+
+
+def drawn(trees: Trees, K: np.ndarray, pose: Pose, sun_l: np.ndarray, w_img: int,
+          h_img: int, planes: np.ndarray, haze: Haze | None = None) -> Drawn | None:
+    """The trees seen (``outlines``), ready to fill; ``planes``: the view
+    frustum's (x, y, z coefficients a row; a tree wholly outside one is left
+    out); ``haze``: their colours seen through it at their crowns' centres'
+    distance. None if none is seen."""
     if not len(trees):
-        return []
+        return None
     centre, semi = _axes(trees)  # each tree inside a sphere about its crown's centre
     ball = np.maximum(semi.max(axis=1), -centre[:, 2])  # the foot is this far below
     side = ((centre - pose.c_l) @ pose.R_cl.T) @ planes.T
     side /= np.linalg.norm(planes, axis=1)
     trees = trees.take(np.flatnonzero((side >= -ball[:, None]).all(axis=1)))
     if not len(trees):
-        return []
+        return None
     crown, cap, trunk, outside = outlines(trees, pose.c_l, sun_l)
-    shade, lit = (_bgra(c) for c in colours(trees))
-    bark = _bgra(TRUNK_RGB[None, :])[0]
     polys = np.concatenate([trunk, crown, cap], axis=1)  # (N, 4 + 2 SIDES, 3)
     pts_c = (polys - pose.c_l) @ pose.R_cl.T
     z = pts_c[..., 2]
     depth = np.linalg.norm(pts_c[:, 4:4 + SIDES].mean(axis=1), axis=1)
     front = outside & (z.min(axis=1) >= NEAR_M)
-    out: list[Item] = []
-    i_front = np.flatnonzero(front)
-    if len(i_front):
-        uv = project(K, pts_c[i_front].reshape(-1, 3)).reshape(len(i_front), -1, 2)
+    n = len(trees)
+    out = np.zeros((n, 3, _K, 2))  # trunk, crown, cap of each tree
+    counts = np.zeros((n, 3), np.int64)
+    if front.any():
+        f = np.flatnonzero(front)
+        uv = project(K, pts_c[f].reshape(-1, 3)).reshape(len(f), -1, 2)
+        out[f, 0, :4], out[f, 1, :SIDES], out[f, 2, :SIDES] = \
+            uv[:, :4], uv[:, 4:4 + SIDES], uv[:, 4 + SIDES:]
         ring = uv[:, 4:4 + SIDES]
-        lo, hi = ring.min(axis=1), ring.max(axis=1)
-        seen = (hi[:, 0] >= -0.5) & (hi[:, 1] >= -0.5) & (lo[:, 0] <= w_img - 0.5) \
-            & (lo[:, 1] <= h_img - 0.5)
         # a trunk whose foot lies inside the crown's inscribed circle is hidden
         mid = ring.mean(axis=1)
         inner = np.linalg.norm(ring - mid[:, None, :], axis=2).min(axis=1) * math.cos(
             math.pi / SIDES)
-        foot = 0.5 * (uv[:, 0] + uv[:, 1])
-        bare = np.linalg.norm(foot - mid, axis=1) > inner
-        px = fixed(uv)
-        for k in np.flatnonzero(seen).tolist():
-            i = int(i_front[k])
-            d = float(depth[i])
-            if bare[k]:
-                out.append((d, d, px[k, :4], bark, -1))
-            out.append((d, d, px[k, 4:4 + SIDES], shade[i], -1))
-            out.append((d, d, px[k, 4 + SIDES:], lit[i], -1))
+        bare = np.linalg.norm(0.5 * (uv[:, 0] + uv[:, 1]) - mid, axis=1) > inner
+        counts[f] = np.column_stack([np.where(bare, 4, 0), np.full((len(f), 2), SIDES)])
     for i in np.flatnonzero(outside & ~front & (z.max(axis=1) >= NEAR_M)).tolist():
-        d = float(depth[i])  # across the near plane: each outline clipped to it
-        for poly, bgra in ((trunk[i], bark), (crown[i], shade[i]), (cap[i], lit[i])):
+        for part, poly in enumerate((trunk[i], crown[i], cap[i])):  # clipped to the near plane
             uv_i = to_image(K, pose, poly[None])[0][0]
             if uv_i is not None:
-                out.append((d, d, fixed(uv_i), bgra, -1))
-    return out
-
-
-def _bgra(rgb: np.ndarray) -> list[tuple[int, int, int, int]]:
-    """RGB colours (N, 3) as OpenCV's BGRA tuples of whole numbers (opaque)."""
-    c = np.minimum(rgb[:, ::-1], 255.0).astype(int).tolist()
-    return [(b, g, r, 255) for b, g, r in c]
+                out[i, part, :len(uv_i)], counts[i, part] = uv_i, len(uv_i)
+    ring_n = np.maximum(counts[:, 1], 1)
+    crown_px = np.where((np.arange(_K)[None, :] < ring_n[:, None])[..., None], out[:, 1],
+                        out[:, 1, :1])  # the crown's box, from its own vertices
+    lo, hi = crown_px.min(axis=1), crown_px.max(axis=1)
+    seen = (counts[:, 1] >= 3) & (hi[:, 0] >= -0.5) & (hi[:, 1] >= -0.5) \
+        & (lo[:, 0] <= w_img - 0.5) & (lo[:, 1] <= h_img - 0.5)
+    order = np.flatnonzero(seen)[np.argsort(-depth[seen], kind="stable")]
+    if not len(order):
+        return None
+    shade, lit = colours(trees.take(order))
+    bgr = np.stack([np.broadcast_to(TRUNK_RGB, shade.shape), shade, lit], axis=1)[..., ::-1]
+    d = depth[order]
+    if haze is not None:
+        bgr = np.array([[haze.colour(c, float(di)) for c in tree] for tree, di in zip(bgr, d)])
+    bgr = np.rint(np.clip(bgr, 0.0, 255.0)).astype(np.uint8)
+    keep = counts[order] > 0
+    clear = np.broadcast_to(np.array([True, True, False]), keep.shape)[keep]
+    return Drawn(d, np.concatenate([[0], np.cumsum(keep.sum(axis=1))]), out[order][keep],
+                 counts[order][keep], np.ascontiguousarray(bgr[keep]), clear)
 
 
 def shadows_l(trees: Trees, sun_l: np.ndarray) -> list[np.ndarray]:

@@ -529,18 +529,16 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
         faces.extend(_target_faces(pose, specs[k], origins[k], time_s, seed + k, k + 1,
                                    world.sun_l))
     faces.extend(world.buildings.faces(rot, shift, pose, world.sun_l, near))
-    if trees is not None:
-        faces.extend(canopy.faces(trees, K, pose, world.sun_l, w_img, h_img, view.planes))
+    seen = canopy.drawn(trees, K, pose, world.sun_l, w_img, h_img, view.planes, haze) \
+        if trees is not None else None
+    done = 0  # the trees drawn so far (in painter's order with the faces)
     faces.sort(key=lambda f: -f[0])  # painter's order: far to near
     outlines: dict[int, list[np.ndarray]] = {}  # per target id, its faces as filled
     for _, depth_m, v_c, bgra, tid in faces:
         if haze is not None:  # a flat face: hazed at its centre's distance
             bgra = haze.bgra(bgra, depth_m)
-        if tid < 0:  # a tree's outline, in pixels: hides what is behind it
-            cv2.fillConvexPoly(img, v_c, bgra, cv2.LINE_8, SHIFT)
-            if dirty[2] > dirty[0]:  # a target may be behind it
-                cv2.fillConvexPoly(ids, v_c, 0, cv2.LINE_8, SHIFT)
-            continue
+        if seen is not None:  # the trees farther than the face
+            done = seen.draw_to(depth_m, done, img, ids)
         pts = fixed(project(K, v_c))
         if tid:
             cv2.fillConvexPoly(img, pts, bgra, cv2.LINE_8, SHIFT)
@@ -554,6 +552,8 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
         dirty[:] = [max(0, min(dirty[0], int(lo_px[0]))), max(0, min(dirty[1], int(lo_px[1]))),
                     min(w_img, max(dirty[2], int(hi_px[0]))),
                     min(h_img, max(dirty[3], int(hi_px[1])))]
+    if seen is not None:  # the trees nearer than every face
+        seen.draw_to(-math.inf, done, img, ids)
     for k, t in enumerate(specs):
         if visible[k] and t.kind == "fire":
             draw_smoke(K, pose, t, origins[k], time_s, seed + k, img, world.sun_l, haze)

@@ -199,3 +199,30 @@ def test_the_trees_key(tmp_path: Path) -> None:
                           ("  trees: [3d]\n", "expected a string, got a list")):
         with pytest.raises(ConfigError, match=f"{f}:9: ground.trees: {problem}"):
             ground(body)
+
+
+def test_the_compiled_fill_covers_every_pixel_a_polygon_reaches_into() -> None:
+    from cosim.renderer.canopy_pass import fill_polygons
+
+    rng = np.random.default_rng(5)
+    h, w = 60, 80
+    for _ in range(40):
+        n = int(rng.integers(3, 12))
+        ang = np.sort(rng.uniform(0, 2 * np.pi, n))
+        centre, radius = rng.uniform([-10, -10], [w + 10, h + 10]), rng.uniform(0.2, 30.0, 2)
+        poly = centre + np.column_stack([np.cos(ang), np.sin(ang)]) * radius
+        img, ids = np.zeros((h, w, 4), np.uint8), np.full((h, w), 7, np.uint16)
+        fill_polygons(img, ids, poly[None], np.array([n]), np.array([[1, 2, 3]], np.uint8),
+                      np.array([True]), 0, 1)
+        got = img[..., 0] == 1
+        assert np.array_equal(got, ids == 0) and (img[..., 3] == 0).all()
+        # every pixel whose centre is inside is filled; none is more than a pixel away
+        ys, xs = np.mgrid[0:h, 0:w]
+        inside = np.ones((h, w), bool)
+        near = np.ones((h, w), bool)
+        for (ax, ay), (bx, by) in zip(poly, np.roll(poly, -1, axis=0)):
+            cross = (bx - ax) * (ys - ay) - (by - ay) * (xs - ax)
+            edge = math.hypot(bx - ax, by - ay)
+            inside &= cross >= 0
+            near &= cross >= -0.75 * edge  # within 0.75 px (a pixel's half diagonal)
+        assert (got[inside]).all() and not (got & ~near).any()
