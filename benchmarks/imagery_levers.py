@@ -17,8 +17,10 @@ which counts every encoder thread):
   fixed-point maps;
 - motion blur (3.4 px down the columns): cv2.filter2D (committed) against
   cv2.sepFilter2D;
-- haze: cv2.LUT with a four-channel table (committed) against one table for
-  every channel and three channels after a colour conversion;
+- haze: the compiled sweep (committed: each 4 x 32 tile through its own
+  table, ``haze_pass``; here every tile the same level) against cv2.LUT with a
+  four-channel table over the frame, one table for every channel and three
+  channels after a colour conversion;
 - datalink: ``Downlink.send`` (x264 ultrafast, one encoder thread, the frame
   handed over as a view of the converted buffer: committed) against a copy of
   it (from_ndarray; the two videos are checked to be the same bytes) and
@@ -208,16 +210,26 @@ def blur(rounds: int) -> dict[str, float]:
 
 
 def haze_lut(rounds: int) -> dict[str, float]:
-    """The haze's table look-up over a whole frame: its four-channel table
-    (committed: the airlight's colour differs by channel) against one table
-    shared by the channels (what a grey airlight would allow) and three
-    channels after a colour conversion."""
+    """The haze's table look-up over a whole frame: the compiled sweep over
+    tiles (committed) against cv2.LUT with a four-channel table (the airlight's
+    colour differs by channel), one table shared by the channels (what a grey
+    airlight would allow) and three channels after a colour conversion."""
+    from cosim.renderer.haze import TILE_COLS, TILE_ROWS
+    from cosim.renderer.haze_pass import haze_tiles
+
     base = _frame()
     ramp = np.arange(256) // 2
     table4 = np.dstack([ramp + 10, ramp + 20, ramp + 30, np.arange(256)]).astype(np.uint8)
     table3 = np.ascontiguousarray(table4[..., :3])
     table1 = (ramp + 20).astype(np.uint8)
     bgr = np.empty((H, W, 3), np.uint8)
+    tables = np.ascontiguousarray(table4)  # one level: (1, 256, 4)
+    rows = np.array([(y, y + TILE_ROWS) for y in range(0, H, TILE_ROWS)], np.int64)
+    levels = np.zeros((len(rows), -(-W // TILE_COLS)), np.int64)
+
+    def swept(_: int) -> None:
+        img = base.copy()
+        haze_tiles(img, rows, levels, tables, TILE_COLS)
 
     def four(_: int) -> None:
         img = base.copy()
@@ -233,7 +245,9 @@ def haze_lut(rounds: int) -> dict[str, float]:
         cv2.LUT(bgr, table3, dst=bgr)
         cv2.cvtColor(bgr, cv2.COLOR_BGR2BGRA, dst=img)
 
-    return _ab({"haze, cv2.LUT four-channel table (committed)": four,
+    swept(0)  # numba compiles (or loads) it
+    return _ab({"haze, compiled sweep over tiles (committed)": swept,
+                "haze, cv2.LUT four-channel table": four,
                 "haze, cv2.LUT one table for all channels": shared,
                 "haze, cv2.LUT three channels after cvtColor": three}, rounds)
 
