@@ -148,8 +148,11 @@ def undistort_radius(k1: float, k2: float, r_d: np.ndarray, r_max: float,
     for _ in range(30):
         r2 = r * r
         g = r * (1.0 + k1 * r2 + k2 * r2 * r2) - r_d
+        before = r.copy()
         r -= g / (1.0 + 3 * k1 * r2 + 5 * k2 * r2 * r2)
         np.clip(r, 0.0, r_max, out=r)
+        if not np.abs(r - before).max() > 1e-14:  # settled (quadratically: a few steps)
+            break
     g_max = r_max * (1.0 + k1 * r_max ** 2 + k2 * r_max ** 4)
     past: float | np.ndarray = np.nan
     if extend:
@@ -416,11 +419,10 @@ class Sensor:
             self.maps = distortion_maps(cam, spec.k1, spec.k2, extend=True)
             margin = tuple(max(0, math.ceil(max(-float(v.min()), float(v.max()) - (n - 1))) + 1)
                            for v, n in zip(self.maps, (w, h)))
-            if margin != (0, 0):
+            if margin != (0, 0):  # the same maps, into the larger render
                 mx, my = margin
                 self.source = source_camera(cam, (mx, my))
-                self.maps = distortion_maps(cam, spec.k1, spec.k2, margin_px=(mx, my),
-                                            extend=True)
+                self.maps = (self.maps[0] + np.float32(mx), self.maps[1] + np.float32(my))
         self.plain_maps: tuple[np.ndarray, np.ndarray] | None = None  # for a frame of cam's size
         self.warped = np.empty((h, w, 4), np.uint8)
         self.table = noise_table(spec.snr_db) if spec.snr_db is not None else None
