@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from cosim.core.camera import NEAR_M, Pose, clip_near
+from cosim.core.camera import NEAR_M, Pose, clip_near, project
 from cosim.renderer.targets import lambert
 from cosim.world.obstacles import Obstacle, signed_area
 
@@ -211,9 +211,14 @@ class BuildingSet:
         return [self.shadows[i] @ rot.T + shift for i in which] if self.shadows else []
 
     def faces(self, rot: np.ndarray, shift: np.ndarray, pose: Pose, sun_l: np.ndarray,
-              which: Sequence[int]) -> list[Face]:
+              which: Sequence[int], K: np.ndarray | None = None,
+              boxes_c: np.ndarray | None = None, drawn: Sequence[Face] = ()) -> list[Face]:
         """The front faces of buildings ``which``, flat-shaded by the sun
-        (``sun_l``, in L), clipped to the near plane."""
+        (``sun_l``, in L), clipped to the near plane, in painter's order with
+        the targets' faces ``drawn`` (their boxes' corners ``boxes_c``, T x 8
+        x 3 camera axes, target id k + 1 for row k; ``K`` the intrinsics):
+        see ``_painter_depth``."""
+        targets = _targets(K, boxes_c, drawn) if K is not None and boxes_c is not None else []
         out: list[Face] = []
         for i in which:
             b = self.buildings[i]
@@ -232,5 +237,57 @@ class BuildingSet:
                 bgra = (min(255, int(c[2] * k)), min(255, int(c[1] * k)),
                         min(255, int(c[0] * k)), 255)
                 depth_m = float(np.linalg.norm(v_c.mean(axis=0)))
-                out.append((depth_m, depth_m, v_c, bgra, 0))
+                key = _painter_depth(depth_m, v_c, pose.R_cl @ normals[f], K, targets) \
+                    if targets and K is not None else depth_m
+                out.append((key, depth_m, v_c, bgra, 0))
         return out
+
+
+#: a target as the painter's order with buildings sees it: its faces' nearest
+#: and farthest painter's depth, its box's centre (camera axes) and image box
+_Target = tuple[float, float, np.ndarray, tuple[float, float, float, float]]
+
+
+def _targets(K: np.ndarray, boxes_c: np.ndarray, drawn: Sequence[Face]) -> list[_Target]:
+    """The targets among ``drawn`` (faces with an id above 0)."""
+    keys: dict[int, tuple[float, float]] = {}
+    for key, _, _, _, tid in drawn:
+        if tid > 0:
+            lo, hi = keys.get(tid, (math.inf, -math.inf))
+            keys[tid] = (min(lo, key), max(hi, key))
+    out = []
+    for tid, (lo, hi) in keys.items():
+        box = boxes_c[tid - 1]
+        if (box[:, 2] >= NEAR_M).all():
+            uv = project(K, box)
+            rect = (float(uv[:, 0].min()), float(uv[:, 1].min()), float(uv[:, 0].max()),
+                    float(uv[:, 1].max()))
+        else:  # across the near plane: anywhere
+            rect = (-math.inf, -math.inf, math.inf, math.inf)
+        out.append((lo, hi, box.mean(axis=0), rect))
+    return out
+
+
+def _painter_depth(depth_m: float, v_c: np.ndarray, normal_c: np.ndarray, K: np.ndarray,
+                   targets: list[_Target]) -> float:
+    """A building face's painter's depth (its centre's distance ``depth_m``
+    otherwise): painted after every target whose image box meets its own and
+    whose box centre lies behind the face's plane (seen from the camera), and
+    before every such target in front of it, whatever their centres'
+    distances (a long wall's centre may be farther than a car behind it).
+    Should a target behind the face be nearer than one in front of it (rare),
+    the one in front keeps its place and the one behind may show through."""
+    uv = project(K, v_c)
+    x0, y0 = uv.min(axis=0).tolist()
+    x1, y1 = uv.max(axis=0).tolist()
+    key = depth_m
+    behind, front = math.inf, -math.inf
+    for lo, hi, centre, (tx0, ty0, tx1, ty1) in targets:
+        if tx1 < x0 or x1 < tx0 or ty1 < y0 or y1 < ty0:
+            continue  # they do not overlap in the image
+        if float(np.dot(centre - v_c[0], normal_c)) < 0:
+            behind = min(behind, lo)
+        else:
+            front = max(front, hi)
+    key = min(key, behind - 1e-3)
+    return max(key, front + 1e-3)

@@ -528,7 +528,7 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
     for k in np.flatnonzero(visible).tolist():
         faces.extend(_target_faces(pose, specs[k], origins[k], time_s, seed + k, k + 1,
                                    world.sun_l))
-    faces.extend(world.buildings.faces(rot, shift, pose, world.sun_l, near))
+    faces.extend(world.buildings.faces(rot, shift, pose, world.sun_l, near, K, box_c, faces))
     seen = canopy.drawn(trees, K, pose, world.sun_l, w_img, h_img, view.planes, haze) \
         if trees is not None else None
     done = 0  # the trees drawn so far (in painter's order with the faces)

@@ -110,3 +110,21 @@ def test_unoccluded_pixels_counts_an_overlap_once_and_only_inside_the_image() ->
     assert 0 < unoccluded_pixels([square(114.4, 50.2)], mask) < \
         unoccluded_pixels([square(50.0, 50.2)], mask)
     assert unoccluded_pixels([square(-20.0, 30.0)], mask) == 0
+
+
+def test_a_long_wall_hides_the_car_behind_it_and_not_the_car_before_it() -> None:
+    """A forward camera 1.5 m up looking north. A 4 m wall across the view
+    20 m ahead, 85 m long, its centre 42 m off: a car 24 m ahead, behind it,
+    is hidden though nearer than the wall's centre. A 4 m wall along the view
+    3 m to the right, from 5 to 60 m ahead (centre 32.6 m off): a car 40 m
+    ahead beside it, on the camera's side of it, is not hidden though
+    farther than the wall's centre (by centre distances alone: 0.56)."""
+    cam = _cam("forward", 0.0, 640, 480, 60.0)
+    across = Obstacle("a", ((20.0, -5.0), (20.0, 80.0), (21.0, 80.0), (21.0, -5.0)), 4.0)
+    along = Obstacle("b", ((5.0, 3.0), (5.0, 4.0), (60.0, 4.0), (60.0, 3.0)), 4.0)
+    behind = _row((_target("car", 24.0, 0.0),), (across,), cam, 1.5)
+    assert behind["in_view"] == 1 and behind["visible_fraction"] == 0.0
+    beside = _row((_target("car", 40.0, 2.0),), (along,), cam, 1.5)
+    assert beside["pixels_on_target"] == _row((_target("car", 40.0, 2.0),), (), cam,
+                                              1.5)["pixels_on_target"]
+    assert beside["visible_fraction"] == 1.0
