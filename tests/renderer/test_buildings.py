@@ -15,7 +15,7 @@ from cosim.errors import ConfigError
 from cosim.renderer.buildings import building
 from cosim.renderer.frame import World, WorldSpec, _scenario_to_l, render_frame
 from cosim.renderer.targets import lambert
-from cosim.scenario import parse_scenario
+from cosim.scenario import load_scenario, parse_scenario
 from cosim.world.ground import GroundSpec
 from cosim.world.obstacles import WALL_RGB, Obstacle
 from cosim.world.sun import SunSpec
@@ -215,3 +215,13 @@ def test_buildings_out_of_view_are_culled_but_not_a_shadow_reaching_into_it() ->
     dark = np.flatnonzero((frames[0] != frames[1]).any(axis=2).any(axis=0))
     edge = (320 - 1) / 2 + cam.fx_px * (67.0 - 12.0 / math.tan(math.radians(30.0))) / 100.0
     assert abs(dark.min() - edge) <= 2.0 and dark.max() == 319  # the shadow, to the edge
+
+
+def test_the_village_example_validates() -> None:
+    """examples/village/village.yaml, the README's runnable village."""
+    scn = load_scenario(Path(__file__).resolve().parents[2] / "examples/village/village.yaml",
+                        check_properties=False)
+    roofs = [(o.id, o.roof) for o in scn.world.obstacles]
+    assert roofs == [("house1", "gable"), ("house2", "hip"), ("barn", "gable"),
+                     ("shed", "flat")]
+    assert scn.world.sun.shadows and len(scn.world.targets) == 2
