@@ -267,12 +267,23 @@ def distort_truth(rows: list[dict[str, Any]], cam: CameraSpec, box_uv: np.ndarra
     a, b = _EDGES[:, 0], _EDGES[:, 1]
     cx, cy = (cam.width_px - 1) / 2.0, (cam.height_px - 1) / 2.0
     xmax, ymax = cam.width_px - 0.5, cam.height_px - 0.5
+    # every centre and every box's edge points through the lens at once
+    centred = [k for k, row in enumerate(rows) if row["center_x_px"] is not None]
+    if centred:
+        c_d = distort_px(cam, s.k1, s.k2, np.array([[rows[k]["center_x_px"],
+                                                     rows[k]["center_y_px"]] for k in centred]))
+        for k, (cu, cv_) in zip(centred, c_d.tolist()):
+            rows[k].update(center_x_px=cu, center_y_px=cv_,
+                           eccentricity_px=math.hypot(cu - cx, cv_ - cy))
+    boxed = [k for k, row in enumerate(rows) if row["bbox_x0_px"] is not None and front[k]]
+    edges: dict[int, np.ndarray] = {}
+    if boxed:
+        uv = box_uv[boxed]  # (n, 8, 2)
+        pts = distort_px(cam, s.k1, s.k2, (uv[:, a][:, :, None, :] * (1 - t)
+                                           + uv[:, b][:, :, None, :] * t
+                                           ).reshape(len(boxed), -1, 2))
+        edges = dict(zip(boxed, pts))
     for k, row in enumerate(rows):
-        if row["center_x_px"] is not None:
-            cu, cv_ = distort_px(cam, s.k1, s.k2, np.array([row["center_x_px"],
-                                                           row["center_y_px"]]))
-            row.update(center_x_px=float(cu), center_y_px=float(cv_),
-                       eccentricity_px=math.hypot(cu - cx, cv_ - cy))
         if row["bbox_x0_px"] is None:
             continue
         if not front[k]:  # its ideal geometry: in view if its box meets the frame
@@ -282,11 +293,9 @@ def distort_truth(rows: list[dict[str, Any]], cam: CameraSpec, box_uv: np.ndarra
                                      and row["bbox_y0_px"] <= ymax)
                 _unseen(row)
             continue
-        uv = box_uv[k]
-        pts = distort_px(cam, s.k1, s.k2, (uv[a][:, None, :] * (1 - t) + uv[b][:, None, :] * t
-                                           ).reshape(-1, 2))
-        x0, y0 = (float(v) for v in pts.min(axis=0))
-        x1, y1 = (float(v) for v in pts.max(axis=0))
+        box_pts = edges[k]
+        x0, y0 = box_pts.min(axis=0).tolist()
+        x1, y1 = box_pts.max(axis=0).tolist()
         row.update(bbox_x0_px=x0, bbox_y0_px=y0, bbox_x1_px=x1, bbox_y1_px=y1)
         inside = x0 >= -0.5 and y0 >= -0.5 and x1 <= xmax and y1 <= ymax
         if inside:
@@ -294,7 +303,7 @@ def distort_truth(rows: list[dict[str, Any]], cam: CameraSpec, box_uv: np.ndarra
         elif x1 < -0.5 or y1 < -0.5 or x0 > xmax or y0 > ymax:
             row["in_view"] = 0
         else:
-            hull = cv2.convexHull(pts.astype(np.float32))
+            hull = cv2.convexHull(box_pts.astype(np.float32))
             row["in_view"] = int(cv2.intersectConvexConvex(hull, image_quad)[0] > 0)
         row["fully_in_view"] = int(inside)
         if (mx, my) != (0, 0):
