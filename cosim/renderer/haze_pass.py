@@ -48,3 +48,16 @@ def haze_tiles(img: np.ndarray, rows: np.ndarray, levels: np.ndarray, tables: np
 
 
 _NO_MASK = np.zeros((1, 1), np.uint8)
+
+
+def _warm() -> None:
+    """Compile (or load) the pass for the types frames have, on import: a
+    render worker pays for it while it starts, not on its first frame."""
+    img = np.zeros((4, 4, 4), np.uint8)
+    rows, levels = np.array([[0, 4]], np.int64), np.zeros((1, 1), np.int64)
+    tables = np.zeros((1, 256, 4), np.uint8)
+    haze_tiles(img, rows, levels, tables, 4)
+    haze_tiles(img, rows, levels, tables, 4, np.zeros((4, 4), np.uint8))
+
+
+_warm()

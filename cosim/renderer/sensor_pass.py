@@ -93,3 +93,15 @@ def gain_noise(img: np.ndarray, gain: np.ndarray | None, table: np.ndarray | Non
 
 _NO_GAIN = np.zeros(1, np.uint32)
 _NO_TABLE = np.zeros(1, np.uint8)
+
+
+def _warm() -> None:
+    """Compile (or load) the passes for the types frames have, on import: a
+    render worker pays for it while it starts, not on its first frame."""
+    img = np.zeros((2, 2, 4), np.uint8)
+    words = np.zeros(2, np.uint64)
+    gain_noise(img, gain_fixed(np.ones((2, 2))), np.zeros(65536, np.uint8),
+               fill_levels(words, 1))
+
+
+_warm()
