@@ -309,10 +309,10 @@ def drawn(trees: Trees, K: np.ndarray, pose: Pose, sun_l: np.ndarray, w_img: int
             uv_i = to_image(K, pose, poly[None])[0][0]
             if uv_i is not None:
                 out[i, part, :len(uv_i)], counts[i, part] = uv_i, len(uv_i)
-    ring_n = np.maximum(counts[:, 1], 1)
-    crown_px = np.where((np.arange(_K)[None, :] < ring_n[:, None])[..., None], out[:, 1],
-                        out[:, 1, :1])  # the crown's box, from its own vertices
-    lo, hi = crown_px.min(axis=1), crown_px.max(axis=1)
+    # the box of each tree's crown and trunk, from their own vertices
+    used = np.arange(_K)[None, None, :] < counts[:, :2, None]
+    lo = np.where(used[..., None], out[:, :2], np.inf).min(axis=(1, 2))
+    hi = np.where(used[..., None], out[:, :2], -np.inf).max(axis=(1, 2))
     seen = (counts[:, 1] >= 3) & (hi[:, 0] >= -0.5) & (hi[:, 1] >= -0.5) \
         & (lo[:, 0] <= w_img - 0.5) & (lo[:, 1] <= h_img - 0.5)
     order = np.flatnonzero(seen)[np.argsort(-depth[seen], kind="stable")]
@@ -322,7 +322,7 @@ def drawn(trees: Trees, K: np.ndarray, pose: Pose, sun_l: np.ndarray, w_img: int
     bgr = np.stack([np.broadcast_to(TRUNK_RGB, shade.shape), shade, lit], axis=1)[..., ::-1]
     d = depth[order]
     if haze is not None:
-        bgr = np.array([[haze.colour(c, float(di)) for c in tree] for tree, di in zip(bgr, d)])
+        bgr = np.array([haze.colour(tree, float(di)) for tree, di in zip(bgr, d)])
     bgr = np.rint(np.clip(bgr, 0.0, 255.0)).astype(np.uint8)
     keep = counts[order] > 0
     clear = np.broadcast_to(np.array([True, True, False]), keep.shape)[keep]

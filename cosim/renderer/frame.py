@@ -534,11 +534,11 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
     done = 0  # the trees drawn so far (in painter's order with the faces)
     faces.sort(key=lambda f: -f[0])  # painter's order: far to near
     outlines: dict[int, list[np.ndarray]] = {}  # per target id, its faces as filled
-    for _, depth_m, v_c, bgra, tid in faces:
+    for paint_m, depth_m, v_c, bgra, tid in faces:
         if haze is not None:  # a flat face: hazed at its centre's distance
             bgra = haze.bgra(bgra, depth_m)
-        if seen is not None:  # the trees farther than the face
-            done = seen.draw_to(depth_m, done, img, ids)
+        if seen is not None:  # the trees farther than the face (in painter's order)
+            done = seen.draw_to(paint_m, done, img, ids)
         pts = fixed(project(K, v_c))
         if tid:
             cv2.fillConvexPoly(img, pts, bgra, cv2.LINE_8, SHIFT)

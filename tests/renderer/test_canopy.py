@@ -226,3 +226,27 @@ def test_the_compiled_fill_covers_every_pixel_a_polygon_reaches_into() -> None:
             inside &= cross >= 0
             near &= cross >= -0.75 * edge  # within 0.75 px (a pixel's half diagonal)
         assert (got[inside]).all() and not (got & ~near).any()
+
+
+def test_a_target_in_front_of_a_crown_stays_whole() -> None:
+    # a person 6 m south of a tree on the wood's southern edge (no tree within 15 m
+    # south of it, 8 m either side), seen from 20 m south of it and 2 m up: the
+    # tree's trunk rises behind the person, who keeps every pixel it has with flat
+    # trees (the trunk drawn over it, it would lose some); 6 m north of the tree,
+    # behind the trunk, it loses some (here all: the trunk is as wide as it, nearer)
+    t = canopy.standing(SEED, 360.0, 430.0, -60.0, 90.0)
+    edge = [k for k in np.argsort(t.north_m) if not ((t.north_m < t.north_m[k])
+            & (t.north_m > t.north_m[k] - 15.0) & (abs(t.east_m - t.east_m[k]) < 8.0)).any()]
+    n, e = float(t.north_m[edge[0]]), float(t.east_m[edge[0]])
+    cam = _cam(-5.0, hfov=20.0)
+    px = {}
+    for dn in (-6.0, 6.0):
+        lat, lon = _world().frame.place(n + dn - 20.0, e, GROUND_M)[:2]
+        pose = camera_pose(cam, float(lat), float(lon), GROUND_M + 2.0, 0.0, 0.0, 0.0,
+                           GROUND_M)
+        person = TargetSpec("p", "person", n + dn, e, None, None, 0.0, 0.5, 0.5, 1.8,
+                            (220, 30, 30))
+        px[dn] = [render_frame(_world(mode, targets=(person,)), cam, pose, 0)[1][0]
+                  ["pixels_on_target"] for mode in ("flat", "3d")]
+    assert px[-6.0][0] == px[-6.0][1] > 50
+    assert px[6.0][1] < px[6.0][0]
