@@ -1,9 +1,9 @@
 """The README's ground-detail picture (docs/images/ground_detail.png): the
 altitude_speed trial's nadir camera (37.6 deg along track, 640 x 480) 30 m
 over its truck, the middle 318 x 240 pixels of the frame (about 14 x 10 m at
-4.3 cm a pixel), with the ground texture before version 9 (its fine detail
-smooth value-noise octaves, the within-field brightness down to 7.5 m only)
-and today's (clods, stones, leaf litter and tufts, ``cosim.renderer.detail``).
+4.3 cm a pixel), with the ground texture of version 8 (its fine detail smooth
+value-noise octaves, the within-field brightness down to 7.5 m only) and
+today's (clods, stones, leaf litter and tufts, ``cosim.renderer.detail``).
 Each half is labelled with the frame's spectral exponent (the whole frame,
 ``cosim.conspicuity.spectrum``).
 
@@ -47,7 +47,7 @@ def detail_v8(seed: int) -> tuple[np.ndarray, ...]:
         d += amp * (value_noise(x * cells / 512, y * cells / 512, seed + 31 + k,
                                 period=cells) - 0.5)
         amp *= 0.8
-    levels = [(1.0 + 0.6 * d).astype(np.float32)]
+    levels = [np.repeat((1.0 + 0.6 * d).astype(np.float32)[..., None], 3, axis=2)]  # grey
     while levels[-1].shape[0] > 1:
         a = levels[-1]
         levels.append(0.25 * (a[0::2, 0::2] + a[1::2, 0::2] + a[0::2, 1::2] + a[1::2, 1::2]))
@@ -56,7 +56,7 @@ def detail_v8(seed: int) -> tuple[np.ndarray, ...]:
 
 @contextmanager
 def version_8() -> Iterator[None]:
-    """The ground texture as it was before version 9, within the block."""
+    """The ground texture as it was in version 8, within the block."""
     kept = texture.detail_pyramid, texture.BRIGHT_M, texture.BRIGHT_AMP
     texture.detail_pyramid = detail_v8  # type: ignore[assignment]
     texture.BRIGHT_M, texture.BRIGHT_AMP = (60.0, 30.0, 15.0, 7.5), (0.35, 0.175, 0.0875,
@@ -79,7 +79,8 @@ def main(out: Path) -> None:
     pose = camera_pose(cam, float(lat), float(lon), o.ground_alt_m + ALT_M, 0.0, 0.0, 0.0,
                        ground_alt_m=o.ground_alt_m)
     halves = []
-    for old, label in ((True, "before (texture version 8)"), (False, "today (version 9)")):
+    for old, label in ((True, "before (texture version 8)"),
+                       (False, f"today (version {texture.TEXTURE_VERSION})")):
         ws = WorldSpec(o.lat_deg, o.lon_deg, o.ground_alt_m, scn.seed, 120.0,
                        scn.world.ground, scn.world.targets, scn.world.obstacles, scn.world.sun)
         if old:

@@ -7,7 +7,9 @@ Two layers, summed:
 * litter: the clods, stones, leaf litter and tufts of grass that cover a
   field, as a "dead leaves" picture (Matheron 1968; Lee, Mumford and Huang
   2001): ellipses of random tone, size, elongation and heading laid one over
-  another, their radii drawn with density ``r**-3`` from ``LITTER_R_PX``.
+  another, their radii drawn with density ``r**-3`` from ``LITTER_R_PX``, each
+  tinted as what it is (``LITTER_KINDS``: living leaves, dry straw, bare soil,
+  stone; a tint changes the hue, not the luminance).
   Scale-invariant occlusion of that kind is what gives natural pictures their
   ``f**-2`` power spectrum; each is antialiased (drawn at ``SUPERSAMPLE`` x the
   base resolution and area-averaged), and none is narrower than two pixels;
@@ -42,6 +44,10 @@ LITTER_COUNT = 40000
 LITTER_R_PX = (1.0, 12.0)
 LITTER_ELONGATION = 4.0
 LITTER_TONE_SD = 0.2  # an ellipse's tone: 1 + this x a standard normal
+#: what an ellipse is: its share of them and its tint (R, G, B multipliers of
+#: Rec. 709 luminance 1)
+LITTER_KINDS = {"leaf": (0.55, (0.95, 1.02, 0.95)), "straw": (0.20, (1.06, 1.00, 0.87)),
+                "soil": (0.20, (1.07, 0.98, 0.94)), "stone": (0.05, (0.99, 1.00, 1.02))}
 SUPERSAMPLE = 2  # the litter drawn at this many times the base resolution
 #: growth and moisture: value-noise octaves of this many cells across, each of
 #: this amplitude
@@ -52,21 +58,25 @@ _SHIFT = 4  # OpenCV's sub-pixel bits for the ellipses' centres and axes
 
 
 def litter(seed: int) -> np.ndarray:
-    """The litter layer (``DETAIL_PX`` square, float32, tones about 0, tileable):
-    ``LITTER_COUNT`` ellipses in a fixed order, each later one over the earlier
-    ones, drawn again one period over where they cross the texture's edge."""
+    """The litter layer (``DETAIL_PX`` square x RGB, float32, tones about 0,
+    tileable): ``LITTER_COUNT`` ellipses in a fixed order, each later one over the
+    earlier ones, drawn again one period over where they cross the texture's edge."""
     S, ss = DETAIL_PX, SUPERSAMPLE
     k = np.arange(LITTER_COUNT, dtype=np.float64)
-    cy, cx, ur, ut, uphase, ue, uh = (uniform_hash(k, np.full_like(k, j), seed).astype(
-        np.float64) for j in range(7))
+    cy, cx, ur, ut, uphase, ue, uh, uk = (uniform_hash(k, np.full_like(k, j), seed).astype(
+        np.float64) for j in range(8))
     lo, hi = LITTER_R_PX[0] ** -2.0, LITTER_R_PX[1] ** -2.0
     r = (lo - ur * (lo - hi)) ** -0.5  # inverse of the r**-3 density's distribution
     gauss = np.sqrt(-2.0 * np.log(np.maximum(ut, 1e-7))) * np.cos(2.0 * np.pi * uphase)
-    tone = np.clip(np.rint(128.0 * (1.0 + LITTER_TONE_SD * gauss)), 1, 255).astype(int)
+    share = np.cumsum([f for f, _ in LITTER_KINDS.values()])
+    tint = np.array([t for _, t in LITTER_KINDS.values()])[
+        np.minimum(np.searchsorted(share / share[-1], uk, "right"), len(share) - 1)]
+    colour = np.clip(np.rint(128.0 * (1.0 + LITTER_TONE_SD * gauss)[:, None] * tint), 1,
+                     255).astype(int)
     elong = 1.0 + (LITTER_ELONGATION - 1.0) * ue
     major, minor = r * np.sqrt(elong), r / np.sqrt(elong)
     pad = math.ceil(LITTER_R_PX[1] * math.sqrt(LITTER_ELONGATION)) + 2
-    canvas = np.full(((S + 2 * pad) * ss,) * 2, 128, np.uint8)
+    canvas = np.full(((S + 2 * pad) * ss,) * 2 + (3,), 128, np.uint8)
     # each ellipse where it is and, near an edge, one period over (its copies drawn
     # right after it): in the canvas's fixed point
     y, x = cy * S, cx * S
@@ -82,7 +92,7 @@ def litter(seed: int) -> np.ndarray:
     fixed = np.rint(np.stack([(x[which] + ox[copy, which] + pad) * unit,
                               (y[which] + oy[copy, which] + pad) * unit,
                               major[which] * unit, minor[which] * unit])).astype(np.int64)
-    for (px, py, a, b), t, h in zip(fixed.T.tolist(), tone[which].tolist(),
+    for (px, py, a, b), t, h in zip(fixed.T.tolist(), colour[which].tolist(),
                                     (uh[which] * 180.0).tolist()):
         cv2.ellipse(canvas, (px, py), (a, b), h, 0, 360, t, -1, cv2.LINE_AA, _SHIFT)
     small = cv2.resize(canvas, None, fx=1 / ss, fy=1 / ss, interpolation=cv2.INTER_AREA)
@@ -105,21 +115,23 @@ def growth(seed: int) -> np.ndarray:
 
 
 def highpass(d: np.ndarray, scale_px: float) -> np.ndarray:
-    """``d`` (square, periodic) without its scales above about ``scale_px``: its
-    spectrum times ``1 - exp(-(f scale_px)**2 / 2)`` (float32)."""
+    """``d`` (square, periodic; any channels along a third axis) without its scales
+    above about ``scale_px``: its spectrum times ``1 - exp(-(f scale_px)**2 / 2)``
+    (float32)."""
     n = d.shape[0]
     f = np.hypot(np.fft.fftfreq(n)[:, None], np.fft.rfftfreq(n)[None, :])
-    keep = -np.expm1(-0.5 * (f * scale_px) ** 2)
-    out: np.ndarray = np.fft.irfft2(np.fft.rfft2(d) * keep, s=d.shape).astype(np.float32)
+    keep = -np.expm1(-0.5 * (f * scale_px) ** 2).reshape(f.shape + (1,) * (d.ndim - 2))
+    out: np.ndarray = np.fft.irfft2(np.fft.rfft2(d, axes=(0, 1)) * keep, s=d.shape[:2],
+                                    axes=(0, 1)).astype(np.float32)
     return out
 
 
 @functools.lru_cache(maxsize=4)
 def detail_pyramid(seed: int) -> tuple[np.ndarray, ...]:
-    """The detail multiplier (around 1) at the base level and its 2x2-averaged
-    levels down to 1 px (float32; kept for the last few seeds: about a second to
-    make; the arrays are not to be written)."""
-    d = highpass(litter(seed + 40) + growth(seed), HIGHPASS_PX)
+    """The detail multiplier (around 1; R, G, B along the last axis) at the base
+    level and its 2x2-averaged levels down to 1 px (float32; kept for the last
+    few seeds: about half a second to make; the arrays are not to be written)."""
+    d = highpass(litter(seed + 40) + growth(seed)[..., None], HIGHPASS_PX)
     d += np.float32(1.0)
     levels = [d]
     while levels[-1].shape[0] > 1:

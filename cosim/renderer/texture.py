@@ -42,7 +42,7 @@ MACRO_STEP_M = 0.5  # macro features (fields, roads, trees) sampled at least thi
 MACRO_OVERSAMPLE = 2.0  # macro features sampled at most every this many pixels, then upsampled
 #: bump whenever a tile's pixels change for the same seed and ground parameters
 #: (old cache folders are then ignored; delete ~/.cache/cosim/ground to reclaim the space)
-TEXTURE_VERSION = 9
+TEXTURE_VERSION = 10
 FIELD_N_M, FIELD_E_M = 160.0, 220.0  # field size
 WARP_M = 15.0  # the field grid's warp, at most this many metres
 TREE_M = 7.0  # one tree at most per cell of this size, at a random place in its middle half
@@ -410,7 +410,7 @@ class ProceduralTiles:
 
     def _detail_slab(self, level: int, r0: int, c0: int) -> np.ndarray:
         """The fine-detail multiplier over one tile's pixels (T x T x 4 float32: the
-        same factor for B, G, R and 255 for alpha, which the warp leaves at 1)."""
+        factors for B, G, R and 255 for alpha, which the warp leaves at 1)."""
         d = self.detail[level]
         s = d.shape[0]
         key = (level, r0 % s, c0 % s)
@@ -419,7 +419,7 @@ class ProceduralTiles:
             T = self.tile_px
             ri, ci = (np.arange(r0, r0 + T) % s), (np.arange(c0, c0 + T) % s)
             slab = np.empty((T, T, 4), np.float32)
-            slab[..., :3] = d[np.ix_(ri, ci)][..., None]
+            slab[..., :3] = d[np.ix_(ri, ci)][..., ::-1]  # RGB to BGR
             slab[..., 3] = 255.0
             self._slabs[key] = slab
         return slab

@@ -1,12 +1,14 @@
 """The ground's fine detail (cosim.renderer.detail): its spectrum is the natural
-f**-2 law over the octaves it spans, it repeats seamlessly, it is a pure
-function of the seed and it leaves the scales above its high-pass to the macro
-brightness."""
+f**-2 law over the octaves it spans, its litter is tinted by kind, it repeats
+seamlessly, it is a pure function of the seed and it leaves the scales above
+its high-pass to the macro brightness."""
 
 import numpy as np
 
 from cosim.conspicuity.spectrum import spectral_exponent
 from cosim.renderer import detail
+
+REC709 = np.array([0.2126, 0.7152, 0.0722])
 
 
 def test_spectral_exponent_over_its_octaves_is_natural() -> None:
@@ -14,12 +16,25 @@ def test_spectral_exponent_over_its_octaves_is_natural() -> None:
     # span of the litter (ellipses 2 to 24 px across) and the growth octaves; the
     # smoothed value-noise octaves of the earlier texture gave 2.7 to 2.8 here
     for seed in (0, 7):
-        base = detail.detail_pyramid(seed)[0].astype(np.float64)
+        base = detail.detail_pyramid(seed)[0].astype(np.float64) @ REC709
         got = spectral_exponent(base, lo_cpi=16, hi_nyquist=0.5)
         assert abs(got.exponent - 2.0) < 0.25, (seed, got.exponent)
         assert got.r2 > 0.95
         assert 0.1 < base.std() < 0.3  # a visible texture, a multiplier about 1
         assert abs(base.mean() - 1.0) < 0.02
+
+
+def test_litter_is_tinted_by_kind() -> None:
+    # each kind's tint changes the hue, not the luminance; the texture's channels
+    # then differ where straw and soil (warmer) or leaves (greener) lie, and not
+    # elsewhere: a grey texture fails
+    for _, tint in detail.LITTER_KINDS.values():
+        assert abs(float(np.array(tint) @ REC709) - 1.0) < 0.01
+    d = detail.detail_pyramid(0)[0].astype(np.float64)
+    assert np.allclose(d.mean(axis=(0, 1)), 1.0, atol=0.02)
+    warm = d[..., 0] - d[..., 2]  # red over blue
+    assert 0.02 < warm.std() < 0.1
+    assert (warm > 0.05).mean() > 0.1  # straw and soil over a tenth of the ground
 
 
 def test_repeats_seamlessly() -> None:
@@ -44,6 +59,6 @@ def test_no_scales_above_the_highpass() -> None:
     # the texture repeats every DETAIL_PX pixels: at 32 base pixels a pixel (level
     # 5) it is nearly flat, the larger scales being the macro brightness's
     levels = detail.detail_pyramid(7)
-    assert levels[5].shape == (16, 16)
+    assert levels[5].shape == (16, 16, 3)
     assert levels[5].std() < 0.2 * levels[0].std()
-    assert len(levels) == 10 and levels[-1].shape == (1, 1)
+    assert len(levels) == 10 and levels[-1].shape == (1, 1, 3)
