@@ -156,3 +156,15 @@ def test_realism_measures_each_camera(tmp_path: Path) -> None:
     assert "goal: 1.6 to 2.6" in proc.stdout
     got = json.loads(out.read_text())["scenarios/cameras/flyover.yaml:uav1/belly"]
     assert len(got["exponent"]) == 2 and all(1.0 < a < 4.0 for a in got["exponent"])
+    # each camera's verdict on its median, and how many met the goal
+    row = next(r for r in proc.stdout.splitlines() if "uav1/belly" in r)
+    assert row.rsplit("| ", 1)[1] in ("met", "too flat", "too steep")
+    assert "of 1 cameras within the goal" in proc.stdout
+
+
+def test_realism_verdict() -> None:
+    from realism import within
+
+    assert [within(a) for a in (1.6, 2.0, 2.6)] == ["met"] * 3
+    assert within(1.59) == "too flat" and within(2.61) == "too steep"
+    assert within(float("nan")) == "no fit (flat image)"
