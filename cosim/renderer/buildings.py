@@ -34,7 +34,7 @@ import numpy as np
 
 from cosim.core.camera import NEAR_M, Pose, clip_near, project
 from cosim.renderer.targets import lambert
-from cosim.world.obstacles import Obstacle, signed_area
+from cosim.world.obstacles import Obstacle, inside, signed_area
 
 #: a face for the frame's painter: (painter's depth, depth, camera-axis
 #: polygon, BGRA, target id: 0, a building being no target)
@@ -182,6 +182,10 @@ class BuildingSet:
         #: per building, its faces' normals and centres (F x 3 each)
         self.face_normals = [b.normals for b in self.buildings]
         self.face_centres = [b.centres for b in self.buildings]
+        #: per building, its top's height and its box (north, east min; north, east max)
+        self.tops_m = np.array([-float(b.points[:, 2].min()) for b in self.buildings])
+        self.boxes = np.array([[*b.points[:, :2].min(axis=0), *b.points[:, :2].max(axis=0)]
+                               for b in self.buildings]).reshape(-1, 4)
         self.centres = np.zeros((len(self.buildings), 3))
         self.radii = np.zeros(len(self.buildings))
         for i, b in enumerate(self.buildings):
@@ -203,6 +207,29 @@ class BuildingSet:
         side = c_c @ (planes / np.linalg.norm(planes, axis=1)[:, None]).T
         side[:, 0] -= NEAR_M
         out: list[int] = np.flatnonzero((side >= -self.radii[:, None]).all(axis=1)).tolist()
+        return out
+
+    def in_shadow(self, pts: np.ndarray, sun_ned: np.ndarray, which: Sequence[int]
+                  ) -> np.ndarray:
+        """Whether each of ``pts`` (n x 3, scenario NED) is in the shadow of one
+        of buildings ``which``: its ray toward the sun (``sun_ned``, unit)
+        enters one of their faces."""
+        out = np.zeros(len(pts), dtype=bool)
+        if not len(which) or not len(pts):
+            return out
+        up_s = -float(sun_ned[2])  # the sun's rise per metre along its ray
+        tops_m = self.tops_m[which][:, None]  # (W, 1)
+        box = self.boxes[which][:, None, :]  # (W, 1, 4)
+        # where each ray rises past each building's top (W, n, 2): none reaches a
+        # building unless its way there meets the building's box
+        reach = pts[None, :, :2] + sun_ned[:2] * ((tops_m + pts[None, :, 2]) / up_s)[..., None]
+        near = ((-pts[None, :, 2] < tops_m)
+                & (np.minimum(pts[None, :, :2], reach) <= box[..., 2:]).all(axis=2)
+                & (np.maximum(pts[None, :, :2], reach) >= box[..., :2]).all(axis=2))
+        for w, k in np.argwhere(near).tolist():
+            if not out[k]:
+                b = self.buildings[which[w]]
+                out[k] = any(_enters(b.points[idx], n, pts[k], sun_ned) for idx, n, _ in b.faces)
         return out
 
     def shadows_l(self, rot: np.ndarray, shift: np.ndarray, which: Sequence[int]
@@ -241,6 +268,22 @@ class BuildingSet:
                     if targets and K is not None else depth_m
                 out.append((key, depth_m, v_c, bgra, 0))
         return out
+
+
+def _enters(v: np.ndarray, normal: np.ndarray, p: np.ndarray, d: np.ndarray) -> bool:
+    """Whether the ray from ``p`` along ``d`` enters the planar face ``v``
+    (k x 3) of outward ``normal``: it meets the face's plane ahead, going in,
+    at a point inside the face (in the plane's projection onto the two axes
+    the normal leans on least)."""
+    into = float(np.dot(normal, d))
+    if into > -1e-9:
+        return False  # along the face or out of it
+    t = float(np.dot(normal, v[0] - p)) / into
+    if t <= 0:
+        return False
+    x = p + t * d
+    keep = [a for a in range(3) if a != int(np.argmax(np.abs(normal)))]
+    return bool(inside(v[:, keep], x[None, keep])[0])
 
 
 #: a target as the painter's order with buildings sees it: its faces' nearest

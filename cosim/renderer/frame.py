@@ -61,6 +61,8 @@ from cosim.world.targets import TargetSpec
 MAX_PATCH_PX = 3000
 STRIPS = 8  # bands of rows, each drawn from one ground level
 OPAQUE = 255  # the frame's alpha channel: frames are BGRA (see render_frame)
+#: the sun of a target in a building's shadow: none (``targets.lambert`` gives ambient light)
+_NO_SUN = np.zeros(3)
 
 
 @dataclass(frozen=True)
@@ -525,9 +527,13 @@ def render_frame(world: World, cam: CameraSpec, pose: Pose, tick: int,
     probe_c = (origins[:, None, :] + offsets - pose.c_l) @ pose.R_cl.T  # (T, 9, 3)
     box_c = probe_c[:, :8]
     visible = ~_culled(view.planes, probe_c)
+    # a target whose box centre is in a building's shadow: lit by the sky alone
+    shaded = world.buildings.in_shadow((origins + offsets[:, :8].mean(axis=1) - shift) @ rot,
+                                       world.sun_l, near) \
+        if world.shade_table is not None and near else np.zeros(len(specs), dtype=bool)
     for k in np.flatnonzero(visible).tolist():
         faces.extend(_target_faces(pose, specs[k], origins[k], time_s, seed + k, k + 1,
-                                   world.sun_l))
+                                   _NO_SUN if shaded[k] else world.sun_l))
     faces.extend(world.buildings.faces(rot, shift, pose, world.sun_l, near, K, box_c, faces))
     seen = canopy.drawn(trees, K, pose, world.sun_l, w_img, h_img, view.planes, haze) \
         if trees is not None else None

@@ -12,7 +12,7 @@ import pytest
 
 from cosim.core.camera import CameraSpec, camera_pose
 from cosim.errors import ConfigError
-from cosim.renderer.buildings import building
+from cosim.renderer.buildings import BuildingSet, building
 from cosim.renderer.frame import World, WorldSpec, _scenario_to_l, render_frame
 from cosim.renderer.targets import lambert
 from cosim.scenario import load_scenario, parse_scenario
@@ -225,3 +225,51 @@ def test_the_village_example_validates() -> None:
     assert roofs == [("house1", "gable"), ("house2", "hip"), ("barn", "gable"),
                      ("shed", "flat")]
     assert scn.world.sun.shadows and len(scn.world.targets) == 2
+
+
+def test_a_target_in_a_buildings_shadow_is_lit_by_the_sky_alone() -> None:
+    """The sun 30 deg up in the east behind a 10 m block (east 5 m to -5 m):
+    its shadow reaches 22.3 m west. A person 10 m west of its middle (its
+    ray toward the sun meets the wall 3.8 m up) shows only the ambient share
+    of its colours, 0.45 (targets.lambert with no sun); one 30 m west, past
+    the shadow, is sunlit, as both are without the block."""
+    from cosim.renderer.targets import AMBIENT, parts_of
+    from cosim.world.targets import TARGET_DEFAULTS, TargetSpec
+
+    L, W, H, c = TARGET_DEFAULTS["person"]
+    people = tuple(TargetSpec(f"p{e:g}", "person", 0.0, e, None, None, 0.0, L, W, H, c)
+                   for e in (-10.0, -30.0))
+    block = Obstacle("b", ((-5.0, -5.0), (-5.0, 5.0), (5.0, 5.0), (5.0, -5.0)), 10.0)
+    cam = _cam()
+    la, lo = World(WorldSpec(LAT0, LON0, GROUND_M, 1, 120.0, GroundSpec(), ())).frame.place(
+        0.0, -20.0, GROUND_M)
+    pose = camera_pose(cam, float(la), float(lo), GROUND_M + 40.0, 0.0, 0.0, 0.0,
+                       ground_alt_m=GROUND_M)
+    ambient = {tuple(min(255, int(v * AMBIENT)) for v in p.color_rgb[::-1])
+               for p in parts_of(people[0])}
+    sun = SunSpec(azimuth_deg=90.0, elevation_deg=30.0, shadows=True)
+    for obstacles, want in (((block,), (True, False)), ((), (False, False))):
+        world = World(WorldSpec(LAT0, LON0, GROUND_M, 1, 120.0, GroundSpec(), people, obstacles,
+                                sun))
+        img, rows = render_frame(world, cam, pose, 0)
+        ids = world.last_ids(cam.height_px, cam.width_px)
+        for k in range(2):
+            assert rows[k]["fully_in_view"] == 1 and rows[k]["pixels_on_target"] > 10
+            colours = {tuple(int(v) for v in px) for px in img[ids == k + 1][:, :3]}
+            assert (colours <= ambient) == want[k], (k, colours, ambient)
+
+
+def test_what_lies_in_a_gable_houses_shadow_follows_its_roof() -> None:
+    """The sun 30 deg up in the east, the north-south gable house (walls 5 m,
+    ridge 9 m over east 0): a ray toward the sun from 0.5 m up rises
+    tan(30 deg) a metre. From 1 m west of the west wall it meets the wall;
+    from 8 m it clears the eaves (5.12 m) but meets the roof, steeper than
+    the ray; from 12 m it passes over the ridge (10.3 m at east 0), which a
+    flat roof at 9 m would stop."""
+    sun = SunSpec(azimuth_deg=90.0, elevation_deg=30.0).to_sun_ned()
+    pts = np.array([[0.0, -6.0, -0.5], [0.0, -13.0, -0.5], [0.0, -17.0, -0.5],
+                    [15.0, -6.0, -0.5]])  # the last north of the house
+    gable = BuildingSet((Obstacle("h", HOUSE, 9.0, "gable", 4.0),), sun, True)
+    assert gable.in_shadow(pts, sun, [0]).tolist() == [True, True, False, False]
+    flat = BuildingSet((Obstacle("h", HOUSE, 9.0),), sun, True)
+    assert flat.in_shadow(pts, sun, [0]).tolist() == [True, True, True, False]
