@@ -5,7 +5,8 @@ Owns the ``cameras:`` section (``section``, parsed by ``config``), the ground
 a frame draws (``ground``: the procedural texture ``texture`` and its
 ``noise``, its tiles in memory ``pyramid`` and on disk ``tile_cache``, the
 imagery drawn over it ``image_layers``), target drawing and ground truth
-(``targets``), one frame (``frame``) and its ground truth (``truth``), the
+(``targets``), the obstacles' buildings and shadows (``buildings``,
+``shadows``), one frame (``frame``) and its ground truth (``truth``), the
 operator view (``operator``), video (``video``, ``stream``), the render pool
 (``render_pool``), what the cameras write (``outputs``) and the loop's hooks
 (``participant``). What it draws is
