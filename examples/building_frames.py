@@ -1,8 +1,9 @@
 """The README's buildings picture (docs/images/buildings.png): the village
 example (examples/village/village.yaml: gable, hip and flat roofs, a car and
 a person, the afternoon sun) seen obliquely from its quadrotor's side of the
-village, with the sun's shadows off and on, each target's box labelled with
-its ground truth's visible_fraction.
+village, with the sun's shadows off and on (the person then in a house's
+shadow, lit by the sky alone), each target's box labelled with its ground
+truth's visible_fraction.
 
     python examples/building_frames.py [OUT.png]
 """
