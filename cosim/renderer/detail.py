@@ -39,7 +39,8 @@ from cosim.renderer.noise import uniform_hash, value_noise
 
 DETAIL_PX = 512  # the tileable detail texture's size at the base level
 #: litter: this many ellipses, radii (the geometric mean of the two semi-axes,
-#: base pixels) from .. to, elongation (major / minor axis) 1 to this
+#: base pixels) from .. to, elongation (major / minor axis) 1 to this, or less:
+#: no ellipse is narrower than two base pixels (its minor semi-axis at least 1)
 LITTER_COUNT = 40000
 LITTER_R_PX = (1.0, 12.0)
 LITTER_ELONGATION = 4.0
@@ -57,11 +58,11 @@ HIGHPASS_PX = 64.0  # scales above about this many base pixels removed
 _SHIFT = 4  # OpenCV's sub-pixel bits for the ellipses' centres and axes
 
 
-def litter(seed: int) -> np.ndarray:
-    """The litter layer (``DETAIL_PX`` square x RGB, float32, tones about 0,
-    tileable): ``LITTER_COUNT`` ellipses in a fixed order, each later one over the
-    earlier ones, drawn again one period over where they cross the texture's edge."""
-    S, ss = DETAIL_PX, SUPERSAMPLE
+def litter_ellipses(seed: int) -> tuple[np.ndarray, ...]:
+    """The litter's ellipses, in the order they are laid: centre row and column,
+    major and minor semi-axes (base pixels), heading (degrees) and colour (R, G, B
+    on 0..255, 128 the ground's own)."""
+    S = DETAIL_PX
     k = np.arange(LITTER_COUNT, dtype=np.float64)
     cy, cx, ur, ut, uphase, ue, uh, uk = (uniform_hash(k, np.full_like(k, j), seed).astype(
         np.float64) for j in range(8))
@@ -73,13 +74,20 @@ def litter(seed: int) -> np.ndarray:
         np.minimum(np.searchsorted(share / share[-1], uk, "right"), len(share) - 1)]
     colour = np.clip(np.rint(128.0 * (1.0 + LITTER_TONE_SD * gauss)[:, None] * tint), 1,
                      255).astype(int)
-    elong = 1.0 + (LITTER_ELONGATION - 1.0) * ue
-    major, minor = r * np.sqrt(elong), r / np.sqrt(elong)
+    elong = 1.0 + (np.minimum(LITTER_ELONGATION, r * r) - 1.0) * ue
+    return cy * S, cx * S, r * np.sqrt(elong), r / np.sqrt(elong), uh * 180.0, colour
+
+
+def litter(seed: int) -> np.ndarray:
+    """The litter layer (``DETAIL_PX`` square x RGB, float32, tones about 0,
+    tileable): ``litter_ellipses`` in their order, each later one over the earlier
+    ones, drawn again one period over where they cross the texture's edge."""
+    S, ss = DETAIL_PX, SUPERSAMPLE
+    y, x, major, minor, heading, colour = litter_ellipses(seed)
     pad = math.ceil(LITTER_R_PX[1] * math.sqrt(LITTER_ELONGATION)) + 2
     canvas = np.full(((S + 2 * pad) * ss,) * 2 + (3,), 128, np.uint8)
     # each ellipse where it is and, near an edge, one period over (its copies drawn
     # right after it): in the canvas's fixed point
-    y, x = cy * S, cx * S
     near_y = np.where(y < pad, S, np.where(y > S - pad, -S, 0))
     near_x = np.where(x < pad, S, np.where(x > S - pad, -S, 0))
     oy = np.stack([np.zeros_like(near_y), near_y, np.zeros_like(near_y), near_y])
@@ -93,7 +101,7 @@ def litter(seed: int) -> np.ndarray:
                               (y[which] + oy[copy, which] + pad) * unit,
                               major[which] * unit, minor[which] * unit])).astype(np.int64)
     for (px, py, a, b), t, h in zip(fixed.T.tolist(), colour[which].tolist(),
-                                    (uh[which] * 180.0).tolist()):
+                                    heading[which].tolist()):
         cv2.ellipse(canvas, (px, py), (a, b), h, 0, 360, t, -1, cv2.LINE_AA, _SHIFT)
     small = cv2.resize(canvas, None, fx=1 / ss, fy=1 / ss, interpolation=cv2.INTER_AREA)
     out: np.ndarray = small[pad:pad + S, pad:pad + S].astype(np.float32)

@@ -42,7 +42,7 @@ MACRO_STEP_M = 0.5  # macro features (fields, roads, trees) sampled at least thi
 MACRO_OVERSAMPLE = 2.0  # macro features sampled at most every this many pixels, then upsampled
 #: bump whenever a tile's pixels change for the same seed and ground parameters
 #: (old cache folders are then ignored; delete ~/.cache/cosim/ground to reclaim the space)
-TEXTURE_VERSION = 10
+TEXTURE_VERSION = 11
 FIELD_N_M, FIELD_E_M = 160.0, 220.0  # field size
 WARP_M = 15.0  # the field grid's warp, at most this many metres
 TREE_M = 7.0  # one tree at most per cell of this size, at a random place in its middle half

@@ -37,6 +37,17 @@ def test_litter_is_tinted_by_kind() -> None:
     assert (warm > 0.05).mean() > 0.1  # straw and soil over a tenth of the ground
 
 
+def test_no_litter_narrower_than_two_pixels() -> None:
+    # band-limited at the base level as every feature of the ground: an ellipse's
+    # minor semi-axis at least 1 px, its radii as drawn (r**-3 from 1 to 12 px)
+    _, _, major, minor, _, _ = detail.litter_ellipses(0)
+    assert minor.min() >= 1.0 - 1e-9
+    r = np.sqrt(major * minor)
+    assert r.min() >= 1.0 - 1e-9 and r.max() <= 12.0 + 1e-9
+    assert 0.45 < (r < np.sqrt(2.0)).mean() < 0.55  # half of them below sqrt(2) px
+    assert (major / minor).max() > 3.9  # elongated where wide enough
+
+
 def test_repeats_seamlessly() -> None:
     # across the texture's edge the detail changes no more than between any two
     # neighbouring pixels (an ellipse cut at the edge would show as a seam)
