@@ -2,8 +2,8 @@
 frames to video plus a ground-truth record per frame.
 
 Owns the ``cameras:`` section (``section``, parsed by ``config``), the ground
-a frame draws (``ground``: the procedural texture ``texture`` and its
-``noise``, its tiles in memory ``pyramid`` and on disk ``tile_cache``, the
+a frame draws (``ground``: the procedural texture ``texture``, its fine
+detail ``detail`` and its ``noise``, its tiles in memory ``pyramid`` and on disk ``tile_cache``, the
 imagery drawn over it ``image_layers``), target drawing and ground truth
 (``targets``), the obstacles' buildings and shadows (``buildings``,
 ``shadows``), one frame (``frame``) and its ground truth (``truth``), the
