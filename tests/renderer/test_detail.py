@@ -5,8 +5,9 @@ its high-pass to the macro brightness."""
 
 import numpy as np
 
-from cosim.conspicuity.spectrum import spectral_exponent
+from cosim.conspicuity.spectrum import luminance, spectral_exponent
 from cosim.renderer import detail
+from cosim.renderer.texture import ProceduralTiles
 
 REC709 = np.array([0.2126, 0.7152, 0.0722])
 
@@ -22,6 +23,18 @@ def test_spectral_exponent_over_its_octaves_is_natural() -> None:
         assert got.r2 > 0.95
         assert 0.1 < base.std() < 0.3  # a visible texture, a multiplier about 1
         assert abs(base.mean() - 1.0) < 0.02
+
+
+def test_a_level_0_tile_has_the_natural_exponent_at_fine_scales() -> None:
+    # the detail as the ground's tiles carry it (macro colour times the detail):
+    # 32 px to 4 px of a 5 cm level-0 tile, where the macro colour (a 0.5 m lattice)
+    # has little power; the version 8 texture's tiles gave 2.7 to 3.0 here
+    tiles = ProceduralTiles(0, 0.05, 256)
+    out = np.empty((256, 256, 4), np.uint8)
+    for ti, tj in ((0, 0), (3, 5), (-7, 2)):
+        lum = luminance(tiles.make(0, ti, tj, out)[..., 2::-1])
+        got = spectral_exponent(lum, lo_cpi=8, hi_nyquist=0.5).exponent
+        assert abs(got - 2.0) < 0.3, ((ti, tj), got)
 
 
 def test_litter_is_tinted_by_kind() -> None:
