@@ -396,17 +396,14 @@ class ProceduralTiles:
         #: the finest level whose tiles show the trees (flat); finer ones show the
         #: ground under them (their trees are drawn in 3-D: ``canopy``)
         self.trees_from_level = trees_from_level
+        #: the fine detail's levels (``detail.detail_pyramid``, about 0.5 s a seed):
+        #: made here, at the start, not in the middle of a run at its first new tile
+        self.detail = detail_pyramid(self.seed)
         T = tile_px
         self._slabs: dict[tuple[int, int, int], np.ndarray] = {}
         self._warp_buf = np.empty((T, T, 4), np.float32)
         self._coarse_buf = np.empty((0, 0, 4), np.float32)
         self._big_bufs: dict[int, np.ndarray] = {}  # resized lattice, by level
-
-    @property
-    def detail(self) -> tuple[np.ndarray, ...]:
-        """The fine detail's levels (``detail.detail_pyramid``): made for the first
-        tile made, not for tiles read from the cache."""
-        return detail_pyramid(self.seed)
 
     def _detail_slab(self, level: int, r0: int, c0: int) -> np.ndarray:
         """The fine-detail multiplier over one tile's pixels (T x T x 4 float32: the
