@@ -265,9 +265,6 @@ class Drawn:
         return max(k, done)
 
 
-_K = SIDES + 2  # a polygon's vertices at most (an outline clipped to the near plane)
-
-
 def drawn(trees: Trees, K: np.ndarray, pose: Pose, sun_l: np.ndarray, w_img: int,
           h_img: int, planes: np.ndarray, haze: Haze | None = None) -> Drawn | None:
     """The trees seen (``outlines``), ready to fill; ``planes``: the view
@@ -283,34 +280,21 @@ def drawn(trees: Trees, K: np.ndarray, pose: Pose, sun_l: np.ndarray, w_img: int
     trees = trees.take(np.flatnonzero((side >= -ball[:, None]).all(axis=1)))
     if not len(trees):
         return None
-    crown, cap, trunk, outside = outlines(trees, pose.c_l, sun_l)
-    polys = np.concatenate([trunk, crown, cap], axis=1)  # (N, 4 + 2 SIDES, 3)
-    pts_c = (polys - pose.c_l) @ pose.R_cl.T
-    z = pts_c[..., 2]
-    depth = np.linalg.norm(pts_c[:, 4:4 + SIDES].mean(axis=1), axis=1)
-    front = outside & (z.min(axis=1) >= NEAR_M)
-    n = len(trees)
-    out = np.zeros((n, 3, _K, 2))  # trunk, crown, cap of each tree
-    counts = np.zeros((n, 3), np.int64)
-    if front.any():
-        f = np.flatnonzero(front)
-        uv = project(K, pts_c[f].reshape(-1, 3)).reshape(len(f), -1, 2)
-        out[f, 0, :4], out[f, 1, :SIDES], out[f, 2, :SIDES] = \
-            uv[:, :4], uv[:, 4:4 + SIDES], uv[:, 4 + SIDES:]
-        ring = uv[:, 4:4 + SIDES]
-        # a trunk whose foot lies inside the crown's inscribed circle is hidden
-        mid = ring.mean(axis=1)
-        inner = np.linalg.norm(ring - mid[:, None, :], axis=2).min(axis=1) * math.cos(
-            math.pi / SIDES)
-        bare = np.linalg.norm(0.5 * (uv[:, 0] + uv[:, 1]) - mid, axis=1) > inner
-        counts[f] = np.column_stack([np.where(bare, 4, 0), np.full((len(f), 2), SIDES)])
-    for i in np.flatnonzero(outside & ~front & (z.max(axis=1) >= NEAR_M)).tolist():
-        for part, poly in enumerate((trunk[i], crown[i], cap[i])):  # clipped to the near plane
-            uv_i = to_image(K, pose, poly[None])[0][0]
-            if uv_i is not None:
-                out[i, part, :len(uv_i)], counts[i, part] = uv_i, len(uv_i)
+    from cosim.renderer.canopy_pass import outline_pixels  # numba: only when drawn
+
+    out, counts, depth, state = outline_pixels(*_axes(trees), sun_l, pose.c_l, pose.R_cl, K,
+                                               _COS, _SIN, LIT, TRUNK_M, NEAR_M)
+    across = np.flatnonzero(state == 1)
+    if len(across):  # across the near plane: each outline clipped to it
+        crown, cap, trunk, _ = outlines(trees.take(across), pose.c_l, sun_l)
+        counts[across] = 0
+        for j, i in enumerate(across.tolist()):
+            for part, poly in enumerate((trunk[j], crown[j], cap[j])):
+                uv_i = to_image(K, pose, poly[None])[0][0]
+                if uv_i is not None:
+                    out[i, part, :len(uv_i)], counts[i, part] = uv_i, len(uv_i)
     # the box of each tree's crown and trunk, from their own vertices
-    used = np.arange(_K)[None, None, :] < counts[:, :2, None]
+    used = np.arange(out.shape[2])[None, None, :] < counts[:, :2, None]
     lo = np.where(used[..., None], out[:, :2], np.inf).min(axis=(1, 2))
     hi = np.where(used[..., None], out[:, :2], -np.inf).max(axis=(1, 2))
     seen = (counts[:, 1] >= 3) & (hi[:, 0] >= -0.5) & (hi[:, 1] >= -0.5) \

@@ -206,7 +206,7 @@ def test_the_compiled_fill_covers_every_pixel_a_polygon_reaches_into() -> None:
 
     rng = np.random.default_rng(5)
     h, w = 60, 80
-    for _ in range(40):
+    for _ in range(200):
         n = int(rng.integers(3, 12))
         ang = np.sort(rng.uniform(0, 2 * np.pi, n))
         centre, radius = rng.uniform([-10, -10], [w + 10, h + 10]), rng.uniform(0.2, 30.0, 2)
@@ -250,3 +250,39 @@ def test_a_target_in_front_of_a_crown_stays_whole() -> None:
                   ["pixels_on_target"] for mode in ("flat", "3d")]
     assert px[-6.0][0] == px[-6.0][1] > 50
     assert px[6.0][1] < px[6.0][0]
+
+
+def test_the_compiled_outlines_are_numpys() -> None:
+    from cosim.renderer.canopy_pass import outline_pixels
+
+    rng = np.random.default_rng(11)
+    n = 300
+    trees = canopy.Trees(rng.uniform(-60, 60, n), rng.uniform(-60, 60, n),
+                         rng.uniform(1.6, 2.8, n), rng.uniform(2.5, 5.0, n),
+                         rng.uniform(6.0, 16.0, n), np.ones(n))
+    cam, world = _cam(-30.0), _world()
+    K = world.view(cam).K
+    pose = camera_pose(cam, LAT0, LON0, GROUND_M + 9.0, 0.0, 0.0, 30.0, GROUND_M)
+    centre, semi = canopy._axes(trees)
+    out, counts, depth, state = outline_pixels(centre, semi, world.sun_l, pose.c_l, pose.R_cl,
+                                               K, canopy._COS, canopy._SIN, canopy.LIT,
+                                               canopy.TRUNK_M, 0.05)
+    crown, cap, trunk, outside = canopy.outlines(trees, pose.c_l, world.sun_l)
+    assert np.array_equal(state == 2, ~outside)
+    front = state == 0
+    assert front.sum() > 100 and (state == 1).sum() > 5  # some across the near plane
+    for part, polys in ((0, trunk), (1, crown), (2, cap)):
+        uv = project(K, ((polys[front] - pose.c_l) @ pose.R_cl.T).reshape(-1, 3))
+        got = out[front, part, :polys.shape[1]].reshape(-1, 2)
+        assert np.allclose(got, uv, atol=1e-6)
+    mid = ((crown[front] - pose.c_l) @ pose.R_cl.T).mean(axis=1)
+    assert np.allclose(depth[front], np.linalg.norm(mid, axis=1))
+    # a trunk is left out where its foot lies inside the crown's inscribed circle
+    ring = out[front, 1, :canopy.SIDES]
+    centre_px = ring.mean(axis=1)
+    inner = np.linalg.norm(ring - centre_px[:, None], axis=2).min(axis=1) * math.cos(
+        math.pi / canopy.SIDES)
+    foot = out[front, 0, :2].mean(axis=1)
+    bare = np.linalg.norm(foot - centre_px, axis=1) > inner
+    assert np.array_equal(counts[front, 0], np.where(bare, 4, 0))
+    assert (counts[front, 1:] == canopy.SIDES).all()
