@@ -11,7 +11,8 @@ turns it into what the camera records, in this order:
    may fold back), the lens goes on at its rate at the corner. A barrel lens
    (``k1 < 0``) sees beyond the pinhole's field at the frame's edges and
    corners, so its stream renders a larger frame (``Sensor.source``: the same
-   focal length and centre, ``margin_px`` more on each side), nothing black.
+   focal length and centre, ``margin_px`` more on each side, at most half the
+   frame's size), nothing black unless the lens sees further still.
    The ground truth's geometry in pixels is distorted the same way and given
    in the recorded frame (``distort_truth``);
 2. motion blur: an exposure of ``T`` = ``exposure_ms`` ending at the frame's
@@ -426,7 +427,10 @@ class Sensor:
         self.maps: tuple[np.ndarray, np.ndarray] | None = None
         if spec.k1 or spec.k2:
             self.maps = distortion_maps(cam, spec.k1, spec.k2, extend=True)
-            margin = tuple(max(0, math.ceil(max(-float(v.min()), float(v.max()) - (n - 1))) + 1)
+            # at most half the frame on each side (a lens near folding at its
+            # corner would ask for a render many times the frame's size)
+            margin = tuple(min(n // 2, max(0, math.ceil(max(-float(v.min()),
+                                                            float(v.max()) - (n - 1))) + 1))
                            for v, n in zip(self.maps, (w, h)))
             if margin != (0, 0):  # the same maps, into the larger render
                 mx, my = margin

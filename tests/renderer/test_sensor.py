@@ -348,6 +348,25 @@ def test_a_barrel_lens_sees_scene_in_its_corners_and_its_truth_box_holds(tmp_pat
     assert box[1] < 3  # its top: the pinhole's field reaches row 11 there, black above
 
 
+def test_a_lens_near_folding_renders_at_most_twice_the_frame() -> None:
+    """k1 -1 at 46 deg barely keeps from folding at the corner: its corners would
+    ask for a render 1796 x 1348 for a 640 x 480 frame; it gets half the frame
+    more on each side at most, and what lies past that stays black."""
+    cam = _cam(hfov=46.0, k1=-1.0)
+    s = cam.sensor
+    assert s is not None
+    sensor = Sensor(cam, s, 1, 0)
+    assert (sensor.source.width_px, sensor.source.height_px) == (1280, 960)
+    assert sensor.source.fx_px == pytest.approx(cam.fx_px)
+    img = np.full((960, 1280, 4), 200, np.uint8)
+    out = sensor.apply(img, 0)
+    assert (out[0, 0, :3] == 0).all() and (out[240, 320, :3] == 200).all()
+    mild = _cam(hfov=60.0, k1=-0.1)
+    assert mild.sensor is not None
+    src = Sensor(mild, mild.sensor, 1, 0).source
+    assert 640 < src.width_px < 800 and 480 < src.height_px < 600
+
+
 # --- motion blur -----------------------------------------------------------------------
 
 
