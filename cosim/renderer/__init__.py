@@ -6,7 +6,8 @@ a frame draws (``ground``: the procedural texture ``texture``, its fine
 detail ``detail`` and its ``noise``, its tiles in memory ``pyramid`` and on disk ``tile_cache``, the
 imagery drawn over it ``image_layers``), target drawing and ground truth
 (``targets``), the obstacles' buildings and shadows (``buildings``,
-``shadows``), one frame (``frame``) and its ground truth (``truth``), the
+``shadows``), the procedural ground's trees in 3-D (``canopy``, filled by
+``canopy_pass``), one frame (``frame``) and its ground truth (``truth``), the
 operator view (``operator``), video (``video``, ``stream``), the render pool
 (``render_pool``), what the cameras write (``outputs``) and the loop's hooks
 (``participant``). What it draws is
