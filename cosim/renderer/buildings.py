@@ -181,6 +181,10 @@ class BuildingSet:
             if shadows else []
         #: per building, its faces' normals and centres (F x 3 each)
         self.face_normals = [b.normals for b in self.buildings]
+        #: per building, its faces' corners' indices (F x most corners, the first repeated)
+        self.face_corners = [np.array([[*idx, *[idx[0]] * (max(len(j) for j, _, _ in b.faces)
+                                                              - len(idx))]
+                                       for idx, _, _ in b.faces]) for b in self.buildings]
         self.face_centres = [b.centres for b in self.buildings]
         #: per building, its top's height and its box (north, east min; north, east max)
         self.tops_m = np.array([-float(b.points[:, 2].min()) for b in self.buildings])
@@ -245,7 +249,8 @@ class BuildingSet:
         the targets' faces ``drawn`` (their boxes' corners ``boxes_c``, T x 8
         x 3 camera axes, target id k + 1 for row k; ``K`` the intrinsics):
         see ``_painter_depth``."""
-        targets = _targets(K, boxes_c, drawn) if K is not None and boxes_c is not None else []
+        targets = _targets(K, boxes_c, drawn) \
+            if K is not None and boxes_c is not None and drawn else None
         out: list[Face] = []
         for i in which:
             b = self.buildings[i]
@@ -253,6 +258,20 @@ class BuildingSet:
             normals = self.face_normals[i] @ rot.T
             # the camera on the outer side of a face's plane: the face is seen
             toward = ((self.face_centres[i] @ rot.T + shift - pose.c_l) * normals).sum(axis=1)
+            # the building's image points, if it lies before the near plane and a
+            # target's image box meets its own (else its faces keep their depths)
+            uv = keys = None
+            if targets is not None and K is not None:
+                if pts_c[:, 2].min() < NEAR_M:
+                    uv = np.empty((0, 2))  # across the near plane: each face projected
+                else:
+                    uv = project(K, pts_c)
+                    if not any(_meets(targets[2], uv)):
+                        uv = None
+                    else:  # every face's order against the targets at once
+                        keys = _painter_bounds(uv[self.face_corners[i]],
+                                               pts_c[self.face_corners[i][:, 0]],
+                                               normals @ pose.R_cl.T, targets)
             for f in np.flatnonzero(toward < 0).tolist():
                 idx, _, c = b.faces[f]
                 v_c = pts_c[idx]
@@ -264,8 +283,12 @@ class BuildingSet:
                 bgra = (min(255, int(c[2] * k)), min(255, int(c[1] * k)),
                         min(255, int(c[0] * k)), 255)
                 depth_m = float(np.linalg.norm(v_c.mean(axis=0)))
-                key = _painter_depth(depth_m, v_c, pose.R_cl @ normals[f], K, targets) \
-                    if targets and K is not None else depth_m
+                key = depth_m
+                if keys is not None:
+                    key = max(min(depth_m, keys[0][f]), keys[1][f])
+                elif uv is not None and targets is not None and K is not None:
+                    key = _painter_depth(depth_m, project(K, v_c), v_c[0],
+                                         pose.R_cl @ normals[f], targets)
                 out.append((key, depth_m, v_c, bgra, 0))
         return out
 
@@ -286,51 +309,75 @@ def _enters(v: np.ndarray, normal: np.ndarray, p: np.ndarray, d: np.ndarray) -> 
     return bool(inside(v[:, keep], x[None, keep])[0])
 
 
-#: a target as the painter's order with buildings sees it: its faces' nearest
-#: and farthest painter's depth, its box's centre (camera axes) and image box
-_Target = tuple[float, float, np.ndarray, tuple[float, float, float, float]]
+#: the targets as the painter's order with buildings sees them: per target
+#: its faces' nearest and farthest painter's depths, its image box (x0, y0,
+#: x1, y1) and its box's centre (T x 3, camera axes). A handful of targets:
+#: plain floats cost less than numpy's calls here.
+_Targets = tuple[list[float], list[float], list[list[float]], np.ndarray]
 
 
-def _targets(K: np.ndarray, boxes_c: np.ndarray, drawn: Sequence[Face]) -> list[_Target]:
-    """The targets among ``drawn`` (faces with an id above 0)."""
+def _targets(K: np.ndarray, boxes_c: np.ndarray, drawn: Sequence[Face]) -> _Targets | None:
+    """The targets among ``drawn`` (faces with an id above 0), None if none."""
     keys: dict[int, tuple[float, float]] = {}
     for key, _, _, _, tid in drawn:
         if tid > 0:
             lo, hi = keys.get(tid, (math.inf, -math.inf))
             keys[tid] = (min(lo, key), max(hi, key))
-    out = []
-    for tid, (lo, hi) in keys.items():
-        box = boxes_c[tid - 1]
-        if (box[:, 2] >= NEAR_M).all():
-            uv = project(K, box)
-            rect = (float(uv[:, 0].min()), float(uv[:, 1].min()), float(uv[:, 0].max()),
-                    float(uv[:, 1].max()))
-        else:  # across the near plane: anywhere
-            rect = (-math.inf, -math.inf, math.inf, math.inf)
-        out.append((lo, hi, box.mean(axis=0), rect))
-    return out
+    if not keys:
+        return None
+    tids = list(keys)
+    boxes = boxes_c[[t - 1 for t in tids]]  # (T, 8, 3)
+    rects = np.tile([-math.inf, -math.inf, math.inf, math.inf], (len(tids), 1))
+    ahead = (boxes[:, :, 2] >= NEAR_M).all(axis=1)  # else across the near plane: anywhere
+    if ahead.any():
+        uv = project(K, boxes[ahead].reshape(-1, 3)).reshape(-1, 8, 2)
+        rects[ahead] = np.concatenate([uv.min(axis=1), uv.max(axis=1)], axis=1)
+    return ([keys[t][0] for t in tids], [keys[t][1] for t in tids], rects.tolist(),
+            boxes.mean(axis=1))
 
 
-def _painter_depth(depth_m: float, v_c: np.ndarray, normal_c: np.ndarray, K: np.ndarray,
-                   targets: list[_Target]) -> float:
+def _meets(rects: list[list[float]], uv: np.ndarray) -> list[bool]:
+    """Which of image boxes ``rects`` meet the box around points ``uv`` (n x 2)."""
+    bx0, by0 = uv.min(axis=0).tolist()
+    bx1, by1 = uv.max(axis=0).tolist()
+    return [x1 >= bx0 and x0 <= bx1 and y1 >= by0 and y0 <= by1 for x0, y0, x1, y1 in rects]
+
+
+def _painter_bounds(uv: np.ndarray, on_plane: np.ndarray, normals_c: np.ndarray,
+                    targets: _Targets) -> tuple[list[float], list[float]]:
+    """``_painter_depth``'s rule for F faces at once (``uv``: F x corners x 2,
+    ``on_plane``, ``normals_c``: F x 3): the painter's depth each may have at
+    most (before the targets behind it) and at least (after those in front)."""
+    t_lo, t_hi, rects, centres = targets
+    f_x0, f_y0 = uv.min(axis=1).T.tolist()
+    f_x1, f_y1 = uv.max(axis=1).T.tolist()
+    # the side of each face's plane each target's centre is on: c . n against p . n
+    c_n = (normals_c @ centres.T).tolist()
+    p_n = (on_plane * normals_c).sum(axis=1).tolist()
+    most, least = [], []
+    for f in range(len(p_n)):
+        m, n = math.inf, -math.inf
+        for t, (x0, y0, x1, y1) in enumerate(rects):
+            if x1 >= f_x0[f] and x0 <= f_x1[f] and y1 >= f_y0[f] and y0 <= f_y1[f]:
+                if c_n[f][t] < p_n[f]:
+                    m = min(m, t_lo[t])
+                else:
+                    n = max(n, t_hi[t])
+        most.append(m - 1e-3)
+        least.append(n + 1e-3)
+    return most, least
+
+
+def _painter_depth(depth_m: float, uv: np.ndarray, on_plane: np.ndarray, normal_c: np.ndarray,
+                   targets: _Targets) -> float:
     """A building face's painter's depth (its centre's distance ``depth_m``
-    otherwise): painted after every target whose image box meets its own and
-    whose box centre lies behind the face's plane (seen from the camera), and
-    before every such target in front of it, whatever their centres'
-    distances (a long wall's centre may be farther than a car behind it).
-    Should a target behind the face be nearer than one in front of it (rare),
-    the one in front keeps its place and the one behind may show through."""
-    uv = project(K, v_c)
-    x0, y0 = uv.min(axis=0).tolist()
-    x1, y1 = uv.max(axis=0).tolist()
-    key = depth_m
-    behind, front = math.inf, -math.inf
-    for lo, hi, centre, (tx0, ty0, tx1, ty1) in targets:
-        if tx1 < x0 or x1 < tx0 or ty1 < y0 or y1 < ty0:
-            continue  # they do not overlap in the image
-        if float(np.dot(centre - v_c[0], normal_c)) < 0:
-            behind = min(behind, lo)
-        else:
-            front = max(front, hi)
-    key = min(key, behind - 1e-3)
-    return max(key, front + 1e-3)
+    otherwise; ``uv`` its corners in the image, ``on_plane`` a point of its
+    plane and ``normal_c`` its outward normal, camera axes): painted after
+    every target whose image box meets its own and whose box centre lies
+    behind the face's plane (seen from the camera), and before every such
+    target in front of it, whatever their centres' distances (a long wall's
+    centre may be farther than a car behind it). Should a target behind the
+    face be nearer than one in front of it (rare), the one in front keeps
+    its place and the one behind may show through."""
+    most, least = _painter_bounds(uv[None], on_plane[None], normal_c[None], targets)
+    return max(min(depth_m, most[0]), least[0])
