@@ -181,10 +181,8 @@ class BuildingSet:
             if shadows else []
         #: per building, its faces' normals and centres (F x 3 each)
         self.face_normals = [b.normals for b in self.buildings]
-        #: per building, its faces' corners' indices (F x most corners, the first repeated)
-        self.face_corners = [np.array([[*idx, *[idx[0]] * (max(len(j) for j, _, _ in b.faces)
-                                                              - len(idx))]
-                                       for idx, _, _ in b.faces]) for b in self.buildings]
+        #: per building, its faces' corners' indices (``_corner_table``)
+        self.face_corners = [_corner_table(b) for b in self.buildings]
         self.face_centres = [b.centres for b in self.buildings]
         #: per building, its top's height and its box (north, east min; north, east max)
         self.tops_m = np.array([-float(b.points[:, 2].min()) for b in self.buildings])
@@ -258,8 +256,9 @@ class BuildingSet:
             normals = self.face_normals[i] @ rot.T
             # the camera on the outer side of a face's plane: the face is seen
             toward = ((self.face_centres[i] @ rot.T + shift - pose.c_l) * normals).sum(axis=1)
-            # the building's image points, if it lies before the near plane and a
-            # target's image box meets its own (else its faces keep their depths)
+            # its order against the targets whose image boxes meet its own (none:
+            # its faces keep their depths): every face at once (keys) if it lies
+            # before the near plane, else face by face, each clipped and projected
             uv = keys = None
             if targets is not None and K is not None:
                 if pts_c[:, 2].min() < NEAR_M:
@@ -291,6 +290,13 @@ class BuildingSet:
                                          pose.R_cl @ normals[f], targets)
                 out.append((key, depth_m, v_c, bgra, 0))
         return out
+
+
+def _corner_table(b: Building) -> np.ndarray:
+    """Building ``b``'s faces' corners' indices, a face a row (F x its most
+    corners), the rows of faces with fewer corners padded with their first."""
+    most = max(len(idx) for idx, _, _ in b.faces)
+    return np.array([[*idx, *[idx[0]] * (most - len(idx))] for idx, _, _ in b.faces])
 
 
 def _enters(v: np.ndarray, normal: np.ndarray, p: np.ndarray, d: np.ndarray) -> bool:
