@@ -36,8 +36,9 @@ from cosim.renderer.haze import Haze
 from cosim.renderer.targets import AMBIENT
 from cosim.renderer.texture import _TREE, TREE_M, TREE_R_M, WOOD_TOP_M, tree_tables
 
-#: ground levels this coarse (level 4: 0.8 m a pixel at the default 5 cm base)
-#: or coarser keep their flat crowns; finer ones show the ground under the trees
+#: ground levels this coarse (level 4: 0.8 m a pixel at the default 5 cm base,
+#: which a frame draws where a pixel covers 0.57 m or more) or coarser keep their
+#: flat crowns; finer ones show the ground under the trees
 FLAT_FROM_LEVEL = 4
 MAX_TREES = 4000  # trees drawn in 3-D a frame at most, the nearest
 REACH_M = 600.0  # trees drawn in 3-D at most this far from the camera's ground point

@@ -286,3 +286,20 @@ def test_the_compiled_outlines_are_numpys() -> None:
     bare = np.linalg.norm(foot - centre_px, axis=1) > inner
     assert np.array_equal(counts[front, 0], np.where(bare, 4, 0))
     assert (counts[front, 1:] == canopy.SIDES).all()
+
+
+@pytest.mark.integration
+def test_3d_trees_are_the_same_inline_and_in_worker_processes(tmp_path: Path) -> None:
+    from tests.renderer.test_renderer import _fly
+
+    # ten 160 x 120 frames 80 m apart along a line north, 60 m up (0.36 m a pixel:
+    # ground finer than the flat trees' levels), hedgerows and woods in view
+    digests = []
+    for n in (0, 1):
+        summary, _ = _fly(tmp_path, f"w{n}", workers=n, rate=10.0, dur=1.0, v_mps=800.0,
+                          alt_agl_m=60.0, more="ground: {texture: procedural, trees: 3d}\n")
+        digests.append([s["frames_sha256"] for s in summary["streams"]])
+    flat, _ = _fly(tmp_path, "flat", workers=0, rate=10.0, dur=1.0, v_mps=800.0,
+                   alt_agl_m=60.0)
+    assert digests[0] == digests[1]
+    assert digests[0] != [s["frames_sha256"] for s in flat["streams"]]  # trees in view
