@@ -26,6 +26,7 @@ targets' (``shadows.draw_shadows``).
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -74,22 +75,32 @@ class Trees:
         return len(self.north_m)
 
 
+@functools.lru_cache(maxsize=256)
+def _block(seed: int, bn: int, be: int) -> np.ndarray:
+    """The trees standing in the block of tree cells from ``(bn, be)`` (``_BLOCK``
+    a side): (6, n) float64, foot north and east, radius, crown, top, tone (at
+    most 50 kB a block; not to be written)."""
+    tab = tree_tables(seed, bn, bn, be, be)  # the block that holds the cell, kept
+    assert tab is not None and tab[1] - tab[0] == _BLOCK
+    wood, hedge, tn, te, radius, tone, crown, top = tab[4]
+    k = np.flatnonzero(wood | hedge)
+    out = np.stack([a.take(k).astype(np.float64) for a in (tn, te, radius, crown, top, tone)])
+    out.flags.writeable = False
+    return out
+
+
 def standing(seed: int, n0: float, n1: float, e0: float, e1: float) -> Trees:
     """The trees (scenario frame) whose foot lies in north ``[n0, n1)`` x east
     ``[e0, e1)``: the texture's, from its tables (kept by whole blocks)."""
     kn0, kn1 = math.floor(n0 / TREE_M), math.floor(n1 / TREE_M)
     ke0, ke1 = math.floor(e0 / TREE_M), math.floor(e1 / TREE_M)
-    got: list[tuple[np.ndarray, ...]] = []
-    for bn in range(kn0 - kn0 % _BLOCK, kn1 + 1, _BLOCK):
-        for be in range(ke0 - ke0 % _BLOCK, ke1 + 1, _BLOCK):
-            tab = tree_tables(seed, bn, bn, be, be)  # the block that holds the cell, kept
-            assert tab is not None and tab[1] - tab[0] == _BLOCK
-            wood, hedge, tn, te, radius, tone, crown, top = tab[4]
-            k = np.flatnonzero((wood | hedge) & (tn >= n0) & (tn < n1) & (te >= e0) & (te < e1))
-            got.append(tuple(a.take(k) for a in (tn, te, radius, crown, top, tone)))
-    if not got:
-        return Trees(*(np.zeros(0) for _ in range(6)))
-    return Trees(*(np.concatenate([g[i] for g in got]).astype(np.float64) for i in range(6)))
+    blocks = [_block(seed, bn, be) for bn in range(kn0 - kn0 % _BLOCK, kn1 + 1, _BLOCK)
+              for be in range(ke0 - ke0 % _BLOCK, ke1 + 1, _BLOCK)]
+    if not blocks:
+        return Trees(*np.zeros((6, 0)))
+    every = blocks[0] if len(blocks) == 1 else np.concatenate(blocks, axis=1)
+    tn, te = every[0], every[1]
+    return Trees(*every[:, (tn >= n0) & (tn < n1) & (te >= e0) & (te < e1)])
 
 
 def _circle(centre: np.ndarray, radius: np.ndarray, axis: np.ndarray) -> np.ndarray:
