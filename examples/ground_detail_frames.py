@@ -2,8 +2,9 @@
 altitude_speed trial's nadir camera (37.6 deg along track, 640 x 480) 30 m
 over its truck, the middle 318 x 240 pixels of the frame (about 14 x 10 m at
 4.3 cm a pixel), with the ground texture of version 8 (its fine detail smooth
-value-noise octaves, the within-field brightness down to 7.5 m only) and
-today's (clods, stones, leaf litter and tufts, ``cosim.renderer.detail``).
+value-noise octaves, the within-field brightness down to 7.5 m only, no
+tramlines) and today's (clods, stones, leaf litter and tufts,
+``cosim.renderer.detail``).
 Each half is labelled with the frame's spectral exponent (the whole frame,
 ``cosim.conspicuity.spectrum``).
 
@@ -28,7 +29,7 @@ import numpy as np
 from cosim.conspicuity.spectrum import luminance, spectral_exponent
 from cosim.core.camera import CameraSpec, camera_pose
 from cosim.core.geo import LocalFrame
-from cosim.renderer import texture
+from cosim.renderer import noise, texture
 from cosim.renderer.frame import World, WorldSpec, render_frame
 from cosim.renderer.noise import value_noise
 from cosim.scenario import load_scenario
@@ -56,15 +57,19 @@ def detail_v8(seed: int) -> tuple[np.ndarray, ...]:
 
 @contextmanager
 def version_8() -> Iterator[None]:
-    """The ground texture as it was in version 8, within the block."""
-    kept = texture.detail_pyramid, texture.BRIGHT_M, texture.BRIGHT_AMP
+    """The ground texture as it was in version 8, within the block (no tramlines;
+    its own per-cell tables, which the tramlines' strength is part of)."""
+    kept = (texture.detail_pyramid, texture.BRIGHT_M, texture.BRIGHT_AMP, texture.TRACK_DARK,
+            noise.TABLES)
     texture.detail_pyramid = detail_v8  # type: ignore[assignment]
     texture.BRIGHT_M, texture.BRIGHT_AMP = (60.0, 30.0, 15.0, 7.5), (0.35, 0.175, 0.0875,
                                                                      0.04375)
+    texture.TRACK_DARK, noise.TABLES = 0.0, noise.Tables(noise.TABLES.max_bytes)
     try:
         yield
     finally:
-        texture.detail_pyramid, texture.BRIGHT_M, texture.BRIGHT_AMP = kept
+        (texture.detail_pyramid, texture.BRIGHT_M, texture.BRIGHT_AMP, texture.TRACK_DARK,
+         noise.TABLES) = kept
 
 
 def main(out: Path) -> None:

@@ -1,13 +1,13 @@
 """The procedural ground's texture: a pure function of the seed and the
 position, drawn a tile at a time (``ProceduralTiles.make``).
 
-Fields in a gently warped grid (crop colours, crop rows), hedgerows and woods
-of individual tree crowns, roads (``macro_rgb``), and a tileable fine-detail
-texture down to the base level (5 cm/px by default: clods, stones, leaf litter
-and tufts, ``detail``). Every feature is
-band-limited to the level it is drawn at (crop rows and noise octaves finer
-than two pixels are left out, roads and tree crowns are drawn with their pixel
-coverage). A tile costs about 1 to 2 ms to make. Level ``l`` has
+Fields in a gently warped grid (crop colours, crop rows, tramlines), hedgerows
+and woods of individual tree crowns, roads (``macro_rgb``), and a tileable
+fine-detail texture down to the base level (5 cm/px by default: clods, stones,
+leaf litter and tufts, ``detail``). Every feature is band-limited to the level
+it is drawn at (crop rows and noise octaves finer than two pixels are left out,
+roads, tree crowns and tramlines' tracks are drawn with their pixel coverage). A
+tile costs about 1 to 2 ms to make. Level ``l`` has
 ``base_m_per_px * 2**l`` metres per pixel; its pixel ``(row, col)`` is centred
 at ``east = (col + 0.5) * mpp``, ``north = -(row + 0.5) * mpp`` (scenario
 frame metres).
@@ -42,7 +42,7 @@ MACRO_STEP_M = 0.5  # macro features (fields, roads, trees) sampled at least thi
 MACRO_OVERSAMPLE = 2.0  # macro features sampled at most every this many pixels, then upsampled
 #: bump whenever a tile's pixels change for the same seed and ground parameters
 #: (old cache folders are then ignored; delete ~/.cache/cosim/ground to reclaim the space)
-TEXTURE_VERSION = 11
+TEXTURE_VERSION = 12
 FIELD_N_M, FIELD_E_M = 160.0, 220.0  # field size
 WARP_M = 15.0  # the field grid's warp, at most this many metres
 TREE_M = 7.0  # one tree at most per cell of this size, at a random place in its middle half
@@ -58,6 +58,12 @@ BRIGHT_AMP: tuple[float, ...] = (0.35, 0.25, 0.25, 0.25, 0.25)
 #: above the ground); a hedgerow's trees are lower
 WOOD_CROWN_M, WOOD_TOP_M = (3.0, 5.0), (8.0, 16.0)
 HEDGE_CROWN_M, HEDGE_TOP_M = (2.5, 4.0), (6.0, 10.0)
+
+#: tramlines: in some crop fields (``TRAMLINE_SHARE`` of crops, wheat and dark crop)
+#: a pair of wheel tracks ``TRACK_GAUGE_M`` apart, each ``TRACK_M`` wide, along the
+#: crop rows every ``TRAMLINE_ROWS`` rows, darker by ``TRACK_DARK`` (bare soil)
+TRAMLINE_SHARE, TRAMLINE_ROWS = 0.6, 8
+TRACK_GAUGE_M, TRACK_M, TRACK_DARK = 1.8, 0.45, 0.35
 
 # field palette, RGB: crops, pasture, wheat, ploughed soil, dry grass, dark crop
 _FIELDS = np.array([[96, 128, 58], [118, 140, 72], [176, 160, 96], [122, 98, 72],
@@ -77,8 +83,10 @@ def _field_cells(seed: int, step_m: float, a0: int, a1: int, b0: int,
                  b1: int) -> tuple[np.ndarray, ...]:
     """What depends only on a field: for the cells ``[a0, a1) x [b0, b1)`` of the
     field grid (flat, row-major) its colour (3 x cells), crop-row amplitude and
-    cycles per field unit along u and v; and whether the grid lines ``a0 .. a1 - 1``
-    (north) and ``b0 .. b1 - 1`` (east) are roads (a road's half width, or -1000)."""
+    cycles per field unit along u and v, its tramlines' strength (0: none) and
+    spacing (metres); and
+    whether the grid lines ``a0 .. a1 - 1`` (north) and ``b0 .. b1 - 1`` (east) are
+    roads (a road's half width, or -1000)."""
     ki = np.arange(a0, a1, dtype=np.float64)
     kj = np.arange(b0, b1, dtype=np.float64)
     hf = uniform_hash(ki[:, None], kj[None, :], seed + 3).ravel()
@@ -92,11 +100,17 @@ def _field_cells(seed: int, step_m: float, a0: int, a1: int, b0: int,
     amp = (0.10 * fade * (kind != 1)).astype(np.float32)  # pasture has none
     cu = np.where(along, FIELD_N_M / period, 0.0).astype(np.float32)  # cycles per field unit
     cv = np.where(along, 0.0, FIELD_E_M / period).astype(np.float32)
+    # tramlines, 20 m or more apart: faded out where a sample is 4 to 8 m
+    tram = next(derive(hf, 4241.3)) < TRAMLINE_SHARE
+    tram &= (kind == 0) | (kind == 2) | (kind == 5)
+    tram_fade = float(np.clip((8.0 - step_m) / 4.0, 0.0, 1.0))
+    tram_amp = (TRACK_DARK * tram_fade * tram).astype(np.float32)
+    tram_m = (TRAMLINE_ROWS * period).astype(np.float32)
     road_n = np.where(uniform_hash(ki, np.zeros_like(ki), seed + 8) < 0.3, 3.0,
                       -1e3).astype(np.float32)
     road_e = np.where(uniform_hash(np.zeros_like(kj), kj, seed + 9) < 0.3, 3.0,
                       -1e3).astype(np.float32)
-    return colour, amp, cu, cv, road_n, road_e
+    return colour, amp, cu, cv, tram_amp, tram_m, road_n, road_e
 
 
 def _tree_cells(kn: np.ndarray, ke: np.ndarray, seed: int) -> tuple[np.ndarray, ...]:
@@ -249,6 +263,33 @@ def _trees(nv: np.ndarray, ev: np.ndarray, step_m: float, seed: int,
     return at, alpha.take(at), shade.take(at)
 
 
+def _tracks(rows: np.ndarray, tram_m: np.ndarray, step_m: float) -> np.ndarray:
+    """A tramline's wheel tracks' coverage (0..1, float32) of each sample, box-filtered
+    over ``step_m`` (a track narrower than a sample covers its share of it, both
+    tracks a sample wider than them both), from the crop-row phase ``rows`` (rows
+    across the field) and the tramlines' spacing ``tram_m`` (metres, every
+    ``TRAMLINE_ROWS``-th row): its two tracks ``TRACK_GAUGE_M / 2`` to either side
+    of each. A sample ``2 b`` wide at a distance ``d >= 0`` from a track ``2 h``
+    wide overlaps it by ``clip(h + b - d, 0, 2 min(h, b))``."""
+    f32 = np.float32
+    half, box, gauge = f32(TRACK_M / 2), f32(max(step_m, 1e-6) / 2), f32(TRACK_GAUGE_M / 2)
+    dist = rows / f32(TRAMLINE_ROWS)
+    dist -= np.round(dist)
+    np.abs(dist, out=dist)
+    dist *= tram_m  # metres from the tramline's centre
+    near = np.abs(dist - gauge)  # from the nearer track, then the farther one's overlap
+    out = np.subtract(half + box - gauge, dist, out=dist)
+    cap = f32(2 * min(half, box))
+    np.clip(out, 0.0, cap, out=out)
+    near -= half + box
+    np.negative(near, out=near)
+    np.clip(near, 0.0, cap, out=near)
+    out += near
+    out *= f32(1.0 / (2 * box))
+    res: np.ndarray = np.minimum(out, 1.0, out=out)
+    return res
+
+
 def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int,
               with_trees: bool = True) -> np.ndarray:
     """The procedural ground's colour as float32 planes (3, R, C), RGB about 0..255
@@ -282,7 +323,7 @@ def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int,
     got = noise.TABLES.cover(("field", seed, step_m), ci0, ci1, cj0, cj1, 8,
                         functools.partial(_field_cells, seed, step_m))
     assert got is not None
-    a0, a1, b0, b1, (colour, amp, cu, cv, road_n, road_e) = got
+    a0, a1, b0, b1, (colour, amp, cu, cv, tram_amp, tram_m, road_n, road_e) = got
     nj = b1 - b0
     here = (slice(ci0 - a0, ci1 + 1 - a0), slice(cj0 - b0, cj1 + 1 - b0))  # of a table
     fu, fv = np.floor(u), np.floor(v)
@@ -293,14 +334,19 @@ def macro_rgb(n: np.ndarray, e: np.ndarray, step_m: float, seed: int,
     cell = iu * nj
     cell += iv
     # crop rows: 2.5-4 m apart, along or across the field, only where resolvable
-    if amp.reshape(-1, nj)[here].any():
+    rows_here, trams_here = amp.reshape(-1, nj)[here].any(), tram_amp.reshape(-1, nj)[here].any()
+    if rows_here or trams_here:
         phase = u * cu.take(cell)
-        phase += v * cv.take(cell)
+        phase += v * cv.take(cell)  # crop rows (cycles) across the field
+        tracks = _tracks(phase, tram_m.take(cell), step_m) if trams_here else None
         phase -= np.floor(phase)  # sin in float32 of the phase in [0, 1)
         phase *= f32(2 * np.pi)
         factor = np.sin(phase, out=phase)
         factor *= amp.take(cell)
         factor += f32(1.0)
+        if tracks is not None:
+            tracks *= tram_amp.take(cell)
+            factor *= f32(1.0) - tracks
     else:
         factor = np.ones((R, C), np.float32)
     # brightness variation within fields (soil moisture, growth)
