@@ -210,12 +210,13 @@ def blur(rounds: int) -> dict[str, float]:
 
 
 def haze_lut(rounds: int) -> dict[str, float]:
-    """The haze's table look-up over a whole frame: the compiled sweep over
-    tiles (committed) against cv2.LUT with a four-channel table (the airlight's
-    colour differs by channel), one table shared by the channels (what a grey
-    airlight would allow) and three channels after a colour conversion."""
+    """The haze's table look-up over a whole frame: the compiled sweep of each
+    pixel's interpolated transmittance (committed) against cv2.LUT with a
+    four-channel table (the airlight's colour differs by channel), one table
+    shared by the channels (what a grey airlight would allow) and three
+    channels after a colour conversion."""
     from cosim.renderer.haze import TILE_COLS, TILE_ROWS
-    from cosim.renderer.haze_pass import haze_tiles
+    from cosim.renderer.haze_pass import haze_smooth
 
     base = _frame()
     ramp = np.arange(256) // 2
@@ -225,11 +226,13 @@ def haze_lut(rounds: int) -> dict[str, float]:
     bgr = np.empty((H, W, 3), np.uint8)
     tables = np.ascontiguousarray(table4)  # one level: (1, 256, 4)
     rows = np.array([(y, y + TILE_ROWS) for y in range(0, H, TILE_ROWS)], np.int64)
-    levels = np.zeros((len(rows), -(-W // TILE_COLS)), np.int64)
+    yc = rows.mean(axis=1) - 0.5
+    xc = np.arange(0, W, TILE_COLS) + (TILE_COLS - 1) / 2.0
+    t_c = np.full((len(rows), len(xc)), 0.5)
 
     def swept(_: int) -> None:
         img = base.copy()
-        haze_tiles(img, rows, levels, tables, TILE_COLS)
+        haze_smooth(img, rows, yc, xc, t_c, tables)
 
     def four(_: int) -> None:
         img = base.copy()
@@ -246,7 +249,7 @@ def haze_lut(rounds: int) -> dict[str, float]:
         cv2.cvtColor(bgr, cv2.COLOR_BGR2BGRA, dst=img)
 
     swept(0)  # numba compiles (or loads) it
-    return _ab({"haze, compiled sweep over tiles (committed)": swept,
+    return _ab({"haze, compiled sweep, interpolated (committed)": swept,
                 "haze, cv2.LUT four-channel table": four,
                 "haze, cv2.LUT one table for all channels": shared,
                 "haze, cv2.LUT three channels after cvtColor": three}, rounds)

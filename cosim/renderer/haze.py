@@ -7,15 +7,14 @@ A colour ``L0`` (sRGB linearised as the ground truth's contrast does it,
 are flat, so each face's colour is hazed once at its own distance (its
 centre's, the one that orders the faces) before it is filled; smoke puffs
 likewise at theirs. The ground is hazed where it is drawn, before anything
-is drawn over it, in tiles of ``TILE_ROWS x TILE_COLS`` pixels, each with the
-transmittance of the ray through its centre to the ground plane (a ray that
+is drawn over it: the transmittance of the ray through each tile centre of a
+grid ``TILE_ROWS x TILE_COLS`` pixels apart to the ground plane (a ray that
 misses the ground, or meets it beyond the ground's range, counts at that
-range) in steps of ``1 / LEVELS``, each hazed with its step's middle: one
-table look-up per value, each tile through its step's table, in one compiled
-sweep (``haze_pass``; the same bytes as a ``cv2.LUT`` per run of tiles of one
-step, ``Haze.pieces``, at a third of the cost). ``tile_transmittance``
-gives those values; the tests hold them to the exact per-pixel ones. The sky
-is left as it is (its horizon is the default airlight: ``cosim.renderer.sky``).
+range), interpolated bilinearly to every pixel, in steps of ``1 / LEVELS``,
+each hazed with its step's middle: one table look-up per value in one
+compiled sweep (``haze_pass``). The tests hold the pixels' transmittance to
+the exact per-pixel one. The sky is left as it is (its horizon is the
+default airlight: ``cosim.renderer.sky``).
 """
 
 from __future__ import annotations
@@ -34,7 +33,7 @@ GAMMA = 2.2
 #: transmittance steps of the ground's tables: step k holds t from k / LEVELS
 #: to (k + 1) / LEVELS and hazes with their middle, within 1 / (2 LEVELS)
 LEVELS = 128
-#: the ground's tiles (pixels), each hazed with one transmittance
+#: the ground's transmittance is computed this many pixels apart, interpolated between
 TILE_ROWS, TILE_COLS = 4, 32
 
 
@@ -81,14 +80,16 @@ class Haze:
         (``[y0, y1)`` each), in place; with ``mask`` (h x w uint8) only the
         pixels it marks. ``H``: image -> L ground (north, east)
         (``cosim.core.camera.ground_homography``), ``max_r_m`` the ground's range."""
-        rows, levels = self.tile_levels(H, pose, max_r_m, bands, img.shape[1])
+        rows, yc, xc, t = self.tile_transmittance(H, pose, max_r_m, bands, img.shape[1])
         if len(rows):
-            self.compiled.haze_tiles(img, rows, levels, self.tables3, TILE_COLS, mask)
+            self.compiled.haze_smooth(img, rows, yc, xc, t, self.tables3, mask)
 
-    def tile_levels(self, H: np.ndarray, pose: Pose, max_r_m: float,
-                    bands: list[tuple[int, int]], w: int) -> tuple[np.ndarray, np.ndarray]:
-        """The ground's rows of tiles (n x 2: ``[y0, y1)``) and each tile's
-        step (n x tiles across): it hazes with ``(level + 0.5) / LEVELS``."""
+    def tile_transmittance(self, H: np.ndarray, pose: Pose, max_r_m: float,
+                           bands: list[tuple[int, int]], w: int
+                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The ground's rows of tiles (n x 2: ``[y0, y1)``), their centres' rows
+        (n) and columns (tiles across), and the transmittance there (n x tiles
+        across): what ``haze_pass.haze_smooth`` interpolates."""
         key = (tuple(bands), w)
         grid = self.grids.get(key)
         if grid is None:  # the tiles of these bands, once (a frame's bands repeat)
@@ -98,51 +99,11 @@ class Haze:
                 self.grids.clear()
             grid = self.grids[key] = (rows, tile_centres(rows.tolist(), w))
         rows, centres = grid
-        if not len(rows):
-            return rows, np.zeros((0, 0), np.int64)
-        t = transmittance_at(self.k_per_m, H, pose, max_r_m, centres).reshape(len(rows), -1)
-        return rows, np.minimum((t * LEVELS).astype(np.int64), LEVELS - 1)
-
-    def pieces(self, H: np.ndarray, pose: Pose, max_r_m: float, bands: list[tuple[int, int]],
-               w: int) -> list[tuple[int, int, int, int, int]]:
-        """The ground's rectangles ``(y0, y1, x0, x1, level)`` each hazed with
-        one transmittance ``(level + 0.5) / LEVELS``: runs of tiles of one level
-        along a row of tiles, joined with the row above when it has the same
-        runs."""
-        rows_a, levels = self.tile_levels(H, pose, max_r_m, bands, w)
-        if not len(rows_a):
-            return []
-        rows = rows_a.tolist()
-        n_r, n_c = levels.shape
-        cut = np.ones((n_r, n_c + 1), bool)  # a run starts (or the row ends) here
-        cut[:, 1:-1] = levels[:, 1:] != levels[:, :-1]
-        rr, cc = np.nonzero(cut)
-        first = np.flatnonzero(cc < n_c)  # each run: its row, first and end tile
-        r, c0, c1 = rr[first], cc[first], cc[first + 1]
-        lv = levels[r, c0]
-        # a run continues the same run (columns and level) of the row above
-        order = np.lexsort((r, lv, c1, c0))
-        r, c0, c1, lv = r[order], c0[order], c1[order], lv[order]
-        y0 = np.array([a for a, _ in rows])[r]
-        y1 = np.array([b for _, b in rows])[r]
-        goes_on = np.zeros(len(r), bool)
-        goes_on[1:] = ((c0[1:] == c0[:-1]) & (c1[1:] == c1[:-1]) & (lv[1:] == lv[:-1])
-                       & (r[1:] == r[:-1] + 1) & (y0[1:] == y1[:-1]))
-        starts = np.flatnonzero(~goes_on)
-        ends = np.append(starts[1:], len(r)) - 1
-        edges = np.minimum(np.arange(n_c + 1) * TILE_COLS, w)
-        out = list(zip(y0[starts].tolist(), y1[ends].tolist(), edges[c0[starts]].tolist(),
-                       edges[c1[starts]].tolist(), lv[starts].tolist()))
-        return out
-
-
-def tile_transmittance(k_per_m: float, H: np.ndarray, pose: Pose, max_r_m: float,
-                       rows: Sequence[Sequence[int]], w: int) -> np.ndarray:
-    """(len(rows), tiles across) transmittance ``exp(-k d)`` of the ground at
-    each tile's centre: rows ``[y0, y1)`` of tiles, ``TILE_COLS`` wide across
-    an image ``w`` pixels wide (the last tile may be narrower)."""
-    centres = tile_centres(rows, w)
-    return transmittance_at(k_per_m, H, pose, max_r_m, centres).reshape(len(rows), -1)
+        n = len(rows)
+        if not n:
+            return rows, np.zeros(0), np.zeros(0), np.zeros((0, 0))
+        t = transmittance_at(self.k_per_m, H, pose, max_r_m, centres).reshape(n, -1)
+        return rows, centres[1, ::t.shape[1]], centres[0, :t.shape[1]], t
 
 
 def tile_centres(rows: Sequence[Sequence[int]], w: int) -> np.ndarray:
