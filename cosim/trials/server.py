@@ -59,6 +59,7 @@ from cosim.core.display import DisplayProfile
 from cosim.core.netaddr import is_loopback
 from cosim.errors import ConfigError
 from cosim.trials.files import file_kind
+from cosim.trials.instrument_routes import Instruments
 from cosim.trials.limits import (
     MAX_BODY_BYTES,
     MAX_JSON_DEPTH,
@@ -503,6 +504,7 @@ def make_app(study: Study | str | Path, db: Store | str | Path,
     st = study if isinstance(study, Study) else load_study(study)
     store = db if isinstance(db, Store) else Store(db)
     a = TrialApp(st, store)
+    instruments = Instruments(st, store, a._session, a._view, _json_body, BadRequest)
     routes = [
         Route("/", _experimenter(_page("experimenter.html"))),
         Route("/participant", _page("participant.html")),
@@ -510,6 +512,7 @@ def make_app(study: Study | str | Path, db: Store | str | Path,
         Route("/api/sessions", _experimenter(a.list_sessions), methods=["GET"]),
         Route("/api/sessions", _experimenter(a.create_session), methods=["POST"]),
         Route("/api/sessions/{sid}", a.get_session),
+        *instruments.routes(),
         Route("/api/sessions/{sid}/state", _experimenter(a.set_state), methods=["POST"]),
         Route("/api/sessions/{sid}/responses", a.post_response, methods=["POST"]),
         Route("/api/sessions/{sid}/window", a.report_window, methods=["POST"]),
@@ -523,6 +526,7 @@ def make_app(study: Study | str | Path, db: Store | str | Path,
                                 Middleware(TrustedHostMiddleware,
                                            allowed_hosts=allowed_hosts or LOCAL_HOSTS)])
     app.state.trials = a
+    app.state.instruments = instruments  # the live console sets its freeze_state
     return app
 
 

@@ -13,6 +13,11 @@ Owns the two tables and their CSV export. An embedded SQLite file by default
   unique: posting the same response again (a reload, a retry) returns the
   stored row and adds nothing, so a response is never duplicated, and the
   first one posted wins.
+- ``instrument_answers``: one row per NASA-TLX block or SAGAT probe of a
+  session (``instruments``, ``sagat``): the answer as checked (JSON), the
+  raw and weighted TLX, a probe's scores per question (JSON; empty until
+  scored) and its count of correct answers. ``(session, instrument,
+  trial_index, item)`` is unique: the first answer posted wins.
 
 ``export_csv(db, path)`` writes ``EXPORT_COLUMNS`` in that order (the
 analysis reads them): booleans as 0/1, a missing value as an empty field.
@@ -65,6 +70,27 @@ sessions = sa.Table(
     # the size (device px) the participant's page last reported
     sa.Column("window_width_px", sa.Integer),
     sa.Column("window_height_px", sa.Integer),
+)
+#: the answers to a study's instruments (``instruments``, ``sagat``): one row a
+#: NASA-TLX block or a SAGAT probe of a session's trial
+instrument_answers = sa.Table(
+    "instrument_answers", metadata,
+    sa.Column("id", sa.Integer, primary_key=True, autoincrement=True),
+    sa.Column("session", sa.String(32), sa.ForeignKey("sessions.id"), nullable=False),
+    sa.Column("participant", sa.String(64), nullable=False),
+    sa.Column("instrument", sa.String(16), nullable=False),  # "tlx" or "sagat"
+    sa.Column("trial_index", sa.Integer, nullable=False),  # tlx: the block's last trial
+    sa.Column("item", sa.Integer, nullable=False),  # tlx: the block; sagat: the probe
+    sa.Column("answer", sa.Text, nullable=False),  # JSON, as checked
+    sa.Column("raw_tlx", sa.Float),
+    sa.Column("weighted_tlx", sa.Float),  # null: the study asks no weights
+    # sagat: JSON {question id: {correct, error, truth}}; null until scored
+    sa.Column("scores", sa.Text),
+    sa.Column("correct", sa.Integer),  # sagat: the questions answered correctly
+    sa.Column("questions", sa.Integer),  # sagat: the questions scored
+    sa.Column("created", sa.String(32), nullable=False),
+    sa.UniqueConstraint("session", "instrument", "trial_index", "item",
+                        name="one_answer_per_item"),
 )
 responses = sa.Table(
     "responses", metadata,
@@ -203,6 +229,54 @@ class Store:
         with self.engine.begin() as c:
             c.execute(sessions.update().where(sessions.c.id == session_id).values(state=state))
 
+    # --- instruments ---
+    def record_instrument(self, row: dict[str, Any]) -> tuple[dict[str, Any], bool]:
+        """Store one instrument answer (``instrument_answers``' columns;
+        ``answer`` and ``scores`` as JSON-able values); (the stored row, True)
+        or, when this session's item already has one, (that row, False): the
+        first answer posted wins."""
+        values = {c.name: row.get(c.name) for c in instrument_answers.columns
+                  if c.name not in ("id", "created")}
+        values["answer"] = json.dumps(row["answer"])
+        values["scores"] = None if row.get("scores") is None else json.dumps(row["scores"])
+        values["created"] = _now()
+        try:
+            with self.engine.begin() as c:
+                c.execute(instrument_answers.insert().values(**values))
+            created = True
+        except IntegrityError:
+            created = False
+        t = instrument_answers.c
+        q = instrument_answers.select().where(
+            t.session == row["session"], t.instrument == row["instrument"],
+            t.trial_index == row["trial_index"], t.item == row["item"])
+        with self.engine.connect() as c:
+            stored = c.execute(q).mappings().first()
+        if stored is None:  # the IntegrityError was something else (e.g. no such session)
+            raise ConfigError(f"{row.get('instrument')} answer {row.get('item')} of session "
+                              f"{row.get('session')} was refused by the database")
+        return _instrument_row(stored), created
+
+    def instrument_answers(self, session_id: str | None = None,
+                           instrument: str | None = None) -> list[dict[str, Any]]:
+        """Instrument answers (``answer`` and ``scores`` decoded), in the order
+        stored; of one session and one instrument if given."""
+        q = instrument_answers.select().order_by(instrument_answers.c.id)
+        if session_id is not None:
+            q = q.where(instrument_answers.c.session == session_id)
+        if instrument is not None:
+            q = q.where(instrument_answers.c.instrument == instrument)
+        with self.engine.connect() as c:
+            return [_instrument_row(r) for r in c.execute(q).mappings()]
+
+    def score_instrument(self, answer_id: int, scores: dict[str, Any]) -> None:
+        """Keep a SAGAT answer's scores (``{question id: {correct, ...}}``),
+        counted into ``correct`` and ``questions``."""
+        with self.engine.begin() as c:
+            c.execute(instrument_answers.update().where(instrument_answers.c.id == answer_id)
+                      .values(scores=json.dumps(scores), questions=len(scores),
+                              correct=sum(bool(s["correct"]) for s in scores.values())))
+
     # --- responses ---
     def record_response(self, row: dict[str, Any]) -> tuple[dict[str, Any], bool]:
         """Store one response; (the stored row, True) or, when this session's
@@ -233,6 +307,13 @@ class Store:
             q = q.where(responses.c.session == session_id)
         with self.engine.connect() as c:
             return [dict(r) for r in c.execute(q).mappings()]
+
+
+def _instrument_row(r: Any) -> dict[str, Any]:
+    out = dict(r)
+    out["answer"] = json.loads(out["answer"])
+    out["scores"] = None if out["scores"] is None else json.loads(out["scores"])
+    return out
 
 
 def _check_sqlite_file(url: str, db: str | Path) -> None:

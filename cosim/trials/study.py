@@ -79,6 +79,8 @@ from cosim.scenario.yaml_lines import (
     read_text_bounded,
 )
 from cosim.trials.clips import GtFrame, csv_rows, inside, probe_video, read_bounded, read_clip_truth
+from cosim.trials.instruments import STUDY_KEYS, TlxSetting, parse_sagat, parse_tlx
+from cosim.trials.sagat import Probe
 
 #: clips in one study (after ``repeats``: trials in one session)
 MAX_CLIPS = 5000
@@ -185,6 +187,10 @@ class Study:
     order: str
     seed: int
     roots: tuple[Path, ...]
+    #: NASA-TLX after each block or the session (``instruments``); None: not asked
+    tlx: TlxSetting | None = None
+    #: SAGAT freeze probes of each live trial (``sagat``)
+    sagat: tuple[Probe, ...] = ()
     #: ``track``: the arrow's speed away from the target (degrees of visual angle a second)
     arrow_speed_deg_s: float = 2.0
     #: the clips practice trials are drawn from (empty: from ``clips``)
@@ -253,7 +259,7 @@ def parse_study(text: str, path: Path) -> Study:
     ctx = Problems(fname, lines)
     for ln, m in dups:
         ctx.problems.append((ln, m))
-    top = Reader(ctx, data, (), TOP_KEYS)
+    top = Reader(ctx, data, (), TOP_KEYS + STUDY_KEYS)
     version = top.integer("schema_version", 1)
     if version is not None and version != 1:
         ctx.err(("schema_version",), f"unsupported schema_version {version}; this cosim reads 1")
@@ -265,6 +271,11 @@ def parse_study(text: str, path: Path) -> Study:
     repeats = top.integer("repeats", 1, lo=1, hi=MAX_REPEATS)
     order = top.string("order", "shuffle", choices=ORDERS)
     seed = top.integer("seed", 0, lo=0, hi=2**32 - 1)
+    tlx = parse_tlx(ctx, top.d.get("tlx"))
+    sagat = parse_sagat(ctx, top.d["sagat"]) if "sagat" in top.d else ()
+    if sagat and protocol != "live":
+        ctx.err(("sagat",), f"freeze probes are asked during live trials (`protocol: live`), "
+                            f"not during {protocol} clips")
     if isinstance(top.d.get("description", ""), (dict, list)):
         ctx.err(("description",), "expected text")
     base = path.resolve().parent
@@ -295,7 +306,8 @@ def parse_study(text: str, path: Path) -> Study:
                                          f"of its own (`id:`, or another sweep folder)")
     if ctx.problems or ctx.more:
         raise ctx.error()
-    return Study(path=path, name=name, protocol=protocol, clips=tuple(clips), practice=practice,
+    return Study(tlx=tlx, sagat=sagat,
+                 path=path, name=name, protocol=protocol, clips=tuple(clips), practice=practice,
                  break_every=break_every, repeats=repeats, order=order, seed=seed,
                  roots=tuple(roots), arrow_speed_deg_s=float(arrow or 2.0),
                  practice_clips=tuple(practice_clips))
