@@ -6,6 +6,7 @@ delivered frames are the ones shown; bad reports and settings are refused."""
 from __future__ import annotations
 
 import csv
+import math
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -25,6 +26,7 @@ from cosim.trials.live_scoring import (
     feed_bounds,
     parse_report,
     read_feed_truth,
+    read_run_truth,
     read_scoring,
     score_session,
 )
@@ -257,3 +259,53 @@ def test_scoring_settings_read_and_refused() -> None:
                 "unknown key 'nope'", "duplicate_window_s: must be > 0",
                 "min_pixels_on_target"):
         assert msg in text, text
+
+
+@pytest.mark.integration
+def test_real_run_ground_truth(tmp_path: Path) -> None:
+    """The flyover's ground truth (17 s: the truck passes under the camera, the
+    fire truck comes into view at the end): a click near the truck's centre 10
+    frames after it first shows, a click on bare ground and no click on the
+    fire truck score as the CSV read directly says: a hit with the offset as
+    its error and the frames' time difference (and 0.2 s) as its latency, a
+    false alarm, and a miss."""
+    from cosim.cli import main
+
+    repo = Path(__file__).resolve().parents[2]
+    out = tmp_path / "run"
+    assert main(["run", str(repo / "scenarios/cameras/flyover.yaml"), "--backend", "inline",
+                 "--duration-s", "17", "--out", str(out), "--no-progress"]) == 0
+    with open(out / "cameras" / "uav1_belly.gt.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    s = ScoringSettings()
+
+    def seen(r: dict[str, str]) -> bool:
+        return r["in_view"] == "1" and float(r["pixels_on_target"]) >= s.min_pixels_on_target
+
+    truck = [r for r in rows if r["target"] == "truck1"]
+    first = next(i for i, r in enumerate(truck) if seen(r))
+    at = truck[first + 10]
+    cx, cy = float(at["center_x_px"]), float(at["center_y_px"])
+    click_s = float(at["time_s"]) + 0.2
+    fire = [r for r in rows if r["target"] == "firetruck1"]
+    runs, n = [], 0
+    for r in fire:
+        n = n + 1 if seen(r) else 0
+        runs.append(n)
+    assert max(runs) * 0.1 >= s.min_visible_s  # long enough to be missed
+    truth = read_run_truth(out, ["uav1/belly"])
+    b = feed_bounds(truth, {"uav1/belly": (640, 480)})["uav1/belly"]
+    assert (b.first_frame, b.last_frame) == (0, len(truck) - 1)
+    reports = [parse_report({"feed": "uav1/belly", "frame": int(at["frame"]), "x_px": cx + 2,
+                             "y_px": cy - 1, "time_s": click_s}, {"uav1/belly": b}, 17.0),
+               Report("uav1/belly", int(at["frame"]), 5.0, 5.0, click_s + 1)]
+    sc = score_session(truth, reports)
+    hit, fa = sc.reports
+    assert (hit.outcome, hit.target, fa.outcome) == ("hit", "truck1", "false_alarm")
+    assert hit.error_px == pytest.approx(math.sqrt(5))
+    expected_s = click_s - float(truck[first]["time_s"])
+    assert hit.latency_feed_s == pytest.approx(expected_s) == hit.latency_any_s
+    assert expected_s == pytest.approx(1.2, abs=1e-6)
+    assert [t.target for t in sc.misses] == ["firetruck1"]
+    with pytest.raises(ConfigError, match="no ground truth for feed 'uav2/belly'.*uav1/belly"):
+        read_run_truth(out, ["uav2/belly"])
