@@ -154,7 +154,7 @@ def live_tables(rows: Sequence[dict[str, Any]], level: float = 0.95
             who = cluster_ids(who_all[sel], int(sel.sum()))
             slope = slope_estimate(x[sel], y[sel], who)
             lo, hi = t_interval(slope, level)
-            unit = "per target" if measure == "detected" else "s"
+            unit = "probability" if measure == "detected" else "s"
             effect_rows.append({"measure": measure, "condition": name,
                                 "slope": slope[0] if slope else math.nan,
                                 "unit": f"{unit} per unit of {name}", "ci_lo": lo, "ci_hi": hi,

@@ -1,13 +1,14 @@
 """cosim.trials.live_analysis: synthetic live sessions with known effects
-(latency rising and detection falling with the number of feeds, each
-participant with their own offset) scored by live_scoring, and the effects
+(examples/live_synthetic.py: latency rising and detection falling with the
+number of feeds, each participant with their own offset) scored by
+live_scoring, and the effects
 recovered within their intervals; the intervals are the t intervals over
 participants; a categorical condition; the figures and tables written."""
 
 from __future__ import annotations
 
 import csv
-import math
+import importlib.util
 from pathlib import Path
 from typing import Any
 
@@ -16,63 +17,24 @@ import pytest
 from scipy import stats
 
 from cosim.trials.live_analysis import ScoredSession, analyse_live, live_tables, target_rows
-from cosim.trials.live_scoring import Report, TargetFrame, score_session
+from cosim.trials.live_scoring import score_session
 
-RATE_HZ = 10.0
-FEEDS = (1, 2, 4, 9)
-PARTICIPANTS = 12
-TARGETS = 10
-LAT_0_S, LAT_PER_FEED_S = 1.0, 0.4
-DET_0, DET_PER_FEED = 0.95, -0.05
-
-
-def session(rng: np.random.Generator, k: int, offset_s: float, behaviour: str
-            ) -> tuple[list[TargetFrame], list[Report], list[float]]:
-    """A session of ``k`` feeds and TARGETS targets, each visible for 12 s
-    in one feed from a known time; the participant clicks each one's centre
-    with probability DET_0 + DET_PER_FEED k, LAT_0_S + LAT_PER_FEED_S k +
-    ``offset_s`` + noise after it first showed, and makes one false alarm.
-    Returns the truth, the reports and the latencies clicked."""
-    truth: list[TargetFrame] = []
-    reports: list[Report] = []
-    lats = []
-    for j in range(TARGETS):
-        feed = f"u{j % k}/cam"
-        a = 20 + 40 * j
-        for f in range(a - 10, a + 120):  # 10 frames out of view, then 12 s in view
-            on = f >= a
-            cx, cy = 100.0 + f, 60.0 + 25 * j  # targets apart
-            truth.append(TargetFrame(feed, f, f / RATE_HZ, f"t{j}", on,
-                                     (cx - 5, cy - 5, cx + 5, cy + 5), (cx, cy),
-                                     50.0 if on else 0.0, 1.0))
-        if rng.random() < DET_0 + DET_PER_FEED * k:
-            lat = max(0.2, LAT_0_S + LAT_PER_FEED_S * k + offset_s + rng.normal(0, 0.5))
-            t = a / RATE_HZ + lat
-            f = int(math.floor(t * RATE_HZ))  # the frame on screen at the click
-            reports.append(Report(feed, f, 100.0 + f + 1.0, 60.0 + 25 * j, t))
-            lats.append(lat)
-    f = 25
-    reports.append(Report("u0/cam", f, 600.0, 20.0, f / RATE_HZ + 0.5))  # a false alarm
-    return truth, reports, lats
+REPO = Path(__file__).resolve().parents[2]
+_SPEC = importlib.util.spec_from_file_location("live_synthetic",
+                                               REPO / "examples" / "live_synthetic.py")
+assert _SPEC is not None and _SPEC.loader is not None
+syn = importlib.util.module_from_spec(_SPEC)  # the README's synthetic sessions
+_SPEC.loader.exec_module(syn)
+FEEDS, PARTICIPANTS, TARGETS = syn.FEEDS, syn.PARTICIPANTS, syn.TARGETS
 
 
 @pytest.fixture(scope="module")
 def sessions() -> list[ScoredSession]:
-    rng = np.random.default_rng(11)
-    out = []
-    for p in range(PARTICIPANTS):
-        offset = rng.normal(0, 0.6)
-        for k in FEEDS:
-            truth, reports, _ = session(rng, k, offset, "search" if p % 2 else "orbit")
-            out.append(ScoredSession(f"s{p}_{k}", f"p{p}",
-                                     (("feeds", str(k)),
-                                      ("behaviour", "search" if p % 2 else "orbit")),
-                                     score_session(truth, reports)))
-    return out
+    return syn.sessions(11)
 
 
 def test_scored_latencies_are_the_clicked_ones() -> None:
-    truth, reports, lats = session(np.random.default_rng(3), 4, 0.3, "search")
+    truth, reports, lats = syn.session(np.random.default_rng(3), 4, 0.3)
     sc = score_session(truth, reports)
     assert [r.outcome for r in sc.reports].count("false_alarm") == 1
     got = sorted(r.latency_any_s for r in sc.reports if r.outcome == "hit")  # type: ignore
@@ -85,21 +47,21 @@ def test_effects_recovered_within_intervals(sessions: list[ScoredSession]) -> No
     levels, effects = live_tables(target_rows(sessions))
     eff = {(e["measure"], e["condition"]): e for e in effects}
     lat = eff[("latency_any_s", "feeds")]
-    assert lat["ci_lo"] <= LAT_PER_FEED_S <= lat["ci_hi"]
+    assert lat["ci_lo"] <= syn.LAT_PER_FEED_S <= lat["ci_hi"]
     assert lat["ci_lo"] > 0.2  # latency shown to rise
     assert lat["participants"] == PARTICIPANTS and lat["df"] == PARTICIPANTS - 1
     same = eff[("latency_feed_s", "feeds")]  # each target shows in one feed only
     assert same["slope"] == pytest.approx(lat["slope"])
     det = eff[("detected", "feeds")]
-    assert det["ci_lo"] <= DET_PER_FEED <= det["ci_hi"] < 0
+    assert det["ci_lo"] <= syn.DET_PER_FEED <= det["ci_hi"] < 0
     for k in FEEDS:
         row = next(r for r in levels if r["measure"] == "latency_any_s"
                    and r["condition"] == "feeds" and r["level"] == k)
-        assert row["ci_lo"] <= LAT_0_S + LAT_PER_FEED_S * k <= row["ci_hi"], row
+        assert row["ci_lo"] <= syn.LAT_0_S + syn.LAT_PER_FEED_S * k <= row["ci_hi"], row
         assert row["interval"] == "t over participants"
         row = next(r for r in levels if r["measure"] == "detected"
                    and r["condition"] == "feeds" and r["level"] == k)
-        assert row["ci_lo"] <= DET_0 + DET_PER_FEED * k <= row["ci_hi"], row
+        assert row["ci_lo"] <= syn.DET_0 + syn.DET_PER_FEED * k <= row["ci_hi"], row
         assert row["targets"] == PARTICIPANTS * TARGETS
 
 
