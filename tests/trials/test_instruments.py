@@ -14,7 +14,7 @@ import numpy as np
 import pyarrow as pa
 import pytest
 from matplotlib.path import Path as MplPath
-from test_server import PROFILE, asgi
+from test_server import PROFILE, _session, asgi, live_server, participant_page, small_study
 from test_store import CLIPS, write_study
 
 from cosim.errors import ConfigError
@@ -494,3 +494,45 @@ def test_sagat_answers_are_checked_stored_and_scored_against_the_freeze(tmp_path
             truth_north == 1
         assert sc["fuel"] == {"correct": False, "error": 1.0, "truth": ["b"]}
         assert r["answer"]["questions"] == 3
+
+
+# --- the participant's page (headless Debian chromium) ---
+def test_a_tlx_on_the_participant_page_is_filled_in_and_stored(tmp_path: Path,
+                                                               chromium: str) -> None:
+    """After the session's last trial the page asks the six scales (no mark
+    chosen, "Next" only once all six are), then the 15 pairs one at a time;
+    the stored ratings, weights and scores are those of the clicks."""
+    study = small_study(tmp_path, "protocol: disappear\ntlx: {after: session, weights: true}\n",
+                        {"a": 150.0})
+    with live_server(study) as server:
+        s = _session(server, "p-tlx")
+        server.request("POST", f"/api/sessions/{s['id']}/state", {"state": "running"})
+        with participant_page(server, s, chromium=chromium) as page:
+            page.keyboard.press("Space")  # the clip plays to its end, no press: then the TLX
+            page.wait_for_function("document.body.dataset.phase === 'tlx'")
+            assert page.locator(".tlx .scale").count() == 6
+            assert page.locator(".tlx .tick.chosen").count() == 0
+            assert page.locator(".scale[data-scale=temporal] .tick").count() == 21
+            assert page.evaluate("getComputedStyle(document.body).cursor") == "default"
+            for key, v in RATINGS.items():
+                assert page.is_disabled("button.next")
+                page.click(f".scale[data-scale={key}] .tick[data-value='{v}']")
+            page.screenshot(path=str(tmp_path / "tlx_scales.png"))
+            page.click("button.next")
+            shown = []
+            for k in range(15):
+                form = page.locator(f".pairs[data-pair='{k}']")
+                form.wait_for()
+                a, b = (form.locator("button").nth(i).get_attribute("data-scale")
+                        for i in range(2))
+                shown.append((a, b))
+                if k == 0:
+                    page.screenshot(path=str(tmp_path / "tlx_pair.png"))
+                form.locator(f"button[data-scale={min(a, b, key=ORDER.index)}]").click()
+            page.wait_for_function("document.body.dataset.phase === 'finished'")
+        (row,) = server.store.instrument_answers(s["id"])
+    assert shown == tlx_pair_order(0, 0, 0)
+    assert row["answer"]["ratings"] == RATINGS and row["answer"]["pairs"] == PAIRS
+    assert row["answer"]["weights"] == {"mental": 5, "physical": 0, "temporal": 3,
+                                        "performance": 2, "effort": 4, "frustration": 1}
+    assert (row["raw_tlx"], row["weighted_tlx"], row["item"]) == (45.0, 57.0, 0)

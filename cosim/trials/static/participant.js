@@ -11,6 +11,8 @@
 // The instructions show a picture of each target (/target/N: cut from a clip by
 // the server); practice trials are labelled as such; a clip starts only when the
 // participant presses the space bar for it.
+// After each block (or the session) the study's NASA-TLX, if it asks one, is
+// filled in with the mouse (instruments.js) before the page goes on.
 "use strict";
 (() => {
   const READY_MS = 1000; // fixation before each clip starts
@@ -376,6 +378,18 @@
     let asked = true; // the participant has just pressed for what comes next
     for (;;) {
       s = await api(base);
+      // a block's NASA-TLX, when its trials are done (before the next block or the end)
+      const due = await api(`${base}/instrument`);
+      if (due.instrument === "tlx") {
+        phase("tlx");
+        show("");
+        const body = await CosimInstruments.tlx(message, due);
+        phase("saving");
+        show("<p>\u2026</p>");
+        await api(`${base}/instruments`, body);
+        asked = false;
+        continue;
+      }
       if (s.next_trial === null) {
         phase("finished");
         show("<p>Finished. Thank you!</p>");
