@@ -14,6 +14,10 @@ the frame on screen at that moment; the server turns that
 into the frame number (``round(mediaTime * rate_hz)``) and computes every
 measure from the stored ground truth and the session's display profile.
 
+A study with ``protocol: live`` is served by the same app: its sessions'
+trials are runs of scenarios, started by the experimenter and watched on
+``/live`` (routes, runs and reports: ``live_routes``).
+
 The participant's page reports its size (device px) when it loads, when it
 is resized and with every response; the server keeps the last one per
 session (in the database: it survives a restart of the server) and the
@@ -37,12 +41,14 @@ response stored) run in the thread pool, off the event loop.
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import logging
 import math
 import re
 import stat
+from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
 
@@ -67,6 +73,8 @@ from cosim.trials.limits import (
     json_depth,
     uvicorn_settings,
 )
+from cosim.trials.live_routes import LiveConsole, live_order
+from cosim.trials.live_routes import routes as live_routes
 from cosim.trials.measures import measures_at, participant_display, track_measures
 from cosim.trials.store import Store, shown_url, write_csv
 from cosim.trials.study import TRACK_DIRECTIONS, Clip, Study, load_study
@@ -183,6 +191,8 @@ class TrialApp:
         #: the study's targets, numbered for ``/target/N`` (their pictures)
         self.targets = sorted({c.target for c in study.all_clips})
         self._pictures: dict[int, bytes] = {}
+        #: ``protocol: live``: the sessions' runs (``live_routes``)
+        self.live = LiveConsole(study, store, BadRequest, _number)
 
     # --- helpers ---
     def _session(self, sid: str) -> dict[str, Any]:
@@ -222,6 +232,8 @@ class TrialApp:
         return n, c
 
     def _view(self, s: dict[str, Any]) -> dict[str, Any]:
+        if s["protocol"] == "live":
+            return self.live.view(s)
         done: dict[int, list[str]] = {}
         for r in self.store.responses(s["id"]):
             done.setdefault(r["trial_index"], []).append(r["kind"])
@@ -309,10 +321,11 @@ class TrialApp:
         st = self.study
         number = self.store.session_count(st.name)
         clips = st.all_clips
-        order = [{"index": t.index, "practice": t.practice, "clip": t.clip,
-                  "clip_id": clips[t.clip].id, "fingerprint": clips[t.clip].fingerprint,
-                  "break_before": t.break_before}
-                 for t in st.trial_order(number)]
+        order = live_order(st, number) if st.protocol == "live" else [
+            {"index": t.index, "practice": t.practice, "clip": t.clip,
+             "clip_id": clips[t.clip].id, "fingerprint": clips[t.clip].fingerprint,
+             "break_before": t.break_before}
+            for t in st.trial_order(number)]
         s = self.store.create_session(
             participant=participant, study=st.name, protocol=st.protocol,
             display={k: float(fields[k]) if k.endswith("_mm") else int(fields[k])
@@ -332,11 +345,16 @@ class TrialApp:
             raise BadRequest("state: expected 'running' or 'paused'")
         if s["state"] != "finished":
             self.store.set_state(s["id"], state)
+        if state == "paused":  # a live trial's run ends with it
+            self.live.stop_session(s["id"])
         return JSONResponse(self._view(self._session(s["id"])))
 
     async def post_response(self, request: Request) -> Response:
         s = self._session(request.path_params["sid"])
         d = await _json_body(request)
+        if s["protocol"] == "live":
+            raise BadRequest(f"session {s['id']} is a live session: its clicks go to "
+                             f"/api/sessions/{s['id']}/live/reports", 409)
         ti = d.get("trial_index")
         if isinstance(ti, bool) or not isinstance(ti, int) or not 0 <= ti < len(s["trial_order"]):
             raise BadRequest(f"trial_index: expected 0..{len(s['trial_order']) - 1}, "
@@ -517,11 +535,18 @@ def make_app(study: Study | str | Path, db: Store | str | Path,
         Route("/api/sessions/{sid}/responses", a.post_response, methods=["POST"]),
         Route("/api/sessions/{sid}/window", a.report_window, methods=["POST"]),
         Route("/api/export.csv", _experimenter(a.export)),
+        *live_routes(a.live, _json_body, _experimenter, _page),
         Route("/video/{n:int}", a.video),
         Route("/target/{n:int}", a.target_picture),
         Mount("/static", StaticFiles(directory=STATIC), name="static"),
     ]
+    @contextlib.asynccontextmanager
+    async def lifespan(app: Starlette) -> AsyncIterator[None]:
+        yield
+        await run_in_threadpool(a.live.close)  # the live runs stop with the server
+
     app = Starlette(routes=routes, exception_handlers={BadRequest: _bad_request},
+                    lifespan=lifespan,
                     middleware=[Middleware(HeadLimit),
                                 Middleware(TrustedHostMiddleware,
                                            allowed_hosts=allowed_hosts or LOCAL_HOSTS)])

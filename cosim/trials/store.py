@@ -9,6 +9,10 @@ Owns the two tables and their CSV export. An embedded SQLite file by default
   distance), the trial order with the method, seed and session number it was
   drawn with, its state (``ready``, ``running``, ``paused``, ``finished``)
   and when it was created.
+- ``live_reports``: one row per click on a feed of a live-console trial
+  (its feed, the frame drawn there, the pixel in the frame's own
+  coordinates, the page's click and draw times); ``(session, trial_index,
+  report_key)`` is unique, the key the page's own for each click.
 - ``responses``: one row per response. ``(session, trial_index, kind)`` is
   unique: posting the same response again (a reload, a retry) returns the
   stored row and adds nothing, so a response is never duplicated, and the
@@ -129,6 +133,29 @@ responses = sa.Table(
     sa.UniqueConstraint("session", "trial_index", "kind", name="one_response_per_trial"),
 )
 _RESPONSE_FIELDS = tuple(c.name for c in responses.columns if c.name not in ("id", "created"))
+#: a live-console trial's reports: one row per click on a feed (``live_routes``)
+live_reports = sa.Table(
+    "live_reports", metadata,
+    sa.Column("id", sa.Integer, primary_key=True, autoincrement=True),
+    sa.Column("session", sa.String(32), sa.ForeignKey("sessions.id"), nullable=False),
+    sa.Column("participant", sa.String(64), nullable=False),
+    sa.Column("trial_index", sa.Integer, nullable=False),
+    sa.Column("condition", sa.String(200), nullable=False),
+    # the page's own id of the click: a report posted again (a retry) is kept once
+    sa.Column("report_key", sa.String(64), nullable=False),
+    sa.Column("feed", sa.Integer, nullable=False),  # the condition's feed number
+    sa.Column("feed_name", sa.String(200), nullable=False),  # VEHICLE/CAMERA
+    sa.Column("frame", sa.Integer, nullable=False),  # the feed's frame drawn at the click
+    sa.Column("x_px", sa.Float, nullable=False),  # in the frame's own pixels
+    sa.Column("y_px", sa.Float, nullable=False),
+    # the page's clock (performance.now(), ms): the click and when that frame was drawn
+    sa.Column("click_time_ms", sa.Float, nullable=False),
+    sa.Column("drawn_time_ms", sa.Float),
+    sa.Column("run", sa.String(400), nullable=False),  # the trial's run folder
+    sa.Column("created", sa.String(32), nullable=False),
+    sa.UniqueConstraint("session", "trial_index", "report_key", name="one_row_per_report"),
+)
+_LIVE_FIELDS = tuple(c.name for c in live_reports.columns if c.name not in ("id", "created"))
 
 
 def _now() -> str:
@@ -281,23 +308,41 @@ class Store:
     def record_response(self, row: dict[str, Any]) -> tuple[dict[str, Any], bool]:
         """Store one response; (the stored row, True) or, when this session's
         trial already has a response of this kind, (that row, False)."""
-        values = {k: row.get(k) for k in _RESPONSE_FIELDS}
+        return self._insert_once(responses, _RESPONSE_FIELDS, row, "kind", "response to")
+
+    def _insert_once(self, table: sa.Table, fields: tuple[str, ...], row: dict[str, Any],
+                     key: str, what: str) -> tuple[dict[str, Any], bool]:
+        """Insert ``row`` unless the row of its session, trial and ``key`` is
+        there: (the stored row, whether it was inserted now)."""
+        values = {k: row.get(k) for k in fields}
         values["created"] = _now()
         try:
             with self.engine.begin() as c:
-                c.execute(responses.insert().values(**values))
+                c.execute(table.insert().values(**values))
             created = True
         except IntegrityError:
             created = False
-        q = responses.select().where(responses.c.session == row["session"],
-                                     responses.c.trial_index == row["trial_index"],
-                                     responses.c.kind == row["kind"])
+        q = table.select().where(table.c.session == row["session"],
+                                 table.c.trial_index == row["trial_index"],
+                                 table.c[key] == row[key])
         with self.engine.connect() as c:
             stored = c.execute(q).mappings().first()
         if stored is None:  # the IntegrityError was something else (e.g. no such session)
-            raise ConfigError(f"response to trial {row.get('trial_index')} of session "
+            raise ConfigError(f"{what} trial {row.get('trial_index')} of session "
                               f"{row.get('session')} was refused by the database")
         return dict(stored), created
+
+    def record_live_report(self, row: dict[str, Any]) -> tuple[dict[str, Any], bool]:
+        """Store one click of a live trial; (the stored row, True) or, when
+        the page posted this report before, (that row, False)."""
+        return self._insert_once(live_reports, _LIVE_FIELDS, row, "report_key", "report of")
+
+    def live_reports(self, session_id: str) -> list[dict[str, Any]]:
+        """A session's live reports, in the order they were stored."""
+        q = (live_reports.select().where(live_reports.c.session == session_id)
+             .order_by(live_reports.c.id))
+        with self.engine.connect() as c:
+            return [dict(r) for r in c.execute(q).mappings()]
 
     def responses(self, session_id: str | None = None) -> list[dict[str, Any]]:
         q = (sa.select(responses).select_from(responses.join(sessions))

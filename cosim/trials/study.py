@@ -53,6 +53,10 @@ session_number, repeat])``. Practice clips are drawn by
 and they need ``practice:`` above 0. A trial's ``clip`` numbers
 ``Study.all_clips``: the clips, then the practice clips.
 
+A study with ``protocol: live`` has ``scenarios:`` (read by ``live_study``:
+a scenario file and the feeds to show, per condition) in place of clips,
+and its trial order is drawn over them the same way (``Study.live``).
+
 Each clip carries a fingerprint (``Clip.fingerprint``: the SHA-256 of its
 ground-truth file and its video's size in bytes, taken when the study is
 read); a session records each trial's clip id and fingerprint, so a study
@@ -80,6 +84,7 @@ from cosim.scenario.yaml_lines import (
 )
 from cosim.trials.clips import GtFrame, csv_rows, inside, probe_video, read_bounded, read_clip_truth
 from cosim.trials.instruments import STUDY_KEYS, TlxSetting, parse_sagat, parse_tlx
+from cosim.trials.live_study import LiveCondition, read_live_conditions
 from cosim.trials.sagat import Probe
 
 #: clips in one study (after ``repeats``: trials in one session)
@@ -89,7 +94,7 @@ MAX_TRIALS = 20_000
 MAX_MANIFEST_BYTES = 16 * 1024 * 1024
 MAX_PRACTICE = 100
 MAX_REPEATS = 100
-PROTOCOLS = ("disappear", "recognise", "track")
+PROTOCOLS = ("disappear", "recognise", "track", "live")
 #: a "track" trial's sub-trials: the arrow leaves the target this way (screen axes)
 TRACK_DIRECTIONS = {"right": (1.0, 0.0), "left": (-1.0, 0.0), "up": (0.0, -1.0),
                     "down": (0.0, 1.0)}
@@ -101,7 +106,7 @@ PRACTICE_STREAM = 1_000_003
 MANIFEST_COLUMNS = ("run", "vehicle", "camera", "video", "ground_truth", "frames", "rate_hz",
                     "width_px", "height_px", "hfov_deg", "vfov_deg")
 TOP_KEYS = ("schema_version", "name", "description", "protocol", "arrow_speed_deg_s", "sweep",
-            "clips", "practice", "practice_clips",
+            "clips", "scenarios", "practice", "practice_clips",
             "break_every", "repeats", "order", "seed")
 CLIP_KEYS = ("id", "video", "ground_truth", "target", "rate_hz", "width_px", "height_px",
              "hfov_deg", "conditions", "run")
@@ -195,6 +200,8 @@ class Study:
     arrow_speed_deg_s: float = 2.0
     #: the clips practice trials are drawn from (empty: from ``clips``)
     practice_clips: tuple[Clip, ...] = ()
+    #: ``live``: the conditions (scenario and feeds) a trial runs, in place of clips
+    live: tuple[LiveCondition, ...] = ()
 
     @property
     def all_clips(self) -> tuple[Clip, ...]:
@@ -204,7 +211,7 @@ class Study:
     def trial_order(self, session_number: int) -> list[Trial]:
         """The trials of the ``session_number``-th session (0-based): practice
         first, then every clip ``repeats`` times (see the module docstring)."""
-        n = len(self.clips)
+        n = len(self.clips) or len(self.live)
         trials: list[Trial] = []
         if self.practice:
             pool = len(self.practice_clips) or n
@@ -281,8 +288,20 @@ def parse_study(text: str, path: Path) -> Study:
     base = path.resolve().parent
     roots: list[Path] = [base]
     clips: list[Clip] = []
-    which = top.one_of("sweep", "clips")
-    if which is None and not ctx.problems:
+    live: list[LiveCondition] = []
+    if protocol == "live":
+        for key in ("sweep", "clips", "practice_clips"):
+            if key in top.d:
+                ctx.err((key,), "a live study runs scenarios (`scenarios:`), not clips")
+        if practice:
+            ctx.err(("practice",), "a live study has no practice trials yet: set it to 0")
+        live = read_live_conditions(ctx, top.d.get("scenarios"), base, tuple(roots),
+                                    condition_values)
+    elif "scenarios" in top.d:
+        ctx.err(("scenarios",), "`scenarios:` are for `protocol: live`; clips are given with "
+                                "`sweep:` or `clips:`")
+    which = None if protocol == "live" else top.one_of("sweep", "clips")
+    if which is None and protocol != "live" and not ctx.problems:
         ctx.err((), "missing the clips: give `sweep:` (a cosim sweep folder) or `clips:` "
                     "(a list of video + ground_truth)")
     elif which is not None:
@@ -310,7 +329,7 @@ def parse_study(text: str, path: Path) -> Study:
                  path=path, name=name, protocol=protocol, clips=tuple(clips), practice=practice,
                  break_every=break_every, repeats=repeats, order=order, seed=seed,
                  roots=tuple(roots), arrow_speed_deg_s=float(arrow or 2.0),
-                 practice_clips=tuple(practice_clips))
+                 practice_clips=tuple(practice_clips), live=tuple(live))
 
 
 def _clips_of(ctx: Problems, key: str, spec: Any, base: Path, roots: list[Path]) -> list[Clip]:
@@ -396,17 +415,7 @@ def _listed_clips(ctx: Problems, items: Any, base: Path, roots: tuple[Path, ...]
         hfov = r.num("hfov_deg", None, lo=0, hi=179, lo_open=True)
         cid = r.string("id", f"{id_prefix}{i}")
         run = r.string("run", "")
-        conds: dict[str, str] = {}
-        cd = r.d.get("conditions", {})
-        if not isinstance(cd, dict):
-            ctx.err(at + ("conditions",), f"expected a mapping, got {describe(cd)}")
-        else:
-            for k, v in list(cd.items())[:100]:
-                if isinstance(v, (dict, list)) or v is None or not isinstance(k, str):
-                    ctx.err(at + ("conditions", k), f"expected a name: value, got "
-                                                    f"{describe(v)}")
-                else:
-                    conds[k] = _fmt_value(v)
+        conds = condition_values(ctx, at, r.d.get("conditions", {}))
         if len(ctx.problems) != before or video is None or gt is None:
             continue
         c = _clip_from(ctx, at, cid, video, gt, target, run, rate, width, height, conds,
@@ -414,6 +423,21 @@ def _listed_clips(ctx: Problems, items: Any, base: Path, roots: tuple[Path, ...]
         if c is not None:
             out.append(c)
     return out
+
+
+def condition_values(ctx: Problems, at: tuple[Any, ...], cd: Any) -> dict[str, str]:
+    """A clip's or live condition's ``conditions:`` mapping as name: text
+    (problems go to ``ctx``)."""
+    conds: dict[str, str] = {}
+    if not isinstance(cd, dict):
+        ctx.err(at + ("conditions",), f"expected a mapping, got {describe(cd)}")
+        return conds
+    for k, v in list(cd.items())[:100]:
+        if isinstance(v, (dict, list)) or v is None or not isinstance(k, str):
+            ctx.err(at + ("conditions", k), f"expected a name: value, got {describe(v)}")
+        else:
+            conds[k] = _fmt_value(v)
+    return conds
 
 
 def _fmt_value(v: Any) -> str:

@@ -107,7 +107,7 @@ def test_williams_square_is_balanced() -> None:
 @pytest.mark.parametrize("body, match", [
     ("protocol: disappear\nspeed: 3\n" + CLIPS, r"study\.yaml:2: speed: unknown key"),
     ("protocol: blink\n" + CLIPS, r"study\.yaml:1: protocol: expected one of: disappear, "
-                                  r"recognise, track; got 'blink'"),
+                                  r"recognise, track, live; got 'blink'"),
     ("protocol: disappear\n", r"study\.yaml:1: \(top level\): missing the clips"),
     ("protocol: disappear\npractice: -1\n" + CLIPS, r"study\.yaml:2: practice: must be >= 0"),
     ("protocol: disappear\nclips:\n  - {video: c0.mp4, ground_truth: c0.gt.csv, fps: 3}\n",

@@ -1,0 +1,289 @@
+"""A live-console trial's run: its scenario paced at real time, its feeds
+handed to the participant's page.
+
+Owns the three pieces between a run and the browsers: ``FeedTap``, a run
+participant (``cosim.sync.runner.Run(..., extra_participants=[...])``) that
+takes the frames the cameras render anyway (``RunContext.frame_taps``: the
+datalink's delivered frame where the scenario sets a datalink, else the
+rendered one), JPEG-encodes those of the condition's feeds with their feed
+number and frame number, and the aircraft's positions a few times a second;
+``Hub``, which fans each message out to every page watching the session
+without ever waiting for one (a page that does not keep up loses its oldest
+messages, and its dropped frames are counted); and ``LiveRun``, the run in
+its own thread, into the session's own run folder, stopped when the
+session ends or the server shuts down. It does not serve HTTP
+(``live_routes``), parse the study (``live_study``) or store reports
+(``store``).
+
+The tap never changes the simulation: it reads the frames and states it is
+handed and returns; the run's states are those of the same scenario run
+without it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import json
+import logging
+import threading
+import time
+from collections import deque
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cosim.core.state import STATE_INDEX
+from cosim.errors import ConfigError
+from cosim.trials.live_study import LiveCondition
+
+log = logging.getLogger(__name__)
+
+#: JPEG quality of the frames sent to the page
+JPEG_QUALITY = 80
+#: how often the map's positions are sent (Hz of simulated time)
+MAP_RATE_HZ = 4.0
+#: messages waiting for one page before its oldest are dropped
+MAX_PENDING = 32
+#: pages watching one session at once
+MAX_WATCHERS = 4
+_POS_COLS = [STATE_INDEX[c] for c in ("lat_deg", "lon_deg", "alt_msl_m", "yaw_deg")]
+
+
+class Watcher:
+    """One page's queue of messages (only ever touched in the event loop).
+    Full: the oldest message goes, and a frame among them counts as dropped."""
+
+    def __init__(self, max_pending: int = MAX_PENDING) -> None:
+        self.max_pending = max_pending
+        self.pending: deque[tuple[str, str]] = deque()
+        self.ready = asyncio.Event()
+        self.sent_frames = 0
+        self.dropped_frames = 0
+        self.closed = False
+
+    def put(self, kind: str, text: str) -> None:
+        if len(self.pending) >= self.max_pending:
+            old, _ = self.pending.popleft()
+            if old == "frame":
+                self.dropped_frames += 1
+        self.pending.append((kind, text))
+        self.ready.set()
+
+    async def get(self) -> tuple[str, str]:
+        """The next message; ("end", ...) once the session's run is over and
+        nothing is left."""
+        while not self.pending:
+            if self.closed:
+                return "end", "{}"
+            self.ready.clear()
+            await self.ready.wait()
+        kind, text = self.pending.popleft()
+        if kind == "frame":
+            self.sent_frames += 1
+        return kind, text
+
+
+class Hub:
+    """The messages of one live session, fanned out to its watchers. ``publish``
+    may be called from any thread and never blocks (the run's thread calls it);
+    the watchers live in the event loop ``loop``."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
+        self.loop = loop
+        self.watchers: list[Watcher] = []
+        self.published_frames = 0
+        #: the messages a page needs on arrival: the feeds, the map's last positions
+        self.hello: str = "{}"
+        self.last_states: str | None = None
+        self.ended = False
+        #: frames dropped for pages that have gone
+        self.dropped_gone = 0
+
+    def publish(self, kind: str, payload: dict[str, Any]) -> None:
+        text = json.dumps(payload, separators=(",", ":"))
+        if kind == "frame":
+            self.published_frames += 1
+        try:
+            self.loop.call_soon_threadsafe(self._fan, kind, text)
+        except RuntimeError:  # the loop is closed: the server is going
+            pass
+
+    def end(self) -> None:
+        try:
+            self.loop.call_soon_threadsafe(self._end)
+        except RuntimeError:
+            pass
+
+    def _fan(self, kind: str, text: str) -> None:
+        if kind == "states":
+            self.last_states = text
+        for w in self.watchers:
+            w.put(kind, text)
+
+    def _end(self) -> None:
+        self.ended = True
+        for w in self.watchers:
+            w.closed = True
+            w.ready.set()
+
+    def watch(self, max_pending: int = MAX_PENDING) -> Watcher:
+        """A new watcher (in the event loop), primed with the feeds and the map."""
+        if len(self.watchers) >= MAX_WATCHERS:
+            raise ConfigError(f"{MAX_WATCHERS} pages already watch this session")
+        w = Watcher(max_pending)
+        w.put("hello", self.hello)
+        if self.last_states is not None:
+            w.put("states", self.last_states)
+        w.closed = self.ended
+        self.watchers.append(w)
+        return w
+
+    def leave(self, w: Watcher) -> None:
+        if w in self.watchers:
+            self.watchers.remove(w)
+            self.dropped_gone += w.dropped_frames
+
+    @property
+    def dropped_frames(self) -> int:
+        """Frames dropped for slow pages, those still watching and those gone."""
+        return self.dropped_gone + sum(w.dropped_frames for w in self.watchers)
+
+
+class FeedTap:
+    """The run participant that hands the condition's feeds and the aircraft's
+    positions to a ``Hub`` (see the module docstring)."""
+
+    name = "live_console"
+
+    def __init__(self, condition: LiveCondition, hub: Hub) -> None:
+        self.condition, self.hub = condition, hub
+        self.index = {(f.vehicle, f.camera): k for k, f in enumerate(condition.feeds)}
+        self.frames_sent = 0
+        #: each feed's last frame number handed to the hub
+        self.last_frame: dict[int, int] = {}
+        self.encode_s = 0.0
+        self.every = 1
+
+    def prepare(self, ctx: Any) -> None:
+        """Before any participant starts: every camera's frames, at full size."""
+        if ctx.frame_taps is not None:
+            ctx.frame_taps.append((self.frame, None))
+
+    def start(self, ctx: Any) -> None:
+        self.ctx = ctx
+        self.every = max(1, round(ctx.physics_hz / MAP_RATE_HZ))
+        self.ground_m = ctx.scenario.origin.ground_alt_m
+        self.ids = list(ctx.ids)
+
+    def frame(self, vehicle: str, camera: str, time_s: float, bgr: np.ndarray) -> None:
+        k = self.index.get((vehicle, camera))
+        if k is None:
+            return
+        import cv2
+
+        feed = self.condition.feeds[k]
+        t0 = time.perf_counter()
+        ok, jpg = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+        self.encode_s += time.perf_counter() - t0
+        if not ok:
+            log.warning("feed %s: frame at %.2f s could not be JPEG-encoded", feed.name, time_s)
+            return
+        frame_no = round(time_s * feed.rate_hz)
+        self.last_frame[k] = frame_no
+        self.hub.publish("frame", {"feed": k, "frame": frame_no, "time_s": round(time_s, 6),
+                                   "jpeg": base64.b64encode(jpg.tobytes()).decode()})
+        self.frames_sent += 1
+
+    def on_exchange(self, tick: int, states: np.ndarray) -> None:
+        if tick % self.every:
+            return
+        s = states[:, _POS_COLS]
+        ok = np.isfinite(s[:, 0]) & np.isfinite(s[:, 1])
+        frame = self.ctx.frame
+        n, e, _ = frame.geodetic_to_ned(np.where(ok, s[:, 0], frame.lat_deg),
+                                        np.where(ok, s[:, 1], frame.lon_deg),
+                                        np.where(ok, s[:, 2], frame.alt_m))
+        self.hub.publish("states", {
+            "time_s": round(tick / self.ctx.physics_hz, 6),
+            "vehicles": [{"id": self.ids[i], "north_m": round(float(n[i]), 2),
+                          "east_m": round(float(e[i]), 2),
+                          "alt_agl_m": round(float(s[i, 2]) - self.ground_m, 2),
+                          "yaw_deg": round(float(s[i, 3]), 1)}
+                         for i in np.flatnonzero(ok).tolist()]})
+
+    def finish(self, tick: int, reason: str) -> dict[str, Any] | None:
+        return {"feeds": [f.name for f in self.condition.feeds], "frames_sent": self.frames_sent,
+                "jpeg_encode_s": round(self.encode_s, 3)}
+
+    def after_run(self, out_dir: Path) -> None:
+        return None
+
+
+class LiveRun:
+    """One session's live run: the condition's scenario, paced at ``realtime``
+    (1.0: real time), into ``out_dir``, in a thread of its own. ``stop`` ends
+    it early; ``wait`` waits for it (both safe to call twice)."""
+
+    def __init__(self, condition: LiveCondition, out_dir: Path, hub: Hub, *,
+                 realtime: float = 1.0, backend: str = "process",
+                 workers: int | None = None) -> None:
+        from cosim.scenario import load_scenario
+        from cosim.sync.runner import Run
+
+        scn = load_scenario(condition.scenario)
+        if condition.duration_s is not None:
+            scn = scn.with_duration(condition.duration_s)
+        self.condition, self.out_dir, self.hub = condition, out_dir, hub
+        self.tap = FeedTap(condition, hub)
+        hub.hello = json.dumps({"condition": condition.id, "duration_s": scn.duration_s,
+                                "feeds": [{"feed": k, "name": f.name, "width_px": f.width_px,
+                                           "height_px": f.height_px, "rate_hz": f.rate_hz}
+                                          for k, f in enumerate(condition.feeds)],
+                                "vehicles": [v.id for v in scn.vehicles]})
+        self.run = Run(scn, out_dir, backend=backend, workers=workers, realtime=realtime,
+                       extra_participants=[self.tap])
+        self.result: Any = None
+        self.error: BaseException | None = None
+        self.started_s = time.time()
+        self._thread = threading.Thread(target=self._main, name=f"live-{out_dir.name}",
+                                        daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def _main(self) -> None:
+        try:
+            self.result = self.run.run()
+            if self.result.error is not None:
+                self.error = self.result.error
+                log.error("live run %s ended: %s", self.out_dir, self.result.error)
+        except Exception as e:  # noqa: BLE001 - said on the experimenter's page
+            self.error = e
+            log.exception("live run %s failed", self.out_dir)
+        finally:
+            self.hub.end()
+
+    @property
+    def running(self) -> bool:
+        return self._thread.is_alive()
+
+    def stop(self, reason: str = "session_ended") -> None:
+        self.run.stop(reason)
+
+    def wait(self, timeout_s: float | None = None) -> bool:
+        """True once the run is over (within ``timeout_s``)."""
+        if self._thread.ident is None:
+            return True
+        self._thread.join(timeout_s)
+        return not self._thread.is_alive()
+
+    def status(self) -> dict[str, Any]:
+        r = self.result
+        return {"running": self.running, "out_dir": str(self.out_dir),
+                "stop_reason": r.stop_reason if r is not None else None,
+                "error": str(self.error)[:500] if self.error is not None else None,
+                "frames_published": self.hub.published_frames,
+                "frames_dropped": self.hub.dropped_frames,
+                "watchers": len(self.hub.watchers)}

@@ -1,0 +1,255 @@
+"""The live console's routes of the trial web app (``protocol: live``).
+
+Owns the HTTP side of live trials: the experimenter starts a session's trial
+(``POST /api/sessions/{sid}/live/start``: its condition's scenario runs,
+paced at real time, into the session's own run folder, one run per session
+at a time) and may stop it (``.../live/stop``); the participant's page
+(``/live?session=ID``, ``static/live.html``) follows the run through a
+server-sent event stream (``GET .../live/stream``: the feeds, each frame
+JPEG-encoded with its feed and frame number, and the aircraft's positions)
+and posts each click on a feed (``POST .../live/reports``: the feed, the
+frame the page drew there, the pixel in the frame's own coordinates, the
+page's click and draw times), which the store keeps
+(``Store.live_reports``). The run and its fan-out are ``live``'s.
+
+Bounds: a report is a small flat JSON object (the app's body limits); its
+feed must be one of the condition's, its frame one the server has sent on
+that feed, its pixel inside the frame; a session has at most one run at a
+time and at most ``live.MAX_WATCHERS`` pages watching it; a page that does
+not keep up loses frames (counted), never slows the run. The run is stopped
+when its session is stopped or finished and when the server shuts down
+(``LiveConsole.close``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import re
+from collections.abc import AsyncIterator
+from pathlib import Path
+from typing import Any
+
+from starlette.concurrency import run_in_threadpool
+from starlette.requests import Request
+from starlette.responses import JSONResponse, Response, StreamingResponse
+from starlette.routing import Route
+
+from cosim.errors import ConfigError
+from cosim.trials.live import Hub, LiveRun
+from cosim.trials.live_study import LiveCondition
+from cosim.trials.study import Study
+
+log = logging.getLogger(__name__)
+
+REPORT_KEY = re.compile(r"^[A-Za-z0-9_\-]{1,64}$")
+#: seconds a stopped run may take to end before the server gives up waiting
+STOP_WAIT_S = 30.0
+#: the page's clock readings accepted (ms since the page loaded): a day
+MAX_PAGE_TIME_MS = 86_400_000.0
+
+
+def live_order(study: Study, session_number: int) -> list[dict[str, Any]]:
+    """A new live session's trials: each with its condition's id and fingerprint."""
+    return [{"index": t.index, "practice": False, "clip": t.clip,
+             "condition_id": study.live[t.clip].id,
+             "fingerprint": study.live[t.clip].fingerprint, "break_before": t.break_before}
+            for t in study.trial_order(session_number)]
+
+
+class LiveConsole:
+    """The live runs of one app (one per session at most) and their routes.
+    ``bad``: the app's exception for a refused request (message, status);
+    ``number(body, key, optional=False)``: the app's reader of a JSON number."""
+
+    def __init__(self, study: Study, store: Any, bad: type[Exception], number: Any,
+                 runs_dir: Path | None = None, backend: str = "process",
+                 realtime: float = 1.0) -> None:
+        self.study, self.store, self.bad, self.number = study, store, bad, number
+        self.runs_dir = runs_dir or study.path.resolve().with_name(f"{study.path.stem}-live")
+        self.backend, self.realtime = backend, realtime
+        self.runs: dict[str, tuple[int, LiveRun]] = {}
+        self._by_id = {c.id: c for c in study.live}
+
+    # --- helpers ---
+    def condition(self, t: dict[str, Any]) -> LiveCondition:
+        """A session trial's condition, refused (409) if gone or changed."""
+        c = self._by_id.get(t.get("condition_id", ""))
+        if c is None:
+            raise self.bad(f"condition {str(t.get('condition_id'))[:200]!r} of this session is "
+                           f"no longer in the study {self.study.path}", 409)
+        if t.get("fingerprint") != c.fingerprint:
+            raise self.bad(f"condition {c.id!r}: its scenario {c.scenario} changed since the "
+                           f"session was created: restore it, or start a new session", 409)
+        return c
+
+    def view(self, s: dict[str, Any]) -> dict[str, Any]:
+        """What the pages see of a live session."""
+        trials = []
+        for t in s["trial_order"]:
+            c = self.condition(t)
+            trials.append({**t, "condition": c.id, "conditions": c.condition_map,
+                           "feeds": [f.name for f in c.feeds],
+                           "run": str(self._folder(s["id"], t["index"]))})
+        live = self.runs.get(s["id"])
+        return {"id": s["id"], "participant": s["participant"], "protocol": "live",
+                "state": s["state"], "trials": trials,
+                "live": None if live is None else {"trial_index": live[0], **live[1].status()},
+                "order_method": s["order_method"], "seed": s["seed"],
+                "session_number": s["session_number"]}
+
+    def _folder(self, sid: str, index: int) -> Path:
+        return self.runs_dir / sid / f"trial{index:03d}"
+
+    def _session(self, request: Request) -> dict[str, Any]:
+        sid = request.path_params["sid"]
+        s = self.store.session(sid) if len(sid) <= 32 else None
+        if s is None or s["protocol"] != "live":
+            raise self.bad(f"no live session {sid[:40]!r}", 404)
+        return dict(s)
+
+    def _live(self, sid: str) -> tuple[int, LiveRun]:
+        live = self.runs.get(sid)
+        if live is None:
+            raise self.bad("no trial of this session has been started", 409)
+        return live
+
+    # --- routes ---
+    async def start(self, request: Request, body: dict[str, Any]) -> Response:
+        s = await run_in_threadpool(self._session, request)
+        ti = body.get("trial_index")
+        if isinstance(ti, bool) or not isinstance(ti, int) or not 0 <= ti < len(s["trial_order"]):
+            raise self.bad(f"trial_index: expected 0..{len(s['trial_order']) - 1}, "
+                           f"got {ti!r}"[:200])
+        if s["state"] == "finished":
+            raise self.bad("this session is finished", 409)
+        was = self.runs.get(s["id"])
+        if was is not None and was[1].running:
+            raise self.bad(f"trial {was[0]} of this session is still running: stop it first "
+                           f"(one run per session)", 409)
+        folder = self._folder(s["id"], ti)
+        if folder.exists():
+            raise self.bad(f"trial {ti} of this session has run already (its run is in "
+                           f"{folder})", 409)
+        c = self.condition(s["trial_order"][ti])
+        hub = Hub(asyncio.get_running_loop())
+        try:
+            run = await run_in_threadpool(LiveRun, c, folder, hub, realtime=self.realtime,
+                                          backend=self.backend)
+        except ConfigError as e:
+            raise self.bad("; ".join(e.problems)[:2000], 409) from None
+        self.runs[s["id"]] = (ti, run)
+        run.start()
+        await run_in_threadpool(self.store.set_state, s["id"], "running")
+        log.info("session %s: trial %d (%s) live in %s", s["id"], ti, c.id, folder)
+        return JSONResponse({"trial_index": ti, **run.status()}, status_code=201)
+
+    async def stop(self, request: Request, body: dict[str, Any]) -> Response:
+        s = await run_in_threadpool(self._session, request)
+        ti, run = self._live(s["id"])
+        run.stop("stopped by the experimenter")
+        await run_in_threadpool(run.wait, STOP_WAIT_S)
+        return JSONResponse({"trial_index": ti, **run.status()})
+
+    async def status(self, request: Request) -> Response:
+        s = await run_in_threadpool(self._session, request)
+        return JSONResponse(await run_in_threadpool(self.view, s))
+
+    async def stream(self, request: Request) -> Response:
+        """The session's live run as server-sent events: ``hello`` (its feeds),
+        ``frame`` and ``states`` messages, then ``end``."""
+        s = await run_in_threadpool(self._session, request)
+        ti, run = self._live(s["id"])
+        try:
+            watcher = run.hub.watch()
+        except ConfigError as e:
+            raise self.bad("; ".join(e.problems), 429) from None
+
+        async def events() -> AsyncIterator[str]:
+            try:
+                while True:
+                    kind, text = await watcher.get()
+                    yield f"event: {kind}\ndata: {text}\n\n"
+                    if kind == "end":
+                        return
+            finally:
+                run.hub.leave(watcher)
+
+        return StreamingResponse(events(), media_type="text/event-stream",
+                                 headers={"Cache-Control": "no-store",
+                                          "X-Accel-Buffering": "no"})
+
+    async def report(self, request: Request, body: dict[str, Any]) -> Response:
+        s = await run_in_threadpool(self._session, request)
+        ti, run = self._live(s["id"])
+        if body.get("trial_index") != ti:
+            raise self.bad(f"trial_index: the live trial of this session is {ti}, got "
+                           f"{body.get('trial_index')!r}"[:200], 409)
+        key = body.get("report_key")
+        if not isinstance(key, str) or not REPORT_KEY.match(key):
+            raise self.bad("report_key: expected the page's id of the click (1-64 letters, "
+                           "digits, '_', '-')")
+        feeds = run.condition.feeds
+        k = body.get("feed")
+        if isinstance(k, bool) or not isinstance(k, int) or not 0 <= k < len(feeds):
+            raise self.bad(f"feed: expected 0..{len(feeds) - 1} (this trial's feeds), "
+                           f"got {k!r}"[:200])
+        feed = feeds[k]
+        frame = body.get("frame")
+        last = run.tap.last_frame.get(k)
+        if isinstance(frame, bool) or not isinstance(frame, int) or last is None \
+                or not 0 <= frame <= last:
+            sent = "none yet" if last is None else f"0..{last}"
+            raise self.bad(f"frame: expected a frame of feed {feed.name} sent to the page "
+                           f"({sent}), got {frame!r}"[:200])
+        x, y = self.number(body, "x_px"), self.number(body, "y_px")
+        if not (0 <= x <= feed.width_px and 0 <= y <= feed.height_px):
+            raise self.bad(f"x_px, y_px: expected a pixel of the {feed.width_px} x "
+                           f"{feed.height_px} frame, got ({x:g}, {y:g})")
+        click = self.number(body, "click_time_ms")
+        drawn = self.number(body, "drawn_time_ms", optional=True)
+        for name, v in (("click_time_ms", click), ("drawn_time_ms", drawn)):
+            if v is not None and not 0 <= v <= MAX_PAGE_TIME_MS:
+                raise self.bad(f"{name}: expected 0..{MAX_PAGE_TIME_MS:.0f} ms (the page's "
+                               f"clock), got {v:g}")
+        row = {"session": s["id"], "participant": s["participant"], "trial_index": ti,
+               "condition": run.condition.id, "report_key": key, "feed": k,
+               "feed_name": feed.name, "frame": frame, "x_px": x, "y_px": y,
+               "click_time_ms": click, "drawn_time_ms": drawn, "run": str(run.out_dir)}
+        stored, created = await run_in_threadpool(self.store.record_live_report, row)
+        return JSONResponse({"report": stored, "created": created},
+                            status_code=201 if created else 200)
+
+    def close(self) -> None:
+        """Stop every run and wait for each to end (the server is going)."""
+        for _, run in self.runs.values():
+            run.stop("server shut down")
+        for _, run in self.runs.values():
+            if not run.wait(STOP_WAIT_S):
+                log.error("live run %s did not stop within %g s", run.out_dir, STOP_WAIT_S)
+
+    def stop_session(self, sid: str) -> None:
+        """The session ends (paused, finished): its run stops."""
+        live = self.runs.get(sid)
+        if live is not None and live[1].running:
+            live[1].stop("session ended")
+
+
+def routes(console: LiveConsole, json_body: Any, experimenter: Any, page: Any) -> list[Route]:
+    """The live console's routes; ``json_body``, ``experimenter`` and ``page``
+    are the app's (a checked JSON body, the loopback-only guard, a static page)."""
+    def with_body(fn: Any) -> Any:
+        async def handler(request: Request) -> Response:
+            out: Response = await fn(request, await json_body(request))
+            return out
+        return handler
+
+    base = "/api/sessions/{sid}/live"
+    return [
+        Route("/live", page("live.html")),
+        Route(base, console.status, methods=["GET"]),
+        Route(f"{base}/start", experimenter(with_body(console.start)), methods=["POST"]),
+        Route(f"{base}/stop", experimenter(with_body(console.stop)), methods=["POST"]),
+        Route(f"{base}/stream", console.stream, methods=["GET"]),
+        Route(f"{base}/reports", with_body(console.report), methods=["POST"]),
+    ]

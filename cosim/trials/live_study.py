@@ -1,0 +1,168 @@
+"""The conditions of a live-console study (``protocol: live``).
+
+Owns reading the study file's ``scenarios:`` list: each condition names a
+scenario file (inside the study's folder), the camera feeds the participant
+watches and, optionally, how long it runs and its condition values. It does
+not run anything (``live``) or serve anything (``server``, ``live_routes``).
+
+Example (in a study file)::
+
+    protocol: live
+    scenarios:
+      - id: two_feeds
+        scenario: scenarios/pair.yaml   # relative to the study file
+        feeds: [uav1/belly, uav2/belly] # VEHICLE/CAMERA, or a count: the first K
+        duration_s: 60                  # default: the scenario's own
+        conditions: {feeds: 2, alt_agl_m: 100}
+
+A feed is one camera of one vehicle (``VEHICLE/CAMERA``, the names the
+scenario gives them); ``feeds: K`` takes the first K in the scenario's order
+(its cameras as listed, each over its vehicles). 1 to ``MAX_FEEDS`` feeds.
+Each scenario is loaded and checked as the study is read, so a misspelt
+feed or a broken scenario is a ``ConfigError`` before any session starts.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from cosim.errors import ConfigError
+from cosim.scenario.reader import Problems, Reader, describe
+from cosim.trials.clips import inside
+
+#: the most feeds one condition shows (a 4 x 4 grid)
+MAX_FEEDS = 16
+#: the most conditions a live study has
+MAX_CONDITIONS = 200
+#: the longest live trial (s): an hour
+MAX_DURATION_S = 3600.0
+CONDITION_KEYS = ("id", "scenario", "feeds", "duration_s", "conditions")
+
+
+@dataclass(frozen=True)
+class Feed:
+    """One camera of one vehicle as the participant sees it: its name
+    (``VEHICLE/CAMERA``), its frame size and rate."""
+
+    name: str
+    vehicle: str
+    camera: str
+    width_px: int
+    height_px: int
+    rate_hz: float
+
+
+@dataclass(frozen=True)
+class LiveCondition:
+    """One live trial's scenario and feeds."""
+
+    id: str
+    scenario: Path
+    feeds: tuple[Feed, ...]
+    duration_s: float | None
+    conditions: tuple[tuple[str, str], ...]
+    #: the SHA-256 (hex) of the scenario file when the study was read
+    scenario_sha256: str = ""
+
+    @property
+    def fingerprint(self) -> dict[str, Any]:
+        """What a session records to know the condition again."""
+        return {"scenario_sha256": self.scenario_sha256}
+
+    @property
+    def condition_map(self) -> dict[str, str]:
+        return dict(self.conditions)
+
+
+def scenario_feeds(scn: Any) -> list[Feed]:
+    """Every camera stream of a loaded scenario, in the cameras participant's
+    order (each camera as listed, over its vehicles)."""
+    cams = scn.sections.get("cameras") if hasattr(scn, "sections") else None
+    if cams is None:
+        return []
+    return [Feed(f"{scn.vehicles[row].id}/{cam.name}", scn.vehicles[row].id, cam.name,
+                 int(cam.width_px), int(cam.height_px), float(cam.rate_hz))
+            for cam in cams.views for row in cam.vehicles]
+
+
+def read_live_conditions(ctx: Problems, items: Any, base: Path, roots: tuple[Path, ...],
+                         condition_values: Callable[[Problems, tuple[Any, ...], Any],
+                                                    dict[str, str]]) -> list[LiveCondition]:
+    """The conditions of ``scenarios:`` (problems go to ``ctx``);
+    ``condition_values`` reads a ``conditions:`` mapping as the clips' are."""
+    from cosim.scenario import load_scenario
+
+    if not isinstance(items, list) or not items:
+        ctx.err(("scenarios",), f"expected a non-empty list of live conditions "
+                                f"({{id, scenario, feeds}}), got {describe(items)}")
+        return []
+    if len(items) > MAX_CONDITIONS:
+        ctx.err(("scenarios",), f"{len(items)} conditions; a live study may have at most "
+                                f"{MAX_CONDITIONS}")
+        return []
+    out: list[LiveCondition] = []
+    for i, item in enumerate(items):
+        at: tuple[Any, ...] = ("scenarios", i)
+        r = Reader(ctx, item, at, CONDITION_KEYS)
+        before = len(ctx.problems)
+        cid = r.string("id", f"live{i}")
+        duration = r.num("duration_s", None, lo=0, hi=MAX_DURATION_S, lo_open=True)
+        value = r.d.get("scenario")
+        path = None
+        if not isinstance(value, str) or not value or "\x00" in value:
+            ctx.err(at + ("scenario",), f"expected the path of a scenario file, got "
+                                        f"{describe(value)}")
+        else:
+            path, instead = inside(base / value, roots)
+            if path is None:
+                ctx.err(at + ("scenario",), f"{value[:200]!r}: the scenario must be an existing "
+                                            f"file inside the study's folder ({base}){instead}")
+        conds = condition_values(ctx, at, r.d.get("conditions", {}))
+        if path is None or len(ctx.problems) != before:
+            continue
+        try:
+            scn = load_scenario(path)
+        except ConfigError as e:
+            for m in e.problems[:20]:
+                ctx.err(at + ("scenario",), m)
+            continue
+        feeds = _feeds(ctx, at + ("feeds",), r.d.get("feeds"), scenario_feeds(scn), path)
+        if feeds:
+            sha = hashlib.sha256(path.read_bytes()).hexdigest()
+            out.append(LiveCondition(cid, path, tuple(feeds), duration, tuple(conds.items()),
+                                     sha))
+    ids = [c.id for c in out]
+    if len(set(ids)) != len(ids):
+        ctx.err(("scenarios",), f"condition ids given twice: "
+                                f"{', '.join(sorted({i for i in ids if ids.count(i) > 1})[:10])}")
+    return out
+
+
+def _feeds(ctx: Problems, at: tuple[Any, ...], spec: Any, have: list[Feed],
+           path: Path) -> list[Feed]:
+    names = ", ".join(f.name for f in have[:20]) or "none: it has no cameras: section"
+    if isinstance(spec, int) and not isinstance(spec, bool):
+        if not 1 <= spec <= MAX_FEEDS or spec > len(have):
+            ctx.err(at, f"{spec} feeds: expected 1..{min(MAX_FEEDS, len(have))} ({path} has "
+                        f"{len(have)} camera streams: {names})")
+            return []
+        return have[:spec]
+    if not isinstance(spec, list) or not spec or len(spec) > MAX_FEEDS:
+        ctx.err(at, f"expected a list of 1..{MAX_FEEDS} feeds (VEHICLE/CAMERA) or a count, "
+                    f"got {describe(spec)}")
+        return []
+    by_name = {f.name: f for f in have}
+    out = []
+    for k, name in enumerate(spec):
+        f = by_name.get(name) if isinstance(name, str) else None
+        if f is None:
+            ctx.err(at + (k,), f"no feed {str(name)[:100]!r} in {path}; it has: {names}")
+        elif f in out:
+            ctx.err(at + (k,), f"feed {name!r} given twice")
+        else:
+            out.append(f)
+    return out if len(out) == len(spec) else []

@@ -1,0 +1,220 @@
+// The live console's participant page (protocol: live). Dependency-free.
+// Waits for the experimenter to start a trial, then follows its run through the
+// server's event stream: the feeds drawn in a grid (each with its id), the map
+// of the aircraft (north up, a scale bar, ids, tracks). Each frame is drawn in a
+// requestAnimationFrame callback; the page remembers, per feed, which frame it
+// drew and when (the callback's time). A click on a feed posts that feed, the
+// frame drawn there, the pixel in the frame's own coordinates (scaled from the
+// displayed size) and the click's time (both on the page's clock,
+// performance.now()). A frame that arrives before the previous one of its feed
+// was drawn replaces it (the page keeps up by skipping, never by falling behind).
+"use strict";
+(() => {
+  const sid = new URLSearchParams(location.search).get("session");
+  const feedsEl = document.getElementById("feeds");
+  const map = document.getElementById("map");
+  const clock = document.getElementById("clock");
+  const message = document.getElementById("message");
+  const TRACK_POINTS = 600;
+  const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
+  const esc = (text) => String(text).replace(/[&<>"']/g, (c) => `&#${c.charCodeAt(0)};`);
+  const phase = (p) => { document.body.dataset.phase = p; };
+
+  let trialIndex = null;
+  let feeds = [];          // [{feed, name, width_px, height_px, canvas, cell}]
+  const due = new Map();   // feed -> {frame, bitmap}: the newest frame not drawn yet
+  const drawn = new Map(); // feed -> {frame, time_ms}: what is on screen
+  const tracks = new Map(); // vehicle id -> [[north_m, east_m], ...]
+  let last = null;         // the last states message
+  let rafPending = false;
+  // for a test's eyes: every frame drawn and every report posted
+  window.live = { drawn: [], reports: [] };
+
+  function say(html) { message.innerHTML = html; message.hidden = false; }
+
+  function layout() {
+    const k = feeds.length;
+    if (!k) return;
+    const cols = Math.ceil(Math.sqrt(k));
+    const rows = Math.ceil(k / cols);
+    feedsEl.style.gridTemplateColumns = `repeat(${cols}, minmax(0, 1fr))`;
+    feedsEl.style.gridTemplateRows = `repeat(${rows}, minmax(0, 1fr))`;
+    for (const f of feeds) {
+      const box = f.cell.getBoundingClientRect();
+      const s = Math.min(box.width / f.width_px, box.height / f.height_px);
+      f.canvas.style.width = `${f.width_px * s}px`;
+      f.canvas.style.height = `${f.height_px * s}px`;
+    }
+  }
+
+  function build(hello) {
+    feedsEl.innerHTML = "";
+    feeds = hello.feeds.map((f) => {
+      const cell = document.createElement("div");
+      cell.className = "cell";
+      const canvas = document.createElement("canvas");
+      canvas.width = f.width_px;
+      canvas.height = f.height_px;
+      canvas.dataset.feed = String(f.feed);
+      const id = document.createElement("div");
+      id.className = "id";
+      id.textContent = f.name;
+      const on = document.createElement("div"); // the frame and its id, as large as drawn
+      on.className = "frame";
+      on.append(canvas, id);
+      cell.append(on);
+      feedsEl.append(cell);
+      const out = { ...f, canvas, cell, on };
+      canvas.addEventListener("pointerdown", (e) => report(out, e));
+      return out;
+    });
+    layout();
+  }
+
+  function draw(now) {
+    rafPending = false;
+    for (const [k, d] of due) {
+      const f = feeds[k];
+      if (!f) continue;
+      f.canvas.getContext("2d").drawImage(d.bitmap, 0, 0, f.width_px, f.height_px);
+      d.bitmap.close();
+      drawn.set(k, { frame: d.frame, time_ms: now });
+      window.live.drawn.push([k, d.frame, now]);
+      if (window.live.drawn.length > 10000) window.live.drawn.splice(0, 5000);
+    }
+    due.clear();
+    document.body.dataset.drawn = String(drawn.size);
+  }
+
+  async function frame(msg) {
+    const bytes = Uint8Array.from(atob(msg.jpeg), (c) => c.charCodeAt(0));
+    const bitmap = await createImageBitmap(new Blob([bytes], { type: "image/jpeg" }));
+    const was = due.get(msg.feed);
+    if (was && was.frame > msg.frame) { bitmap.close(); return; }
+    if (was) was.bitmap.close();
+    due.set(msg.feed, { frame: msg.frame, bitmap });
+    if (!rafPending) { rafPending = true; requestAnimationFrame(draw); }
+  }
+
+  function report(f, e) {
+    const on = drawn.get(f.feed);
+    if (!on || trialIndex === null) return; // nothing drawn there yet
+    const r = f.canvas.getBoundingClientRect();
+    const x = (e.clientX - r.left) * f.width_px / r.width;
+    const y = (e.clientY - r.top) * f.height_px / r.height;
+    const body = {
+      trial_index: trialIndex, report_key: crypto.randomUUID(), feed: f.feed,
+      frame: on.frame, x_px: x, y_px: y, click_time_ms: e.timeStamp,
+      drawn_time_ms: on.time_ms,
+    };
+    window.live.reports.push(body);
+    const mark = document.createElement("div");
+    mark.className = "mark";
+    mark.style.left = `${e.clientX - r.left}px`;
+    mark.style.top = `${e.clientY - r.top}px`;
+    f.on.append(mark);
+    setTimeout(() => mark.remove(), 600);
+    post(body);
+  }
+
+  async function post(body) {
+    for (let attempt = 0; attempt < 5; attempt++) { // the same key: stored once
+      try {
+        const r = await fetch(`/api/sessions/${sid}/live/reports`, {
+          method: "POST", headers: { "Content-Type": "application/json" },
+          body: JSON.stringify(body) });
+        body.status = r.status;
+        if (r.status < 500) return;
+      } catch (err) { body.status = String(err); }
+      await sleep(500 * (attempt + 1));
+    }
+  }
+
+  function drawMap() {
+    const ctx = map.getContext("2d");
+    const w = map.width, h = map.height;
+    ctx.fillStyle = "#1d2a1d";
+    ctx.fillRect(0, 0, w, h);
+    let pts = [];
+    for (const tr of tracks.values()) pts = pts.concat(tr);
+    if (!pts.length) return;
+    const ns = pts.map((p) => p[0]), es = pts.map((p) => p[1]);
+    const cn = (Math.max(...ns) + Math.min(...ns)) / 2;
+    const ce = (Math.max(...es) + Math.min(...es)) / 2;
+    const span = Math.max(200, Math.max(...ns) - Math.min(...ns), Math.max(...es) - Math.min(...es));
+    const s = (0.8 * Math.min(w, h)) / span; // px per metre, the same both ways
+    const at = (p) => [w / 2 + (p[1] - ce) * s, h / 2 - (p[0] - cn) * s];
+    ctx.lineWidth = 1.5;
+    ctx.strokeStyle = "#7ab";
+    for (const tr of tracks.values()) {
+      ctx.beginPath();
+      tr.forEach((p, i) => { const [x, y] = at(p); if (i) ctx.lineTo(x, y); else ctx.moveTo(x, y); });
+      ctx.stroke();
+    }
+    ctx.font = "12px monospace";
+    for (const v of (last ? last.vehicles : [])) {
+      const [x, y] = at([v.north_m, v.east_m]);
+      const a = (v.yaw_deg * Math.PI) / 180;
+      ctx.fillStyle = "#fc3";
+      ctx.beginPath(); // a triangle pointing along the heading (north up)
+      ctx.moveTo(x + 8 * Math.sin(a), y - 8 * Math.cos(a));
+      ctx.lineTo(x + 5 * Math.sin(a + 2.5), y - 5 * Math.cos(a + 2.5));
+      ctx.lineTo(x + 5 * Math.sin(a - 2.5), y - 5 * Math.cos(a - 2.5));
+      ctx.fill();
+      ctx.fillStyle = "#fff";
+      ctx.fillText(v.id, x + 9, y - 6);
+    }
+    // north arrow and a scale bar of a round length
+    ctx.fillStyle = "#fff";
+    ctx.fillText("N \u2191", w - 34, 16);
+    const target = (w * 0.3) / s;
+    const pow = 10 ** Math.floor(Math.log10(target));
+    const len = [5, 2, 1].map((m) => m * pow).find((l) => l <= target) || pow;
+    ctx.fillRect(10, h - 14, len * s, 3);
+    ctx.fillText(len >= 1000 ? `${len / 1000} km` : `${len} m`, 10, h - 20);
+  }
+
+  function states(msg) {
+    last = msg;
+    for (const v of msg.vehicles) {
+      if (!tracks.has(v.id)) tracks.set(v.id, []);
+      const tr = tracks.get(v.id);
+      tr.push([v.north_m, v.east_m]);
+      if (tr.length > TRACK_POINTS) tr.shift();
+    }
+    clock.textContent = `t = ${msg.time_s.toFixed(1)} s`;
+    drawMap();
+  }
+
+  function follow() {
+    const es = new EventSource(`/api/sessions/${sid}/live/stream`);
+    es.addEventListener("hello", (e) => {
+      build(JSON.parse(e.data));
+      message.hidden = true;
+      phase("live");
+    });
+    es.addEventListener("frame", (e) => { frame(JSON.parse(e.data)); });
+    es.addEventListener("states", (e) => states(JSON.parse(e.data)));
+    es.addEventListener("end", () => {
+      es.close();
+      phase("ended");
+      say("<p>This trial is over. Thank you.</p>");
+    });
+  }
+
+  async function main() {
+    phase("waiting");
+    say("<p>Please wait: the experimenter will start the trial.</p>");
+    for (;;) { // until the experimenter starts a trial
+      const r = await fetch(`/api/sessions/${sid}/live`);
+      if (r.status !== 200) { say(`<p>${esc((await r.json()).error || r.status)}</p>`); return; }
+      const s = await r.json();
+      if (s.live && s.live.running) { trialIndex = s.live.trial_index; break; }
+      await sleep(300);
+    }
+    follow();
+  }
+
+  window.addEventListener("resize", layout);
+  main();
+})();

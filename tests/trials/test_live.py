@@ -1,0 +1,307 @@
+"""The live console (``protocol: live``): the study's live conditions, the
+hub's drops for a slow page, and a live session end to end: uvicorn on
+127.0.0.1 (an ephemeral port) in a thread, a two-aircraft scenario paced at
+real time, a slow raw client and a scripted participant in headless Debian
+Chromium (/usr/bin/chromium through Playwright; nothing is downloaded)."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import socket
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+from test_server import live_server
+
+from cosim.errors import ConfigError
+from cosim.trials.live import Hub
+from cosim.trials.study import load_study
+
+W, H, RATE_HZ, DURATION_S = 160, 120, 10.0, 3.0
+SCENARIO = """\
+schema_version: 1
+name: live_pair
+origin: {{lat_deg: 37.4150, lon_deg: -122.0480, ground_alt_m: 10}}
+rates: {{physics_hz: 120, control_hz: 30, log_hz: 10}}
+duration_s: {duration_s}
+seed: 7
+vehicles:
+  - id: uav1
+    model: uav700
+    init: {{north_m: -150, east_m: 0, alt_agl_m: 100, heading_deg: 0, airspeed_kt: 100}}
+  - id: uav2
+    model: uav700
+    init: {{north_m: -150, east_m: 60, alt_agl_m: 100, heading_deg: 0, airspeed_kt: 100}}
+ground: {{texture: procedural}}
+targets:
+  - {{id: truck1, kind: truck, north_m: 0, east_m: 0, heading_deg: 20}}
+cameras:
+  render_workers: 0
+  views:
+    - {{name: belly, vehicles: [uav1, uav2], mount: nadir, vfov_deg: 40, width_px: {w},
+       height_px: {h}, rate_hz: {rate_hz:g}}}
+"""
+STUDY = """\
+name: live_test
+protocol: live
+scenarios:
+  - {id: two, scenario: pair.yaml, feeds: [uav1/belly, uav2/belly], conditions: {feeds: 2}}
+order: shuffle
+"""
+PROFILE = {"screen_width_px": 1000, "screen_height_px": 500, "screen_width_mm": 500.0,
+           "screen_height_mm": 250.0, "viewing_distance_mm": 600.0}
+
+
+def live_study(folder: Path, study: str = STUDY, size_px: tuple[int, int] = (W, H)) -> Path:
+    (folder / "pair.yaml").write_text(SCENARIO.format(duration_s=DURATION_S, w=size_px[0],
+                                                      h=size_px[1], rate_hz=RATE_HZ))
+    p = folder / "study.yaml"
+    p.write_text(study)
+    return p
+
+
+@pytest.mark.parametrize("scenarios, match", [
+    ("[{scenario: pair.yaml, feeds: [uav1/nose]}]",
+     r"study\.yaml:4: scenarios\[0\]\.feeds\[0\]: no feed 'uav1/nose' in .*pair\.yaml; it "
+     r"has: uav1/belly, uav2/belly"),
+    ("[{scenario: pair.yaml, feeds: 3}]",
+     r"scenarios\[0\]\.feeds: 3 feeds: expected 1\.\.2 \(.*pair\.yaml has 2 camera streams"),
+    ("[{scenario: pair.yaml, feeds: [uav1/belly, uav1/belly]}]",
+     r"scenarios\[0\]\.feeds\[1\]: feed 'uav1/belly' given twice"),
+    ("[{scenario: ../elsewhere.yaml, feeds: 1}]",
+     r"scenarios\[0\]\.scenario: '\.\./elsewhere\.yaml': the scenario must be an existing "
+     r"file inside the study's folder"),
+    ("[{scenario: pair.yaml, feeds: 1, colour: red}]", r"scenarios\[0\]\.colour: unknown key"),
+])
+def test_live_conditions_are_checked(tmp_path: Path, scenarios: str, match: str) -> None:
+    (tmp_path.parent / "elsewhere.yaml").write_text("{}")
+    p = live_study(tmp_path, f"name: bad\nprotocol: live\norder: shuffle\n"
+                             f"scenarios: {scenarios}\n")
+    with pytest.raises(ConfigError, match=match):
+        load_study(p)
+
+
+def test_a_live_study_has_scenarios_not_clips(tmp_path: Path) -> None:
+    p = live_study(tmp_path, "protocol: live\nsweep: runs\n")
+    with pytest.raises(ConfigError, match=r"sweep: a live study runs scenarios"):
+        load_study(p)
+    p = live_study(tmp_path, "protocol: disappear\nscenarios: []\n")
+    with pytest.raises(ConfigError, match=r"scenarios: `scenarios:` are for `protocol: live`"):
+        load_study(p)
+
+
+def test_a_live_studys_feeds_by_count_are_the_scenarios_first(tmp_path: Path) -> None:
+    p = live_study(tmp_path, "protocol: live\nscenarios: [{scenario: pair.yaml, feeds: 1, "
+                             "duration_s: 2}]\n")
+    (c,) = load_study(p).live
+    assert [f.name for f in c.feeds] == ["uav1/belly"] and c.duration_s == 2.0
+    assert (c.feeds[0].width_px, c.feeds[0].height_px, c.feeds[0].rate_hz) == (W, H, RATE_HZ)
+
+
+def test_a_watcher_that_does_not_keep_up_loses_its_oldest_frames_counted() -> None:
+    """Frames published from another thread never wait for a page: a page
+    that reads nothing keeps the newest ``max_pending`` and counts the rest
+    as dropped; one that reads gets every frame."""
+    async def scenario() -> tuple[int, int, list[int], int]:
+        hub = Hub(asyncio.get_running_loop())
+        slow, fast = hub.watch(max_pending=4), hub.watch(max_pending=1000)
+        await slow.get()  # hello
+        got: list[int] = []
+
+        async def read() -> None:
+            while True:
+                kind, text = await fast.get()
+                if kind == "end":
+                    return
+                if kind == "frame":
+                    got.append(int(text.split('"frame":')[1].rstrip("}")))
+
+        reader = asyncio.create_task(read())
+        t0 = time.perf_counter()
+        def publish() -> None:
+            for k in range(50):
+                hub.publish("frame", {"feed": 0, "frame": k})
+            hub.end()
+
+        th = threading.Thread(target=publish)
+        th.start()
+        th.join()
+        took = time.perf_counter() - t0
+        await reader
+        left = [int(t.split('"frame":')[1].rstrip("}"))
+                for _, t in list(slow.pending)]
+        assert took < 1.0
+        return slow.dropped_frames, hub.dropped_frames, left, len(got)
+
+    dropped, total, left, got = asyncio.run(scenario())
+    assert dropped == 46  # 50 frames, the newest 4 kept
+    assert total == dropped and left == [46, 47, 48, 49] and got == 50
+
+
+def _same_states(a: Path, b: Path) -> None:
+    """The two runs' states.parquet hold the same values, column by column."""
+    ta, tb = pq.read_table(a / "states.parquet"), pq.read_table(b / "states.parquet")
+    assert ta.column_names == tb.column_names and ta.num_rows == tb.num_rows > 0
+    for c in ta.column_names:
+        x = ta.column(c).to_numpy(zero_copy_only=False)
+        y = tb.column(c).to_numpy(zero_copy_only=False)
+        if x.dtype.kind == "f":
+            assert np.array_equal(x, y, equal_nan=True), c
+        else:
+            assert list(x) == list(y), c
+
+
+def _start(server: Any, sid: str) -> dict[str, Any]:
+    status, out = server.request("POST", f"/api/sessions/{sid}/live/start", {"trial_index": 0})
+    assert status == 201, out
+    return dict(out)
+
+
+def _wait_over(server: Any, sid: str, timeout_s: float = 60.0) -> dict[str, Any]:
+    deadline = time.monotonic() + timeout_s
+    while True:
+        status, v = server.request("GET", f"/api/sessions/{sid}/live")
+        assert status == 200, v
+        if not v["live"]["running"]:
+            return dict(v)
+        assert time.monotonic() < deadline, "the live run did not end"
+        time.sleep(0.2)
+
+
+@pytest.mark.integration  # a live run of a few seconds
+def test_a_slow_page_loses_frames_and_the_run_keeps_real_time(tmp_path: Path) -> None:
+    """A client that opens the stream and never reads: its frames are dropped
+    and counted, and the run still keeps to real time. (640 x 480 frames: more
+    than the sockets' buffers hold.)"""
+    with live_server(live_study(tmp_path, size_px=(640, 480))) as server:
+        status, s = server.request("POST", "/api/sessions", {"participant": "slow", **PROFILE})
+        assert status == 201, s
+        status, out = server.request("GET", f"/api/sessions/{s['id']}/live/stream")
+        assert status == 409 and "no trial of this session has been started" in out["error"]
+        _start(server, s["id"])
+        status, out = server.request("POST", f"/api/sessions/{s['id']}/live/start",
+                                     {"trial_index": 0})
+        assert status == 409 and "still running" in out["error"], out
+        sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 2048)
+        sock.connect((server.host, int(server.port)))
+        sock.sendall(f"GET /api/sessions/{s['id']}/live/stream HTTP/1.1\r\n"
+                     f"Host: 127.0.0.1\r\n\r\n".encode())
+        try:
+            v = _wait_over(server, s["id"])
+        finally:
+            sock.close()
+        folder = Path(v["trials"][0]["run"])
+        summary = json.loads((folder / "summary.json").read_text())
+        assert summary["stop_reason"] == "completed"
+        live = v["live"]
+        assert live["frames_published"] == 2 * DURATION_S * RATE_HZ, live
+        assert live["frames_dropped"] > 0, live
+        pacing = summary["realtime"]
+        # the tick loop kept to real time: no tick more than 100 ms behind on the
+        # median, whatever the client did
+        assert pacing["lateness_ms_p50"] < 100.0, pacing
+
+
+PIXELS_AT_CLICK = """
+(() => {
+  window.witness = [];
+  window.addEventListener("pointerdown", (e) => {  // before the page's own listener
+    const c = e.target;
+    if (!(c instanceof HTMLCanvasElement) || c.dataset.feed === undefined) return;
+    const d = c.getContext("2d").getImageData(0, 0, c.width, c.height).data;
+    window.witness.push({feed: Number(c.dataset.feed), pixels: Array.from(d)});
+  }, true);
+})();
+"""
+
+
+def _video_frames(path: Path) -> list[np.ndarray]:
+    cap = cv2.VideoCapture(str(path))
+    out: list[np.ndarray] = []
+    while True:
+        ok, img = cap.read()
+        if not ok:
+            return out
+        out.append(cv2.cvtColor(img, cv2.COLOR_BGR2GRAY).astype(float))
+
+
+def test_a_click_on_a_feed_is_stored_with_its_frame_and_pixel(tmp_path: Path,
+                                                              chromium: str) -> None:
+    """The page draws both feeds of a live run; a scripted click on the
+    second is stored with that feed, a frame the page drew (its pixels are
+    the run's video frame of that number, not its neighbours') and the pixel
+    in the frame's coordinates from the canvas's box as Playwright measures
+    it. The run's states equal the same scenario's run without the console."""
+    from playwright.sync_api import sync_playwright
+
+    from cosim.scenario import load_scenario
+    from cosim.sync.runner import run_scenario
+
+    with live_server(live_study(tmp_path)) as server:
+        status, s = server.request("POST", "/api/sessions", {"participant": "p1", **PROFILE})
+        assert status == 201 and s["protocol"] == "live", s
+        sid = s["id"]
+        with sync_playwright() as pw:
+            browser = pw.chromium.launch(executable_path=chromium)
+            try:
+                page = browser.new_page(viewport={"width": 1000, "height": 500},
+                                        device_scale_factor=1)
+                page.add_init_script(PIXELS_AT_CLICK)
+                errors: list[str] = []
+                page.on("pageerror", lambda e: errors.append(str(e)))
+                page.set_default_timeout(30_000)
+                page.goto(f"{server.url}/live?session={sid}")
+                page.wait_for_function("document.body.dataset.phase === 'waiting'")
+                _start(server, sid)
+                page.wait_for_function("document.body.dataset.drawn === '2' && "
+                                       "window.live.drawn.length >= 6")
+                box = page.locator("canvas[data-feed='1']").bounding_box()
+                assert box is not None
+                cx, cy = round(box["x"] + 0.3 * box["width"]), round(box["y"] + 0.6 * box["height"])
+                page.mouse.click(cx, cy)
+                page.screenshot(path=str(tmp_path / "live.png"))
+                page.wait_for_function("window.live.reports.length === 1 && "
+                                       "window.live.reports[0].status === 201")
+                sent = page.evaluate("window.live.reports[0]")
+                drawn = page.evaluate("window.live.drawn")
+                witness = page.evaluate("window.witness")
+                page.wait_for_function("document.body.dataset.phase === 'ended'",
+                                       timeout=60_000)
+                assert not errors, errors
+            finally:
+                browser.close()
+        v = _wait_over(server, sid)
+        (stored,) = server.store.live_reports(sid)
+    folder = Path(v["trials"][0]["run"])
+    assert stored["feed"] == 1 and stored["feed_name"] == "uav2/belly"
+    assert stored["frame"] == sent["frame"]
+    # a frame the page drew on that feed before the click
+    assert [1, stored["frame"]] in [d[:2] for d in drawn if d[2] <= sent["click_time_ms"]]
+    # the pixel, from the canvas's box as the browser lays it out
+    assert stored["x_px"] == pytest.approx((cx - box["x"]) * W / box["width"], abs=1e-6)
+    assert stored["y_px"] == pytest.approx((cy - box["y"]) * H / box["height"], abs=1e-6)
+    assert 0 < stored["x_px"] < W and 0 < stored["y_px"] < H
+    assert stored["drawn_time_ms"] <= stored["click_time_ms"]
+    # what was on the canvas at the click is the run's frame of that number
+    (w,) = witness
+    assert w["feed"] == 1
+    shown = np.asarray(w["pixels"], float).reshape(H, W, 4)[:, :, :3]
+    grey = shown @ np.array([0.299, 0.587, 0.114])
+    frames = _video_frames(folder / "cameras" / "uav2_belly.mp4")
+    k = stored["frame"]
+    near = {j: float(np.abs(frames[j] - grey).mean()) for j in (k - 1, k, k + 1)
+            if 0 <= j < len(frames)}
+    assert min(near, key=near.__getitem__) == k, near
+    # the console never changes the simulation
+    alone = run_scenario(load_scenario(tmp_path / "pair.yaml"),
+                         tmp_path / "alone")
+    assert alone.ok
+    _same_states(folder, tmp_path / "alone")
