@@ -324,6 +324,32 @@ def parse_report(d: Any, feeds: Mapping[str, FeedBounds], duration_s: float) -> 
     return Report(feed, frame, x, y, t)
 
 
+def stored_reports(rows: Iterable[Mapping[str, Any]], truth: Sequence[TargetFrame],
+                   feeds: Mapping[str, FeedBounds], duration_s: float) -> list[Report]:
+    """The clicks as the live console stores them (``feed_name``, ``frame``,
+    ``x_px`` and ``y_px`` in the page's pixels of the frame, 0 at its left or
+    top edge, and the page's ``click_time_ms`` and ``drawn_time_ms``) as
+    reports: the position moved half a pixel onto the ground truth's (pixel
+    centres at whole numbers), the time on the run's clock: when the frame
+    was on screen there (``TargetFrame.time_s``) plus how long after the page
+    drew it the click came (nothing added when the page did not say). Each
+    is bounded as ``parse_report`` bounds a report; a frame the ground truth
+    does not have is a ``ReportError``."""
+    shown = {(t.feed, t.frame): t.time_s for t in truth}
+    out = []
+    for r in rows:
+        at = shown.get((r["feed_name"], r["frame"]))
+        if at is None:
+            raise ReportError(f"report {r.get('report_key', '')!s:.64}: frame {r['frame']!s:.20} "
+                              f"of {r['feed_name']!s:.200} is not in the ground truth")
+        click, drawn = r["click_time_ms"], r.get("drawn_time_ms")
+        after_s = 0.0 if drawn is None else (click - drawn) / 1000.0
+        out.append(parse_report({"feed": r["feed_name"], "frame": r["frame"],
+                                 "x_px": r["x_px"] - 0.5, "y_px": r["y_px"] - 0.5,
+                                 "time_s": at + after_s}, feeds, duration_s))
+    return out
+
+
 # ---- scoring
 
 

@@ -29,6 +29,7 @@ from cosim.trials.live_scoring import (
     read_run_truth,
     read_scoring,
     score_session,
+    stored_reports,
 )
 
 RATE_HZ = 10.0
@@ -309,3 +310,25 @@ def test_real_run_ground_truth(tmp_path: Path) -> None:
     assert [t.target for t in sc.misses] == ["firetruck1"]
     with pytest.raises(ConfigError, match="no ground truth for feed 'uav2/belly'.*uav1/belly"):
         read_run_truth(out, ["uav2/belly"])
+
+
+def test_stored_reports_on_the_run_clock(truth: list[Any]) -> None:
+    """A click as the console stores it: page pixels (0 at the frame's edge)
+    half a pixel off the ground truth's, the time the clicked frame's plus the
+    page's click - draw interval."""
+    feeds = {"u1/cam": FeedBounds(0, 99, W, H), "u2/cam": FeedBounds(0, 99, W, H)}
+    ax, ay, _ = A(35)
+    rows = [{"report_key": "k1", "feed_name": "u1/cam", "frame": 35, "x_px": ax + 3.5,
+             "y_px": ay + 4.5, "click_time_ms": 10_400.0, "drawn_time_ms": 10_000.0},
+            {"report_key": "k2", "feed_name": "u2/cam", "frame": 60, "x_px": 0.0, "y_px": H,
+             "click_time_ms": 20_000.0, "drawn_time_ms": None}]
+    got = stored_reports(rows, truth, feeds, 60.0)
+    assert got == [Report("u1/cam", 35, ax + 3, ay + 4, 3.5 + 0.4),
+                   Report("u2/cam", 60, -0.5, H - 0.5, 6.0)]
+    sc = score_session(truth, got)
+    assert sc.reports[0].error_px == pytest.approx(5.0)
+    assert sc.reports[0].latency_feed_s == pytest.approx(3.9 - 2.3)
+    with pytest.raises(ReportError, match="report k3: frame 100 of u1/cam is not in the ground"):
+        stored_reports([{**rows[0], "report_key": "k3", "frame": 100}], truth, feeds, 60.0)
+    with pytest.raises(ReportError, match="x_px: expected a number from -0.5 to 639.5"):
+        stored_reports([{**rows[0], "x_px": W + 1.0}], truth, feeds, 60.0)
