@@ -39,6 +39,8 @@ known feed, a whole frame number among the feed's, a finite position within
 the frame, a finite time within the session) and refuses the rest with a
 ``ReportError`` saying what was wrong.
 
+The clicks the live console stores become reports by ``stored_reports``;
+``score_stored`` scores a trial from its run folder and its stored clicks.
 Pure functions: it reads ground-truth files (``read_feed_truth``,
 ``read_run_truth``) but runs, serves and stores nothing.
 """
@@ -462,3 +464,14 @@ def score_session(truth: Sequence[TargetFrame], reports: Sequence[Report],
             latency_feed_s=h.latency_feed_s if h else None,
             latency_any_s=h.latency_any_s if h else None, error_px=h.error_px if h else None))
     return SessionScore(tuple(scored), tuple(targets), s)
+
+
+def score_stored(run_dir: str | Path, sizes: Mapping[str, tuple[int, int]],
+                 rows: Iterable[Mapping[str, Any]], duration_s: float,
+                 settings: ScoringSettings | None = None) -> SessionScore:
+    """A live trial scored from its run folder: the ground truth of its
+    feeds (``sizes``: each feed's (width, height) px, in the trial's order)
+    and the clicks the console stored for it (``stored_reports``)."""
+    truth = read_run_truth(run_dir, list(sizes))
+    reports = stored_reports(rows, truth, feed_bounds(truth, sizes), duration_s)
+    return score_session(truth, reports, settings)

@@ -29,6 +29,7 @@ from cosim.trials.live_scoring import (
     read_run_truth,
     read_scoring,
     score_session,
+    score_stored,
     stored_reports,
 )
 
@@ -310,6 +311,11 @@ def test_real_run_ground_truth(tmp_path: Path) -> None:
     assert [t.target for t in sc.misses] == ["firetruck1"]
     with pytest.raises(ConfigError, match="no ground truth for feed 'uav2/belly'.*uav1/belly"):
         read_run_truth(out, ["uav2/belly"])
+    # the same clicks as the console stores them: the page's pixels, 0.2 s after drawing
+    stored = [{"feed_name": "uav1/belly", "frame": int(at["frame"]), "x_px": cx + 2.5,
+               "y_px": cy - 0.5, "click_time_ms": 5200.0, "drawn_time_ms": 5000.0}]
+    again = score_stored(out, {"uav1/belly": (640, 480)}, stored, 17.0)
+    assert again.reports[0] == hit and again.misses == sc.misses
 
 
 def test_stored_reports_on_the_run_clock(truth: list[Any]) -> None:
