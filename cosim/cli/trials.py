@@ -28,6 +28,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     te = trs.add_parser("export", help="the responses as CSV")
     te.add_argument("db", metavar="DB", help="the study's database (file or URL)")
     te.add_argument("--out", metavar="CSV", required=True)
+    te.add_argument("--instruments", metavar="CSV",
+                    help="also write the NASA-TLX and SAGAT answers here, a row per block "
+                         "or probe")
     ta = trs.add_parser("analyse", help="conspicuity angles and distances, the critical gap, "
                                         "recognition against altitude, speed and conspicuity")
     ta.add_argument("responses", metavar="DB_OR_CSV",
@@ -54,6 +57,8 @@ def run(a: argparse.Namespace) -> int:
 
         _existing_db(a.db)
         print(export_csv(a.db, a.out))
+        if a.instruments:
+            print(_export_instruments(a.db, a.instruments))
         return EXIT_OK
     if a.trials_cmd == "analyse":
         import tempfile
@@ -94,6 +99,18 @@ def run(a: argparse.Namespace) -> int:
         print(f"outputs in {a.out}/: " + ", ".join(Path(f).name for f in summary.get("files", [])))
         return EXIT_OK
     raise ConfigError("cosim trials: give serve, export or analyse (cosim trials --help)")
+
+
+def _export_instruments(db: str, out: str) -> Path:
+    """The study's NASA-TLX and SAGAT answers as CSV (``instruments``)."""
+    from cosim.trials.instruments import write_instruments_csv
+    from cosim.trials.store import Store
+
+    with Store(db) as store:
+        rows = store.instrument_answers()
+    with Path(out).open("w", newline="") as f:
+        write_instruments_csv(rows, f)
+    return Path(out)
 
 
 def _gap_summary(fit: dict[str, Any], verdicts: list[str]) -> str:

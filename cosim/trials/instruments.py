@@ -38,7 +38,7 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, TextIO
 
 import numpy as np
 
@@ -421,3 +421,30 @@ def score_probe(probe: Probe, state: FreezeState, answers: dict[str, Any]
         s = score(q, state, answers[q.id])
         out[q.id] = {"correct": s.correct, "error": s.error, "truth": s.truth}
     return out
+
+
+# --- the answers as CSV (``cosim trials export --instruments``) ---------------------------
+#: the columns of the instruments' CSV, in order: a row per TLX block or SAGAT probe
+EXPORT_COLUMNS = ("session", "participant", "instrument", "trial_index", "item", "raw_tlx",
+                  "weighted_tlx", *(f"rating_{k}" for k in SCALE_KEYS),
+                  *(f"weight_{k}" for k in SCALE_KEYS), "sagat_correct", "sagat_questions")
+
+
+def write_instruments_csv(rows: list[dict[str, Any]], f: TextIO) -> None:
+    """Instrument answers (``Store.instrument_answers()`` rows) as CSV with
+    ``EXPORT_COLUMNS``: a TLX's ratings and weights a column each (weights
+    empty without them), a probe's count of correct answers of those scored
+    (both empty until scored). Text a spreadsheet would run as a formula is
+    neutralised (``spreadsheet.SafeWriter``)."""
+    from cosim.trials.spreadsheet import SafeWriter
+
+    w = SafeWriter(f)
+    w.writerow(EXPORT_COLUMNS)
+    for r in rows:
+        a = r["answer"] if r["instrument"] == "tlx" else {}
+        ratings, weights = a.get("ratings", {}), a.get("weights") or {}
+        cells = [r["session"], r["participant"], r["instrument"], r["trial_index"], r["item"],
+                 r["raw_tlx"], r["weighted_tlx"], *(ratings.get(k) for k in SCALE_KEYS),
+                 *(weights.get(k) for k in SCALE_KEYS), r["correct"], r["questions"]]
+        w.writerow(["" if c is None else repr(c) if isinstance(c, float) else str(c)
+                    for c in cells])

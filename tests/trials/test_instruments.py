@@ -536,3 +536,37 @@ def test_a_tlx_on_the_participant_page_is_filled_in_and_stored(tmp_path: Path,
     assert row["answer"]["weights"] == {"mental": 5, "physical": 0, "temporal": 3,
                                         "performance": 2, "effort": 4, "frustration": 1}
     assert (row["raw_tlx"], row["weighted_tlx"], row["item"]) == (45.0, 57.0, 0)
+
+
+def test_export_writes_the_instruments_a_row_per_block_or_probe(tmp_path: Path) -> None:
+    """``cosim trials export DB --out CSV --instruments CSV``: a TLX's ratings
+    and weights a column each; a probe's correct answers once scored."""
+    import csv
+
+    from cosim.cli import main
+
+    db = tmp_path / "t.sqlite"
+    with Store(db) as store:
+        s = store.create_session(participant="-p1", study="s", protocol="disappear",
+                                 display=PROFILE, order_method="shuffle", seed=1,
+                                 session_number=0, trial_order=[])
+        a = check_tlx_answer({"ratings": RATINGS, "pairs": PAIRS}, weights=True)
+        base = {"session": s["id"], "participant": "-p1", "trial_index": 4}
+        store.record_instrument({**base, "instrument": "tlx", "item": 0, "raw_tlx": a.raw,
+                                 "weighted_tlx": a.weighted,
+                                 "answer": {"ratings": a.ratings, "weights": a.weights}})
+        scored, _ = store.record_instrument({**base, "instrument": "sagat", "item": 0,
+                                             "answer": {"n": 2}})
+        store.score_instrument(scored["id"], {"n": {"correct": True, "error": 0.0, "truth": 2}})
+        store.record_instrument({**base, "instrument": "sagat", "item": 1, "answer": {"n": 5}})
+    out, inst = tmp_path / "r.csv", tmp_path / "i.csv"
+    assert main(["-q", "trials", "export", str(db), "--out", str(out), "--instruments",
+                 str(inst)]) == 0
+    tlx, sagat0, sagat1 = csv.DictReader(inst.open())
+    assert tlx["participant"] == "'-p1"  # a spreadsheet would read -p1 as a formula
+    assert {k: int(tlx[f"rating_{k}"]) for k in SCALE_KEYS} == RATINGS
+    assert [int(tlx[f"weight_{k}"]) for k in SCALE_KEYS] == [5, 0, 3, 2, 4, 1]
+    assert (float(tlx["raw_tlx"]), float(tlx["weighted_tlx"])) == (45.0, 57.0)
+    assert (tlx["sagat_correct"], sagat0["sagat_correct"], sagat0["sagat_questions"]) == (
+        "", "1", "1")
+    assert (sagat1["item"], sagat1["sagat_correct"], sagat1["rating_mental"]) == ("1", "", "")
