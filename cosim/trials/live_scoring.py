@@ -55,6 +55,7 @@ from pathlib import Path
 from statistics import median
 from typing import Any
 
+from cosim.conspicuity.visibility import camera_entries
 from cosim.errors import ConfigError
 from cosim.scenario.reader import Problems, Reader
 from cosim.trials.clips import MAX_GT_BYTES, csv_rows, read_bounded
@@ -261,8 +262,6 @@ def read_run_truth(run_dir: str | Path, feeds: Sequence[str]) -> list[TargetFram
     """The ground truth of the named feeds (``VEHICLE/CAMERA``) of a run
     folder, from its summary's camera streams; a feed the run has no
     ground truth for is a ``ConfigError`` naming those it has."""
-    from cosim.conspicuity.visibility import camera_entries
-
     files = {f"{e.get('vehicle')}/{e.get('camera')}": e.get("ground_truth")
              for e in camera_entries(run_dir)}
     out: list[TargetFrame] = []
