@@ -14,7 +14,14 @@ Owns the HTTP side of ``instruments`` and ``sagat``:
   once (posting it again returns the stored row: 200, not 201). A SAGAT
   answer is scored at once when ``Instruments.freeze_state`` (set by the
   live console, which knows the run) gives the true state at that freeze;
-  otherwise it is stored unscored, to be scored from the run's log later.
+  otherwise it is stored unscored (``Store.score_instrument`` keeps scores
+  made later, e.g. from the run's state log through
+  ``sagat.from_state_log``).
+
+A block's trials count as done when the session's view (``server``'s
+``_view``) marks them ``answered``: a clip trial with its response; a live
+trial as the live console's view marks it (its view does not yet, so a live
+study's TLX is not yet asked).
 
 Requests go through the app's own bounds (same origin, JSON, size and
 nesting: ``server``'s ``_json_body``, handed in, as are its session lookup
