@@ -133,6 +133,8 @@ responses = sa.Table(
     sa.UniqueConstraint("session", "trial_index", "kind", name="one_response_per_trial"),
 )
 _RESPONSE_FIELDS = tuple(c.name for c in responses.columns if c.name not in ("id", "created"))
+_INSTRUMENT_FIELDS = tuple(c.name for c in instrument_answers.columns
+                           if c.name not in ("id", "created"))
 #: a live-console trial's reports: one row per click on a feed (``live_routes``)
 live_reports = sa.Table(
     "live_reports", metadata,
@@ -262,26 +264,11 @@ class Store:
         ``answer`` and ``scores`` as JSON-able values); (the stored row, True)
         or, when this session's item already has one, (that row, False): the
         first answer posted wins."""
-        values = {c.name: row.get(c.name) for c in instrument_answers.columns
-                  if c.name not in ("id", "created")}
-        values["answer"] = json.dumps(row["answer"])
-        values["scores"] = None if row.get("scores") is None else json.dumps(row["scores"])
-        values["created"] = _now()
-        try:
-            with self.engine.begin() as c:
-                c.execute(instrument_answers.insert().values(**values))
-            created = True
-        except IntegrityError:
-            created = False
-        t = instrument_answers.c
-        q = instrument_answers.select().where(
-            t.session == row["session"], t.instrument == row["instrument"],
-            t.trial_index == row["trial_index"], t.item == row["item"])
-        with self.engine.connect() as c:
-            stored = c.execute(q).mappings().first()
-        if stored is None:  # the IntegrityError was something else (e.g. no such session)
-            raise ConfigError(f"{row.get('instrument')} answer {row.get('item')} of session "
-                              f"{row.get('session')} was refused by the database")
+        values = {**row, "answer": json.dumps(row["answer"]),
+                  "scores": None if row.get("scores") is None else json.dumps(row["scores"])}
+        stored, created = self._insert_once(
+            instrument_answers, _INSTRUMENT_FIELDS, values, ("instrument", "item"),
+            f"{row.get('instrument')} answer {row.get('item')} of")
         return _instrument_row(stored), created
 
     def instrument_answers(self, session_id: str | None = None,
@@ -308,11 +295,11 @@ class Store:
     def record_response(self, row: dict[str, Any]) -> tuple[dict[str, Any], bool]:
         """Store one response; (the stored row, True) or, when this session's
         trial already has a response of this kind, (that row, False)."""
-        return self._insert_once(responses, _RESPONSE_FIELDS, row, "kind", "response to")
+        return self._insert_once(responses, _RESPONSE_FIELDS, row, ("kind",), "response to")
 
     def _insert_once(self, table: sa.Table, fields: tuple[str, ...], row: dict[str, Any],
-                     key: str, what: str) -> tuple[dict[str, Any], bool]:
-        """Insert ``row`` unless the row of its session, trial and ``key`` is
+                     keys: tuple[str, ...], what: str) -> tuple[dict[str, Any], bool]:
+        """Insert ``row`` unless the row of its session, trial and ``keys`` is
         there: (the stored row, whether it was inserted now)."""
         values = {k: row.get(k) for k in fields}
         values["created"] = _now()
@@ -324,7 +311,7 @@ class Store:
             created = False
         q = table.select().where(table.c.session == row["session"],
                                  table.c.trial_index == row["trial_index"],
-                                 table.c[key] == row[key])
+                                 *(table.c[k] == row[k] for k in keys))
         with self.engine.connect() as c:
             stored = c.execute(q).mappings().first()
         if stored is None:  # the IntegrityError was something else (e.g. no such session)
@@ -335,7 +322,8 @@ class Store:
     def record_live_report(self, row: dict[str, Any]) -> tuple[dict[str, Any], bool]:
         """Store one click of a live trial; (the stored row, True) or, when
         the page posted this report before, (that row, False)."""
-        return self._insert_once(live_reports, _LIVE_FIELDS, row, "report_key", "report of")
+        return self._insert_once(live_reports, _LIVE_FIELDS, row, ("report_key",),
+                                 "report of")
 
     def live_reports(self, session_id: str) -> list[dict[str, Any]]:
         """A session's live reports, in the order they were stored."""

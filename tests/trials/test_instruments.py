@@ -355,7 +355,8 @@ def test_answers_are_stored_once_and_read_back(tmp_path: Path) -> None:
         (back,) = store.instrument_answers(s["id"], "sagat")
         assert (back["correct"], back["questions"]) == (1, 2)
         assert back["scores"]["m"] == {"correct": False, "error": 2.0, "truth": 1}
-        with pytest.raises(ConfigError, match=r"tlx answer 0 of session nope was refused"):
+        with pytest.raises(ConfigError, match=r"tlx answer 0 of trial 3 of session nope was "
+                                              r"refused by the database"):
             store.record_instrument({**row, "session": "nope"})
     # a database made before the instruments: the table is added when it is opened
     con = sqlite3.connect(db)
