@@ -38,6 +38,8 @@ Example::
     repeats: 1                 # every clip shown this many times
     order: latin_square        # or shuffle
     seed: 1
+    # tlx: {after: block, weights: true}  # NASA-TLX; sagat: [...] freeze probes (live)
+    #                          # (both read by ``instruments``)
 
 Trial order (``Study.trial_order(session_number)``): ``latin_square`` takes
 row ``session_number`` of a balanced (Williams) Latin square over the clips,
