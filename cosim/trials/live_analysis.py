@@ -4,7 +4,7 @@ Each session (``ScoredSession``: its participant, its condition values and
 its ``live_scoring.SessionScore``) gives one row per target that counted
 (visible long enough, or hit: ``target_rows``): detected or not, and for a
 detected target its first hit's latency from its first visibility in any
-feed and in the clicked feed and its pixel error.
+feed and in the clicked feed and its pixel error (each a measure).
 
 ``live_tables`` gives, for every condition the sessions carry (number of
 feeds, altitude, speed, behaviour: whatever their ``conditions`` name),
@@ -14,8 +14,9 @@ not independent trials: with two or more, every interval is a t interval
 with standard errors clustered by participant (``estimates.mean_estimate``
 and ``estimates.slope_estimate``: a slope within participants); with one,
 the detection probability has a Wilson interval and the rest trial-level
-ones. A condition with more than ``conditions.MAX_LEVELS`` values is cut
-into bins (``conditions.condition_levels``).
+ones. A numeric condition with more than ``conditions.MAX_LEVELS`` values
+is cut into bins (``conditions.condition_levels``); any other keeps its
+``MAX_LEVELS - 1`` most common values and puts the rest in ``OTHER``.
 
 ``analyse_live`` writes the tables (``live_targets.csv``, ``live_levels.csv``,
 ``live_effects.csv``) and a figure a condition (``live_figures``). It reads
@@ -33,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from cosim.trials.conditions import condition_levels
+from cosim.trials.conditions import MAX_LEVELS, condition_levels
 from cosim.trials.estimates import (
     cluster_ids,
     mean_estimate,
@@ -46,8 +47,9 @@ from cosim.trials.output import write_csv
 
 log = logging.getLogger(__name__)
 
-#: the measures analysed: whether a target was detected (0/1), its latencies (s)
-MEASURES = ("detected", "latency_any_s", "latency_feed_s")
+#: the measures analysed: whether a target was detected (0/1), its first hit's
+#: latencies (s) and pixel error (px)
+MEASURES = ("detected", "latency_any_s", "latency_feed_s", "error_px")
 TARGET_FIELDS = ("session", "participant", "target", "visible_s", "detected",
                  "latency_any_s", "latency_feed_s", "error_px")
 LEVEL_FIELDS = ("measure", "condition", "level", "targets", "participants", "estimate",
@@ -56,6 +58,8 @@ EFFECT_FIELDS = ("measure", "condition", "slope", "unit", "ci_lo", "ci_hi", "df"
                  "participants", "targets")
 #: the most conditions analysed (each gets a figure)
 MAX_CONDITIONS = 12
+#: the level of a condition's values past the MAX_LEVELS - 1 most common
+OTHER = "(other)"
 
 
 @dataclass(frozen=True)
@@ -95,6 +99,23 @@ def _numeric(values: Sequence[Any]) -> np.ndarray | None:
     except (TypeError, ValueError):
         return None
     return out if np.isfinite(out).all() else None
+
+
+def _categories(values: list[str | None], name: str) -> tuple[list[Any], np.ndarray]:
+    """(levels, each row's level) of a condition whose values are not numbers:
+    the values, or past ``MAX_LEVELS`` the ``MAX_LEVELS - 1`` with the most
+    rows and one level ``OTHER`` for the rest."""
+    counts: dict[str, int] = {}
+    for v in values:
+        if v is not None:
+            counts[v] = counts.get(v, 0) + 1
+    if len(counts) <= MAX_LEVELS:
+        return sorted(counts), np.array(values, dtype=object)
+    kept = set(sorted(counts, key=lambda v: (-counts[v], v))[:MAX_LEVELS - 1])
+    log.warning("condition %s takes %d values: the %d with the most targets analysed alone, "
+                "the rest as %r", name, len(counts), MAX_LEVELS - 1, OTHER)
+    lv = np.array([v if v is None or v in kept else OTHER for v in values], dtype=object)
+    return [*sorted(kept), OTHER], lv
 
 
 def _level_estimate(measure: str, y: np.ndarray, who_names: np.ndarray, level: float
@@ -137,8 +158,7 @@ def live_tables(rows: Sequence[dict[str, Any]], level: float = 0.95
             keys: list[Any] = sorted(set(x[has].tolist()))
             lv = x
         else:
-            keys = sorted({str(v) for v, h in zip(raw, has) if h})
-            lv = np.array([str(v) if h else None for v, h in zip(raw, has)], dtype=object)
+            keys, lv = _categories([str(v) if h else None for v, h in zip(raw, has)], name)
         for measure in MEASURES:
             y = _values(rows, measure)
             for k in keys:
@@ -154,7 +174,7 @@ def live_tables(rows: Sequence[dict[str, Any]], level: float = 0.95
             who = cluster_ids(who_all[sel], int(sel.sum()))
             slope = slope_estimate(x[sel], y[sel], who)
             lo, hi = t_interval(slope, level)
-            unit = "probability" if measure == "detected" else "s"
+            unit = {"detected": "probability", "error_px": "px"}.get(measure, "s")
             effect_rows.append({"measure": measure, "condition": name,
                                 "slope": slope[0] if slope else math.nan,
                                 "unit": f"{unit} per unit of {name}", "ci_lo": lo, "ci_hi": hi,

@@ -16,7 +16,14 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from cosim.trials.live_analysis import ScoredSession, analyse_live, live_tables, target_rows
+from cosim.trials.conditions import MAX_LEVELS
+from cosim.trials.live_analysis import (
+    OTHER,
+    ScoredSession,
+    analyse_live,
+    live_tables,
+    target_rows,
+)
 from cosim.trials.live_scoring import score_session
 
 REPO = Path(__file__).resolve().parents[2]
@@ -104,3 +111,23 @@ def test_analyse_live_writes_tables_and_figures(sessions: list[ScoredSession],
     assert {"condition_feeds", "condition_behaviour"} <= set(got[0])
     for name in ("live_feeds.png", "live_behaviour.png"):
         assert (tmp_path / name).stat().st_size > 10_000
+
+
+def test_many_levels_bounded(sessions: list[ScoredSession]) -> None:
+    """A condition of a value a session (48 names) keeps the 19 most common
+    and one level for the rest; a numeric one of 48 values is cut into 20 bins."""
+    rows = target_rows(sessions)
+    for i, r in enumerate(rows):
+        r["condition_pilot"] = f"name{i // TARGETS:02d}"
+        r["condition_wind_mps"] = str(i // TARGETS)
+    levels, effects = live_tables(rows)
+    pilot = [r for r in levels if r["condition"] == "pilot" and r["measure"] == "detected"]
+    assert len(pilot) == MAX_LEVELS and pilot[-1]["level"] == OTHER
+    assert pilot[-1]["targets"] == (len(sessions) - MAX_LEVELS + 1) * TARGETS
+    wind = [r for r in levels if r["condition"] == "wind_mps" and r["measure"] == "detected"]
+    assert len(wind) == MAX_LEVELS
+    assert sum(r["targets"] for r in wind) == len(rows)
+    # every click is 1 px off its target's centre
+    err = next(e for e in effects if e["measure"] == "error_px" and e["condition"] == "feeds")
+    assert err["slope"] == pytest.approx(0.0, abs=1e-9) and err["unit"] == "px per unit of feeds"
+    assert all(r["estimate"] == pytest.approx(1.0) for r in levels if r["measure"] == "error_px")
