@@ -571,3 +571,55 @@ def test_export_writes_the_instruments_a_row_per_block_or_probe(tmp_path: Path) 
     assert (tlx["sagat_correct"], sagat0["sagat_correct"], sagat0["sagat_questions"]) == (
         "", "1", "1")
     assert (sagat1["item"], sagat1["sagat_correct"], sagat1["rating_mental"]) == ("1", "", "")
+
+
+#: in the participant's page: probe 0 of its session asked through the probe form
+#: (instruments.js), the map's click standing in as (110, -40); its answers posted
+ASK_PROBE = """async () => {
+  const sid = new URLSearchParams(location.search).get("session");
+  const base = `/api/sessions/${sid}`;
+  const probe = await (await fetch(`${base}/sagat/0`)).json();
+  const box = document.getElementById("message");
+  box.hidden = false;
+  CosimInstruments.sagat(box, probe, 0, ["a", "b", "c"],
+                         async () => ({ north_m: 110, east_m: -40 }))
+    .then((body) => fetch(`${base}/instruments`, {
+      method: "POST", headers: { "Content-Type": "application/json" },
+      body: JSON.stringify(body) }))
+    .then((r) => r.json()).then((j) => { window.probeStored = j; });
+}"""
+
+
+def test_a_sagat_probe_asked_through_the_probe_form_is_stored(
+        tmp_path: Path, chromium: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The form the live console's page is to use: the map's point, a count
+    typed (an empty or negative one is not taken) and an aircraft chosen are
+    posted and stored as given."""
+    import cosim.trials.server as server_module
+
+    probes, _ = sagat_of(PROBES)
+    study = small_study(tmp_path, "protocol: disappear\n", {"a": 150.0})
+    read = server_module.load_study
+    monkeypatch.setattr(server_module, "load_study", lambda p: replace(read(p), sagat=probes))
+    with live_server(study) as server:
+        s = _session(server, "p-sagat")
+        with participant_page(server, s, chromium=chromium) as page:
+            page.evaluate(ASK_PROBE)
+            page.locator(".sagat[data-question=north] input").wait_for()
+            assert page.evaluate("getComputedStyle(document.body).cursor") == "default"
+            page.click(".sagat button.next")  # empty: not taken
+            page.fill(".sagat input", "-2")
+            page.click(".sagat button.next")  # negative: not taken
+            assert page.locator(".sagat[data-question=north]").count() == 1
+            page.fill(".sagat input", "2")
+            page.click(".sagat button.next")
+            page.locator(".sagat[data-question=fuel] button").first.wait_for()
+            assert page.locator(".sagat button.choice").all_inner_texts() == ["a", "b", "c"]
+            page.click(".sagat button.choice >> text=b")
+            page.wait_for_function("window.probeStored !== undefined")
+            stored = page.evaluate("window.probeStored")
+        assert stored.get("created") is True, stored
+        (row,) = server.store.instrument_answers(s["id"], "sagat")
+    assert (row["trial_index"], row["item"], row["scores"]) == (0, 0, None)
+    assert row["answer"] == {"where": {"north_m": 110.0, "east_m": -40.0}, "north": 2,
+                             "fuel": "b"}

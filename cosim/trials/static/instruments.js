@@ -127,6 +127,7 @@ window.CosimInstruments = (() => {
           const ok = el("button", "next", "Next");
           ok.type = "button";
           form.append(input, ok);
+          input.focus();
           answers[q.id] = await new Promise((resolve) => ok.addEventListener("click", () => {
             const n = Number(input.value);
             if (input.value !== "" && Number.isInteger(n) && n >= 0) resolve(n);
