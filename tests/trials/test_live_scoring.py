@@ -23,6 +23,7 @@ from cosim.trials.live_scoring import (
     Report,
     ReportError,
     ScoringSettings,
+    TargetFrame,
     feed_bounds,
     parse_report,
     read_feed_truth,
@@ -130,6 +131,11 @@ def test_tolerance_window_and_visibility_settings(truth: list[Any]) -> None:
     outside = Report("u2/cam", 50, bx + bh + 7, by, 5.3)
     assert score_session(truth, [outside], ScoringSettings(tolerance_px=6.0)
                          ).reports[0].outcome == "false_alarm"
+    for dx, dy in ((-1, 0), (0, -1), (0, 1)):  # each side: within the tolerance, then past it
+        sides = [Report("u2/cam", 50, bx + dx * (bh + d), by + dy * (bh + d), 5.3)
+                 for d in (9.9, 10.1)]
+        assert [r.outcome for r in score_session(truth, sides).reports] == ["hit",
+                                                                             "false_alarm"]
     again = [Report("u2/cam", 50, bx, by, 5.3), Report("u2/cam", 75, *B(75)[:2], 8.0)]
     assert [r.outcome for r in score_session(truth, again).reports] == ["hit", "duplicate"]
     windowed = score_session(truth, again, ScoringSettings(duplicate_window_s=2.0)).reports
@@ -338,3 +344,24 @@ def test_stored_reports_on_the_run_clock(truth: list[Any]) -> None:
         stored_reports([{**rows[0], "report_key": "k3", "frame": 100}], truth, feeds, 60.0)
     with pytest.raises(ReportError, match="x_px: expected a number from -0.5 to 639.5"):
         stored_reports([{**rows[0], "x_px": W + 1.0}], truth, feeds, 60.0)
+
+
+def test_runs_breaks_fractions_and_windows() -> None:
+    """A target visible 1 s, hidden 1 s, visible 1 s has a longest run of 1 s
+    (not 2); a visible fraction under the setting is not visible; a second
+    click within the window is a duplicate, after it a hit."""
+    def tf(f: int, on: bool, frac: float = 1.0) -> TargetFrame:
+        return TargetFrame("f", f, f / RATE_HZ, "T", on, (10.0, 10.0, 20.0, 20.0),
+                           (15.0, 15.0), 30.0 if on else 0.0, frac if on else math.nan)
+
+    gap = [tf(f, 10 <= f < 20 or 30 <= f < 40) for f in range(50)]
+    assert score_session(gap, []).targets[0].visible_s == pytest.approx(1.0)
+    assert score_session(gap, [], ScoringSettings(min_visible_s=1.5)).misses == ()
+    faint = [tf(f, 10 <= f < 40, 0.3 if f < 25 else 0.8) for f in range(50)]
+    half = ScoringSettings(min_visible_fraction=0.5)
+    assert score_session(faint, [], half).targets[0].first_visible_s == pytest.approx(2.5)
+    assert score_session(faint, []).targets[0].first_visible_s == pytest.approx(1.0)
+    clicks = [Report("f", 12, 15.0, 15.0, 1.5), Report("f", 35, 15.0, 15.0, 4.0)]
+    for window_s, second in ((3.0, "duplicate"), (2.0, "hit")):
+        got = score_session(gap, clicks, ScoringSettings(duplicate_window_s=window_s)).reports
+        assert [r.outcome for r in got] == ["hit", second]
