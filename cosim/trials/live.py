@@ -3,10 +3,12 @@ handed to the participant's page.
 
 Owns the three pieces between a run and the browsers: ``FeedTap``, a run
 participant (``cosim.sync.runner.Run(..., extra_participants=[...])``) that
-takes the frames the cameras render anyway (``RunContext.frame_taps``: the
-datalink's delivered frame where the scenario sets a datalink, else the
-rendered one), JPEG-encodes those of the condition's feeds with their feed
-number and frame number, and the aircraft's positions a few times a second;
+takes the frames the cameras render anyway (``RunContext.frame_taps``),
+JPEG-encodes those of the condition's feeds with their feed number and
+frame number, and the aircraft's positions a few times a second; where the
+scenario sets a ``datalink:`` a feed is its delivered frames (each
+``every``-th, as the downlink decoded it, numbered as the ground truth
+numbers it) handed on its ``latency_ms`` later;
 ``Hub``, which fans each message out to every page watching the session
 without ever waiting for one (a page that does not keep up loses its oldest
 messages, and its dropped frames are counted); and ``LiveRun``, the run in
@@ -100,25 +102,42 @@ class Hub:
         self.ended = False
         #: frames dropped for pages that have gone
         self.dropped_gone = 0
+        #: each feed's last frame number sent to the watchers
+        self.last_frame: dict[int, int] = {}
 
-    def publish(self, kind: str, payload: dict[str, Any]) -> None:
+    def publish(self, kind: str, payload: dict[str, Any], delay_s: float = 0.0) -> None:
+        """Send ``payload`` to every watcher, ``delay_s`` from now (a
+        datalink's latency); a ``frame`` payload has its ``feed`` and ``frame``."""
         text = json.dumps(payload, separators=(",", ":"))
         if kind == "frame":
             self.published_frames += 1
         try:
-            self.loop.call_soon_threadsafe(self._fan, kind, text)
+            self.loop.call_soon_threadsafe(self._later, delay_s, kind, text,
+                                           payload.get("feed"), payload.get("frame"))
         except RuntimeError:  # the loop is closed: the server is going
             pass
 
-    def end(self) -> None:
+    def _later(self, delay_s: float, *args: Any) -> None:
+        if delay_s > 0:
+            self.loop.call_later(delay_s, self._fan, *args)
+        else:
+            self._fan(*args)
+
+    def end(self, delay_s: float = 0.0) -> None:
+        """No more messages (after those published up to ``delay_s`` from now)."""
         try:
-            self.loop.call_soon_threadsafe(self._end)
+            self.loop.call_soon_threadsafe(self._later, delay_s, "end", "", None, None)
         except RuntimeError:
             pass
 
-    def _fan(self, kind: str, text: str) -> None:
+    def _fan(self, kind: str, text: str, feed: int | None, frame: int | None) -> None:
+        if kind == "end":
+            self._end()
+            return
         if kind == "states":
             self.last_states = text
+        elif kind == "frame" and feed is not None and frame is not None:
+            self.last_frame[feed] = frame
         for w in self.watchers:
             w.put(kind, text)
 
@@ -161,8 +180,9 @@ class FeedTap:
         self.condition, self.hub = condition, hub
         self.index = {(f.vehicle, f.camera): k for k, f in enumerate(condition.feeds)}
         self.frames_sent = 0
-        #: each feed's last frame number handed to the hub
-        self.last_frame: dict[int, int] = {}
+        #: each downlinked feed's (every how many rendered frames one is
+        #: delivered, its latency in s)
+        self.links: dict[int, tuple[int, float]] = {}
         self.encode_s = 0.0
         self.every = 1
 
@@ -176,6 +196,11 @@ class FeedTap:
         self.every = max(1, round(ctx.physics_hz / MAP_RATE_HZ))
         self.ground_m = ctx.scenario.origin.ground_alt_m
         self.ids = list(ctx.ids)
+        cams = {c.name: c for c in ctx.scenario.sections["cameras"].views}
+        for k, f in enumerate(self.condition.feeds):
+            link = cams[f.camera].datalink
+            if link is not None:
+                self.links[k] = (int(link.every), float(link.latency_ms) / 1000.0)
 
     def frame(self, vehicle: str, camera: str, time_s: float, bgr: np.ndarray) -> None:
         k = self.index.get((vehicle, camera))
@@ -184,16 +209,19 @@ class FeedTap:
         import cv2
 
         feed = self.condition.feeds[k]
+        frame_no = round(time_s * feed.rate_hz)
+        every, latency_s = self.links.get(k, (1, 0.0))
+        if frame_no % every:  # between a downlink's deliveries: its last frame held
+            return
         t0 = time.perf_counter()
         ok, jpg = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
         self.encode_s += time.perf_counter() - t0
         if not ok:
             log.warning("feed %s: frame at %.2f s could not be JPEG-encoded", feed.name, time_s)
             return
-        frame_no = round(time_s * feed.rate_hz)
-        self.last_frame[k] = frame_no
         self.hub.publish("frame", {"feed": k, "frame": frame_no, "time_s": round(time_s, 6),
-                                   "jpeg": base64.b64encode(jpg.tobytes()).decode()})
+                                   "jpeg": base64.b64encode(jpg.tobytes()).decode()},
+                         delay_s=latency_s)
         self.frames_sent += 1
 
     def on_exchange(self, tick: int, states: np.ndarray) -> None:
@@ -262,8 +290,8 @@ class LiveRun:
         except Exception as e:  # noqa: BLE001 - said on the experimenter's page
             self.error = e
             log.exception("live run %s failed", self.out_dir)
-        finally:
-            self.hub.end()
+        finally:  # after the frames still held back by a downlink's latency
+            self.hub.end(max((lat for _, lat in self.tap.links.values()), default=0.0))
 
     @property
     def running(self) -> bool:

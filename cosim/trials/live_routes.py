@@ -36,7 +36,9 @@ from starlette.responses import JSONResponse, Response, StreamingResponse
 from starlette.routing import Route
 
 from cosim.errors import ConfigError
+from cosim.scenario import load_scenario
 from cosim.trials.live import Hub, LiveRun
+from cosim.trials.live_scoring import SessionScore, score_stored
 from cosim.trials.live_study import LiveCondition
 from cosim.trials.study import Study
 
@@ -45,6 +47,9 @@ log = logging.getLogger(__name__)
 REPORT_KEY = re.compile(r"^[A-Za-z0-9_\-]{1,64}$")
 #: seconds a stopped run may take to end before the server gives up waiting
 STOP_WAIT_S = 30.0
+#: a click this long (s) after the run's end is scored (the page shows the last
+#: frame until it hears of the end)
+END_MARGIN_S = 5.0
 #: the page's clock readings accepted (ms since the page loaded): a day
 MAX_PAGE_TIME_MS = 86_400_000.0
 
@@ -196,7 +201,7 @@ class LiveConsole:
                            f"got {k!r}"[:200])
         feed = feeds[k]
         frame = body.get("frame")
-        last = run.tap.last_frame.get(k)
+        last = run.hub.last_frame.get(k)
         if isinstance(frame, bool) or not isinstance(frame, int) or last is None \
                 or not 0 <= frame <= last:
             sent = "none yet" if last is None else f"0..{last}"
@@ -204,8 +209,9 @@ class LiveConsole:
                            f"({sent}), got {frame!r}"[:200])
         x, y = self.number(body, "x_px"), self.number(body, "y_px")
         if not (0 <= x <= feed.width_px and 0 <= y <= feed.height_px):
-            raise self.bad(f"x_px, y_px: expected a pixel of the {feed.width_px} x "
-                           f"{feed.height_px} frame, got ({x:g}, {y:g})")
+            raise self.bad(f"x_px, y_px: expected a point of the {feed.width_px} x "
+                           f"{feed.height_px} frame (0 at its left and top edges), got "
+                           f"({x:g}, {y:g})")
         click = self.number(body, "click_time_ms")
         drawn = self.number(body, "drawn_time_ms", optional=True)
         for name, v in (("click_time_ms", click), ("drawn_time_ms", drawn)):
@@ -220,6 +226,37 @@ class LiveConsole:
         return JSONResponse({"report": stored, "created": created},
                             status_code=201 if created else 200)
 
+    async def score(self, request: Request) -> Response:
+        """A trial's stored reports scored against its run's ground truth
+        (``?trial_index=N``; once its run is over)."""
+        s = await run_in_threadpool(self._session, request)
+        raw = request.query_params.get("trial_index", "")
+        if not raw.isdigit() or not int(raw) < len(s["trial_order"]):
+            raise self.bad(f"trial_index: expected 0..{len(s['trial_order']) - 1}, "
+                           f"got {raw[:40]!r}")
+        score = await run_in_threadpool(self.score_trial, s, int(raw))
+        return JSONResponse(score_json(score))
+
+    def score_trial(self, s: dict[str, Any], ti: int) -> SessionScore:
+        """Trial ``ti`` of session ``s``: its reports scored (``live_scoring``)
+        against the ground truth of its run's feeds, with the study's
+        ``scoring:`` settings."""
+        live = self.runs.get(s["id"])
+        if live is not None and live[0] == ti and live[1].running:
+            raise self.bad(f"trial {ti} is still running: it is scored once its run is over",
+                           409)
+        folder = self._folder(s["id"], ti)
+        if not (folder / "summary.json").is_file():
+            raise self.bad(f"trial {ti} of this session has not run (no {folder})", 409)
+        c = self.condition(s["trial_order"][ti])
+        try:
+            duration_s = c.duration_s or load_scenario(c.scenario).duration_s
+            rows = [r for r in self.store.live_reports(s["id"]) if r["trial_index"] == ti]
+            return score_stored(folder, {f.name: (f.width_px, f.height_px) for f in c.feeds},
+                                rows, duration_s + END_MARGIN_S, self.study.scoring)
+        except ConfigError as e:  # ReportError too
+            raise self.bad(f"trial {ti}: " + "; ".join(e.problems)[:2000], 409) from None
+
     def close(self) -> None:
         """Stop every run and wait for each to end (the server is going)."""
         for _, run in self.runs.values():
@@ -233,6 +270,22 @@ class LiveConsole:
         live = self.runs.get(sid)
         if live is not None and live[1].running:
             live[1].stop("session ended")
+
+
+def score_json(score: SessionScore) -> dict[str, Any]:
+    """A trial's score as the experimenter's API gives it."""
+    return {
+        "hits": score.count("hit"), "duplicates": score.count("duplicate"),
+        "false_alarms": score.count("false_alarm"), "misses": len(score.misses),
+        "reports": [{"feed": r.report.feed, "frame": r.report.frame, "x_px": r.report.x_px,
+                     "y_px": r.report.y_px, "time_s": r.report.time_s, "outcome": r.outcome,
+                     "target": r.target, "error_px": r.error_px,
+                     "latency_feed_s": r.latency_feed_s, "latency_any_s": r.latency_any_s}
+                    for r in score.reports],
+        "targets": [{"target": t.target, "detected": t.detected, "eligible": t.eligible,
+                     "visible_s": t.visible_s, "first_visible_s": t.first_visible_s,
+                     "latency_feed_s": t.latency_feed_s, "latency_any_s": t.latency_any_s,
+                     "error_px": t.error_px} for t in score.targets]}
 
 
 def routes(console: LiveConsole, json_body: Any, experimenter: Any, page: Any) -> list[Route]:
@@ -252,4 +305,5 @@ def routes(console: LiveConsole, json_body: Any, experimenter: Any, page: Any) -
         Route(f"{base}/stop", experimenter(with_body(console.stop)), methods=["POST"]),
         Route(f"{base}/stream", console.stream, methods=["GET"]),
         Route(f"{base}/reports", with_body(console.report), methods=["POST"]),
+        Route(f"{base}/score", experimenter(console.score), methods=["GET"]),
     ]

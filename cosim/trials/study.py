@@ -86,6 +86,7 @@ from cosim.scenario.yaml_lines import (
 )
 from cosim.trials.clips import GtFrame, csv_rows, inside, probe_video, read_bounded, read_clip_truth
 from cosim.trials.instruments import STUDY_KEYS, TlxSetting, parse_sagat, parse_tlx
+from cosim.trials.live_scoring import ScoringSettings, read_scoring
 from cosim.trials.live_study import LiveCondition, read_live_conditions
 from cosim.trials.sagat import Probe
 
@@ -108,7 +109,7 @@ PRACTICE_STREAM = 1_000_003
 MANIFEST_COLUMNS = ("run", "vehicle", "camera", "video", "ground_truth", "frames", "rate_hz",
                     "width_px", "height_px", "hfov_deg", "vfov_deg")
 TOP_KEYS = ("schema_version", "name", "description", "protocol", "arrow_speed_deg_s", "sweep",
-            "clips", "scenarios", "practice", "practice_clips",
+            "clips", "scenarios", "scoring", "practice", "practice_clips",
             "break_every", "repeats", "order", "seed")
 CLIP_KEYS = ("id", "video", "ground_truth", "target", "rate_hz", "width_px", "height_px",
              "hfov_deg", "conditions", "run")
@@ -204,6 +205,8 @@ class Study:
     practice_clips: tuple[Clip, ...] = ()
     #: ``live``: the conditions (scenario and feeds) a trial runs, in place of clips
     live: tuple[LiveCondition, ...] = ()
+    #: ``live``: how its reports are scored (``scoring:``)
+    scoring: ScoringSettings = field(default_factory=ScoringSettings)
 
     @property
     def all_clips(self) -> tuple[Clip, ...]:
@@ -291,6 +294,7 @@ def parse_study(text: str, path: Path) -> Study:
     roots: list[Path] = [base]
     clips: list[Clip] = []
     live: list[LiveCondition] = []
+    scoring = ScoringSettings()
     if protocol == "live":
         for key in ("sweep", "clips", "practice_clips"):
             if key in top.d:
@@ -299,9 +303,11 @@ def parse_study(text: str, path: Path) -> Study:
             ctx.err(("practice",), "a live study has no practice trials yet: set it to 0")
         live = read_live_conditions(ctx, top.d.get("scenarios"), base, tuple(roots),
                                     condition_values)
-    elif "scenarios" in top.d:
-        ctx.err(("scenarios",), "`scenarios:` are for `protocol: live`; clips are given with "
-                                "`sweep:` or `clips:`")
+        scoring = read_scoring(ctx, top.d.get("scoring", {}))
+    elif "scenarios" in top.d or "scoring" in top.d:
+        key = "scenarios" if "scenarios" in top.d else "scoring"
+        ctx.err((key,), f"`{key}:` is for `protocol: live`; clips are given with `sweep:` or "
+                        f"`clips:`")
     which = None if protocol == "live" else top.one_of("sweep", "clips")
     if which is None and protocol != "live" and not ctx.problems:
         ctx.err((), "missing the clips: give `sweep:` (a cosim sweep folder) or `clips:` "
@@ -331,7 +337,7 @@ def parse_study(text: str, path: Path) -> Study:
                  path=path, name=name, protocol=protocol, clips=tuple(clips), practice=practice,
                  break_every=break_every, repeats=repeats, order=order, seed=seed,
                  roots=tuple(roots), arrow_speed_deg_s=float(arrow or 2.0),
-                 practice_clips=tuple(practice_clips), live=tuple(live))
+                 practice_clips=tuple(practice_clips), live=tuple(live), scoring=scoring)
 
 
 def _clips_of(ctx: Problems, key: str, spec: Any, base: Path, roots: list[Path]) -> list[Clip]:

@@ -7,7 +7,9 @@ Chromium (/usr/bin/chromium through Playwright; nothing is downloaded)."""
 from __future__ import annotations
 
 import asyncio
+import csv
 import json
+import math
 import socket
 import threading
 import time
@@ -24,7 +26,7 @@ from cosim.errors import ConfigError
 from cosim.trials.live import Hub
 from cosim.trials.study import load_study
 
-W, H, RATE_HZ, DURATION_S = 160, 120, 10.0, 3.0
+W, H, RATE_HZ, DURATION_S = 160, 120, 10.0, 4.0
 SCENARIO = """\
 schema_version: 1
 name: live_pair
@@ -35,10 +37,10 @@ seed: 7
 vehicles:
   - id: uav1
     model: uav700
-    init: {{north_m: -150, east_m: 0, alt_agl_m: 100, heading_deg: 0, airspeed_kt: 100}}
+    init: {{north_m: -130, east_m: 0, alt_agl_m: 100, heading_deg: 0, airspeed_kt: 100}}
   - id: uav2
     model: uav700
-    init: {{north_m: -150, east_m: 60, alt_agl_m: 100, heading_deg: 0, airspeed_kt: 100}}
+    init: {{north_m: -130, east_m: 60, alt_agl_m: 100, heading_deg: 0, airspeed_kt: 100}}
 ground: {{texture: procedural}}
 targets:
   - {{id: truck1, kind: truck, north_m: 0, east_m: 0, heading_deg: 20}}
@@ -93,8 +95,19 @@ def test_a_live_study_has_scenarios_not_clips(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match=r"sweep: a live study runs scenarios"):
         load_study(p)
     p = live_study(tmp_path, "protocol: disappear\nscenarios: []\n")
-    with pytest.raises(ConfigError, match=r"scenarios: `scenarios:` are for `protocol: live`"):
+    with pytest.raises(ConfigError, match=r"scenarios: `scenarios:` is for `protocol: live`"):
         load_study(p)
+
+
+def test_a_live_studys_scoring_settings_are_read_and_checked(tmp_path: Path) -> None:
+    head = "protocol: live\nscenarios: [{scenario: pair.yaml, feeds: 2}]\n"
+    st = load_study(live_study(tmp_path, head + "scoring: {tolerance_px: 4, "
+                                              "duplicate_window_s: 30}\n"))
+    assert (st.scoring.tolerance_px, st.scoring.duplicate_window_s) == (4.0, 30.0)
+    with pytest.raises(ConfigError, match=r"study\.yaml:3: scoring\.tolerance_px: .*-1"):
+        load_study(live_study(tmp_path, head + "scoring: {tolerance_px: -1}\n"))
+    with pytest.raises(ConfigError, match=r"scoring: `scoring:` is for `protocol: live`"):
+        load_study(live_study(tmp_path, "protocol: disappear\nscoring: {}\n"))
 
 
 def test_a_live_studys_feeds_by_count_are_the_scenarios_first(tmp_path: Path) -> None:
@@ -233,19 +246,51 @@ def _video_frames(path: Path) -> list[np.ndarray]:
         out.append(cv2.cvtColor(img, cv2.COLOR_BGR2GRAY).astype(float))
 
 
+def _truck(gt: Path) -> dict[int, dict[str, float]]:
+    """The truck's rows of a feed's ground truth, by frame, where it is in
+    view with at least 4 pixels (the scoring's default visibility)."""
+    with open(gt, newline="") as f:
+        return {int(r["frame"]): {k: float(r[k]) for k in (
+                    "time_s", "bbox_x0_px", "bbox_y0_px", "bbox_x1_px", "bbox_y1_px",
+                    "center_x_px", "center_y_px")}
+                for r in csv.DictReader(f)
+                if r["target"] == "truck1" and r["in_view"] == "1"
+                and float(r["pixels_on_target"]) >= 4}
+
+
+def _expected(truck: dict[int, dict[str, float]], frame: int, x: float, y: float
+              ) -> tuple[str, float | None]:
+    """(outcome, pixel error) of a first click at (x, y) on ``frame``: a hit
+    inside the truck's box grown by 10 px (the default tolerance)."""
+    r = truck.get(frame)
+    if r is None or not (r["bbox_x0_px"] - 10 <= x <= r["bbox_x1_px"] + 10
+                         and r["bbox_y0_px"] - 10 <= y <= r["bbox_y1_px"] + 10):
+        return "false_alarm", None
+    return "hit", math.hypot(x - r["center_x_px"], y - r["center_y_px"])
+
+
 def test_a_click_on_a_feed_is_stored_with_its_frame_and_pixel(tmp_path: Path,
                                                               chromium: str) -> None:
     """The page draws both feeds of a live run; a scripted click on the
     second is stored with that feed, a frame the page drew (its pixels are
     the run's video frame of that number, not its neighbours') and the pixel
     in the frame's coordinates from the canvas's box as Playwright measures
-    it. The run's states equal the same scenario's run without the console."""
+    it; a click on the truck in the first feed (where the same scenario's
+    run without the console has it) is scored a hit with the pixel error
+    from the ground truth, the other a false alarm. The run's states and
+    ground truth equal those of the run without the console."""
     from playwright.sync_api import sync_playwright
 
     from cosim.scenario import load_scenario
     from cosim.sync.runner import run_scenario
 
-    with live_server(live_study(tmp_path)) as server:
+    study = live_study(tmp_path)
+    alone = run_scenario(load_scenario(tmp_path / "pair.yaml"), tmp_path / "alone")
+    assert alone.ok
+    truck = _truck(tmp_path / "alone" / "cameras" / "uav1_belly.gt.csv")
+    seen = sorted(truck)
+    assert len(seen) >= 8, seen  # the truck passes under uav1 within the run
+    with live_server(study) as server:
         status, s = server.request("POST", "/api/sessions", {"participant": "p1", **PROFILE})
         assert status == 201 and s["protocol"] == "live", s
         sid = s["id"]
@@ -268,9 +313,19 @@ def test_a_click_on_a_feed_is_stored_with_its_frame_and_pixel(tmp_path: Path,
                 cx, cy = round(box["x"] + 0.3 * box["width"]), round(box["y"] + 0.6 * box["height"])
                 page.mouse.click(cx, cy)
                 page.screenshot(path=str(tmp_path / "live.png"))
-                page.wait_for_function("window.live.reports.length === 1 && "
-                                       "window.live.reports[0].status === 201")
-                sent = page.evaluate("window.live.reports[0]")
+                # the truck in feed 0: click where the ground truth has it on the
+                # frame drawn last (the frame on screen at the click may be the next)
+                page.wait_for_function(f"window.live.drawn.some((d) => d[0] === 0 && "
+                                       f"d[1] >= {seen[1]})", timeout=60_000)
+                last = page.evaluate("window.live.drawn.filter((d) => d[0] === 0).pop()[1]")
+                box0 = page.locator("canvas[data-feed='0']").bounding_box()
+                assert box0 is not None and last in truck, (last, seen)
+                tx = box0["x"] + (truck[last]["center_x_px"] + 0.5) * box0["width"] / W
+                ty = box0["y"] + (truck[last]["center_y_px"] + 0.5) * box0["height"] / H
+                page.mouse.click(round(tx), round(ty))
+                page.wait_for_function("window.live.reports.length === 2 && "
+                                       "window.live.reports.every((r) => r.status === 201)")
+                sent = page.evaluate("window.live.reports")
                 drawn = page.evaluate("window.live.drawn")
                 witness = page.evaluate("window.witness")
                 page.wait_for_function("document.body.dataset.phase === 'ended'",
@@ -279,29 +334,94 @@ def test_a_click_on_a_feed_is_stored_with_its_frame_and_pixel(tmp_path: Path,
             finally:
                 browser.close()
         v = _wait_over(server, sid)
-        (stored,) = server.store.live_reports(sid)
+        first, second = server.store.live_reports(sid)
+        status, score = server.request("GET", f"/api/sessions/{sid}/live/score?trial_index=0")
+        assert status == 200, score
     folder = Path(v["trials"][0]["run"])
-    assert stored["feed"] == 1 and stored["feed_name"] == "uav2/belly"
-    assert stored["frame"] == sent["frame"]
+    assert first["feed"] == 1 and first["feed_name"] == "uav2/belly"
+    assert first["frame"] == sent[0]["frame"]
     # a frame the page drew on that feed before the click
-    assert [1, stored["frame"]] in [d[:2] for d in drawn if d[2] <= sent["click_time_ms"]]
-    # the pixel, from the canvas's box as the browser lays it out
-    assert stored["x_px"] == pytest.approx((cx - box["x"]) * W / box["width"], abs=1e-6)
-    assert stored["y_px"] == pytest.approx((cy - box["y"]) * H / box["height"], abs=1e-6)
-    assert 0 < stored["x_px"] < W and 0 < stored["y_px"] < H
-    assert stored["drawn_time_ms"] <= stored["click_time_ms"]
+    assert [1, first["frame"]] in [d[:2] for d in drawn if d[2] <= sent[0]["click_time_ms"]]
+    # the pixel, from the canvas's box as the browser lays it out (0 at the
+    # frame's edge)
+    assert first["x_px"] == pytest.approx((cx - box["x"]) * W / box["width"], abs=1e-6)
+    assert first["y_px"] == pytest.approx((cy - box["y"]) * H / box["height"], abs=1e-6)
+    assert 0 < first["x_px"] < W and 0 < first["y_px"] < H
+    assert first["drawn_time_ms"] <= first["click_time_ms"]
     # what was on the canvas at the click is the run's frame of that number
-    (w,) = witness
+    (w, _) = witness
     assert w["feed"] == 1
     shown = np.asarray(w["pixels"], float).reshape(H, W, 4)[:, :, :3]
     grey = shown @ np.array([0.299, 0.587, 0.114])
     frames = _video_frames(folder / "cameras" / "uav2_belly.mp4")
-    k = stored["frame"]
+    k = first["frame"]
     near = {j: float(np.abs(frames[j] - grey).mean()) for j in (k - 1, k, k + 1)
             if 0 <= j < len(frames)}
     assert min(near, key=near.__getitem__) == k, near
+    # the scores, against the ground truth of the run without the console
+    assert second["feed_name"] == "uav1/belly" and second["frame"] in (last, last + 1)
+    outcomes = [(r["feed"], r["frame"], r["outcome"], r["error_px"]) for r in score["reports"]]
+    truck2 = _truck(tmp_path / "alone" / "cameras" / "uav2_belly.gt.csv")
+    # (the ground truth's pixel centres are at whole numbers: half a pixel off the edge)
+    want = [("uav2/belly", first["frame"], *_expected(truck2, first["frame"],
+                                                     first["x_px"] - 0.5, first["y_px"] - 0.5)),
+            ("uav1/belly", second["frame"], *_expected(truck, second["frame"],
+                                                      second["x_px"] - 0.5,
+                                                      second["y_px"] - 0.5))]
+    assert [o[:3] for o in outcomes] == [o[:3] for o in want]
+    assert want[1][2] == "hit" and outcomes[1][3] == pytest.approx(want[1][3], abs=1e-3)
+    # the report's time: its frame's time plus the page's time from drawing it to the click
+    assert score["reports"][1]["time_s"] == pytest.approx(
+        truck[second["frame"]]["time_s"]
+        + (second["click_time_ms"] - second["drawn_time_ms"]) / 1000, abs=1e-6)
     # the console never changes the simulation
-    alone = run_scenario(load_scenario(tmp_path / "pair.yaml"),
-                         tmp_path / "alone")
-    assert alone.ok
     _same_states(folder, tmp_path / "alone")
+    for f in ("uav1_belly.gt.csv", "uav2_belly.gt.csv"):
+        assert (folder / "cameras" / f).read_bytes() == \
+            (tmp_path / "alone" / "cameras" / f).read_bytes(), f
+
+
+@pytest.mark.integration  # a live run of a second and a half
+def test_a_downlinked_feed_is_its_delivered_frames_handed_on_after_the_latency(
+        tmp_path: Path) -> None:
+    """With a ``datalink:`` (5 of the camera's 10 frames a second, 300 ms
+    late) the page gets the frames the ground truth says were delivered,
+    each handed on 300 ms after the run made it."""
+    from cosim.trials.live import LiveRun
+
+    text = SCENARIO.format(duration_s=1.5, w=W, h=H, rate_hz=RATE_HZ).replace(
+        "rate_hz: 10}", "rate_hz: 10,\n       datalink: {rate_hz: 5, latency_ms: 300}}")
+    assert "datalink" in text
+    (tmp_path / "pair.yaml").write_text(text)
+    (tmp_path / "study.yaml").write_text(STUDY)
+    (c,) = load_study(tmp_path / "study.yaml").live
+    published: dict[int, float] = {}
+    arrived: dict[int, float] = {}
+
+    class Timed(Hub):
+        def publish(self, kind: str, payload: dict[str, Any], delay_s: float = 0.0) -> None:
+            if kind == "frame" and payload["feed"] == 0:
+                published[payload["frame"]] = time.monotonic()
+            super().publish(kind, payload, delay_s)
+
+    async def watch() -> None:
+        hub = Timed(asyncio.get_running_loop())
+        w = hub.watch(max_pending=1000)
+        run = LiveRun(c, tmp_path / "run", hub, backend="inline")
+        run.start()
+        while True:
+            kind, msg = await w.get()
+            if kind == "end":
+                break
+            if kind == "frame" and json.loads(msg)["feed"] == 0:
+                arrived[json.loads(msg)["frame"]] = time.monotonic()
+        assert run.wait(10) and run.error is None, run.error
+
+    asyncio.run(watch())
+    with open(tmp_path / "run" / "cameras" / "uav1_belly.gt.csv", newline="") as f:
+        delivered = sorted({int(r["frame"]) for r in csv.DictReader(f)
+                            if r["delivered_time_s"]})
+    assert delivered == list(range(0, 15, 2))
+    assert sorted(arrived) == sorted(published) == delivered
+    late = [arrived[k] - published[k] for k in delivered]
+    assert min(late) >= 0.3 - 0.005, late

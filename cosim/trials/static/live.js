@@ -100,8 +100,9 @@
     const on = drawn.get(f.feed);
     if (!on || trialIndex === null) return; // nothing drawn there yet
     const r = f.canvas.getBoundingClientRect();
-    const x = (e.clientX - r.left) * f.width_px / r.width;
-    const y = (e.clientY - r.top) * f.height_px / r.height;
+    // in the frame's pixels, 0 at its left and top edges
+    const x = ((e.clientX - r.left) * f.width_px) / r.width;
+    const y = ((e.clientY - r.top) * f.height_px) / r.height;
     const body = {
       trial_index: trialIndex, report_key: crypto.randomUUID(), feed: f.feed,
       frame: on.frame, x_px: x, y_px: y, click_time_ms: e.timeStamp,
