@@ -20,10 +20,12 @@ feeds and map blank and the page asks the probe's questions. Kinds:
 
 The true state is a ``FreezeState``: the vehicles as a run's state log
 holds them (``from_state_log`` reads one from ``states.parquet`` at a time)
-and the targets with when each was last seen, which the live console (the
-session's runner, another module) hands in. The state log holds no fuel
-today: a ``fuel_kg`` question is scored only from a state that carries it
-(``VehicleAt.fuel_kg``), and refused (``ScoringError``) otherwise. Nothing
+and the targets with when each was last seen in any feed (visible by the
+reports' rules, ``live_scoring``): ``freeze_state_from_run`` makes one from
+a live trial's run folder, or the live console hands one in. The state
+log holds no fuel today: a ``fuel_kg`` question is scored only from a
+state that carries it (``VehicleAt.fuel_kg``), and refused
+(``ScoringError``) otherwise. Nothing
 here knows about HTTP, the study file or the store.
 """
 
@@ -31,7 +33,9 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -39,6 +43,8 @@ import pyarrow as pa
 
 from cosim.core.geo import MAX_DISTANCE_M
 from cosim.errors import CosimError
+from cosim.logs.runfolder import read_states
+from cosim.trials.live_scoring import ScoringSettings, TargetFrame, read_run_truth, visible
 
 KINDS = ("last_target", "count", "choice")
 WHICH = ("lowest", "highest")
@@ -186,6 +192,34 @@ def from_state_log(table: pa.Table, time_s: float,
         id=v, **{c: float(cols[c][i]) for c in cols},
         fuel_kg=None if fuel is None else float(fuel[i])) for v, i in last.items())
     return FreezeState(time_s=float(time_s), vehicles=vehicles, targets=targets)
+
+
+def last_sightings(truth: Iterable[TargetFrame], time_s: float,
+                   settings: ScoringSettings | None = None) -> dict[str, float]:
+    """Each target's latest time on screen at or before ``time_s`` in any
+    feed, in a frame where it counts as visible (``live_scoring.visible``:
+    the same thresholds as the reports' scoring)."""
+    s = settings or ScoringSettings()
+    out: dict[str, float] = {}
+    for t in truth:
+        if t.time_s <= time_s + 1e-9 and visible(t, s) and t.time_s > out.get(t.target, -1.0):
+            out[t.target] = t.time_s
+    return out
+
+
+def freeze_state_from_run(run_dir: str | Path, feeds: Sequence[str], time_s: float,
+                          positions: Mapping[str, tuple[float, float]],
+                          settings: ScoringSettings | None = None) -> FreezeState:
+    """The true state ``time_s`` into a live trial, from its run folder: the
+    aircraft as its ``states.parquet`` holds them (``from_state_log``); the
+    targets at ``positions`` (``{id: (north_m, east_m)}``, the scenario's:
+    e.g. the renderer's ``TargetSet``) with their last sightings in the
+    ``feeds`` the participant watched (``VEHICLE/CAMERA``, their ground
+    truth: ``last_sightings``)."""
+    seen = last_sightings(read_run_truth(run_dir, list(feeds)), time_s, settings)
+    targets = tuple(TargetAt(k, float(n), float(e), seen.get(k))
+                    for k, (n, e) in positions.items())
+    return from_state_log(read_states(run_dir), time_s, targets)
 
 
 def inside_polygon(north_m: float, east_m: float, poly: tuple[tuple[float, float], ...]) -> bool:

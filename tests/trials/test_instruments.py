@@ -623,3 +623,68 @@ def test_a_sagat_probe_asked_through_the_probe_form_is_stored(
     assert (row["trial_index"], row["item"], row["scores"]) == (0, 0, None)
     assert row["answer"] == {"where": {"north_m": 110.0, "east_m": -40.0}, "north": 2,
                              "fuel": "b"}
+
+
+def test_last_sightings_equal_a_brute_force_search() -> None:
+    """Each target's latest frame at or before the freeze in which it counts
+    as visible (in view, enough pixels, enough of it unoccluded), any feed."""
+    from cosim.trials.live_scoring import ScoringSettings, TargetFrame
+    from cosim.trials.sagat import last_sightings
+
+    rng = np.random.default_rng(2)
+    frames = [TargetFrame(feed=f"u{k % 3}/belly", frame=k, time_s=round(k * 0.1, 1),
+                          target=f"t{rng.integers(4)}", in_view=bool(rng.random() < 0.7),
+                          bbox_px=None, center_px=None,
+                          pixels_on_target=float(rng.integers(0, 12)),
+                          visible_fraction=float(rng.random())) for k in range(400)]
+    settings = ScoringSettings(min_pixels_on_target=5, min_visible_fraction=0.3)
+    for freeze_s in (0.0, 7.35, 21.0, 50.0):
+        want: dict[str, float] = {}
+        for f in frames:
+            if (f.time_s <= freeze_s and f.in_view and f.pixels_on_target >= 5
+                    and f.visible_fraction >= 0.3):
+                want[f.target] = max(want.get(f.target, -1.0), f.time_s)
+        assert last_sightings(frames, freeze_s, settings) == want
+
+
+@pytest.mark.integration
+def test_the_state_at_a_freeze_of_a_real_run(tmp_path: Path) -> None:
+    """The flyover, 12 s: the state 11 s in, from its run folder, is the
+    aircraft's last logged row by then (read back by pyarrow) and the truck
+    where the scenario puts it, last seen when its ground-truth CSV, read
+    directly, last shows it visible by then; a click 10 m off it is scored
+    10 m, and the aircraft is the lowest of one."""
+    import csv
+
+    import pyarrow.parquet as pq
+
+    from cosim.cli import main
+    from cosim.trials.sagat import freeze_state_from_run
+
+    repo = Path(__file__).resolve().parents[2]
+    out = tmp_path / "run"
+    assert main(["-q", "run", str(repo / "scenarios/cameras/flyover.yaml"), "--backend",
+                 "inline", "--duration-s", "12", "--out", str(out), "--no-progress"]) == 0
+    st = freeze_state_from_run(out, ["uav1/belly"], 11.0,
+                               {"truck1": (0.0, 0.0), "firetruck1": (300.0, 15.0)})
+    log = pq.read_table(out / "states.parquet").to_pydict()  # the parts, read by pyarrow
+    i = max(k for k, time_s in enumerate(log["time_s"]) if time_s <= 11.0 + 1e-9)
+    (v,) = st.vehicles
+    assert (v.id, v.north_m, v.east_m, v.alt_agl_m) == (
+        "uav1", log["north_m"][i], log["east_m"][i], log["alt_agl_m"][i])
+    assert 10.9 < log["time_s"][i] <= 11.0
+    with open(out / "cameras" / "uav1_belly.gt.csv", newline="") as f:
+        seen = [(r["target"], float(r["time_s"])) for r in csv.DictReader(f)
+                if r["in_view"] == "1" and float(r["pixels_on_target"]) >= 4
+                and float(r["time_s"]) <= 11.0]
+    last = max(seen, key=lambda x: x[1])
+    assert last[0] == "truck1"
+    t = st.last_target()
+    assert t is not None and (t.id, t.last_seen_s) == last
+    s = score(Question("w", "last_target", tolerance_m=5.0), st,
+              {"north_m": 6.0, "east_m": -8.0})
+    assert (s.error, s.correct) == (10.0, False)
+    assert score(Question("a", "choice", which="lowest", of="alt_agl_m"), st, "uav1").correct
+    # 5 s in, no target has been on the screen yet: nothing to be right about
+    early = freeze_state_from_run(out, ["uav1/belly"], 5.0, {"truck1": (0.0, 0.0)})
+    assert early.last_target() is None and min(time_s for _, time_s in seen) > 5.0
