@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import re
 from dataclasses import dataclass
 from typing import Any, TextIO
 
@@ -69,6 +70,8 @@ TLX_KEYS = ("after", "weights")
 PROBE_KEYS = ("at_s", "questions")
 QUESTION_KEYS = ("id", "kind", "text", "tolerance_m", "tolerance", "sector", "which", "of",
                  "from")
+#: a question's id (a key of the answers the page posts)
+QUESTION_ID = re.compile(r"[A-Za-z0-9_]{1,32}")
 #: a rating's step and range (the paper form's 21 marks)
 TLX_STEP, TLX_MAX = 5, 100
 #: the seed stream of the pairs' order on the page (``tlx_pair_order``)
@@ -264,7 +267,7 @@ def _question(ctx: Problems, d: Any, at: tuple[Any, ...], j: int) -> Question | 
     r = Reader(ctx, d, at, QUESTION_KEYS)
     kind = r.string("kind", choices=KINDS)
     qid = r.string("id", f"q{j}")
-    if isinstance(qid, str) and not (0 < len(qid) <= 32 and qid.replace("_", "").isalnum()):
+    if isinstance(qid, str) and not QUESTION_ID.fullmatch(qid):
         ctx.err(at + ("id",), f"{qid[:40]!r}: 1-32 letters, digits and '_'")
     text = r.string("text", "")
     if isinstance(text, str) and len(text) > MAX_TEXT_CHARS:

@@ -215,6 +215,8 @@ def test_sagat_probes_are_read() -> None:
      "from: [0, 0]}]}\n", r"questions\[0\]\.from: only a distance_m question has a point"),
     ("sagat:\n  - {at_s: 5, questions: [{kind: last_target, sector: [[0, 0], [1, 0], [0, 1]]}]}\n",
      r"questions\[0\]\.sector: not a key of a last_target question \(its keys: tolerance_m\)"),
+    ("sagat:\n  - {at_s: 5, questions: [{id: wh\u00e9re, kind: last_target}]}\n",
+     r"questions\[0\]\.id: 'wh\u00e9re': 1-32 letters, digits and '_'"),
     ("sagat:\n  - {at_s: 5, questions: [{kind: choice, which: most, of: fuel_kg}]}\n",
      r"questions\[0\]\.which: expected one of: lowest, highest; got 'most'"),
     ("sagat:\n  - {at_s: 5, questions: [{id: a, kind: last_target}, {id: a, kind: last_target}]}"
