@@ -93,9 +93,10 @@ class LiveConsole:
         trials = []
         for t in s["trial_order"]:
             c = self.condition(t)
+            folder = self._folder(s["id"], t["index"])
             trials.append({**t, "condition": c.id, "conditions": c.condition_map,
-                           "feeds": [f.name for f in c.feeds],
-                           "run": str(self._folder(s["id"], t["index"]))})
+                           "feeds": [f.name for f in c.feeds], "run": str(folder),
+                           "ran": folder.exists()})
         live = self.runs.get(s["id"])
         return {"id": s["id"], "participant": s["participant"], "protocol": "live",
                 "state": s["state"], "trials": trials,

@@ -270,7 +270,7 @@ class TrialApp:
         st = self.study
         return JSONResponse({"name": st.name, "protocol": st.protocol, "clips": len(st.clips),
                              "practice": st.practice, "practice_clips": len(st.practice_clips),
-                             "break_every": st.break_every,
+                             "break_every": st.break_every, "conditions": len(st.live),
                              "repeats": st.repeats, "order": st.order, "seed": st.seed})
 
     async def list_sessions(self, request: Request) -> Response:

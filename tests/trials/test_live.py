@@ -425,3 +425,40 @@ def test_a_downlinked_feed_is_its_delivered_frames_handed_on_after_the_latency(
     assert sorted(arrived) == sorted(published) == delivered
     late = [arrived[k] - published[k] for k in delivered]
     assert min(late) >= 0.3 - 0.005, late
+
+
+def test_the_experimenter_starts_and_stops_a_live_trial_from_the_page(
+        tmp_path: Path, chromium: str) -> None:
+    """The experimenter's page links a live session's participant page to
+    /live and has its trial's button: Start runs it, Stop ends its run
+    early (the run's summary says so), then no trial is left to start."""
+    from playwright.sync_api import sync_playwright
+
+    with live_server(live_study(tmp_path)) as server:
+        status, s = server.request("POST", "/api/sessions", {"participant": "p2", **PROFILE})
+        assert status == 201, s
+        with sync_playwright() as pw:
+            browser = pw.chromium.launch(executable_path=chromium)
+            try:
+                page = browser.new_page()
+                page.set_default_timeout(30_000)
+                page.goto(f"{server.url}/")
+                button = page.locator("button.live-control")
+                page.wait_for_function("document.querySelector('button.live-control')"
+                                       "?.textContent === 'Start trial 1 of 1'")
+                assert page.locator("#sessions a").get_attribute("href") == \
+                    f"/live?session={s['id']}"
+                assert "protocol live, 1 conditions" in page.locator("#study").inner_text()
+                button.click()
+                page.wait_for_function("document.querySelector('button.live-control')"
+                                       "?.textContent === 'Stop trial 1'")
+                page.locator("button.live-control").click()
+                page.wait_for_function("document.querySelector('button.live-control')"
+                                       "?.textContent === 'All trials run'")
+                assert page.locator("button.live-control").is_disabled()
+            finally:
+                browser.close()
+        v = _wait_over(server, s["id"])
+    summary = json.loads((Path(v["trials"][0]["run"]) / "summary.json").read_text())
+    assert summary["stop_reason"] == "stopped by the experimenter"
+    assert summary["ticks"] < DURATION_S * 120, summary["ticks"]

@@ -26,7 +26,7 @@
   async function refresh() {
     const r = await fetch("/api/sessions", { cache: "no-store" });
     const list = await r.json();
-    tbody.replaceChildren();
+    const rows = []; // put in at once: a refresh waits for live sessions' states
     for (const s of list) {
       const tr = document.createElement("tr");
       cell(tr, s.participant);
@@ -42,7 +42,8 @@
       }
       cell(tr, page);
       const a = document.createElement("a");
-      a.href = `/participant?session=${encodeURIComponent(s.id)}`;
+      const live = s.protocol === "live";
+      a.href = `/${live ? "live" : "participant"}?session=${encodeURIComponent(s.id)}`;
       a.textContent = "open";
       a.target = "_blank";
       cell(tr, a);
@@ -53,8 +54,32 @@
       b.onclick = () => post(`/api/sessions/${encodeURIComponent(s.id)}/state`, { state: next })
         .then(refresh).catch((e) => alert(e.message));
       cell(tr, b);
-      tbody.appendChild(tr);
+      if (live) cell(tr, await liveControl(s));
+      rows.push(tr);
     }
+    tbody.replaceChildren(...rows);
+  }
+
+  // A live session's trials run one at a time: start the next, or stop the running one.
+  async function liveControl(s) {
+    const sid = encodeURIComponent(s.id);
+    const v = await (await fetch(`/api/sessions/${sid}/live`, { cache: "no-store" })).json();
+    const b = document.createElement("button");
+    b.className = "live-control";
+    if (v.live && v.live.running) {
+      b.textContent = `Stop trial ${v.live.trial_index + 1}`;
+      b.onclick = () => post(`/api/sessions/${sid}/live/stop`, {})
+        .then(refresh).catch((e) => alert(e.message));
+      return b;
+    }
+    const next = (v.trials || []).find((t) => !t.ran);
+    b.textContent = next ? `Start trial ${next.index + 1} of ${v.trials.length}` : "All trials run";
+    b.disabled = !next || s.state === "finished";
+    if (next) {
+      b.onclick = () => post(`/api/sessions/${sid}/live/start`, { trial_index: next.index })
+        .then(refresh).catch((e) => alert(e.message));
+    }
+    return b;
   }
 
   form.addEventListener("submit", async (ev) => {
@@ -68,6 +93,12 @@
   });
 
   fetch("/api/study").then((r) => r.json()).then((s) => {
+    if (s.protocol === "live") {
+      document.getElementById("study").textContent =
+        `Study ${s.name}: protocol live, ${s.conditions} conditions x ${s.repeats}, ` +
+        `order ${s.order} (seed ${s.seed})`;
+      return;
+    }
     const from = s.practice_clips ? ` (from ${s.practice_clips} practice clips)` : "";
     document.getElementById("study").textContent =
       `Study ${s.name}: protocol ${s.protocol}, ${s.clips} clips x ${s.repeats}, ` +
