@@ -13,6 +13,7 @@ import math
 import socket
 import threading
 import time
+from collections.abc import MutableMapping
 from pathlib import Path
 from typing import Any
 
@@ -462,3 +463,37 @@ def test_the_experimenter_starts_and_stops_a_live_trial_from_the_page(
     summary = json.loads((Path(v["trials"][0]["run"]) / "summary.json").read_text())
     assert summary["stop_reason"] == "stopped by the experimenter"
     assert summary["ticks"] < DURATION_S * 120, summary["ticks"]
+
+
+@pytest.mark.integration  # a live run started, then stopped
+def test_the_live_runs_stop_when_the_server_shuts_down(tmp_path: Path) -> None:
+    """The app's lifespan ends with every live run stopped and waited for."""
+    from test_server import asgi
+
+    from cosim.trials.server import make_app
+    from cosim.trials.store import Store
+
+    with Store(tmp_path / "db.sqlite") as store:
+        app = make_app(live_study(tmp_path), store)
+        status, s = asgi(app, "POST", "/api/sessions", {"participant": "p3", **PROFILE})
+        assert status == 201, s
+        status, out = asgi(app, "POST", f"/api/sessions/{s['id']}/live/start",
+                           {"trial_index": 0})
+        assert status == 201 and out["running"], out
+        events = [{"type": "lifespan.startup"}, {"type": "lifespan.shutdown"}]
+        sent: list[dict[str, Any]] = []
+
+        async def receive() -> dict[str, Any]:
+            return events.pop(0)
+
+        async def send(message: MutableMapping[str, Any]) -> None:
+            sent.append(dict(message))
+
+        asyncio.run(app({"type": "lifespan", "asgi": {"version": "3.0"}, "state": {}},
+                        receive, send))
+        assert [m["type"] for m in sent] == ["lifespan.startup.complete",
+                                             "lifespan.shutdown.complete"]
+        _, run = app.state.trials.live.runs[s["id"]]
+        assert not run.running
+    summary = json.loads((Path(out["out_dir"]) / "summary.json").read_text())
+    assert summary["stop_reason"] == "server shut down"
