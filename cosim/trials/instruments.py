@@ -262,6 +262,19 @@ def parse_sagat(ctx: Problems, spec: Any) -> tuple[Probe, ...]:
     return tuple(probes)
 
 
+def check_probe_times(ctx: Problems, probes: tuple[Probe, ...],
+                      durations: dict[str, float | None]) -> None:
+    """A probe at or after the end of a live condition (``{id: duration_s}``;
+    None: the scenario's own, not checked here) would never be asked: refused."""
+    for p in probes:
+        ends = {cid: d for cid, d in durations.items() if d is not None and p.at_s >= d}
+        if ends:
+            shown = ", ".join(f"{cid} ({d:g} s)" for cid, d in list(ends.items())[:5])
+            ctx.err(("sagat", p.index, "at_s"), f"{p.at_s:g} s: not before the end of "
+                                                f"condition {shown}: the probe would never be "
+                                                f"asked")
+
+
 def _question(ctx: Problems, d: Any, at: tuple[Any, ...], j: int) -> Question | None:
     before = len(ctx.problems)
     r = Reader(ctx, d, at, QUESTION_KEYS)

@@ -85,7 +85,13 @@ from cosim.scenario.yaml_lines import (
     read_text_bounded,
 )
 from cosim.trials.clips import GtFrame, csv_rows, inside, probe_video, read_bounded, read_clip_truth
-from cosim.trials.instruments import STUDY_KEYS, TlxSetting, parse_sagat, parse_tlx
+from cosim.trials.instruments import (
+    STUDY_KEYS,
+    TlxSetting,
+    check_probe_times,
+    parse_sagat,
+    parse_tlx,
+)
 from cosim.trials.live_scoring import ScoringSettings, read_scoring
 from cosim.trials.live_study import LiveCondition, read_live_conditions
 from cosim.trials.sagat import Probe
@@ -303,6 +309,7 @@ def parse_study(text: str, path: Path) -> Study:
             ctx.err(("practice",), "a live study has no practice trials yet: set it to 0")
         live = read_live_conditions(ctx, top.d.get("scenarios"), base, tuple(roots),
                                     condition_values)
+        check_probe_times(ctx, sagat, {c.id: c.duration_s for c in live})
         scoring = read_scoring(ctx, top.d.get("scoring", {}))
     elif "scenarios" in top.d or "scoring" in top.d:
         key = "scenarios" if "scenarios" in top.d else "scoring"

@@ -690,3 +690,21 @@ def test_the_state_at_a_freeze_of_a_real_run(tmp_path: Path) -> None:
     # 5 s in, no target has been on the screen yet: nothing to be right about
     early = freeze_state_from_run(out, ["uav1/belly"], 5.0, {"truck1": (0.0, 0.0)})
     assert early.last_target() is None and min(time_s for _, time_s in seen) > 5.0
+
+
+
+def test_a_live_study_reads_its_probes_and_refuses_one_after_a_trials_end(
+        tmp_path: Path) -> None:
+    from test_live import live_study
+
+    body = ("name: live_sagat\nprotocol: live\ntlx: {after: session}\nscenarios:\n"
+            "  - {id: two, scenario: pair.yaml, feeds: 2, duration_s: 120}\n"
+            "  - {id: one, scenario: pair.yaml, feeds: 1}\n" + PROBES)
+    st = load_study(live_study(tmp_path, body))
+    assert [p.at_s for p in st.sagat] == [40.0, 90.0] and st.tlx is not None
+    # 'two' cut to 60 s: the second probe, 90 s in, comes after its end ('one' runs the
+    # scenario's own duration, not checked)
+    with pytest.raises(ConfigError, match=r"study\.yaml:13: sagat\[1\]\.at_s: 90 s: not before "
+                                          r"the end of condition two \(60 s\): the probe would "
+                                          r"never be asked"):
+        load_study(live_study(tmp_path, body.replace("duration_s: 120", "duration_s: 60")))
