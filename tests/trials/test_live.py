@@ -100,6 +100,15 @@ def test_a_live_study_has_scenarios_not_clips(tmp_path: Path) -> None:
         load_study(p)
 
 
+def test_the_example_live_study_reads() -> None:
+    """studies/live_feeds.yaml: 1, 2 and 4 feeds of its line-abreast scenario."""
+    st = load_study(Path(__file__).resolve().parents[2] / "studies" / "live_feeds.yaml")
+    assert [(c.id, len(c.feeds), c.condition_map) for c in st.live] == [
+        ("one_feed", 1, {"feeds": "1"}), ("two_feeds", 2, {"feeds": "2"}),
+        ("four_feeds", 4, {"feeds": "4"})]
+    assert st.live[2].feeds[3].name == "uav4/front" and st.scoring.tolerance_px == 10
+
+
 def test_a_live_studys_scoring_settings_are_read_and_checked(tmp_path: Path) -> None:
     head = "protocol: live\nscenarios: [{scenario: pair.yaml, feeds: 2}]\n"
     st = load_study(live_study(tmp_path, head + "scoring: {tolerance_px: 4, "
