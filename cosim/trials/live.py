@@ -220,6 +220,7 @@ class FeedTap:
             log.warning("feed %s: frame at %.2f s could not be JPEG-encoded", feed.name, time_s)
             return
         self.hub.publish("frame", {"feed": k, "frame": frame_no, "time_s": round(time_s, 6),
+                                   "made_ms": round(time.time() * 1000.0, 1),
                                    "jpeg": base64.b64encode(jpg.tobytes()).decode()},
                          delay_s=latency_s)
         self.frames_sent += 1
@@ -274,6 +275,8 @@ class LiveRun:
                        extra_participants=[self.tap])
         self.result: Any = None
         self.error: BaseException | None = None
+        #: the last timing the participant's page reported (``live_routes``)
+        self.page_timing: dict[str, Any] | None = None
         self.started_s = time.time()
         self._thread = threading.Thread(target=self._main, name=f"live-{out_dir.name}",
                                         daemon=True)
@@ -314,4 +317,4 @@ class LiveRun:
                 "error": str(self.error)[:500] if self.error is not None else None,
                 "frames_published": self.hub.published_frames,
                 "frames_dropped": self.hub.dropped_frames,
-                "watchers": len(self.hub.watchers)}
+                "watchers": len(self.hub.watchers), "page_timing": self.page_timing}

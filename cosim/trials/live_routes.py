@@ -26,6 +26,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import re
+import time
 from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
@@ -36,6 +37,7 @@ from starlette.responses import JSONResponse, Response, StreamingResponse
 from starlette.routing import Route
 
 from cosim.errors import ConfigError
+from cosim.logs import write_json_atomic
 from cosim.scenario import load_scenario
 from cosim.trials.live import Hub, LiveRun
 from cosim.trials.live_scoring import SessionScore, score_stored
@@ -50,6 +52,11 @@ STOP_WAIT_S = 30.0
 #: a click this long (s) after the run's end is scored (the page shows the last
 #: frame until it hears of the end)
 END_MARGIN_S = 5.0
+#: a page's timing report: its counts (whole, at most MAX_FRAMES) and times (ms)
+TIMING_COUNTS = ("frames_received", "frames_drawn", "latency_samples")
+TIMING_MS = ("latency_ms_p50", "latency_ms_p95", "latency_ms_max", "clock_rtt_ms")
+MAX_FRAMES = 10_000_000
+MAX_LATENCY_MS = 600_000.0
 #: the page's clock readings accepted (ms since the page loaded): a day
 MAX_PAGE_TIME_MS = 86_400_000.0
 
@@ -258,6 +265,37 @@ class LiveConsole:
         except ConfigError as e:  # ReportError too
             raise self.bad(f"trial {ti}: " + "; ".join(e.problems)[:2000], 409) from None
 
+    async def clock(self, request: Request) -> Response:
+        """This server's clock (ms since 1970), for the page's estimate of the
+        offset between its clock and the server's."""
+        return JSONResponse({"server_ms": time.time() * 1000.0})
+
+    async def timing(self, request: Request, body: dict[str, Any]) -> Response:
+        """The page's timing of the running trial: frames received and drawn,
+        and the glass-to-glass latency (from the run making a frame to the page
+        drawing it) of the frames drawn; kept with the run (its status and
+        ``page_timing.json`` in its folder)."""
+        s = await run_in_threadpool(self._session, request)
+        ti, run = self._live(s["id"])
+        if body.get("trial_index") != ti:
+            raise self.bad(f"trial_index: the live trial of this session is {ti}, got "
+                           f"{body.get('trial_index')!r}"[:200], 409)
+        out: dict[str, Any] = {"trial_index": ti}
+        for key in TIMING_COUNTS:
+            v = self.number(body, key)
+            if not (v == int(v) and 0 <= v <= MAX_FRAMES):
+                raise self.bad(f"{key}: expected a whole number 0..{MAX_FRAMES}, got {v:g}")
+            out[key] = int(v)
+        for key in TIMING_MS:
+            v = self.number(body, key, optional=True)
+            if v is not None and not -MAX_LATENCY_MS <= v <= MAX_LATENCY_MS:
+                raise self.bad(f"{key}: expected -{MAX_LATENCY_MS:.0f}..{MAX_LATENCY_MS:.0f} ms, "
+                               f"got {v:g}")
+            out[key] = v
+        run.page_timing = out
+        await run_in_threadpool(write_json_atomic, run.out_dir / "page_timing.json", out)
+        return JSONResponse(out)
+
     def close(self) -> None:
         """Stop every run and wait for each to end (the server is going)."""
         for _, run in self.runs.values():
@@ -307,4 +345,6 @@ def routes(console: LiveConsole, json_body: Any, experimenter: Any, page: Any) -
         Route(f"{base}/stream", console.stream, methods=["GET"]),
         Route(f"{base}/reports", with_body(console.report), methods=["POST"]),
         Route(f"{base}/score", experimenter(console.score), methods=["GET"]),
+        Route(f"{base}/clock", console.clock, methods=["GET"]),
+        Route(f"{base}/timing", with_body(console.timing), methods=["POST"]),
     ]

@@ -344,6 +344,7 @@ def test_a_click_on_a_feed_is_stored_with_its_frame_and_pixel(tmp_path: Path,
             finally:
                 browser.close()
         v = _wait_over(server, sid)
+        timing = v["live"]["page_timing"]
         first, second = server.store.live_reports(sid)
         status, score = server.request("GET", f"/api/sessions/{sid}/live/score?trial_index=0")
         assert status == 200, score
@@ -384,6 +385,12 @@ def test_a_click_on_a_feed_is_stored_with_its_frame_and_pixel(tmp_path: Path,
     assert score["reports"][1]["time_s"] == pytest.approx(
         truck[second["frame"]]["time_s"]
         + (second["click_time_ms"] - second["drawn_time_ms"]) / 1000, abs=1e-6)
+    # the page's timing: every frame drawn has its glass-to-glass latency, under a
+    # second here (no downlink; the test's downlink one adds its delay)
+    assert timing["frames_drawn"] == timing["latency_samples"] >= 6, timing
+    assert timing["frames_received"] >= timing["frames_drawn"]
+    assert 0 <= timing["latency_ms_p50"] <= timing["latency_ms_p95"] < 1000, timing
+    assert json.loads((folder / "page_timing.json").read_text()) == timing
     # the console never changes the simulation
     _same_states(folder, tmp_path / "alone")
     for f in ("uav1_belly.gt.csv", "uav2_belly.gt.csv"):
@@ -506,3 +513,36 @@ def test_the_live_runs_stop_when_the_server_shuts_down(tmp_path: Path) -> None:
         assert not run.running
     summary = json.loads((Path(out["out_dir"]) / "summary.json").read_text())
     assert summary["stop_reason"] == "server shut down"
+
+
+def test_the_page_measures_a_downlinks_delay_in_its_glass_to_glass_latency(
+        tmp_path: Path, chromium: str) -> None:
+    """With a downlink 500 ms late, the page's glass-to-glass latency (from
+    the run making a frame, on the server's clock, to the page drawing it)
+    is at least 500 ms and the page draws the delivered frames."""
+    from playwright.sync_api import sync_playwright
+
+    text = SCENARIO.format(duration_s=2.0, w=W, h=H, rate_hz=RATE_HZ).replace(
+        "rate_hz: 10}", "rate_hz: 10,\n       datalink: {rate_hz: 5, latency_ms: 500}}")
+    (tmp_path / "pair.yaml").write_text(text)
+    (tmp_path / "study.yaml").write_text(STUDY)
+    with live_server(tmp_path / "study.yaml") as server:
+        status, s = server.request("POST", "/api/sessions", {"participant": "p4", **PROFILE})
+        assert status == 201, s
+        with sync_playwright() as pw:
+            browser = pw.chromium.launch(executable_path=chromium)
+            try:
+                page = browser.new_page()
+                page.set_default_timeout(30_000)
+                page.goto(f"{server.url}/live?session={s['id']}")
+                page.wait_for_function("document.body.dataset.phase === 'waiting'")
+                _start(server, s["id"])
+                page.wait_for_function("document.body.dataset.phase === 'ended'",
+                                       timeout=60_000)
+                drawn = page.evaluate("window.live.drawn")
+            finally:
+                browser.close()
+        timing = _wait_over(server, s["id"])["live"]["page_timing"]
+    assert {d[1] % 2 for d in drawn} == {0}  # the delivered frames only
+    assert timing["frames_drawn"] >= 10, timing  # 2 feeds x 10 delivered, some skipped
+    assert 500 <= timing["latency_ms_p50"] < 1500, timing

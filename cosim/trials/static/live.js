@@ -8,6 +8,12 @@
 // displayed size) and the click's time (both on the page's clock,
 // performance.now()). A frame that arrives before the previous one of its feed
 // was drawn replaces it (the page keeps up by skipping, never by falling behind).
+// Timing: the page estimates the offset between its clock and the server's
+// (the quickest of a few round trips) and, for every frame drawn, the time
+// from the run making it (its made_ms, the server's clock) to the page drawing
+// it (glass-to-glass, up to the display's own delay); every 2 s, and at the
+// end, it posts the frames received and drawn and those latencies' median,
+// 95th percentile and maximum over the trial.
 "use strict";
 (() => {
   const sid = new URLSearchParams(location.search).get("session");
@@ -27,6 +33,12 @@
   const tracks = new Map(); // vehicle id -> [[north_m, east_m], ...]
   let last = null;         // the last states message
   let rafPending = false;
+  let offsetMs = 0;        // the server's clock minus the page's (ms)
+  let rttMs = null;        // the round trip that estimate came from
+  let received = 0;
+  let drawnCount = 0;
+  const latencies = [];    // glass-to-glass of every frame drawn (ms)
+  const MAX_LATENCIES = 100000;
   // for a test's eyes: every frame drawn and every report posted
   window.live = { drawn: [], reports: [] };
 
@@ -79,6 +91,10 @@
       f.canvas.getContext("2d").drawImage(d.bitmap, 0, 0, f.width_px, f.height_px);
       d.bitmap.close();
       drawn.set(k, { frame: d.frame, time_ms: now });
+      drawnCount += 1;
+      if (latencies.length < MAX_LATENCIES) {
+        latencies.push(performance.timeOrigin + now + offsetMs - d.made_ms);
+      }
       window.live.drawn.push([k, d.frame, now]);
       if (window.live.drawn.length > 10000) window.live.drawn.splice(0, 5000);
     }
@@ -89,10 +105,11 @@
   async function frame(msg) {
     const bytes = Uint8Array.from(atob(msg.jpeg), (c) => c.charCodeAt(0));
     const bitmap = await createImageBitmap(new Blob([bytes], { type: "image/jpeg" }));
+    received += 1;
     const was = due.get(msg.feed);
     if (was && was.frame > msg.frame) { bitmap.close(); return; }
     if (was) was.bitmap.close();
-    due.set(msg.feed, { frame: msg.frame, bitmap });
+    due.set(msg.feed, { frame: msg.frame, bitmap, made_ms: msg.made_ms });
     if (!rafPending) { rafPending = true; requestAnimationFrame(draw); }
   }
 
@@ -187,8 +204,42 @@
     drawMap();
   }
 
+  async function syncClock() {
+    for (let i = 0; i < 5; i++) {
+      const t0 = performance.now();
+      const r = await fetch(`/api/sessions/${sid}/live/clock`, { cache: "no-store" });
+      const t1 = performance.now();
+      const server = (await r.json()).server_ms;
+      if (rttMs === null || t1 - t0 < rttMs) {
+        rttMs = t1 - t0;
+        offsetMs = server - (performance.timeOrigin + (t0 + t1) / 2);
+      }
+    }
+  }
+
+  function quantile(sorted, q) {
+    if (!sorted.length) return null;
+    const i = (sorted.length - 1) * q, lo = Math.floor(i), hi = Math.ceil(i);
+    return sorted[lo] + (sorted[hi] - sorted[lo]) * (i - lo);
+  }
+
+  function timing() {
+    const s = [...latencies].sort((a, b) => a - b);
+    const body = {
+      trial_index: trialIndex, frames_received: received, frames_drawn: drawnCount,
+      latency_samples: s.length, latency_ms_p50: quantile(s, 0.5),
+      latency_ms_p95: quantile(s, 0.95), latency_ms_max: s.length ? s[s.length - 1] : null,
+      clock_rtt_ms: rttMs,
+    };
+    window.live.timing = body;
+    return fetch(`/api/sessions/${sid}/live/timing`, {
+      method: "POST", headers: { "Content-Type": "application/json" },
+      body: JSON.stringify(body) }).catch(() => {});
+  }
+
   function follow() {
     const es = new EventSource(`/api/sessions/${sid}/live/stream`);
+    const every = setInterval(timing, 2000);
     es.addEventListener("hello", (e) => {
       build(JSON.parse(e.data));
       message.hidden = true;
@@ -196,8 +247,10 @@
     });
     es.addEventListener("frame", (e) => { frame(JSON.parse(e.data)); });
     es.addEventListener("states", (e) => states(JSON.parse(e.data)));
-    es.addEventListener("end", () => {
+    es.addEventListener("end", async () => {
       es.close();
+      clearInterval(every);
+      await timing();
       phase("ended");
       say("<p>This trial is over. Thank you.</p>");
     });
@@ -213,6 +266,7 @@
       if (s.live && s.live.running) { trialIndex = s.live.trial_index; break; }
       await sleep(300);
     }
+    await syncClock();
     follow();
   }
 
