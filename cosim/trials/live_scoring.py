@@ -15,9 +15,8 @@ The rules (``ScoringSettings``; a study's ``scoring:`` mapping, read by
 - a target is **visible** in a frame of a feed when it is ``in_view`` with at
   least ``min_pixels_on_target`` unoccluded pixels and a ``visible_fraction``
   of at least ``min_visible_fraction`` (an unknown fraction counts as 0 when
-  the setting is above 0). A feed with a downlink shows only its delivered
-  frames: its frames are those with a ``delivered_time_s``, each on screen
-  from then, and its pixels are the delivered ``delivered_pixels_on_target``;
+  the setting is above 0); a feed with a downlink shows its delivered frames
+  and pixels (``live_truth``, which reads the ground truth);
 - a report is a **hit** on the target whose box in that frame, grown by
   ``tolerance_px`` on every side, holds the click (the target in view; of
   several, the one whose centre is nearest the click), with its pixel error:
@@ -41,8 +40,8 @@ the frame, a finite time within the session) and refuses the rest with a
 
 The clicks the live console stores become reports by ``stored_reports``;
 ``score_stored`` scores a trial from its run folder and its stored clicks.
-Pure functions: it reads ground-truth files (``read_feed_truth``,
-``read_run_truth``) but runs, serves and stores nothing.
+Pure functions: the ground truth is read by ``live_truth``; it runs, serves
+and stores nothing.
 """
 
 from __future__ import annotations
@@ -55,10 +54,14 @@ from pathlib import Path
 from statistics import median
 from typing import Any
 
-from cosim.conspicuity.visibility import camera_entries
 from cosim.errors import ConfigError
 from cosim.scenario.reader import Problems, Reader
-from cosim.trials.clips import MAX_GT_BYTES, csv_rows, read_bounded
+from cosim.trials.live_truth import (
+    SessionTruth,
+    TargetFrame,
+    read_run_truth,
+    session_truth,
+)
 
 log = logging.getLogger(__name__)
 
@@ -68,12 +71,6 @@ SCORING_KEYS = ("tolerance_px", "duplicate_window_s", "min_pixels_on_target",
 #: the largest tolerance (px) and times (s) a study may set
 MAX_TOLERANCE_PX = 1000.0
 MAX_WINDOW_S = 24 * 3600.0
-#: the columns a live feed's ground-truth file must have
-LIVE_GT_REQUIRED = ("frame", "time_s", "target", "in_view", "bbox_x0_px", "bbox_y0_px",
-                    "bbox_x1_px", "bbox_y1_px", "center_x_px", "center_y_px",
-                    "pixels_on_target")
-#: the largest |value| of a ground-truth number (a coordinate, a time) kept
-MAX_GT_VALUE = 1e9
 OUTCOMES = ("hit", "duplicate", "false_alarm")
 #: times within this (s) are equal (frame periods summed from float times)
 _EPS_S = 1e-6
@@ -117,22 +114,6 @@ def read_scoring(ctx: Problems, d: Any, at: tuple[Any, ...] = ("scoring",)) -> S
         min_pixels_on_target=dflt.min_pixels_on_target if px is None else px,
         min_visible_fraction=dflt.min_visible_fraction if frac is None else frac,
         min_visible_s=dflt.min_visible_s if vis is None else vis)
-
-
-@dataclass(frozen=True)
-class TargetFrame:
-    """One target in one frame of one feed, as the ground truth has it."""
-
-    feed: str
-    frame: int
-    #: when the frame is on screen (s): its ``time_s``, or with a downlink its ``delivered_time_s``
-    time_s: float
-    target: str
-    in_view: bool
-    bbox_px: tuple[float, float, float, float] | None  # x0, y0, x1, y1
-    center_px: tuple[float, float] | None
-    pixels_on_target: float  # with a downlink: delivered; NaN: not known
-    visible_fraction: float = math.nan  # NaN: not known
 
 
 @dataclass(frozen=True)
@@ -196,92 +177,11 @@ class SessionScore:
         return tuple(t for t in self.targets if t.eligible and not t.detected)
 
 
-# ---- ground truth in
-
-
-def _number(v: Any, what: str) -> float:
-    """A ground-truth value: NaN for empty/None, else a finite number within
-    +-``MAX_GT_VALUE`` (ValueError otherwise)."""
-    if v is None or v == "":
-        return math.nan
-    x = float(v)
-    if not (math.isfinite(x) and abs(x) <= MAX_GT_VALUE):
-        raise ValueError(f"{what}: expected a finite number within +-{MAX_GT_VALUE:g}, "
-                         f"got {str(v)[:40]!r}")
-    return x
-
-
-def target_frame(feed: str, row: Mapping[str, Any]) -> TargetFrame | None:
-    """A ground-truth row (``truth.GT_COLUMNS``, values as numbers or as the
-    CSV's text) as a ``TargetFrame``; None for a frame a downlink did not
-    deliver (a row with ``delivered_time_s`` empty). ValueError naming the
-    column for a bad value."""
-    frame = _number(row["frame"], "frame")
-    if not (frame >= 0 and frame == int(frame)):
-        raise ValueError(f"frame: expected a whole number >= 0, got {str(row['frame'])[:40]!r}")
-    link = "delivered_time_s" in row
-    if link and row["delivered_time_s"] in ("", None):
-        return None
-    time_s = _number(row["delivered_time_s" if link else "time_s"], "time_s")
-    if not time_s >= 0:
-        raise ValueError(f"time_s: expected a time >= 0, got {time_s!r}")
-    in_view = _number(row["in_view"], "in_view")
-    if in_view not in (0.0, 1.0):
-        raise ValueError(f"in_view: expected 0 or 1, got {str(row['in_view'])[:40]!r}")
-    box = tuple(_number(row[c], c) for c in ("bbox_x0_px", "bbox_y0_px", "bbox_x1_px",
-                                              "bbox_y1_px"))
-    ctr = tuple(_number(row[c], c) for c in ("center_x_px", "center_y_px"))
-    px = _number(row["delivered_pixels_on_target" if link else "pixels_on_target"],
-                 "pixels_on_target")
-    return TargetFrame(feed=feed, frame=int(frame), time_s=time_s, target=str(row["target"]),
-                       in_view=in_view == 1.0,
-                       bbox_px=box if all(map(math.isfinite, box)) else None,  # type: ignore[arg-type]
-                       center_px=ctr if all(map(math.isfinite, ctr)) else None,  # type: ignore[arg-type]
-                       pixels_on_target=px,
-                       visible_fraction=_number(row.get("visible_fraction"), "visible_fraction"))
-
-
-def read_feed_truth(path: str | Path, feed: str) -> list[TargetFrame]:
-    """The rows of one feed's ground-truth CSV (the renderer's ``.gt.csv``):
-    a regular UTF-8 file of at most ``clips.MAX_GT_BYTES``, every value
-    checked (``ConfigError`` with its file:line otherwise)."""
-    p = Path(path)
-    text = read_bounded(p, MAX_GT_BYTES, "ground-truth file")
-    out = []
-    for line, r in csv_rows(text, p, "ground-truth file", LIVE_GT_REQUIRED):
-        try:
-            tf = target_frame(feed, r)
-        except ValueError as e:
-            raise ConfigError(f"{p}:{line}: {e}") from None
-        if tf is not None:
-            out.append(tf)
-    return out
-
-
-def read_run_truth(run_dir: str | Path, feeds: Sequence[str]) -> list[TargetFrame]:
-    """The ground truth of the named feeds (``VEHICLE/CAMERA``) of a run
-    folder, from its summary's camera streams; a feed the run has no
-    ground truth for is a ``ConfigError`` naming those it has."""
-    files = {f"{e.get('vehicle')}/{e.get('camera')}": e.get("ground_truth")
-             for e in camera_entries(run_dir)}
-    out: list[TargetFrame] = []
-    for feed in feeds:
-        path = files.get(feed)
-        if not path:
-            raise ConfigError(f"{run_dir}: no ground truth for feed {feed!r}; the run has: "
-                              f"{', '.join(sorted(k for k, v in files.items() if v)[:20])}")
-        out.extend(read_feed_truth(path, feed))
-    return out
-
-
-def feed_bounds(truth: Iterable[TargetFrame], sizes: Mapping[str, tuple[int, int]]
+def feed_bounds(truth: SessionTruth, sizes: Mapping[str, tuple[int, int]]
                 ) -> dict[str, FeedBounds]:
     """Each feed's ``FeedBounds``: its first and last frame in the ground
     truth and its (width, height) from ``sizes``."""
-    frames: dict[str, list[int]] = {}
-    for t in truth:
-        frames.setdefault(t.feed, []).append(t.frame)
-    return {f: FeedBounds(min(fr), max(fr), *sizes[f]) for f, fr in frames.items()}
+    return {f: FeedBounds(min(fr), max(fr), *sizes[f]) for f, fr in truth.frames.items() if fr}
 
 
 # ---- reports in
@@ -325,7 +225,7 @@ def parse_report(d: Any, feeds: Mapping[str, FeedBounds], duration_s: float) -> 
     return Report(feed, frame, x, y, t)
 
 
-def stored_reports(rows: Iterable[Mapping[str, Any]], truth: Sequence[TargetFrame],
+def stored_reports(rows: Iterable[Mapping[str, Any]], truth: SessionTruth,
                    feeds: Mapping[str, FeedBounds], duration_s: float) -> list[Report]:
     """The clicks as the live console stores them (``feed_name``, ``frame``,
     ``x_px`` and ``y_px`` in the page's pixels of the frame, 0 at its left or
@@ -336,10 +236,9 @@ def stored_reports(rows: Iterable[Mapping[str, Any]], truth: Sequence[TargetFram
     drew it the click came (nothing added when the page did not say). Each
     is bounded as ``parse_report`` bounds a report; a frame the ground truth
     does not have is a ``ReportError``."""
-    shown = {(t.feed, t.frame): t.time_s for t in truth}
     out = []
     for r in rows:
-        at = shown.get((r["feed_name"], r["frame"]))
+        at = truth.frames.get(r["feed_name"], {}).get(r["frame"])
         if at is None:
             raise ReportError(f"report {r.get('report_key', '')!s:.64}: frame {r['frame']!s:.20} "
                               f"of {r['feed_name']!s:.200} is not in the ground truth")
@@ -361,23 +260,21 @@ def visible(t: TargetFrame, s: ScoringSettings) -> bool:
     return s.min_visible_fraction <= 0 or t.visible_fraction >= s.min_visible_fraction
 
 
-def _longest_runs(truth: Sequence[TargetFrame], s: ScoringSettings
+def _longest_runs(truth: SessionTruth, s: ScoringSettings
                   ) -> tuple[dict[str, float], dict[tuple[str, str], float]]:
     """(each target's longest unbroken visible run in one feed (s), the first
     time each (target, feed) is visible). A run is consecutive frames of the
     feed (as it shows them), each standing for the feed's frame period (the
     median step between its frames' times)."""
-    frames: dict[str, dict[int, float]] = {}
     seen: dict[tuple[str, str], list[int]] = {}
     first: dict[tuple[str, str], float] = {}
-    for t in truth:
-        frames.setdefault(t.feed, {})[t.frame] = t.time_s
+    for t in truth.rows:
         if visible(t, s):
-            seen.setdefault((t.target, t.feed), []).append(t.frame)
             key = (t.target, t.feed)
+            seen.setdefault(key, []).append(t.frame)
             first[key] = min(first.get(key, math.inf), t.time_s)
     longest: dict[str, float] = {}
-    for feed, by_frame in frames.items():
+    for feed, by_frame in truth.frames.items():
         order = sorted(by_frame)
         times = [by_frame[f] for f in order]
         steps = [b - a for a, b in zip(times, times[1:]) if b > a]
@@ -413,14 +310,17 @@ def _hit_target(rows: Sequence[TargetFrame], r: Report, tol_px: float
     return best
 
 
-def score_session(truth: Sequence[TargetFrame], reports: Sequence[Report],
+def score_session(truth: SessionTruth | Sequence[TargetFrame], reports: Sequence[Report],
                   settings: ScoringSettings | None = None) -> SessionScore:
-    """Every report scored (in time order) and every target's outcome (the
-    module docstring gives the rules). A report naming a frame the ground
-    truth does not have for its feed is a ``ReportError``."""
+    """Every report scored (in time order) and every target in view at some
+    time's outcome (the module docstring gives the rules); ``truth`` a
+    session's, or its rows. A report naming a frame the ground truth does
+    not have for its feed is a ``ReportError``."""
     s = settings or ScoringSettings()
+    if not isinstance(truth, SessionTruth):
+        truth = session_truth(truth)
     by_frame: dict[tuple[str, int], list[TargetFrame]] = {}
-    for t in truth:
+    for t in truth.rows:
         by_frame.setdefault((t.feed, t.frame), []).append(t)
     longest, first = _longest_runs(truth, s)
     first_any: dict[str, float] = {}
@@ -430,11 +330,10 @@ def score_session(truth: Sequence[TargetFrame], reports: Sequence[Report],
     first_hit: dict[str, ScoredReport] = {}
     scored: list[ScoredReport] = []
     for r in sorted(reports, key=lambda r: r.time_s):
-        rows = by_frame.get((r.feed, r.frame))
-        if rows is None:
+        if r.frame not in truth.frames.get(r.feed, {}):
             raise ReportError(f"report at {r.time_s:g} s: frame {r.frame} of {r.feed} is not "
                               f"in the session's ground truth (not shown)")
-        found = _hit_target(rows, r, s.tolerance_px)
+        found = _hit_target(by_frame.get((r.feed, r.frame), []), r, s.tolerance_px)
         if found is None:
             scored.append(ScoredReport(r, "false_alarm"))
             continue
@@ -453,7 +352,7 @@ def score_session(truth: Sequence[TargetFrame], reports: Sequence[Report],
         scored.append(sr)
         first_hit.setdefault(t.target, sr)
     targets = []
-    for name in sorted({t.target for t in truth}):
+    for name in sorted({t.target for t in truth.rows}):
         vis_s = longest.get(name, 0.0)
         h = first_hit.get(name)
         targets.append(TargetScore(

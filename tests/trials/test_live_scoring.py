@@ -23,15 +23,19 @@ from cosim.trials.live_scoring import (
     Report,
     ReportError,
     ScoringSettings,
-    TargetFrame,
     feed_bounds,
     parse_report,
-    read_feed_truth,
-    read_run_truth,
     read_scoring,
     score_session,
     score_stored,
     stored_reports,
+)
+from cosim.trials.live_truth import (
+    SessionTruth,
+    TargetFrame,
+    combine,
+    read_feed_truth,
+    read_run_truth,
 )
 
 RATE_HZ = 10.0
@@ -90,15 +94,15 @@ D = _path(400.0, 60.0, -1.0, 0.0, 8.0)   # feed 2 frames 40-70, never reported: 
 
 
 @pytest.fixture
-def truth(tmp_path: Path) -> list[Any]:
+def truth(tmp_path: Path) -> SessionTruth:
     f1 = write_gt(tmp_path / "f1.gt.csv", gt_rows({
         "A": (A, 20, 60, {20, 21, 22}), "C": (C, 10, 14, set())}))
     f2 = write_gt(tmp_path / "f2.gt.csv", gt_rows({
         "A": (A2, 15, 50, set()), "B": (B, 30, 80, set()), "D": (D, 40, 70, set())}))
-    return read_feed_truth(f1, "u1/cam") + read_feed_truth(f2, "u2/cam")
+    return combine([read_feed_truth(f1, "u1/cam"), read_feed_truth(f2, "u2/cam")])
 
 
-def test_hits_errors_latencies_equal_the_paths(truth: list[Any]) -> None:
+def test_hits_errors_latencies_equal_the_paths(truth: SessionTruth) -> None:
     ax, ay, _ = A(35)
     bx, by, bh = B(50)
     reports = [
@@ -126,7 +130,7 @@ def test_hits_errors_latencies_equal_the_paths(truth: list[Any]) -> None:
     assert (sc.count("hit"), sc.count("duplicate"), sc.count("false_alarm")) == (2, 1, 1)
 
 
-def test_tolerance_window_and_visibility_settings(truth: list[Any]) -> None:
+def test_tolerance_window_and_visibility_settings(truth: SessionTruth) -> None:
     bx, by, bh = B(50)
     outside = Report("u2/cam", 50, bx + bh + 7, by, 5.3)
     assert score_session(truth, [outside], ScoringSettings(tolerance_px=6.0)
@@ -151,7 +155,7 @@ def test_tolerance_window_and_visibility_settings(truth: list[Any]) -> None:
     assert a.latency_feed_s == pytest.approx(3.9 - 2.0)
 
 
-def test_click_before_visibility_has_no_latency(truth: list[Any]) -> None:
+def test_click_before_visibility_has_no_latency(truth: SessionTruth) -> None:
     """A hit on a frame where the target is in view but not yet visible
     enough (too few pixels) has no latency in that feed."""
     r = score_session(truth, [Report("u1/cam", 21, *A(21)[:2], 2.2)]).reports[0]
@@ -173,7 +177,8 @@ def test_nearest_centre_of_overlapping_boxes(tmp_path: Path) -> None:
 def test_downlink_shows_delivered_frames_only(tmp_path: Path) -> None:
     p = write_gt(tmp_path / "l.gt.csv", gt_rows({"B": (B, 30, 80, set())}, link_every=3))
     t = read_feed_truth(p, "f")
-    assert {x.frame for x in t} == set(range(0, FRAMES, 3))
+    assert set(t.frames["f"]) == set(range(0, FRAMES, 3))
+    assert t.frames["f"][30] == pytest.approx(3.05)
     sc = score_session(t, [Report("f", 45, *B(45)[:2], 6.0)])
     # first delivered frame in view: 30, on screen at 3.05 s
     assert sc.reports[0].latency_feed_s == pytest.approx(6.0 - 3.05)
@@ -234,7 +239,7 @@ def test_bad_reports_refused() -> None:
             parse_report(d, feeds, 60.0)
 
 
-def test_feed_bounds(truth: list[Any]) -> None:
+def test_feed_bounds(truth: SessionTruth) -> None:
     b = feed_bounds(truth, {"u1/cam": (W, H), "u2/cam": (320, 180)})
     assert b == {"u1/cam": FeedBounds(0, 99, W, H), "u2/cam": FeedBounds(0, 99, 320, 180)}
 
@@ -324,7 +329,7 @@ def test_real_run_ground_truth(tmp_path: Path) -> None:
     assert again.reports[0] == hit and again.misses == sc.misses
 
 
-def test_stored_reports_on_the_run_clock(truth: list[Any]) -> None:
+def test_stored_reports_on_the_run_clock(truth: SessionTruth) -> None:
     """A click as the console stores it: page pixels (0 at the frame's edge)
     half a pixel off the ground truth's, the time the clicked frame's plus the
     page's click - draw interval."""
