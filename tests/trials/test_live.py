@@ -7,13 +7,14 @@ Chromium (/usr/bin/chromium through Playwright; nothing is downloaded)."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import csv
 import json
 import math
 import socket
 import threading
 import time
-from collections.abc import MutableMapping
+from collections.abc import Iterator, MutableMapping
 from pathlib import Path
 from typing import Any
 
@@ -181,6 +182,44 @@ def _same_states(a: Path, b: Path) -> None:
             assert list(x) == list(y), c
 
 
+def downlink_study(folder: Path, duration_s: float, latency_ms: float) -> Path:
+    """The two-aircraft study with a downlink on the cameras: 5 of their 10
+    frames a second, ``latency_ms`` late."""
+    text = SCENARIO.format(duration_s=duration_s, w=W, h=H, rate_hz=RATE_HZ).replace(
+        "rate_hz: 10}",
+        f"rate_hz: 10,\n       datalink: {{rate_hz: 5, latency_ms: {latency_ms:g}}}}}")
+    assert "datalink" in text
+    (folder / "pair.yaml").write_text(text)
+    (folder / "study.yaml").write_text(STUDY)
+    return folder / "study.yaml"
+
+
+def _session(server: Any, participant: str) -> dict[str, Any]:
+    status, s = server.request("POST", "/api/sessions", {"participant": participant, **PROFILE})
+    assert status == 201 and s["protocol"] == "live", s
+    return dict(s)
+
+
+@contextlib.contextmanager
+def browser_page(chromium: str, *scripts: str,
+                 viewport: tuple[int, int] | None = None) -> Iterator[Any]:
+    """A page of headless Chromium (the ``chromium`` fixture's), ``scripts``
+    run in it before the page's own."""
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=chromium)
+        try:
+            page = browser.new_page(viewport={"width": viewport[0], "height": viewport[1]},
+                                    device_scale_factor=1) if viewport else browser.new_page()
+            for script in scripts:
+                page.add_init_script(script)
+            page.set_default_timeout(30_000)
+            yield page
+        finally:
+            browser.close()
+
+
 def _start(server: Any, sid: str) -> dict[str, Any]:
     status, out = server.request("POST", f"/api/sessions/{sid}/live/start", {"trial_index": 0})
     assert status == 201, out
@@ -289,8 +328,6 @@ def test_a_click_on_a_feed_is_stored_with_its_frame_and_pixel(tmp_path: Path,
     run without the console has it) is scored a hit with the pixel error
     from the ground truth, the other a false alarm. The run's states and
     ground truth equal those of the run without the console."""
-    from playwright.sync_api import sync_playwright
-
     from cosim.scenario import load_scenario
     from cosim.sync.runner import run_scenario
 
@@ -301,48 +338,39 @@ def test_a_click_on_a_feed_is_stored_with_its_frame_and_pixel(tmp_path: Path,
     seen = sorted(truck)
     assert len(seen) >= 8, seen  # the truck passes under uav1 within the run
     with live_server(study) as server:
-        status, s = server.request("POST", "/api/sessions", {"participant": "p1", **PROFILE})
-        assert status == 201 and s["protocol"] == "live", s
-        sid = s["id"]
-        with sync_playwright() as pw:
-            browser = pw.chromium.launch(executable_path=chromium)
-            try:
-                page = browser.new_page(viewport={"width": 1000, "height": 500},
-                                        device_scale_factor=1)
-                page.add_init_script(PIXELS_AT_CLICK)
-                errors: list[str] = []
-                page.on("pageerror", lambda e: errors.append(str(e)))
-                page.set_default_timeout(30_000)
-                page.goto(f"{server.url}/live?session={sid}")
-                page.wait_for_function("document.body.dataset.phase === 'waiting'")
-                _start(server, sid)
-                page.wait_for_function("document.body.dataset.drawn === '2' && "
-                                       "window.live.drawn.length >= 6")
-                box = page.locator("canvas[data-feed='1']").bounding_box()
-                assert box is not None
-                cx, cy = round(box["x"] + 0.3 * box["width"]), round(box["y"] + 0.6 * box["height"])
-                page.mouse.click(cx, cy)
-                page.screenshot(path=str(tmp_path / "live.png"))
-                # the truck in feed 0: click where the ground truth has it on the
-                # frame drawn last (the frame on screen at the click may be the next)
-                page.wait_for_function(f"window.live.drawn.some((d) => d[0] === 0 && "
-                                       f"d[1] >= {seen[1]})", timeout=60_000)
-                last = page.evaluate("window.live.drawn.filter((d) => d[0] === 0).pop()[1]")
-                box0 = page.locator("canvas[data-feed='0']").bounding_box()
-                assert box0 is not None and last in truck, (last, seen)
-                tx = box0["x"] + (truck[last]["center_x_px"] + 0.5) * box0["width"] / W
-                ty = box0["y"] + (truck[last]["center_y_px"] + 0.5) * box0["height"] / H
-                page.mouse.click(round(tx), round(ty))
-                page.wait_for_function("window.live.reports.length === 2 && "
-                                       "window.live.reports.every((r) => r.status === 201)")
-                sent = page.evaluate("window.live.reports")
-                drawn = page.evaluate("window.live.drawn")
-                witness = page.evaluate("window.witness")
-                page.wait_for_function("document.body.dataset.phase === 'ended'",
-                                       timeout=60_000)
-                assert not errors, errors
-            finally:
-                browser.close()
+        sid = _session(server, "p1")["id"]
+        with browser_page(chromium, PIXELS_AT_CLICK,
+                          viewport=(1000, 500)) as page:
+            errors: list[str] = []
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.goto(f"{server.url}/live?session={sid}")
+            page.wait_for_function("document.body.dataset.phase === 'waiting'")
+            _start(server, sid)
+            page.wait_for_function("document.body.dataset.drawn === '2' && "
+                                   "window.live.drawn.length >= 6")
+            box = page.locator("canvas[data-feed='1']").bounding_box()
+            assert box is not None
+            cx, cy = round(box["x"] + 0.3 * box["width"]), round(box["y"] + 0.6 * box["height"])
+            page.mouse.click(cx, cy)
+            page.screenshot(path=str(tmp_path / "live.png"))
+            # the truck in feed 0: click where the ground truth has it on the
+            # frame drawn last (the frame on screen at the click may be the next)
+            page.wait_for_function(f"window.live.drawn.some((d) => d[0] === 0 && "
+                                   f"d[1] >= {seen[1]})", timeout=60_000)
+            last = page.evaluate("window.live.drawn.filter((d) => d[0] === 0).pop()[1]")
+            box0 = page.locator("canvas[data-feed='0']").bounding_box()
+            assert box0 is not None and last in truck, (last, seen)
+            tx = box0["x"] + (truck[last]["center_x_px"] + 0.5) * box0["width"] / W
+            ty = box0["y"] + (truck[last]["center_y_px"] + 0.5) * box0["height"] / H
+            page.mouse.click(round(tx), round(ty))
+            page.wait_for_function("window.live.reports.length === 2 && "
+                                   "window.live.reports.every((r) => r.status === 201)")
+            sent = page.evaluate("window.live.reports")
+            drawn = page.evaluate("window.live.drawn")
+            witness = page.evaluate("window.witness")
+            page.wait_for_function("document.body.dataset.phase === 'ended'",
+                                   timeout=60_000)
+            assert not errors, errors
         v = _wait_over(server, sid)
         timing = v["live"]["page_timing"]
         first, second = server.store.live_reports(sid)
@@ -406,12 +434,7 @@ def test_a_downlinked_feed_is_its_delivered_frames_handed_on_after_the_latency(
     each handed on 300 ms after the run made it."""
     from cosim.trials.live import LiveRun
 
-    text = SCENARIO.format(duration_s=1.5, w=W, h=H, rate_hz=RATE_HZ).replace(
-        "rate_hz: 10}", "rate_hz: 10,\n       datalink: {rate_hz: 5, latency_ms: 300}}")
-    assert "datalink" in text
-    (tmp_path / "pair.yaml").write_text(text)
-    (tmp_path / "study.yaml").write_text(STUDY)
-    (c,) = load_study(tmp_path / "study.yaml").live
+    (c,) = load_study(downlink_study(tmp_path, 1.5, 300)).live
     published: dict[int, float] = {}
     arrived: dict[int, float] = {}
 
@@ -449,32 +472,23 @@ def test_the_experimenter_starts_and_stops_a_live_trial_from_the_page(
     """The experimenter's page links a live session's participant page to
     /live and has its trial's button: Start runs it, Stop ends its run
     early (the run's summary says so), then no trial is left to start."""
-    from playwright.sync_api import sync_playwright
-
     with live_server(live_study(tmp_path)) as server:
-        status, s = server.request("POST", "/api/sessions", {"participant": "p2", **PROFILE})
-        assert status == 201, s
-        with sync_playwright() as pw:
-            browser = pw.chromium.launch(executable_path=chromium)
-            try:
-                page = browser.new_page()
-                page.set_default_timeout(30_000)
-                page.goto(f"{server.url}/")
-                button = page.locator("button.live-control")
-                page.wait_for_function("document.querySelector('button.live-control')"
-                                       "?.textContent === 'Start trial 1 of 1'")
-                assert page.locator("#sessions a").get_attribute("href") == \
-                    f"/live?session={s['id']}"
-                assert "protocol live, 1 conditions" in page.locator("#study").inner_text()
-                button.click()
-                page.wait_for_function("document.querySelector('button.live-control')"
-                                       "?.textContent === 'Stop trial 1'")
-                page.locator("button.live-control").click()
-                page.wait_for_function("document.querySelector('button.live-control')"
-                                       "?.textContent === 'All trials run'")
-                assert page.locator("button.live-control").is_disabled()
-            finally:
-                browser.close()
+        s = _session(server, "p2")
+        with browser_page(chromium) as page:
+            page.goto(f"{server.url}/")
+            button = page.locator("button.live-control")
+            page.wait_for_function("document.querySelector('button.live-control')"
+                                   "?.textContent === 'Start trial 1 of 1'")
+            assert page.locator("#sessions a").get_attribute("href") == \
+                f"/live?session={s['id']}"
+            assert "protocol live, 1 conditions" in page.locator("#study").inner_text()
+            button.click()
+            page.wait_for_function("document.querySelector('button.live-control')"
+                                   "?.textContent === 'Stop trial 1'")
+            page.locator("button.live-control").click()
+            page.wait_for_function("document.querySelector('button.live-control')"
+                                   "?.textContent === 'All trials run'")
+            assert page.locator("button.live-control").is_disabled()
         v = _wait_over(server, s["id"])
     summary = json.loads((Path(v["trials"][0]["run"]) / "summary.json").read_text())
     assert summary["stop_reason"] == "stopped by the experimenter"
@@ -520,28 +534,15 @@ def test_the_page_measures_a_downlinks_delay_in_its_glass_to_glass_latency(
     """With a downlink 500 ms late, the page's glass-to-glass latency (from
     the run making a frame, on the server's clock, to the page drawing it)
     is at least 500 ms and the page draws the delivered frames."""
-    from playwright.sync_api import sync_playwright
-
-    text = SCENARIO.format(duration_s=2.0, w=W, h=H, rate_hz=RATE_HZ).replace(
-        "rate_hz: 10}", "rate_hz: 10,\n       datalink: {rate_hz: 5, latency_ms: 500}}")
-    (tmp_path / "pair.yaml").write_text(text)
-    (tmp_path / "study.yaml").write_text(STUDY)
-    with live_server(tmp_path / "study.yaml") as server:
-        status, s = server.request("POST", "/api/sessions", {"participant": "p4", **PROFILE})
-        assert status == 201, s
-        with sync_playwright() as pw:
-            browser = pw.chromium.launch(executable_path=chromium)
-            try:
-                page = browser.new_page()
-                page.set_default_timeout(30_000)
-                page.goto(f"{server.url}/live?session={s['id']}")
-                page.wait_for_function("document.body.dataset.phase === 'waiting'")
-                _start(server, s["id"])
-                page.wait_for_function("document.body.dataset.phase === 'ended'",
-                                       timeout=60_000)
-                drawn = page.evaluate("window.live.drawn")
-            finally:
-                browser.close()
+    with live_server(downlink_study(tmp_path, 2.0, 500)) as server:
+        s = _session(server, "p4")
+        with browser_page(chromium) as page:
+            page.goto(f"{server.url}/live?session={s['id']}")
+            page.wait_for_function("document.body.dataset.phase === 'waiting'")
+            _start(server, s["id"])
+            page.wait_for_function("document.body.dataset.phase === 'ended'",
+                                   timeout=60_000)
+            drawn = page.evaluate("window.live.drawn")
         timing = _wait_over(server, s["id"])["live"]["page_timing"]
     assert {d[1] % 2 for d in drawn} == {0}  # the delivered frames only
     assert timing["frames_drawn"] >= 10, timing  # 2 feeds x 10 delivered, some skipped
