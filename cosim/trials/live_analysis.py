@@ -18,8 +18,9 @@ ones. A numeric condition with more than ``conditions.MAX_LEVELS`` values
 is cut into bins (``conditions.condition_levels``); any other keeps its
 ``MAX_LEVELS - 1`` most common values and puts the rest in ``OTHER``.
 
-``analyse_live`` writes the tables (``live_targets.csv``, ``live_levels.csv``,
-``live_effects.csv``) and a figure a condition (``live_figures``). It reads
+``analyse_live`` writes the tables (``live_targets.csv``, ``live_sessions.csv``:
+a session's counts of hits, duplicates, false alarms and misses,
+``live_levels.csv``, ``live_effects.csv``) and a figure a condition (``live_figures``). It reads
 no file, runs nothing and knows nothing of how sessions are stored.
 """
 
@@ -52,6 +53,8 @@ log = logging.getLogger(__name__)
 MEASURES = ("detected", "latency_any_s", "latency_feed_s", "error_px")
 TARGET_FIELDS = ("session", "participant", "target", "visible_s", "detected",
                  "latency_any_s", "latency_feed_s", "error_px")
+SESSION_FIELDS = ("session", "participant", "hits", "duplicates", "false_alarms", "targets",
+                  "misses")
 LEVEL_FIELDS = ("measure", "condition", "level", "targets", "participants", "estimate",
                 "ci_lo", "ci_hi", "interval")
 EFFECT_FIELDS = ("measure", "condition", "slope", "unit", "ci_lo", "ci_hi", "df",
@@ -86,6 +89,16 @@ def target_rows(sessions: Sequence[ScoredSession]) -> list[dict[str, Any]]:
                          "detected": int(t.detected), "latency_any_s": t.latency_any_s,
                          "latency_feed_s": t.latency_feed_s, "error_px": t.error_px, **conds})
     return rows
+
+
+def session_rows(sessions: Sequence[ScoredSession]) -> list[dict[str, Any]]:
+    """One row per session: its counts of reports by outcome, of targets
+    that counted and of misses (``SESSION_FIELDS``), and its conditions."""
+    return [{"session": s.session, "participant": s.participant,
+             **{f"{o}s": s.score.count(o) for o in ("hit", "duplicate", "false_alarm")},
+             "targets": sum(t.eligible for t in s.score.targets),
+             "misses": len(s.score.misses),
+             **{f"condition_{k}": v for k, v in s.conditions}} for s in sessions]
 
 
 def _values(rows: Sequence[dict[str, Any]], key: str) -> np.ndarray:
@@ -186,18 +199,22 @@ def live_tables(rows: Sequence[dict[str, Any]], level: float = 0.95
 
 def analyse_live(sessions: Sequence[ScoredSession], out_dir: str | Path, *,
                  level: float = 0.95, plots: bool = True) -> dict[str, Any]:
-    """Write ``live_targets.csv``, ``live_levels.csv``, ``live_effects.csv``
-    and (with ``plots``) ``live_<condition>.png`` into ``out_dir``; return a
+    """Write ``live_targets.csv``, ``live_sessions.csv``, ``live_levels.csv``,
+    ``live_effects.csv`` and (with ``plots``) ``live_<condition>.png`` into ``out_dir``; return a
     summary (counts, files)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     rows = target_rows(sessions)
     conds = sorted({k for r in rows for k in r if k.startswith("condition_")})
     write_csv(out / "live_targets.csv", (*TARGET_FIELDS, *conds), rows)
+    per_session = session_rows(sessions)
+    write_csv(out / "live_sessions.csv",
+              (*SESSION_FIELDS, *sorted({k for r in per_session for k in r
+                                         if k.startswith("condition_")})), per_session)
     level_rows, effect_rows = live_tables(rows, level)
     write_csv(out / "live_levels.csv", LEVEL_FIELDS, level_rows)
     write_csv(out / "live_effects.csv", EFFECT_FIELDS, effect_rows)
-    files = ["live_targets.csv", "live_levels.csv", "live_effects.csv"]
+    files = ["live_targets.csv", "live_sessions.csv", "live_levels.csv", "live_effects.csv"]
     if plots:
         from cosim.trials.live_figures import plot_condition
 

@@ -102,8 +102,8 @@ def test_categorical_condition_and_one_participant(sessions: list[ScoredSession]
 def test_analyse_live_writes_tables_and_figures(sessions: list[ScoredSession],
                                                 tmp_path: Path) -> None:
     summary = analyse_live(sessions, tmp_path)
-    assert summary["files"] == ["live_targets.csv", "live_levels.csv", "live_effects.csv",
-                                "live_behaviour.png", "live_feeds.png"]
+    assert summary["files"] == ["live_targets.csv", "live_sessions.csv", "live_levels.csv",
+                                "live_effects.csv", "live_behaviour.png", "live_feeds.png"]
     assert summary["reports"]["false_alarm"] == len(sessions)
     with open(tmp_path / "live_targets.csv", newline="") as f:
         got: list[dict[str, Any]] = list(csv.DictReader(f))
@@ -131,3 +131,17 @@ def test_many_levels_bounded(sessions: list[ScoredSession]) -> None:
     err = next(e for e in effects if e["measure"] == "error_px" and e["condition"] == "feeds")
     assert err["slope"] == pytest.approx(0.0, abs=1e-9) and err["unit"] == "px per unit of feeds"
     assert all(r["estimate"] == pytest.approx(1.0) for r in levels if r["measure"] == "error_px")
+
+
+def test_session_counts(tmp_path: Path) -> None:
+    """live_sessions.csv: each session's hits are the clicks the model made,
+    its misses the targets it did not click, one false alarm each."""
+    rng = np.random.default_rng(4)
+    truth, reports, lats = syn.session(rng, 2, 0.0)
+    one = ScoredSession("s", "p", (("feeds", "2"),), score_session(truth, reports))
+    analyse_live([one], tmp_path, plots=False)
+    with open(tmp_path / "live_sessions.csv", newline="") as f:
+        (row,) = list(csv.DictReader(f))
+    assert row == {"session": "s", "participant": "p", "hits": str(len(lats)),
+                   "duplicates": "0", "false_alarms": "1", "targets": str(TARGETS),
+                   "misses": str(TARGETS - len(lats)), "condition_feeds": "2"}
