@@ -370,3 +370,43 @@ def test_runs_breaks_fractions_and_windows() -> None:
     for window_s, second in ((3.0, "duplicate"), (2.0, "hit")):
         got = score_session(gap, clicks, ScoringSettings(duplicate_window_s=window_s)).reports
         assert [r.outcome for r in got] == ["hit", second]
+
+
+@pytest.mark.integration
+def test_real_run_through_a_datalink(tmp_path: Path) -> None:
+    """The flyover with a 5 Hz downlink 150 ms late (12 s): the feed is its
+    delivered frames, each on screen at its delivered_time_s, and a click on
+    the truck is timed from its first delivered frame with enough delivered
+    pixels, as the CSV read directly says; a click naming a frame the link
+    did not deliver is refused."""
+    from cosim.cli import main
+
+    repo = Path(__file__).resolve().parents[2]
+    text = (repo / "scenarios/cameras/flyover.yaml").read_text()
+    linked = text.replace("rate_hz: 10}", "rate_hz: 10, datalink: {bitrate_kbps: 2000, "
+                                          "rate_hz: 5, latency_ms: 150}}")
+    assert linked != text
+    (tmp_path / "linked.yaml").write_text(linked)
+    out = tmp_path / "run"
+    assert main(["run", str(tmp_path / "linked.yaml"), "--backend", "inline",
+                 "--duration-s", "12", "--out", str(out), "--no-progress"]) == 0
+    with open(out / "cameras" / "uav1_belly.gt.csv", newline="") as f:
+        rows = [r for r in csv.DictReader(f) if r["target"] == "truck1"]
+    shown = [r for r in rows if r["delivered_time_s"]]
+    assert [int(r["frame"]) for r in shown] == list(range(0, len(rows), 2))
+    first = next(i for i, r in enumerate(shown) if r["in_view"] == "1" and
+                 int(r["delivered_pixels_on_target"]) >= ScoringSettings().min_pixels_on_target)
+    at = shown[first + 3]
+    click_s = float(at["delivered_time_s"]) + 0.3
+    truth = read_run_truth(out, ["uav1/belly"])
+    assert dict(truth.frames["uav1/belly"]) == {
+        int(r["frame"]): float(r["delivered_time_s"]) for r in shown}
+    sc = score_session(truth, [Report("uav1/belly", int(at["frame"]),
+                                      float(at["center_x_px"]), float(at["center_y_px"]),
+                                      click_s)])
+    hit = sc.reports[0]
+    assert (hit.outcome, hit.target, hit.error_px) == ("hit", "truck1", 0.0)
+    assert hit.latency_feed_s == pytest.approx(click_s - float(shown[first]["delivered_time_s"]))
+    assert hit.latency_feed_s == pytest.approx(3 * 0.2 + 0.3)
+    with pytest.raises(ReportError, match=r"frame 1 of uav1/belly is not in the session's"):
+        score_session(truth, [Report("uav1/belly", 1, 5.0, 5.0, 1.0)])
