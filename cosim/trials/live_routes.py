@@ -41,7 +41,7 @@ from cosim.logs import write_json_atomic
 from cosim.scenario import load_scenario
 from cosim.trials.live import Hub, LiveRun
 from cosim.trials.live_scoring import SessionScore, score_stored
-from cosim.trials.live_study import LiveCondition
+from cosim.trials.live_study import LiveCondition, TimingLimits
 from cosim.trials.study import Study
 
 log = logging.getLogger(__name__)
@@ -105,9 +105,12 @@ class LiveConsole:
                            "feeds": [f.name for f in c.feeds], "run": str(folder),
                            "ran": folder.exists()})
         live = self.runs.get(s["id"])
+        status = None
+        if live is not None:
+            status = {"trial_index": live[0], **live[1].status()}
+            status["flags"] = timing_flags(self.study.timing_limits, status)
         return {"id": s["id"], "participant": s["participant"], "protocol": "live",
-                "state": s["state"], "trials": trials,
-                "live": None if live is None else {"trial_index": live[0], **live[1].status()},
+                "state": s["state"], "trials": trials, "live": status,
                 "order_method": s["order_method"], "seed": s["seed"],
                 "session_number": s["session_number"]}
 
@@ -309,6 +312,29 @@ class LiveConsole:
         live = self.runs.get(sid)
         if live is not None and live[1].running:
             live[1].stop("session ended")
+
+
+def timing_flags(limits: TimingLimits, status: dict[str, Any]) -> list[str]:
+    """What is wrong with a live run's timing (``LiveRun.status``) by the
+    study's limits: its page's median glass-to-glass latency, and its frames
+    lost (dropped for a page that did not keep up, or received and skipped
+    by it) as a share of the frames sent."""
+    out = []
+    page = status.get("page_timing") or {}
+    p50 = page.get("latency_ms_p50")
+    if limits.latency_ms_p50 is not None and p50 is not None and p50 > limits.latency_ms_p50:
+        out.append(f"median glass-to-glass latency {p50:.0f} ms, over the study's "
+                   f"{limits.latency_ms_p50:g} ms")
+    sent = status.get("frames_published") or 0
+    if limits.dropped_percent is not None and sent:
+        dropped = status.get("frames_dropped") or 0
+        skipped = max(0, page.get("frames_received", 0) - page.get("frames_drawn", 0))
+        lost = 100.0 * (dropped + skipped) / sent
+        if lost > limits.dropped_percent:
+            out.append(f"{lost:.1f} % of frames lost ({dropped} dropped for the page, "
+                       f"{skipped} skipped by it, of {sent}), over the study's "
+                       f"{limits.dropped_percent:g} %")
+    return out
 
 
 def score_json(score: SessionScore) -> dict[str, Any]:

@@ -18,6 +18,8 @@ Example (in a study file)::
 A feed is one camera of one vehicle (``VEHICLE/CAMERA``, the names the
 scenario gives them); ``feeds: K`` takes the first K in the scenario's order
 (its cameras as listed, each over its vehicles). 1 to ``MAX_FEEDS`` feeds.
+The study's ``timing_limits: {latency_ms_p50: 200, dropped_percent: 1}``
+(``TimingLimits``) flag a trial whose timing is worse.
 Each scenario is loaded and checked as the study is read, so a misspelt
 feed or a broken scenario is a ``ConfigError`` before any session starts.
 """
@@ -41,6 +43,25 @@ MAX_CONDITIONS = 200
 #: the longest live trial (s): an hour
 MAX_DURATION_S = 3600.0
 CONDITION_KEYS = ("id", "scenario", "feeds", "duration_s", "conditions")
+TIMING_KEYS = ("latency_ms_p50", "dropped_percent")
+
+
+@dataclass(frozen=True)
+class TimingLimits:
+    """A live study's ``timing_limits:``: a trial whose page's median
+    glass-to-glass latency or share of frames lost (dropped for a slow page,
+    or skipped by it) is over these is flagged for the experimenter (None:
+    no limit)."""
+
+    latency_ms_p50: float | None = None
+    dropped_percent: float | None = None
+
+
+def read_timing_limits(ctx: Problems, d: Any) -> TimingLimits:
+    """The study's ``timing_limits:`` mapping (problems go to ``ctx``)."""
+    r = Reader(ctx, d, ("timing_limits",), TIMING_KEYS)
+    return TimingLimits(r.num("latency_ms_p50", None, lo=0, hi=60_000, lo_open=True),
+                        r.num("dropped_percent", None, lo=0, hi=100))
 
 
 @dataclass(frozen=True)

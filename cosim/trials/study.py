@@ -93,7 +93,12 @@ from cosim.trials.instruments import (
     parse_tlx,
 )
 from cosim.trials.live_scoring import ScoringSettings, read_scoring
-from cosim.trials.live_study import LiveCondition, read_live_conditions
+from cosim.trials.live_study import (
+    LiveCondition,
+    TimingLimits,
+    read_live_conditions,
+    read_timing_limits,
+)
 from cosim.trials.sagat import Probe
 
 #: clips in one study (after ``repeats``: trials in one session)
@@ -115,8 +120,10 @@ PRACTICE_STREAM = 1_000_003
 MANIFEST_COLUMNS = ("run", "vehicle", "camera", "video", "ground_truth", "frames", "rate_hz",
                     "width_px", "height_px", "hfov_deg", "vfov_deg")
 TOP_KEYS = ("schema_version", "name", "description", "protocol", "arrow_speed_deg_s", "sweep",
-            "clips", "scenarios", "scoring", "practice", "practice_clips",
+            "clips", "scenarios", "scoring", "timing_limits", "practice", "practice_clips",
             "break_every", "repeats", "order", "seed")
+#: the keys of a live study only
+LIVE_KEYS = ("scenarios", "scoring", "timing_limits")
 CLIP_KEYS = ("id", "video", "ground_truth", "target", "rate_hz", "width_px", "height_px",
              "hfov_deg", "conditions", "run")
 
@@ -213,6 +220,8 @@ class Study:
     live: tuple[LiveCondition, ...] = ()
     #: ``live``: how its reports are scored (``scoring:``)
     scoring: ScoringSettings = field(default_factory=ScoringSettings)
+    #: ``live``: the timing beyond which a trial is flagged (``timing_limits:``)
+    timing_limits: TimingLimits = field(default_factory=TimingLimits)
 
     @property
     def all_clips(self) -> tuple[Clip, ...]:
@@ -301,6 +310,7 @@ def parse_study(text: str, path: Path) -> Study:
     clips: list[Clip] = []
     live: list[LiveCondition] = []
     scoring = ScoringSettings()
+    limits = TimingLimits()
     if protocol == "live":
         for key in ("sweep", "clips", "practice_clips"):
             if key in top.d:
@@ -311,8 +321,9 @@ def parse_study(text: str, path: Path) -> Study:
                                     condition_values)
         check_probe_times(ctx, sagat, {c.id: c.duration_s for c in live})
         scoring = read_scoring(ctx, top.d.get("scoring", {}))
-    elif "scenarios" in top.d or "scoring" in top.d:
-        key = "scenarios" if "scenarios" in top.d else "scoring"
+        limits = read_timing_limits(ctx, top.d.get("timing_limits", {}))
+    elif any(k in top.d for k in LIVE_KEYS):
+        key = next(k for k in LIVE_KEYS if k in top.d)
         ctx.err((key,), f"`{key}:` is for `protocol: live`; clips are given with `sweep:` or "
                         f"`clips:`")
     which = None if protocol == "live" else top.one_of("sweep", "clips")
@@ -344,7 +355,8 @@ def parse_study(text: str, path: Path) -> Study:
                  path=path, name=name, protocol=protocol, clips=tuple(clips), practice=practice,
                  break_every=break_every, repeats=repeats, order=order, seed=seed,
                  roots=tuple(roots), arrow_speed_deg_s=float(arrow or 2.0),
-                 practice_clips=tuple(practice_clips), live=tuple(live), scoring=scoring)
+                 practice_clips=tuple(practice_clips), live=tuple(live), scoring=scoring,
+                 timing_limits=limits)
 
 
 def _clips_of(ctx: Problems, key: str, spec: Any, base: Path, roots: list[Path]) -> list[Clip]:

@@ -237,12 +237,37 @@ def _wait_over(server: Any, sid: str, timeout_s: float = 60.0) -> dict[str, Any]
         time.sleep(0.2)
 
 
+def test_timing_over_the_studys_limits_is_flagged(tmp_path: Path) -> None:
+    from cosim.trials.live_routes import timing_flags
+    from cosim.trials.live_study import TimingLimits
+
+    status = {"frames_published": 200, "frames_dropped": 3,
+              "page_timing": {"frames_received": 197, "frames_drawn": 190,
+                              "latency_ms_p50": 250.0}}
+    assert timing_flags(TimingLimits(200, 1.0), status) == [
+        "median glass-to-glass latency 250 ms, over the study's 200 ms",
+        "5.0 % of frames lost (3 dropped for the page, 7 skipped by it, of 200), over the "
+        "study's 1 %"]  # (3 + 7) / 200
+    assert timing_flags(TimingLimits(250, 5.0), status) == []
+    assert timing_flags(TimingLimits(), status) == []
+    head = "protocol: live\nscenarios: [{scenario: pair.yaml, feeds: 2}]\n"
+    st = load_study(live_study(tmp_path, head + "timing_limits: {latency_ms_p50: 200, "
+                                              "dropped_percent: 1}\n"))
+    assert st.timing_limits == TimingLimits(200.0, 1.0)
+    with pytest.raises(ConfigError, match=r"study\.yaml:3: timing_limits\.dropped_percent: "
+                                          r".*101"):
+        load_study(live_study(tmp_path, head + "timing_limits: {dropped_percent: 101}\n"))
+
+
 @pytest.mark.integration  # a live run of a few seconds
-def test_a_slow_page_loses_frames_and_the_run_keeps_real_time(tmp_path: Path) -> None:
+def test_a_slow_page_loses_frames_and_the_run_keeps_real_time(tmp_path: Path,
+                                                              chromium: str) -> None:
     """A client that opens the stream and never reads: its frames are dropped
-    and counted, and the run still keeps to real time. (640 x 480 frames: more
-    than the sockets' buffers hold.)"""
-    with live_server(live_study(tmp_path, size_px=(640, 480))) as server:
+    and counted, and the run still keeps to real time; the trial is flagged
+    on the experimenter's page for the study's limit on lost frames. (640 x
+    480 frames: more than the sockets' buffers hold.)"""
+    study = STUDY + "timing_limits: {dropped_percent: 0.5}\n"
+    with live_server(live_study(tmp_path, study, size_px=(640, 480))) as server:
         status, s = server.request("POST", "/api/sessions", {"participant": "slow", **PROFILE})
         assert status == 201, s
         status, out = server.request("GET", f"/api/sessions/{s['id']}/live/stream")
@@ -266,6 +291,15 @@ def test_a_slow_page_loses_frames_and_the_run_keeps_real_time(tmp_path: Path) ->
         live = v["live"]
         assert live["frames_published"] == 2 * DURATION_S * RATE_HZ, live
         assert live["frames_dropped"] > 0, live
+        lost = 100 * live["frames_dropped"] / live["frames_published"]
+        assert live["flags"] == [f"{lost:.1f} % of frames lost ({live['frames_dropped']} "
+                                 f"dropped for the page, 0 skipped by it, of "
+                                 f"{live['frames_published']}), over the study's 0.5 %"]
+        with browser_page(chromium) as page:
+            page.goto(f"{server.url}/")
+            page.wait_for_selector(".live-flags")
+            assert page.locator(".live-flags").inner_text() == \
+                f" \u26a0 trial 1: {live['flags'][0]}"
         pacing = summary["realtime"]
         # the tick loop kept to real time: no tick more than 100 ms behind on the
         # median, whatever the client did

@@ -66,11 +66,19 @@
     const v = await (await fetch(`/api/sessions/${sid}/live`, { cache: "no-store" })).json();
     const b = document.createElement("button");
     b.className = "live-control";
+    const out = document.createElement("span");
+    out.append(b);
+    if (v.live && v.live.flags && v.live.flags.length) { // timing over the study's limits
+      const w = document.createElement("span");
+      w.className = "warning live-flags";
+      w.textContent = ` \u26a0 trial ${v.live.trial_index + 1}: ${v.live.flags.join("; ")}`;
+      out.append(w);
+    }
     if (v.live && v.live.running) {
       b.textContent = `Stop trial ${v.live.trial_index + 1}`;
       b.onclick = () => post(`/api/sessions/${sid}/live/stop`, {})
         .then(refresh).catch((e) => alert(e.message));
-      return b;
+      return out;
     }
     const next = (v.trials || []).find((t) => !t.ran);
     b.textContent = next ? `Start trial ${next.index + 1} of ${v.trials.length}` : "All trials run";
@@ -79,7 +87,7 @@
       b.onclick = () => post(`/api/sessions/${sid}/live/start`, { trial_index: next.index })
         .then(refresh).catch((e) => alert(e.message));
     }
-    return b;
+    return out;
   }
 
   form.addEventListener("submit", async (ev) => {
