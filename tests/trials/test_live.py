@@ -581,3 +581,26 @@ def test_the_page_measures_a_downlinks_delay_in_its_glass_to_glass_latency(
     assert {d[1] % 2 for d in drawn} == {0}  # the delivered frames only
     assert timing["frames_drawn"] >= 10, timing  # 2 feeds x 10 delivered, some skipped
     assert 500 <= timing["latency_ms_p50"] < 1500, timing
+
+
+def test_a_reloaded_page_follows_the_running_trial_again(tmp_path: Path, chromium: str) -> None:
+    """Reloaded mid-trial, the page finds the running trial again and draws
+    its next frames; the stream of the page before is let go (one watcher)."""
+    with live_server(live_study(tmp_path)) as server:
+        sid = _session(server, "p5")["id"]
+        with browser_page(chromium) as page:
+            page.goto(f"{server.url}/live?session={sid}")
+            page.wait_for_function("document.body.dataset.phase === 'waiting'")
+            _start(server, sid)
+            page.wait_for_function("window.live.drawn.length >= 4")
+            before = page.evaluate("Math.max(...window.live.drawn.map((d) => d[1]))")
+            page.reload()
+            page.wait_for_function("document.body.dataset.phase === 'live' && "
+                                   "window.live.drawn.length >= 2")
+            after = page.evaluate("Math.min(...window.live.drawn.map((d) => d[1]))")
+            status, v = server.request("GET", f"/api/sessions/{sid}/live")
+            assert status == 200 and v["live"]["running"], v
+            assert v["live"]["watchers"] == 1, v["live"]
+            page.wait_for_function("document.body.dataset.phase === 'ended'", timeout=60_000)
+        _wait_over(server, sid)
+    assert after >= before, (before, after)
