@@ -77,10 +77,11 @@ class ScoredSession:
 
 def target_rows(sessions: Sequence[ScoredSession]) -> list[dict[str, Any]]:
     """One row per target that counted in each session (``TARGET_FIELDS``
-    and ``condition_<name>`` for each of the session's conditions)."""
+    and ``condition_<name>`` for each of the session's conditions; a session
+    that names no ``feeds`` condition has its number of feeds as one)."""
     rows = []
     for s in sessions:
-        conds = {f"condition_{k}": v for k, v in s.conditions}
+        conds = _conditions(s)
         for t in s.score.targets:
             if not t.eligible:
                 continue
@@ -98,7 +99,16 @@ def session_rows(sessions: Sequence[ScoredSession]) -> list[dict[str, Any]]:
              **{f"{o}s": s.score.count(o) for o in ("hit", "duplicate", "false_alarm")},
              "targets": sum(t.eligible for t in s.score.targets),
              "misses": len(s.score.misses),
-             **{f"condition_{k}": v for k, v in s.conditions}} for s in sessions]
+             **_conditions(s)} for s in sessions]
+
+
+def _conditions(s: ScoredSession) -> dict[str, Any]:
+    """A session's ``condition_<name>`` values, with ``condition_feeds`` its
+    number of feeds where it names none."""
+    conds = {f"condition_{k}": v for k, v in s.conditions}
+    if "condition_feeds" not in conds and s.score.feeds:
+        conds["condition_feeds"] = str(len(s.score.feeds))
+    return conds
 
 
 def _values(rows: Sequence[dict[str, Any]], key: str) -> np.ndarray:

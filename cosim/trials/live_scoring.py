@@ -168,6 +168,8 @@ class SessionScore:
     reports: tuple[ScoredReport, ...]
     targets: tuple[TargetScore, ...]
     settings: ScoringSettings = field(default_factory=ScoringSettings)
+    #: the session's feeds (those its ground truth has frames of)
+    feeds: tuple[str, ...] = ()
 
     def count(self, outcome: str) -> int:
         return sum(1 for r in self.reports if r.outcome == outcome)
@@ -361,7 +363,8 @@ def score_session(truth: SessionTruth | Sequence[TargetFrame], reports: Sequence
             eligible=h is not None or vis_s >= s.min_visible_s - _EPS_S,
             latency_feed_s=h.latency_feed_s if h else None,
             latency_any_s=h.latency_any_s if h else None, error_px=h.error_px if h else None))
-    return SessionScore(tuple(scored), tuple(targets), s)
+    return SessionScore(tuple(scored), tuple(targets), s,
+                        tuple(f for f, fr in truth.frames.items() if fr))
 
 
 def score_stored(run_dir: str | Path, sizes: Mapping[str, tuple[int, int]],

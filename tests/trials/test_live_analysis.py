@@ -145,3 +145,21 @@ def test_session_counts(tmp_path: Path) -> None:
     assert row == {"session": "s", "participant": "p", "hits": str(len(lats)),
                    "duplicates": "0", "false_alarms": "1", "targets": str(TARGETS),
                    "misses": str(TARGETS - len(lats)), "condition_feeds": "2"}
+
+
+def test_number_of_feeds_from_the_ground_truth() -> None:
+    """Sessions that name no feeds condition are analysed against their
+    number of feeds, counted from their ground truth; a named one is kept."""
+    rng = np.random.default_rng(8)
+    plain = []
+    for p in range(4):
+        for k in (1, 4):
+            truth, reports, _ = syn.session(rng, k, 0.0)
+            plain.append(ScoredSession(f"s{p}{k}", f"p{p}", (("alt_agl_m", "100"),),
+                                       score_session(truth, reports)))
+    assert sorted({s.score.feeds for s in plain}) == [
+        ("u0/cam",), ("u0/cam", "u1/cam", "u2/cam", "u3/cam")]
+    levels, _ = live_tables(target_rows(plain))
+    assert sorted({r["level"] for r in levels if r["condition"] == "feeds"}) == [1.0, 4.0]
+    named = ScoredSession("s", "p", (("feeds", "nine"),), plain[0].score)
+    assert {r["condition_feeds"] for r in target_rows([named])} == {"nine"}
