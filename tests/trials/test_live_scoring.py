@@ -410,3 +410,28 @@ def test_real_run_through_a_datalink(tmp_path: Path) -> None:
     assert hit.latency_feed_s == pytest.approx(3 * 0.2 + 0.3)
     with pytest.raises(ReportError, match=r"frame 1 of uav1/belly is not in the session's"):
         score_session(truth, [Report("uav1/belly", 1, 5.0, 5.0, 1.0)])
+
+
+def test_random_reports_are_parsed_or_refused() -> None:
+    """Seeded random JSON values in every field of a report: each parses
+    within the session's bounds or is a ReportError, never another exception."""
+    import random
+
+    feeds = {"u1/cam": FeedBounds(0, 99, W, H)}
+    values: list[Any] = [None, True, False, 0, -1, 3, 99, 100, 2**70, 0.5, -0.5, 639.5, 640.0,
+                         1e308, float("nan"), float("inf"), "", "u1/cam", "3", [], {}, [1],
+                         {"a": 1}]
+    rng = random.Random(5)
+    ok = 0
+    for _ in range(2000):
+        d = {"feed": "u1/cam", "frame": 3, "x_px": 10.0, "y_px": 20.0, "time_s": 1.0}
+        for k in rng.sample(list(d), rng.randrange(1, 4)):
+            d[k] = rng.choice(values)
+        try:
+            r = parse_report(d, feeds, 60.0)
+        except ReportError:
+            continue
+        ok += 1
+        assert 0 <= r.frame <= 99 and -0.5 <= r.x_px <= W - 0.5 and -0.5 <= r.y_px <= H - 0.5
+        assert 0 <= r.time_s <= 60.0 and all(map(math.isfinite, (r.x_px, r.y_px, r.time_s)))
+    assert 0 < ok < 2000

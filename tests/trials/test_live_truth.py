@@ -55,3 +55,39 @@ def test_out_of_view_rows_checked(tmp_path: Path) -> None:
         with pytest.raises(ConfigError, match=r"v\.gt\.csv:2: " + msg):
             read_feed_truth(_write(tmp_path / "v.gt.csv", [{**_row(0, "a", 0), "in_view": v}]),
                             "f")
+
+
+def test_mutated_ground_truth_is_read_or_refused(tmp_path: Path) -> None:
+    """Seeded mutations of a valid file (cells replaced by junk, NaN,
+    infinities, huge numbers, rows cut short or doubled, bytes that are not
+    UTF-8): each is read or refused with a ConfigError naming the file, never
+    another exception."""
+    import random
+
+    rows = [_row(f, t, int(f % 3 == 0)) for f in range(10) for t in ("a", "b")]
+    good = _write(tmp_path / "good.gt.csv", rows).read_bytes()
+    junk = ["", "x", "nan", "inf", "-inf", "1e400", "-1", "1.5", "0x10", "\x00", "1,2", '"']
+    rng = random.Random(3)
+    refused = 0
+    for case in range(300):
+        lines = good.split(b"\n")
+        k = rng.randrange(1, len(lines) - 1)
+        cells = lines[k].split(b",")
+        how = case % 4
+        if how == 0:
+            cells[rng.randrange(len(cells))] = rng.choice(junk).encode()
+            lines[k] = b",".join(cells)
+        elif how == 1:
+            lines[k] = b",".join(cells[:rng.randrange(len(cells))])
+        elif how == 2:
+            lines.insert(k, lines[k].replace(b"0.", b"9.", 1))
+        else:
+            lines[k] = lines[k][:5] + bytes([rng.randrange(128, 256)]) + lines[k][5:]
+        p = tmp_path / f"m{case}.gt.csv"
+        p.write_bytes(b"\n".join(lines))
+        try:
+            read_feed_truth(p, "f")
+        except ConfigError as e:
+            assert str(p) in str(e), e
+            refused += 1
+    assert 100 < refused < 300  # most mutations are refused, some are harmless
