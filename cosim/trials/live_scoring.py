@@ -245,11 +245,19 @@ def stored_reports(rows: Iterable[Mapping[str, Any]], truth: SessionTruth,
             raise ReportError(f"report {r.get('report_key', '')!s:.64}: frame {r['frame']!s:.20} "
                               f"of {r['feed_name']!s:.200} is not in the ground truth")
         click, drawn = r["click_time_ms"], r.get("drawn_time_ms")
+        if not all(_is_number(v) for v in (click, 0.0 if drawn is None else drawn)):
+            raise ReportError(f"report {r.get('report_key', '')!s:.64}: click_time_ms, "
+                              f"drawn_time_ms: expected the page's times (ms), got "
+                              f"{click!s:.40}, {drawn!s:.40}")
         after_s = 0.0 if drawn is None else (click - drawn) / 1000.0
-        out.append(parse_report({"feed": r["feed_name"], "frame": r["frame"],
-                                 "x_px": r["x_px"] - 0.5, "y_px": r["y_px"] - 0.5,
-                                 "time_s": at + after_s}, feeds, duration_s))
+        x, y = (v - 0.5 if _is_number(v) else v for v in (r["x_px"], r["y_px"]))
+        out.append(parse_report({"feed": r["feed_name"], "frame": r["frame"], "x_px": x,
+                                 "y_px": y, "time_s": at + after_s}, feeds, duration_s))
     return out
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
 # ---- scoring

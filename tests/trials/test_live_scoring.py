@@ -349,6 +349,10 @@ def test_stored_reports_on_the_run_clock(truth: SessionTruth) -> None:
         stored_reports([{**rows[0], "report_key": "k3", "frame": 100}], truth, feeds, 60.0)
     with pytest.raises(ReportError, match="x_px: expected a number from -0.5 to 639.5"):
         stored_reports([{**rows[0], "x_px": W + 1.0}], truth, feeds, 60.0)
+    with pytest.raises(ReportError, match="y_px: expected a number .* got 'None'"):
+        stored_reports([{**rows[0], "y_px": None}], truth, feeds, 60.0)
+    with pytest.raises(ReportError, match="report k1: click_time_ms, drawn_time_ms: expected"):
+        stored_reports([{**rows[0], "click_time_ms": "soon"}], truth, feeds, 60.0)
 
 
 def test_runs_breaks_fractions_and_windows() -> None:
