@@ -51,6 +51,10 @@ MAX_PENDING = 32
 #: pages watching one session at once
 MAX_WATCHERS = 4
 _POS_COLS = [STATE_INDEX[c] for c in ("lat_deg", "lon_deg", "alt_msl_m", "yaw_deg")]
+_POSE_COLS = [STATE_INDEX[c] for c in ("lat_deg", "lon_deg", "alt_msl_m", "roll_deg",
+                                       "pitch_deg", "yaw_deg")]
+#: how far (m, horizontally) a footprint's corner above the horizon is drawn
+FOOTPRINT_RANGE_M = 2000.0
 
 
 class Watcher:
@@ -193,9 +197,20 @@ class FeedTap:
 
     def start(self, ctx: Any) -> None:
         self.ctx = ctx
-        self.every = max(1, round(ctx.physics_hz / MAP_RATE_HZ))
+        # a whole number of exchanges (the ticks on_exchange sees)
+        self.every = ctx.control_every * max(1, round(ctx.physics_hz / MAP_RATE_HZ
+                                                      / ctx.control_every))
         self.ground_m = ctx.scenario.origin.ground_alt_m
         self.ids = list(ctx.ids)
+        from cosim.vehicles import get_class
+
+        scn = ctx.scenario
+        row = {v.id: i for i, v in enumerate(scn.vehicles)}
+        cam_of = {c.name: c for c in scn.sections["cameras"].views}
+        #: each feed's vehicle row, camera and the camera's height above the vehicle's
+        self.feed_cams = [(row[f.vehicle], cam_of[f.camera],
+                           get_class(scn.vehicles[row[f.vehicle]].vehicle_class).camera_height_m)
+                          for f in self.condition.feeds]
         cams = {c.name: c for c in ctx.scenario.sections["cameras"].views}
         for k, f in enumerate(self.condition.feeds):
             link = cams[f.camera].datalink
@@ -234,13 +249,33 @@ class FeedTap:
         n, e, _ = frame.geodetic_to_ned(np.where(ok, s[:, 0], frame.lat_deg),
                                         np.where(ok, s[:, 1], frame.lon_deg),
                                         np.where(ok, s[:, 2], frame.alt_m))
-        self.hub.publish("states", {
+        msg: dict[str, Any] = {
             "time_s": round(tick / self.ctx.physics_hz, 6),
             "vehicles": [{"id": self.ids[i], "north_m": round(float(n[i]), 2),
                           "east_m": round(float(e[i]), 2),
                           "alt_agl_m": round(float(s[i, 2]) - self.ground_m, 2),
                           "yaw_deg": round(float(s[i, 3]), 1)}
-                         for i in np.flatnonzero(ok).tolist()]})
+                         for i in np.flatnonzero(ok).tolist()]}
+        if "footprints" in self.condition.map_layers:
+            msg["footprints"] = self._footprints(states, n, e, ok)
+        self.hub.publish("states", msg)
+
+    def _footprints(self, states: np.ndarray, n: np.ndarray, e: np.ndarray,
+                    ok: np.ndarray) -> list[dict[str, Any]]:
+        """Each feed's ground footprint (its image's corners on flat ground,
+        north/east m in the scenario frame; the camera's mount, not a gimbal
+        command's angles)."""
+        from cosim.core.camera import camera_pose, footprint
+
+        out = []
+        for k, (r, cam, lift_m) in enumerate(self.feed_cams):
+            if not ok[r]:
+                continue
+            la, lo, alt, roll, pitch, yaw = (float(x) for x in states[r, _POSE_COLS])
+            pose = camera_pose(cam, la, lo, alt + lift_m, roll, pitch, yaw, self.ground_m)
+            ne = footprint(cam, pose, FOOTPRINT_RANGE_M) + [float(n[r]), float(e[r])]
+            out.append({"feed": k, "corners_ne_m": np.round(ne, 1).tolist()})
+        return out
 
     def finish(self, tick: int, reason: str) -> dict[str, Any] | None:
         return {"feeds": [f.name for f in self.condition.feeds], "frames_sent": self.frames_sent,
@@ -248,6 +283,19 @@ class FeedTap:
 
     def after_run(self, out_dir: Path) -> None:
         return None
+
+
+def _targets(scn: Any) -> list[dict[str, Any]]:
+    """The scenario's targets where they start (north/east m in its frame)."""
+    frame = scn.origin.frame
+    out = []
+    for t in scn.world.targets:
+        if t.north_m is None:
+            n, e, _ = frame.geodetic_to_ned(t.lat_deg, t.lon_deg, scn.origin.ground_alt_m)
+        else:
+            n, e = t.north_m, t.east_m
+        out.append({"id": t.id, "north_m": round(float(n), 2), "east_m": round(float(e), 2)})
+    return out
 
 
 class LiveRun:
@@ -267,6 +315,9 @@ class LiveRun:
         self.condition, self.out_dir, self.hub = condition, out_dir, hub
         self.tap = FeedTap(condition, hub)
         hub.hello = json.dumps({"condition": condition.id, "duration_s": scn.duration_s,
+                                "map": list(condition.map_layers),
+                                "targets": _targets(scn) if "targets" in condition.map_layers
+                                else [],
                                 "feeds": [{"feed": k, "name": f.name, "width_px": f.width_px,
                                            "height_px": f.height_px, "rate_hz": f.rate_hz}
                                           for k, f in enumerate(condition.feeds)],

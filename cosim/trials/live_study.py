@@ -13,6 +13,7 @@ Example (in a study file)::
         scenario: scenarios/pair.yaml   # relative to the study file
         feeds: [uav1/belly, uav2/belly] # VEHICLE/CAMERA, or a count: the first K
         duration_s: 60                  # default: the scenario's own
+        map: {tracks: true, footprints: true, targets: false}  # (the defaults)
         conditions: {feeds: 2, alt_agl_m: 100}
 
 A feed is one camera of one vehicle (``VEHICLE/CAMERA``, the names the
@@ -42,7 +43,9 @@ MAX_FEEDS = 16
 MAX_CONDITIONS = 200
 #: the longest live trial (s): an hour
 MAX_DURATION_S = 3600.0
-CONDITION_KEYS = ("id", "scenario", "feeds", "duration_s", "conditions")
+CONDITION_KEYS = ("id", "scenario", "feeds", "duration_s", "conditions", "map")
+#: what the map may show, and whether it does unless a condition says
+MAP_LAYERS = {"tracks": True, "footprints": True, "targets": False}
 TIMING_KEYS = ("latency_ms_p50", "dropped_percent")
 
 
@@ -88,6 +91,8 @@ class LiveCondition:
     conditions: tuple[tuple[str, str], ...]
     #: the SHA-256 (hex) of the scenario file when the study was read
     scenario_sha256: str = ""
+    #: what the map shows (``MAP_LAYERS``' names)
+    map_layers: tuple[str, ...] = tuple(k for k, on in MAP_LAYERS.items() if on)
 
     @property
     def fingerprint(self) -> dict[str, Any]:
@@ -143,6 +148,8 @@ def read_live_conditions(ctx: Problems, items: Any, base: Path, roots: tuple[Pat
                 ctx.err(at + ("scenario",), f"{value[:200]!r}: the scenario must be an existing "
                                             f"file inside the study's folder ({base}){instead}")
         conds = condition_values(ctx, at, r.d.get("conditions", {}))
+        shown = Reader(ctx, r.d.get("map", {}), at + ("map",), tuple(MAP_LAYERS))
+        layers = tuple(k for k, on in MAP_LAYERS.items() if shown.boolean(k, on))
         if path is None or len(ctx.problems) != before:
             continue
         try:
@@ -155,7 +162,7 @@ def read_live_conditions(ctx: Problems, items: Any, base: Path, roots: tuple[Pat
         if feeds:
             sha = hashlib.sha256(path.read_bytes()).hexdigest()
             out.append(LiveCondition(cid, path, tuple(feeds), duration, tuple(conds.items()),
-                                     sha))
+                                     sha, layers))
     ids = [c.id for c in out]
     if len(set(ids)) != len(ids):
         ctx.err(("scenarios",), f"condition ids given twice: "

@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import csv
+import dataclasses
 import json
 import math
 import socket
@@ -604,3 +605,52 @@ def test_a_reloaded_page_follows_the_running_trial_again(tmp_path: Path, chromiu
             page.wait_for_function("document.body.dataset.phase === 'ended'", timeout=60_000)
         _wait_over(server, sid)
     assert after >= before, (before, after)
+
+
+@pytest.mark.integration  # a live run of a second
+def test_the_map_gets_the_feeds_footprints_and_the_targets_its_condition_asks_for(
+        tmp_path: Path) -> None:
+    """A condition with ``map: {targets: true}``: the page is told the
+    targets; every states message has each feed's footprint, a nadir
+    camera's about the aircraft (within its attitude's tilt) with sides
+    2 h tan(fov / 2)."""
+    from cosim.trials.live import LiveRun
+
+    study = STUDY.replace("conditions: {feeds: 2}}", "conditions: {feeds: 2},\n"
+                          "     map: {targets: true, tracks: false}}")
+    (c,) = load_study(live_study(tmp_path, study)).live
+    assert c.map_layers == ("footprints", "targets")
+    got: list[tuple[str, dict[str, Any]]] = []
+
+    async def watch() -> None:
+        hub = Hub(asyncio.get_running_loop())
+        run = LiveRun(dataclasses.replace(c, duration_s=1.0), tmp_path / "run", hub,
+                      backend="inline")
+        w = hub.watch(max_pending=10_000)  # as a page does: once the run is made
+        run.start()
+        while True:
+            kind, msg = await w.get()
+            if kind == "end":
+                break
+            if kind in ("hello", "states"):
+                got.append((kind, json.loads(msg)))
+        assert run.wait(10) and run.error is None, run.error
+
+    asyncio.run(watch())
+    hello = got[0][1]
+    assert hello["map"] == ["footprints", "targets"]
+    assert hello["targets"] == [{"id": "truck1", "north_m": 0.0, "east_m": 0.0}]
+    states = [m for k, m in got if k == "states"]
+    assert len(states) >= 4
+    half_v = math.tan(math.radians(20))
+    half_h = half_v * W / H  # square pixels: the horizontal field from the vertical
+    for m in states:
+        assert [f["feed"] for f in m["footprints"]] == [0, 1]
+        for f, v in zip(m["footprints"], m["vehicles"]):
+            ne = np.asarray(f["corners_ne_m"])
+            h = v["alt_agl_m"]
+            sides = sorted(float(np.hypot(*(ne[i] - ne[(i + 1) % 4]))) for i in range(4))
+            assert sides == pytest.approx([2 * h * half_v] * 2 + [2 * h * half_h] * 2,
+                                          rel=0.05), (sides, h)
+            tilt_m = h * math.tan(math.radians(6))
+            assert math.hypot(*(ne.mean(axis=0) - [v["north_m"], v["east_m"]])) < tilt_m

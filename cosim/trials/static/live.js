@@ -32,6 +32,8 @@
   const drawn = new Map(); // feed -> {frame, time_ms}: what is on screen
   const tracks = new Map(); // vehicle id -> [[north_m, east_m], ...]
   let last = null;         // the last states message
+  let layers = [];         // what the map shows: tracks, footprints, targets
+  let targets = [];        // [{id, north_m, east_m}] when the map shows targets
   let rafPending = false;
   let offsetMs = 0;        // the server's clock minus the page's (ms)
   let rttMs = null;        // the round trip that estimate came from
@@ -60,6 +62,8 @@
   }
 
   function build(hello) {
+    layers = hello.map || [];
+    targets = hello.targets || [];
     feedsEl.innerHTML = "";
     feeds = hello.feeds.map((f) => {
       const cell = document.createElement("div");
@@ -70,7 +74,7 @@
       canvas.dataset.feed = String(f.feed);
       const id = document.createElement("div");
       id.className = "id";
-      id.textContent = f.name;
+      id.textContent = `${f.feed + 1} ${f.name}`; // its number on the map's footprint
       const on = document.createElement("div"); // the frame and its id, as large as drawn
       on.className = "frame";
       on.append(canvas, id);
@@ -155,6 +159,9 @@
     ctx.fillRect(0, 0, w, h);
     let pts = [];
     for (const tr of tracks.values()) pts = pts.concat(tr);
+    const prints = (last && last.footprints) || [];
+    for (const f of prints) pts = pts.concat(f.corners_ne_m);
+    for (const t of targets) pts.push([t.north_m, t.east_m]);
     if (!pts.length) return;
     const ns = pts.map((p) => p[0]), es = pts.map((p) => p[1]);
     const cn = (Math.max(...ns) + Math.min(...ns)) / 2;
@@ -162,14 +169,40 @@
     const span = Math.max(200, Math.max(...ns) - Math.min(...ns), Math.max(...es) - Math.min(...es));
     const s = (0.8 * Math.min(w, h)) / span; // px per metre, the same both ways
     const at = (p) => [w / 2 + (p[1] - ce) * s, h / 2 - (p[0] - cn) * s];
-    ctx.lineWidth = 1.5;
-    ctx.strokeStyle = "#7ab";
-    for (const tr of tracks.values()) {
+    const path = (ps) => {
       ctx.beginPath();
-      tr.forEach((p, i) => { const [x, y] = at(p); if (i) ctx.lineTo(x, y); else ctx.moveTo(x, y); });
-      ctx.stroke();
-    }
+      ps.forEach((p, i) => { const [x, y] = at(p); if (i) ctx.lineTo(x, y); else ctx.moveTo(x, y); });
+    };
     ctx.font = "12px monospace";
+    ctx.lineWidth = 1;
+    for (const f of prints) { // each feed's ground footprint, its number at its middle
+      path(f.corners_ne_m);
+      ctx.closePath();
+      ctx.fillStyle = "rgba(255, 255, 255, 0.08)";
+      ctx.strokeStyle = "rgba(255, 255, 255, 0.5)";
+      ctx.fill();
+      ctx.stroke();
+      const mid = f.corners_ne_m.reduce((a, p) => [a[0] + p[0] / 4, a[1] + p[1] / 4], [0, 0]);
+      const [x, y] = at(mid);
+      ctx.fillStyle = "rgba(255, 255, 255, 0.7)";
+      ctx.fillText(String(f.feed + 1), x - 3, y + 4);
+    }
+    if (layers.includes("tracks")) {
+      ctx.lineWidth = 1.5;
+      ctx.strokeStyle = "#7ab";
+      for (const tr of tracks.values()) { path(tr); ctx.stroke(); }
+    }
+    for (const t of targets) { // a red cross and the target's id
+      const [x, y] = at([t.north_m, t.east_m]);
+      ctx.strokeStyle = "#f55";
+      ctx.lineWidth = 2;
+      ctx.beginPath();
+      ctx.moveTo(x - 4, y - 4); ctx.lineTo(x + 4, y + 4);
+      ctx.moveTo(x - 4, y + 4); ctx.lineTo(x + 4, y - 4);
+      ctx.stroke();
+      ctx.fillStyle = "#f99";
+      ctx.fillText(t.id, x + 6, y + 4);
+    }
     for (const v of (last ? last.vehicles : [])) {
       const [x, y] = at([v.north_m, v.east_m]);
       const a = (v.yaw_deg * Math.PI) / 180;
