@@ -12,6 +12,7 @@ import csv
 import dataclasses
 import json
 import math
+import re
 import socket
 import threading
 import time
@@ -26,7 +27,7 @@ import pytest
 from test_server import live_server
 
 from cosim.errors import ConfigError
-from cosim.trials.live import Hub
+from cosim.trials.live import MAX_WATCHERS, Hub
 from cosim.trials.study import load_study
 
 W, H, RATE_HZ, DURATION_S = 160, 120, 10.0, 4.0
@@ -166,6 +167,15 @@ def test_a_watcher_that_does_not_keep_up_loses_its_oldest_frames_counted() -> No
         return slow.dropped_frames, hub.dropped_frames, left, len(got)
 
     dropped, total, left, got = asyncio.run(scenario())
+    # at most MAX_WATCHERS pages watch one session
+    async def crowd() -> None:
+        hub = Hub(asyncio.get_running_loop())
+        for _ in range(MAX_WATCHERS):
+            hub.watch()
+        with pytest.raises(ConfigError, match=rf"{MAX_WATCHERS} pages already watch this"):
+            hub.watch()
+
+    asyncio.run(crowd())
     assert dropped == 46  # 50 frames, the newest 4 kept
     assert total == dropped and left == [46, 47, 48, 49] and got == 50
 
@@ -296,6 +306,33 @@ def test_a_slow_page_loses_frames_and_the_run_keeps_real_time(tmp_path: Path,
         assert live["flags"] == [f"{lost:.1f} % of frames lost ({live['frames_dropped']} "
                                  f"dropped for the page, 0 skipped by it, of "
                                  f"{live['frames_published']}), over the study's 0.5 %"]
+        # reports and timings are checked against the trial's feeds and frames sent
+        good = {"trial_index": 0, "report_key": "k1", "feed": 1, "frame": 3, "x_px": 10.5,
+                "y_px": 20.0, "click_time_ms": 1000.0, "drawn_time_ms": 990.0}
+        last = 2 * DURATION_S * RATE_HZ // 2 - 1
+        cases: list[tuple[dict[str, Any], int, str]] = [
+            ({"feed": 2}, 400, r"feed: expected 0\.\.1 \(this trial's feeds\), got 2"),
+            ({"frame": 10_000}, 400, rf"frame: expected a frame of feed uav2/belly sent to "
+                                     rf"the page \(0\.\.{last:.0f}\), got 10000"),
+            ({"x_px": 641.0}, 400, r"x_px, y_px: expected a point of the 640 x 480 frame"),
+            ({"y_px": float("nan")}, 400, r"not JSON|y_px: expected a number"),
+            ({"report_key": "a b"}, 400, r"report_key: expected the page's id of the click"),
+            ({"trial_index": 1}, 409, r"trial_index: the live trial of this session is 0"),
+            ({"click_time_ms": -1}, 400, r"click_time_ms: expected 0\.\.86400000 ms"),
+        ]
+        for change, status_want, match in cases:
+            status, out = server.request("POST", f"/api/sessions/{s['id']}/live/reports",
+                                         {**good, **change})
+            assert status == status_want and re.search(match, out["error"]), (change, out)
+        for again, status_want in ((False, 201), (True, 200)):  # a retry is kept once
+            status, out = server.request("POST", f"/api/sessions/{s['id']}/live/reports", good)
+            assert status == status_want and out["created"] is not again, out
+        assert len(server.store.live_reports(s["id"])) == 1
+        status, out = server.request("POST", f"/api/sessions/{s['id']}/live/timing",
+                                     {"trial_index": 0, "frames_received": 1.5,
+                                      "frames_drawn": 1, "latency_samples": 1})
+        assert status == 400 and re.search(r"frames_received: expected a whole number "
+                                           r"0\.\.10000000, got 1\.5", out["error"]), out
         with browser_page(chromium) as page:
             page.goto(f"{server.url}/")
             page.wait_for_selector(".live-flags")
