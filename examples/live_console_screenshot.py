@@ -2,7 +2,9 @@
 temporary folder, so its runs and database stay out of the repository),
 open a session's live page in headless Chromium (Debian's
 /usr/bin/chromium), start the trial of the condition asked for and take a
-screenshot some seconds into it.
+screenshot some seconds into it; with ``--until-end``, also wait for the
+trial's end and print the run's status with the page's timing (frames sent,
+dropped, drawn, glass-to-glass latency).
 
     python examples/live_console_screenshot.py studies/live_feeds.yaml \
         --condition four_feeds --at-s 11 --out console.png
@@ -49,6 +51,8 @@ def main() -> None:
     ap.add_argument("--condition", required=True, help="the live condition's id")
     ap.add_argument("--at-s", type=float, default=10.0, help="seconds into the trial")
     ap.add_argument("--out", required=True)
+    ap.add_argument("--until-end", action="store_true",
+                    help="then wait for the trial's end and print its timing")
     a = ap.parse_args()
     from playwright.sync_api import sync_playwright
 
@@ -83,8 +87,15 @@ def main() -> None:
                                        f".textContent.match(/[0-9.]+/) || [0])[0]) >= "
                                        f"{a.at_s}", timeout=120_000)
                 page.screenshot(path=a.out)
+                if a.until_end:
+                    page.wait_for_function("document.body.dataset.phase === 'ended'",
+                                           timeout=3_600_000)
                 browser.close()
-            _post(f"{url}/api/sessions/{s['id']}/live/stop", {})
+            if a.until_end:
+                with urllib.request.urlopen(f"{url}/api/sessions/{s['id']}/live") as r:
+                    print(json.dumps(json.loads(r.read())["live"], indent=1))
+            else:
+                _post(f"{url}/api/sessions/{s['id']}/live/stop", {})
         finally:
             server.should_exit = True
             th.join(30)
