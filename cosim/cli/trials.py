@@ -42,6 +42,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                          "as a share of it (default 0.1: 10%%)")
     ta.add_argument("--exclude-reshown", action="store_true",
                     help="leave out trials shown a second time after the page was reloaded")
+    ta.add_argument("--study", metavar="STUDY.yaml",
+                    help="the study file: needed to score a live study's sessions (from the "
+                         "database) and to analyse the NASA-TLX and SAGAT answers")
+    ta.add_argument("--runs", metavar="DIR",
+                    help="a live study's run folders (default STUDY-live beside the study)")
 
 
 def run(a: argparse.Namespace) -> int:
@@ -61,44 +66,114 @@ def run(a: argparse.Namespace) -> int:
             print(_export_instruments(a.db, a.instruments))
         return EXIT_OK
     if a.trials_cmd == "analyse":
-        import tempfile
-
-        from cosim.trials.analysis import analyse
-        from cosim.trials.figures import MAX_PANELS, shown_first
-        from cosim.trials.store import export_csv
-
-        src = Path(a.responses)
-        with tempfile.TemporaryDirectory() as tmp:
-            if src.suffix.lower() != ".csv":  # a database: its responses first
-                _existing_db(a.responses)
-                src = export_csv(a.responses, Path(tmp) / "responses.csv")
-            summary = analyse(src, a.out, seed=a.seed, exclude_reshown=a.exclude_reshown,
-                              tolerance=a.tolerance)
-        verdicts: dict[str, list[str]] = {}
-        for c in summary.get("critical_gap_check", []):
-            verdicts.setdefault(c["fit"], []).append(c["verdict"])
-        fits = summary.get("critical_gap", {})
-        labels = list(fits)
-        order = shown_first([fits[label].get("status", "") for label in labels])
-        for i in order[:MAX_PANELS]:  # those with a critical gap first, as in the figure
-            fit = fits[labels[i]]
-            print(f"critical gap, {labels[i]}: {_gap_summary(fit, verdicts.get(labels[i], []))}")
-        if len(order) > MAX_PANELS:
-            print(f"critical gap: {len(order) - MAX_PANELS} more of the {len(order)} fits in "
-                  f"critical_gap.csv (those above have a critical gap first)")
-        for which, columns in summary.get("binned_conditions", {}).items():
-            for column, bins in columns.items():
-                print(f"{column}: {sum(b['values'] for b in bins)} values in the {which} "
-                      f"responses, cut into {len(bins)} bins of about equal trials, each "
-                      f"analysed at its trials' mean (the bins in analysis.json)")
-        model = (summary.get("recognise") or {}).get("logistic") or {}
-        for name, c in (model.get("coefficients") or {}).items():
-            if name != "intercept":
-                print(f"recognition, {name}: {c['estimate']:+.2f} (95% CI {c['ci'][0]:+.2f} "
-                      f"to {c['ci'][1]:+.2f}) on the log-odds")
-        print(f"outputs in {a.out}/: " + ", ".join(Path(f).name for f in summary.get("files", [])))
-        return EXIT_OK
+        return _analyse(a)
     raise ConfigError("cosim trials: give serve, export or analyse (cosim trials --help)")
+
+
+def _analyse(a: argparse.Namespace) -> int:
+    """``cosim trials analyse``: a clip study's responses, a live study's
+    sessions scored, and the instruments' answers of either."""
+    from cosim.trials.study import load_study
+
+    if a.runs and not a.study:
+        raise ConfigError("--runs: give the live study too (--study STUDY.yaml)")
+    study = load_study(a.study) if a.study else None
+    is_db = Path(a.responses).suffix.lower() != ".csv"
+    live = study is not None and study.protocol == "live"
+    if live and not is_db:
+        raise ConfigError(f"{a.responses}: a live study ({a.study}) is analysed from its "
+                          f"database (its sessions, clicks and instruments), not a CSV")
+    files: list[str] = []
+    if is_db:
+        _existing_db(a.responses)
+    if not live:
+        files += _analyse_clips(a)
+    if is_db:
+        files += _analyse_db(a, study)
+    print(f"outputs in {a.out}/: " + ", ".join(dict.fromkeys(files)))
+    return EXIT_OK
+
+
+def _analyse_db(a: argparse.Namespace, study: Any) -> list[str]:
+    """A database's live sessions and instrument answers analysed (both need
+    the study); what is there and cannot be analysed without it is refused
+    (live sessions) or said (instrument answers)."""
+    from cosim.trials.store import Store
+
+    files: list[str] = []
+    with Store(a.responses) as store:
+        has_live = any(r["protocol"] == "live" for r in store.sessions())
+        answers = store.instrument_answers()
+        if study is None:
+            if has_live:
+                raise ConfigError(f"{a.responses}: holds live sessions: give their study "
+                                  f"(--study STUDY.yaml) to score them")
+            if answers:
+                print(f"{len(answers)} NASA-TLX and SAGAT answers not analysed: give the "
+                      f"study (--study STUDY.yaml)")
+            return files
+        if study.protocol == "live":
+            files += _analyse_live(a, study, store)
+        elif has_live:
+            raise ConfigError(f"{a.responses}: holds live sessions but {a.study} is a "
+                              f"{study.protocol} study: give the live study they belong to")
+    return files
+
+
+def _analyse_live(a: argparse.Namespace, study: Any, store: Any) -> list[str]:
+    """Every run trial of the live study's sessions scored and analysed."""
+    from cosim.trials.live_analysis import analyse_live
+    from cosim.trials.live_results import scored_sessions
+
+    res = scored_sessions(study, store, Path(a.runs) if a.runs else None)
+    summary = analyse_live(res.sessions, a.out)
+    rep = summary["reports"]
+    print(f"live: {len(res.sessions)} trials scored of {summary['participants']} "
+          f"participants: {summary['detected']} of {summary['targets']} targets detected; "
+          f"{rep['hit']} hits, {rep['duplicate']} duplicates, {rep['false_alarm']} false "
+          f"alarms" + (f"; {len(res.not_run)} trials not run (no run folder)"
+                       if res.not_run else ""))
+    return list(summary["files"])
+
+
+def _analyse_clips(a: argparse.Namespace) -> list[str]:
+    """The clip trials' analysis (``analysis.analyse``) and its print-out."""
+    import tempfile
+
+    from cosim.trials.analysis import analyse
+    from cosim.trials.figures import MAX_PANELS, shown_first
+    from cosim.trials.store import export_csv
+
+    src = Path(a.responses)
+    with tempfile.TemporaryDirectory() as tmp:
+        if src.suffix.lower() != ".csv":  # a database: its responses first
+            _existing_db(a.responses)
+            src = export_csv(a.responses, Path(tmp) / "responses.csv")
+        summary = analyse(src, a.out, seed=a.seed, exclude_reshown=a.exclude_reshown,
+                          tolerance=a.tolerance)
+    verdicts: dict[str, list[str]] = {}
+    for c in summary.get("critical_gap_check", []):
+        verdicts.setdefault(c["fit"], []).append(c["verdict"])
+    fits = summary.get("critical_gap", {})
+    labels = list(fits)
+    order = shown_first([fits[label].get("status", "") for label in labels])
+    for i in order[:MAX_PANELS]:  # those with a critical gap first, as in the figure
+        fit = fits[labels[i]]
+        print(f"critical gap, {labels[i]}: {_gap_summary(fit, verdicts.get(labels[i], []))}")
+    if len(order) > MAX_PANELS:
+        print(f"critical gap: {len(order) - MAX_PANELS} more of the {len(order)} fits in "
+              f"critical_gap.csv (those above have a critical gap first)")
+    for which, columns in summary.get("binned_conditions", {}).items():
+        for column, bins in columns.items():
+            print(f"{column}: {sum(b['values'] for b in bins)} values in the {which} "
+                  f"responses, cut into {len(bins)} bins of about equal trials, each "
+                  f"analysed at its trials' mean (the bins in analysis.json)")
+    model = (summary.get("recognise") or {}).get("logistic") or {}
+    for name, c in (model.get("coefficients") or {}).items():
+        if name != "intercept":
+            print(f"recognition, {name}: {c['estimate']:+.2f} (95% CI {c['ci'][0]:+.2f} "
+                  f"to {c['ci'][1]:+.2f}) on the log-odds")
+    return [Path(f).name for f in summary.get("files", [])]
 
 
 def _export_instruments(db: str, out: str) -> Path:

@@ -1,0 +1,123 @@
+"""A live study's stored trials scored, without a running console.
+
+``score_trial(study, session, trial_index, reports, runs_dir)`` scores one
+trial of a stored live session (``live_scoring.score_stored``) from its run
+folder (``RUNS/SESSION/trialNNN``, ``RUNS`` the console's, by default
+``STUDY-live`` beside the study) and its stored clicks, with the study's
+``scoring:`` settings and its condition's duration (plus the margin the
+console allows for a click on the last frame). ``scored_sessions(study,
+store)`` does so for every trial of every live session that has run and
+gives ``live_analysis.ScoredSession``s (one per session and trial, named
+``SESSION/TRIAL``) with the trial's conditions: what ``cosim trials analyse``
+hands to ``live_analysis.analyse_live``.
+
+The store and the run folders are untrusted: a trial whose condition is no
+longer in the study, whose run folder lacks a feed's ground truth or whose
+stored clicks are not reports is a ``ConfigError`` naming the session and
+the trial. It reads; it runs nothing and serves nothing.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from cosim.errors import ConfigError
+from cosim.scenario import load_scenario
+from cosim.trials.live_analysis import ScoredSession
+from cosim.trials.live_scoring import SessionScore, score_stored
+from cosim.trials.study import Study
+
+log = logging.getLogger(__name__)
+
+#: a click this long (s) after the run's end is scored (the page shows the last
+#: frame until it hears of the end; the console's ``live_routes.END_MARGIN_S``)
+END_MARGIN_S = 5.0
+
+
+def runs_folder(study: Study) -> Path:
+    """Where the console keeps a study's live runs: ``STUDY-live`` beside it."""
+    return study.path.resolve().with_name(f"{study.path.stem}-live")
+
+
+def trial_folder(runs_dir: Path, session_id: str, trial_index: int) -> Path:
+    """The run folder of one trial of a session."""
+    return runs_dir / session_id / f"trial{trial_index:03d}"
+
+
+def score_trial(study: Study, session: Mapping[str, Any], trial_index: int,
+                reports: Sequence[Mapping[str, Any]], runs_dir: Path | None = None
+                ) -> SessionScore:
+    """Trial ``trial_index`` of a stored live ``session`` scored from its run
+    folder and its stored ``reports`` (``Store.live_reports`` rows; those of
+    other trials are left out)."""
+    cond = trial_condition(study, session, trial_index)
+    folder = trial_folder(runs_dir or runs_folder(study), str(session["id"]), trial_index)
+    where = f"session {session['id']} trial {trial_index}"
+    try:
+        duration_s = cond.duration_s or load_scenario(cond.scenario).duration_s
+        rows = [r for r in reports if r.get("trial_index") == trial_index]
+        return score_stored(folder, {f.name: (f.width_px, f.height_px) for f in cond.feeds},
+                            rows, duration_s + END_MARGIN_S, study.scoring)
+    except ConfigError as e:  # ReportError too
+        raise ConfigError([f"{where}: {p}" for p in e.problems], e.more) from None
+
+
+def trial_condition(study: Study, session: Mapping[str, Any], trial_index: int) -> Any:
+    """The study's live condition of a session's trial; a ``ConfigError`` if
+    the trial or its condition is not there."""
+    order = session.get("trial_order") or []
+    if not 0 <= trial_index < len(order):
+        raise ConfigError(f"session {session.get('id')}: no trial {trial_index} (it has "
+                          f"{len(order)})")
+    cid = order[trial_index].get("condition_id") if isinstance(order[trial_index], dict) \
+        else None
+    by_id = {c.id: c for c in study.live}
+    if cid not in by_id:
+        raise ConfigError(f"session {session.get('id')} trial {trial_index}: condition "
+                          f"{str(cid)[:200]!r} is not in the study {study.path} (it has: "
+                          f"{', '.join(sorted(by_id)[:20])})")
+    cond = by_id[cid]
+    if order[trial_index].get("fingerprint") != cond.fingerprint:
+        log.warning("session %s trial %d: condition %s's scenario changed since the session "
+                    "was created; scored from its run folder's ground truth as it ran",
+                    session.get("id"), trial_index, cid)
+    return cond
+
+
+@dataclass(frozen=True)
+class LiveResults:
+    """The scored trials and the trials left out (not run yet: no summary)."""
+
+    sessions: tuple[ScoredSession, ...]
+    not_run: tuple[str, ...]
+
+
+def scored_sessions(study: Study, store: Any, runs_dir: Path | None = None) -> LiveResults:
+    """Every trial of every stored live session of ``study`` that has run
+    (its folder has its ``summary.json``), scored; practice trials left out."""
+    runs = runs_dir or runs_folder(study)
+    out: list[ScoredSession] = []
+    not_run: list[str] = []
+    for row in sorted(store.sessions(), key=lambda r: (r["created"], r["id"])):
+        if row["protocol"] != "live":
+            continue
+        s = store.session(row["id"])
+        reports = store.live_reports(s["id"])
+        for ti, t in enumerate(s["trial_order"]):
+            if isinstance(t, dict) and t.get("practice"):
+                continue
+            if not (trial_folder(runs, s["id"], ti) / "summary.json").is_file():
+                not_run.append(f"{s['id']}/{ti}")
+                continue
+            score = score_trial(study, s, ti, reports, runs)
+            cond = trial_condition(study, s, ti)
+            out.append(ScoredSession(f"{s['id']}/{ti}", str(s["participant"]),
+                                     tuple(cond.conditions), score))
+    if not_run:
+        log.info("%d live trials have not run (no run folder): %s", len(not_run),
+                 ", ".join(not_run[:10]))
+    return LiveResults(tuple(out), tuple(not_run))

@@ -1,0 +1,180 @@
+"""`cosim trials analyse` on a live study: the stored sessions' trials are
+scored from their run folders (ground truth written like a run's) and
+analysed; the targets' outcomes, latencies and pixel errors equal those
+worked out by hand from the synthetic paths below; bad or missing data is
+refused with exit 2 and a message saying what and where."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+from test_live import PROFILE, live_study
+from test_live_scoring import gt_rows, write_gt
+
+from cosim.cli import main
+from cosim.trials.live_results import runs_folder, trial_folder
+from cosim.trials.store import Store
+from cosim.trials.study import Study, load_study
+
+STUDY = """\
+name: live_results
+protocol: live
+scenarios:
+  - {id: one, scenario: pair.yaml, feeds: [uav1/belly], conditions: {feeds: 1}}
+  - {id: two, scenario: pair.yaml, feeds: [uav1/belly, uav2/belly], conditions: {feeds: 2}}
+order: shuffle
+"""
+# in uav1/belly the truck sits at (80, 60), half size 5, in view frames 10-40 (1.0-4.0 s);
+# in uav2/belly the car at (40, 30), half size 4, frames 20-45 (2.0-4.5 s); 10 Hz
+TRUCK: tuple[Any, int, int, set[int]] = (lambda f: (80.0, 60.0, 5.0), 10, 40, set())
+CAR: tuple[Any, int, int, set[int]] = (lambda f: (40.0, 30.0, 4.0), 20, 45, set())
+
+
+def _session(store: Store, study: Study, who: str, conds: list[str]) -> dict[str, Any]:
+    by_id = {c.id: c for c in study.live}
+    order = [{"index": i, "practice": False, "clip": i, "condition_id": c,
+              "fingerprint": by_id[c].fingerprint, "break_before": False}
+             for i, c in enumerate(conds)]
+    return store.create_session(participant=who, study=study.name, protocol="live",
+                                display=PROFILE, order_method="shuffle", seed=1,
+                                session_number=0, trial_order=order)
+
+
+def _run(study: Study, sid: str, ti: int, feeds: dict[str, Any]) -> None:
+    """A trial's run folder as the console leaves it: summary.json naming each
+    camera's ground truth."""
+    folder = trial_folder(runs_folder(study), sid, ti)
+    (folder / "cameras").mkdir(parents=True)
+    cams = []
+    for feed, targets in feeds.items():
+        v, c = feed.split("/")
+        write_gt(folder / "cameras" / f"{v}_{c}.gt.csv", gt_rows(targets))
+        cams.append({"vehicle": v, "camera": c, "ground_truth": f"cameras/{v}_{c}.gt.csv"})
+    (folder / "summary.json").write_text(json.dumps({"cameras": cams}))
+
+
+def _click(store: Store, s: dict[str, Any], ti: int, key: str, feed: str, frame: int,
+           x_px: float, y_px: float, after_ms: float = 0.0) -> None:
+    """A click ``after_ms`` after the page drew ``frame`` (pixel edges at whole
+    numbers: ``x_px`` 80.5 is the truth's 80)."""
+    store.record_live_report({
+        "session": s["id"], "participant": s["participant"], "trial_index": ti,
+        "condition": s["trial_order"][ti]["condition_id"], "report_key": key, "feed": 0,
+        "feed_name": feed, "frame": frame, "x_px": x_px, "y_px": y_px,
+        "click_time_ms": 1000.0 + after_ms, "drawn_time_ms": 1000.0, "run": "r"})
+
+
+@pytest.fixture
+def live_db(tmp_path: Path) -> tuple[Path, Path, dict[str, dict[str, Any]]]:
+    study_path = live_study(tmp_path, STUDY)
+    study = load_study(study_path)
+    db = tmp_path / "live.sqlite"
+    one = {"uav1/belly": {"truck1": TRUCK}}
+    two = {"uav1/belly": {"truck1": TRUCK}, "uav2/belly": {"car": CAR}}
+    with Store(db) as store:
+        p1 = _session(store, study, "p1", ["one", "two"])
+        p2 = _session(store, study, "p2", ["two", "one"])
+        p3 = _session(store, study, "p3", ["one", "two"])  # never run
+        _run(study, p1["id"], 0, one)
+        _run(study, p1["id"], 1, two)
+        _run(study, p2["id"], 0, two)
+        _run(study, p2["id"], 1, one)
+        # p1, one feed: the truck at frame 15 (1.5 s) clicked 200 ms later, dead centre
+        # (latency 1.7 - 1.0 = 0.7 s); a click on nothing at frame 30: a false alarm
+        _click(store, p1, 0, "a", "uav1/belly", 15, 80.5, 60.5, 200.0)
+        _click(store, p1, 0, "b", "uav1/belly", 30, 10.5, 10.5)
+        # p1, two feeds: the truck at frame 20 (latency 1.0 s); the car never: a miss
+        _click(store, p1, 1, "a", "uav1/belly", 20, 80.5, 60.5)
+        # p2, two feeds: the truck at frame 12 + 100 ms, 3 px right and 4 down (error 5 px,
+        # latency 0.3 s); again at frame 30 (a duplicate); the car at frame 25 (0.5 s after
+        # 2.0 s, its first sight in any feed and in its own)
+        _click(store, p2, 0, "a", "uav1/belly", 12, 83.5, 64.5, 100.0)
+        _click(store, p2, 0, "b", "uav1/belly", 30, 80.5, 60.5)
+        _click(store, p2, 0, "c", "uav2/belly", 25, 40.5, 30.5)
+        # p2, one feed: nothing clicked: the truck (in view 3.1 s) a miss
+    return study_path, db, {"p1": p1, "p2": p2, "p3": p3}
+
+
+def _rows(path: Path) -> list[dict[str, str]]:
+    with path.open(newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def _num(v: str) -> float | None:
+    return None if v == "" else round(float(v), 9)
+
+
+def test_analyse_scores_the_stored_live_sessions(
+        live_db: tuple[Path, Path, dict[str, dict[str, Any]]], tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    study, db, s = live_db
+    out = tmp_path / "a"
+    assert main(["-q", "trials", "analyse", str(db), "--study", str(study), "--out",
+                 str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert ("live: 4 trials scored of 2 participants: 4 of 6 targets detected; 4 hits, "
+            "1 duplicates, 1 false alarms; 2 trials not run (no run folder)") in printed
+    p1, p2 = s["p1"]["id"], s["p2"]["id"]
+    got = {(r["session"], r["target"]): (r["detected"], _num(r["latency_any_s"]),
+                                         _num(r["latency_feed_s"]), _num(r["error_px"]),
+                                         r["condition_feeds"])
+           for r in _rows(out / "live_targets.csv")}
+    assert got == {
+        (f"{p1}/0", "truck1"): ("1", 0.7, 0.7, 0.0, "1"),
+        (f"{p1}/1", "truck1"): ("1", 1.0, 1.0, 0.0, "2"),
+        (f"{p1}/1", "car"): ("0", None, None, None, "2"),
+        (f"{p2}/0", "truck1"): ("1", 0.3, 0.3, 5.0, "2"),
+        (f"{p2}/0", "car"): ("1", 0.5, 0.5, 0.0, "2"),
+        (f"{p2}/1", "truck1"): ("0", None, None, None, "1"),
+    }
+    sessions = {r["session"]: (r["hits"], r["duplicates"], r["false_alarms"], r["misses"])
+                for r in _rows(out / "live_sessions.csv")}
+    assert sessions == {f"{p1}/0": ("1", "0", "1", "0"), f"{p1}/1": ("1", "0", "0", "1"),
+                        f"{p2}/0": ("2", "1", "0", "0"), f"{p2}/1": ("0", "0", "0", "1")}
+    # detection against feeds: 1 of 2 trucks with one feed; 3 of 4 targets with two
+    det = {r["level"]: (float(r["estimate"]), r["participants"], r["interval"])
+           for r in _rows(out / "live_levels.csv")
+           if r["measure"] == "detected" and r["condition"] == "feeds"}
+    assert det == {"1": (0.5, "2", "t over participants"),
+                   "2": (0.75, "2", "t over participants")}
+    assert (out / "live_feeds.png").stat().st_size > 0
+    assert not (out / "conspicuity.csv").exists()  # no clip analysis of a live study
+
+
+def test_live_data_missing_or_bad_is_refused(
+        live_db: tuple[Path, Path, dict[str, dict[str, Any]]], tmp_path: Path,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    study, db, s = live_db
+    argv = ["-q", "trials", "analyse", str(db), "--out", str(tmp_path / "a")]
+    assert main(argv) == 2
+    assert "live.sqlite: holds live sessions: give their study (--study STUDY.yaml)" \
+        in capsys.readouterr().err
+    assert main([*argv, "--runs", str(tmp_path)]) == 2
+    assert "--runs: give the live study too" in capsys.readouterr().err
+    csv_path = tmp_path / "r.csv"
+    csv_path.write_text("session\n")
+    assert main(["-q", "trials", "analyse", str(csv_path), "--study", str(study), "--out",
+                 str(tmp_path / "a")]) == 2
+    assert "is analysed from its database" in capsys.readouterr().err
+    # a click on a frame the run's ground truth does not have
+    with Store(db) as store:
+        _click(store, s["p2"], 1, "z", "uav1/belly", 150, 5.5, 5.5)
+    assert main([*argv, "--study", str(study)]) == 2
+    err = capsys.readouterr().err
+    assert f"session {s['p2']['id']} trial 1: report z: frame 150 of uav1/belly is not in " \
+           f"the ground truth" in err and "Traceback" not in err
+    # a run folder without one of its feeds' ground truth
+    folder = trial_folder(runs_folder(load_study(study)), s["p2"]["id"], 1)
+    (folder / "summary.json").write_text(json.dumps({"cameras": []}))
+    assert main([*argv, "--study", str(study)]) == 2
+    assert (f"session {s['p2']['id']} trial 1: " in (err := capsys.readouterr().err)
+            and "no ground truth for feed 'uav1/belly'" in err)
+    # a session whose condition the study no longer has
+    body = study.read_text().replace("id: one,", "id: uno,")
+    study.write_text(body)
+    assert main([*argv, "--study", str(study)]) == 2
+    assert "trial 0: condition 'one' is not in the study" in capsys.readouterr().err
