@@ -28,6 +28,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     te = trs.add_parser("export", help="the responses as CSV")
     te.add_argument("db", metavar="DB", help="the study's database (file or URL)")
     te.add_argument("--out", metavar="CSV", required=True)
+    te.add_argument("--live", metavar="CSV",
+                    help="also write a live study's clicks here (the live console's "
+                         "reports, as stored), a row per click")
     te.add_argument("--instruments", metavar="CSV",
                     help="also write the NASA-TLX and SAGAT answers here, a row per block "
                          "or probe")
@@ -64,6 +67,8 @@ def run(a: argparse.Namespace) -> int:
         print(export_csv(a.db, a.out))
         if a.instruments:
             print(_export_instruments(a.db, a.instruments))
+        if a.live:
+            print(_export_live(a.db, a.live))
         return EXIT_OK
     if a.trials_cmd == "analyse":
         return _analyse(a)
@@ -174,6 +179,17 @@ def _analyse_clips(a: argparse.Namespace) -> list[str]:
             print(f"recognition, {name}: {c['estimate']:+.2f} (95% CI {c['ci'][0]:+.2f} "
                   f"to {c['ci'][1]:+.2f}) on the log-odds")
     return [Path(f).name for f in summary.get("files", [])]
+
+
+def _export_live(db: str, out: str) -> Path:
+    """A live study's stored clicks as CSV (``store.LIVE_EXPORT_COLUMNS``)."""
+    from cosim.trials.store import LIVE_EXPORT_COLUMNS, Store, write_csv
+
+    with Store(db) as store:
+        rows = store.live_reports()
+    with Path(out).open("w", newline="") as f:
+        write_csv(rows, f, LIVE_EXPORT_COLUMNS)
+    return Path(out)
 
 
 def _export_instruments(db: str, out: str) -> Path:

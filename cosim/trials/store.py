@@ -158,6 +158,8 @@ live_reports = sa.Table(
     sa.UniqueConstraint("session", "trial_index", "report_key", name="one_row_per_report"),
 )
 _LIVE_FIELDS = tuple(c.name for c in live_reports.columns if c.name not in ("id", "created"))
+#: the columns of ``cosim trials export --live``: every stored click, as stored
+LIVE_EXPORT_COLUMNS = tuple(c.name for c in live_reports.columns if c.name != "id")
 
 
 def _now() -> str:
@@ -325,10 +327,12 @@ class Store:
         return self._insert_once(live_reports, _LIVE_FIELDS, row, ("report_key",),
                                  "report of")
 
-    def live_reports(self, session_id: str) -> list[dict[str, Any]]:
-        """A session's live reports, in the order they were stored."""
-        q = (live_reports.select().where(live_reports.c.session == session_id)
-             .order_by(live_reports.c.id))
+    def live_reports(self, session_id: str | None = None) -> list[dict[str, Any]]:
+        """A session's live reports (None: every session's), in the order they
+        were stored."""
+        q = live_reports.select().order_by(live_reports.c.id)
+        if session_id is not None:
+            q = q.where(live_reports.c.session == session_id)
         with self.engine.connect() as c:
             return [dict(r) for r in c.execute(q).mappings()]
 
@@ -417,14 +421,16 @@ def export_csv(db: Store | str | Path, path: str | Path) -> Path:
     return out
 
 
-def write_csv(rows: list[dict[str, Any]], f: TextIO) -> None:
-    """Responses (``Store.responses()`` rows) as CSV with ``EXPORT_COLUMNS``;
+def write_csv(rows: list[dict[str, Any]], f: TextIO,
+              columns: tuple[str, ...] = EXPORT_COLUMNS) -> None:
+    """Responses (``Store.responses()`` rows) as CSV with ``EXPORT_COLUMNS``
+    (or live reports, ``Store.live_reports()``, with ``LIVE_EXPORT_COLUMNS``);
     text a spreadsheet would run as a formula is neutralised
     (``spreadsheet.safe_cell``), for ``cosim trials export`` and the
     experimenter's download alike."""
     from cosim.trials.spreadsheet import SafeWriter
 
     w = SafeWriter(f)
-    w.writerow(EXPORT_COLUMNS)
+    w.writerow(columns)
     for r in rows:
-        w.writerow([_cell(r[c]) for c in EXPORT_COLUMNS])
+        w.writerow([_cell(r[c]) for c in columns])

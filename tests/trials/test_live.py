@@ -328,6 +328,7 @@ def test_a_slow_page_loses_frames_and_the_run_keeps_real_time(tmp_path: Path,
             status, out = server.request("POST", f"/api/sessions/{s['id']}/live/reports", good)
             assert status == status_want and out["created"] is not again, out
         assert len(server.store.live_reports(s["id"])) == 1
+        (stored,) = server.store.live_reports(s["id"])
         status, out = server.request("POST", f"/api/sessions/{s['id']}/live/timing",
                                      {"trial_index": 0, "frames_received": 1.5,
                                       "frames_drawn": 1, "latency_samples": 1})
@@ -342,6 +343,19 @@ def test_a_slow_page_loses_frames_and_the_run_keeps_real_time(tmp_path: Path,
         # the tick loop kept to real time: no tick more than 100 ms behind on the
         # median, whatever the client did
         assert pacing["lateness_ms_p50"] < 100.0, pacing
+    # cosim trials export --live: the click as stored
+    from cosim.cli import main
+
+    out = tmp_path / "live.csv"
+    assert main(["-q", "trials", "export", str(tmp_path / "study.sqlite"), "--out",
+                 str(tmp_path / "responses.csv"), "--live", str(out)]) == 0
+    with open(out, newline="") as f:
+        (row,) = list(csv.DictReader(f))
+    assert {k: row[k] for k in ("session", "participant", "feed_name", "frame", "x_px",
+                                "click_time_ms", "report_key")} == {
+        "session": s["id"], "participant": "slow", "feed_name": "uav2/belly", "frame": "3",
+        "x_px": "10.5", "click_time_ms": "1000.0", "report_key": "k1"}
+    assert row["run"] == stored["run"] and row["created"] == stored["created"]
 
 
 PIXELS_AT_CLICK = """
