@@ -5,7 +5,9 @@ Owns the three pieces between a run and the browsers: ``FeedTap``, a run
 participant (``cosim.sync.runner.Run(..., extra_participants=[...])``) that
 takes the frames the cameras render anyway (``RunContext.frame_taps``),
 JPEG-encodes those of the condition's feeds with their feed number and
-frame number, and the aircraft's positions a few times a second; where the
+frame number (also written in rows below the picture, ``with_counter``, for
+the page to read back from what it decoded), and the aircraft's positions
+a few times a second; where the
 scenario sets a ``datalink:`` a feed is its delivered frames (each
 ``every``-th, as the downlink decoded it, numbered as the ground truth
 numbers it) handed on its ``latency_ms`` later;
@@ -50,6 +52,8 @@ MAP_RATE_HZ = 4.0
 MAX_PENDING = 32
 #: pages watching one session at once
 MAX_WATCHERS = 4
+#: rows below each frame sent that carry its number (``with_counter``)
+COUNTER_ROWS = 32
 _POS_COLS = [STATE_INDEX[c] for c in ("lat_deg", "lon_deg", "alt_msl_m", "yaw_deg")]
 _POSE_COLS = [STATE_INDEX[c] for c in ("lat_deg", "lon_deg", "alt_msl_m", "roll_deg",
                                        "pitch_deg", "yaw_deg")]
@@ -174,6 +178,37 @@ class Hub:
         return self.dropped_gone + sum(w.dropped_frames for w in self.watchers)
 
 
+def with_counter(bgr: np.ndarray, frame_no: int) -> np.ndarray:
+    """The frame (BGR) with ``COUNTER_ROWS`` rows below it that carry its
+    number (mod 2**16) for the page to read back from what it decoded: bit
+    ``b`` is white (1) or black (0) in block ``b % 8`` (each ``width // 8``
+    px wide) of band ``b // 8`` (each 16 rows). The page draws the frame
+    without them."""
+    h, w = bgr.shape[:2]
+    out = np.zeros((h + COUNTER_ROWS, w, 3), np.uint8)
+    out[:h] = bgr[:, :, :3]
+    bw = w // 8
+    for b in range(16):
+        if (frame_no >> b) & 1:
+            band, col = divmod(b, 8)
+            out[h + 16 * band:h + 16 * (band + 1), col * bw:(col + 1) * bw] = 255
+    return out
+
+
+def read_counter(img: np.ndarray) -> int:
+    """The number ``with_counter`` wrote into ``img`` (its last
+    ``COUNTER_ROWS`` rows; BGR or grey), each block read at its centre."""
+    strip = img[-COUNTER_ROWS:]
+    bw = strip.shape[1] // 8
+    value = 0
+    for b in range(16):
+        band, col = divmod(b, 8)
+        px = strip[16 * band + 8, col * bw + bw // 2]
+        if float(np.mean(px)) >= 128:
+            value |= 1 << b
+    return value
+
+
 class FeedTap:
     """The run participant that hands the condition's feeds and the aircraft's
     positions to a ``Hub`` (see the module docstring)."""
@@ -229,7 +264,8 @@ class FeedTap:
         if frame_no % every:  # between a downlink's deliveries: its last frame held
             return
         t0 = time.perf_counter()
-        ok, jpg = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+        ok, jpg = cv2.imencode(".jpg", with_counter(bgr, frame_no),
+                               [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
         self.encode_s += time.perf_counter() - t0
         if not ok:
             log.warning("feed %s: frame at %.2f s could not be JPEG-encoded", feed.name, time_s)

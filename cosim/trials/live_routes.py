@@ -53,7 +53,7 @@ STOP_WAIT_S = 30.0
 #: frame until it hears of the end)
 END_MARGIN_S = 5.0
 #: a page's timing report: its counts (whole, at most MAX_FRAMES) and times (ms)
-TIMING_COUNTS = ("frames_received", "frames_drawn", "latency_samples")
+TIMING_COUNTS = ("frames_received", "frames_drawn", "latency_samples", "counter_mismatches")
 TIMING_MS = ("latency_ms_p50", "latency_ms_p95", "latency_ms_max", "clock_rtt_ms")
 MAX_FRAMES = 10_000_000
 MAX_LATENCY_MS = 600_000.0

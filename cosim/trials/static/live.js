@@ -39,6 +39,7 @@
   let rttMs = null;        // the round trip that estimate came from
   let received = 0;
   let drawnCount = 0;
+  let mismatches = 0;      // frames whose pixels carry another number than said
   const latencies = [];    // glass-to-glass of every frame drawn (ms)
   const MAX_LATENCIES = 100000;
   // for a test's eyes: every frame drawn and every report posted
@@ -92,28 +93,52 @@
     for (const [k, d] of due) {
       const f = feeds[k];
       if (!f) continue;
-      f.canvas.getContext("2d").drawImage(d.bitmap, 0, 0, f.width_px, f.height_px);
+      f.canvas.getContext("2d").drawImage(d.bitmap, 0, 0, d.bitmap.width,
+                                          d.bitmap.height - COUNTER_ROWS, 0, 0,
+                                          f.width_px, f.height_px);
       d.bitmap.close();
       drawn.set(k, { frame: d.frame, time_ms: now });
       drawnCount += 1;
       if (latencies.length < MAX_LATENCIES) {
         latencies.push(performance.timeOrigin + now + offsetMs - d.made_ms);
       }
-      window.live.drawn.push([k, d.frame, now]);
+      window.live.drawn.push([k, d.frame, now, d.counter]);
       if (window.live.drawn.length > 10000) window.live.drawn.splice(0, 5000);
     }
     due.clear();
     document.body.dataset.drawn = String(drawn.size);
   }
 
+  // The frame number written in the rows below the picture (the server's
+  // with_counter): bit b white or black at the centre of block b % 8 of band b / 8.
+  const COUNTER_ROWS = 32;
+  const strip = document.createElement("canvas");
+  const stripCtx = strip.getContext("2d", { willReadFrequently: true });
+  function readCounter(bitmap) {
+    const w = bitmap.width, bw = Math.floor(w / 8);
+    strip.width = w;
+    strip.height = COUNTER_ROWS;
+    stripCtx.drawImage(bitmap, 0, bitmap.height - COUNTER_ROWS, w, COUNTER_ROWS,
+                       0, 0, w, COUNTER_ROWS);
+    const px = stripCtx.getImageData(0, 0, w, COUNTER_ROWS).data;
+    let value = 0;
+    for (let b = 0; b < 16; b++) {
+      const i = ((16 * Math.floor(b / 8) + 8) * w + (b % 8) * bw + Math.floor(bw / 2)) * 4;
+      if ((px[i] + px[i + 1] + px[i + 2]) / 3 >= 128) value |= 1 << b;
+    }
+    return value;
+  }
+
   async function frame(msg) {
     const bytes = Uint8Array.from(atob(msg.jpeg), (c) => c.charCodeAt(0));
     const bitmap = await createImageBitmap(new Blob([bytes], { type: "image/jpeg" }));
+    const counter = readCounter(bitmap);
+    if (counter !== msg.frame % 65536) mismatches += 1;
     received += 1;
     const was = due.get(msg.feed);
     if (was && was.frame > msg.frame) { bitmap.close(); return; }
     if (was) was.bitmap.close();
-    due.set(msg.feed, { frame: msg.frame, bitmap, made_ms: msg.made_ms });
+    due.set(msg.feed, { frame: msg.frame, bitmap, made_ms: msg.made_ms, counter });
     if (!rafPending) { rafPending = true; requestAnimationFrame(draw); }
   }
 
@@ -262,7 +287,7 @@
       trial_index: trialIndex, frames_received: received, frames_drawn: drawnCount,
       latency_samples: s.length, latency_ms_p50: quantile(s, 0.5),
       latency_ms_p95: quantile(s, 0.95), latency_ms_max: s.length ? s[s.length - 1] : null,
-      clock_rtt_ms: rttMs,
+      clock_rtt_ms: rttMs, counter_mismatches: mismatches,
     };
     window.live.timing = body;
     return fetch(`/api/sessions/${sid}/live/timing`, {
