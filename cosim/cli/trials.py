@@ -122,7 +122,24 @@ def _analyse_db(a: argparse.Namespace, study: Any) -> list[str]:
         elif has_live:
             raise ConfigError(f"{a.responses}: holds live sessions but {a.study} is a "
                               f"{study.protocol} study: give the live study they belong to")
+        if answers:
+            files += _analyse_instruments(a, study, store, answers)
     return files
+
+
+def _analyse_instruments(a: argparse.Namespace, study: Any, store: Any,
+                         answers: list[dict[str, Any]]) -> list[str]:
+    """The NASA-TLX and SAGAT answers' tables and figures."""
+    from cosim.trials.instrument_analysis import analyse_instruments
+
+    sessions = [store.session(r["id"]) for r in store.sessions()]
+    summary = analyse_instruments(study, sessions, answers, a.out)
+    print(f"instruments: {summary['tlx_blocks']} NASA-TLX blocks of "
+          f"{summary['participants']} participants; SAGAT {summary['sagat_correct']} of "
+          f"{summary['sagat_questions']} questions answered correctly" +
+          (f" ({summary['sagat_unscored']} probes' answers stored unscored, left out)"
+           if summary["sagat_unscored"] else ""))
+    return list(summary["files"])
 
 
 def _analyse_live(a: argparse.Namespace, study: Any, store: Any) -> list[str]:

@@ -70,11 +70,10 @@ def trial_condition(study: Study, session: Mapping[str, Any], trial_index: int) 
     """The study's live condition of a session's trial; a ``ConfigError`` if
     the trial or its condition is not there."""
     order = session.get("trial_order") or []
-    if not 0 <= trial_index < len(order):
+    if not 0 <= trial_index < len(order) or not isinstance(order[trial_index], dict):
         raise ConfigError(f"session {session.get('id')}: no trial {trial_index} (it has "
                           f"{len(order)})")
-    cid = order[trial_index].get("condition_id") if isinstance(order[trial_index], dict) \
-        else None
+    cid = order[trial_index].get("condition_id")
     by_id = {c.id: c for c in study.live}
     if cid not in by_id:
         raise ConfigError(f"session {session.get('id')} trial {trial_index}: condition "

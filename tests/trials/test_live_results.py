@@ -34,10 +34,13 @@ TRUCK: tuple[Any, int, int, set[int]] = (lambda f: (80.0, 60.0, 5.0), 10, 40, se
 CAR: tuple[Any, int, int, set[int]] = (lambda f: (40.0, 30.0, 4.0), 20, 45, set())
 
 
-def _session(store: Store, study: Study, who: str, conds: list[str]) -> dict[str, Any]:
+def live_session(store: Store, study: Study, who: str, conds: list[str],
+                 breaks: bool = False) -> dict[str, Any]:
+    """A stored live session of ``study``'s conditions ``conds`` in that
+    order (with ``breaks``, a break before every trial but the first)."""
     by_id = {c.id: c for c in study.live}
     order = [{"index": i, "practice": False, "clip": i, "condition_id": c,
-              "fingerprint": by_id[c].fingerprint, "break_before": False}
+              "fingerprint": by_id[c].fingerprint, "break_before": breaks and i > 0}
              for i, c in enumerate(conds)]
     return store.create_session(participant=who, study=study.name, protocol="live",
                                 display=PROFILE, order_method="shuffle", seed=1,
@@ -76,9 +79,9 @@ def live_db(tmp_path: Path) -> tuple[Path, Path, dict[str, dict[str, Any]]]:
     one = {"uav1/belly": {"truck1": TRUCK}}
     two = {"uav1/belly": {"truck1": TRUCK}, "uav2/belly": {"car": CAR}}
     with Store(db) as store:
-        p1 = _session(store, study, "p1", ["one", "two"])
-        p2 = _session(store, study, "p2", ["two", "one"])
-        p3 = _session(store, study, "p3", ["one", "two"])  # never run
+        p1 = live_session(store, study, "p1", ["one", "two"])
+        p2 = live_session(store, study, "p2", ["two", "one"])
+        p3 = live_session(store, study, "p3", ["one", "two"])  # never run
         _run(study, p1["id"], 0, one)
         _run(study, p1["id"], 1, two)
         _run(study, p2["id"], 0, two)
@@ -99,9 +102,16 @@ def live_db(tmp_path: Path) -> tuple[Path, Path, dict[str, dict[str, Any]]]:
     return study_path, db, {"p1": p1, "p2": p2, "p3": p3}
 
 
-def _rows(path: Path) -> list[dict[str, str]]:
+def csv_rows(path: Path) -> list[dict[str, str]]:
     with path.open(newline="") as f:
         return list(csv.DictReader(f))
+
+
+def analyse_ok(db: Path, study: Path, out: Path, capsys: pytest.CaptureFixture[str]) -> str:
+    """``cosim trials analyse DB --study STUDY --out OUT``, which succeeds; its print-out."""
+    assert main(["-q", "trials", "analyse", str(db), "--study", str(study), "--out",
+                 str(out)]) == 0
+    return capsys.readouterr().out
 
 
 def _num(v: str) -> float | None:
@@ -113,16 +123,14 @@ def test_analyse_scores_the_stored_live_sessions(
         capsys: pytest.CaptureFixture[str]) -> None:
     study, db, s = live_db
     out = tmp_path / "a"
-    assert main(["-q", "trials", "analyse", str(db), "--study", str(study), "--out",
-                 str(out)]) == 0
-    printed = capsys.readouterr().out
+    printed = analyse_ok(db, study, out, capsys)
     assert ("live: 4 trials scored of 2 participants: 4 of 6 targets detected; 4 hits, "
             "1 duplicates, 1 false alarms; 2 trials not run (no run folder)") in printed
     p1, p2 = s["p1"]["id"], s["p2"]["id"]
     got = {(r["session"], r["target"]): (r["detected"], _num(r["latency_any_s"]),
                                          _num(r["latency_feed_s"]), _num(r["error_px"]),
                                          r["condition_feeds"])
-           for r in _rows(out / "live_targets.csv")}
+           for r in csv_rows(out / "live_targets.csv")}
     assert got == {
         (f"{p1}/0", "truck1"): ("1", 0.7, 0.7, 0.0, "1"),
         (f"{p1}/1", "truck1"): ("1", 1.0, 1.0, 0.0, "2"),
@@ -132,12 +140,12 @@ def test_analyse_scores_the_stored_live_sessions(
         (f"{p2}/1", "truck1"): ("0", None, None, None, "1"),
     }
     sessions = {r["session"]: (r["hits"], r["duplicates"], r["false_alarms"], r["misses"])
-                for r in _rows(out / "live_sessions.csv")}
+                for r in csv_rows(out / "live_sessions.csv")}
     assert sessions == {f"{p1}/0": ("1", "0", "1", "0"), f"{p1}/1": ("1", "0", "0", "1"),
                         f"{p2}/0": ("2", "1", "0", "0"), f"{p2}/1": ("0", "0", "0", "1")}
     # detection against feeds: 1 of 2 trucks with one feed; 3 of 4 targets with two
     det = {r["level"]: (float(r["estimate"]), r["participants"], r["interval"])
-           for r in _rows(out / "live_levels.csv")
+           for r in csv_rows(out / "live_levels.csv")
            if r["measure"] == "detected" and r["condition"] == "feeds"}
     assert det == {"1": (0.5, "2", "t over participants"),
                    "2": (0.75, "2", "t over participants")}
