@@ -1,5 +1,6 @@
 """``cosim trials``: serve a study in the browser, export its responses,
-analyse them (conspicuity angles, the critical gap, recognition)."""
+analyse them (conspicuity angles, the critical gap, recognition; a live
+study's sessions scored; the NASA-TLX and SAGAT answers)."""
 
 from __future__ import annotations
 
@@ -35,7 +36,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                     help="also write the NASA-TLX and SAGAT answers here, a row per block "
                          "or probe")
     ta = trs.add_parser("analyse", help="conspicuity angles and distances, the critical gap, "
-                                        "recognition against altitude, speed and conspicuity")
+                                        "recognition against altitude, speed and conspicuity; "
+                                        "with --study, a live study's sessions scored and the "
+                                        "NASA-TLX and SAGAT answers")
     ta.add_argument("responses", metavar="DB_OR_CSV",
                     help="the study's database, or a responses CSV (cosim trials export)")
     ta.add_argument("--out", metavar="DIR", required=True, help="folder for the CSVs and PNGs")

@@ -186,3 +186,63 @@ def test_live_data_missing_or_bad_is_refused(
     study.write_text(body)
     assert main([*argv, "--study", str(study)]) == 2
     assert "trial 0: condition 'one' is not in the study" in capsys.readouterr().err
+
+
+@pytest.mark.integration  # a live run of four seconds, and the same run without the console
+def test_a_real_live_trial_is_analysed_as_the_console_scores_it(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A trial run by the console (no browser: clicks posted as its page
+    posts them) and analysed by `cosim trials analyse` from the run folder the
+    console left: the truck's hit has the pixel error the ground truth of the
+    same scenario run without the console gives, and the targets' outcomes
+    and latencies are those the console's own score gives."""
+    import math
+    import time
+
+    from test_live import _start, _truck, _wait_over
+    from test_server import _session, live_server
+
+    from cosim.scenario import load_scenario
+    from cosim.sync.runner import run_scenario
+
+    study = live_study(tmp_path)  # one condition: two feeds, uav1/belly and uav2/belly
+    assert run_scenario(load_scenario(tmp_path / "pair.yaml"), tmp_path / "alone").ok
+    truck = _truck(tmp_path / "alone" / "cameras" / "uav1_belly.gt.csv")
+    frame = sorted(truck)[2]
+    x, y = truck[frame]["center_x_px"] + 3.5, truck[frame]["center_y_px"] + 0.5
+    with live_server(study) as server:
+        sid = _session(server, "p1")["id"]
+        _start(server, sid)
+        deadline = time.monotonic() + 60
+        for key, feed, fr, px in (("t", 0, frame, (x, y)), ("f", 1, 2, (1.5, 1.5))):
+            while True:  # once the console has sent that frame
+                status, out = server.request("POST", f"/api/sessions/{sid}/live/reports", {
+                    "trial_index": 0, "report_key": key, "feed": feed, "frame": fr,
+                    "x_px": px[0], "y_px": px[1], "click_time_ms": 5250.0,
+                    "drawn_time_ms": 5000.0})
+                if status == 201 or time.monotonic() > deadline:
+                    break
+                time.sleep(0.05)
+            assert status == 201, out
+        _wait_over(server, sid)
+        status, score = server.request("GET", f"/api/sessions/{sid}/live/score?trial_index=0")
+        assert status == 200, score
+    out = tmp_path / "a"
+    printed = analyse_ok(study.with_suffix(".sqlite"), study, out, capsys)
+    assert "live: 1 trials scored of 1 participants" in printed
+    got = {r["target"]: r for r in csv_rows(out / "live_targets.csv")}
+    hit = got["truck1"]
+    assert hit["detected"] == "1"
+    assert float(hit["error_px"]) == pytest.approx(3.0, abs=1e-3)  # 3 px right of its centre
+    want = {t["target"]: t for t in score["targets"] if t["eligible"]}
+    assert set(got) == set(want)
+    for name, t in want.items():
+        r = got[name]
+        assert r["detected"] == str(int(t["detected"]))
+        for k in ("latency_any_s", "latency_feed_s", "error_px"):
+            assert (r[k] == "" if t[k] is None
+                    else math.isclose(float(r[k]), t[k], abs_tol=1e-6)), (name, k)
+    (s,) = csv_rows(out / "live_sessions.csv")
+    assert (s["session"], s["hits"], s["false_alarms"], s["misses"]) == \
+        (f"{sid}/0", str(score["hits"]), str(score["false_alarms"]), str(score["misses"]))
+    assert score["false_alarms"] == 1
