@@ -742,3 +742,33 @@ def test_the_map_gets_the_feeds_footprints_and_the_targets_its_condition_asks_fo
                                           rel=0.05), (sides, h)
             tilt_m = h * math.tan(math.radians(6))
             assert math.hypot(*(ne.mean(axis=0) - [v["north_m"], v["east_m"]])) < tilt_m
+
+
+def test_the_page_follows_each_trial_the_experimenter_starts(tmp_path: Path,
+                                                             chromium: str) -> None:
+    """A session of two trials: after the first the page says so and waits;
+    the second, started later, is followed with its own feeds; after it the
+    page says the session is over."""
+    study = ("name: two\nprotocol: live\norder: shuffle\nscenarios:\n"
+             "  - {id: one, scenario: pair.yaml, feeds: [uav2/belly], duration_s: 1}\n"
+             "  - {id: two, scenario: pair.yaml, feeds: 2, duration_s: 1}\n")
+    with live_server(live_study(tmp_path, study)) as server:
+        s = _session(server, "p6")
+        feeds = {t["index"]: len(t["feeds"]) for t in s["trials"]}
+        with browser_page(chromium) as page:
+            page.goto(f"{server.url}/live?session={s['id']}")
+            page.wait_for_function("document.body.dataset.phase === 'waiting'")
+            for ti in (0, 1):
+                status, out = server.request("POST", f"/api/sessions/{s['id']}/live/start",
+                                             {"trial_index": ti})
+                assert status == 201, out
+                page.wait_for_function("document.body.dataset.phase === 'live'")
+                assert page.locator("canvas[data-feed]").count() == feeds[ti]
+                page.wait_for_function("document.body.dataset.phase === 'ended'",
+                                       timeout=60_000)
+                _wait_over(server, s["id"])
+                text = "Please wait for the next one" if ti == 0 else "and the session with it"
+                page.wait_for_function(f"document.getElementById('message').innerText"
+                                       f".includes({text!r})")
+                assert page.evaluate("window.live.drawn.every((d) => d[0] < "
+                                     f"{feeds[ti]})")

@@ -295,7 +295,10 @@
       body: JSON.stringify(body) }).catch(() => {});
   }
 
+  // Follow the running trial's stream; resolved at its end.
   function follow() {
+    let ended;
+    const over = new Promise((resolve) => { ended = resolve; });
     const es = new EventSource(`/api/sessions/${sid}/live/stream`);
     const every = setInterval(timing, 2000);
     es.addEventListener("hello", (e) => {
@@ -309,23 +312,50 @@
       es.close();
       clearInterval(every);
       await timing();
-      phase("ended");
-      say("<p>This trial is over. Thank you.</p>");
+      ended();
     });
+    return over;
   }
 
+  // A new trial's page state: nothing drawn, received or reported yet.
+  function reset() {
+    for (const d of due.values()) d.bitmap.close();
+    due.clear();
+    drawn.clear();
+    tracks.clear();
+    last = null;
+    received = drawnCount = mismatches = 0;
+    latencies.length = 0;
+    window.live = { drawn: [], reports: [] };
+  }
+
+  // Each trial the experimenter starts, followed to its end; between trials
+  // the page waits (after one, it says so, and whether the session is over).
   async function main() {
+    let done = null; // the trial followed last
     phase("waiting");
     say("<p>Please wait: the experimenter will start the trial.</p>");
-    for (;;) { // until the experimenter starts a trial
+    for (;;) {
       const r = await fetch(`/api/sessions/${sid}/live`);
       if (r.status !== 200) { say(`<p>${esc((await r.json()).error || r.status)}</p>`); return; }
       const s = await r.json();
-      if (s.live && s.live.running) { trialIndex = s.live.trial_index; break; }
+      if (s.live && s.live.running && s.live.trial_index !== done) {
+        trialIndex = s.live.trial_index;
+        reset();
+        await syncClock();
+        await follow();
+        done = trialIndex;
+        say("<p>This trial is over. Thank you.</p>");
+        phase("ended");
+        continue;
+      }
+      if (done !== null) {
+        const left = (s.trials || []).some((t) => !t.ran);
+        say(left ? "<p>This trial is over. Thank you.</p><p>Please wait for the next one.</p>"
+                 : "<p>This trial is over, and the session with it. Thank you.</p>");
+      }
       await sleep(300);
     }
-    await syncClock();
-    follow();
   }
 
   window.addEventListener("resize", layout);
