@@ -105,6 +105,10 @@ class LiveConsole:
                            "feeds": [f.name for f in c.feeds], "run": str(folder),
                            "ran": folder.exists()})
         live = self.runs.get(s["id"])
+        if s["state"] != "finished" and all(t["ran"] for t in trials) and not (
+                live is not None and live[1].running):  # every trial has run
+            self.store.set_state(s["id"], "finished")
+            s["state"] = "finished"
         status = None
         if live is not None:
             status = {"trial_index": live[0], **live[1].status()}

@@ -612,6 +612,10 @@ def test_the_experimenter_starts_and_stops_a_live_trial_from_the_page(
             page.wait_for_function("document.querySelector('button.live-control')"
                                    "?.textContent === 'All trials run'")
             assert page.locator("button.live-control").is_disabled()
+            # every trial has run: the session is finished, its progress in runs
+            page.wait_for_function("document.querySelector('#sessions td:nth-child(4)')"
+                                   "?.textContent === 'finished'")
+            assert page.locator("#sessions td:nth-child(3)").inner_text() == "1 / 1 run"
         v = _wait_over(server, s["id"])
     summary = json.loads((Path(v["trials"][0]["run"]) / "summary.json").read_text())
     assert summary["stop_reason"] == "stopped by the experimenter"

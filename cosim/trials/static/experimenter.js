@@ -29,10 +29,13 @@
     const rows = []; // put in at once: a refresh waits for live sessions' states
     for (const s of list) {
       const tr = document.createElement("tr");
+      const live = s.protocol === "live";
+      const v = live ? await liveState(s) : null; // a live session: its trials' runs
       cell(tr, s.participant);
       cell(tr, s.created.replace("T", " ").slice(0, 19));
-      cell(tr, `${s.answered} / ${s.trials}`);
-      cell(tr, s.state);
+      cell(tr, live ? `${v.trials.filter((t) => t.ran).length} / ${v.trials.length} run`
+                    : `${s.answered} / ${s.trials}`);
+      cell(tr, live ? v.state : s.state);
       const page = document.createElement("span");
       if (s.window_warning) {
         page.className = "warning";
@@ -42,7 +45,6 @@
       }
       cell(tr, page);
       const a = document.createElement("a");
-      const live = s.protocol === "live";
       a.href = `/${live ? "live" : "participant"}?session=${encodeURIComponent(s.id)}`;
       a.textContent = "open";
       a.target = "_blank";
@@ -54,16 +56,20 @@
       b.onclick = () => post(`/api/sessions/${encodeURIComponent(s.id)}/state`, { state: next })
         .then(refresh).catch((e) => alert(e.message));
       cell(tr, b);
-      if (live) cell(tr, await liveControl(s));
+      if (live) cell(tr, liveControl(s, v));
       rows.push(tr);
     }
     tbody.replaceChildren(...rows);
   }
 
-  // A live session's trials run one at a time: start the next, or stop the running one.
-  async function liveControl(s) {
+  async function liveState(s) {
     const sid = encodeURIComponent(s.id);
-    const v = await (await fetch(`/api/sessions/${sid}/live`, { cache: "no-store" })).json();
+    return (await fetch(`/api/sessions/${sid}/live`, { cache: "no-store" })).json();
+  }
+
+  // A live session's trials run one at a time: start the next, or stop the running one.
+  function liveControl(s, v) {
+    const sid = encodeURIComponent(s.id);
     const b = document.createElement("button");
     b.className = "live-control";
     const out = document.createElement("span");
