@@ -61,6 +61,8 @@ SAGAT_LEVEL_FIELDS = ("kind", "condition", "level", "questions", "participants",
                       "ci_lo", "ci_hi", "interval")
 #: the condition of the SAGAT levels over all the answers
 ALL = "(all)"
+#: the most answers analysed
+MAX_ANSWERS = 100_000
 
 
 def trial_conditions(study: Any, session: Mapping[str, Any], trial_index: int
@@ -247,6 +249,9 @@ def analyse_instruments(study: Any, sessions: Sequence[Mapping[str, Any]],
     """Write the TLX and SAGAT tables and figures (module docstring) into
     ``out_dir``; return a summary (counts, files). ``sessions``: the
     store's sessions with their ``trial_order``."""
+    if len(answers) > MAX_ANSWERS:
+        raise ConfigError(f"{len(answers)} NASA-TLX and SAGAT answers: more than {MAX_ANSWERS}; "
+                          f"analyse a copy of the database with fewer sessions")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     by_id = {str(s["id"]): s for s in sessions}

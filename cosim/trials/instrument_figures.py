@@ -17,14 +17,15 @@ import numpy as np
 
 from cosim.trials.figures import _pyplot
 
-#: the most condition panels drawn (the tables hold them all)
+#: the most conditions drawn, a panel each (the tables hold them all)
 MAX_PANELS = 3
 #: the most participants drawn one line each in the TLX's first panel
 MAX_LINES = 24
 
 
-def _conditions(levels: Sequence[dict[str, Any]]) -> list[str]:
-    return list(dict.fromkeys(r["condition"] for r in levels))[:MAX_PANELS]
+def _conditions(levels: Sequence[dict[str, Any]], also: int = 0) -> list[str]:
+    """The conditions drawn: the first ``MAX_PANELS`` (and ``also`` panels more)."""
+    return list(dict.fromkeys(r["condition"] for r in levels))[:MAX_PANELS + also]
 
 
 def _axis(ax: Any, keys: list[Any], name: str) -> dict[Any, float]:
@@ -104,7 +105,7 @@ def plot_sagat(path: Path, levels: Sequence[dict[str, Any]], level: float = 0.95
     """SAGAT accuracy per kind of question: over all answers, and against
     each condition."""
     plt = _pyplot()
-    conds = _conditions(levels)
+    conds = _conditions(levels, also=1)  # all answers, then the conditions
     fig, axes = plt.subplots(1, max(len(conds), 1), figsize=(4.5 * max(len(conds), 1), 4),
                              squeeze=False)
     kinds = sorted({r["kind"] for r in levels})

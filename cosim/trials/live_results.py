@@ -36,6 +36,9 @@ log = logging.getLogger(__name__)
 #: a click this long (s) after the run's end is scored (the page shows the last
 #: frame until it hears of the end; the console's ``live_routes.END_MARGIN_S``)
 END_MARGIN_S = 5.0
+#: the most trials ``scored_sessions`` scores, and stored clicks a trial may have
+MAX_TRIALS = 10_000
+MAX_REPORTS = 100_000
 
 
 def runs_folder(study: Study) -> Path:
@@ -60,6 +63,9 @@ def score_trial(study: Study, session: Mapping[str, Any], trial_index: int,
     try:
         duration_s = cond.duration_s or load_scenario(cond.scenario).duration_s
         rows = [r for r in reports if r.get("trial_index") == trial_index]
+        if len(rows) > MAX_REPORTS:
+            raise ConfigError(f"{len(rows)} stored clicks: more than {MAX_REPORTS} in one "
+                              f"trial; not scored")
         return score_stored(folder, {f.name: (f.width_px, f.height_px) for f in cond.feeds},
                             rows, duration_s + END_MARGIN_S, study.scoring)
     except ConfigError as e:  # ReportError too
@@ -112,6 +118,9 @@ def scored_sessions(study: Study, store: Any, runs_dir: Path | None = None) -> L
             if not (trial_folder(runs, s["id"], ti) / "summary.json").is_file():
                 not_run.append(f"{s['id']}/{ti}")
                 continue
+            if len(out) >= MAX_TRIALS:
+                raise ConfigError(f"the database has more than {MAX_TRIALS} live trials that "
+                                  f"have run: analyse a copy with fewer sessions")
             score = score_trial(study, s, ti, reports, runs)
             cond = trial_condition(study, s, ti)
             out.append(ScoredSession(f"{s['id']}/{ti}", str(s["participant"]),
@@ -120,3 +129,4 @@ def scored_sessions(study: Study, store: Any, runs_dir: Path | None = None) -> L
         log.info("%d live trials have not run (no run folder): %s", len(not_run),
                  ", ".join(not_run[:10]))
     return LiveResults(tuple(out), tuple(not_run))
+

@@ -178,3 +178,16 @@ def test_answers_of_another_study_refused(
                  str(tmp_path / "a")]) == 2
     assert "asks no NASA-TLX (no tlx:): is it the study these answers belong to?" in \
         capsys.readouterr().err
+
+
+def test_the_answers_analysed_are_bounded(
+        db: tuple[Path, Path, dict[str, dict[str, Any]]], tmp_path: Path,
+        capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    import cosim.trials.instrument_analysis as ia
+
+    study, path, _ = db
+    monkeypatch.setattr(ia, "MAX_ANSWERS", 11)  # 6 TLX and 6 SAGAT answers
+    assert main(["-q", "trials", "analyse", str(path), "--study", str(study), "--out",
+                 str(tmp_path / "a")]) == 2
+    assert "12 NASA-TLX and SAGAT answers: more than 11; analyse a copy" in \
+        capsys.readouterr().err

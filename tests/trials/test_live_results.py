@@ -246,3 +246,23 @@ def test_a_real_live_trial_is_analysed_as_the_console_scores_it(
     assert (s["session"], s["hits"], s["false_alarms"], s["misses"]) == \
         (f"{sid}/0", str(score["hits"]), str(score["false_alarms"]), str(score["misses"]))
     assert score["false_alarms"] == 1
+
+
+def test_the_work_is_bounded(live_db: tuple[Path, Path, dict[str, dict[str, Any]]],
+                             tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                             monkeypatch: pytest.MonkeyPatch) -> None:
+    """More trials that have run, or more clicks in a trial, than the limits
+    are refused (exit 2), not scored."""
+    import cosim.trials.live_results as lr
+
+    study, db, s = live_db
+    argv = ["-q", "trials", "analyse", str(db), "--study", str(study), "--out",
+            str(tmp_path / "a")]
+    monkeypatch.setattr(lr, "MAX_REPORTS", 2)  # p2's trial 0 has 3
+    assert main(argv) == 2
+    assert (f"session {s['p2']['id']} trial 0: 3 stored clicks: more than 2 in one trial; "
+            f"not scored") in capsys.readouterr().err
+    monkeypatch.setattr(lr, "MAX_REPORTS", 3)
+    monkeypatch.setattr(lr, "MAX_TRIALS", 3)  # four have run
+    assert main(argv) == 2
+    assert "the database has more than 3 live trials that have run" in capsys.readouterr().err
