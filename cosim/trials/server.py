@@ -585,6 +585,8 @@ def serve(study_path: str | Path, host: str = "127.0.0.1", port: int = 8000,
     db = db_url or str(default_db(study_path))
     hosts = ["*"] if public else local_hosts(host)
     app = make_app(st, db, allowed_hosts=hosts)
-    log.info("study %s: %d clips; responses in %s; experimenter page http://%s:%d/",
-             st.name, len(st.clips), shown_url(db), host, port)
+    what = f"{len(st.live)} live conditions" if st.protocol == "live" else \
+        f"{len(st.clips)} clips"
+    log.info("study %s: %s; responses in %s; experimenter page http://%s:%d/",
+             st.name, what, shown_url(db), host, port)
     uvicorn.run(app, host=host, port=port, log_level="info", **uvicorn_settings())
