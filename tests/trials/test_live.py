@@ -11,6 +11,7 @@ import contextlib
 import csv
 import dataclasses
 import json
+import logging
 import math
 import re
 import socket
@@ -776,3 +777,16 @@ def test_the_page_follows_each_trial_the_experimenter_starts(tmp_path: Path,
                                        f".includes({text!r})")
                 assert page.evaluate("window.live.drawn.every((d) => d[0] < "
                                      f"{feeds[ti]})")
+
+
+def test_serve_says_how_many_live_conditions_the_study_has(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
+    import uvicorn
+
+    from cosim.trials.server import serve
+
+    monkeypatch.setattr(uvicorn, "run", lambda *a, **k: None)  # not served: only its start
+    with caplog.at_level(logging.INFO, logger="cosim.trials.server"):
+        serve(live_study(tmp_path), port=8123)
+    assert re.search(r"study live_test: 1 live conditions; responses in .*study\.sqlite",
+                     caplog.text), caplog.text
