@@ -191,3 +191,50 @@ def test_the_answers_analysed_are_bounded(
                  str(tmp_path / "a")]) == 2
     assert "12 NASA-TLX and SAGAT answers: more than 11; analyse a copy" in \
         capsys.readouterr().err
+
+
+def test_a_clip_studys_tlx_is_analysed_against_its_clips_conditions(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A clip study (sessions made by the trial server, so with its trial
+    orders) whose clips name an altitude: each block of one clip has that
+    clip's altitude, the raw TLX (no weights asked) is analysed against it,
+    the weighted TLX is empty, and the clip responses' tables are still
+    written."""
+    from test_server import asgi, small_study
+
+    from cosim.trials.server import make_app
+
+    study = small_study(tmp_path, "protocol: disappear\nbreak_every: 1\norder: shuffle\n"
+                                  "tlx: {after: block, weights: false}\n",
+                        {"a": 150.0, "b": 120.0})
+    study.write_text(study.read_text()
+                     .replace("ground_truth: a.gt.csv}", "ground_truth: a.gt.csv, "
+                                                          "conditions: {alt_agl_m: 100}}")
+                     .replace("ground_truth: b.gt.csv}", "ground_truth: b.gt.csv, "
+                                                          "conditions: {alt_agl_m: 300}}"))
+    db = tmp_path / "c.sqlite"
+    st = load_study(study)
+    alt = {c.id: c.conditions[0][1] for c in st.clips}
+    want: dict[str, list[float]] = {"100": [], "300": []}
+    with Store(db) as store:
+        app = make_app(study, store)
+        for i, who in enumerate(("p1", "p2", "p3")):
+            status, s = asgi(app, "POST", "/api/sessions", {"participant": who, **PROFILE})
+            assert status == 201, s
+            s = store.session(s["id"])
+            for k, t in enumerate(s["trial_order"]):
+                v = 20 + 10 * i + (30 if alt[t["clip_id"]] == "300" else 0)
+                want[alt[t["clip_id"]]].append(v)
+                store.record_instrument({
+                    "session": s["id"], "participant": who, "instrument": "tlx",
+                    "trial_index": k, "item": k,
+                    "answer": {"ratings": dict.fromkeys(SCALE_KEYS, v)}})
+    out = tmp_path / "a"
+    printed = analyse_ok(db, study, out, capsys)
+    assert "instruments: 6 NASA-TLX blocks of 3 participants" in printed
+    assert (out / "conspicuity.csv").is_file()
+    assert {r["weighted_tlx"] for r in csv_rows(out / "tlx_blocks.csv")} == {""}
+    got = {r["level"]: float(r["estimate"]) for r in csv_rows(out / "tlx_levels.csv")
+           if r["measure"] == "raw_tlx" and r["condition"] == "alt_agl_m"}
+    assert got == {"100": pytest.approx(30.0), "300": pytest.approx(60.0)}
+    assert got == {k: pytest.approx(sum(v) / len(v)) for k, v in want.items()}
