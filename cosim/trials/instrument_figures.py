@@ -116,7 +116,8 @@ def plot_sagat(path: Path, levels: Sequence[dict[str, Any]], level: float = 0.95
         if name == "(all)":
             x_of = {k: float(i) for i, k in enumerate(kinds)}
             kr = [next(r for r in rs if r["kind"] == k) for k in kinds]
-            _errorbars(ax, list(x_of.values()), kr, "accuracy", fmt="o", color="C2")
+            for i, r in enumerate(kr):  # each kind in its colour of the other panels
+                _errorbars(ax, [x_of[r["kind"]]], [r], "accuracy", fmt="o", color=f"C{i}")
             ax.set_xticks(list(x_of.values()))
             ax.set_xticklabels([f"{k}\n({r['questions']} answers)" for k, r in zip(kinds, kr)],
                                fontsize=8)

@@ -221,8 +221,9 @@ def test_a_clip_studys_tlx_is_analysed_against_its_clips_conditions(
         for i, who in enumerate(("p1", "p2", "p3")):
             status, s = asgi(app, "POST", "/api/sessions", {"participant": who, **PROFILE})
             assert status == 201, s
-            s = store.session(s["id"])
-            for k, t in enumerate(s["trial_order"]):
+            stored = store.session(s["id"])
+            assert stored is not None
+            for k, t in enumerate(stored["trial_order"]):
                 v = 20 + 10 * i + (30 if alt[t["clip_id"]] == "300" else 0)
                 want[alt[t["clip_id"]]].append(v)
                 store.record_instrument({
@@ -238,3 +239,38 @@ def test_a_clip_studys_tlx_is_analysed_against_its_clips_conditions(
            if r["measure"] == "raw_tlx" and r["condition"] == "alt_agl_m"}
     assert got == {"100": pytest.approx(30.0), "300": pytest.approx(60.0)}
     assert got == {k: pytest.approx(sum(v) / len(v)) for k, v in want.items()}
+
+
+def test_the_synthetic_answers_model_is_recovered(tmp_path: Path,
+                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    """examples/instruments_synthetic.py: at every number of feeds the model's
+    TLX (25 + 5 x feeds, plus the twelve participants' mean offset) and each
+    kind's probability of a right answer lie within the intervals found."""
+    import importlib.util
+    import sys
+
+    import numpy as np
+
+    from cosim.trials.instrument_analysis import analyse_instruments
+
+    path = Path(__file__).resolve().parents[2] / "examples" / "instruments_synthetic.py"
+    spec = importlib.util.spec_from_file_location("instruments_synthetic", path)
+    assert spec is not None and spec.loader is not None
+    ex = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, spec.name, ex)  # its dataclasses look themselves up
+    spec.loader.exec_module(ex)
+    st, sessions, answers = ex.synthetic(1)
+    analyse_instruments(st, sessions, answers, tmp_path, plots=False)
+    tlx = {r["level"]: r for r in csv_rows(tmp_path / "tlx_levels.csv")
+           if r["measure"] == "raw_tlx"}
+    # the offsets' mean is in every level's mean: the level's mean less the model's
+    offsets = [float(tlx[str(k)]["estimate"]) - ex.TLX_0 - ex.TLX_PER_FEED * k
+               for k in ex.FEEDS]
+    assert float(np.ptp(offsets)) < 3.0, offsets  # the same offset at every level
+    for k in ex.FEEDS:
+        r = tlx[str(k)]
+        assert float(r["ci_lo"]) <= ex.TLX_0 + ex.TLX_PER_FEED * k <= float(r["ci_hi"]), r
+    for r in csv_rows(tmp_path / "sagat_levels.csv"):
+        if r["condition"] == "feeds":
+            a, b = ex.SAGAT[r["kind"]]
+            assert float(r["ci_lo"]) <= a + b * int(r["level"]) <= float(r["ci_hi"]), r
