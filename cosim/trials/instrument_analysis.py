@@ -45,7 +45,7 @@ import numpy as np
 from cosim.errors import ConfigError, CosimError
 from cosim.trials.conditions import condition_levels
 from cosim.trials.instruments import check_tlx_answer, tlx_blocks
-from cosim.trials.live_analysis import MAX_CONDITIONS, _categories, _level_estimate, _numeric
+from cosim.trials.live_analysis import MAX_CONDITIONS, categories, level_estimate, numeric
 from cosim.trials.live_results import trial_condition
 from cosim.trials.output import write_csv
 
@@ -157,7 +157,7 @@ def sagat_rows(study: Any, sessions: Mapping[str, Mapping[str, Any]],
             rows.append({"session": s["id"], "participant": s["participant"],
                          "trial_index": ti, "probe": k, "at_s": probe.at_s, "question": qid,
                          "kind": kinds[qid], "correct": int(correct),
-                         "error": float(err) if _numeric([err]) is not None else None,
+                         "error": float(err) if numeric([err]) is not None else None,
                          **conds})
     return rows, unscored
 
@@ -175,13 +175,13 @@ def _levels(rows: Sequence[Mapping[str, Any]], name: str) -> tuple[list[Any], np
     condition, grouped as the live analysis groups them."""
     raw = [r.get(f"condition_{name}") for r in rows]
     has = np.array([v is not None and v != "" for v in raw], dtype=bool)
-    nums = _numeric([v for v, h in zip(raw, has) if h])
+    nums = numeric([v for v, h in zip(raw, has) if h])
     if nums is not None and nums.size:
         lv = np.full(len(rows), None, dtype=object)
         binned, _ = condition_levels(nums)
         lv[has] = [float(x) for x in binned]
         return sorted(set(lv[has].tolist())), lv
-    return _categories([str(v) if h else None for v, h in zip(raw, has)], name)
+    return categories([str(v) if h else None for v, h in zip(raw, has)], name)
 
 
 def _names(rows: Sequence[Mapping[str, Any]]) -> list[str]:
@@ -201,7 +201,7 @@ def _estimate_rows(rows: Sequence[Mapping[str, Any]], measure: str, as_proportio
     out = []
     for cond, lvl, sel in groups:
         sel = sel & np.isfinite(y)
-        est, lo, hi, how = _level_estimate("detected" if as_proportion else measure, y[sel],
+        est, lo, hi, how = level_estimate("detected" if as_proportion else measure, y[sel],
                                            who[sel], level)
         out.append({"condition": cond, "level": lvl, "n": int(sel.sum()),
                     "participants": len(set(who[sel])), "estimate": est, "ci_lo": lo,

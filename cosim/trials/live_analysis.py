@@ -115,7 +115,7 @@ def _values(rows: Sequence[dict[str, Any]], key: str) -> np.ndarray:
     return np.array([math.nan if r.get(key) is None else float(r[key]) for r in rows])
 
 
-def _numeric(values: Sequence[Any]) -> np.ndarray | None:
+def numeric(values: Sequence[Any]) -> np.ndarray | None:
     """The values as numbers, None if any is not one."""
     try:
         out = np.array([float(v) for v in values])
@@ -124,7 +124,7 @@ def _numeric(values: Sequence[Any]) -> np.ndarray | None:
     return out if np.isfinite(out).all() else None
 
 
-def _categories(values: list[str | None], name: str) -> tuple[list[Any], np.ndarray]:
+def categories(values: list[str | None], name: str) -> tuple[list[Any], np.ndarray]:
     """(levels, each row's level) of a condition whose values are not numbers:
     the values, or past ``MAX_LEVELS`` the ``MAX_LEVELS - 1`` with the most
     rows and one level ``OTHER`` for the rest."""
@@ -141,7 +141,7 @@ def _categories(values: list[str | None], name: str) -> tuple[list[Any], np.ndar
     return [*sorted(kept), OTHER], lv
 
 
-def _level_estimate(measure: str, y: np.ndarray, who_names: np.ndarray, level: float
+def level_estimate(measure: str, y: np.ndarray, who_names: np.ndarray, level: float
                     ) -> tuple[float, float, float, str]:
     """(estimate, lo, hi, how the interval was made) of ``y`` at one level."""
     who = cluster_ids(who_names, y.size)
@@ -174,19 +174,19 @@ def live_tables(rows: Sequence[dict[str, Any]], level: float = 0.95
     for name in names:
         raw = [r.get(f"condition_{name}") for r in rows]
         has = np.array([v is not None and v != "" for v in raw])
-        nums = _numeric([v for v, h in zip(raw, has) if h])
+        nums = numeric([v for v, h in zip(raw, has) if h])
         if nums is not None:
             x = np.full(len(rows), math.nan)
             x[has], _ = condition_levels(nums)
             keys: list[Any] = sorted(set(x[has].tolist()))
             lv = x
         else:
-            keys, lv = _categories([str(v) if h else None for v, h in zip(raw, has)], name)
+            keys, lv = categories([str(v) if h else None for v, h in zip(raw, has)], name)
         for measure in MEASURES:
             y = _values(rows, measure)
             for k in keys:
                 sel = has & (lv == k) & np.isfinite(y)
-                est, lo, hi, how = _level_estimate(measure, y[sel], who_all[sel], level)
+                est, lo, hi, how = level_estimate(measure, y[sel], who_all[sel], level)
                 level_rows.append({"measure": measure, "condition": name, "level": k,
                                    "targets": int(sel.sum()),
                                    "participants": len(set(who_all[sel])), "estimate": est,

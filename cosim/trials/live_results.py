@@ -34,7 +34,7 @@ from cosim.trials.study import Study
 log = logging.getLogger(__name__)
 
 #: a click this long (s) after the run's end is scored (the page shows the last
-#: frame until it hears of the end; the console's ``live_routes.END_MARGIN_S``)
+#: frame until it hears of the end)
 END_MARGIN_S = 5.0
 #: the most trials ``scored_sessions`` scores, and stored clicks a trial may have
 MAX_TRIALS = 10_000

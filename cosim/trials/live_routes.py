@@ -38,9 +38,9 @@ from starlette.routing import Route
 
 from cosim.errors import ConfigError
 from cosim.logs import write_json_atomic
-from cosim.scenario import load_scenario
 from cosim.trials.live import Hub, LiveRun
-from cosim.trials.live_scoring import SessionScore, score_stored
+from cosim.trials.live_results import runs_folder, score_trial, trial_folder
+from cosim.trials.live_scoring import SessionScore
 from cosim.trials.live_study import LiveCondition, TimingLimits
 from cosim.trials.study import Study
 
@@ -49,9 +49,6 @@ log = logging.getLogger(__name__)
 REPORT_KEY = re.compile(r"^[A-Za-z0-9_\-]{1,64}$")
 #: seconds a stopped run may take to end before the server gives up waiting
 STOP_WAIT_S = 30.0
-#: a click this long (s) after the run's end is scored (the page shows the last
-#: frame until it hears of the end)
-END_MARGIN_S = 5.0
 #: a page's timing report: its counts (whole, at most MAX_FRAMES) and times (ms)
 TIMING_COUNTS = ("frames_received", "frames_drawn", "latency_samples", "counter_mismatches")
 TIMING_MS = ("latency_ms_p50", "latency_ms_p95", "latency_ms_max", "clock_rtt_ms")
@@ -78,7 +75,7 @@ class LiveConsole:
                  runs_dir: Path | None = None, backend: str = "process",
                  realtime: float = 1.0) -> None:
         self.study, self.store, self.bad, self.number = study, store, bad, number
-        self.runs_dir = runs_dir or study.path.resolve().with_name(f"{study.path.stem}-live")
+        self.runs_dir = runs_dir or runs_folder(study)
         self.backend, self.realtime = backend, realtime
         self.runs: dict[str, tuple[int, LiveRun]] = {}
         self._by_id = {c.id: c for c in study.live}
@@ -119,7 +116,7 @@ class LiveConsole:
                 "session_number": s["session_number"]}
 
     def _folder(self, sid: str, index: int) -> Path:
-        return self.runs_dir / sid / f"trial{index:03d}"
+        return trial_folder(self.runs_dir, sid, index)
 
     def _session(self, request: Request) -> dict[str, Any]:
         sid = request.path_params["sid"]
@@ -263,12 +260,10 @@ class LiveConsole:
         folder = self._folder(s["id"], ti)
         if not (folder / "summary.json").is_file():
             raise self.bad(f"trial {ti} of this session has not run (no {folder})", 409)
-        c = self.condition(s["trial_order"][ti])
+        self.condition(s["trial_order"][ti])  # refused (409) if gone or changed
         try:
-            duration_s = c.duration_s or load_scenario(c.scenario).duration_s
-            rows = [r for r in self.store.live_reports(s["id"]) if r["trial_index"] == ti]
-            return score_stored(folder, {f.name: (f.width_px, f.height_px) for f in c.feeds},
-                                rows, duration_s + END_MARGIN_S, self.study.scoring)
+            return score_trial(self.study, s, ti, self.store.live_reports(s["id"]),
+                               self.runs_dir)
         except ConfigError as e:  # ReportError too
             raise self.bad(f"trial {ti}: " + "; ".join(e.problems)[:2000], 409) from None
 
