@@ -124,6 +124,16 @@ def intrinsics(cam: CameraSpec) -> np.ndarray:
                      [0.0, 0.0, 1.0]])
 
 
+def frustum_planes(K: np.ndarray, w_px: int, h_px: int) -> np.ndarray:
+    """(5, 3) the view frustum's planes through the camera of intrinsics ``K``
+    and a ``w_px`` x ``h_px`` image (near, left, right, top, bottom; the
+    image's outer pixel edges): a point ``p`` (camera axes) is inside a plane
+    ``n`` where ``n . p >= 0`` (the near plane: ``z >= 0``)."""
+    f, cx, cy = K[0, 0], K[0, 2], K[1, 2]
+    return np.array([[0.0, 0.0, 1.0], [f, 0.0, cx + 0.5], [-f, 0.0, w_px - 0.5 - cx],
+                     [0.0, f, cy + 0.5], [0.0, -f, h_px - 0.5 - cy]])
+
+
 def mount_rotation(cam: CameraSpec, gimbal: tuple[float, float] | None = None) -> np.ndarray:
     """R_bc: camera axes -> body axes, for the mount's angles or a gimbal's
     current ``(pitch_deg, yaw_deg)``: yaw about the body's down axis (positive

@@ -26,6 +26,7 @@ from cosim.core.camera import (
     Pose,
     clip_near,
     fixed,
+    frustum_planes,
     ground_homography,
     intrinsics,
     project,
@@ -210,10 +211,7 @@ class _View:
         p = world.pixel_grid(0, h, w, 9)
         grid = np.concatenate([p, p + np.array([[1.0], [0.0], [0.0]]),
                                p + np.array([[0.0], [1.0], [0.0]])], axis=1)
-        f, cx, cy = K[0, 0], K[0, 2], K[1, 2]
-        # near, left, right, top, bottom
-        planes = np.array([[0.0, 0.0, 1.0], [f, 0.0, cx + 0.5], [-f, 0.0, w - 0.5 - cx],
-                           [0.0, f, cy + 0.5], [0.0, -f, h - 0.5 - cy]])
+        planes = frustum_planes(K, w, h)
         quad = np.array([[-0.5, -0.5], [w - 0.5, -0.5], [w - 0.5, h - 0.5], [-0.5, h - 0.5]],
                         dtype=np.float32)
         bounds = tuple(int(b) for b in np.linspace(0, h, STRIPS + 1).round().astype(int))

@@ -21,7 +21,7 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
-from cosim.core.camera import NEAR_M, SHIFT, Pose, clip_near, fixed, project
+from cosim.core.camera import NEAR_M, SHIFT, Pose, clip_near, fixed, frustum_planes, project
 from cosim.renderer.targets import (
     AMBIENT,
     UNIT_CORNERS,
@@ -114,10 +114,7 @@ def may_reach_view(t: TargetSpec, origin_l: np.ndarray, sun_l: np.ndarray, K: np
     reach_m = (max(abs(lo_x), abs(hi_x)) ** 2 + max(abs(lo_y), abs(hi_y)) ** 2) ** 0.5 \
         + abs(lo_z) * float(np.hypot(sun_l[0], sun_l[1])) / -float(sun_l[2])
     c = pose.R_cl @ (origin_l - pose.c_l)
-    f, cx, cy = K[0, 0], K[0, 2], K[1, 2]
-    # the view's planes through the camera (near, left, right, top, bottom), inside >= 0
-    planes = np.array([[0.0, 0.0, 1.0], [f, 0.0, cx + 0.5], [-f, 0.0, w_img - 0.5 - cx],
-                       [0.0, f, cy + 0.5], [0.0, -f, h_img - 0.5 - cy]])
+    planes = frustum_planes(K, w_img, h_img)
     return bool(((planes @ c) >= -reach_m * np.linalg.norm(planes, axis=1)).all())
 
 
