@@ -17,18 +17,12 @@ from __future__ import annotations
 import argparse
 import json
 import shutil
-import socket
 import tempfile
-import threading
-import time
 import urllib.request
 from pathlib import Path
 from typing import Any
 
-import uvicorn
-
-from cosim.trials.limits import uvicorn_settings
-from cosim.trials.server import make_app
+from cosim.trials.server import make_app, served_in_thread
 from cosim.trials.store import Store
 from cosim.trials.study import load_study
 
@@ -62,43 +56,33 @@ def main() -> None:
             "*.sqlite*", "*-live"))
         study = load_study(Path(tmp) / "study" / Path(a.study).name)
         store = Store(Path(tmp) / "demo.sqlite")
-        sock = socket.socket()
-        sock.bind(("127.0.0.1", 0))
-        port = sock.getsockname()[1]
-        server = uvicorn.Server(uvicorn.Config(make_app(study, store), log_level="warning",
-                                               **uvicorn_settings()))
-        th = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, daemon=True)
-        th.start()
-        while not server.started:
-            time.sleep(0.05)
-        url = f"http://127.0.0.1:{port}"
         try:
-            s = _post(f"{url}/api/sessions", {"participant": "demo", **PROFILE})
-            trial = next(t["index"] for t in s["trials"] if t["condition"] == a.condition)
-            with sync_playwright() as pw:
-                browser = pw.chromium.launch(executable_path=CHROMIUM)
-                page = browser.new_page(viewport={"width": WIDTH_PX, "height": HEIGHT_PX})
-                page.goto(f"{url}/live?session={s['id']}")
-                page.wait_for_function("document.body.dataset.phase === 'waiting'")
-                _post(f"{url}/api/sessions/{s['id']}/live/start", {"trial_index": trial})
-                page.wait_for_function("document.body.dataset.phase === 'live'",
-                                       timeout=60_000)
-                page.wait_for_function(f"Number((document.getElementById('clock')"
-                                       f".textContent.match(/[0-9.]+/) || [0])[0]) >= "
-                                       f"{a.at_s}", timeout=120_000)
-                page.screenshot(path=a.out)
+            with served_in_thread(make_app(study, store), lifespan="auto",
+                                  stop_timeout_s=30) as url:
+                s = _post(f"{url}/api/sessions", {"participant": "demo", **PROFILE})
+                trial = next(t["index"] for t in s["trials"] if t["condition"] == a.condition)
+                with sync_playwright() as pw:
+                    browser = pw.chromium.launch(executable_path=CHROMIUM)
+                    page = browser.new_page(viewport={"width": WIDTH_PX, "height": HEIGHT_PX})
+                    page.goto(f"{url}/live?session={s['id']}")
+                    page.wait_for_function("document.body.dataset.phase === 'waiting'")
+                    _post(f"{url}/api/sessions/{s['id']}/live/start", {"trial_index": trial})
+                    page.wait_for_function("document.body.dataset.phase === 'live'",
+                                           timeout=60_000)
+                    page.wait_for_function(f"Number((document.getElementById('clock')"
+                                           f".textContent.match(/[0-9.]+/) || [0])[0]) >= "
+                                           f"{a.at_s}", timeout=120_000)
+                    page.screenshot(path=a.out)
+                    if a.until_end:
+                        page.wait_for_function("document.body.dataset.phase === 'ended'",
+                                               timeout=3_600_000)
+                    browser.close()
                 if a.until_end:
-                    page.wait_for_function("document.body.dataset.phase === 'ended'",
-                                           timeout=3_600_000)
-                browser.close()
-            if a.until_end:
-                with urllib.request.urlopen(f"{url}/api/sessions/{s['id']}/live") as r:
-                    print(json.dumps(json.loads(r.read())["live"], indent=1))
-            else:
-                _post(f"{url}/api/sessions/{s['id']}/live/stop", {})
+                    with urllib.request.urlopen(f"{url}/api/sessions/{s['id']}/live") as r:
+                        print(json.dumps(json.loads(r.read())["live"], indent=1))
+                else:
+                    _post(f"{url}/api/sessions/{s['id']}/live/stop", {})
         finally:
-            server.should_exit = True
-            th.join(30)
             store.close()
     print(f"wrote {a.out}")
 

@@ -14,17 +14,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import socket
 import tempfile
-import threading
 import time
 import urllib.request
 from pathlib import Path
 
-import uvicorn
-
-from cosim.trials.limits import uvicorn_settings
-from cosim.trials.server import make_app
+from cosim.trials.server import make_app, served_in_thread
 from cosim.trials.store import Store
 from cosim.trials.study import load_study
 
@@ -58,51 +53,40 @@ def main() -> None:
     study = load_study(a.study)
     with tempfile.TemporaryDirectory() as tmp:
         store = Store(Path(tmp) / "demo.sqlite")
-        sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        sock.bind(("127.0.0.1", 0))
-        port = sock.getsockname()[1]
-        srv = uvicorn.Server(uvicorn.Config(make_app(a.study, store), log_level="warning",
-                                            lifespan="off", **uvicorn_settings()))
-        th = threading.Thread(target=srv.run, kwargs={"sockets": [sock]}, daemon=True)
-        th.start()
-        while not srv.started:
-            time.sleep(0.02)
-        url = f"http://127.0.0.1:{port}"
         try:
-            s = _post(f"{url}/api/sessions", {"participant": "demo", **PROFILE})
-            _post(f"{url}/api/sessions/{s['id']}/state", {"state": "running"})
-            with sync_playwright() as pw:
-                browser = pw.chromium.launch(executable_path=CHROMIUM,
-                                             args=["--autoplay-policy=no-user-gesture-required"])
-                page = browser.new_page(viewport={"width": PROFILE["screen_width_px"],
-                                                  "height": PROFILE["screen_height_px"]})
-                page.goto(f"{url}/participant?session={s['id']}")
-                page.wait_for_function("document.body.dataset.phase === 'begin'")
-                if a.instructions_out:
-                    page.wait_for_function("[...document.querySelectorAll('img.target')]"
-                                           ".every((i) => i.complete && i.naturalWidth > 0)")
-                    page.screenshot(path=a.instructions_out)
-                page.keyboard.press("Space")
-                page.wait_for_function("['practice', 'fixation']"
-                                       ".includes(document.body.dataset.phase)")
-                if page.evaluate("document.body.dataset.phase") == "practice":
-                    page.keyboard.press("Space")  # (the practice clips' screen)
-                page.wait_for_function("document.body.dataset.phase === 'playing'")
-                clip = study.all_clips[s["trials"][0]["clip"]]
-                deadline = time.monotonic() + 60
-                while time.monotonic() < deadline:  # the target fully in the picture
-                    k = int(page.evaluate("Number(document.body.dataset.frame || -1)"))
-                    if 0 <= k < len(clip.frames) and clip.frames[k].in_view and \
-                            _inside(clip, k):
-                        page.screenshot(path=a.out)
-                        break
-                    page.wait_for_timeout(20)
-                else:
-                    raise SystemExit("the first clip's target never came into view")
-                browser.close()
+            with served_in_thread(make_app(a.study, store)) as url:
+                s = _post(f"{url}/api/sessions", {"participant": "demo", **PROFILE})
+                _post(f"{url}/api/sessions/{s['id']}/state", {"state": "running"})
+                with sync_playwright() as pw:
+                    browser = pw.chromium.launch(executable_path=CHROMIUM,
+                                                 args=["--autoplay-policy=no-user-gesture-required"])
+                    page = browser.new_page(viewport={"width": PROFILE["screen_width_px"],
+                                                      "height": PROFILE["screen_height_px"]})
+                    page.goto(f"{url}/participant?session={s['id']}")
+                    page.wait_for_function("document.body.dataset.phase === 'begin'")
+                    if a.instructions_out:
+                        page.wait_for_function("[...document.querySelectorAll('img.target')]"
+                                               ".every((i) => i.complete && i.naturalWidth > 0)")
+                        page.screenshot(path=a.instructions_out)
+                    page.keyboard.press("Space")
+                    page.wait_for_function("['practice', 'fixation']"
+                                           ".includes(document.body.dataset.phase)")
+                    if page.evaluate("document.body.dataset.phase") == "practice":
+                        page.keyboard.press("Space")  # (the practice clips' screen)
+                    page.wait_for_function("document.body.dataset.phase === 'playing'")
+                    clip = study.all_clips[s["trials"][0]["clip"]]
+                    deadline = time.monotonic() + 60
+                    while time.monotonic() < deadline:  # the target fully in the picture
+                        k = int(page.evaluate("Number(document.body.dataset.frame || -1)"))
+                        if 0 <= k < len(clip.frames) and clip.frames[k].in_view and \
+                                _inside(clip, k):
+                            page.screenshot(path=a.out)
+                            break
+                        page.wait_for_timeout(20)
+                    else:
+                        raise SystemExit("the first clip's target never came into view")
+                    browser.close()
         finally:
-            srv.should_exit = True
-            th.join(10)
             store.close()
     print(a.out)
 

@@ -47,10 +47,13 @@ import json
 import logging
 import math
 import re
+import socket
 import stat
-from collections.abc import AsyncIterator
+import threading
+import time
+from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from starlette.applications import Starlette
 from starlette.concurrency import run_in_threadpool
@@ -570,6 +573,39 @@ def default_db(study_path: str | Path) -> Path:
     the study file (``studies/exp2.yaml``: ``studies/exp2.sqlite``; git ignores
     ``*.sqlite``: participants' data stay out of the repository)."""
     return Path(study_path).with_suffix(".sqlite")
+
+
+@contextlib.contextmanager
+def served_in_thread(app: Any, *, lifespan: Literal["auto", "on", "off"] = "off",
+                     start_timeout_s: float = 10.0, stop_timeout_s: float = 10.0,
+                     **limits: Any) -> Iterator[str]:
+    """``app`` served by uvicorn in a thread on 127.0.0.1 at an ephemeral port,
+    with ``cosim trials serve``'s bounds (``limits``: other values of
+    ``uvicorn_settings``'s); yields its URL. For scripts and tests that drive
+    the pages; a ``RuntimeError`` if uvicorn does not start or stop in time."""
+    import uvicorn
+
+    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    sock.bind(("127.0.0.1", 0))
+    port = sock.getsockname()[1]
+    srv = uvicorn.Server(uvicorn.Config(app, log_level="warning", lifespan=lifespan,
+                                        **uvicorn_settings(**limits)))
+    th = threading.Thread(target=srv.run, kwargs={"sockets": [sock]}, daemon=True)
+    th.start()
+    deadline = time.monotonic() + start_timeout_s
+    try:
+        while not srv.started:
+            if time.monotonic() >= deadline or not th.is_alive():
+                raise RuntimeError("uvicorn did not start")
+            time.sleep(0.02)
+        yield f"http://127.0.0.1:{port}"
+    finally:
+        srv.should_exit = True
+        th.join(stop_timeout_s)
+        sock.close()
+    if th.is_alive():
+        raise RuntimeError("uvicorn did not stop")
 
 
 def serve(study_path: str | Path, host: str = "127.0.0.1", port: int = 8000,

@@ -10,9 +10,6 @@ import http.client
 import json
 import math
 import os
-import socket
-import threading
-import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -24,8 +21,7 @@ import uvicorn
 from test_store import write_gt, write_video
 
 from cosim.renderer.video import open_video
-from cosim.trials.limits import uvicorn_settings
-from cosim.trials.server import make_app, serve
+from cosim.trials.server import make_app, serve, served_in_thread
 from cosim.trials.store import Store
 
 W, H, RATE_HZ, FRAMES = 320, 240, 10.0, 20  # each clip: 2 s of 320 x 240 at 10 Hz
@@ -190,27 +186,11 @@ def live_server(study_path: Path, **limits: Any) -> Iterator[LiveServer]:
     127.0.0.1:<ephemeral>, with ``cosim trials serve``'s bounds (``limits``:
     other values of ``uvicorn_settings``'s)."""
     store = Store(study_path.with_suffix(".sqlite"))
-    app = make_app(study_path, store)
-    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    sock.bind(("127.0.0.1", 0))
-    port = sock.getsockname()[1]
-    srv = uvicorn.Server(uvicorn.Config(app, log_level="warning", lifespan="off",
-                                        **uvicorn_settings(**limits)))
-    th = threading.Thread(target=srv.run, kwargs={"sockets": [sock]}, daemon=True)
-    th.start()
-    deadline = time.monotonic() + 10
-    while not srv.started:
-        assert time.monotonic() < deadline and th.is_alive(), "uvicorn did not start"
-        time.sleep(0.02)
     try:
-        yield LiveServer(f"http://127.0.0.1:{port}", store, study_path)
+        with served_in_thread(make_app(study_path, store), **limits) as url:
+            yield LiveServer(url, store, study_path)
     finally:
-        srv.should_exit = True
-        th.join(10)
-        sock.close()
         store.close()
-    assert not th.is_alive(), "uvicorn did not stop"
 
 
 @pytest.fixture(scope="module")
@@ -343,7 +323,6 @@ def test_serve_on_another_loopback_address_answers_requests_to_it(
         study_file: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """``--host 127.0.0.2`` is this machine: the browser's ``Host: 127.0.0.2:port``
     is answered; another name still is not."""
-    import uvicorn
 
     ran: dict[str, Any] = {}
     monkeypatch.setattr(uvicorn, "run", lambda app, **kw: ran.update(app=app, **kw))
