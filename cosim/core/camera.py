@@ -94,6 +94,9 @@ class CameraSpec:
 
 
 NEAR_M = 0.05  # points closer than this along the optical axis are clipped
+#: the power law between a frame's 8-bit values and linear light (``(v / 255) **
+#: GAMMA``): the ground truth's contrast, the haze, the shade and the sensor use it
+GAMMA = 2.2
 
 # camera axes (columns) in body axes for the forward mount
 _R_BC_FORWARD = np.array([[0.0, 0.0, 1.0],

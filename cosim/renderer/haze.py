@@ -25,11 +25,9 @@ from typing import Any
 
 import numpy as np
 
-from cosim.core.camera import Pose
+from cosim.core.camera import GAMMA, Pose
 from cosim.world.atmosphere import EXTINCTION, AtmosphereSpec
 
-#: sRGB's linearisation as the ground truth's contrast does it (truth.py)
-GAMMA = 2.2
 #: transmittance steps of the ground's tables: step k holds t from k / LEVELS
 #: to (k + 1) / LEVELS and hazes with their middle, within 1 / (2 LEVELS)
 LEVELS = 128

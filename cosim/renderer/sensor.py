@@ -67,6 +67,7 @@ import numpy as np
 from scipy.special import ndtri
 
 from cosim.core.camera import (
+    GAMMA,
     CameraSpec,
     Pose,
     SensorSpec,
@@ -82,8 +83,6 @@ from cosim.core.camera import (
 SMEAR_RANGE_M = 5000.0
 #: kernels of fewer cells cv2.filter2D applies tap by tap (8-bit in and out)
 _DIRECT_CELLS = 130
-#: the power law between a frame's 8-bit values and linear light
-GAMMA = 2.2
 #: the linear signal at which ``snr_db`` is given (18 % grey)
 MID_GREY = 0.18
 #: the linear signal at which read noise equals shot noise

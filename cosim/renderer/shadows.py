@@ -21,7 +21,16 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
-from cosim.core.camera import NEAR_M, SHIFT, Pose, clip_near, fixed, frustum_planes, project
+from cosim.core.camera import (
+    GAMMA,
+    NEAR_M,
+    SHIFT,
+    Pose,
+    clip_near,
+    fixed,
+    frustum_planes,
+    project,
+)
 from cosim.renderer.targets import (
     AMBIENT,
     UNIT_CORNERS,
@@ -39,7 +48,7 @@ def shade_table(elevation_deg: float) -> np.ndarray:
     s = float(np.sin(np.radians(elevation_deg)))
     ratio = AMBIENT / (AMBIENT + (1.0 - AMBIENT) * s)
     v = np.arange(256, dtype=np.float64)
-    dark = np.clip(np.round(v * ratio ** (1 / 2.2)), 0, 255).astype(np.uint8)
+    dark = np.clip(np.round(v * ratio ** (1 / GAMMA)), 0, 255).astype(np.uint8)
     table = np.repeat(dark[None, :, None], 4, axis=2)
     table[0, :, 3] = np.arange(256, dtype=np.uint8)
     return table

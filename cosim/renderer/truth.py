@@ -32,7 +32,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from cosim.core.camera import NEAR_M, SHIFT, CameraSpec, clip_near, project
+from cosim.core.camera import GAMMA, NEAR_M, SHIFT, CameraSpec, clip_near, project
 from cosim.renderer.sensor import distort_truth
 from cosim.renderer.targets import FACE_IDX
 
@@ -40,7 +40,7 @@ GT_COLUMNS = ("frame", "time_s", "vehicle", "camera", "target", "in_view", "full
               "bbox_x0_px", "bbox_y0_px", "bbox_x1_px", "bbox_y1_px", "center_x_px",
               "center_y_px", "eccentricity_px", "eccentricity_deg", "angular_size_deg",
               "pixels_on_target", "range_m", "contrast", "visible_fraction")
-_LIN = ((np.arange(256) / 255.0) ** 2.2).astype(np.float32)  # sRGB -> linear (approx.)
+_LIN = ((np.arange(256) / 255.0) ** GAMMA).astype(np.float32)  # sRGB -> linear (approx.)
 _LIN_BGRA = np.repeat(_LIN[None, :, None], 4, axis=2)  # cv2.LUT's table for BGRA pixels
 _REC709_BGRA = np.array([[0.0722, 0.7152, 0.2126, 0.0]], np.float32)  # linear BGRA -> Y
 
