@@ -162,6 +162,16 @@ _LIVE_FIELDS = tuple(c.name for c in live_reports.columns if c.name not in ("id"
 LIVE_EXPORT_COLUMNS = tuple(c.name for c in live_reports.columns if c.name != "id")
 
 
+def _session_id() -> str:
+    """A new session's id: 12 URL-safe random characters beginning with a letter or a
+    digit, so that an exported id never reads as an option on a command line or is
+    escaped as a would-be formula in a spreadsheet (a cell beginning with "-")."""
+    while True:
+        sid = secrets.token_urlsafe(9)
+        if sid[0].isalnum():
+            return sid
+
+
 def _now() -> str:
     return datetime.now(timezone.utc).isoformat(timespec="milliseconds")
 
@@ -218,7 +228,7 @@ class Store:
     def create_session(self, *, participant: str, study: str, protocol: str,
                        display: dict[str, Any], order_method: str, seed: int,
                        session_number: int, trial_order: list[dict[str, Any]]) -> dict[str, Any]:
-        row = {"id": secrets.token_urlsafe(9), "participant": participant, "study": study,
+        row = {"id": _session_id(), "participant": participant, "study": study,
                "protocol": protocol, **display, "order_method": order_method, "seed": seed,
                "session_number": session_number, "trial_order": json.dumps(trial_order),
                "state": "ready", "created": _now()}

@@ -483,3 +483,18 @@ def test_track_camera_gap_is_the_arrows_way_in_camera_pixels(tmp_path: Path) -> 
         camera_px = r_mm / (3.75 * 0.25)  # 3.75 screen px a camera px, 0.25 mm a screen px
         assert m.onscreen_distance_mm == pytest.approx(r_mm)
         assert m.camera_gap_deg == pytest.approx(math.degrees(math.atan(camera_px / 160.0)))
+
+
+def test_a_session_id_never_begins_with_a_dash(tmp_path: Path,
+                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    """One random id in 32 began with "-" or "_": a spreadsheet export escaped it as a
+    would-be formula, so the exported id no longer matched the stored one."""
+    import secrets
+
+    drawn = iter(["-Ce3h3qTpdLT", "_Ce3h3qTpdLT", "Ce3h3qTpdLT0"])
+    monkeypatch.setattr(secrets, "token_urlsafe", lambda n: next(drawn))
+    with Store(tmp_path / "ids.sqlite") as store:
+        s = store.create_session(participant="p01", study="s", protocol="disappear",
+                                 display=DISPLAY, order_method="shuffle", seed=7,
+                                 session_number=0, trial_order=[{"index": 0}])
+    assert s["id"] == "Ce3h3qTpdLT0"
