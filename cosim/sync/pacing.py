@@ -5,6 +5,8 @@ drifts silently: every paced tick records how late it finished relative to
 its deadline, and ``stats()`` reports p50/p99/max lateness and the number
 of overruns. A run too slow for real time runs as fast as it can and
 catches up when it can (the deadline is absolute, not per tick).
+``hold()`` and ``release()`` stop its clock while a run is paused: the
+pause is neither lateness nor time to catch up.
 """
 
 from __future__ import annotations
@@ -21,9 +23,21 @@ class Pacer:
         self.factor = float(factor)
         self._t0: float | None = None
         self._late: list[float] = []
+        self._held: float | None = None
 
     def start(self) -> None:
         self._t0 = time.monotonic()
+
+    def hold(self) -> None:
+        """Stop the clock (a paused run): deadlines move on by the time held."""
+        if self._held is None:
+            self._held = time.monotonic()
+
+    def release(self) -> None:
+        """Start the clock again after ``hold``."""
+        if self._held is not None and self._t0 is not None:
+            self._t0 += time.monotonic() - self._held
+        self._held = None
 
     def pace(self, sim_time_s: float) -> float:
         """Call after finishing the tick that ends at ``sim_time_s``: records its

@@ -85,6 +85,8 @@ class _Outcome:
     startup_s: float = 0.0
     loop0: float | None = None  # when the tick loop started
     loop_s: float = 0.0
+    #: seconds the loop was held by ``Run.pause`` (not in ``wall_time_s``)
+    paused_s: float = 0.0
     workers: int = 1
     complete: bool = True  # every output written and closed
     sections: dict[str, Any] = field(default_factory=dict)  # participants' summary parts
@@ -150,6 +152,8 @@ class Run:
         self.mavlink: Any = None
         self._stop = threading.Event()
         self._stop_reason = "interrupted"
+        self._go = threading.Event()  # cleared while paused (``pause``)
+        self._go.set()
         self._building = False
         self.pool: Pool | None = None
         self.participants: list[Participant] = []
@@ -158,6 +162,21 @@ class Run:
         """Ask the loop to stop after the current tick (safe from a signal handler)."""
         self._stop_reason = reason
         self._stop.set()
+
+    def pause(self) -> None:
+        """Hold the loop before its next exchange until ``resume`` (safe from
+        any thread): simulated time stops and nothing is skipped, so the run's
+        states are those of a run never paused. The pacer's clock stops too
+        (no lateness, no catching up afterwards); ``stop`` still ends it."""
+        self._go.clear()
+
+    def resume(self) -> None:
+        """Let a paused loop go on (nothing if it is not paused)."""
+        self._go.set()
+
+    @property
+    def paused(self) -> bool:
+        return not self._go.is_set()
 
     @property
     def building(self) -> bool:
@@ -277,6 +296,9 @@ class Run:
             if self._stop.is_set():
                 o.reason = self._stop_reason
                 return states
+            if not self._go.is_set():
+                self._hold(o)
+                continue  # a stop while held ends the run here
             for step in before:  # commands, then guidance: setpoints
                 step(o.tick, states, pool.setpoints)
             at_tick = states.copy() if copy_states else states  # the step overwrites
@@ -289,6 +311,17 @@ class Run:
                 record(o.tick, states)
         o.reason = "completed"
         return states
+
+    def _hold(self, o: _Outcome) -> None:
+        """Wait while paused (or until a stop), the pacer's clock stopped."""
+        t0 = time.perf_counter()
+        if self.pacer:
+            self.pacer.hold()
+        while not self._go.wait(0.05) and not self._stop.is_set():
+            pass
+        if self.pacer:
+            self.pacer.release()
+        o.paused_s += time.perf_counter() - t0
 
     @staticmethod
     def _failed(o: _Outcome, e: Exception, events: EventLog) -> None:
@@ -355,8 +388,10 @@ class Run:
         events.close()
 
     def _write_summary(self, o: _Outcome, events: EventLog, states_log: StateLog) -> None:
-        summary = self._summary(o.reason, o.tick, o.startup_s, o.loop_s, o.workers,
-                                events.counts, states_log.rows_logged, o.error)
+        summary = self._summary(o.reason, o.tick, o.startup_s, o.loop_s - o.paused_s,
+                                o.workers, events.counts, states_log.rows_logged, o.error)
+        if o.paused_s:
+            summary["paused_s"] = round(o.paused_s, 4)
         if self.mavlink is not None:
             summary["mavlink"] = {"url": self.mavlink_config.url,
                                   "counters": self.mavlink.counters()}
