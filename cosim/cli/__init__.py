@@ -1,5 +1,5 @@
 """The ``cosim`` command: one module a subcommand (``run``, ``validate``,
-``models``, ``plot``, ``export``, ``recover``, ``visibility``, ``trials``,
+``models``, ``plot``, ``export``, ``recover``, ``replay``, ``visibility``, ``trials``,
 ``bench``) and the subcommands scenario sections bring (``sweep``,
 ``search-plan``, ``swarm``: ``cosim.core.section.CliCommand``).
 
@@ -16,7 +16,18 @@ import sys
 from collections.abc import Sequence
 
 from cosim import __version__
-from cosim.cli import bench, export, models, plot, recover, run, trials, validate, visibility
+from cosim.cli import (
+    bench,
+    export,
+    models,
+    plot,
+    recover,
+    replay,
+    run,
+    trials,
+    validate,
+    visibility,
+)
 from cosim.cli.common import (
     EXIT_FAIL,
     EXIT_INTERRUPTED,
@@ -32,7 +43,7 @@ __all__ = ["EXIT_FAIL", "EXIT_INTERRUPTED", "EXIT_OK", "EXIT_USAGE", "main"]
 
 #: the CLI's own commands (``cosim --help`` lists them and the sections' by rank)
 OWN = (run.COMMAND, validate.COMMAND, models.COMMAND, plot.COMMAND, export.COMMAND,
-       recover.COMMAND, visibility.COMMAND, trials.COMMAND, bench.COMMAND)
+       recover.COMMAND, replay.COMMAND, visibility.COMMAND, trials.COMMAND, bench.COMMAND)
 
 
 def commands() -> dict[str, CliCommand]:

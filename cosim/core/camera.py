@@ -172,16 +172,39 @@ def camera_pose(cam: CameraSpec, lat_deg: float, lon_deg: float, alt_msl_m: floa
     """The camera's pose for the vehicle's; ``gimbal``: a gimbal's current
     ``(pitch_deg, yaw_deg)`` instead of the mount's."""
     local = LocalFrame(float(lat_deg), float(lon_deg), float(ground_alt_m))
-    if cam.stabilised:
-        r_nb = rot_z(math.radians(yaw_deg))
-    else:
-        r_nb = (rot_z(math.radians(yaw_deg)) @ rot_y(math.radians(pitch_deg))
-                @ rot_x(math.radians(roll_deg)))
-    r_lc = r_nb @ mount_rotation(cam, gimbal)
+    r_lc = _mount_base(cam, roll_deg, pitch_deg, yaw_deg) @ mount_rotation(cam, gimbal)
     h = float(alt_msl_m) - float(ground_alt_m)
     return Pose(R_cl=r_lc.T.copy(), c_l=np.array([0.0, 0.0, -h]), local=local, height_m=h,
                 local_ecef_m=np.array(geodetic_to_ecef(local.lat_deg, local.lon_deg,
                                                        local.alt_m)))
+
+
+def _mount_base(cam: CameraSpec, roll_deg: float, pitch_deg: float, yaw_deg: float
+                ) -> np.ndarray:
+    """R_nb as the mount sees it: the body's attitude, or only its heading for
+    a stabilised mount."""
+    if cam.stabilised:
+        return rot_z(math.radians(yaw_deg))
+    return (rot_z(math.radians(yaw_deg)) @ rot_y(math.radians(pitch_deg))
+            @ rot_x(math.radians(roll_deg)))
+
+
+def look_at_angles(cam: CameraSpec, lat_deg: float, lon_deg: float, alt_msl_m: float,
+                   roll_deg: float, pitch_deg: float, yaw_deg: float, ground_alt_m: float,
+                   at_lat_deg: float, at_lon_deg: float, at_alt_msl_m: float
+                   ) -> tuple[float, float]:
+    """The gimbal's ``(pitch_deg, yaw_deg)`` (as ``mount_rotation`` takes
+    them, not clamped) that put the point at (``at_lat_deg``, ``at_lon_deg``,
+    ``at_alt_msl_m``) on the optical axis, the image's centre, of a camera at
+    the vehicle's pose: the point in the frame's L, turned into the mount's
+    base axes (the body's, or the heading's if stabilised); its azimuth there
+    is the yaw, its elevation the pitch. Straight below gives yaw 0."""
+    local = LocalFrame(float(lat_deg), float(lon_deg), float(ground_alt_m))
+    n, e, d = local.geodetic_to_ned(at_lat_deg, at_lon_deg, at_alt_msl_m)
+    v_l = np.array([float(n), float(e), float(d) + float(alt_msl_m) - float(ground_alt_m)])
+    x, y, z = _mount_base(cam, roll_deg, pitch_deg, yaw_deg).T @ v_l
+    return (-math.degrees(math.atan2(z, math.hypot(x, y))),
+            math.degrees(math.atan2(y, x)) if x or y else 0.0)
 
 
 def to_camera(pose: Pose, pts_l: np.ndarray) -> np.ndarray:

@@ -28,8 +28,12 @@ now and by MAVLink and the swarm controller later:
 - ``velocity``: (vertical-lift vehicles) ``north_mps``/``east_mps``: fly this
   ground velocity (ends a goto, waypoints or a hold)
 - ``gimbal``: point the vehicle's gimbal cameras: ``pitch_deg`` (-90 nadir
-  .. 30) and/or ``yaw_deg`` (relative to the nose, -180..180). Not a flight
-  command: a command of only ``gimbal`` leaves the flight as it is.
+  .. 30) and/or ``yaw_deg`` (relative to the nose, -180..180); or
+  ``look_at`` (a point, as goto's, with optional ``alt_msl_m``/``alt_agl_m``;
+  default the ground at the scenario's origin height): the cameras keep
+  pointing at it as the vehicle moves, within those limits, until a gimbal
+  command with angles or another ``look_at``. Not a flight command: a
+  command of only ``gimbal`` leaves the flight as it is.
 - ``camera``: the vehicle's renderer cameras take stills (full frames with
   their ground truth, into the run folder's ``stills/``): ``shoot: true``
   one now; ``interval_s`` one every so many seconds (``count``: that many,
@@ -63,6 +67,7 @@ GIMBAL_PITCH_DEG = (-90.0, 30.0)
 GIMBAL_YAW_DEG = (-180.0, 180.0)
 _POINT_KEYS = ("lat_deg", "lon_deg", "north_m", "east_m", "frame")
 _TARGET_EXTRA = ("alt_msl_m", "alt_agl_m", "airspeed_kt", "airspeed_mps")
+_LOOK_AT_EXTRA = ("alt_msl_m", "alt_agl_m")
 
 
 def min_turn_radius_m(airspeed_mps: float, bank_limit_deg: float) -> float:
@@ -133,6 +138,8 @@ class Command:
     #: gimbal cameras' new angles (None: unchanged); not part of the flight
     gimbal_pitch_deg: float | None = None
     gimbal_yaw_deg: float | None = None
+    #: a point the gimbal cameras keep pointing at (None: no tracking asked)
+    gimbal_look_at: Point | None = None
     #: stills from the vehicle's cameras (None: none); not part of the flight
     camera: CameraTrigger | None = None
     source: dict[str, Any] = field(default_factory=dict, compare=False)
@@ -149,7 +156,8 @@ class Command:
 
     @property
     def points_gimbal(self) -> bool:
-        return self.gimbal_pitch_deg is not None or self.gimbal_yaw_deg is not None
+        return (self.gimbal_pitch_deg is not None or self.gimbal_yaw_deg is not None
+                or self.gimbal_look_at is not None)
 
     def label(self) -> str:
         """A short description for the state log's ``command`` column."""
@@ -170,7 +178,12 @@ class Command:
             parts.append("land")
         if self.velocity_ne is not None:
             parts.append("velocity {:g} {:g}".format(*self.velocity_ne))
-        if self.points_gimbal:
+        if self.gimbal_look_at is not None:
+            p = self.gimbal_look_at
+            parts.append(f"gimbal look at {p.a:g},{p.b:g}"
+                         + (" (lat/lon)" if p.frame == "geodetic" else
+                            " (from start)" if p.frame == "start" else ""))
+        elif self.points_gimbal:
             parts.append("gimbal " + " ".join(
                 f"{k} {v:g}" for k, v in (("pitch", self.gimbal_pitch_deg),
                                           ("yaw", self.gimbal_yaw_deg)) if v is not None))
@@ -278,7 +291,8 @@ def parse_command(d: Any, path: P, report: Report) -> Command | None:
     if stall is not None and not isinstance(stall, bool):
         report(path + ("stall_protection",), f"expected true or false, got {stall!r}")
         stall = None
-    gimbal = _gimbal(d["gimbal"], path + ("gimbal",), report) if "gimbal" in d else (None, None)
+    gimbal = _gimbal(d["gimbal"], path + ("gimbal",), report) if "gimbal" in d \
+        else (None, None, None)
     camera = _camera(d["camera"], path + ("camera",), report) if "camera" in d else None
     takeoff = _num(d, "takeoff_agl_m", path, report, 0.5, 3000) if "takeoff_agl_m" in d else None
     land = d.get("land", False)
@@ -372,7 +386,8 @@ def parse_command(d: Any, path: P, report: Report) -> Command | None:
                    loiter_radius_m=radius, loiter_cw=cw, loiter_here=here, leg_from=leg_from,
                    leg_continue=leg_continue,
                    takeoff_agl_m=takeoff, land=land, velocity_ne=velocity,
-                   gimbal_pitch_deg=gimbal[0], gimbal_yaw_deg=gimbal[1], camera=camera,
+                   gimbal_pitch_deg=gimbal[0], gimbal_yaw_deg=gimbal[1],
+                   gimbal_look_at=gimbal[2], camera=camera,
                    source=d)
 
 
@@ -388,16 +403,25 @@ def _velocity(v: Any, path: P, report: Report) -> tuple[float, float] | None:
     return None if n is None or e is None else (n, e)
 
 
-def _gimbal(g: Any, path: P, report: Report) -> tuple[float | None, float | None]:
+def _gimbal(g: Any, path: P, report: Report
+            ) -> tuple[float | None, float | None, Point | None]:
+    """A ``gimbal`` command: its (pitch_deg, yaw_deg, look_at point)."""
     if not isinstance(g, dict) or not g:
-        report(path, f"expected a mapping with pitch_deg and/or yaw_deg, got {g!r}")
-        return None, None
+        report(path, f"expected a mapping with pitch_deg and/or yaw_deg, or look_at, got {g!r}")
+        return None, None, None
     for k in g:
-        if k not in ("pitch_deg", "yaw_deg"):
-            report(path + (k,), f"unknown key {k!r}; expected pitch_deg, yaw_deg")
+        if k not in ("pitch_deg", "yaw_deg", "look_at"):
+            report(path + (k,), f"unknown key {k!r}; expected pitch_deg, yaw_deg, look_at")
+    if "look_at" in g:
+        angles = [k for k in ("pitch_deg", "yaw_deg") if k in g]
+        if angles:
+            report(path, f"give look_at or angles ({' / '.join(angles)}), not both: look_at "
+                         f"points the gimbal itself")
+            return None, None, None
+        return None, None, _point(g["look_at"], path + ("look_at",), report, _LOOK_AT_EXTRA)
     pitch = _num(g, "pitch_deg", path, report, *GIMBAL_PITCH_DEG) if "pitch_deg" in g else None
     yaw = _num(g, "yaw_deg", path, report, *GIMBAL_YAW_DEG) if "yaw_deg" in g else None
-    return pitch, yaw
+    return pitch, yaw, None
 
 
 def _camera(c: Any, path: P, report: Report) -> CameraTrigger | None:

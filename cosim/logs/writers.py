@@ -234,7 +234,8 @@ class StateLog:
 
 #: what a run writes into its output folder (``clear_outputs`` removes them)
 RUN_OUTPUTS = ("states.parquet", "events.jsonl", "summary.json", "scenario.resolved.yaml",
-               "track.png", "faulthandler.log", ".cosim-reserve", ".cosim-reserve-summary")
+               "commands.jsonl", "track.png", "faulthandler.log", ".cosim-reserve",
+               ".cosim-reserve-summary")
 
 
 def clear_outputs(folder: str | Path) -> None:

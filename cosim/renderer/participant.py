@@ -8,11 +8,13 @@ exchange it sends the frames due, those between the last exchange and this
 one from the states the run gathered in between (``watch_requests``), and
 takes what the pool has rendered: thumbnails for the operator view and the
 frame taps (``--video``), stills for their record. Commands point gimbal
-cameras (a ``gimbal`` event) and trigger stills (the ``camera`` command: one
-now, every so many seconds or metres, at most a count). ``finish`` renders
-what is still due, closes the pool and the files and returns the ``cameras``
-section of the summary; an error the loop did not see yet is raised there as
-``ParticipantFailed`` with the section.
+cameras (a ``gimbal`` event): at angles, or at a point they keep in the
+image's centre (``look_at``: the angles recomputed from the vehicle's pose
+for every frame, within the gimbal's limits); they also trigger stills (the
+``camera`` command: one now, every so many seconds or metres, at most a
+count). ``finish`` renders what is still due, closes the pool and the files
+and returns the ``cameras`` section of the summary; an error the loop did
+not see yet is raised there as ``ParticipantFailed`` with the section.
 
 Owns the loop hooks and when frames and stills are due: the processes are the
 pool's, the files ``outputs``', the pixels ``frame``'s.
@@ -29,8 +31,9 @@ from typing import Any
 
 import numpy as np
 
-from cosim.core.camera import CameraSpec
+from cosim.core.camera import CameraSpec, look_at_angles
 from cosim.core.state import STATE_INDEX
+from cosim.guidance.commands import GIMBAL_PITCH_DEG, GIMBAL_YAW_DEG, Point
 from cosim.renderer.config import CamerasSpec
 from cosim.renderer.frame import WorldSpec
 from cosim.renderer.outputs import Stills, Stream, summary
@@ -81,7 +84,17 @@ class CameraParticipant:
         #: each gimbal stream's current (pitch_deg, yaw_deg), set by commands
         self.gimbal: dict[int, tuple[float, float]] = {}
         self.gimbal_before: dict[int, tuple[float, float]] = {}  # as of the last exchange
-        self.gimbal_moves: list[tuple[Stream, str]] = []
+        #: the gimbal streams that track a point (``look_at``): its lat_deg,
+        #: lon_deg, alt_msl_m; and as of the last exchange
+        self.look_at: dict[int, tuple[float, float, float]] = {}
+        self.look_at_before: dict[int, tuple[float, float, float]] = {}
+        #: streams whose tracking an angle command ended at this exchange: the
+        #: point, and the command's pitch and yaw (None: where tracking left it)
+        self.released: dict[int, tuple[tuple[float, float, float], float | None,
+                                       float | None]] = {}
+        #: gimbal commands for this exchange's events: the stream, the source
+        #: and the point tracked (north_m, east_m, alt_msl_m; None: angles)
+        self.gimbal_moves: list[tuple[Stream, str, dict[str, float] | None]] = []
         #: still triggering per vehicle row (``camera`` commands) and the streams
         #: whose next frame is a still (stream index -> the command's source)
         self.triggers: dict[int, _Trigger] = {}
@@ -141,24 +154,67 @@ class CameraParticipant:
         log.info("cameras: %d stream(s) on %d render worker(s)", len(self.streams), n)
 
     def point_gimbal(self, row: int, cmd: Any, source: str) -> None:
-        """A command's gimbal angles, for the vehicle's gimbal cameras from this
-        exchange's frame on (a ``gimbal`` event); ignored, with a warning, by a
-        vehicle without one."""
+        """A command's gimbal angles, or the point to track (``look_at``), for
+        the vehicle's gimbal cameras from this exchange's frame on (a
+        ``gimbal`` event); ignored, with a warning, by a vehicle without one.
+        Angles end tracking (an angle not given stays where tracking left it)."""
         if not cmd.points_gimbal:
             return
-        moved = []
-        for s in self.streams:
-            if s.row == row and s.index in self.gimbal:
-                pitch, yaw = self.gimbal[s.index]
-                self.gimbal[s.index] = (
-                    pitch if cmd.gimbal_pitch_deg is None else cmd.gimbal_pitch_deg,
-                    yaw if cmd.gimbal_yaw_deg is None else cmd.gimbal_yaw_deg)
-                moved.append(s)
+        moved = [s for s in self.streams if s.row == row and s.index in self.gimbal]
         if not moved:
             log.warning("vehicle %s has no camera on a gimbal: gimbal command (%s) ignored",
                         self.ctx.ids[row], source)
             return
-        self.gimbal_moves += [(s, source) for s in moved]  # events at this exchange's tick
+        at = None if cmd.gimbal_look_at is None else self._resolve(cmd.gimbal_look_at, row)
+        p_cmd, y_cmd = cmd.gimbal_pitch_deg, cmd.gimbal_yaw_deg
+        for s in moved:
+            i = s.index
+            if at is not None:
+                self.look_at[i] = at[0]
+                self.released.pop(i, None)
+            elif i in self.look_at or i in self.released:  # the angles at this exchange's pose
+                point, p0, y0 = self.released.get(i) or (self.look_at.pop(i), None, None)
+                self.released[i] = (point, p0 if p_cmd is None else p_cmd,
+                                    y0 if y_cmd is None else y_cmd)
+            else:
+                pitch, yaw = self.gimbal[i]
+                self.gimbal[i] = (pitch if p_cmd is None else p_cmd,
+                                  yaw if y_cmd is None else y_cmd)
+        # events at this exchange's tick
+        self.gimbal_moves += [(s, source, None if at is None else at[1]) for s in moved]
+
+    def _resolve(self, p: Point, row: int
+                 ) -> tuple[tuple[float, float, float], dict[str, float]]:
+        """A look_at point for vehicle ``row``: its (lat_deg, lon_deg,
+        alt_msl_m), and its north_m, east_m, alt_msl_m in the scenario frame
+        (for the event). Its height: the ground's (the scenario origin's)
+        unless given."""
+        ground_m = float(self.scn.origin.ground_alt_m)
+        alt_m = ground_m if p.alt_m is None else p.alt_m + (ground_m if p.alt_agl else 0.0)
+        frame = self.ctx.frame
+        if p.frame == "geodetic":
+            lat, lon = p.a, p.b
+            ned = frame.geodetic_to_ned(lat, lon, alt_m)
+            n, e = float(ned[0]), float(ned[1])
+        else:
+            n, e = (p.a, p.b) if p.frame == "local" else (
+                float(self.ctx.start_ned_m[row, 0]) + p.a,
+                float(self.ctx.start_ned_m[row, 1]) + p.b)
+            la, lo = frame.place(n, e, alt_m)
+            lat, lon = float(la), float(lo)
+        return (lat, lon, alt_m), {"north_m": round(n, 3), "east_m": round(e, 3),
+                                   "alt_msl_m": round(alt_m, 3)}
+
+    def _aim(self, s: Stream, pose6: tuple[float, ...], at: tuple[float, float, float]
+             ) -> tuple[float, float]:
+        """Stream ``s``'s gimbal angles that keep the point ``at`` (lat, lon,
+        alt MSL) in its image's centre from the camera's pose ``pose6``,
+        clamped to the gimbal's limits."""
+        lat, lon, alt_m, roll, pitch, yaw = pose6
+        pitch, yaw = look_at_angles(s.camera, lat, lon, alt_m, roll, pitch, yaw,
+                                    float(self.scn.origin.ground_alt_m), *at)
+        return (min(max(pitch, GIMBAL_PITCH_DEG[0]), GIMBAL_PITCH_DEG[1]),
+                min(max(yaw, GIMBAL_YAW_DEG[0]), GIMBAL_YAW_DEG[1]))
 
     def trigger_camera(self, row: int, cmd: Any, source: str) -> None:
         """A ``camera`` command: stills of the vehicle's cameras from this
@@ -228,10 +284,20 @@ class CameraParticipant:
         self.pool.tick = tick
         if self.triggers:
             self._due_stills(tick, states)
-        for s, source in self.gimbal_moves:
+        for s in self.streams:  # tracking: the angles from this exchange's pose
+            at = self.look_at.get(s.index)
+            if at is not None:
+                self.gimbal[s.index] = self._aim(s, self._pose6(s, states[s.row]), at)
+            elif s.index in self.released:  # ended here: held where it was, but for the
+                point, p_cmd, y_cmd = self.released.pop(s.index)  # angles commanded
+                pitch, yaw = self._aim(s, self._pose6(s, states[s.row]), point)
+                self.gimbal[s.index] = (pitch if p_cmd is None else p_cmd,
+                                        yaw if y_cmd is None else y_cmd)
+        for s, source, looked_at in self.gimbal_moves:
             pitch, yaw = self.gimbal[s.index]
+            extra = {} if looked_at is None else {"look_at": looked_at}
             self.ctx.events.emit("gimbal", tick, vehicle=s.vehicle, camera=s.camera.name,
-                                 pitch_deg=pitch, yaw_deg=yaw, source=source)
+                                 pitch_deg=pitch, yaw_deg=yaw, source=source, **extra)
         self.gimbal_moves.clear()
         self.pool.check()
         self._between(tick)
@@ -243,6 +309,7 @@ class CameraParticipant:
         # the angles the frames until the next exchange were taken with (a
         # command at that exchange moves the gimbal only from its own tick)
         self.gimbal_before = dict(self.gimbal)
+        self.look_at_before = dict(self.look_at)
         if self.operator is not None:
             self.operator.at_exchange(tick, states)
         self.pool.collect(block=False)
@@ -267,8 +334,11 @@ class CameraParticipant:
                 break
             for s in self.streams:
                 if s.row in pos and t % s.camera.frame_every == 0:
-                    self._frame(s, t, w.states[c, pos[s.row]], self.gimbal_before.get(s.index),
-                                stills=False)
+                    row = w.states[c, pos[s.row]]
+                    at = self.look_at_before.get(s.index)
+                    gimbal = self.gimbal_before.get(s.index) if at is None else \
+                        self._aim(s, self._pose6(s, row), at)
+                    self._frame(s, t, row, gimbal, stills=False)
 
     def _frame(self, s: Stream, tick: int, row: np.ndarray,
                gimbal: tuple[float, float] | None, stills: bool) -> None:
@@ -277,15 +347,22 @@ class CameraParticipant:
         due and ``stills``)."""
         assert self.pool is not None and self.stills is not None
         every = s.camera.frame_every
-        pose6 = tuple(float(x) for x in row[_POSE_COLS])
-        if s.lift_m:
-            pose6 = pose6[:2] + (pose6[2] + s.lift_m,) + pose6[3:]
+        pose6 = self._pose6(s, row)
         frame_no = tick // every
         still = self.stills.name(s, frame_no, tick, pose6, gimbal, self.still_due.pop(s.index)) \
             if stills and s.index in self.still_due else None
         sensor = s.camera.sensor
         motion = self._motion(s, tick, row) if sensor is not None and sensor.exposure_ms else None
         self.pool.submit(s, frame_no, tick, pose6, gimbal, still, motion)
+
+    @staticmethod
+    def _pose6(s: Stream, row: np.ndarray) -> tuple[float, ...]:
+        """Stream ``s``'s camera pose (lat, lon, alt MSL, roll, pitch, yaw) from
+        its vehicle's state ``row``: lifted by the class's camera height."""
+        pose6 = tuple(float(x) for x in row[_POSE_COLS])
+        if s.lift_m:
+            pose6 = pose6[:2] + (pose6[2] + s.lift_m,) + pose6[3:]
+        return pose6
 
     def _motion(self, s: Stream, tick: int, row: np.ndarray) -> tuple[float, ...]:
         """What the exposure of stream ``s``'s frame at ``tick`` sees move: the

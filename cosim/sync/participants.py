@@ -8,6 +8,12 @@ A scenario section whose ``Section.participant(scenario)`` gives one
 - ``prepare(ctx)`` (optional) once, before any participant starts: e.g. to
   add a tap on the camera frames (``ctx.frame_taps``);
 - ``start(ctx)`` once, after the vehicles are built, before the first tick;
+- ``before_step(tick, states, setpoints)`` (optional) at every exchange,
+  before the pool's step from ``tick``: after the schedule's and MAVLink's
+  commands, before guidance follows them, in participant order. For commands
+  of the participant's own (``cosim.sync.inbox.CommandInbox``: an
+  operator's), given through ``ctx.commander.command`` like every other
+  source's; ``states`` is the state array at ``tick`` (read only);
 - ``on_exchange(tick, states)`` at every exchange, after the schedule,
   MAVLink commands and guidance, once the pool's step from ``tick`` has
   started (``pool.send``) and the telemetry due at ``tick`` has been sent:
@@ -129,6 +135,8 @@ class Participant(Protocol):
     name: str
 
     def start(self, ctx: RunContext) -> None: ...
+
+    # optional: ``before_step(tick, states, setpoints) -> None`` (module docstring)
 
     def on_exchange(self, tick: int, states: np.ndarray) -> None: ...
 

@@ -299,7 +299,7 @@ class Run:
             if not self._go.is_set():
                 self._hold(o)
                 continue  # a stop while held ends the run here
-            for step in before:  # commands, then guidance: setpoints
+            for step in before:  # schedule, MAVLink, participants' commands, guidance
                 step(o.tick, states, pool.setpoints)
             at_tick = states.copy() if copy_states else states  # the step overwrites
             pool.send(k)
@@ -456,8 +456,6 @@ class Run:
             mav_part = parts.MavlinkPart(self.mavlink, commander, events, ids)
             before.append(mav_part.before_step)
             during.append(mav_part.on_exchange)
-        if commander.active:
-            before.append(parts.Guidance(commander, events, ids).before_step)
         self.participants = wanted
         watched = (WatchedStates(pool.watch.rows, [], pool.watched[:0].copy())
                    if pool.watch is not None else None)
@@ -472,6 +470,11 @@ class Run:
         for part in self.participants:
             part.start(ctx)
             during.append(part.on_exchange)
+            hook = getattr(part, "before_step", None)
+            if hook is not None:  # commands of its own (an operator's), in participant order
+                before.append(hook)
+        if commander.active:  # guidance last: it follows every command of the exchange
+            before.append(parts.Guidance(commander, events, ids).before_step)
         index = {f.name: j for j, f in enumerate(pool.layout)}
         status_events = parts.StatusEvents(scn, index, events, ids)
         logger = parts.StateLogger(states_log, scn.rates.log_every, commander)

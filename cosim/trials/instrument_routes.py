@@ -8,6 +8,10 @@ Owns the HTTP side of ``instruments`` and ``sagat``:
   else ``{"instrument": null}``.
 - ``GET /api/sessions/{sid}/sagat/{probe}``: a probe's questions (for the
   live console's page to ask at the probe's time; never the answers).
+- ``GET /api/sessions/{sid}/live/freeze``: ``{"freeze": ...}``, what the
+  live console's page asks now: the probe its trial's run is frozen at
+  (``live_freeze.Freezes.current``: its questions, the aircraft, the blank
+  map's extent), or null.
 - ``POST /api/sessions/{sid}/instruments``: an answer, ``{"instrument":
   "tlx", "block", "ratings", "pairs"}`` or ``{"instrument": "sagat",
   "trial_index", "probe", "answers"}``, checked (``instruments``) and stored
@@ -16,12 +20,13 @@ Owns the HTTP side of ``instruments`` and ``sagat``:
   live console, which knows the run) gives the true state at that freeze;
   otherwise it is stored unscored (``Store.score_instrument`` keeps scores
   made later, e.g. from the run's state log through
-  ``sagat.from_state_log``).
+  ``sagat.from_state_log``). With the live console's ``freezes``, a live
+  session's SAGAT answer must be to a probe its trial was frozen for (409
+  otherwise), and posting it lets the frozen run go on.
 
 A block's trials count as done when the session's view (``server``'s
 ``_view``) marks them ``answered``: a clip trial with its response; a live
-trial as the live console's view marks it (its view does not yet, so a live
-study's TLX is not yet asked).
+trial once it has run (its run folder made) and is not running.
 
 Requests go through the app's own bounds (same origin, JSON, size and
 nesting: ``server``'s ``_json_body``, handed in, as are its session lookup
@@ -47,6 +52,7 @@ from cosim.trials.instruments import (
     score_probe,
     tlx_row,
 )
+from cosim.trials.live_freeze import Freezes
 from cosim.trials.sagat import FreezeState, Probe, ScoringError
 from cosim.trials.store import Store
 
@@ -69,15 +75,33 @@ class Instruments:
         self._json_body, self._bad = json_body, bad_request
         #: the live console's source of the true state at a freeze (None: scored later)
         self.freeze_state: FreezeSource | None = None
+        #: the live console's freeze probes (None: no live console)
+        self.freezes: Freezes | None = None
+
+    def follow_live(self, console: Any) -> None:
+        """Freeze the live console's trials at the study's SAGAT probes
+        (``live_freeze``): each run gets its probes as it starts
+        (``console.on_start``) and the answers are scored from its freezes."""
+        if getattr(self.study, "protocol", None) != "live" or not self.study.sagat:
+            return
+        self.freezes = Freezes(self.study, self.store)
+        self.freeze_state = self.freezes.freeze_state
+        console.on_start.append(self.freezes.attach)
 
     def routes(self) -> list[Route]:
         return [Route("/api/sessions/{sid}/instrument", self.pending, methods=["GET"]),
                 Route("/api/sessions/{sid}/sagat/{probe:int}", self.probe, methods=["GET"]),
-                Route("/api/sessions/{sid}/instruments", self.post, methods=["POST"])]
+                Route("/api/sessions/{sid}/instruments", self.post, methods=["POST"]),
+                Route("/api/sessions/{sid}/live/freeze", self.freeze, methods=["GET"])]
 
     def _answered(self, s: dict[str, Any]) -> set[int]:
-        """The session's trials with their response (as its page's view says)."""
-        return {int(t["index"]) for t in self._view_of(s)["trials"] if t.get("answered")}
+        """The session's trials with their response (as its page's view says);
+        a live trial once it has run and is not running."""
+        view = self._view_of(s)
+        live = view.get("live") or {}
+        running = live.get("trial_index") if live.get("running") else None
+        return {int(t["index"]) for t in view["trials"]
+                if t.get("answered") or (t.get("ran") and t["index"] != running)}
 
     def _pending(self, sid: str) -> dict[str, Any]:
         s = self._session_of(sid)
@@ -95,6 +119,11 @@ class Instruments:
         except AnswerError as e:
             raise self._bad(str(e), 404) from None
 
+    async def freeze(self, request: Request) -> Response:
+        s = await run_in_threadpool(self._session_of, request.path_params["sid"])
+        now = self.freezes.current(s["id"]) if self.freezes is not None else None
+        return JSONResponse({"freeze": now}, headers={"Cache-Control": "no-store"})
+
     def _store(self, sid: str, body: dict[str, Any]) -> tuple[dict[str, Any], bool]:
         s = self._session_of(sid)
         kind = body.get("instrument")
@@ -107,7 +136,13 @@ class Instruments:
                 raise AnswerError(f"instrument: expected 'tlx' or 'sagat', got {kind!r}"[:200])
         except AnswerError as e:
             raise self._bad(str(e), 400) from None
+        freezes = self.freezes if kind == "sagat" and s.get("protocol") == "live" else None
+        if freezes is not None and not freezes.asked(s["id"], row["trial_index"], row["item"]):
+            raise self._bad(f"probe {row['item']}: trial {row['trial_index']} of this session "
+                            f"has not been frozen for it", 409)
         stored, created = self.store.record_instrument(row)
+        if freezes is not None:  # the frozen run goes on
+            freezes.answered(s["id"], row["trial_index"], row["item"])
         if kind == "sagat" and created and self.freeze_state is not None:
             probe = self.study.sagat[row["item"]]
             state = self.freeze_state(s, row["trial_index"], probe)

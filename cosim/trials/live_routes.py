@@ -27,7 +27,7 @@ import asyncio
 import logging
 import re
 import time
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Any
 
@@ -77,6 +77,10 @@ class LiveConsole:
         self.study, self.store, self.bad, self.number = study, store, bad, number
         self.runs_dir = runs_dir or runs_folder(study)
         self.backend, self.realtime = backend, realtime
+        #: called with (session, trial index, LiveRun) as a trial's run is about
+        #: to start (its thread not yet started): ``instrument_routes`` adds its
+        #: SAGAT freezes to the run this way
+        self.on_start: list[Callable[[dict[str, Any], int, LiveRun], None]] = []
         self.runs: dict[str, tuple[int, LiveRun]] = {}
         self._by_id = {c.id: c for c in study.live}
 
@@ -156,6 +160,8 @@ class LiveConsole:
         except ConfigError as e:
             raise self.bad("; ".join(e.problems)[:2000], 409) from None
         self.runs[s["id"]] = (ti, run)
+        for hook in self.on_start:  # participants of others join the run (SAGAT freezes)
+            hook(s, ti, run)
         run.start()
         await run_in_threadpool(self.store.set_state, s["id"], "running")
         log.info("session %s: trial %d (%s) live in %s", s["id"], ti, c.id, folder)

@@ -554,7 +554,8 @@ def make_app(study: Study | str | Path, db: Store | str | Path,
                                 Middleware(TrustedHostMiddleware,
                                            allowed_hosts=allowed_hosts or LOCAL_HOSTS)])
     app.state.trials = a
-    app.state.instruments = instruments  # the live console sets its freeze_state
+    instruments.follow_live(a.live)  # a live study's SAGAT probes freeze its runs
+    app.state.instruments = instruments
     return app
 
 
