@@ -168,3 +168,36 @@ def test_realism_verdict() -> None:
     assert [within(a) for a in (1.6, 2.0, 2.6)] == ["met"] * 3
     assert within(1.59) == "too flat" and within(2.61) == "too steep"
     assert within(float("nan")) == "no fit (flat image)"
+
+
+def test_live_console_bench_reports_one_small_trial(tmp_path: Path) -> None:
+    """One feed of studies/live_search.yaml at 160 x 90 for 2 s, followed by
+    headless Debian Chromium: the row's counts are those of the run and the
+    page, in order, and its shares and costs are worked out from them."""
+    import json
+
+    if not Path("/usr/bin/chromium").exists():
+        pytest.skip("no /usr/bin/chromium")
+    import live_console_bench as bench
+
+    out = tmp_path / "live.json"
+    assert bench.main(["--condition", "feeds1", "--size", "160x90", "--duration-s", "2",
+                       "--backend", "inline", "--out", str(out)]) == 0
+    (r,) = json.loads(out.read_text())["rows"]
+    assert (r["condition"], r["feeds"], r["size"], r["stop_reason"]) == (
+        "feeds1", 1, "160x90", "completed")
+    # the tap publishes every frame the feed's camera rendered (only it renders)
+    assert r["frames_published"] == r["frames_rendered"] >= 20
+    assert 0 < r["frames_drawn"] <= r["frames_received"] <= r["frames_published"]
+    assert r["page_skipped"] == r["frames_received"] - r["frames_drawn"]
+    assert r["lost_percent"] == pytest.approx(
+        100 * (r["server_dropped"] + r["page_skipped"]) / r["frames_published"], abs=0.01)
+    assert 0 < r["latency_ms_p50"] <= r["latency_ms_p95"] <= r["latency_ms_max"] < 60_000
+    assert r["counter_mismatches"] == 0 and r["real_time_factor"] > 0.2
+    assert r["jpeg_ms_per_frame"] > 0 and r["lateness_ms_p50"] >= 0
+    # inline: the flight models step in the run's thread, no fdm workers
+    assert all(r["cores"][k] > 0 for k in ("run", "render", "browser")) and "fdm" not in r["cores"]
+    assert r["cores"]["machine"] >= sum(v for k, v in r["cores"].items()
+                                        if k not in ("machine", "others")) - 0.01
+    with pytest.raises(SystemExit):
+        bench.main(["--vary", "colour=red"])
