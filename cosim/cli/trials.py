@@ -1,6 +1,7 @@
 """``cosim trials``: serve a study in the browser, export its responses,
 analyse them (conspicuity angles, the critical gap, recognition; a live
-study's sessions scored; the NASA-TLX and SAGAT answers)."""
+study's sessions scored; the NASA-TLX and SAGAT answers), replay a live
+session's runs from their logged commands."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from cosim.cli.common import EXIT_OK, Parser
+from cosim.cli.common import EXIT_FAIL, EXIT_OK, Parser
 from cosim.core.section import CliCommand
 from cosim.errors import ConfigError
 
@@ -32,6 +33,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     te.add_argument("--live", metavar="CSV",
                     help="also write a live study's clicks here (the live console's "
                          "reports, as stored), a row per click")
+    te.add_argument("--live-commands", metavar="CSV",
+                    help="also write a live study's map commands here (go, orbit, look: "
+                         "as stored, with the tick each was applied at), a row per command")
     te.add_argument("--instruments", metavar="CSV",
                     help="also write the NASA-TLX and SAGAT answers here, a row per block "
                          "or probe")
@@ -53,6 +57,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                          "database) and to analyse the NASA-TLX and SAGAT answers")
     ta.add_argument("--runs", metavar="DIR",
                     help="a live study's run folders (default STUDY-live beside the study)")
+    tr = trs.add_parser("replay", help="run a live session's trials again from their logged "
+                                       "commands and say whether the states and videos come "
+                                       "out identical")
+    tr.add_argument("db", metavar="DB", help="the study's database (file or URL)")
+    tr.add_argument("session", metavar="SESSION", help="the live session's id")
+    tr.add_argument("--trial", type=int, metavar="N",
+                    help="only this trial (default: every trial of the session that has run)")
+    tr.add_argument("--out", metavar="DIR",
+                    help="where the replays go, a folder a trial (default "
+                         "RUNS/SESSION/replay)")
+    tr.add_argument("--runs", metavar="DIR",
+                    help="the study's live run folders (default STUDY-live beside the "
+                         "database STUDY.sqlite)")
 
 
 def run(a: argparse.Namespace) -> int:
@@ -72,10 +89,46 @@ def run(a: argparse.Namespace) -> int:
             print(_export_instruments(a.db, a.instruments))
         if a.live:
             print(_export_live(a.db, a.live))
+        if a.live_commands:
+            print(_export_live(a.db, a.live_commands, commands=True))
         return EXIT_OK
     if a.trials_cmd == "analyse":
         return _analyse(a)
-    raise ConfigError("cosim trials: give serve, export or analyse (cosim trials --help)")
+    if a.trials_cmd == "replay":
+        return _replay(a)
+    raise ConfigError("cosim trials: give serve, export, analyse or replay "
+                      "(cosim trials --help)")
+
+
+def _replay(a: argparse.Namespace) -> int:
+    """``cosim trials replay``: each trial of the session replayed; 0 if every
+    one is identical, 1 if any differs."""
+    import sys
+
+    from cosim.trials.live_replay import default_runs_dir, replay_session
+    from cosim.trials.store import Store
+
+    _existing_db(a.db)
+    runs = Path(a.runs) if a.runs else default_runs_dir(a.db)
+    if runs is None:
+        raise ConfigError(f"{a.db}: a database URL: give the study's live run folders "
+                          f"(--runs DIR)")
+    if a.runs and not runs.is_dir():
+        raise ConfigError(f"--runs {a.runs}: no such folder")
+    out = Path(a.out) if a.out else runs / a.session / "replay"
+    with Store(a.db) as store:
+        results = replay_session(store, a.session, runs, out, a.trial,
+                                 progress=sys.stderr.isatty())
+    for r in results:
+        if r.identical:
+            print(f"trial {r.trial_index}: identical ({r.run_dir} replayed into {r.out_dir})")
+        else:
+            print(f"trial {r.trial_index}: differs ({r.run_dir} replayed into {r.out_dir}):")
+            for d in r.differences[:50]:
+                print(f"  {d}")
+            if len(r.differences) > 50:
+                print(f"  ... and {len(r.differences) - 50} more")
+    return EXIT_OK if all(r.identical for r in results) else EXIT_FAIL
 
 
 def _analyse(a: argparse.Namespace) -> int:
@@ -158,6 +211,10 @@ def _analyse_live(a: argparse.Namespace, study: Any, store: Any) -> list[str]:
           f"{rep['hit']} hits, {rep['duplicate']} duplicates, {rep['false_alarm']} false "
           f"alarms" + (f"; {len(res.not_run)} trials not run (no run folder)"
                        if res.not_run else ""))
+    cmds = summary["commands"]
+    if any(cmds.values()):
+        print(f"live: {sum(cmds.values())} commands from the map ({cmds['go']} go, "
+              f"{cmds['orbit']} orbit, {cmds['look']} look): live_tasking_levels.csv")
     return list(summary["files"])
 
 
@@ -201,14 +258,15 @@ def _analyse_clips(a: argparse.Namespace) -> list[str]:
     return [Path(f).name for f in summary.get("files", [])]
 
 
-def _export_live(db: str, out: str) -> Path:
-    """A live study's stored clicks as CSV (``store.LIVE_EXPORT_COLUMNS``)."""
-    from cosim.trials.store import LIVE_EXPORT_COLUMNS, Store, write_csv
+def _export_live(db: str, out: str, commands: bool = False) -> Path:
+    """A live study's stored clicks (``store.LIVE_EXPORT_COLUMNS``) or, with
+    ``commands``, its map commands (``store.LIVE_COMMAND_COLUMNS``) as CSV."""
+    from cosim.trials.store import LIVE_COMMAND_COLUMNS, LIVE_EXPORT_COLUMNS, Store, write_csv
 
     with Store(db) as store:
-        rows = store.live_reports()
+        rows = store.live_commands() if commands else store.live_reports()
     with Path(out).open("w", newline="") as f:
-        write_csv(rows, f, LIVE_EXPORT_COLUMNS)
+        write_csv(rows, f, LIVE_COMMAND_COLUMNS if commands else LIVE_EXPORT_COLUMNS)
     return Path(out)
 
 

@@ -15,7 +15,11 @@ numbers it) handed on its ``latency_ms`` later;
 without ever waiting for one (a page that does not keep up loses its oldest
 messages, and its dropped frames are counted); and ``LiveRun``, the run in
 its own thread, into the session's own run folder, stopped when the
-session ends or the server shuts down. It does not serve HTTP
+session ends or the server shuts down; where the condition allows tasking,
+the run has a ``cosim.sync.inbox.CommandInbox`` through which the
+participant's map commands (``command_spec``) reach the aircraft by the one
+command path, each applied at the next exchange and logged in the run
+folder's ``commands.jsonl``. It does not serve HTTP
 (``live_routes``), parse the study (``live_study``) or store reports
 (``store``).
 
@@ -33,6 +37,7 @@ import logging
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -40,7 +45,7 @@ import numpy as np
 
 from cosim.core.state import STATE_INDEX
 from cosim.errors import ConfigError
-from cosim.trials.live_study import LiveCondition
+from cosim.trials.live_study import TASKING_ACTIONS, LiveCondition
 
 log = logging.getLogger(__name__)
 
@@ -334,14 +339,35 @@ def _targets(scn: Any) -> list[dict[str, Any]]:
     return out
 
 
+def command_spec(action: str, north_m: float, east_m: float,
+                 orbit_radius_m: float) -> dict[str, Any]:
+    """The command (the vocabulary of ``cosim.guidance.commands``, as a
+    schedule item's ``command:``) of a map action at a point (north/east m
+    in the scenario frame): ``go`` flies there, ``orbit`` circles it at
+    ``orbit_radius_m``, ``look`` points the gimbal cameras at it (on the
+    ground)."""
+    at = {"north_m": float(north_m), "east_m": float(east_m)}
+    if action == "go":
+        return {"goto": at}
+    if action == "orbit":
+        return {"loiter": {"center": at, "radius_m": float(orbit_radius_m)}}
+    if action == "look":
+        return {"gimbal": {"look_at": at}}
+    raise ConfigError(f"action: expected one of {', '.join(TASKING_ACTIONS)}, got {action!r}")
+
+
 class LiveRun:
     """One session's live run: the condition's scenario, paced at ``realtime``
     (1.0: real time), into ``out_dir``, in a thread of its own. ``stop`` ends
-    it early; ``wait`` waits for it (both safe to call twice)."""
+    it early; ``wait`` waits for it (both safe to call twice). Where the
+    condition allows tasking, ``command`` hands a map command to the run
+    (``on_applied(entry)`` is called from the run's thread with each
+    command's log entry once applied)."""
 
     def __init__(self, condition: LiveCondition, out_dir: Path, hub: Hub, *,
                  realtime: float = 1.0, backend: str = "process",
-                 workers: int | None = None) -> None:
+                 workers: int | None = None,
+                 on_applied: Callable[[dict[str, Any]], None] | None = None) -> None:
         from cosim.scenario import load_scenario
         from cosim.sync.runner import Run
 
@@ -357,9 +383,20 @@ class LiveRun:
                                 "feeds": [{"feed": k, "name": f.name, "width_px": f.width_px,
                                            "height_px": f.height_px, "rate_hz": f.rate_hz}
                                           for k, f in enumerate(condition.feeds)],
-                                "vehicles": [v.id for v in scn.vehicles]})
+                                "vehicles": [v.id for v in scn.vehicles],
+                                "tasking": {"actions": list(condition.tasking),
+                                            "vehicles": list(condition.taskable),
+                                            "orbit_radius_m": condition.orbit_radius_m}})
+        extra: list[Any] = [self.tap]
+        #: the participant's commands' way into the run (None: no tasking)
+        self.inbox: Any = None
+        if condition.tasking:
+            from cosim.sync.inbox import CommandInbox
+
+            self.inbox = CommandInbox(source="operator", on_applied=on_applied)
+            extra.append(self.inbox)
         self.run = Run(scn, out_dir, backend=backend, workers=workers, realtime=realtime,
-                       extra_participants=[self.tap])
+                       extra_participants=extra)
         self.result: Any = None
         self.error: BaseException | None = None
         #: the last timing the participant's page reported (``live_routes``)
@@ -386,6 +423,23 @@ class LiveRun:
     @property
     def running(self) -> bool:
         return self._thread.is_alive()
+
+    def command(self, vehicle: str, action: str, north_m: float, east_m: float) -> int:
+        """Hand the run the map command ``action`` for ``vehicle`` at a point
+        (north/east m in the scenario frame); its sequence number. A
+        ``ConfigError`` if the condition does not allow it, or the inbox
+        refuses it (an unknown vehicle, a full queue, a run that is over)."""
+        c = self.condition
+        if self.inbox is None or action not in c.tasking:
+            allowed = ", ".join(c.tasking) or "none"
+            raise ConfigError(f"action: {str(action)[:40]!r} is not allowed in condition "
+                              f"{c.id!r} (allowed: {allowed})")
+        if vehicle not in c.taskable:
+            raise ConfigError(f"vehicle: {str(vehicle)[:40]!r} cannot be tasked in condition "
+                              f"{c.id!r} (it may task: {', '.join(c.taskable)[:400]})")
+        seq: int = self.inbox.submit(vehicle, command_spec(action, north_m, east_m,
+                                                           c.orbit_radius_m))
+        return seq
 
     def stop(self, reason: str = "session_ended") -> None:
         self.run.stop(reason)

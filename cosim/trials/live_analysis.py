@@ -18,9 +18,16 @@ ones. A numeric condition with more than ``conditions.MAX_LEVELS`` values
 is cut into bins (``conditions.condition_levels``); any other keeps its
 ``MAX_LEVELS - 1`` most common values and puts the rest in ``OTHER``.
 
+The operator's tasking (the commands sent from the map, ``ScoredSession.
+commands``) is a measure of workload a trial: its counts of go, orbit and
+look commands, their total and the total a minute of the trial's simulated
+time; ``tasking_tables`` gives its levels and slopes against the conditions
+as ``live_tables`` does the targets' measures, from one row a trial.
+
 ``analyse_live`` writes the tables (``live_targets.csv``, ``live_sessions.csv``:
-a session's counts of hits, duplicates, false alarms and misses,
-``live_levels.csv``, ``live_effects.csv``) and a figure a condition (``live_figures``). It reads
+a session's counts of hits, duplicates, false alarms, misses and commands,
+``live_levels.csv``, ``live_effects.csv``, ``live_tasking_levels.csv``,
+``live_tasking_effects.csv``) and a figure a condition (``live_figures``). It reads
 no file, runs nothing and knows nothing of how sessions are stored.
 """
 
@@ -54,7 +61,13 @@ MEASURES = ("detected", "latency_any_s", "latency_feed_s", "error_px")
 TARGET_FIELDS = ("session", "participant", "target", "visible_s", "detected",
                  "latency_any_s", "latency_feed_s", "error_px")
 SESSION_FIELDS = ("session", "participant", "hits", "duplicates", "false_alarms", "targets",
-                  "misses")
+                  "misses", "duration_s", "go", "orbit", "look", "commands",
+                  "commands_per_min")
+#: the tasking measures, one value a trial: its commands, and those a minute
+TASKING_MEASURES = ("commands", "commands_per_min")
+#: each measure's unit in the effects' tables
+UNITS = {"detected": "probability", "error_px": "px", "commands": "commands",
+         "commands_per_min": "commands per minute"}
 LEVEL_FIELDS = ("measure", "condition", "level", "targets", "participants", "estimate",
                 "ci_lo", "ci_hi", "interval")
 EFFECT_FIELDS = ("measure", "condition", "slope", "unit", "ci_lo", "ci_hi", "df",
@@ -73,6 +86,10 @@ class ScoredSession:
     participant: str
     conditions: tuple[tuple[str, str], ...]
     score: SessionScore
+    #: the actions of the commands the participant sent from the map, in order
+    commands: tuple[str, ...] = ()
+    #: the trial's simulated time (s; None: not known)
+    duration_s: float | None = None
 
 
 def target_rows(sessions: Sequence[ScoredSession]) -> list[dict[str, Any]]:
@@ -94,11 +111,16 @@ def target_rows(sessions: Sequence[ScoredSession]) -> list[dict[str, Any]]:
 
 def session_rows(sessions: Sequence[ScoredSession]) -> list[dict[str, Any]]:
     """One row per session: its counts of reports by outcome, of targets
-    that counted and of misses (``SESSION_FIELDS``), and its conditions."""
+    that counted, of misses and of commands by action, with their total a
+    minute (``SESSION_FIELDS``), and its conditions."""
     return [{"session": s.session, "participant": s.participant,
              **{f"{o}s": s.score.count(o) for o in ("hit", "duplicate", "false_alarm")},
              "targets": sum(t.eligible for t in s.score.targets),
-             "misses": len(s.score.misses),
+             "misses": len(s.score.misses), "duration_s": s.duration_s,
+             **{a: s.commands.count(a) for a in ("go", "orbit", "look")},
+             "commands": len(s.commands),
+             "commands_per_min": (60.0 * len(s.commands) / s.duration_s
+                                  if s.duration_s else None),
              **_conditions(s)} for s in sessions]
 
 
@@ -157,7 +179,15 @@ def level_estimate(measure: str, y: np.ndarray, who_names: np.ndarray, level: fl
     return est[0], lo, hi, "t over participants" if who is not None else "t over targets"
 
 
-def live_tables(rows: Sequence[dict[str, Any]], level: float = 0.95
+def tasking_tables(sessions: Sequence[ScoredSession], level: float = 0.95
+                   ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """(levels, effects) of the tasking measures (``TASKING_MEASURES``)
+    against the conditions, one row a trial (``targets`` counts trials)."""
+    return live_tables(session_rows(sessions), level, TASKING_MEASURES)
+
+
+def live_tables(rows: Sequence[dict[str, Any]], level: float = 0.95,
+                measures: Sequence[str] = MEASURES
                 ) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
     """(levels, effects): each condition's levels with every measure's
     estimate and interval, and each numeric condition's slope of every
@@ -182,7 +212,7 @@ def live_tables(rows: Sequence[dict[str, Any]], level: float = 0.95
             lv = x
         else:
             keys, lv = categories([str(v) if h else None for v, h in zip(raw, has)], name)
-        for measure in MEASURES:
+        for measure in measures:
             y = _values(rows, measure)
             for k in keys:
                 sel = has & (lv == k) & np.isfinite(y)
@@ -197,7 +227,7 @@ def live_tables(rows: Sequence[dict[str, Any]], level: float = 0.95
             who = cluster_ids(who_all[sel], int(sel.sum()))
             slope = slope_estimate(x[sel], y[sel], who)
             lo, hi = t_interval(slope, level)
-            unit = {"detected": "probability", "error_px": "px"}.get(measure, "s")
+            unit = UNITS.get(measure, "s")
             effect_rows.append({"measure": measure, "condition": name,
                                 "slope": slope[0] if slope else math.nan,
                                 "unit": f"{unit} per unit of {name}", "ci_lo": lo, "ci_hi": hi,
@@ -224,7 +254,11 @@ def analyse_live(sessions: Sequence[ScoredSession], out_dir: str | Path, *,
     level_rows, effect_rows = live_tables(rows, level)
     write_csv(out / "live_levels.csv", LEVEL_FIELDS, level_rows)
     write_csv(out / "live_effects.csv", EFFECT_FIELDS, effect_rows)
-    files = ["live_targets.csv", "live_sessions.csv", "live_levels.csv", "live_effects.csv"]
+    task_levels, task_effects = tasking_tables(sessions, level)
+    write_csv(out / "live_tasking_levels.csv", LEVEL_FIELDS, task_levels)
+    write_csv(out / "live_tasking_effects.csv", EFFECT_FIELDS, task_effects)
+    files = ["live_targets.csv", "live_sessions.csv", "live_levels.csv", "live_effects.csv",
+             "live_tasking_levels.csv", "live_tasking_effects.csv"]
     if plots:
         from cosim.trials.live_figures import plot_condition
 
@@ -237,6 +271,8 @@ def analyse_live(sessions: Sequence[ScoredSession], out_dir: str | Path, *,
             "targets": len(rows), "detected": sum(r["detected"] for r in rows),
             "reports": {o: sum(s.score.count(o) for s in sessions)
                         for o in ("hit", "duplicate", "false_alarm")},
+            "commands": {a: sum(s.commands.count(a) for s in sessions)
+                         for a in ("go", "orbit", "look")},
             "files": files}
 
 

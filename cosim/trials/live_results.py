@@ -8,8 +8,10 @@ folder (``RUNS/SESSION/trialNNN``, ``RUNS`` the console's, by default
 console allows for a click on the last frame). ``scored_sessions(study,
 store)`` does so for every trial of every live session that has run and
 gives ``live_analysis.ScoredSession``s (one per session and trial, named
-``SESSION/TRIAL``) with the trial's conditions: what ``cosim trials analyse``
-hands to ``live_analysis.analyse_live``.
+``SESSION/TRIAL``) with the trial's conditions, the actions of the commands
+its participant sent from the map (``Store.live_commands``) and its
+simulated time (its ``summary.json``'s ``sim_time_s``): what ``cosim trials
+analyse`` hands to ``live_analysis.analyse_live``.
 
 The store and the run folders are untrusted: a trial whose condition is no
 longer in the study, whose run folder lacks a feed's ground truth or whose
@@ -19,7 +21,9 @@ the trial. It reads; it runs nothing and serves nothing.
 
 from __future__ import annotations
 
+import json
 import logging
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,6 +43,8 @@ END_MARGIN_S = 5.0
 #: the most trials ``scored_sessions`` scores, and stored clicks a trial may have
 MAX_TRIALS = 10_000
 MAX_REPORTS = 100_000
+#: the largest run summary read (bytes)
+MAX_SUMMARY_BYTES = 1_000_000
 
 
 def runs_folder(study: Study) -> Path:
@@ -112,6 +118,7 @@ def scored_sessions(study: Study, store: Any, runs_dir: Path | None = None) -> L
             continue
         s = store.session(row["id"])
         reports = store.live_reports(s["id"])
+        commands = store.live_commands(s["id"])
         for ti, t in enumerate(s["trial_order"]):
             if isinstance(t, dict) and t.get("practice"):
                 continue
@@ -123,10 +130,29 @@ def scored_sessions(study: Study, store: Any, runs_dir: Path | None = None) -> L
                                   f"have run: analyse a copy with fewer sessions")
             score = score_trial(study, s, ti, reports, runs)
             cond = trial_condition(study, s, ti)
+            actions = tuple(str(c["action"]) for c in commands if c["trial_index"] == ti)
             out.append(ScoredSession(f"{s['id']}/{ti}", str(s["participant"]),
-                                     tuple(cond.conditions), score))
+                                     tuple(cond.conditions), score, actions,
+                                     run_time_s(trial_folder(runs, s["id"], ti))))
     if not_run:
         log.info("%d live trials have not run (no run folder): %s", len(not_run),
                  ", ".join(not_run[:10]))
     return LiveResults(tuple(out), tuple(not_run))
 
+
+
+def run_time_s(folder: Path) -> float | None:
+    """A run folder's simulated time (s, its ``summary.json``'s
+    ``sim_time_s``); None, with a warning, where it does not say."""
+    path = folder / "summary.json"
+    try:
+        if path.stat().st_size > MAX_SUMMARY_BYTES:
+            raise ValueError(f"larger than {MAX_SUMMARY_BYTES} bytes")
+        v = json.loads(path.read_text()).get("sim_time_s")
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
+                or v <= 0:
+            raise ValueError(f"sim_time_s is {v!r}, not a positive number")
+        return float(v)
+    except (OSError, ValueError, AttributeError) as e:
+        log.warning("%s: no simulated time (%s); its commands a minute left out", path, e)
+        return None

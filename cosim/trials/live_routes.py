@@ -10,11 +10,19 @@ JPEG-encoded with its feed and frame number, and the aircraft's positions)
 and posts each click on a feed (``POST .../live/reports``: the feed, the
 frame the page drew there, the pixel in the frame's own coordinates, the
 page's click and draw times), which the store keeps
-(``Store.live_reports``). The run and its fan-out are ``live``'s.
+(``Store.live_reports``). Where the condition allows tasking, the page posts
+the participant's map commands (``POST .../live/command``: go to, orbit or
+look at a point with one aircraft), handed to the run
+(``LiveRun.command``) and kept (``Store.live_commands``, with the tick the
+run applied each at). The run and its fan-out are ``live``'s.
 
 Bounds: a report is a small flat JSON object (the app's body limits); its
 feed must be one of the condition's, its frame one the server has sent on
-that feed, its pixel inside the frame; a session has at most one run at a
+that feed, its pixel inside the frame; a command's action must be one the
+condition allows, its vehicle one that may be tasked, its point within
+``MAX_COMMAND_RANGE_M`` of the scenario's origin, and a session sends at
+most ``MAX_COMMANDS_PER_S`` a second and ``MAX_COMMANDS_PER_TRIAL`` a trial
+(429 beyond); a session has at most one run at a
 time and at most ``live.MAX_WATCHERS`` pages watching it; a page that does
 not keep up loses frames (counted), never slows the run. The run is stopped
 when its session is stopped or finished and when the server shuts down
@@ -25,8 +33,10 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
 import re
 import time
+from collections import deque
 from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 from typing import Any
@@ -56,6 +66,11 @@ MAX_FRAMES = 10_000_000
 MAX_LATENCY_MS = 600_000.0
 #: the page's clock readings accepted (ms since the page loaded): a day
 MAX_PAGE_TIME_MS = 86_400_000.0
+#: how far from the scenario's origin (m) a map command's point may be
+MAX_COMMAND_RANGE_M = 20_000.0
+#: a session's map commands: at most this many in any second, and in one trial
+MAX_COMMANDS_PER_S = 5
+MAX_COMMANDS_PER_TRIAL = 2000
 
 
 def live_order(study: Study, session_number: int) -> list[dict[str, Any]]:
@@ -83,6 +98,14 @@ class LiveConsole:
         self.on_start: list[Callable[[dict[str, Any], int, LiveRun], None]] = []
         self.runs: dict[str, tuple[int, LiveRun]] = {}
         self._by_id = {c.id: c for c in study.live}
+        #: per session: when (monotonic s) its last commands were taken, and
+        #: how many its live trial has taken
+        self._sent: dict[str, deque[float]] = {}
+        self._commands: dict[tuple[str, int], int] = {}
+        #: the (session, trial, seq) of commands stored, and the log entries of
+        #: those applied before they were stored (both only touched in the event loop)
+        self._stored: set[tuple[str, int, int]] = set()
+        self._applied_early: dict[tuple[str, int, int], dict[str, Any]] = {}
 
     # --- helpers ---
     def condition(self, t: dict[str, Any]) -> LiveCondition:
@@ -153,10 +176,19 @@ class LiveConsole:
             raise self.bad(f"trial {ti} of this session has run already (its run is in "
                            f"{folder})", 409)
         c = self.condition(s["trial_order"][ti])
-        hub = Hub(asyncio.get_running_loop())
+        loop = asyncio.get_running_loop()
+        hub = Hub(loop)
+
+        def on_applied(entry: dict[str, Any], sid: str = s["id"]) -> None:  # the run's thread
+            try:
+                loop.call_soon_threadsafe(self._applied, sid, ti, entry)
+            except RuntimeError:  # the loop is closed: the server is going
+                log.warning("session %s trial %d: command %s applied at tick %s not stored",
+                            sid, ti, entry.get("seq"), entry.get("tick"))
+
         try:
             run = await run_in_threadpool(LiveRun, c, folder, hub, realtime=self.realtime,
-                                          backend=self.backend)
+                                          backend=self.backend, on_applied=on_applied)
         except ConfigError as e:
             raise self.bad("; ".join(e.problems)[:2000], 409) from None
         self.runs[s["id"]] = (ti, run)
@@ -243,6 +275,84 @@ class LiveConsole:
         stored, created = await run_in_threadpool(self.store.record_live_report, row)
         return JSONResponse({"report": stored, "created": created},
                             status_code=201 if created else 200)
+
+    async def command(self, request: Request, body: dict[str, Any]) -> Response:
+        """A map command of the participant (``live.command_spec``): checked,
+        handed to the run and stored; its sequence number in the run."""
+        s = await run_in_threadpool(self._session, request)
+        ti, run = self._live(s["id"])
+        if body.get("trial_index") != ti:
+            raise self.bad(f"trial_index: the live trial of this session is {ti}, got "
+                           f"{body.get('trial_index')!r}"[:200], 409)
+        c = run.condition
+        action, vehicle = body.get("action"), body.get("vehicle")
+        if not c.tasking:
+            raise self.bad(f"action: condition {c.id!r} allows no commands from the map")
+        if not isinstance(action, str) or action not in c.tasking:
+            raise self.bad(f"action: expected one of {', '.join(c.tasking)} (condition "
+                           f"{c.id!r}), got {action!r}"[:300])
+        if not isinstance(vehicle, str) or vehicle not in c.taskable:
+            raise self.bad(f"vehicle: expected one of {', '.join(c.taskable)[:400]} (the "
+                           f"aircraft of condition {c.id!r} that take commands), got "
+                           f"{vehicle!r}"[:600])
+        north_m, east_m = self.number(body, "north_m"), self.number(body, "east_m")
+        if not (math.isfinite(north_m) and math.isfinite(east_m)
+                and math.hypot(north_m, east_m) <= MAX_COMMAND_RANGE_M):
+            raise self.bad(f"north_m, east_m: expected a point within "
+                           f"{MAX_COMMAND_RANGE_M:.0f} m of the scenario's origin, got "
+                           f"({north_m:g}, {east_m:g})")
+        client = self.number(body, "client_time_ms", optional=True)
+        if client is not None and not 0 <= client <= MAX_PAGE_TIME_MS:
+            raise self.bad(f"client_time_ms: expected 0..{MAX_PAGE_TIME_MS:.0f} ms (the "
+                           f"page's clock), got {client:g}")
+        self._take_command(s["id"], ti)
+        try:
+            seq = run.command(vehicle, action, north_m, east_m)
+        except ConfigError as e:  # a full queue, a run that is over
+            raise self.bad("; ".join(e.problems)[:1000], 409) from None
+        row = {"session": s["id"], "participant": s["participant"], "trial_index": ti,
+               "condition": c.id, "seq": seq, "vehicle": vehicle, "action": action,
+               "north_m": north_m, "east_m": east_m, "client_time_ms": client,
+               "run": str(run.out_dir)}
+        stored = await run_in_threadpool(self.store.record_live_command, row)
+        key = (s["id"], ti, seq)
+        self._stored.add(key)
+        early = self._applied_early.pop(key, None)
+        if early is not None:  # applied while it was being stored
+            await run_in_threadpool(self._store_applied, key, early)
+        return JSONResponse({"seq": seq, "action": action, "vehicle": vehicle,
+                             "server_time": stored["server_time"]}, status_code=201)
+
+    def _take_command(self, sid: str, ti: int) -> None:
+        """Count a command of session ``sid``'s trial ``ti``; 429 past the limits."""
+        now = time.monotonic()
+        sent = self._sent.setdefault(sid, deque())
+        while sent and now - sent[0] >= 1.0:
+            sent.popleft()
+        if len(sent) >= MAX_COMMANDS_PER_S:
+            raise self.bad(f"too many commands: at most {MAX_COMMANDS_PER_S} a second; wait "
+                           f"a moment and send it again", 429)
+        n = self._commands.get((sid, ti), 0)
+        if n >= MAX_COMMANDS_PER_TRIAL:
+            raise self.bad(f"too many commands: at most {MAX_COMMANDS_PER_TRIAL} in a trial, "
+                           f"and this trial has had them", 429)
+        sent.append(now)
+        self._commands[(sid, ti)] = n + 1
+
+    def _applied(self, sid: str, ti: int, entry: dict[str, Any]) -> None:
+        """A command's log entry once the run applied it (in the event loop):
+        its tick stored, or kept until its row is."""
+        key = (sid, ti, int(entry["seq"]))
+        if key not in self._stored:
+            self._applied_early[key] = entry
+            return
+        asyncio.get_running_loop().run_in_executor(None, self._store_applied, key, entry)
+
+    def _store_applied(self, key: tuple[str, int, int], entry: dict[str, Any]) -> None:
+        try:
+            self.store.live_command_applied(*key, int(entry["tick"]), float(entry["time_s"]))
+        except Exception:  # noqa: BLE001 - the run goes on; its commands.jsonl has it
+            log.exception("session %s trial %d: command %d's tick not stored", *key)
 
     async def score(self, request: Request) -> Response:
         """A trial's stored reports scored against its run's ground truth
@@ -375,6 +485,7 @@ def routes(console: LiveConsole, json_body: Any, experimenter: Any, page: Any) -
         Route(f"{base}/stop", experimenter(with_body(console.stop)), methods=["POST"]),
         Route(f"{base}/stream", console.stream, methods=["GET"]),
         Route(f"{base}/reports", with_body(console.report), methods=["POST"]),
+        Route(f"{base}/command", with_body(console.command), methods=["POST"]),
         Route(f"{base}/score", experimenter(console.score), methods=["GET"]),
         Route(f"{base}/clock", console.clock, methods=["GET"]),
         Route(f"{base}/timing", with_body(console.timing), methods=["POST"]),

@@ -14,6 +14,8 @@ Example (in a study file)::
         feeds: [uav1/belly, uav2/belly] # VEHICLE/CAMERA, or a count: the first K
         duration_s: 60                  # default: the scenario's own
         map: {tracks: true, footprints: true, targets: false}  # (the defaults)
+        tasking: [go, orbit, look]      # the map's commands allowed (the default)
+        orbit_radius_m: 150             # an orbit's radius (the default)
         conditions: {feeds: 2, alt_agl_m: 100}
 
 A feed is one camera of one vehicle (``VEHICLE/CAMERA``, the names the
@@ -21,6 +23,12 @@ scenario gives them); ``feeds: K`` takes the first K in the scenario's order
 (its cameras as listed, each over its vehicles). 1 to ``MAX_FEEDS`` feeds.
 The study's ``timing_limits: {latency_ms_p50: 200, dropped_percent: 1}``
 (``TimingLimits``) flag a trial whose timing is worse.
+``tasking:`` lists what the participant may tell an aircraft from the map
+(``TASKING_ACTIONS``: ``go`` there, ``orbit`` there at ``orbit_radius_m``,
+``look`` there with its gimbal cameras); by default all three where the
+scenario has aircraft that take commands, none where it has none; ``[]``
+or ``false``: none. Only the scenario's aircraft that take commands may be
+tasked (``LiveCondition.taskable``).
 Each scenario is loaded and checked as the study is read, so a misspelt
 feed or a broken scenario is a ``ConfigError`` before any session starts.
 """
@@ -43,7 +51,14 @@ MAX_FEEDS = 16
 MAX_CONDITIONS = 200
 #: the longest live trial (s): an hour
 MAX_DURATION_S = 3600.0
-CONDITION_KEYS = ("id", "scenario", "feeds", "duration_s", "conditions", "map")
+CONDITION_KEYS = ("id", "scenario", "feeds", "duration_s", "conditions", "map", "tasking",
+                  "orbit_radius_m")
+#: what the participant may tell an aircraft from the map: fly to a point, orbit
+#: it, point the gimbal cameras at it
+TASKING_ACTIONS = ("go", "orbit", "look")
+#: an orbit's radius (m) unless the condition says, and the radii it may say
+ORBIT_RADIUS_M = 150.0
+ORBIT_RADIUS_RANGE_M = (10.0, 5000.0)
 #: what the map may show, and whether it does unless a condition says
 MAP_LAYERS = {"tracks": True, "footprints": True, "targets": False}
 TIMING_KEYS = ("latency_ms_p50", "dropped_percent")
@@ -93,6 +108,11 @@ class LiveCondition:
     scenario_sha256: str = ""
     #: what the map shows (``MAP_LAYERS``' names)
     map_layers: tuple[str, ...] = tuple(k for k, on in MAP_LAYERS.items() if on)
+    #: the map's commands allowed (``TASKING_ACTIONS``' names; empty: none)
+    tasking: tuple[str, ...] = ()
+    orbit_radius_m: float = ORBIT_RADIUS_M
+    #: the vehicles that take commands (those the participant may task)
+    taskable: tuple[str, ...] = ()
 
     @property
     def fingerprint(self) -> dict[str, Any]:
@@ -150,6 +170,9 @@ def read_live_conditions(ctx: Problems, items: Any, base: Path, roots: tuple[Pat
         conds = condition_values(ctx, at, r.d.get("conditions", {}))
         shown = Reader(ctx, r.d.get("map", {}), at + ("map",), tuple(MAP_LAYERS))
         layers = tuple(k for k, on in MAP_LAYERS.items() if shown.boolean(k, on))
+        radius_m = r.num("orbit_radius_m", None, lo=ORBIT_RADIUS_RANGE_M[0],
+                         hi=ORBIT_RADIUS_RANGE_M[1])
+        radius_given = "orbit_radius_m" in r.d
         if path is None or len(ctx.problems) != before:
             continue
         try:
@@ -159,10 +182,18 @@ def read_live_conditions(ctx: Problems, items: Any, base: Path, roots: tuple[Pat
                 ctx.err(at + ("scenario",), m)
             continue
         feeds = _feeds(ctx, at + ("feeds",), r.d.get("feeds"), scenario_feeds(scn), path)
-        if feeds:
+        taskable = commandable_vehicles(scn)
+        tasking = _tasking(ctx, at + ("tasking",), r.d.get("tasking", None), taskable, path)
+        if "orbit" in (tasking or ()):
+            radius_m = _orbit_radius(ctx, at + ("orbit_radius_m",), radius_m if radius_given
+                                     else None, scn, taskable)
+            if radius_m is None:
+                continue
+        if feeds and tasking is not None:
             sha = hashlib.sha256(path.read_bytes()).hexdigest()
             out.append(LiveCondition(cid, path, tuple(feeds), duration, tuple(conds.items()),
-                                     sha, layers))
+                                     sha, layers, tasking, radius_m or ORBIT_RADIUS_M,
+                                     taskable if tasking else ()))
     ids = [c.id for c in out]
     if len(set(ids)) != len(ids):
         ctx.err(("scenarios",), f"condition ids given twice: "
@@ -194,3 +225,71 @@ def _feeds(ctx: Problems, at: tuple[Any, ...], spec: Any, have: list[Feed],
         else:
             out.append(f)
     return out if len(out) == len(spec) else []
+
+
+def commandable_vehicles(scn: Any) -> tuple[str, ...]:
+    """The ids of a loaded scenario's vehicles whose class takes commands."""
+    from cosim.vehicles import get_class
+
+    return tuple(v.id for v in scn.vehicles if get_class(v.vehicle_class).commandable)
+
+
+def _tasking(ctx: Problems, at: tuple[Any, ...], spec: Any, taskable: tuple[str, ...],
+             path: Path) -> tuple[str, ...] | None:
+    """A condition's ``tasking:`` (None: refused, said to ``ctx``)."""
+    if spec is None:  # not given: every action where some vehicle takes commands
+        return TASKING_ACTIONS if taskable else ()
+    if spec is False:
+        return ()
+    if not isinstance(spec, list) or len(spec) > len(TASKING_ACTIONS):
+        ctx.err(at, f"expected a list of the map's commands allowed (some of "
+                    f"{', '.join(TASKING_ACTIONS)}), [] or false, got {describe(spec)}")
+        return None
+    out: list[str] = []
+    for k, action in enumerate(spec):
+        if action not in TASKING_ACTIONS:
+            ctx.err(at + (k,), f"expected one of {', '.join(TASKING_ACTIONS)}, got "
+                               f"{describe(action)}")
+            return None
+        if action in out:
+            ctx.err(at + (k,), f"{action!r} given twice")
+            return None
+        out.append(action)
+    if out and not taskable:
+        ctx.err(at, f"{', '.join(out)}: none of the vehicles of {path} takes commands")
+        return None
+    return tuple(a for a in TASKING_ACTIONS if a in out)
+
+
+def _orbit_radius(ctx: Problems, at: tuple[Any, ...], given: float | None, scn: Any,
+                  taskable: tuple[str, ...]) -> float | None:
+    """The orbit's radius: ``given``, refused (None, said to ``ctx``) if a
+    vehicle that may be tasked could not fly it at its start airspeed (its
+    class's rule for every command path, as a loiter command's); else
+    ``ORBIT_RADIUS_M``, widened in steps of 50 m to the first every such
+    vehicle can fly."""
+    from cosim.guidance import DEFAULT_BANK_LIMIT_DEG, parse_command
+    from cosim.guidance.safety import Limits
+    from cosim.vehicles import get_class
+
+    def problems(radius_m: float) -> list[str]:
+        cmd = parse_command({"loiter": {"radius_m": radius_m}}, (), lambda p, m: None)
+        out: list[str] = []
+        for v in scn.vehicles:
+            if v.id in taskable and cmd is not None:
+                vc = get_class(v.vehicle_class)
+                lim = Limits(v.terrain_alt_m, vc.min_alt_agl_m(v.profile), v.airspeed_mps,
+                             DEFAULT_BANK_LIMIT_DEG)
+                out += vc.command_problems(cmd, v, lim)
+        return out
+
+    if given is not None:
+        said = problems(given)
+        if said:
+            ctx.err(at, f"{given:g} m: an orbit must be one the aircraft can fly: {said[0]}")
+            return None
+        return given
+    radius_m = ORBIT_RADIUS_M
+    while problems(radius_m) and radius_m < ORBIT_RADIUS_RANGE_M[1]:
+        radius_m += 50.0
+    return radius_m

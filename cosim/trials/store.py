@@ -1,6 +1,6 @@
 """Sessions and responses of conspicuity trials, in a database.
 
-Owns the two tables and their CSV export. An embedded SQLite file by default
+Owns the tables below and their CSV export. An embedded SQLite file by default
 (``Store("trials.sqlite")``); any SQLAlchemy database URL otherwise
 (``Store("postgresql+psycopg://...")``, the driver installed separately).
 
@@ -13,6 +13,11 @@ Owns the two tables and their CSV export. An embedded SQLite file by default
   (its feed, the frame drawn there, the pixel in the frame's own
   coordinates, the page's click and draw times); ``(session, trial_index,
   report_key)`` is unique, the key the page's own for each click.
+- ``live_commands``: one row per command the participant sent an aircraft
+  from a live trial's map (the action, the vehicle, the point, the page's
+  time, the server's, the run's sequence number and, once the run applied
+  it, its tick and simulated time); ``(session, trial_index, seq)`` is
+  unique.
 - ``responses``: one row per response. ``(session, trial_index, kind)`` is
   unique: posting the same response again (a reload, a retry) returns the
   stored row and adds nothing, so a response is never duplicated, and the
@@ -160,6 +165,29 @@ live_reports = sa.Table(
 _LIVE_FIELDS = tuple(c.name for c in live_reports.columns if c.name not in ("id", "created"))
 #: the columns of ``cosim trials export --live``: every stored click, as stored
 LIVE_EXPORT_COLUMNS = tuple(c.name for c in live_reports.columns if c.name != "id")
+#: the commands a live trial's participant sent from the map (``live_routes``)
+live_commands = sa.Table(
+    "live_commands", metadata,
+    sa.Column("id", sa.Integer, primary_key=True, autoincrement=True),
+    sa.Column("session", sa.String(32), sa.ForeignKey("sessions.id"), nullable=False),
+    sa.Column("participant", sa.String(64), nullable=False),
+    sa.Column("trial_index", sa.Integer, nullable=False),
+    sa.Column("condition", sa.String(200), nullable=False),
+    sa.Column("seq", sa.Integer, nullable=False),  # the run's number of the command: 0, 1, ...
+    sa.Column("vehicle", sa.String(64), nullable=False),
+    sa.Column("action", sa.String(16), nullable=False),  # go, orbit or look
+    sa.Column("north_m", sa.Float, nullable=False),  # the point, in the scenario's frame
+    sa.Column("east_m", sa.Float, nullable=False),
+    sa.Column("client_time_ms", sa.Float),  # the page's clock (performance.now()) at the click
+    sa.Column("server_time", sa.String(32), nullable=False),  # received (ISO 8601, UTC)
+    sa.Column("tick", sa.Integer),  # the run's tick it was applied at (null until then)
+    sa.Column("sim_time_s", sa.Float),
+    sa.Column("run", sa.String(400), nullable=False),  # the trial's run folder
+    sa.UniqueConstraint("session", "trial_index", "seq", name="one_row_per_command"),
+)
+_COMMAND_FIELDS = tuple(c.name for c in live_commands.columns if c.name != "id")
+#: the columns of ``cosim trials export --live-commands``: every stored command
+LIVE_COMMAND_COLUMNS = _COMMAND_FIELDS
 
 
 def _session_id() -> str:
@@ -346,6 +374,32 @@ class Store:
         with self.engine.connect() as c:
             return [dict(r) for r in c.execute(q).mappings()]
 
+    def record_live_command(self, row: dict[str, Any]) -> dict[str, Any]:
+        """Store one map command of a live trial (``live_commands``' columns;
+        ``server_time`` now unless given); the stored row."""
+        values = {k: row.get(k) for k in _COMMAND_FIELDS}
+        values["server_time"] = row.get("server_time") or _now()
+        with self.engine.begin() as c:
+            c.execute(live_commands.insert().values(**values))
+        return values
+
+    def live_command_applied(self, session_id: str, trial_index: int, seq: int, tick: int,
+                             sim_time_s: float) -> None:
+        """Keep the tick and simulated time a stored command was applied at."""
+        with self.engine.begin() as c:
+            c.execute(live_commands.update().where(
+                live_commands.c.session == session_id,
+                live_commands.c.trial_index == trial_index, live_commands.c.seq == seq)
+                .values(tick=tick, sim_time_s=sim_time_s))
+
+    def live_commands(self, session_id: str | None = None) -> list[dict[str, Any]]:
+        """A session's map commands (None: every session's), in the order stored."""
+        q = live_commands.select().order_by(live_commands.c.id)
+        if session_id is not None:
+            q = q.where(live_commands.c.session == session_id)
+        with self.engine.connect() as c:
+            return [dict(r) for r in c.execute(q).mappings()]
+
     def responses(self, session_id: str | None = None) -> list[dict[str, Any]]:
         q = (sa.select(responses).select_from(responses.join(sessions))
              .order_by(sessions.c.created, responses.c.session, responses.c.trial_index,
@@ -434,7 +488,8 @@ def export_csv(db: Store | str | Path, path: str | Path) -> Path:
 def write_csv(rows: list[dict[str, Any]], f: TextIO,
               columns: tuple[str, ...] = EXPORT_COLUMNS) -> None:
     """Responses (``Store.responses()`` rows) as CSV with ``EXPORT_COLUMNS``
-    (or live reports, ``Store.live_reports()``, with ``LIVE_EXPORT_COLUMNS``);
+    (or live reports, ``Store.live_reports()``, with ``LIVE_EXPORT_COLUMNS``,
+    or live commands, ``Store.live_commands()``, with ``LIVE_COMMAND_COLUMNS``);
     text a spreadsheet would run as a formula is neutralised
     (``spreadsheet.safe_cell``), for ``cosim trials export`` and the
     experimenter's download alike."""

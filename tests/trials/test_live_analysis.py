@@ -103,7 +103,9 @@ def test_analyse_live_writes_tables_and_figures(sessions: list[ScoredSession],
                                                 tmp_path: Path) -> None:
     summary = analyse_live(sessions, tmp_path)
     assert summary["files"] == ["live_targets.csv", "live_sessions.csv", "live_levels.csv",
-                                "live_effects.csv", "live_behaviour.png", "live_feeds.png"]
+                                "live_effects.csv", "live_tasking_levels.csv",
+                                "live_tasking_effects.csv", "live_behaviour.png",
+                                "live_feeds.png"]
     assert summary["reports"]["false_alarm"] == len(sessions)
     with open(tmp_path / "live_targets.csv", newline="") as f:
         got: list[dict[str, Any]] = list(csv.DictReader(f))
@@ -135,16 +137,20 @@ def test_many_levels_bounded(sessions: list[ScoredSession]) -> None:
 
 def test_session_counts(tmp_path: Path) -> None:
     """live_sessions.csv: each session's hits are the clicks the model made,
-    its misses the targets it did not click, one false alarm each."""
+    its misses the targets it did not click, one false alarm each; its map
+    commands counted by action, 3 in 90 s: 2 a minute."""
     rng = np.random.default_rng(4)
     truth, reports, lats = syn.session(rng, 2, 0.0)
-    one = ScoredSession("s", "p", (("feeds", "2"),), score_session(truth, reports))
+    one = ScoredSession("s", "p", (("feeds", "2"),), score_session(truth, reports),
+                        ("go", "look", "go"), 90.0)
     analyse_live([one], tmp_path, plots=False)
     with open(tmp_path / "live_sessions.csv", newline="") as f:
         (row,) = list(csv.DictReader(f))
     assert row == {"session": "s", "participant": "p", "hits": str(len(lats)),
                    "duplicates": "0", "false_alarms": "1", "targets": str(TARGETS),
-                   "misses": str(TARGETS - len(lats)), "condition_feeds": "2"}
+                   "misses": str(TARGETS - len(lats)), "duration_s": "90", "go": "2",
+                   "orbit": "0", "look": "1", "commands": "3", "commands_per_min": "2",
+                   "condition_feeds": "2"}
 
 
 def test_number_of_feeds_from_the_ground_truth() -> None:

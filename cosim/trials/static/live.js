@@ -14,6 +14,13 @@
 // it (glass-to-glass, up to the display's own delay); every 2 s, and at the
 // end, it posts the frames received and drawn and those latencies' median,
 // 95th percentile and maximum over the trial.
+// Tasking (where the condition allows it): a click on an aircraft on the map
+// selects it (ringed, its id shown below the map); a click on the ground then
+// opens a small menu there of the commands allowed (Go here, Orbit here, Look
+// here; keys G, O, L; Escape closes it), posted with the point in metres
+// north and east of the scenario's origin. The aircraft's last command sent
+// is marked on the map until its next one; a refusal is shown for a few seconds.
+// Reports are clicks on the feeds, tasking is clicks on the map.
 "use strict";
 (() => {
   const sid = new URLSearchParams(location.search).get("session");
@@ -21,6 +28,10 @@
   const map = document.getElementById("map");
   const clock = document.getElementById("clock");
   const message = document.getElementById("message");
+  const menu = document.getElementById("taskmenu");
+  const taskLine = document.getElementById("tasking");
+  const ACTIONS = { go: ["Go here", "G"], orbit: ["Orbit here", "O"], look: ["Look here", "L"] };
+  const PICK_PX = 14;      // how near (map px) a click must be to an aircraft to select it
   const TRACK_POINTS = 600;
   const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
   const esc = (text) => String(text).replace(/[&<>"']/g, (c) => `&#${c.charCodeAt(0)};`);
@@ -35,6 +46,11 @@
   let layers = [];         // what the map shows: tracks, footprints, targets
   let targets = [];        // [{id, north_m, east_m}] when the map shows targets
   let rafPending = false;
+  let tasking = { actions: [], vehicles: [], orbit_radius_m: 0 };
+  let selected = null;     // the aircraft selected on the map
+  let view = null;         // the map's last transform: {cn, ce, s, w, h}
+  const sent = new Map();  // vehicle id -> {action, north_m, east_m}: its last command
+  let errorTimer = null;
   let offsetMs = 0;        // the server's clock minus the page's (ms)
   let rttMs = null;        // the round trip that estimate came from
   let received = 0;
@@ -43,7 +59,7 @@
   const latencies = [];    // glass-to-glass of every frame drawn (ms)
   const MAX_LATENCIES = 100000;
   // for a test's eyes: every frame drawn and every report posted
-  window.live = { drawn: [], reports: [] };
+  window.live = { drawn: [], reports: [], commands: [] };
 
   function say(html) { message.innerHTML = html; message.hidden = false; }
 
@@ -65,6 +81,8 @@
   function build(hello) {
     layers = hello.map || [];
     targets = hello.targets || [];
+    tasking = hello.tasking || { actions: [], vehicles: [], orbit_radius_m: 0 };
+    showTasking();
     feedsEl.innerHTML = "";
     feeds = hello.feeds.map((f) => {
       const cell = document.createElement("div");
@@ -187,6 +205,7 @@
     const prints = (last && last.footprints) || [];
     for (const f of prints) pts = pts.concat(f.corners_ne_m);
     for (const t of targets) pts.push([t.north_m, t.east_m]);
+    for (const c of sent.values()) pts.push([c.north_m, c.east_m]);
     if (!pts.length) return;
     const ns = pts.map((p) => p[0]), es = pts.map((p) => p[1]);
     const cn = (Math.max(...ns) + Math.min(...ns)) / 2;
@@ -194,6 +213,8 @@
     const span = Math.max(200, Math.max(...ns) - Math.min(...ns), Math.max(...es) - Math.min(...es));
     const s = (0.8 * Math.min(w, h)) / span; // px per metre, the same both ways
     const at = (p) => [w / 2 + (p[1] - ce) * s, h / 2 - (p[0] - cn) * s];
+    view = { cn, ce, s, w, h };
+    window.live.view = view; // for a test's eyes: the map's scale and centre
     const path = (ps) => {
       ctx.beginPath();
       ps.forEach((p, i) => { const [x, y] = at(p); if (i) ctx.lineTo(x, y); else ctx.moveTo(x, y); });
@@ -228,9 +249,31 @@
       ctx.fillStyle = "#f99";
       ctx.fillText(t.id, x + 6, y + 4);
     }
+    for (const [id, c] of sent) { // each aircraft's last command: a ring and a line to it
+      const [x, y] = at([c.north_m, c.east_m]);
+      const v = last && last.vehicles.find((u) => u.id === id);
+      ctx.strokeStyle = id === selected ? "#6cf" : "rgba(102, 204, 255, 0.6)";
+      ctx.lineWidth = 2;
+      ctx.setLineDash([4, 3]);
+      if (v) { path([[v.north_m, v.east_m], [c.north_m, c.east_m]]); ctx.stroke(); }
+      ctx.setLineDash([]);
+      ctx.beginPath();
+      const r = c.action === "orbit" ? Math.max(6, tasking.orbit_radius_m * s) : 6;
+      ctx.arc(x, y, r, 0, 2 * Math.PI);
+      ctx.stroke();
+      ctx.fillStyle = "#6cf";
+      ctx.fillText(`${ACTIONS[c.action][1]} ${id}`, x + 8, y + 14);
+    }
     for (const v of (last ? last.vehicles : [])) {
       const [x, y] = at([v.north_m, v.east_m]);
       const a = (v.yaw_deg * Math.PI) / 180;
+      if (v.id === selected) { // the selected aircraft: ringed
+        ctx.strokeStyle = "#6cf";
+        ctx.lineWidth = 2;
+        ctx.beginPath();
+        ctx.arc(x, y, 11, 0, 2 * Math.PI);
+        ctx.stroke();
+      }
       ctx.fillStyle = "#fc3";
       ctx.beginPath(); // a triangle pointing along the heading (north up)
       ctx.moveTo(x + 8 * Math.sin(a), y - 8 * Math.cos(a));
@@ -250,8 +293,96 @@
     ctx.fillText(len >= 1000 ? `${len / 1000} km` : `${len} m`, 10, h - 20);
   }
 
+  // --- tasking ---
+  function showTasking(text, error = false) {
+    if (!tasking.actions.length) { taskLine.hidden = true; return; }
+    taskLine.hidden = false;
+    taskLine.classList.toggle("error", error);
+    taskLine.textContent = text || (selected
+      ? `${selected} selected: click the map where it should go`
+      : "Click an aircraft on the map to task it");
+  }
+
+  function failed(text) {
+    showTasking(text, true);
+    clearTimeout(errorTimer);
+    errorTimer = setTimeout(() => showTasking(), 4000);
+  }
+
+  // A click on the map in its own pixels and in metres (north, east).
+  function mapPoint(e) {
+    const r = map.getBoundingClientRect();
+    const x = ((e.clientX - r.left) * map.width) / r.width;
+    const y = ((e.clientY - r.top) * map.height) / r.height;
+    return { x, y, north_m: view.cn - (y - view.h / 2) / view.s,
+             east_m: view.ce + (x - view.w / 2) / view.s };
+  }
+
+  function closeMenu() { menu.hidden = true; menu.innerHTML = ""; }
+
+  function mapClick(e) {
+    if (!tasking.actions.length || !view || trialIndex === null) return;
+    const p = mapPoint(e);
+    let near = null, best = PICK_PX;
+    for (const v of (last ? last.vehicles : [])) {
+      if (!tasking.vehicles.includes(v.id)) continue;
+      const d = Math.hypot(view.w / 2 + (v.east_m - view.ce) * view.s - p.x,
+                           view.h / 2 - (v.north_m - view.cn) * view.s - p.y);
+      if (d <= best) { near = v.id; best = d; }
+    }
+    closeMenu();
+    if (near !== null) { selected = near; showTasking(); drawMap(); return; }
+    if (selected === null) { failed("Click an aircraft first, then where it should go"); return; }
+    for (const a of tasking.actions) {
+      const b = document.createElement("button");
+      b.dataset.action = a;
+      b.textContent = `${ACTIONS[a][0]} (${ACTIONS[a][1]})`;
+      b.addEventListener("click", (ev) => { ev.stopPropagation(); task(a, p, ev.timeStamp); });
+      menu.append(b);
+    }
+    menu.hidden = false;
+    // at the click, kept inside the side panel
+    const side = map.parentElement.getBoundingClientRect(), box = menu.getBoundingClientRect();
+    menu.style.left = `${Math.min(e.clientX - side.left, side.width - box.width - 2)}px`;
+    menu.style.top = `${Math.min(e.clientY - side.top, side.height - box.height - 2)}px`;
+    menu.dataset.north_m = String(p.north_m);
+    menu.dataset.east_m = String(p.east_m);
+  }
+
+  async function task(action, p, timeMs) {
+    closeMenu();
+    const body = { trial_index: trialIndex, vehicle: selected, action,
+                   north_m: p.north_m, east_m: p.east_m, client_time_ms: timeMs };
+    window.live.commands.push(body);
+    try {
+      const r = await fetch(`/api/sessions/${sid}/live/command`, {
+        method: "POST", headers: { "Content-Type": "application/json" },
+        body: JSON.stringify(body) });
+      const out = await r.json();
+      body.status = r.status;
+      if (r.status !== 201) { failed(out.error || `refused (${r.status})`); return; }
+      body.seq = out.seq;
+      sent.set(body.vehicle, { action, north_m: p.north_m, east_m: p.east_m });
+      showTasking(`${ACTIONS[action][0]}: sent to ${body.vehicle}`);
+      clearTimeout(errorTimer);
+      errorTimer = setTimeout(() => showTasking(), 2000);
+      drawMap();
+    } catch (err) { body.status = String(err); failed("not sent: the server did not answer"); }
+  }
+
+  function taskKey(e) {
+    if (menu.hidden) return;
+    if (e.key === "Escape") { closeMenu(); return; }
+    const a = Object.keys(ACTIONS).find((k) => ACTIONS[k][1] === e.key.toUpperCase());
+    if (a && tasking.actions.includes(a)) {
+      task(a, { north_m: Number(menu.dataset.north_m), east_m: Number(menu.dataset.east_m) },
+           e.timeStamp);
+    }
+  }
+
   function states(msg) {
     last = msg;
+    window.live.vehicles = msg.vehicles;
     for (const v of msg.vehicles) {
       if (!tracks.has(v.id)) tracks.set(v.id, []);
       const tr = tracks.get(v.id);
@@ -326,7 +457,11 @@
     last = null;
     received = drawnCount = mismatches = 0;
     latencies.length = 0;
-    window.live = { drawn: [], reports: [] };
+    selected = null;
+    view = null;
+    sent.clear();
+    closeMenu();
+    window.live = { drawn: [], reports: [], commands: [] };
   }
 
   // Each trial the experimenter starts, followed to its end; between trials
@@ -359,5 +494,7 @@
   }
 
   window.addEventListener("resize", layout);
+  map.addEventListener("pointerdown", mapClick);
+  window.addEventListener("keydown", taskKey);
   main();
 })();
