@@ -15,7 +15,7 @@ Example (in a study file)::
         duration_s: 60                  # default: the scenario's own
         map: {tracks: true, footprints: true, targets: false}  # (the defaults)
         tasking: [go, orbit, look]      # the map's commands allowed (the default)
-        orbit_radius_m: 150             # an orbit's radius (the default)
+        orbit_radius_m: 300             # default 150, widened to one they can fly
         conditions: {feeds: 2, alt_agl_m: 100}
 
 A feed is one camera of one vehicle (``VEHICLE/CAMERA``, the names the
