@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import time
 from pathlib import Path
 from typing import Any
@@ -55,8 +56,9 @@ COVERED = """([sel, panel]) => {
 }"""
 
 
-def _answer_tlx(page: Any) -> None:
+def _answer_tlx(page: Any, picture: Path) -> None:
     page.wait_for_selector("#instrument[data-kind='tlx'] .tlx .scale", timeout=60_000)
+    page.screenshot(path=str(picture))
     for key, v in RATINGS.items():
         page.click(f".scale[data-scale='{key}'] .tick[data-value='{v}']")
     page.click(".tlx button.next")
@@ -106,12 +108,25 @@ def test_a_freeze_asks_the_probe_on_a_blank_page_and_scores_it_against_the_run(
             time.sleep(1.0)
             assert page.text_content("#clock") == clock
             page.screenshot(path=str(tmp_path / "freeze.png"))
+            # the blank map: the live map's last view (centre, scale), grown to the sector
+            view = page.evaluate("window.live.view")
+            n0, n1, e0, e1 = page.evaluate("window.liveInstruments.asked[0].extent_ne_m")
+            half_m = view["w"] / 2 / view["s"]
+            assert n0 <= min(view["cn"] - half_m, 0) and n1 >= max(view["cn"] + half_m, 1000)
+            assert e0 <= min(view["ce"] - half_m, -100) and e1 >= max(view["ce"] + half_m, 30)
+            assert n1 - n0 == pytest.approx(e1 - e0) and n1 - n0 == pytest.approx(
+                max(view["cn"] + half_m, 1000) - min(view["cn"] - half_m, 0))
+            # a reload asks the same probe again (its answer is stored once)
+            page.reload()
+            page.wait_for_function("document.body.dataset.freeze === '0'", timeout=30_000)
+            assert page.text_content("#clock") == clock
             # where: a click on the blank map 5 m north and 5 m east of the origin
             page.wait_for_selector("[data-question='where']")
             x, y = page.evaluate("window.liveInstruments.toPixel(5, 5)")
             m_per_px = 100 / (page.evaluate("window.liveInstruments.toPixel(5, 105)")[0] - x)
             page.mouse.click(x, y)
             page.wait_for_selector("[data-question='north']")
+            page.screenshot(path=str(tmp_path / "count.png"))
             page.fill("[data-question='north'] input", "2")
             page.click("[data-question='north'] button.next")
             page.wait_for_selector("[data-question='far']")
@@ -122,7 +137,7 @@ def test_a_freeze_asks_the_probe_on_a_blank_page_and_scores_it_against_the_run(
                                    "p.body.instrument === 'sagat' && p.status === 201)")
             page.wait_for_function("document.body.dataset.freeze === undefined")
             page.wait_for_function("document.body.dataset.phase === 'ended'", timeout=60_000)
-            _answer_tlx(page)
+            _answer_tlx(page, tmp_path / "tlx.png")
             page.wait_for_function("window.liveInstruments.posted.some((p) => "
                                    "p.body.instrument === 'tlx' && p.status === 201)")
             assert not errors, errors
@@ -174,3 +189,32 @@ def test_a_freeze_asks_the_probe_on_a_blank_page_and_scores_it_against_the_run(
     assert tlx["raw_tlx"] == pytest.approx(290 / 6)
     assert tlx["weighted_tlx"] == pytest.approx(975 / 15)  # 4*70 + 5*85 + 40 + 3*60 + 2*25
     assert np.isclose(sum(weights.values()), 15)
+
+
+@pytest.mark.parametrize("at_s, tick", [(2.8, 336), (2.79, 336), (2.801, 340),
+                                        (0.1 * 3, 36), (1 / 30, 4)])
+def test_a_probe_freezes_at_the_first_exchange_at_or_after_its_time(at_s: float,
+                                                                    tick: int) -> None:
+    from cosim.trials.live_freeze import freeze_tick
+
+    assert freeze_tick(at_s, 120.0, 4) == tick  # 30 Hz exchanges of 120 Hz physics
+
+
+def test_a_live_sessions_sagat_answer_needs_its_trial_frozen_for_the_probe(
+        tmp_path: Path) -> None:
+    """Before any trial has run nothing is asked (no freeze, no TLX), and an
+    answer to the probe is refused: its trial was never frozen for it."""
+    with live_server(live_study(tmp_path, STUDY)) as server:
+        sid = _session(server, "p1")["id"]
+        assert server.request("GET", f"/api/sessions/{sid}/live/freeze") == (
+            200, {"freeze": None})
+        assert server.request("GET", f"/api/sessions/{sid}/instrument") == (
+            200, {"instrument": None})
+        body = {"instrument": "sagat", "trial_index": 0, "probe": 0,
+                "answers": {"where": {"north_m": 0, "east_m": 0}, "north": 1, "far": "uav1",
+                            "low": "uav2"}}
+        status, out = server.request("POST", f"/api/sessions/{sid}/instruments", body)
+        assert status == 409
+        assert re.fullmatch(r"probe 0: trial 0 of this session has not been frozen for it",
+                            out["error"]), out
+        assert server.store.instrument_answers(sid) == []

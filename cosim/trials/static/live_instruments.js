@@ -11,7 +11,10 @@
 //   (instruments.js's forms) beside a blank map of the area (north up, a
 //   grid and a scale bar; a count question's sector and a distance question's
 //   point drawn on it): a last-target question is answered by a click on it,
-//   turned into {north_m, east_m} by the map's extent (from the server). The
+//   turned into {north_m, east_m}. The blank map shows the area the live map
+//   showed last (live.js's window.live.view: its centre and scale), grown to
+//   hold the questions' sectors and points; without it (a page reloaded
+//   during the freeze), the server's extent (the aircraft, the sectors). The
 //   answers are posted (POST .../instruments); the server lets the run go on.
 // - NASA-TLX: whenever no trial is live it asks the server whether a TLX is
 //   due (GET .../instrument: after each block of live trials, or after the
@@ -114,6 +117,25 @@
     };
   }
 
+  // [n0, n1, e0, e1] (m): the live map's last view with the probe's sectors
+  // and points in it, else the server's extent.
+  function extentOf(f) {
+    const v = window.live && window.live.view;
+    if (!v || !v.s) return f.extent_ne_m;
+    const hn = v.h / 2 / v.s, he = v.w / 2 / v.s;
+    const ns = [v.cn - hn, v.cn + hn], es = [v.ce - he, v.ce + he];
+    for (const q of f.questions) {
+      for (const [n, e] of (q.sector || []).concat(q.point ? [q.point] : [])) {
+        ns.push(n);
+        es.push(e);
+      }
+    }
+    const n0 = Math.min(...ns), n1 = Math.max(...ns), e0 = Math.min(...es), e1 = Math.max(...es);
+    const half = Math.max(n1 - n0, e1 - e0) / 2; // square, as the canvas
+    const cn = (n0 + n1) / 2, ce = (e0 + e1) / 2;
+    return [cn - half, cn + half, ce - half, ce + half];
+  }
+
   function show(kind) {
     panel.hidden = false;
     panel.dataset.kind = kind;
@@ -128,14 +150,15 @@
   // One frozen probe, asked and answered (the run waits for the answer).
   async function freeze(f) {
     document.body.dataset.freeze = String(f.probe);
+    const extent = extentOf(f);
     state.asked.push({ instrument: "sagat", trial_index: f.trial_index, probe: f.probe,
-                       time_s: f.time_s });
+                       time_s: f.time_s, extent_ne_m: extent });
     show("sagat");
     const byId = Object.fromEntries(f.questions.map((q) => [q.id, q]));
-    let toMap = drawBlank(f.extent_ne_m, null);
+    let toMap = drawBlank(extent, null);
     const watch = new MutationObserver(() => { // redraw for the question shown
       const form = box.querySelector("[data-question]");
-      toMap = drawBlank(f.extent_ne_m, form ? byId[form.dataset.question] : null);
+      toMap = drawBlank(extent, form ? byId[form.dataset.question] : null);
     });
     watch.observe(box, { childList: true });
     blank.classList.remove("pick");
