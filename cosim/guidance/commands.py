@@ -32,7 +32,8 @@ now and by MAVLink and the swarm controller later:
   ``look_at`` (a point, as goto's, with optional ``alt_msl_m``/``alt_agl_m``;
   default the ground at the scenario's origin height): the cameras keep
   pointing at it as the vehicle moves, within those limits, until a gimbal
-  command with angles or another ``look_at``. Not a flight command: a
+  command with angles or another ``look_at``; ``look_at: null`` ends the
+  tracking, the angles staying where it left them. Not a flight command: a
   command of only ``gimbal`` leaves the flight as it is.
 - ``camera``: the vehicle's renderer cameras take stills (full frames with
   their ground truth, into the run folder's ``stills/``): ``shoot: true``
@@ -140,6 +141,8 @@ class Command:
     gimbal_yaw_deg: float | None = None
     #: a point the gimbal cameras keep pointing at (None: no tracking asked)
     gimbal_look_at: Point | None = None
+    #: the gimbal cameras stop tracking, holding the angles they have (``look_at: null``)
+    gimbal_hold: bool = False
     #: stills from the vehicle's cameras (None: none); not part of the flight
     camera: CameraTrigger | None = None
     source: dict[str, Any] = field(default_factory=dict, compare=False)
@@ -157,7 +160,7 @@ class Command:
     @property
     def points_gimbal(self) -> bool:
         return (self.gimbal_pitch_deg is not None or self.gimbal_yaw_deg is not None
-                or self.gimbal_look_at is not None)
+                or self.gimbal_look_at is not None or self.gimbal_hold)
 
     def label(self) -> str:
         """A short description for the state log's ``command`` column."""
@@ -183,6 +186,8 @@ class Command:
             parts.append(f"gimbal look at {p.a:g},{p.b:g}"
                          + (" (lat/lon)" if p.frame == "geodetic" else
                             " (from start)" if p.frame == "start" else ""))
+        elif self.gimbal_hold:
+            parts.append("gimbal hold")
         elif self.points_gimbal:
             parts.append("gimbal " + " ".join(
                 f"{k} {v:g}" for k, v in (("pitch", self.gimbal_pitch_deg),
@@ -292,7 +297,7 @@ def parse_command(d: Any, path: P, report: Report) -> Command | None:
         report(path + ("stall_protection",), f"expected true or false, got {stall!r}")
         stall = None
     gimbal = _gimbal(d["gimbal"], path + ("gimbal",), report) if "gimbal" in d \
-        else (None, None, None)
+        else (None, None, None, False)
     camera = _camera(d["camera"], path + ("camera",), report) if "camera" in d else None
     takeoff = _num(d, "takeoff_agl_m", path, report, 0.5, 3000) if "takeoff_agl_m" in d else None
     land = d.get("land", False)
@@ -387,7 +392,7 @@ def parse_command(d: Any, path: P, report: Report) -> Command | None:
                    leg_continue=leg_continue,
                    takeoff_agl_m=takeoff, land=land, velocity_ne=velocity,
                    gimbal_pitch_deg=gimbal[0], gimbal_yaw_deg=gimbal[1],
-                   gimbal_look_at=gimbal[2], camera=camera,
+                   gimbal_look_at=gimbal[2], gimbal_hold=gimbal[3], camera=camera,
                    source=d)
 
 
@@ -404,11 +409,12 @@ def _velocity(v: Any, path: P, report: Report) -> tuple[float, float] | None:
 
 
 def _gimbal(g: Any, path: P, report: Report
-            ) -> tuple[float | None, float | None, Point | None]:
-    """A ``gimbal`` command: its (pitch_deg, yaw_deg, look_at point)."""
+            ) -> tuple[float | None, float | None, Point | None, bool]:
+    """A ``gimbal`` command: its (pitch_deg, yaw_deg, look_at point, hold:
+    ``look_at: null``)."""
     if not isinstance(g, dict) or not g:
         report(path, f"expected a mapping with pitch_deg and/or yaw_deg, or look_at, got {g!r}")
-        return None, None, None
+        return None, None, None, False
     for k in g:
         if k not in ("pitch_deg", "yaw_deg", "look_at"):
             report(path + (k,), f"unknown key {k!r}; expected pitch_deg, yaw_deg, look_at")
@@ -417,11 +423,14 @@ def _gimbal(g: Any, path: P, report: Report
         if angles:
             report(path, f"give look_at or angles ({' / '.join(angles)}), not both: look_at "
                          f"points the gimbal itself")
-            return None, None, None
-        return None, None, _point(g["look_at"], path + ("look_at",), report, _LOOK_AT_EXTRA)
+            return None, None, None, False
+        if g["look_at"] is None:
+            return None, None, None, True
+        return None, None, _point(g["look_at"], path + ("look_at",), report,
+                                  _LOOK_AT_EXTRA), False
     pitch = _num(g, "pitch_deg", path, report, *GIMBAL_PITCH_DEG) if "pitch_deg" in g else None
     yaw = _num(g, "yaw_deg", path, report, *GIMBAL_YAW_DEG) if "yaw_deg" in g else None
-    return pitch, yaw, None
+    return pitch, yaw, None, False
 
 
 def _camera(c: Any, path: P, report: Report) -> CameraTrigger | None:

@@ -269,8 +269,6 @@ class Mission:
         self.waiting: tuple[int, int] | None = None  # (condition seq, tick it started)
         self.jumps: dict[int, int] = {}  # DO_JUMP seq -> jumps left (-1: for ever)
         self.speed_mps: float | None = None
-        self.roi: tuple[float, float, float] | None = None  # lat, lon, alt MSL
-        self.roi_sent: tuple[float, float] | None = None
         self.complete = False
         self.reported_current = 0  # the seq of the last MISSION_CURRENT sent
         self.reached: list[int] = []  # MISSION_ITEM_REACHED still to send
@@ -328,7 +326,6 @@ class Mission:
         self.do_queue = []
         self.waiting = None
         self.complete = False
-        self.roi = self.roi_sent = None
 
     def state(self, auto: bool) -> dict[str, Any]:
         """MISSION_CURRENT fields (total excludes home, as ArduPilot reports)."""

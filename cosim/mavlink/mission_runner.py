@@ -43,7 +43,7 @@ from cosim.mavlink.mission import (
     NavState,
     flat_ne,
 )
-from cosim.mavlink.outcome import Outcome, text, vocab
+from cosim.mavlink.outcome import Outcome, roi_vocab, text, vocab
 
 if TYPE_CHECKING:
     from cosim.mavlink.services.base import Context
@@ -169,7 +169,6 @@ class MissionRunner:
         if not (math.isfinite(lat) and math.isfinite(lon)):
             return
         self._run_dos(v, tick, out)
-        self._point_roi(v, row, tick, out)
         if self._nav_done(v, ms.nav, row, lat, lon, tick):
             ms.reached.append(ms.nav.item.seq)
             self.ctx.counts["mission_items_reached"] += 1
@@ -227,14 +226,10 @@ class MissionRunner:
                 v.home = (it.lat_deg, it.lon_deg, alt)
             out.replies.append(("HOME_POSITION", v.fields("HOME_POSITION", tick)))
         elif c in (M.MAV_CMD_DO_SET_ROI, M.MAV_CMD_DO_SET_ROI_LOCATION):
-            if it.here:
-                ms.roi = None
-            else:
-                a = self.ctx.alt(v, it.frame, it.z)
-                alt = a[1] if a is not None and a[0] == "alt_msl_m" else v.home[2]
-                ms.roi, ms.roi_sent = (it.lat_deg, it.lon_deg, alt), None
+            d = roi_vocab(None if it.here else (it.lat_deg, it.lon_deg),
+                          self.ctx.alt(v, it.frame, it.z))
         elif c == M.MAV_CMD_DO_SET_ROI_NONE:
-            ms.roi = ms.roi_sent = None
+            d = roi_vocab(None, None)
         elif c in CAMERA_ITEMS:
             d = camera_vocab(it)
         if d is None:
@@ -245,25 +240,6 @@ class MissionRunner:
             self.ctx.counts["mission_items_skipped"] += 1
             return
         out.commands.append(cmd)
-
-    def _point_roi(self, v: MavVehicle, row: list[float], tick: int, out: Outcome) -> None:
-        """Keep the gimbal on the region of interest: a gimbal command when the
-        angles have moved by more than 2 degrees."""
-        roi = v.mission.roi
-        if roi is None:
-            return
-        n, e = flat_ne(float(row[_S["lat_deg"]]), float(row[_S["lon_deg"]]), roi[0], roi[1])
-        down = float(row[_S["alt_msl_m"]]) - roi[2]
-        pitch = max(-90.0, min(30.0, -math.degrees(math.atan2(down, math.hypot(n, e)))))
-        yaw = math.remainder(math.degrees(math.atan2(e, n)) - float(row[_S["yaw_deg"]]), 360.0)
-        sent = v.mission.roi_sent
-        if sent is not None and abs(sent[0] - pitch) <= 2.0 \
-                and abs(math.remainder(sent[1] - yaw, 360.0)) <= 2.0:
-            return
-        cmd = vocab({"gimbal": {"pitch_deg": round(pitch, 2), "yaw_deg": round(yaw, 2)}})
-        if not isinstance(cmd, str):
-            v.mission.roi_sent = (pitch, yaw)
-            out.commands.append(cmd)
 
     def _nav_done(self, v: MavVehicle, nav: NavState, row: list[float], lat: float,
                   lon: float, tick: int) -> bool:

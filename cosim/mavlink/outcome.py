@@ -103,6 +103,21 @@ def text(message: str, severity: int = mav.MAV_SEVERITY_WARNING) -> list[Reply]:
             for i in range(0, len(message), _TEXT_CHARS)]
 
 
+def roi_vocab(location: tuple[float, float] | None, alt: tuple[str, float] | None
+              ) -> dict[str, Any]:
+    """DO_SET_ROI_LOCATION (and a mission's DO_SET_ROI) as the vocabulary's
+    gimbal command: look at (lat_deg, lon_deg) at ``alt`` ((vocabulary key,
+    metres) as ``Context.alt`` gives it; None: the ground); no location (x =
+    y = 0, as ArduPilot reads it) or DO_SET_ROI_NONE: stop tracking, the
+    gimbal holding its angles."""
+    if location is None:
+        return {"gimbal": {"look_at": None}}
+    point: dict[str, Any] = {"lat_deg": location[0], "lon_deg": location[1]}
+    if alt is not None:
+        point[alt[0]] = alt[1]
+    return {"gimbal": {"look_at": point}}
+
+
 def vocab(d: dict[str, Any]) -> Command | str:
     """A vocabulary mapping (what a scenario schedule would hold) -> Command,
     or the problems as one string: MAVLink, the schedule and the swarm share

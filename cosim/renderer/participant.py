@@ -157,7 +157,8 @@ class CameraParticipant:
         """A command's gimbal angles, or the point to track (``look_at``), for
         the vehicle's gimbal cameras from this exchange's frame on (a
         ``gimbal`` event); ignored, with a warning, by a vehicle without one.
-        Angles end tracking (an angle not given stays where tracking left it)."""
+        Angles, or a hold (``look_at: null``), end tracking (an angle not
+        given stays where tracking left it at this exchange)."""
         if not cmd.points_gimbal:
             return
         moved = [s for s in self.streams if s.row == row and s.index in self.gimbal]

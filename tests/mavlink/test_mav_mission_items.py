@@ -25,7 +25,6 @@ from test_mav_mission import (
     upload,
 )
 
-from cosim.mavlink.mission import flat_ne
 from cosim.vehicles.fixed_wing.mav_modes import PlaneMode
 
 ML = mavutil.mavlink
@@ -144,23 +143,24 @@ def test_do_set_home_moves_home(rig) -> None:
 
 
 def test_do_set_roi_points_the_gimbal_at_the_point(rig) -> None:
+    """DO_SET_ROI_LOCATION: one gimbal command to look at the point (the
+    cameras keep it in view from then on); ROI_NONE: one to stop tracking."""
     r = rig(1)
     roi = (LAT0 + 0.003, LON0 + 0.003)
     upload(r, [(ML.MAV_FRAME_GLOBAL_INT, ML.MAV_CMD_DO_SET_ROI_LOCATION, 0, 0, 0, 0, *roi,
-                HOME_ALT_M), A, B, (REL, ML.MAV_CMD_DO_SET_ROI_NONE, 0, 0, 0, 0, 0, 0, 0), C])
+                HOME_ALT_M + 2), A, B, (REL, ML.MAV_CMD_DO_SET_ROI_NONE, 0, 0, 0, 0, 0, 0, 0),
+               C])
     cmds, _ = set_mode(r, PlaneMode.AUTO)
-    g = [vc.command for vc in cmds if vc.command.points_gimbal]
-    assert len(g) == 1
-    row = r.states[0]
-    n, e = flat_ne(row[S["lat_deg"]], row[S["lon_deg"]], *roi)
-    pitch = -math.degrees(math.atan2(row[S["alt_msl_m"]] - HOME_ALT_M, math.hypot(n, e)))
-    yaw = math.remainder(math.degrees(math.atan2(e, n)) - row[S["yaw_deg"]], 360.0)
-    assert g[0].gimbal_pitch_deg == pytest.approx(pitch, abs=0.01)
-    assert g[0].gimbal_yaw_deg == pytest.approx(yaw, abs=0.01)
-    assert not [c for c in r.step(4) if c.command.points_gimbal]  # unchanged: nothing sent
-    assert r.ep.vehicles[0].mission.roi is not None
-    _, reached = reach(r, *at(A))  # B starts: the DO items after it run (ROI_NONE)
-    assert reached == [2] and r.ep.vehicles[0].mission.roi is None
+    [g] = [vc.command for vc in cmds if vc.command.points_gimbal]
+    p = g.gimbal_look_at
+    assert p is not None and (p.frame, p.alt_m, p.alt_agl) == ("geodetic", HOME_ALT_M + 2, False)
+    assert (p.a, p.b) == pytest.approx(roi, abs=1e-7)
+    assert g.gimbal_pitch_deg is None and not g.gimbal_hold and not g.flies
+    assert not [c for c in r.step(4) if c.command.points_gimbal]  # tracked by the cameras
+    cmds, reached = reach(r, *at(A))  # B starts: the DO items after it run (ROI_NONE)
+    assert reached == [2]
+    [g] = [vc.command for vc in cmds if vc.command.points_gimbal]
+    assert g.gimbal_hold and g.gimbal_look_at is None
 
 
 # -- fence and rally --------------------------------------------------------------

@@ -123,6 +123,20 @@ def test_tracking_is_the_same_at_any_exchange_rate_and_ends_at_an_angle_command(
     assert tracked["tick"] == 0
 
 
+def test_a_hold_stops_tracking_at_the_angles_of_that_tick(tmp_path: Path) -> None:
+    """``look_at: null`` (MAVLink's DO_SET_ROI_NONE): the gimbal stays at the
+    angles that pointed at the truck at the command's tick; the aircraft
+    flies on, so the truck drifts off the centre."""
+    sched = LOOK_ONLY + "  - {at_s: 1, vehicles: cam, command: {gimbal: {look_at: null}}}\n"
+    out = _run(tmp_path, "hold", schedule=sched)
+    rows = _truck(out)
+    assert all(float(r["eccentricity_px"]) < 0.1 for r in rows[:31])  # frame 30: tick 120
+    assert all(float(r["eccentricity_px"]) > 1.0 for r in rows[34:])
+    _, held = _events(out, "gimbal")
+    assert held["tick"] == 120 and "look_at" not in held
+    assert held["yaw_deg"] == pytest.approx(_yaw_to_truck(out, 120), abs=1e-6)
+
+
 def _yaw_to_truck(out: Path, tick: int) -> float:
     """The yaw that points at the truck from the logged state at ``tick``,
     worked out on its own (a level frame: a non-stabilised gimbal's yaw also
@@ -199,11 +213,16 @@ def test_look_at_parses_as_goto_s_point() -> None:
     assert cmd.label() == "gimbal look at 37.4,-122 (lat/lon)"
     cmd, problems = _parse({"gimbal": {"look_at": {"north_m": 120, "east_m": -40}}})
     assert not problems and cmd is not None and cmd.label() == "gimbal look at 120,-40"
+    cmd, problems = _parse({"gimbal": {"look_at": None}})
+    assert not problems and cmd is not None and cmd.gimbal_hold and cmd.points_gimbal
+    assert cmd.label() == "gimbal hold" and cmd.gimbal_look_at is None
 
 
 @pytest.mark.parametrize("gimbal,match", [
     ({"look_at": {"north_m": 1}, "pitch_deg": -45},
      r"command\.gimbal: give look_at or angles \(pitch_deg\), not both"),
+    ({"look_at": None, "yaw_deg": 5, "pitch_deg": 0},
+     r"command\.gimbal: give look_at or angles \(pitch_deg / yaw_deg\), not both"),
     ({"look_at": {"north_m": 1, "airspeed_kt": 50}},
      r"command\.gimbal\.look_at\.airspeed_kt: unknown key 'airspeed_kt'"),
     ({"look_at": 5}, r"command\.gimbal\.look_at: expected a point"),

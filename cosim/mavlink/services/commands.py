@@ -11,7 +11,9 @@ ArduPilot does). Results:
 Answered here alike for every vehicle: REQUEST_MESSAGE,
 REQUEST_AUTOPILOT_CAPABILITIES, GET_HOME_POSITION, SET/GET_MESSAGE_INTERVAL,
 DO_SET_MODE (the mode itself is the personality's), DO_SET_MISSION_CURRENT
-and MISSION_START (the mission service's). Every other command is the
+and MISSION_START (the mission service's), DO_SET_ROI_LOCATION and
+DO_SET_ROI_NONE (the gimbal cameras look at the point, or stop tracking and
+hold their angles: the vocabulary's ``gimbal: {look_at: ...}``). Every other command is the
 vehicle's personality's (``Personality.command_handler``).
 
 Positions: COMMAND_LONG carries degrees in param5/6 and an altitude relative
@@ -28,7 +30,15 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from cosim.mavlink import adapter as mav
-from cosim.mavlink.outcome import CommandRequest, Outcome, as_int, command_ack, text
+from cosim.mavlink.outcome import (
+    CommandRequest,
+    Outcome,
+    as_int,
+    command_ack,
+    roi_vocab,
+    text,
+    vocab,
+)
 from cosim.mavlink.services.base import Context
 from cosim.mavlink.vehicle import DEFAULT_RATES_HZ, STREAMABLE, MavVehicle, period_ticks
 
@@ -58,6 +68,8 @@ class CommandService:
             mav.MAV_CMD_DO_SET_MISSION_CURRENT: self._do_set_mission_current,
             mav.MAV_CMD_MISSION_START: self._mission_start,
             mav.MAV_CMD_REQUEST_VIDEO_STREAM_INFORMATION: self._video_info,
+            mav.MAV_CMD_DO_SET_ROI_LOCATION: self._roi,
+            mav.MAV_CMD_DO_SET_ROI_NONE: self._roi,
         }
 
     def supported(self, personality: Personality) -> frozenset[int]:
@@ -104,6 +116,20 @@ class CommandService:
 
     def _do_set_mode(self, v: MavVehicle, req: CommandRequest, tick: int, out: Outcome) -> int:
         return self._set_mode(v, as_int(req.p[0]), req.p[1], tick, out)
+
+    def _roi(self, v: MavVehicle, req: CommandRequest, tick: int, out: Outcome) -> int:
+        """DO_SET_ROI_LOCATION: the gimbal cameras look at x/y (z: its altitude
+        in the command's frame); no location, or DO_SET_ROI_NONE: they stop
+        tracking and hold their angles."""
+        where = None if req.command == mav.MAV_CMD_DO_SET_ROI_NONE else req.location()
+        alt = self.ctx.alt(v, req.frame, req.z) if where is not None and math.isfinite(req.z) \
+            else None
+        cmd = vocab(roi_vocab(where, alt))
+        if isinstance(cmd, str):
+            out.replies.extend(text(f"ROI: {cmd}"))
+            return mav.MAV_RESULT_DENIED
+        out.commands.append(cmd)
+        return mav.MAV_RESULT_ACCEPTED
 
     # -- messages and streams --------------------------------------------------------
     def _send_message(self, v: MavVehicle, name: str | None, tick: int, out: Outcome) -> int:
