@@ -18,8 +18,8 @@ and applies each logged command at exactly its tick, so the run is the
 logged one again (``cosim.sync.replay``).
 
 Bounded: at most ``MAX_PENDING`` commands wait for an exchange, a spec's
-JSON is at most ``MAX_SPEC_BYTES``. Owns ``commands.jsonl``; touches the
-vehicles only through the commander.
+JSON is at most ``MAX_SPEC_BYTES``, a run takes at most ``MAX_COMMANDS``.
+Owns ``commands.jsonl``; touches the vehicles only through the commander.
 """
 
 from __future__ import annotations
@@ -34,6 +34,7 @@ from typing import IO, Any
 
 import numpy as np
 
+from cosim.core.limits import MAX_NAME_CHARS
 from cosim.core.state import STATE_INDEX
 from cosim.errors import ConfigError
 from cosim.guidance import DEFAULT_BANK_LIMIT_DEG, Command, parse_command
@@ -47,6 +48,8 @@ log = logging.getLogger(__name__)
 MAX_PENDING = 64
 #: a command's mapping as JSON, at most
 MAX_SPEC_BYTES = 4096
+#: commands a run takes in all, at most (as many as a replay reads)
+MAX_COMMANDS = 100_000
 #: the log the inbox writes into the run folder
 COMMANDS_LOG = "commands.jsonl"
 _AIRSPEED = STATE_INDEX["airspeed_mps"]
@@ -98,6 +101,9 @@ class CommandInbox:
 
     def __init__(self, source: str = "operator", replay: Sequence[dict[str, Any]] | None = None,
                  on_applied: Callable[[dict[str, Any]], None] | None = None) -> None:
+        if not isinstance(source, str) or not 0 < len(source) <= MAX_NAME_CHARS:
+            raise ConfigError(f"command inbox: source {source!r}: expected a name of 1 to "
+                              f"{MAX_NAME_CHARS} characters")
         self.source = source
         self.on_applied = on_applied
         self.replaying = replay is not None
@@ -197,7 +203,8 @@ class CommandInbox:
         """Queue ``spec`` (a command's mapping) for vehicle ``vehicle_id`` at the
         next exchange; its sequence number. ``ConfigError`` naming the problem:
         a bad command, an unknown vehicle, one whose class takes no commands, a
-        command its class refuses, a full queue, a run not started or over."""
+        command its class refuses, a full queue, a run not started or over, or
+        one that has taken ``MAX_COMMANDS``."""
         where = f"command for {vehicle_id!r}"
         plain = _plain_spec(spec, where)
         cmd = parse_spec(plain, where)
@@ -217,6 +224,9 @@ class CommandInbox:
                                   f"{', '.join(known[:5])}"
                                   f"{f' and {len(known) - 5} more' if len(known) > 5 else ''}")
             self._check(cmd, row, where)
+            if self._next_seq >= MAX_COMMANDS:
+                raise ConfigError(f"{where}: the run has taken {MAX_COMMANDS} commands, as "
+                                  f"many as a replay of it can read; it takes no more")
             if len(self._pending) >= MAX_PENDING:
                 raise ConfigError(f"{where}: {MAX_PENDING} commands already wait for the "
                                   f"next exchange; try again in a moment")

@@ -39,14 +39,14 @@ from cosim.logs.resolved import MAX_RESOLVED_BYTES, RESOLVED
 from cosim.logs.runfolder import MAX_TICK, RunFolder, parse_json
 from cosim.scenario import Scenario, parse_scenario
 from cosim.scenario.yaml_lines import open_bounded
-from cosim.sync.inbox import COMMANDS_LOG, CommandInbox, parse_spec
+from cosim.sync.inbox import COMMANDS_LOG, MAX_COMMANDS, CommandInbox, parse_spec
 from cosim.sync.runner import Run, RunResult
 
 log = logging.getLogger(__name__)
 
-#: ``commands.jsonl``: lines, and bytes a line (a command's JSON is at most
-#: ``inbox.MAX_SPEC_BYTES``)
-MAX_COMMAND_LINES = 100_000
+#: ``commands.jsonl``: lines (as many as an inbox takes), and bytes a line (a
+#: command's JSON is at most ``inbox.MAX_SPEC_BYTES``)
+MAX_COMMAND_LINES = MAX_COMMANDS
 MAX_COMMAND_LINE_BYTES = 8 * 1024
 #: a video compared frame by frame, at most this big and this many frames
 MAX_VIDEO_BYTES = 64 * 1024 ** 3

@@ -23,6 +23,7 @@ from cosim.errors import ConfigError
 from cosim.logs import read_states
 from cosim.scenario import parse_scenario
 from cosim.sync import Run
+from cosim.sync import inbox as inbox_mod
 from cosim.sync import replay as replay_mod
 from cosim.sync.inbox import MAX_PENDING, CommandInbox
 from cosim.sync.replay import read_commands, replay_run
@@ -53,12 +54,12 @@ cameras:
        height_px: 120, rate_hz: 10}
 """
 #: what the operator sends, and at which exchange (at or after) the thread sends it
-COMMANDS: list[tuple[int, str, dict[str, Any]]] = [(40, "uav1", {"heading_deg": 60}),
-            (100, "uav2", {"goto": {"north_m": 200, "east_m": 0}}),
-            (160, "uav1", {"alt_agl_m": 140, "airspeed_kt": 90})]
+COMMANDS: list[tuple[int, str, dict[str, Any]]] = [(24, "uav1", {"heading_deg": 60}),
+            (60, "uav2", {"goto": {"north_m": 200, "east_m": 0}}),
+            (96, "uav1", {"alt_agl_m": 140, "airspeed_kt": 90})]
 
 
-def _scenario(folder: Path, duration_s: float = 2.0, schedule: str = "") -> Any:
+def _scenario(folder: Path, duration_s: float = 1.5, schedule: str = "") -> Any:
     text = BODY.replace("DURATION", f"{duration_s:g}").replace("SCHEDULE\n", schedule)
     return parse_scenario(text, str(folder / "s.yaml"))
 
@@ -103,9 +104,10 @@ def _log(run: Path) -> list[dict[str, Any]]:
 @pytest.fixture(scope="module")
 def operated(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     """A run paced at real time whose operator, in another thread, sends
-    ``COMMANDS``: for each, the last exchange seen before submitting and
-    the last seen once it was queued (it is applied after the first, at the
-    latest at the exchange after the second)."""
+    ``COMMANDS``: for each, the last exchange the probe saw before submitting
+    and the last it saw once the command was queued. It is applied after the
+    first, and at the latest two exchanges after the second: the exchange
+    after it may have taken its commands just before this one came."""
     tmp = tmp_path_factory.mktemp("operated")
     applied: list[dict[str, Any]] = []
     inbox = CommandInbox(on_applied=applied.append)
@@ -135,7 +137,7 @@ def test_commands_from_another_thread_are_applied_at_the_next_exchange_and_logge
     assert operated["seqs"] == [0, 1, 2]
     assert [e["seq"] for e in log] == [0, 1, 2]
     for e, (before, after), (_, vehicle, spec) in zip(log, operated["bounds"], COMMANDS):
-        assert e["tick"] % K == 0 and before < e["tick"] <= after + K, (e, before, after)
+        assert e["tick"] % K == 0 and before < e["tick"] <= after + 2 * K, (e, before, after)
         assert e["time_s"] == e["tick"] / HZ
         assert (e["vehicle"], e["command"], e["source"]) == (vehicle, spec, "operator")
     assert operated["applied"] == log  # on_applied heard each entry as logged
@@ -185,8 +187,8 @@ def test_replay_reproduces_the_states_and_the_video(operated: dict[str, Any],
                                                    tmp_path: Path) -> None:
     res = replay_run(operated["run"], tmp_path / "again")
     assert res.identical, res.differences
-    assert res.run.ticks == 2 * HZ and res.run.summary["command_inbox"] == {"commands": 3}
-    assert res.compared == ["states.parquet: 42 rows, 26 columns",
+    assert res.run.ticks == 180 and res.run.summary["command_inbox"] == {"commands": 3}
+    assert res.compared == ["states.parquet: 32 rows, 26 columns",
                             "cameras/uav1_belly.mp4: the same bytes",
                             "cameras/uav1_belly.gt.csv: the same bytes"]
     assert _log(tmp_path / "again") == _log(operated["run"])
@@ -312,6 +314,54 @@ def test_bad_submissions_are_refused_saying_what(tmp_path: Path) -> None:
         CommandInbox(replay=[]).submit("uav1", {"heading_deg": 10})
 
 
+def test_a_run_takes_at_most_max_commands_and_a_source_is_a_name(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(inbox_mod, "MAX_COMMANDS", 2)
+    inbox = CommandInbox()
+    done: list[int] = []
+
+    def in_the_run(tick: int) -> None:
+        if tick in (8, 12):  # one at each of two exchanges, then no more
+            inbox.submit("uav1", {"heading_deg": tick})
+        if tick == 16:
+            with pytest.raises(ConfigError, match=r"command for 'uav1': the run has taken 2 "
+                                                  r"commands, as many as a replay of it can "
+                                                  r"read; it takes no more"):
+                inbox.submit("uav1", {"heading_deg": 16})
+            done.append(tick)
+
+    res = Run(parse_scenario(MIXED_CLASSES, str(tmp_path / "m.yaml")), tmp_path / "run",
+              backend="inline", extra_participants=[inbox, Probe(in_the_run)]).run()
+    assert res.stop_reason == "completed", res.error
+    assert done == [16] and [e["tick"] for e in _log(tmp_path / "run")] == [12, 16]
+    for source in ("", "x" * 65, None):
+        with pytest.raises(ConfigError, match=r"command inbox: source .*: expected a name of "
+                                              r"1 to 64 characters"):
+            CommandInbox(source=source)  # type: ignore[arg-type]
+
+
+def test_a_run_stopped_early_replays_to_the_tick_it_stopped_at(tmp_path: Path) -> None:
+    """As the live console's experimenter stops a trial: the replay runs the
+    same ticks, no further, and is identical."""
+    inbox = CommandInbox()
+    runs: list[Run] = []
+
+    def in_the_run(tick: int) -> None:
+        if tick == 40:
+            inbox.submit("uav1", {"heading_deg": 60})
+        if tick == 100:
+            runs[0].stop()
+
+    runs.append(Run(_scenario(tmp_path), tmp_path / "run", backend="inline",
+                    extra_participants=[inbox, Probe(in_the_run)]))
+    res = runs[0].run()
+    assert (res.stop_reason, res.ticks) == ("interrupted", 104)
+    again = replay_run(tmp_path / "run", tmp_path / "again")
+    assert again.identical, again.differences
+    assert (again.run.stop_reason, again.run.ticks) == ("completed", 104)
+    assert read_states(tmp_path / "again")["tick"].to_pylist()[-1] == 104
+
+
 GOOD = {"seq": 0, "tick": 8, "time_s": 8 / HZ, "vehicle": "uav1",
         "command": {"heading_deg": 10}, "source": "operator"}
 
@@ -346,6 +396,7 @@ def test_a_cut_last_line_and_too_many_lines_are_refused(
     p.write_text(json.dumps(GOOD) + "\n" + json.dumps({**GOOD, "seq": 1})[:20])
     with pytest.raises(ConfigError, match=r"commands\.jsonl:2: the last line is cut short"):
         read_commands(p)
+    assert replay_mod.MAX_COMMAND_LINES == inbox_mod.MAX_COMMANDS  # every log replays
     monkeypatch.setattr(replay_mod, "MAX_COMMAND_LINES", 3)
     p.write_text("".join(json.dumps({**GOOD, "seq": i}) + "\n" for i in range(4)))
     with pytest.raises(ConfigError, match=r"commands\.jsonl:4: more than 3 commands"):
