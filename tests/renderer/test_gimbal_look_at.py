@@ -123,6 +123,20 @@ def test_tracking_is_the_same_at_any_exchange_rate_and_ends_at_an_angle_command(
     assert tracked["tick"] == 0
 
 
+@pytest.mark.parametrize("point", [
+    "{frame: start, north_m: 110, east_m: 90, alt_msl_m: 21.75}",  # cam starts at -260, 0
+    "{lat_deg: 37.398648467984756, lon_deg: -121.99898356909104, alt_agl_m: 1.75}",
+])
+def test_look_at_takes_goto_s_other_points(tmp_path: Path, point: str) -> None:
+    """The same truck, as an offset from the aircraft's start or by latitude
+    and longitude: the same point, kept in the centre."""
+    sched = f"  - {{at_s: 0, vehicles: cam, command: {{gimbal: {{look_at: {point}}}}}}}\n"
+    out = _run(tmp_path, "other", schedule=sched, dur=0.5)
+    assert all(float(r["eccentricity_px"]) < 0.1 for r in _truck(out))
+    [ev] = _events(out, "gimbal")
+    assert ev["look_at"] == {"north_m": -150.0, "east_m": 90.0, "alt_msl_m": 21.75}
+
+
 def test_a_hold_stops_tracking_at_the_angles_of_that_tick(tmp_path: Path) -> None:
     """``look_at: null`` (MAVLink's DO_SET_ROI_NONE): the gimbal stays at the
     angles that pointed at the truck at the command's tick; the aircraft
