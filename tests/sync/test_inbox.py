@@ -267,6 +267,14 @@ vehicles:
 """
 
 
+def _mixed_run(folder: Path, inbox: CommandInbox, at: Callable[[int], None]) -> None:
+    """``MIXED_CLASSES`` run to its end into ``folder/run`` with ``inbox``, and
+    ``at(tick)`` called in the run's thread at every exchange."""
+    res = Run(parse_scenario(MIXED_CLASSES, str(folder / "m.yaml")), folder / "run",
+              backend="inline", extra_participants=[inbox, Probe(at)]).run()
+    assert res.stop_reason == "completed", res.error
+
+
 def test_bad_submissions_are_refused_saying_what(tmp_path: Path) -> None:
     inbox = CommandInbox()
     with pytest.raises(ConfigError, match=r"the run has not started yet"):
@@ -302,9 +310,7 @@ def test_bad_submissions_are_refused_saying_what(tmp_path: Path) -> None:
             inbox.submit("uav1", {"heading_deg": 99})
         done.append(tick)
 
-    res = Run(parse_scenario(MIXED_CLASSES, str(tmp_path / "m.yaml")), tmp_path / "run",
-              backend="inline", extra_participants=[inbox, Probe(in_the_run)]).run()
-    assert res.stop_reason == "completed", res.error
+    _mixed_run(tmp_path, inbox, in_the_run)
     assert done == [8]
     log = _log(tmp_path / "run")
     assert [(e["seq"], e["tick"]) for e in log] == [(i, 12) for i in range(MAX_PENDING)]
@@ -330,9 +336,7 @@ def test_a_run_takes_at_most_max_commands_and_a_source_is_a_name(
                 inbox.submit("uav1", {"heading_deg": 16})
             done.append(tick)
 
-    res = Run(parse_scenario(MIXED_CLASSES, str(tmp_path / "m.yaml")), tmp_path / "run",
-              backend="inline", extra_participants=[inbox, Probe(in_the_run)]).run()
-    assert res.stop_reason == "completed", res.error
+    _mixed_run(tmp_path, inbox, in_the_run)
     assert done == [16] and [e["tick"] for e in _log(tmp_path / "run")] == [12, 16]
     for source in ("", "x" * 65, None):
         with pytest.raises(ConfigError, match=r"command inbox: source .*: expected a name of "
