@@ -31,7 +31,7 @@ def run(a: argparse.Namespace) -> int:
     if a.workers is not None and a.workers < 1:
         raise ConfigError(f"--workers must be >= 1, got {a.workers}")
     src = Path(a.run)
-    out = Path(a.out) if a.out else src.with_name(src.name + "-replay")
+    out = Path(a.out) if a.out else src.absolute().with_name(src.absolute().name + "-replay")
     hz = physics_hz(RunFolder(src).summary() or {})  # checked again by replay_run
     res = replay_run(src, out, backend=a.backend, workers=a.workers,
                      progress=False if a.no_progress or hz is None else Progress(sys.stderr, hz))

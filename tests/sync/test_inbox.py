@@ -254,6 +254,15 @@ def test_cosim_replay_exit_codes(operated: dict[str, Any], tmp_path: Path,
     assert "would overwrite the run it replays" in capsys.readouterr().err
 
 
+def test_cosim_replay_of_the_current_folder_writes_beside_it(
+        operated: dict[str, Any], tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    shutil.copytree(operated["run"], tmp_path / "run")
+    monkeypatch.chdir(tmp_path / "run")
+    assert main(["replay", ".", "--no-progress"]) == 0, capsys.readouterr().err
+    assert (tmp_path / "run-replay" / "states.parquet").exists()
+
+
 # -- refusals -------------------------------------------------------------------------
 
 MIXED_CLASSES = """\
