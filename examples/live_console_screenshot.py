@@ -10,6 +10,17 @@ dropped, drawn, glass-to-glass latency).
         --condition four_feeds --at-s 11 --out console.png
 
 (docs/images/trials_live_console.jpg is that picture as JPEG, quality 85.)
+With ``--task VEHICLE:ACTION:NORTH_M:EAST_M`` (repeatable) the page's
+participant tasks aircraft from the map first, as a person does (click the
+aircraft, click the ground, choose the action in the menu), a second apart
+from 2 s into the trial; with ``--menu VEHICLE:NORTH_M:EAST_M`` the picture
+is taken with that aircraft selected and the menu open at that point:
+
+    python examples/live_console_screenshot.py studies/live_feeds.yaml \
+        --condition four_feeds --at-s 12 --task uav1:go:400:-500 \
+        --task uav4:orbit:500:400 --menu uav3:300:150 --out tasking.png
+
+(docs/images/trials_live_tasking.jpg is that picture as JPEG, quality 85.)
 """
 
 from __future__ import annotations
@@ -39,6 +50,36 @@ def _post(url: str, body: dict[str, Any]) -> Any:
         return json.loads(r.read())
 
 
+#: the client pixel of a point (north, east m) on the map, from the page's map
+#: transform; then a pointerdown there (selecting an aircraft) or a click
+_MAP_PX = """([n, e]) => {
+  const m = document.getElementById("map"), r = m.getBoundingClientRect();
+  const v = window.live.view;
+  return [r.left + (v.w / 2 + (e - v.ce) * v.s) * r.width / v.w,
+          r.top + (v.h / 2 - (n - v.cn) * v.s) * r.height / v.h];
+}"""
+_SELECT = "(id) => {\n  const at = " + _MAP_PX + """;
+  const u = window.live.vehicles.find((x) => x.id === id);
+  const [x, y] = at([u.north_m, u.east_m]);
+  document.getElementById("map").dispatchEvent(
+    new PointerEvent("pointerdown", {clientX: x, clientY: y, bubbles: true}));
+}"""
+
+
+def _clock_at(page: Any, at_s: float) -> None:
+    page.wait_for_function(f"Number((document.getElementById('clock')"
+                           f".textContent.match(/[0-9.]+/) || [0])[0]) >= {at_s}",
+                           timeout=120_000)
+
+
+def _menu(page: Any, vehicle: str, north_m: float, east_m: float) -> None:
+    """Select ``vehicle`` on the map and click the ground at the point: the menu opens."""
+    page.evaluate(_SELECT, vehicle)
+    x, y = page.evaluate(_MAP_PX, [north_m, east_m])
+    page.mouse.click(x, y)
+    page.wait_for_selector("#taskmenu button")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     ap.add_argument("study")
@@ -47,6 +88,11 @@ def main() -> None:
     ap.add_argument("--out", required=True)
     ap.add_argument("--until-end", action="store_true",
                     help="then wait for the trial's end and print its timing")
+    ap.add_argument("--task", action="append", default=[],
+                    metavar="VEHICLE:ACTION:NORTH_M:EAST_M",
+                    help="task an aircraft from the map first (go, orbit or look)")
+    ap.add_argument("--menu", metavar="VEHICLE:NORTH_M:EAST_M",
+                    help="take the picture with the map's menu open here")
     a = ap.parse_args()
     from playwright.sync_api import sync_playwright
 
@@ -69,9 +115,15 @@ def main() -> None:
                     _post(f"{url}/api/sessions/{s['id']}/live/start", {"trial_index": trial})
                     page.wait_for_function("document.body.dataset.phase === 'live'",
                                            timeout=60_000)
-                    page.wait_for_function(f"Number((document.getElementById('clock')"
-                                           f".textContent.match(/[0-9.]+/) || [0])[0]) >= "
-                                           f"{a.at_s}", timeout=120_000)
+                    for k, task in enumerate(a.task):
+                        vehicle, action, north_m, east_m = task.split(":")
+                        _clock_at(page, 2.0 + k)
+                        _menu(page, vehicle, float(north_m), float(east_m))
+                        page.click(f"#taskmenu button[data-action='{action}']")
+                    _clock_at(page, a.at_s)
+                    if a.menu:
+                        vehicle, north_m, east_m = a.menu.split(":")
+                        _menu(page, vehicle, float(north_m), float(east_m))
                     page.screenshot(path=a.out)
                     if a.until_end:
                         page.wait_for_function("document.body.dataset.phase === 'ended'",

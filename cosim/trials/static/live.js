@@ -205,7 +205,10 @@
     const prints = (last && last.footprints) || [];
     for (const f of prints) pts = pts.concat(f.corners_ne_m);
     for (const t of targets) pts.push([t.north_m, t.east_m]);
-    for (const c of sent.values()) pts.push([c.north_m, c.east_m]);
+    for (const c of sent.values()) { // each command's point, an orbit's whole circle
+      const r = c.action === "orbit" ? tasking.orbit_radius_m : 0;
+      pts.push([c.north_m - r, c.east_m - r], [c.north_m + r, c.east_m + r]);
+    }
     if (!pts.length) return;
     const ns = pts.map((p) => p[0]), es = pts.map((p) => p[1]);
     const cn = (Math.max(...ns) + Math.min(...ns)) / 2;
