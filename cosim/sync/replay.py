@@ -241,6 +241,11 @@ def _compare_states(a: RunFolder, b: RunFolder, differences: list[str],
         differences.append(f"states.parquet: columns {ta.column_names} in the original, "
                            f"{tb.column_names} in the replay")
         return
+    retyped = [f"{f.name} is {f.type} in the original, {g.type} in the replay"
+               for f, g in zip(ta.schema, tb.schema) if f.type != g.type]
+    if retyped:
+        differences.append(f"states.parquet: {'; '.join(retyped)}")
+        return
     if ta.num_rows != tb.num_rows:
         differences.append(f"states.parquet: {ta.num_rows} rows in the original, "
                            f"{tb.num_rows} in the replay")

@@ -234,6 +234,25 @@ def test_a_video_of_other_bytes_but_the_same_frames_replays_identical(
     assert "cameras/uav1_belly.mp4: the same frames (the files' bytes differ)" in res.compared
 
 
+def test_states_of_the_same_values_in_other_types_replay_different(
+        operated: dict[str, Any], tmp_path: Path) -> None:
+    """Bit for bit means the types too: the original's ticks as 32-bit
+    numbers (the same values) are a difference."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    run = tmp_path / "retyped"
+    shutil.copytree(operated["run"], run)
+    t = read_states(run)
+    t = t.set_column(t.column_names.index("tick"), "tick", t["tick"].cast(pa.int32()))
+    shutil.rmtree(run / "states.parquet")
+    pq.write_table(t, run / "states.parquet")
+    res = replay_run(run, tmp_path / "again")
+    assert not res.identical
+    assert res.differences == ["states.parquet: tick is int32 in the original, int64 in the "
+                               "replay"]
+
+
 def test_cosim_replay_exit_codes(operated: dict[str, Any], tmp_path: Path,
                                  capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["replay", str(operated["run"]), "--out", str(tmp_path / "a"),
