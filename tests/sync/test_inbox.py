@@ -8,6 +8,7 @@ bad commands, logs and folders are refused saying what and where."""
 from __future__ import annotations
 
 import json
+import random
 import re
 import shutil
 import threading
@@ -435,3 +436,80 @@ def test_a_cut_last_line_and_too_many_lines_are_refused(
         read_commands(p)
     p.write_text("".join(json.dumps({**GOOD, "seq": i}) + "\n" for i in range(3)))
     assert [e["seq"] for e in read_commands(p)] == [0, 1, 2]
+
+
+JSON_VALUES: list[Any] = [None, True, -1, 0, 2 ** 70, 1e308, -0.0, "", "x" * 70, "uav1", [],
+                          [1, 2], {}, {"heading_deg": 10}, {"goto": {"north_m": "n"}},
+                          {"goto": None}, {"waypoints": [[]]}, {"loiter": {"radius_m": -1}},
+                          {"gimbal": {"look_at": 3}}, {"camera": {"interval_s": []}}]
+
+
+def test_fuzzed_command_logs_are_read_or_refused_naming_the_file(tmp_path: Path) -> None:
+    """2000 seeded logs of one to three good lines, each with up to three
+    fields set to random JSON values, a line cut, doubled or made of bytes that are
+    not UTF-8: each is read, every entry then as it should be, or refused
+    with a ConfigError naming the file (never another exception)."""
+    rng = random.Random(30)
+    p = tmp_path / "commands.jsonl"
+    read = refused = 0
+    for _ in range(2000):
+        lines: list[bytes] = []
+        for seq in range(rng.randint(1, 3)):
+            e: dict[str, Any] = {**GOOD, "seq": seq, "tick": 8 * (seq + 1)}
+            for key in rng.sample([*GOOD, "extra"], rng.choice((0, 0, 0, 1, 2, 3))):
+                e[key] = rng.choice(JSON_VALUES)
+            lines.append(json.dumps(e).encode())
+        kind = rng.randrange(4)
+        if kind == 1:
+            lines[-1] = lines[-1][:rng.randrange(len(lines[-1]))]
+        elif kind == 2:
+            lines.append(lines[-1])
+        elif kind == 3:
+            lines[0] = lines[0].replace(b'"uav1"', b'"uav\xff1"')
+        p.write_bytes(b"".join(x + b"\n" for x in lines))
+        try:
+            entries = read_commands(p, ["uav1", "uav2"], K, 240)
+        except ConfigError as e:
+            assert str(p) in str(e), e
+            refused += 1
+            continue
+        read += 1
+        for i, x in enumerate(entries):
+            assert x["seq"] == i and x["tick"] % K == 0 and x["vehicle"] in ("uav1", "uav2")
+    assert read > 100 and refused > 1000, (read, refused)
+
+
+def test_fuzzed_submissions_are_taken_and_flown_or_refused(tmp_path: Path) -> None:
+    """600 seeded specs of one or two commands of the vocabulary with random
+    values, 60 at each of ten exchanges: each is refused with a ConfigError
+    or taken, and the run flies every one it took to the end."""
+    from cosim.guidance.commands import COMMAND_KEYS
+
+    rng = random.Random(30)
+    good: dict[str, Any] = {
+        "heading_deg": 90, "alt_msl_m": 300, "alt_agl_m": 150, "airspeed_kt": 90,
+        "airspeed_mps": 45, "throttle": 0.5, "bank_limit_deg": 30, "stall_protection": True,
+        "goto": {"north_m": 100, "east_m": 50}, "waypoints": [{"north_m": 0, "east_m": 0}],
+        "loiter": {"radius_m": 400}, "takeoff_agl_m": 50, "land": True,
+        "velocity": {"north_mps": 1, "east_mps": 0}, "gimbal": {"pitch_deg": -30},
+        "camera": {"shoot": True}}
+    assert set(good) == set(COMMAND_KEYS)
+    inbox = CommandInbox()
+    taken: list[int] = []
+    refused: list[str] = []
+
+    def in_the_run(tick: int) -> None:
+        if not 8 <= tick <= 44:  # ten exchanges
+            return
+        for _ in range(60):
+            spec = {k: good[k] if rng.random() < 0.6 else rng.choice(JSON_VALUES)
+                    for k in rng.sample(COMMAND_KEYS, rng.randint(1, 2))}
+            try:
+                taken.append(inbox.submit(rng.choice(["uav1", "f"]), spec))
+            except ConfigError as e:
+                refused.append(str(e))
+
+    _mixed_run(tmp_path, inbox, in_the_run)
+    assert len(taken) + len(refused) == 600 and len(taken) > 10, (len(taken), len(refused))
+    assert [e["seq"] for e in _log(tmp_path / "run")] == taken
+    assert all(m.startswith("command for ") for m in refused)
