@@ -27,7 +27,8 @@ as ``live_tables`` does the targets' measures, from one row a trial.
 ``analyse_live`` writes the tables (``live_targets.csv``, ``live_sessions.csv``:
 a session's counts of hits, duplicates, false alarms, misses and commands,
 ``live_levels.csv``, ``live_effects.csv``, ``live_tasking_levels.csv``,
-``live_tasking_effects.csv``) and a figure a condition (``live_figures``). It reads
+``live_tasking_effects.csv``) and a figure a condition (``live_figures``),
+with ``live_tasking.png`` where any trial has commands. It reads
 no file, runs nothing and knows nothing of how sessions are stored.
 """
 
@@ -260,7 +261,11 @@ def analyse_live(sessions: Sequence[ScoredSession], out_dir: str | Path, *,
     files = ["live_targets.csv", "live_sessions.csv", "live_levels.csv", "live_effects.csv",
              "live_tasking_levels.csv", "live_tasking_effects.csv"]
     if plots:
-        from cosim.trials.live_figures import plot_condition
+        from cosim.trials.live_figures import plot_condition, plot_tasking
+
+        if any(s.commands for s in sessions):
+            plot_tasking(out / "live_tasking.png", task_levels, task_effects, level)
+            files.append("live_tasking.png")
 
         for name in sorted({r["condition"] for r in level_rows}):
             fname = f"live_{_safe(name)}.png"

@@ -28,7 +28,7 @@ from test_server import live_server
 from cosim.cli import main
 from cosim.errors import ConfigError
 from cosim.trials.live import command_spec
-from cosim.trials.live_analysis import ScoredSession, tasking_tables
+from cosim.trials.live_analysis import ScoredSession, analyse_live, tasking_tables
 from cosim.trials.live_scoring import SessionScore
 from cosim.trials.store import Store
 from cosim.trials.study import load_study
@@ -351,11 +351,11 @@ def test_the_commands_export_as_stored_spreadsheet_safe(tmp_path: Path) -> None:
     assert rows[0]["participant"] == "'=HYPERLINK(1)" and rows[0]["server_time"]
 
 
-def test_tasking_counts_against_a_condition_recover_a_known_effect() -> None:
+def test_tasking_counts_against_a_condition_recover_a_known_effect(tmp_path: Path) -> None:
     """Twelve synthetic participants' commands a minute fall by 0.6 a feed
     (12 - 0.6 * feeds, each participant's own offset, noise): the slope's
     interval holds -0.6 and not 0; each level's mean its model value within
-    its interval."""
+    its interval; analyse_live writes the tables and live_tasking.png."""
     rng = np.random.default_rng(30)
     sessions = []
     truth: dict[int, list[float]] = {}
@@ -378,6 +378,14 @@ def test_tasking_counts_against_a_condition_recover_a_known_effect() -> None:
         assert r["estimate"] == pytest.approx(np.mean(truth[int(k)]))
         assert r["ci_lo"] < 12 - 0.6 * k < r["ci_hi"], (k, r)
         assert (r["participants"], r["targets"]) == (12, 12)
+    summary = analyse_live(sessions, tmp_path)
+    assert {"live_tasking_levels.csv", "live_tasking_effects.csv",
+            "live_tasking.png"} <= set(summary["files"])
+    assert sum(summary["commands"].values()) == sum(len(s.commands) for s in sessions)
+    with open(tmp_path / "live_tasking_effects.csv", newline="") as f:
+        (row,) = [r for r in csv.DictReader(f) if r["measure"] == "commands_per_min"]
+    assert float(row["slope"]) == pytest.approx(slope["slope"])
+    assert (tmp_path / "live_tasking.png").stat().st_size > 10_000
 
 
 # --- cosim trials replay ------------------------------------------------------------
