@@ -105,8 +105,8 @@ def test_help_lists_every_command_in_its_rank_order(capsys) -> None:
     CLI's own where their ranks put them, as they always have."""
     assert main(["--help"]) == 0
     listed = re.findall(r"^    (\S+)  ", capsys.readouterr().out, flags=re.M)
-    assert listed == ["run", "validate", "models", "plot", "export", "recover", "sweep",
-                      "visibility", "search-plan", "trials", "swarm", "bench"]
+    assert listed == ["run", "validate", "models", "plot", "export", "recover", "replay",
+                      "sweep", "visibility", "search-plan", "trials", "swarm", "bench"]
 
 
 def test_models_lists_bundled_aircraft(capsys) -> None:
