@@ -218,3 +218,15 @@ def test_a_live_sessions_sagat_answer_needs_its_trial_frozen_for_the_probe(
         assert re.fullmatch(r"probe 0: trial 0 of this session has not been frozen for it",
                             out["error"]), out
         assert server.store.instrument_answers(sid) == []
+
+
+def test_the_example_study_with_the_instruments_reads() -> None:
+    """studies/live_instruments.yaml: live_feeds.yaml's conditions, the TLX
+    with weights after the block, two probes in each minute-long trial."""
+    from cosim.trials.study import load_study
+
+    st = load_study(Path(__file__).resolve().parents[2] / "studies" / "live_instruments.yaml")
+    assert [len(c.feeds) for c in st.live] == [1, 2, 4]
+    assert st.tlx is not None and (st.tlx.after, st.tlx.weights) == ("block", True)
+    assert [(p.at_s, [q.kind for q in p.questions]) for p in st.sagat] == [
+        (20.0, ["last_target", "count"]), (45.0, ["last_target", "choice", "choice"])]

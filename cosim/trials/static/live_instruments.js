@@ -42,8 +42,11 @@
   const blank = el("canvas", "blank");
   blank.width = 420;
   blank.height = 420;
+  const side = el("div", "side"); // what the panel says, then the form
+  const note = el("p", "note");
   const box = el("div", "questions");
-  panel.append(blank, box);
+  side.append(note, box);
+  panel.append(blank, side);
   document.body.append(panel);
 
   async function post(body) {
@@ -143,6 +146,7 @@
   }
   function hide() {
     panel.hidden = true;
+    note.textContent = "";
     box.replaceChildren();
     delete document.body.dataset.freeze;
   }
@@ -156,9 +160,15 @@
     show("sagat");
     const byId = Object.fromEntries(f.questions.map((q) => [q.id, q]));
     let toMap = drawBlank(extent, null);
+    const say = (k) => {
+      note.textContent = `The trial is paused. Question ${k + 1} of ${f.questions.length}: ` +
+        "answer from what you remember.";
+    };
+    say(0);
     const watch = new MutationObserver(() => { // redraw for the question shown
       const form = box.querySelector("[data-question]");
       toMap = drawBlank(extent, form ? byId[form.dataset.question] : null);
+      if (form) say(f.questions.indexOf(byId[form.dataset.question]));
     });
     watch.observe(box, { childList: true });
     blank.classList.remove("pick");
@@ -171,6 +181,7 @@
     });
     try {
       const body = await CosimInstruments.sagat(box, f, f.trial_index, f.aircraft, pickPoint);
+      note.textContent = "";
       box.replaceChildren(el("p", "title", "Thank you. The trial goes on."));
       await post(body);
     } finally {

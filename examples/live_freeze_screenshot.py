@@ -1,0 +1,88 @@
+"""The README's picture of a SAGAT freeze on the live console: serve a live
+study with ``sagat:`` probes (a copy, in a temporary folder, as
+live_console_screenshot.py does), open a session's live page in headless
+Chromium (Debian's /usr/bin/chromium), start the trial of the condition
+asked for, wait for the run to freeze at the probe, answer the questions
+before the one asked for (a click at the blank map's centre, a count of 1,
+the first aircraft) and take a screenshot with that one on the page; then
+the trial is stopped.
+
+    python examples/live_freeze_screenshot.py studies/live_instruments.yaml \
+        --condition four_feeds --probe 0 --question east --out freeze.png
+
+(docs/images/trials_live_sagat.png is that picture.)
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from live_console_screenshot import CHROMIUM, HEIGHT_PX, PROFILE, WIDTH_PX, _post
+
+from cosim.trials.server import make_app, served_in_thread
+from cosim.trials.store import Store
+from cosim.trials.study import load_study
+
+
+def _answer(page: Any, qid: str) -> None:
+    """Answer the question on the page as a participant might."""
+    form = f"[data-question='{qid}']"
+    if page.locator(f"{form} input").count():
+        page.fill(f"{form} input", "1")
+        page.click(f"{form} button.next")
+    elif page.locator(f"{form} button.choice").count():
+        page.locator(f"{form} button.choice").first.click()
+    else:  # a point on the blank map
+        box = page.locator("#instrument canvas.blank").bounding_box()
+        page.mouse.click(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
+    ap.add_argument("study")
+    ap.add_argument("--condition", required=True, help="the live condition's id")
+    ap.add_argument("--probe", type=int, default=0, help="the probe's number (0: the first)")
+    ap.add_argument("--question", help="the question's id shown (default: the first)")
+    ap.add_argument("--out", required=True)
+    a = ap.parse_args()
+    from playwright.sync_api import sync_playwright
+
+    with tempfile.TemporaryDirectory() as tmp:
+        src = Path(a.study).resolve().parent
+        shutil.copytree(src, Path(tmp) / "study", ignore=shutil.ignore_patterns(
+            "*.sqlite*", "*-live"))
+        study = load_study(Path(tmp) / "study" / Path(a.study).name)
+        ids = [q.id for q in study.sagat[a.probe].questions]
+        shown = a.question or ids[0]
+        store = Store(Path(tmp) / "demo.sqlite")
+        try:
+            with served_in_thread(make_app(study, store), lifespan="auto",
+                                  stop_timeout_s=30) as url:
+                s = _post(f"{url}/api/sessions", {"participant": "demo", **PROFILE})
+                trial = next(t["index"] for t in s["trials"] if t["condition"] == a.condition)
+                with sync_playwright() as pw:
+                    browser = pw.chromium.launch(executable_path=CHROMIUM)
+                    page = browser.new_page(viewport={"width": WIDTH_PX, "height": HEIGHT_PX})
+                    page.goto(f"{url}/live?session={s['id']}")
+                    page.wait_for_function("document.body.dataset.phase === 'waiting'")
+                    _post(f"{url}/api/sessions/{s['id']}/live/start", {"trial_index": trial})
+                    page.wait_for_function(f"document.body.dataset.freeze === '{a.probe}'",
+                                           timeout=600_000)
+                    for qid in ids[:ids.index(shown)]:
+                        page.wait_for_selector(f"[data-question='{qid}']")
+                        _answer(page, qid)
+                    page.wait_for_selector(f"[data-question='{shown}']")
+                    page.screenshot(path=a.out)
+                    browser.close()
+                _post(f"{url}/api/sessions/{s['id']}/live/stop", {})
+        finally:
+            store.close()
+    print(f"wrote {a.out}")
+
+
+if __name__ == "__main__":
+    main()
