@@ -513,3 +513,14 @@ def test_fuzzed_submissions_are_taken_and_flown_or_refused(tmp_path: Path) -> No
     assert len(taken) + len(refused) == 600 and len(taken) > 10, (len(taken), len(refused))
     assert [e["seq"] for e in _log(tmp_path / "run")] == taken
     assert all(m.startswith("command for ") for m in refused)
+
+
+def test_the_limits_are_in_the_readme() -> None:
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    assert (f"at most {replay_mod.MAX_COMMAND_LINES:,} lines of at most "
+            f"{replay_mod.MAX_COMMAND_LINE_BYTES // 1024} KiB each") in readme
+    text = " ".join(readme.split())  # the paragraph's words, whatever its line breaks
+    for said in (f"more than {inbox_mod.MAX_SPEC_BYTES // 1024} KiB as JSON",
+                 f"{inbox_mod.MAX_PENDING} commands already waiting",
+                 f"has taken {inbox_mod.MAX_COMMANDS:,} commands"):
+        assert said in text, said
