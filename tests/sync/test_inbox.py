@@ -157,6 +157,32 @@ def test_commands_from_another_thread_are_applied_at_the_next_exchange_and_logge
     assert log[0]["tick"] <= first < log[0]["tick"] + 12  # logged every 12 ticks
 
 
+def test_a_command_from_another_thread_in_an_unpaced_run_applies_at_the_next_exchange(
+        tmp_path: Path) -> None:
+    """The run's thread waits inside its exchange at tick 24 while another
+    thread submits: the command is applied at 28, the exchange after."""
+    inbox = CommandInbox()
+    go, done = threading.Event(), threading.Event()
+
+    def in_the_run(tick: int) -> None:
+        if tick == 24:
+            go.set()
+            assert done.wait(30)
+
+    def operator() -> None:
+        assert go.wait(60)
+        inbox.submit("uav2", {"heading_deg": 45})
+        done.set()
+
+    thread = threading.Thread(target=operator)
+    thread.start()
+    res = Run(_scenario(tmp_path, 0.5), tmp_path / "run", backend="inline",
+              extra_participants=[inbox, Probe(in_the_run)]).run()
+    thread.join(10)
+    assert res.stop_reason == "completed", res.error
+    assert [(e["tick"], e["vehicle"]) for e in _log(tmp_path / "run")] == [(28, "uav2")]
+
+
 def test_the_inbox_run_equals_the_same_commands_as_schedule_items(
         operated: dict[str, Any], tmp_path: Path) -> None:
     """The independent path: the scenario's schedule, at the logged ticks."""
