@@ -386,6 +386,7 @@ class LiveRun:
                                 "vehicles": [v.id for v in scn.vehicles],
                                 "tasking": {"actions": list(condition.tasking),
                                             "vehicles": list(condition.taskable),
+                                            "look_vehicles": list(condition.lookers),
                                             "orbit_radius_m": condition.orbit_radius_m}})
         extra: list[Any] = [self.tap]
         #: the participant's commands' way into the run (None: no tasking)
@@ -437,6 +438,9 @@ class LiveRun:
         if vehicle not in c.taskable:
             raise ConfigError(f"vehicle: {str(vehicle)[:40]!r} cannot be tasked in condition "
                               f"{c.id!r} (it may task: {', '.join(c.taskable)[:400]})")
+        if action == "look" and vehicle not in c.lookers:
+            raise ConfigError(f"vehicle: {vehicle} has no camera on a gimbal to point (those "
+                              f"that do: {', '.join(c.lookers)[:400]})")
         seq: int = self.inbox.submit(vehicle, command_spec(action, north_m, east_m,
                                                            c.orbit_radius_m))
         return seq

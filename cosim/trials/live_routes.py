@@ -295,6 +295,9 @@ class LiveConsole:
             raise self.bad(f"vehicle: expected one of {', '.join(c.taskable)[:400]} (the "
                            f"aircraft of condition {c.id!r} that take commands), got "
                            f"{vehicle!r}"[:600])
+        if action == "look" and vehicle not in c.lookers:
+            raise self.bad(f"vehicle: {vehicle} has no camera on a gimbal to point: look is for "
+                           f"{', '.join(c.lookers)[:400]}")
         north_m, east_m = self.number(body, "north_m"), self.number(body, "east_m")
         if not (math.isfinite(north_m) and math.isfinite(east_m)
                 and math.hypot(north_m, east_m) <= MAX_COMMAND_RANGE_M):

@@ -25,10 +25,12 @@ The study's ``timing_limits: {latency_ms_p50: 200, dropped_percent: 1}``
 (``TimingLimits``) flag a trial whose timing is worse.
 ``tasking:`` lists what the participant may tell an aircraft from the map
 (``TASKING_ACTIONS``: ``go`` there, ``orbit`` there at ``orbit_radius_m``,
-``look`` there with its gimbal cameras); by default all three where the
-scenario has aircraft that take commands, none where it has none; ``[]``
+``look`` there with its gimbal cameras); by default ``go`` and ``orbit``
+where the scenario has aircraft that take commands and ``look`` where one
+of those has a camera on a gimbal, none where none takes commands; ``[]``
 or ``false``: none. Only the scenario's aircraft that take commands may be
-tasked (``LiveCondition.taskable``).
+tasked (``LiveCondition.taskable``), and only those with a gimbal camera
+told to look (``LiveCondition.lookers``).
 Each scenario is loaded and checked as the study is read, so a misspelt
 feed or a broken scenario is a ``ConfigError`` before any session starts.
 """
@@ -113,6 +115,8 @@ class LiveCondition:
     orbit_radius_m: float = ORBIT_RADIUS_M
     #: the vehicles that take commands (those the participant may task)
     taskable: tuple[str, ...] = ()
+    #: those of them with a camera on a gimbal (those that may be told to look)
+    lookers: tuple[str, ...] = ()
 
     @property
     def fingerprint(self) -> dict[str, Any]:
@@ -183,7 +187,9 @@ def read_live_conditions(ctx: Problems, items: Any, base: Path, roots: tuple[Pat
             continue
         feeds = _feeds(ctx, at + ("feeds",), r.d.get("feeds"), scenario_feeds(scn), path)
         taskable = commandable_vehicles(scn)
-        tasking = _tasking(ctx, at + ("tasking",), r.d.get("tasking", None), taskable, path)
+        lookers = tuple(v for v in taskable if v in gimbal_vehicles(scn))
+        tasking = _tasking(ctx, at + ("tasking",), r.d.get("tasking", None), taskable,
+                           lookers, path)
         if "orbit" in (tasking or ()):
             radius_m = _orbit_radius(ctx, at + ("orbit_radius_m",), radius_m if radius_given
                                      else None, scn, taskable)
@@ -193,7 +199,8 @@ def read_live_conditions(ctx: Problems, items: Any, base: Path, roots: tuple[Pat
             sha = hashlib.sha256(path.read_bytes()).hexdigest()
             out.append(LiveCondition(cid, path, tuple(feeds), duration, tuple(conds.items()),
                                      sha, layers, tasking, radius_m or ORBIT_RADIUS_M,
-                                     taskable if tasking else ()))
+                                     taskable if tasking else (),
+                                     lookers if "look" in tasking else ()))
     ids = [c.id for c in out]
     if len(set(ids)) != len(ids):
         ctx.err(("scenarios",), f"condition ids given twice: "
@@ -234,11 +241,21 @@ def commandable_vehicles(scn: Any) -> tuple[str, ...]:
     return tuple(v.id for v in scn.vehicles if get_class(v.vehicle_class).commandable)
 
 
+def gimbal_vehicles(scn: Any) -> set[str]:
+    """The ids of a loaded scenario's vehicles with a camera on a gimbal (one
+    a ``gimbal`` command, ``look_at`` too, points)."""
+    cams = scn.sections.get("cameras") if hasattr(scn, "sections") else None
+    if cams is None:
+        return set()
+    return {scn.vehicles[row].id for cam in cams.views if cam.mount == "gimbal"
+            for row in cam.vehicles}
+
+
 def _tasking(ctx: Problems, at: tuple[Any, ...], spec: Any, taskable: tuple[str, ...],
-             path: Path) -> tuple[str, ...] | None:
+             lookers: tuple[str, ...], path: Path) -> tuple[str, ...] | None:
     """A condition's ``tasking:`` (None: refused, said to ``ctx``)."""
-    if spec is None:  # not given: every action where some vehicle takes commands
-        return TASKING_ACTIONS if taskable else ()
+    if spec is None:  # not given: every action some vehicle can take
+        return tuple(a for a in TASKING_ACTIONS if taskable and (a != "look" or lookers))
     if spec is False:
         return ()
     if not isinstance(spec, list) or len(spec) > len(TASKING_ACTIONS):
@@ -257,6 +274,11 @@ def _tasking(ctx: Problems, at: tuple[Any, ...], spec: Any, taskable: tuple[str,
         out.append(action)
     if out and not taskable:
         ctx.err(at, f"{', '.join(out)}: none of the vehicles of {path} takes commands")
+        return None
+    if "look" in out and not lookers:
+        ctx.err(at + (out.index("look"),), f"look: none of the vehicles of {path} that take "
+                                           f"commands has a camera on a gimbal (a camera's "
+                                           f"mount: gimbal or {{pitch_deg, yaw_deg}})")
         return None
     return tuple(a for a in TASKING_ACTIONS if a in out)
 

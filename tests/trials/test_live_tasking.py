@@ -49,11 +49,13 @@ order: shuffle
 
 def tasking_study(folder: Path, duration_s: float, study: str = TASK_STUDY) -> Path:
     """The two-aircraft scenario of ``duration_s`` with a second target far to
-    the north-east (the map takes it in: room to click the goal)."""
+    the north-east (the map takes it in: room to click the goal) and the
+    belly cameras on gimbals (at nadir until told otherwise)."""
     text = SCENARIO.format(duration_s=duration_s, w=W, h=H, rate_hz=RATE_HZ).replace(
         "heading_deg: 20}\n", "heading_deg: 20}\n  - {id: far, kind: car, north_m: 700, "
-                               "east_m: 600, heading_deg: 0}\n")
-    assert "id: far" in text
+                               "east_m: 600, heading_deg: 0}\n").replace("mount: nadir",
+                                                                         "mount: gimbal")
+    assert "id: far" in text and "mount: gimbal" in text
     (folder / "pair.yaml").write_text(text)
     p = folder / "study.yaml"
     p.write_text(study)
@@ -63,18 +65,23 @@ def tasking_study(folder: Path, duration_s: float, study: str = TASK_STUDY) -> P
 # --- the study and the mapping -------------------------------------------------
 
 def test_a_conditions_tasking_is_read_with_its_defaults(tmp_path: Path) -> None:
-    """Every action where the aircraft take commands unless the condition
-    says; the orbit's radius the 150 m default widened to one a uav700 at
-    100 kt can fly (its turn radius at a 45 deg bank is v^2 / g = 270 m)."""
+    """Every action where the aircraft take commands (look where they have
+    gimbal cameras) unless the condition says; the orbit's radius the 150 m
+    default widened to one a uav700 at 100 kt can fly (its turn radius at a
+    45 deg bank is v^2 / g = 270 m)."""
     st = load_study(tasking_study(tmp_path, 4.0))
     two, go_only = st.live
     assert two.tasking == ("go", "orbit", "look") and two.taskable == ("uav1", "uav2")
+    assert two.lookers == ("uav1", "uav2") and go_only.lookers == ()
     assert go_only.tasking == ("go",)
     v_mps = 100 * 0.514444
     assert two.orbit_radius_m == 300.0 and two.orbit_radius_m - 50 < v_mps ** 2 / 9.80665
     none = load_study(live_study(tmp_path, "protocol: live\norder: shuffle\nscenarios: "
                                            "[{scenario: pair.yaml, feeds: 1, tasking: false}]\n"))
     assert none.live[0].tasking == () and none.live[0].taskable == ()
+    nadir = load_study(live_study(tmp_path, "protocol: live\norder: shuffle\nscenarios: "
+                                            "[{scenario: pair.yaml, feeds: 1}]\n"))
+    assert nadir.live[0].tasking == ("go", "orbit")  # no gimbal: nothing to look with
     wide = load_study(live_study(tmp_path, "protocol: live\norder: shuffle\nscenarios: "
                                            "[{scenario: pair.yaml, feeds: 1, tasking: [orbit], "
                                            "orbit_radius_m: 400}]\n"))
@@ -85,6 +92,8 @@ def test_a_conditions_tasking_is_read_with_its_defaults(tmp_path: Path) -> None:
     ("tasking: [go, fly]", r"study\.yaml:4: scenarios\[0\]\.tasking\[1\]: expected one of go, "
                            r"orbit, look, got 'fly'"),
     ("tasking: [go, go]", r"scenarios\[0\]\.tasking\[1\]: 'go' given twice"),
+    ("tasking: [go, look]", r"scenarios\[0\]\.tasking\[1\]: look: none of the vehicles of "
+                            r".*pair\.yaml that take commands has a camera on a gimbal"),
     ("tasking: go", r"scenarios\[0\]\.tasking: expected a list of the map's commands allowed"),
     ("orbit_radius_m: 5", r"scenarios\[0\]\.orbit_radius_m: must be >= 10, got 5"),
     ("orbit_radius_m: 150", r"scenarios\[0\]\.orbit_radius_m: 150 m: an orbit must be one the "
@@ -115,6 +124,41 @@ def test_the_maps_actions_are_commands_of_the_one_vocabulary() -> None:
     assert orbit.loiter_radius_m == 300.0
     with pytest.raises(ConfigError, match=r"action: expected one of go, orbit, look, got 'fly'"):
         command_spec("fly", 0, 0, 300)
+
+
+def test_a_live_run_takes_only_the_commands_its_condition_allows(tmp_path: Path) -> None:
+    """LiveRun.command: an action the condition does not allow, an aircraft
+    it may not task, a look for an aircraft without a gimbal camera are
+    refused before they reach the run; a run without tasking has no inbox."""
+    import asyncio
+    import dataclasses
+
+    from cosim.trials.live import Hub, LiveRun
+
+    two, go_only = load_study(tasking_study(tmp_path, 4.0)).live
+    loop = asyncio.new_event_loop()
+    try:
+        run = LiveRun(dataclasses.replace(two, lookers=("uav1",)), tmp_path / "a", Hub(loop),
+                      backend="inline")
+        assert run.inbox is not None
+        with pytest.raises(ConfigError, match=r"^vehicle: uav2 has no camera on a gimbal to "
+                                              r"point \(those that do: uav1\)$"):
+            run.command("uav2", "look", 0.0, 0.0)
+        with pytest.raises(ConfigError, match=r"^vehicle: 'uav9' cannot be tasked in condition "
+                                              r"'two' \(it may task: uav1, uav2\)$"):
+            run.command("uav9", "go", 0.0, 0.0)
+        with pytest.raises(ConfigError, match=r"the run has not started yet"):
+            run.command("uav1", "go", 0.0, 0.0)  # reached the inbox: not running
+        only = LiveRun(go_only, tmp_path / "b", Hub(loop), backend="inline")
+        with pytest.raises(ConfigError, match=r"^action: 'orbit' is not allowed in condition "
+                                              r"'go_only' \(allowed: go\)$"):
+            only.command("uav1", "orbit", 0.0, 0.0)
+        none = LiveRun(dataclasses.replace(go_only, tasking=(), taskable=()), tmp_path / "c",
+                       Hub(loop), backend="inline")
+        assert none.inbox is None and json.loads(none.hub.hello)["tasking"] == {
+            "actions": [], "vehicles": [], "look_vehicles": [], "orbit_radius_m": 150.0}
+    finally:
+        loop.close()
 
 
 # --- the page ------------------------------------------------------------------
@@ -163,7 +207,8 @@ def test_a_map_click_sends_the_aircraft_there_and_the_command_is_stored(
     error and distance to it shrink, against the same scenario's run without
     the command, which flies on north. An orbit and a look for uav2 sent
     with the same route are stored and logged as their commands. ``cosim
-    trials replay`` of the session says its run comes out identical."""
+    trials replay`` of the session says its run comes out identical (exit
+    0), and with its log altered that it differs (exit 1)."""
     from cosim.scenario import load_scenario
     from cosim.sync.runner import run_scenario
 
@@ -248,6 +293,15 @@ def test_a_map_click_sends_the_aircraft_there_and_the_command_is_stored(
                      rf".*replay/trial{ti:03d}\)$", said, re.M), said
     tick_r, n_r, e_r = _track(tmp_path / "replay" / f"trial{ti:03d}", "uav1")
     assert np.array_equal(n_r, n) and np.array_equal(e_r, e)
+    # its log altered (the goal 50 m further east): the replay differs, exit 1
+    log = run_dir / "commands.jsonl"
+    log.write_text(log.read_text().replace(f'"east_m": {go["east_m"]}',
+                                           f'"east_m": {go["east_m"] + 50}', 1))
+    assert main(["trials", "replay", str(study.with_suffix(".sqlite")), s["id"], "--trial",
+                 str(ti), "--out", str(tmp_path / "replay2")]) == 1
+    said = capsys.readouterr().out
+    assert re.search(rf"^trial {ti}: differs \(.*\):$", said, re.M), said
+    assert re.search(r"^  .*states", said, re.M), said
 
 
 @pytest.mark.integration  # a live run of a few seconds

@@ -17,8 +17,9 @@
 // Tasking (where the condition allows it): a click on an aircraft on the map
 // selects it (ringed, its id shown below the map); a click on the ground then
 // opens a small menu there of the commands allowed (Go here, Orbit here, Look
-// here; keys G, O, L; Escape closes it), posted with the point in metres
-// north and east of the scenario's origin. The aircraft's last command sent
+// here, for an aircraft with a gimbal camera; keys G, O, L; Escape closes
+// it), posted with the point in metres north and east of the scenario's
+// origin. The aircraft's last command sent
 // is marked on the map until its next one; a refusal is shown for a few seconds.
 // Reports are clicks on the feeds, tasking is clicks on the map.
 "use strict";
@@ -336,7 +337,8 @@
     closeMenu();
     if (near !== null) { selected = near; showTasking(); drawMap(); return; }
     if (selected === null) { failed("Click an aircraft first, then where it should go"); return; }
-    for (const a of tasking.actions) {
+    const lookers = tasking.look_vehicles || [];
+    for (const a of tasking.actions.filter((x) => x !== "look" || lookers.includes(selected))) {
       const b = document.createElement("button");
       b.dataset.action = a;
       b.textContent = `${ACTIONS[a][0]} (${ACTIONS[a][1]})`;
@@ -377,7 +379,7 @@
     if (menu.hidden) return;
     if (e.key === "Escape") { closeMenu(); return; }
     const a = Object.keys(ACTIONS).find((k) => ACTIONS[k][1] === e.key.toUpperCase());
-    if (a && tasking.actions.includes(a)) {
+    if (a && menu.querySelector(`button[data-action="${a}"]`)) {
       task(a, { north_m: Number(menu.dataset.north_m), east_m: Number(menu.dataset.east_m) },
            e.timeStamp);
     }
