@@ -470,3 +470,38 @@ def test_replay_refuses_what_it_cannot_replay(tmp_path: Path,
         assert re.search(match, capsys.readouterr().err), (args, match)
     assert main(["trials", "replay", str(tmp_path / "none.sqlite"), "x"]) == 2
     assert "no such trial database" in capsys.readouterr().err
+
+
+def test_analyse_counts_each_stored_trials_commands(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """cosim trials analyse --study on stored sessions: each trial's stored
+    commands counted by action, a minute of its run's simulated time (its
+    summary.json), and the print-out says so; a trial whose summary gives no
+    time has its counts and no rate."""
+    from test_live_results import live_db as make_db
+
+    study, db, s = make_db.__wrapped__(tmp_path)  # type: ignore[attr-defined]
+    p1 = s["p1"]
+    folder = tmp_path / "study-live" / p1["id"]
+    for ti, sim_s in ((0, 30.0), (1, None)):
+        summary = json.loads((folder / f"trial{ti:03d}" / "summary.json").read_text())
+        if sim_s is not None:
+            summary["sim_time_s"] = sim_s
+        (folder / f"trial{ti:03d}" / "summary.json").write_text(json.dumps(summary))
+    with Store(db) as store:
+        for seq, (ti, action) in enumerate([(0, "go"), (0, "look"), (0, "go"), (1, "orbit")]):
+            store.record_live_command({
+                "session": p1["id"], "participant": "p1", "trial_index": ti, "condition": "c",
+                "seq": seq, "vehicle": "uav1", "action": action, "north_m": 0.0,
+                "east_m": 0.0, "client_time_ms": None, "run": "r"})
+    out = tmp_path / "a"
+    assert main(["-q", "trials", "analyse", str(db), "--study", str(study), "--out",
+                 str(out)]) == 0
+    assert ("live: 4 commands from the map (2 go, 1 orbit, 1 look): live_tasking_levels.csv"
+            in capsys.readouterr().out)
+    with (out / "live_sessions.csv").open(newline="") as f:
+        got = {r["session"]: (r["go"], r["orbit"], r["look"], r["commands"], r["duration_s"],
+                              r["commands_per_min"]) for r in csv.DictReader(f)}
+    assert got[f"{p1['id']}/0"] == ("2", "0", "1", "3", "30", "6")  # 3 in 30 s
+    assert got[f"{p1['id']}/1"] == ("0", "1", "0", "1", "", "")
+    assert got[f"{s['p2']['id']}/0"] == ("0", "0", "0", "0", "", "")
