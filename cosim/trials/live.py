@@ -458,6 +458,8 @@ class LiveRun:
     def status(self) -> dict[str, Any]:
         r = self.result
         return {"running": self.running, "out_dir": str(self.out_dir),
+                # held by Run.pause (a SAGAT freeze waiting for its answers)
+                "paused": self.running and self.run.paused,
                 "stop_reason": r.stop_reason if r is not None else None,
                 "error": str(self.error)[:500] if self.error is not None else None,
                 "frames_published": self.hub.published_frames,

@@ -105,6 +105,14 @@ def test_a_freeze_asks_the_probe_on_a_blank_page_and_scores_it_against_the_run(
             assert [q["id"] for q in now["freeze"]["questions"]] == ["where", "north", "far",
                                                                     "low"]
             assert "truth" not in str(now)  # the page is never told the answers
+            # the experimenter sees why the run stands still
+            status, v = server.request("GET", f"/api/sessions/{sid}/live")
+            assert status == 200 and v["live"]["running"] and v["live"]["paused"], v
+            desk = page.context.browser.new_context().new_page()
+            desk.goto(f"{server.url}/")
+            assert desk.text_content(".live-paused", timeout=10_000) == \
+                " paused: the participant is answering a SAGAT probe"
+            desk.context.close()
             time.sleep(1.0)
             assert page.text_content("#clock") == clock
             page.screenshot(path=str(tmp_path / "freeze.png"))
@@ -142,6 +150,7 @@ def test_a_freeze_asks_the_probe_on_a_blank_page_and_scores_it_against_the_run(
                                    "p.body.instrument === 'tlx' && p.status === 201)")
             assert not errors, errors
         v = _wait_over(server, sid)
+        assert v["live"]["paused"] is False
         deadline = time.monotonic() + 10
         while (sagat := server.store.instrument_answers(sid, "sagat"))[0]["scores"] is None:
             assert time.monotonic() < deadline, "the probe was not scored"

@@ -81,6 +81,12 @@
       out.append(w);
     }
     if (v.live && v.live.running) {
+      if (v.live.paused) { // a SAGAT freeze: the run waits for the participant's answers
+        const w = document.createElement("span");
+        w.className = "live-paused";
+        w.textContent = " paused: the participant is answering a SAGAT probe";
+        out.append(w);
+      }
       b.textContent = `Stop trial ${v.live.trial_index + 1}`;
       b.onclick = () => post(`/api/sessions/${sid}/live/stop`, {})
         .then(refresh).catch((e) => alert(e.message));
