@@ -117,6 +117,8 @@ class Hub:
         self.dropped_gone = 0
         #: each feed's last frame number sent to the watchers
         self.last_frame: dict[int, int] = {}
+        #: each aircraft's last map command (a ``command`` message), for pages arriving
+        self.last_commands: dict[str, str] = {}
 
     def publish(self, kind: str, payload: dict[str, Any], delay_s: float = 0.0) -> None:
         """Send ``payload`` to every watcher, ``delay_s`` from now (a
@@ -154,6 +156,14 @@ class Hub:
         for w in self.watchers:
             w.put(kind, text)
 
+    def command(self, payload: dict[str, Any]) -> None:
+        """A map command taken (in the event loop): to every page, and kept as
+        its aircraft's last for pages that come later (a reload)."""
+        text = json.dumps(payload, separators=(",", ":"))
+        self.last_commands[str(payload["vehicle"])] = text
+        for w in self.watchers:
+            w.put("command", text)
+
     def _end(self) -> None:
         self.ended = True
         for w in self.watchers:
@@ -168,6 +178,8 @@ class Hub:
         w.put("hello", self.hello)
         if self.last_states is not None:
             w.put("states", self.last_states)
+        for text in self.last_commands.values():
+            w.put("command", text)
         w.closed = self.ended
         self.watchers.append(w)
         return w

@@ -6,7 +6,8 @@ paced at real time, into the session's own run folder, one run per session
 at a time) and may stop it (``.../live/stop``); the participant's page
 (``/live?session=ID``, ``static/live.html``) follows the run through a
 server-sent event stream (``GET .../live/stream``: the feeds, each frame
-JPEG-encoded with its feed and frame number, and the aircraft's positions)
+JPEG-encoded with its feed and frame number, the aircraft's positions and
+each aircraft's last map command)
 and posts each click on a feed (``POST .../live/reports``: the feed, the
 frame the page drew there, the pixel in the frame's own coordinates, the
 page's click and draw times), which the store keeps
@@ -317,6 +318,8 @@ class LiveConsole:
                "condition": c.id, "seq": seq, "vehicle": vehicle, "action": action,
                "north_m": north_m, "east_m": east_m, "client_time_ms": client,
                "run": str(run.out_dir)}
+        run.hub.command({"seq": seq, "vehicle": vehicle, "action": action,
+                         "north_m": north_m, "east_m": east_m})
         stored = await run_in_threadpool(self.store.record_live_command, row)
         key = (s["id"], ti, seq)
         self._stored.add(key)

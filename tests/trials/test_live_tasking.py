@@ -206,7 +206,8 @@ def test_a_map_click_sends_the_aircraft_there_and_the_command_is_stored(
     logged it), and uav1's logged track turns toward the point: its bearing
     error and distance to it shrink, against the same scenario's run without
     the command, which flies on north. An orbit and a look for uav2 sent
-    with the same route are stored and logged as their commands. ``cosim
+    with the same route are stored and logged as their commands; the page
+    marks each aircraft's last command, again after a reload. ``cosim
     trials replay`` of the session says its run comes out identical (exit
     0), and with its log altered that it differs (exit 1)."""
     from cosim.scenario import load_scenario
@@ -248,8 +249,13 @@ def test_a_map_click_sends_the_aircraft_there_and_the_command_is_stored(
                     {"trial_index": ti, "vehicle": "uav2", "action": action, "north_m": 200,
                      "east_m": 100, "client_time_ms": 5.0})
                 assert status == 201, out
-            time.sleep(1.0)  # the map draws the marker
+            # every page hears of every command: those sent without it too
+            page.wait_for_function("window.live.marked && window.live.marked.length === 2")
             page.screenshot(path=str(tmp_path / "sent.png"))
+            page.reload()  # and a reloaded page has them again
+            page.wait_for_function("document.body.dataset.phase === 'live' && "
+                                   "window.live.marked && window.live.marked.length === 2")
+            assert sorted(page.evaluate("window.live.marked")) == ["uav1", "uav2"]
             page.wait_for_function("document.body.dataset.phase === 'ended'", timeout=60_000)
             assert not errors, errors
         rows = server.store.live_commands(s["id"])

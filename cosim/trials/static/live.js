@@ -19,8 +19,9 @@
 // opens a small menu there of the commands allowed (Go here, Orbit here, Look
 // here, for an aircraft with a gimbal camera; keys G, O, L; Escape closes
 // it), posted with the point in metres north and east of the scenario's
-// origin. The aircraft's last command sent
-// is marked on the map until its next one; a refusal is shown for a few seconds.
+// origin. Each aircraft's last command (as the server's stream says, so a
+// reloaded page has them again) is marked on the map until its next one; a
+// refusal is shown for a few seconds.
 // Reports are clicks on the feeds, tasking is clicks on the map.
 "use strict";
 (() => {
@@ -367,12 +368,18 @@
       body.status = r.status;
       if (r.status !== 201) { failed(out.error || `refused (${r.status})`); return; }
       body.seq = out.seq;
-      sent.set(body.vehicle, { action, north_m: p.north_m, east_m: p.east_m });
+      commanded({ vehicle: body.vehicle, action, north_m: p.north_m, east_m: p.east_m });
       showTasking(`${ACTIONS[action][0]}: sent to ${body.vehicle}`);
       clearTimeout(errorTimer);
       errorTimer = setTimeout(() => showTasking(), 2000);
-      drawMap();
     } catch (err) { body.status = String(err); failed("not sent: the server did not answer"); }
+  }
+
+  // An aircraft's last command, marked on the map.
+  function commanded(c) {
+    sent.set(c.vehicle, { action: c.action, north_m: c.north_m, east_m: c.east_m });
+    window.live.marked = [...sent.keys()];
+    drawMap();
   }
 
   function taskKey(e) {
@@ -444,6 +451,7 @@
     });
     es.addEventListener("frame", (e) => { frame(JSON.parse(e.data)); });
     es.addEventListener("states", (e) => states(JSON.parse(e.data)));
+    es.addEventListener("command", (e) => commanded(JSON.parse(e.data)));
     es.addEventListener("end", async () => {
       es.close();
       clearInterval(every);
