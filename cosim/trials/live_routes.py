@@ -309,11 +309,12 @@ class LiveConsole:
         if client is not None and not 0 <= client <= MAX_PAGE_TIME_MS:
             raise self.bad(f"client_time_ms: expected 0..{MAX_PAGE_TIME_MS:.0f} ms (the "
                            f"page's clock), got {client:g}")
-        self._take_command(s["id"], ti)
+        self._room_for_command(s["id"], ti)
         try:
             seq = run.command(vehicle, action, north_m, east_m)
         except ConfigError as e:  # a full queue, a run that is over
             raise self.bad("; ".join(e.problems)[:1000], 409) from None
+        self._took_command(s["id"], ti)  # (no await since the check: none slipped in)
         row = {"session": s["id"], "participant": s["participant"], "trial_index": ti,
                "condition": c.id, "seq": seq, "vehicle": vehicle, "action": action,
                "north_m": north_m, "east_m": east_m, "client_time_ms": client,
@@ -329,8 +330,9 @@ class LiveConsole:
         return JSONResponse({"seq": seq, "action": action, "vehicle": vehicle,
                              "server_time": stored["server_time"]}, status_code=201)
 
-    def _take_command(self, sid: str, ti: int) -> None:
-        """Count a command of session ``sid``'s trial ``ti``; 429 past the limits."""
+    def _room_for_command(self, sid: str, ti: int) -> None:
+        """429 if session ``sid`` has had its commands of the last second, or
+        its trial ``ti`` its commands of a trial (refused ones do not count)."""
         now = time.monotonic()
         sent = self._sent.setdefault(sid, deque())
         while sent and now - sent[0] >= 1.0:
@@ -338,12 +340,14 @@ class LiveConsole:
         if len(sent) >= MAX_COMMANDS_PER_S:
             raise self.bad(f"too many commands: at most {MAX_COMMANDS_PER_S} a second; wait "
                            f"a moment and send it again", 429)
-        n = self._commands.get((sid, ti), 0)
-        if n >= MAX_COMMANDS_PER_TRIAL:
+        if self._commands.get((sid, ti), 0) >= MAX_COMMANDS_PER_TRIAL:
             raise self.bad(f"too many commands: at most {MAX_COMMANDS_PER_TRIAL} in a trial, "
                            f"and this trial has had them", 429)
-        sent.append(now)
-        self._commands[(sid, ti)] = n + 1
+
+    def _took_command(self, sid: str, ti: int) -> None:
+        """Count a command the run took."""
+        self._sent.setdefault(sid, deque()).append(time.monotonic())
+        self._commands[(sid, ti)] = self._commands.get((sid, ti), 0) + 1
 
     def _applied(self, sid: str, ti: int, entry: dict[str, Any]) -> None:
         """A command's log entry once the run applied it (in the event loop):

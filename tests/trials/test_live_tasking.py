@@ -378,10 +378,11 @@ def test_the_per_trial_limit_is_refused_with_429(tmp_path: Path) -> None:
     console = live_routes.LiveConsole.__new__(live_routes.LiveConsole)
     console.bad = BadRequest
     console._sent, console._commands = {}, {("s", 0): live_routes.MAX_COMMANDS_PER_TRIAL - 1}
-    console._take_command("s", 0)
+    console._room_for_command("s", 0)
+    console._took_command("s", 0)
     with pytest.raises(BadRequest, match=r"too many commands: at most 2000 in a trial"):
-        console._take_command("s", 0)
-    console._take_command("s", 1)  # another trial: its own count
+        console._room_for_command("s", 0)
+    console._room_for_command("s", 1)  # another trial: its own count
 
 
 # --- the store, the export and the analysis --------------------------------------
