@@ -60,7 +60,45 @@ CHROMIUM = "/usr/bin/chromium"
 WIDTH_PX, HEIGHT_PX = 1920, 1080
 PROFILE = {"screen_width_px": WIDTH_PX, "screen_height_px": HEIGHT_PX,
            "screen_width_mm": 598.0, "screen_height_mm": 336.0, "viewing_distance_mm": 600.0}
-LEVERS = ("size", "jpeg_quality", "render_workers", "map_rate_hz", "cameras", "backend")
+LEVERS = ("size", "jpeg_quality", "render_workers", "map_rate_hz", "cameras", "backend", "page")
+#: the page's variants (``--page``, joined by "+"), served in place of
+#: static/live.js through Playwright's routing: each a list of (text of
+#: live.js, what replaces it). ``now``: live.js as it is; the others put back
+#: what it did before the levers this benchmark measured were adopted:
+#: ``from``: the frame's base64 turned into bytes by ``Uint8Array.from`` with
+#: a function a character (not a loop); ``newest``: a frame that arrives
+#: before the previous one of its feed was drawn replaces it (none wait)
+PAGE_VARIANTS: dict[str, list[tuple[str, str]]] = {
+    "now": [],
+    "from": [
+        ("""    const text = atob(msg.jpeg), bytes = new Uint8Array(text.length);
+    for (let i = 0; i < text.length; i++) bytes[i] = text.charCodeAt(i);""",
+         """    const bytes = Uint8Array.from(atob(msg.jpeg), (c) => c.charCodeAt(0));"""),
+    ],
+    "newest": [
+        ("""    const on = drawn.get(msg.feed); // never back to a frame older than the one shown
+    if (on && on.frame >= msg.frame) { bitmap.close(); return; }
+    const q = due.get(msg.feed) || [];
+    q.push({ frame: msg.frame, bitmap, made_ms: msg.made_ms, counter });
+    q.sort((a, b) => a.frame - b.frame); // decodes may end out of order
+    while (q.length > MAX_WAITING) q.shift().bitmap.close();
+    due.set(msg.feed, q);""",
+         """    const was = due.get(msg.feed);
+    if (was && was.frame > msg.frame) { bitmap.close(); return; }
+    if (was) was.bitmap.close();
+    due.set(msg.feed, { frame: msg.frame, bitmap, made_ms: msg.made_ms, counter });"""),
+        ("""    for (const [k, q] of due) {
+      const d = q.shift();
+      const f = feeds[k];""", """    for (const [k, d] of due) {
+      const f = feeds[k];"""),
+        ("""    for (const [k, q] of due) if (!q.length) due.delete(k);
+    if (due.size) { rafPending = true; requestAnimationFrame(draw); }
+    document.body.dataset.drawn""", """    due.clear();
+    document.body.dataset.drawn"""),
+        ("for (const q of due.values()) for (const d of q) d.bitmap.close();",
+         "for (const d of due.values()) d.bitmap.close();"),
+    ],
+}
 #: how often the CPU of each thread and process is read (s)
 SAMPLE_S = 0.5
 
@@ -194,11 +232,30 @@ class CpuSampler:
         return {k: round(v / self.wall_s, 3) for k, v in sorted(out.items())}
 
 
-def run_trial(url: str, app: Any, browser: Any, condition: str) -> dict[str, Any]:
-    """One session's trial of ``condition``, followed by a page to its end."""
+def page_script(variant: str) -> str:
+    """static/live.js as the page ``variant`` has it (``PAGE_VARIANTS``)."""
+    from cosim.trials import server
+
+    text = (Path(server.__file__).parent / "static" / "live.js").read_text()
+    for old, new in (pair for v in variant.split("+") for pair in PAGE_VARIANTS[v]):
+        if text.count(old) != 1:
+            raise SystemExit(f"page variant {variant!r}: static/live.js no longer has "
+                             f"{old.strip().splitlines()[0]!r} once: update PAGE_VARIANTS")
+        text = text.replace(old, new)
+    return text
+
+
+def run_trial(url: str, app: Any, browser: Any, condition: str,
+              variant: str = "now") -> dict[str, Any]:
+    """One session's trial of ``condition``, followed by a page (``variant``
+    of live.js) to its end."""
     s = _post(f"{url}/api/sessions", {"participant": f"bench-{condition}", **PROFILE})
     trial = next(t["index"] for t in s["trials"] if t["condition"] == condition)
     page = browser.new_page(viewport={"width": WIDTH_PX, "height": HEIGHT_PX})
+    if variant != "now":
+        script = page_script(variant)
+        page.route("**/static/live.js", lambda route: route.fulfill(
+            body=script, content_type="text/javascript"))
     try:
         page.goto(f"{url}/live?session={s['id']}")
         page.wait_for_function("document.body.dataset.phase === 'waiting'")
@@ -293,7 +350,8 @@ def run(study: Path, settings: dict[str, Any], vary: tuple[str, list[Any]] | Non
                     try:
                         with served_in_thread(app, lifespan="auto", stop_timeout_s=60) as url:
                             for c in st.live:
-                                row = run_trial(url, app, browser, c.id)
+                                row = run_trial(url, app, browser, c.id,
+                                                s.get("page") or "now")
                                 row.update(round=r, lever=vary[0] if vary else None,
                                            value=value, settings=_shown(s))
                                 rows.append(row)
@@ -354,13 +412,125 @@ def table(rows: list[dict[str, Any]]) -> str:
     return "\n".join(out)
 
 
+#: the page's ways from a frame message's base64 JPEG to a picture on a
+#: canvas, timed in the browser on the same frames (``decode_paths``); ``now``
+#: is what static/live.js does
+DECODE_PATHS = {
+    "now: atob, Uint8Array.from, createImageBitmap": """async (m) => {
+        const bytes = Uint8Array.from(atob(m.jpeg), (c) => c.charCodeAt(0));
+        return createImageBitmap(new Blob([bytes], { type: "image/jpeg" })); }""",
+    "atob, a loop, createImageBitmap": """async (m) => {
+        const s = atob(m.jpeg), bytes = new Uint8Array(s.length);
+        for (let i = 0; i < s.length; i++) bytes[i] = s.charCodeAt(i);
+        return createImageBitmap(new Blob([bytes], { type: "image/jpeg" })); }""",
+    "fetch(data: URL), createImageBitmap": """async (m) => {
+        const b = await (await fetch("data:image/jpeg;base64," + m.jpeg)).blob();
+        return createImageBitmap(b); }""",
+    "img element, decode()": """async (m) => {
+        const img = new Image(); img.src = "data:image/jpeg;base64," + m.jpeg;
+        await img.decode(); return img; }""",
+    "binary (no base64, no JSON): createImageBitmap": """async (m) => {
+        return createImageBitmap(new Blob([m.bytes], { type: "image/jpeg" })); }""",
+}
+DECODE_PAGE = """async ([texts, path, draw, binary]) => {
+  const decode = eval(path);
+  const canvas = document.createElement("canvas");
+  const ctx = canvas.getContext("2d", { willReadFrequently: true });
+  const msgs = texts.map((t) => JSON.parse(t));
+  for (const m of msgs) m.bytes = Uint8Array.from(atob(m.jpeg), (c) => c.charCodeAt(0));
+  let mainMs = 0;
+  const t0 = performance.now();
+  for (let i = 0; i < texts.length; i++) {
+    const s = performance.now();
+    const m = binary ? msgs[i] : JSON.parse(texts[i]);
+    const p = decode(m);
+    mainMs += performance.now() - s;
+    const pic = await p;
+    const d = performance.now();
+    if (draw) {
+      canvas.width = pic.width; canvas.height = pic.height;
+      ctx.drawImage(pic, 0, 0);
+      ctx.getImageData(0, pic.height - 32, pic.width, 32);
+    }
+    if (pic.close) pic.close();
+    mainMs += performance.now() - d;
+  }
+  return [(performance.now() - t0) / texts.length, mainMs / texts.length];
+}"""
+
+
+def feed_messages(study: Path, condition: str, n: int, quality: int) -> list[str]:
+    """``n`` frame messages of the condition's first feed as the server sends
+    them (``with_counter``, JPEG at ``quality``, base64 in JSON), from a
+    short unpaced run of its scenario."""
+    import base64
+
+    import cv2
+
+    from cosim.scenario import load_scenario
+    from cosim.sync.runner import Run
+    from cosim.trials.live import with_counter
+    from cosim.trials.study import load_study
+
+    c = next(c for c in load_study(study).live if c.id == condition)
+    f = c.feeds[0]
+    with tempfile.TemporaryDirectory() as tmp:
+        scn = load_scenario(c.scenario).with_duration(n / f.rate_hz + 0.5)
+        Run(scn, tmp, backend="inline").run()
+        cap = cv2.VideoCapture(str(Path(tmp) / "cameras" / f"{f.vehicle}_{f.camera}.mp4"))
+        out: list[str] = []
+        while len(out) < n:
+            ok, bgr = cap.read()
+            if not ok:
+                break
+            _, jpg = cv2.imencode(".jpg", with_counter(bgr, len(out)),
+                                  [cv2.IMWRITE_JPEG_QUALITY, quality])
+            out.append(json.dumps({"feed": 0, "frame": len(out), "made_ms": 0.0,
+                                   "jpeg": base64.b64encode(jpg.tobytes()).decode()}))
+        cap.release()
+    return out
+
+
+def decode_paths(study: Path, condition: str, n: int, quality: int,
+                 rounds: int) -> list[dict[str, Any]]:
+    """Each of ``DECODE_PATHS`` timed in headless Chromium on the same ``n``
+    frames, one frame after the other (ms a frame: in all, and on the page's
+    main thread), then with the drawing and the counter's read-back, over
+    ``rounds`` interleaved rounds."""
+    from playwright.sync_api import sync_playwright
+
+    texts = feed_messages(study, condition, n, quality)
+    rows = []
+    with sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=CHROMIUM)
+        page = browser.new_page()
+        page.goto("about:blank")
+        for r in range(rounds):
+            for name, path in DECODE_PATHS.items():
+                for draw in (False, True):
+                    all_ms, main_ms = page.evaluate(DECODE_PAGE, [texts, path, draw,
+                                                                    "binary" in name])
+                    rows.append({"path": name, "drawn": draw, "round": r, "frames": len(texts),
+                                 "kb_a_frame": round(sum(map(len, texts)) / len(texts) / 1024, 1),
+                                 "ms_a_frame": round(all_ms, 2),
+                                 "main_thread_ms_a_frame": round(main_ms, 2)})
+        browser.close()
+    return rows
+
+
+def _variant(text: str) -> str:
+    if not all(v in PAGE_VARIANTS for v in text.split("+")):
+        raise ValueError(f"expected a page variant of {', '.join(PAGE_VARIANTS)}, got {text!r}")
+    return text
+
+
 def _vary(text: str) -> tuple[str, list[Any]]:
     key, _, vals = text.partition("=")
     if key not in LEVERS or not vals:
         raise argparse.ArgumentTypeError(f"expected LEVER=V1,V2 with a lever of "
                                          f"{', '.join(LEVERS)}, got {text!r}")
     conv: Any = {"size": _size, "jpeg_quality": int, "render_workers": int,
-                 "map_rate_hz": float, "cameras": str, "backend": str}[key]
+                 "map_rate_hz": float, "cameras": str, "backend": str, "page": _variant}[key]
     try:
         return key, [conv(v) for v in vals.split(",")]
     except ValueError as e:
@@ -382,15 +552,29 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cameras", choices=("shown", "all"), default="shown",
                     help="render the aircraft shown only, or every camera (default: shown)")
     ap.add_argument("--backend", default="process", help="the flight models' backend")
+    ap.add_argument("--page", type=_variant, default="now",
+                    help=f"the page's variant: {', '.join(PAGE_VARIANTS)} or several joined "
+                         f"by + (default: now, static/live.js as it is)")
     ap.add_argument("--vary", type=_vary, help="LEVER=V1,V2: each value in turn, interleaved")
+    ap.add_argument("--decode-paths", type=int, metavar="N",
+                    help="instead, time the page's decode paths on N frames of the first "
+                         "--condition (default feeds9) in the browser")
     ap.add_argument("--out", type=Path, help="the rows as JSON")
     a = ap.parse_args(argv)
     if not Path(CHROMIUM).exists():
         print(f"no {CHROMIUM}: install Debian's chromium", file=sys.stderr)
         return 1
+    if a.decode_paths:
+        got = decode_paths(a.study.resolve(), (a.condition or ["feeds9"])[0], a.decode_paths,
+                           a.jpeg_quality or 80, a.rounds)
+        for g in got:
+            print(json.dumps(g))
+        if a.out:
+            a.out.write_text(json.dumps({"load_average": os.getloadavg(), "rows": got}, indent=1))
+        return 0
     settings = {"size": a.size, "jpeg_quality": a.jpeg_quality,
                 "render_workers": a.render_workers, "map_rate_hz": a.map_rate_hz,
-                "cameras": a.cameras, "backend": a.backend}
+                "cameras": a.cameras, "backend": a.backend, "page": a.page}
     rows = run(a.study.resolve(), settings, a.vary, a.rounds, a.duration_s, a.condition)
     text = table(rows)
     print(text)

@@ -201,3 +201,6 @@ def test_live_console_bench_reports_one_small_trial(tmp_path: Path) -> None:
                                         if k not in ("machine", "others")) - 0.01
     with pytest.raises(SystemExit):
         bench.main(["--vary", "colour=red"])
+    # the page's earlier variants still apply to static/live.js as it is
+    now = bench.page_script("now")
+    assert all(bench.page_script(v) != now for v in bench.PAGE_VARIANTS if v != "now")
