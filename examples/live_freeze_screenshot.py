@@ -5,19 +5,29 @@ Chromium (Debian's /usr/bin/chromium), start the trial of the condition
 asked for, wait for the run to freeze at the probe, answer the questions
 before the one asked for (a click at the blank map's centre, a count of 1,
 the first aircraft) and take a screenshot with that one on the page; then
-the trial is stopped.
+the trial is stopped. With ``--until-end`` the page instead waits
+``--hold-s`` seconds with the question shown, answers the rest of that
+probe and every later one, follows the trial to its end and prints the
+run's status with the page's timing and the run's pacing: what a freeze
+does (or not) to the timing checks.
 
     python examples/live_freeze_screenshot.py studies/live_instruments.yaml \
         --condition four_feeds --probe 0 --question east --out freeze.png
 
 (docs/images/trials_live_sagat.png is that picture.)
+
+    python examples/live_freeze_screenshot.py studies/live_instruments.yaml \
+        --condition four_feeds --hold-s 45 --until-end --out freeze.png
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import shutil
 import tempfile
+import time
+import urllib.request
 from pathlib import Path
 from typing import Any
 
@@ -48,6 +58,10 @@ def main() -> None:
     ap.add_argument("--probe", type=int, default=0, help="the probe's number (0: the first)")
     ap.add_argument("--question", help="the question's id shown (default: the first)")
     ap.add_argument("--out", required=True)
+    ap.add_argument("--hold-s", type=float, default=0.0,
+                    help="seconds the question stays on the page before it is answered")
+    ap.add_argument("--until-end", action="store_true",
+                    help="answer every probe, follow the trial to its end, print its timing")
     a = ap.parse_args()
     from playwright.sync_api import sync_playwright
 
@@ -77,8 +91,29 @@ def main() -> None:
                         _answer(page, qid)
                     page.wait_for_selector(f"[data-question='{shown}']")
                     page.screenshot(path=a.out)
+                    if a.until_end:
+                        time.sleep(a.hold_s)
+                        for qid in ids[ids.index(shown):]:
+                            page.wait_for_selector(f"[data-question='{qid}']")
+                            _answer(page, qid)
+                        for probe in study.sagat[a.probe + 1:]:
+                            page.wait_for_function(f"document.body.dataset.freeze === "
+                                                   f"'{probe.index}'", timeout=600_000)
+                            for q in probe.questions:
+                                page.wait_for_selector(f"[data-question='{q.id}']")
+                                _answer(page, q.id)
+                        page.wait_for_function("document.body.dataset.phase === 'ended'",
+                                               timeout=3_600_000)
                     browser.close()
-                _post(f"{url}/api/sessions/{s['id']}/live/stop", {})
+                if a.until_end:
+                    with urllib.request.urlopen(f"{url}/api/sessions/{s['id']}/live") as r:
+                        live = json.loads(r.read())["live"]
+                    summary = json.loads((Path(live["out_dir"]) / "summary.json").read_text())
+                    print(json.dumps({"live": live, **{k: summary.get(k) for k in (
+                        "sagat_freezes", "paused_s", "wall_time_s", "real_time_factor",
+                        "realtime")}}, indent=1))
+                else:
+                    _post(f"{url}/api/sessions/{s['id']}/live/stop", {})
         finally:
             store.close()
     print(f"wrote {a.out}")
