@@ -126,6 +126,8 @@ class CameraParticipant:
         self.gimbal = {s.index: (s.camera.pitch_deg, s.camera.yaw_deg) for s in self.streams
                        if s.camera.mount == "gimbal"}
         self.stills = Stills(ctx.out_dir, ctx.physics_hz, ctx.events)
+        self._stream_of = {(s.vehicle, s.camera.name): s.index for s in self.streams}
+        ctx.gimbal_angles = self.gimbal_angles
         if ctx.commander is not None:
             ctx.commander.observers.append(self.point_gimbal)
             ctx.commander.observers.append(self.trigger_camera)
@@ -152,6 +154,12 @@ class CameraParticipant:
                                self._rendered)
         self.pool.start(n, ws, ctx.out_dir, self.spec.codec, self.spec.digest)
         log.info("cameras: %d stream(s) on %d render worker(s)", len(self.streams), n)
+
+    def gimbal_angles(self, vehicle: str, camera: str) -> tuple[float, float] | None:
+        """Camera ``camera`` of ``vehicle``: its gimbal's ``(pitch_deg, yaw_deg)``
+        as of the last exchange (None: not a camera on a gimbal)."""
+        i = self._stream_of.get((vehicle, camera))
+        return None if i is None else self.gimbal.get(i)
 
     def point_gimbal(self, row: int, cmd: Any, source: str) -> None:
         """A command's gimbal angles, or the point to track (``look_at``), for

@@ -92,6 +92,11 @@ class RunContext:
     #: called with each frame scaled to at most ``width_px`` wide (None: full
     #: size); filled before any participant starts, so the cameras know
     frame_taps: list[Any] | None = None
+    #: ``gimbal_angles(vehicle_id, camera_name)``: a gimbal camera's
+    #: ``(pitch_deg, yaw_deg)`` as the cameras last posed it (commands and
+    #: ``look_at`` tracking included; None: not a camera on a gimbal); set by
+    #: the cameras when they start (None: a run without cameras)
+    gimbal_angles: Any = None
     #: the states gathered inside the last exchange for the rows participants
     #: asked for (``watch_requests``); None: nobody asked
     watched: WatchedStates | None = None

@@ -316,16 +316,20 @@ class FeedTap:
     def _footprints(self, states: np.ndarray, n: np.ndarray, e: np.ndarray,
                     ok: np.ndarray) -> list[dict[str, Any]]:
         """Each feed's ground footprint (its image's corners on flat ground,
-        north/east m in the scenario frame; the camera's mount, not a gimbal
-        command's angles)."""
+        north/east m in the scenario frame; a gimbal camera's as the cameras
+        posed it at this exchange: its commanded angles, or a ``look_at``'s)."""
         from cosim.core.camera import camera_pose, footprint
 
         out = []
+        angles_of = self.ctx.gimbal_angles
         for k, (r, cam, lift_m) in enumerate(self.feed_cams):
             if not ok[r]:
                 continue
             la, lo, alt, roll, pitch, yaw = (float(x) for x in states[r, _POSE_COLS])
-            pose = camera_pose(cam, la, lo, alt + lift_m, roll, pitch, yaw, self.ground_m)
+            feed = self.condition.feeds[k]
+            gimbal = None if angles_of is None else angles_of(feed.vehicle, feed.camera)
+            pose = camera_pose(cam, la, lo, alt + lift_m, roll, pitch, yaw, self.ground_m,
+                               gimbal=gimbal)
             ne = footprint(cam, pose, FOOTPRINT_RANGE_M) + [float(n[r]), float(e[r])]
             out.append({"feed": k, "corners_ne_m": np.round(ne, 1).tolist()})
         return out

@@ -749,6 +749,50 @@ def test_the_map_gets_the_feeds_footprints_and_the_targets_its_condition_asks_fo
             assert math.hypot(*(ne.mean(axis=0) - [v["north_m"], v["east_m"]])) < tilt_m
 
 
+@pytest.mark.integration  # a live run of a second
+def test_a_gimbal_camera_s_footprint_follows_its_look_at(tmp_path: Path) -> None:
+    """A gimbal camera told to look at a point 150 m east of the aircraft's
+    track: its footprint on the map is where the cameras point it, not the
+    mount's. The image centre is where the footprint's diagonals cross
+    (a perspective view maps the image's diagonals to the ground's), and it
+    is the point looked at."""
+    from cosim.trials.live import LiveRun
+
+    (tmp_path / "pair.yaml").write_text(SCENARIO.format(
+        duration_s=1.0, w=W, h=H, rate_hz=RATE_HZ).replace(
+        "mount: nadir", "mount: gimbal").replace(
+        "cameras:", "schedule:\n  - {at_s: 0, vehicles: [uav1], command: {gimbal: "
+        "{look_at: {north_m: -60, east_m: 150}}}}\ncameras:"))
+    (tmp_path / "study.yaml").write_text(STUDY)
+    (c,) = load_study(tmp_path / "study.yaml").live
+    got: list[dict[str, Any]] = []
+
+    async def watch() -> None:
+        hub = Hub(asyncio.get_running_loop())
+        run = LiveRun(c, tmp_path / "run", hub, backend="inline")
+        w = hub.watch(max_pending=10_000)
+        run.start()
+        while True:
+            kind, msg = await w.get()
+            if kind == "end":
+                break
+            if kind == "states":
+                got.append(json.loads(msg))
+        assert run.wait(10) and run.error is None, run.error
+
+    asyncio.run(watch())
+    assert len(got) >= 3
+    for m in got:
+        looking, nadir = (np.asarray(f["corners_ne_m"]) for f in m["footprints"])
+        (p0, p1, p2, p3) = looking
+        # the diagonals p0-p2 and p1-p3 cross at p0 + s (p2 - p0)
+        s = np.linalg.solve(np.column_stack([p2 - p0, p1 - p3]), p1 - p0)[0]
+        centre = p0 + s * (p2 - p0)
+        assert np.hypot(*(centre - [-60.0, 150.0])) < 1.0, (m["time_s"], centre)
+        uav2 = m["vehicles"][1]  # its camera still looks straight down
+        assert np.hypot(*(nadir.mean(axis=0) - [uav2["north_m"], uav2["east_m"]])) < 15.0
+
+
 def test_the_page_follows_each_trial_the_experimenter_starts(tmp_path: Path,
                                                              chromium: str) -> None:
     """A session of two trials: after the first the page says so and waits;
