@@ -10,8 +10,8 @@ at real time). Per trial it reports:
 - real time held: the run's simulated over wall time, and its pacing
   lateness (``summary.json``'s ``realtime``: p50, p99, ticks late);
 - frames published by the run, received and drawn by the page; the
-  server's drops (a page that did not keep up), the page's skips (received,
-  replaced by a newer frame before a refresh drew it) and both over the
+  server's drops (a page that did not keep up), the page's skips (received
+  and never drawn: replaced while waiting for a refresh) and both over the
   frames published;
 - glass-to-glass latency p50 / p95 / max and counter mismatches, as the page
   reports them (``live/timing``: from the run making a frame to the page
@@ -19,18 +19,25 @@ at real time). Per trial it reports:
 - where the CPU went, in cores (CPU seconds per wall second, sampled with
   psutil): the run's thread (physics exchange, the cameras' collection, the
   frame tap), of it the JPEG encoding (the tap's own count), the HTTP
-  server's thread, the render workers, the flight-model workers and the
-  browser (its processes and Playwright's driver).
+  server's thread, the render workers, the flight-model workers, the
+  browser (its processes and Playwright's driver) and the rest of the
+  machine (``others``: work that is not this benchmark's); and the CPU ms
+  a frame rendered, JPEG-encoded and handled by the browser.
 
 Levers: ``--size WxH`` (every feed), ``--jpeg-quality``,
 ``--render-workers``, ``--map-rate-hz``, ``--cameras shown|all`` (render
-only the aircraft shown, or every camera of the scenario), ``--backend``;
+only the aircraft shown, or every camera of the scenario), ``--backend``
+(the flight models'; their worker count is the console's own),
+``--page`` (static/live.js as it is, or its earlier ways, ``PAGE_VARIANTS``);
 ``--vary LEVER=V1,V2`` runs the conditions once per value, interleaved over
 ``--rounds`` (A/B in the same run, as the machine's load drifts).
+``--decode-paths N`` instead times the page's ways of decoding a frame in
+the browser alone, on N frames of a condition's first feed.
 
     python benchmarks/live_console_bench.py --out live.json
-    python benchmarks/live_console_bench.py --condition feeds9 --vary jpeg_quality=80,50 \\
+    python benchmarks/live_console_bench.py --condition feeds9 --vary jpeg_quality=80,60 \\
         --rounds 3
+    python benchmarks/live_console_bench.py --decode-paths 60 --rounds 3
 """
 
 from __future__ import annotations
@@ -518,6 +525,12 @@ def decode_paths(study: Path, condition: str, n: int, quality: int,
     return rows
 
 
+def _cameras(text: str) -> str:
+    if text not in ("shown", "all"):
+        raise ValueError(f"expected shown or all, got {text!r}")
+    return text
+
+
 def _variant(text: str) -> str:
     if not all(v in PAGE_VARIANTS for v in text.split("+")):
         raise ValueError(f"expected a page variant of {', '.join(PAGE_VARIANTS)}, got {text!r}")
@@ -530,7 +543,8 @@ def _vary(text: str) -> tuple[str, list[Any]]:
         raise argparse.ArgumentTypeError(f"expected LEVER=V1,V2 with a lever of "
                                          f"{', '.join(LEVERS)}, got {text!r}")
     conv: Any = {"size": _size, "jpeg_quality": int, "render_workers": int,
-                 "map_rate_hz": float, "cameras": str, "backend": str, "page": _variant}[key]
+                 "map_rate_hz": float, "cameras": _cameras, "backend": str,
+                 "page": _variant}[key]
     try:
         return key, [conv(v) for v in vals.split(",")]
     except ValueError as e:
@@ -572,6 +586,16 @@ def main(argv: list[str] | None = None) -> int:
         if a.out:
             a.out.write_text(json.dumps({"load_average": os.getloadavg(), "rows": got}, indent=1))
         return 0
+    from cosim.errors import ConfigError
+    from cosim.trials.study import load_study
+
+    try:
+        ids = [c.id for c in load_study(a.study).live]
+    except ConfigError as e:
+        ap.error("; ".join(e.problems)[:2000])
+    unknown = sorted(set(a.condition or ()) - set(ids))
+    if unknown:
+        ap.error(f"no condition {', '.join(unknown)} in {a.study}; it has {', '.join(ids)}")
     settings = {"size": a.size, "jpeg_quality": a.jpeg_quality,
                 "render_workers": a.render_workers, "map_rate_hz": a.map_rate_hz,
                 "cameras": a.cameras, "backend": a.backend, "page": a.page}

@@ -170,11 +170,13 @@ def test_realism_verdict() -> None:
     assert within(float("nan")) == "no fit (flat image)"
 
 
-def test_live_console_bench_reports_one_small_trial(tmp_path: Path) -> None:
+def test_live_console_bench_reports_one_small_trial(tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
     """One feed of studies/live_search.yaml at 160 x 90 for 2 s, followed by
     headless Debian Chromium: the row's counts are those of the run and the
     page, in order, and its shares and costs are worked out from them."""
     import json
+    import re
 
     if not Path("/usr/bin/chromium").exists():
         pytest.skip("no /usr/bin/chromium")
@@ -199,8 +201,12 @@ def test_live_console_bench_reports_one_small_trial(tmp_path: Path) -> None:
     assert all(r["cores"][k] > 0 for k in ("run", "render", "browser")) and "fdm" not in r["cores"]
     assert r["cores"]["machine"] >= sum(v for k, v in r["cores"].items()
                                         if k not in ("machine", "others")) - 0.01
-    with pytest.raises(SystemExit):
-        bench.main(["--vary", "colour=red"])
+    for argv, said in ((["--vary", "colour=red"], "expected LEVER=V1,V2 with a lever of size"),
+                       (["--condition", "feeds3"], "no condition feeds3 in .*live_search.yaml; "
+                                                   "it has feeds1, feeds4, feeds9, feeds16")):
+        with pytest.raises(SystemExit, match="^2$"):
+            bench.main(argv)
+        assert re.search(said, capsys.readouterr().err)
     # the page's earlier variants still apply to static/live.js as it is
     now = bench.page_script("now")
     assert all(bench.page_script(v) != now for v in bench.PAGE_VARIANTS if v != "now")
