@@ -58,7 +58,7 @@ class SyntheticStudy:
     sagat: tuple[Probe, ...] = (Probe(0, 30.0, (
         Question("where", "last_target"),
         Question("north", "count", sector=((0.0, 0.0), (500.0, 0.0), (500.0, 500.0))),
-        Question("fuel", "choice", which="lowest", of="fuel_kg"))),)
+        Question("low", "choice", which="lowest", of="alt_agl_m"))),)
 
 
 def synthetic(seed: int = 1) -> tuple[SyntheticStudy, list[dict[str, Any]],

@@ -24,7 +24,7 @@ Study keys::
         questions:
           - {id: where, kind: last_target, tolerance_m: 50}
           - {id: north, kind: count, sector: [[0, 0], [500, 0], [500, 500], [0, 500]]}
-          - {id: fuel, kind: choice, which: lowest, of: fuel_kg}
+          - {id: low, kind: choice, which: lowest, of: alt_agl_m}
           - {id: far, kind: choice, which: highest, of: distance_m, from: [0, 0]}
 
 A block is the main (not practice) trials between two breaks
@@ -305,7 +305,11 @@ def _question(ctx: Problems, d: Any, at: tuple[Any, ...], j: int) -> Question | 
     elif kind == "choice":
         which = r.string("which", choices=WHICH)
         of = r.string("of", choices=CHOICE_OF)
-        if of == "distance_m":
+        if of == "fuel_kg":  # scoring needs the fuel at the freeze: no run records it
+            ctx.err(at + ("of",), "fuel_kg: the runs record no fuel (states.parquet has no "
+                                  "fuel column), so the answer could not be scored; ask of "
+                                  "alt_agl_m, alt_msl_m, airspeed_mps or distance_m")
+        elif of == "distance_m":
             if "from" not in r.d:
                 ctx.err(at, "missing required key 'from' (the point [north_m, east_m] the "
                             "distance is from)")

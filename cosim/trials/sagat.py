@@ -23,9 +23,10 @@ holds them (``from_state_log`` reads one from ``states.parquet`` at a time)
 and the targets with when each was last seen in any feed (visible by the
 reports' rules, ``live_scoring``): ``freeze_state_from_run`` makes one from
 a live trial's run folder, or the live console hands one in. The state
-log holds no fuel today: a ``fuel_kg`` question is scored only from a
-state that carries it (``VehicleAt.fuel_kg``), and refused
-(``ScoringError``) otherwise. Nothing
+log holds no fuel today, so a study's ``fuel_kg`` question is refused when
+the study is read (``instruments``); one is scored only from a state that
+carries it (``VehicleAt.fuel_kg``), and refused (``ScoringError``)
+otherwise. Nothing
 here knows about HTTP, the study file or the store.
 """
 

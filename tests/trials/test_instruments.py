@@ -171,7 +171,7 @@ sagat:
     questions:
       - {id: where, kind: last_target, tolerance_m: 25}
       - {id: north, kind: count, sector: [[0, 0], [500, 0], [500, 500]], tolerance: 1}
-      - {id: fuel, kind: choice, which: lowest, of: fuel_kg}
+      - {id: low, kind: choice, which: lowest, of: alt_agl_m}
   - at_s: 90
     questions:
       - {kind: choice, which: highest, of: distance_m, from: [100, -50], text: Who is out?}
@@ -182,11 +182,11 @@ def test_sagat_probes_are_read() -> None:
     probes, problems = sagat_of(PROBES)
     assert problems == []
     assert [p.at_s for p in probes] == [40.0, 90.0]
-    where, north, fuel = probes[0].questions
+    where, north, low = probes[0].questions
     assert (where.kind, where.tolerance_m) == ("last_target", 25.0)
     assert north.sector == ((0, 0), (500, 0), (500, 500)) and north.tolerance == 1
-    assert (fuel.which, fuel.of, fuel.shown_text) == ("lowest", "fuel_kg",
-                                                      "Which aircraft is lowest on fuel?")
+    assert (low.which, low.of, low.shown_text) == ("lowest", "alt_agl_m",
+                                                   "Which aircraft is lowest above the ground?")
     (far,) = probes[1].questions
     assert (far.id, far.point, far.shown_text) == ("q0", (100.0, -50.0), "Who is out?")
     assert far.page_view() == {"id": "q0", "kind": "choice", "text": "Who is out?",
@@ -211,13 +211,16 @@ def test_sagat_probes_are_read() -> None:
      r"within \+-1e\+06 m, got \[1, nan\]"),
     ("sagat:\n  - {at_s: 5, questions: [{kind: choice, which: lowest, of: distance_m}]}\n",
      r"questions\[0\]: missing required key 'from'"),
-    ("sagat:\n  - {at_s: 5, questions: [{kind: choice, which: lowest, of: fuel_kg, "
+    ("sagat:\n  - {at_s: 5, questions: [{kind: choice, which: lowest, of: alt_agl_m, "
      "from: [0, 0]}]}\n", r"questions\[0\]\.from: only a distance_m question has a point"),
+    ("sagat:\n  - {at_s: 5, questions: [{kind: choice, which: lowest, of: fuel_kg}]}\n",
+     r"s\.yaml:2: sagat\[0\]\.questions\[0\]\.of: fuel_kg: the runs record no fuel "
+     r"\(states\.parquet has no fuel column\), so the answer could not be scored"),
     ("sagat:\n  - {at_s: 5, questions: [{kind: last_target, sector: [[0, 0], [1, 0], [0, 1]]}]}\n",
      r"questions\[0\]\.sector: not a key of a last_target question \(its keys: tolerance_m\)"),
     ("sagat:\n  - {at_s: 5, questions: [{id: wh\u00e9re, kind: last_target}]}\n",
      r"questions\[0\]\.id: 'wh\u00e9re': 1-32 letters, digits and '_'"),
-    ("sagat:\n  - {at_s: 5, questions: [{kind: choice, which: most, of: fuel_kg}]}\n",
+    ("sagat:\n  - {at_s: 5, questions: [{kind: choice, which: most, of: alt_agl_m}]}\n",
      r"questions\[0\]\.which: expected one of: lowest, highest; got 'most'"),
     ("sagat:\n  - {at_s: 5, questions: [{id: a, kind: last_target}, {id: a, kind: last_target}]}"
      "\n", r"sagat\[0\]\.questions: question ids given twice: a"),
@@ -448,9 +451,9 @@ def test_sagat_answers_are_checked_stored_and_scored_against_the_freeze(tmp_path
     assert problems == []
     study = replace(load_study(write_study(tmp_path, "protocol: disappear\n" + CLIPS)),
                     sagat=probes)
-    st = FreezeState(40.0, (VehicleAt("a", 300, 100, 300, 200, 30, fuel_kg=2.0),
-                            VehicleAt("b", 100, 400, 300, 200, 30, fuel_kg=1.0),
-                            VehicleAt("c", -50, 100, 300, 200, 30, fuel_kg=5.0)),
+    st = FreezeState(40.0, (VehicleAt("a", 300, 100, 300, 201, 30),
+                            VehicleAt("b", 100, 400, 300, 200, 30),
+                            VehicleAt("c", -50, 100, 300, 204, 30)),
                      (TargetAt("truck", 120.0, -40.0, 31.5),))
     asked: list[tuple[int, int]] = []
     with Store(tmp_path / "t.sqlite") as store:
@@ -459,20 +462,20 @@ def test_sagat_answers_are_checked_stored_and_scored_against_the_freeze(tmp_path
         base = f"/api/sessions/{s['id']}"
         status, page = asgi(app, "GET", f"{base}/sagat/0")
         assert status == 200 and [q["id"] for q in page["questions"]] == ["where", "north",
-                                                                          "fuel"]
+                                                                          "low"]
         assert "tolerance" not in str(page) and page["questions"][1]["sector"][1] == [500, 0]
         assert asgi(app, "GET", f"{base}/sagat/2") == (
             404, {"error": "probe: this study has 2 SAGAT probes; no probe 2"})
-        good = {"where": {"north_m": 110.0, "east_m": -40.0}, "north": 1, "fuel": "a"}
+        good = {"where": {"north_m": 110.0, "east_m": -40.0}, "north": 1, "low": "a"}
         for bad, match in [
                 ({**good, "north": -1}, r"answers\.north: expected a whole number 0\.\.100000"),
                 ({**good, "north": 2.5}, r"answers\.north: expected a whole number"),
                 ({**good, "where": {"north_m": 1.0}}, r"answers\.where: expected \{north_m, "
                                                       r"east_m\}"),
                 ({**good, "where": {"north_m": 1.0, "east_m": 2e6}}, r"answers\.where"),
-                ({**good, "fuel": "<b>"}, r"answers\.fuel: expected an aircraft's id"),
+                ({**good, "low": "<b>"}, r"answers\.low: expected an aircraft's id"),
                 ({"where": good["where"]}, r"answers: expected an answer to each of where, "
-                                           r"north, fuel")]:
+                                           r"north, low")]:
             status, r = asgi(app, "POST", f"{base}/instruments",
                              {"instrument": "sagat", "trial_index": 1, "probe": 0,
                               "answers": bad})
@@ -495,7 +498,7 @@ def test_sagat_answers_are_checked_stored_and_scored_against_the_freeze(tmp_path
             np.array([[300, 100], [100, 400], [-50, 100]])).sum())
         assert sc["north"] == {"correct": True, "error": 0.0, "truth": truth_north} and \
             truth_north == 1
-        assert sc["fuel"] == {"correct": False, "error": 1.0, "truth": ["b"]}
+        assert sc["low"] == {"correct": False, "error": 1.0, "truth": ["b"]}
         assert r["answer"]["questions"] == 3
 
 
@@ -615,7 +618,7 @@ def test_a_sagat_probe_asked_through_the_probe_form_is_stored(
             assert page.locator(".sagat[data-question=north]").count() == 1
             page.fill(".sagat input", "2")
             page.click(".sagat button.next")
-            page.locator(".sagat[data-question=fuel] button").first.wait_for()
+            page.locator(".sagat[data-question=low] button").first.wait_for()
             assert page.locator(".sagat button.choice").all_inner_texts() == ["a", "b", "c"]
             page.click(".sagat button.choice >> text=b")
             page.wait_for_function("window.probeStored !== undefined")
@@ -624,7 +627,7 @@ def test_a_sagat_probe_asked_through_the_probe_form_is_stored(
         (row,) = server.store.instrument_answers(s["id"], "sagat")
     assert (row["trial_index"], row["item"], row["scores"]) == (0, 0, None)
     assert row["answer"] == {"where": {"north_m": 110.0, "east_m": -40.0}, "north": 2,
-                             "fuel": "b"}
+                             "low": "b"}
 
 
 def test_last_sightings_equal_a_brute_force_search() -> None:
