@@ -172,6 +172,8 @@ class CpuSampler:
         self.me = psutil.Process()
         self.last: dict[tuple[str, int], tuple[str, float]] = {}
         self.first: dict[tuple[str, int], float] = {}
+        #: each browser process's kind (``_browser_part``)
+        self.kinds: dict[int, str] = {}
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._main, name="cpu-sampler", daemon=True)
 
@@ -193,16 +195,29 @@ class CpuSampler:
                 part = self._part_of_thread(names, th.id)
                 self._keep(key, part, th.user_time + th.system_time)
         workers = {p.pid: p.name for p in multiprocessing.active_children()}
+        children: list[psutil.Process] = []
         with contextlib.suppress(psutil.Error):
             children = self.me.children(recursive=True)
         for p in children:
             name = workers.get(p.pid, "")
-            part = ("render" if name.startswith("cosim-render") else
-                    "fdm" if name.startswith("cosim-worker") else
-                    "browser" if not name else "other_workers")
             with contextlib.suppress(psutil.Error):
+                part = ("render" if name.startswith("cosim-render") else
+                        "fdm" if name.startswith("cosim-worker") else
+                        self._browser_part(p) if not name else "other_workers")
                 t = p.cpu_times()
                 self._keep(("proc", p.pid), part, t.user + t.system)
+
+    def _browser_part(self, p: psutil.Process) -> str:
+        """``browser:`` and the kind of Chromium process (its ``--type``:
+        renderer, gpu-process, utility; ``main``), or Playwright's driver."""
+        kind = self.kinds.get(p.pid)
+        if kind is None:
+            cmd = p.cmdline()
+            types = [a.split("=", 1)[1] for a in cmd if a.startswith("--type=")]
+            kind = types[0] if types else ("driver" if any("playwright" in a for a in cmd)
+                                           else "main")
+            self.kinds[p.pid] = kind
+        return f"browser:{kind}"
 
     def _keep(self, key: tuple[str, int], part: str, cpu_s: float) -> None:
         self.first.setdefault(key, cpu_s)
@@ -231,11 +246,13 @@ class CpuSampler:
 
     def cores(self) -> dict[str, float]:
         """Each part's CPU seconds per wall second while running, and the
-        whole machine's (``machine``; ``others``: what is not ours)."""
+        whole machine's (``machine``; ``others``: what is not ours);
+        ``browser`` is the sum of its ``browser:KIND`` processes."""
         out: dict[str, float] = {}
         for key, (part, cpu_s) in self.last.items():
             out[part] = out.get(part, 0.0) + cpu_s - self.first[key]
         out["others"] = out["machine"] - sum(v for k, v in out.items() if k != "machine")
+        out["browser"] = sum(v for k, v in out.items() if k.startswith("browser:"))
         return {k: round(v / self.wall_s, 3) for k, v in sorted(out.items())}
 
 

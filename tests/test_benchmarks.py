@@ -199,8 +199,11 @@ def test_live_console_bench_reports_one_small_trial(tmp_path: Path,
     assert r["jpeg_ms_per_frame"] > 0 and r["lateness_ms_p50"] >= 0
     # inline: the flight models step in the run's thread, no fdm workers
     assert all(r["cores"][k] > 0 for k in ("run", "render", "browser")) and "fdm" not in r["cores"]
-    assert r["cores"]["machine"] >= sum(v for k, v in r["cores"].items()
-                                        if k not in ("machine", "others")) - 0.01
+    parts = {k: v for k, v in r["cores"].items() if k not in ("machine", "others", "browser")}
+    assert r["cores"]["machine"] >= sum(parts.values()) - 0.01
+    assert r["cores"]["browser"] == pytest.approx(
+        sum(v for k, v in parts.items() if k.startswith("browser:")), abs=0.005)
+    assert r["cores"]["browser:renderer"] > 0  # the page's own process
     for argv, said in ((["--vary", "colour=red"], "expected LEVER=V1,V2 with a lever of size"),
                        (["--condition", "feeds3"], "no condition feeds3 in .*live_search.yaml; "
                                                    "it has feeds1, feeds4, feeds9, feeds16")):
