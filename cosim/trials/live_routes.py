@@ -421,7 +421,9 @@ class LiveConsole:
                                f"got {v:g}")
             out[key] = v
         run.page_timing = out
-        await run_in_threadpool(write_json_atomic, run.out_dir / "page_timing.json", out)
+        if run.out_dir.is_dir():  # not yet while the run is being built: the page's
+            # next report (every 2 s, and one at the end) writes it
+            await run_in_threadpool(write_json_atomic, run.out_dir / "page_timing.json", out)
         return JSONResponse(out)
 
     def close(self) -> None:

@@ -290,6 +290,28 @@ def test_timing_over_the_studys_limits_is_flagged(tmp_path: Path) -> None:
         load_study(live_study(tmp_path, head + "timing_limits: {dropped_percent: 101}\n"))
 
 
+def test_the_page_s_timing_before_the_run_has_a_folder_is_kept(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The page may report its timing while the run is still being built,
+    before the run's folder exists: the timing is kept with the run (its
+    status) and written to the folder by a later report, not a server error."""
+    from cosim.trials.live import LiveRun
+
+    monkeypatch.setattr(LiveRun, "start", lambda self: None)  # built, never started
+    with live_server(live_study(tmp_path)) as server:
+        status, s = server.request("POST", "/api/sessions", {"participant": "early", **PROFILE})
+        assert status == 201, s
+        _start(server, s["id"])
+        status, out = server.request("POST", f"/api/sessions/{s['id']}/live/timing",
+                                     {"trial_index": 0, "frames_received": 0,
+                                      "frames_drawn": 0, "latency_samples": 0,
+                                      "counter_mismatches": 0})
+        assert status == 200, out
+        status, v = server.request("GET", f"/api/sessions/{s['id']}/live")
+        assert v["live"]["page_timing"]["frames_received"] == 0, v
+        assert not Path(v["live"]["out_dir"]).exists()
+
+
 @pytest.mark.integration  # a live run of a few seconds
 def test_a_slow_page_loses_frames_and_the_run_keeps_real_time(tmp_path: Path,
                                                               chromium: str) -> None:
