@@ -66,7 +66,9 @@ def test_a_paused_run_gives_the_states_of_one_never_paused(mixed_scenario: Path,
     assert part.paused_at == 364 and not run.paused  # the first exchange at or after 361
     assert same_states(read_states(plain.out_dir), read_states(held.out_dir))
     assert part.ticks == list(range(0, 720, 4))  # every exchange, none skipped
-    assert held.summary["paused_s"] >= 0.4 and "paused_s" not in plain.summary
+    # held from the end of the exchange that asked (its timer already running)
+    # to the resume 0.4 s after the ask: 0.4 s less what was left of that exchange
+    assert held.summary["paused_s"] >= 0.2 and "paused_s" not in plain.summary
     # the pause is not the loop's time
     assert held.summary["wall_time_s"] < held.summary["paused_s"] + plain.summary[
         "wall_time_s"] * 3
