@@ -5,10 +5,11 @@ with exit 0, or exit 2 and messages that carry their file line; never a
 traceback (an exception escaping ``main``), a hang (a watchdog fails a case
 that takes too long) or a file written outside the run folder.
 
-Seeded and bounded: the default suite runs ``MUTANTS_PER_SCENARIO`` mutants
-of each scenario (about 400 validations and a dozen runs, ~40 s here);
-``COSIM_FUZZ_SCALE=N`` multiplies that, and the ``slow`` test runs twenty
-times as many with another seed (``python -m pytest -m slow -k fuzz``).
+Seeded and bounded: the integration tier runs ``MUTANTS_PER_SCENARIO``
+mutants of each scenario (about 260 validations and a dozen runs, ~20 s
+here); ``COSIM_FUZZ_SCALE=N`` multiplies that, and the ``slow`` test runs
+``SLOW_MUTANTS_PER_SCENARIO`` of each with another seed (``python -m pytest
+-m slow -k fuzz``).
 """
 
 from __future__ import annotations
@@ -29,7 +30,10 @@ from cosim.scenario import load_scenario
 
 REPO = Path(__file__).resolve().parent.parent
 SCENARIOS = sorted((REPO / "scenarios").rglob("*.yaml"))
-MUTANTS_PER_SCENARIO = 25
+MUTANTS_PER_SCENARIO = 12
+#: the slow test's mutants of each scenario, and its short runs in all
+SLOW_MUTANTS_PER_SCENARIO = 500
+SLOW_RUNS = 240
 RUNS = 12  # short runs of mutants that validate, per fuzz pass
 VALIDATE_LIMIT_S = 20  # a mutant slower than this to validate is a hang
 RUN_LIMIT_S = 60
@@ -229,11 +233,12 @@ def check_run(path: Path, cwd: Path, capsys: pytest.CaptureFixture[str]) -> None
     assert not outside, outside
 
 
-def fuzz(tmp_path: Path, capsys: pytest.CaptureFixture[str], seed: int, scale: int) -> dict:
+def fuzz(tmp_path: Path, capsys: pytest.CaptureFixture[str], seed: int, scale: int,
+         runs: int | None = None) -> dict:
     rng = random.Random(seed)
     base = tmp_path / "a" / "b" / "c" / "d"  # room for ../../../ to land inside tmp_path
     stats = {"mutants": 0, "valid": 0, "runs": 0}
-    runs_left = RUNS * scale
+    runs_left = RUNS * scale if runs is None else runs
     for scenario in SCENARIOS:
         text = scenario.read_text()
         # relative files (ground images) resolve as from the original's folder
@@ -277,5 +282,6 @@ def test_mutated_scenarios_validate_and_run_cleanly(tmp_path: Path, capsys) -> N
 
 @pytest.mark.slow
 def test_mutated_scenarios_long(tmp_path: Path, capsys) -> None:
-    stats = fuzz(tmp_path, capsys, seed=1313, scale=20)
+    scale = -(-SLOW_MUTANTS_PER_SCENARIO // MUTANTS_PER_SCENARIO)
+    stats = fuzz(tmp_path, capsys, seed=1313, scale=scale, runs=SLOW_RUNS)
     assert stats["runs"] >= RUNS, stats
