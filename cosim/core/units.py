@@ -12,5 +12,7 @@ M_TO_FT = 1.0 / FT_TO_M
 KT_TO_MPS = 1852.0 / 3600.0
 #: the pound-force (N)
 LBF_TO_N = 4.4482216152605
+#: pound (mass) to kilogram
+LB_TO_KG = 0.45359237
 #: standard gravity (m/s^2)
 G_MPS2 = 9.80665

@@ -100,6 +100,9 @@ class RunContext:
     #: the states gathered inside the last exchange for the rows participants
     #: asked for (``watch_requests``); None: nobody asked
     watched: WatchedStates | None = None
+    #: the state array's column names (``STATE_FIELDS``, then those the
+    #: run's vehicle classes add, such as ``fuel_kg``); empty outside a run
+    columns: tuple[str, ...] = ()
     #: how long a worker process of a participant (a render worker) may be silent
     #: while it has work, as the pool's workers (``--step-timeout-s``)
     step_timeout_s: float = 60.0

@@ -462,6 +462,7 @@ class Run:
         ctx = RunContext(scn, self.out, ids, scn.origin.frame, start_ned, hz,
                          scn.rates.control_every, events, self.mavlink, pool.workers,
                          commander, frame_taps=[], watched=watched,
+                         columns=tuple(f.name for f in pool.layout),
                          step_timeout_s=self.step_timeout_s)
         for part in self.participants:  # taps on the frames, before the cameras start
             pre = getattr(part, "prepare", None)

@@ -24,7 +24,7 @@ Study keys::
         questions:
           - {id: where, kind: last_target, tolerance_m: 50}
           - {id: north, kind: count, sector: [[0, 0], [500, 0], [500, 500], [0, 500]]}
-          - {id: low, kind: choice, which: lowest, of: alt_agl_m}
+          - {id: fuel, kind: choice, which: lowest, of: fuel_kg}
           - {id: far, kind: choice, which: highest, of: distance_m, from: [0, 0]}
 
 A block is the main (not practice) trials between two breaks
@@ -275,6 +275,25 @@ def check_probe_times(ctx: Problems, probes: tuple[Probe, ...],
                                                 f"asked")
 
 
+def check_fuel_questions(ctx: Problems, probes: tuple[Probe, ...],
+                         no_fuel: dict[str, tuple[str, ...]]) -> None:
+    """A fuel question where a live condition (``{id: its vehicles whose
+    class records no fuel}``) has aircraft without fuel could not be scored:
+    refused."""
+    lacking = {cid: ids for cid, ids in no_fuel.items() if ids}
+    if not lacking:
+        return
+    shown = "; ".join(f"{cid}: {', '.join(ids[:5])}{' ...' if len(ids) > 5 else ''}"
+                      for cid, ids in list(lacking.items())[:5])
+    for p in probes:
+        for j, q in enumerate(p.questions):
+            if q.of == "fuel_kg":
+                ctx.err(("sagat", p.index, "questions", j, "of"),
+                        f"fuel_kg: aircraft of these conditions record no fuel (their class "
+                        f"has none: a batched fixed-wing, a multirotor or a ground vehicle), "
+                        f"so the answer could not be scored: {shown}")
+
+
 def _question(ctx: Problems, d: Any, at: tuple[Any, ...], j: int) -> Question | None:
     before = len(ctx.problems)
     r = Reader(ctx, d, at, QUESTION_KEYS)
@@ -305,11 +324,7 @@ def _question(ctx: Problems, d: Any, at: tuple[Any, ...], j: int) -> Question | 
     elif kind == "choice":
         which = r.string("which", choices=WHICH)
         of = r.string("of", choices=CHOICE_OF)
-        if of == "fuel_kg":  # scoring needs the fuel at the freeze: no run records it
-            ctx.err(at + ("of",), "fuel_kg: the runs record no fuel (states.parquet has no "
-                                  "fuel column), so the answer could not be scored; ask of "
-                                  "alt_agl_m, alt_msl_m, airspeed_mps or distance_m")
-        elif of == "distance_m":
+        if of == "distance_m":
             if "from" not in r.d:
                 ctx.err(at, "missing required key 'from' (the point [north_m, east_m] the "
                             "distance is from)")

@@ -98,9 +98,11 @@ class FreezeProbes:
         _, probe = self._due.pop(0)
         s = states[:, _COLS]
         n, e, _ = self.ctx.frame.geodetic_to_ned(s[:, 0], s[:, 1], s[:, 2])
+        columns = list(self.ctx.columns)
+        fuel = states[:, columns.index("fuel_kg")] if "fuel_kg" in columns else None
         vehicles = tuple(
             VehicleAt(vid, float(n[i]), float(e[i]), float(s[i, 2]), float(s[i, 3]),
-                      float(s[i, 4]))
+                      float(s[i, 4]), None if fuel is None else float(fuel[i]))
             for i, vid in enumerate(self.ctx.ids) if np.isfinite(s[i]).all())
         with self._lock:
             self.freezes[probe.index] = Freeze(probe.index, tick, tick / self.ctx.physics_hz,

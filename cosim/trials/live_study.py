@@ -117,6 +117,9 @@ class LiveCondition:
     taskable: tuple[str, ...] = ()
     #: those of them with a camera on a gimbal (those that may be told to look)
     lookers: tuple[str, ...] = ()
+    #: the vehicles whose class records no fuel (a SAGAT fuel question cannot
+    #: be scored for them)
+    no_fuel: tuple[str, ...] = ()
 
     @property
     def fingerprint(self) -> dict[str, Any]:
@@ -200,7 +203,8 @@ def read_live_conditions(ctx: Problems, items: Any, base: Path, roots: tuple[Pat
             out.append(LiveCondition(cid, path, tuple(feeds), duration, tuple(conds.items()),
                                      sha, layers, tasking, radius_m or ORBIT_RADIUS_M,
                                      taskable if tasking else (),
-                                     lookers if "look" in tasking else ()))
+                                     lookers if "look" in tasking else (),
+                                     fuelless_vehicles(scn)))
     ids = [c.id for c in out]
     if len(set(ids)) != len(ids):
         ctx.err(("scenarios",), f"condition ids given twice: "
@@ -239,6 +243,13 @@ def commandable_vehicles(scn: Any) -> tuple[str, ...]:
     from cosim.vehicles import get_class
 
     return tuple(v.id for v in scn.vehicles if get_class(v.vehicle_class).commandable)
+
+
+def fuelless_vehicles(scn: Any) -> tuple[str, ...]:
+    """The ids of a loaded scenario's vehicles whose class records no fuel."""
+    from cosim.vehicles import get_class
+
+    return tuple(v.id for v in scn.vehicles if not get_class(v.vehicle_class).logs_fuel)
 
 
 def gimbal_vehicles(scn: Any) -> set[str]:

@@ -22,10 +22,11 @@ The true state is a ``FreezeState``: the vehicles as a run's state log
 holds them (``from_state_log`` reads one from ``states.parquet`` at a time)
 and the targets with when each was last seen in any feed (visible by the
 reports' rules, ``live_scoring``): ``freeze_state_from_run`` makes one from
-a live trial's run folder, or the live console hands one in. The state
-log holds no fuel today, so a study's ``fuel_kg`` question is refused when
-the study is read (``instruments``); one is scored only from a state that
-carries it (``VehicleAt.fuel_kg``), and refused (``ScoringError``)
+a live trial's run folder, or the live console hands one in. The fuel on
+board is the state log's ``fuel_kg`` (JSBSim fixed-wings; a study whose
+conditions have aircraft that record none is refused a fuel question when it
+is read, ``instruments``); a fuel question is scored only from a state that
+carries it (``VehicleAt.fuel_kg``, finite), and refused (``ScoringError``)
 otherwise. Nothing
 here knows about HTTP, the study file or the store.
 """
@@ -243,9 +244,9 @@ def quantity(q: Question, v: VehicleAt) -> float:
         pn, pe = q.point or (0.0, 0.0)
         return math.hypot(v.north_m - pn, v.east_m - pe)
     value = getattr(v, q.of or "")
-    if value is None:
+    if value is None or not math.isfinite(value):
         raise ScoringError(f"question {q.id!r} asks {q.of}, which the state at the freeze does "
-                           f"not hold for {v.id!r} (the state log records no fuel)")
+                           f"not hold for {v.id!r} (its class records no fuel)")
     return float(value)
 
 

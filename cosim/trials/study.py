@@ -88,6 +88,7 @@ from cosim.trials.clips import GtFrame, csv_rows, inside, probe_video, read_boun
 from cosim.trials.instruments import (
     STUDY_KEYS,
     TlxSetting,
+    check_fuel_questions,
     check_probe_times,
     parse_sagat,
     parse_tlx,
@@ -320,6 +321,7 @@ def parse_study(text: str, path: Path) -> Study:
         live = read_live_conditions(ctx, top.d.get("scenarios"), base, tuple(roots),
                                     condition_values)
         check_probe_times(ctx, sagat, {c.id: c.duration_s for c in live})
+        check_fuel_questions(ctx, sagat, {c.id: c.no_fuel for c in live})
         scoring = read_scoring(ctx, top.d.get("scoring", {}))
         limits = read_timing_limits(ctx, top.d.get("timing_limits", {}))
     elif any(k in top.d for k in LIVE_KEYS):

@@ -131,6 +131,9 @@ class VehicleClass:
     #: state columns it fills beyond the common ones (``StateField``s; for
     #: JSBSim kinds read from properties, for batched kinds written by the model)
     state_columns: tuple[StateField, ...] = ()
+    #: whether its rows' ``fuel_kg`` column is the fuel on board (a SAGAT
+    #: question of fuel is asked only of aircraft that carry it)
+    logs_fuel: bool = False
     #: the camera mount of a camera that names none
     default_camera_mount: str = "nadir"
     #: how far above the vehicle's position (its state's altitude) its cameras sit

@@ -215,7 +215,7 @@ def test_replay_reproduces_the_states_and_the_video(operated: dict[str, Any],
     res = replay_run(operated["run"], tmp_path / "again")
     assert res.identical, res.differences
     assert res.run.ticks == 180 and res.run.summary["command_inbox"] == {"commands": 3}
-    assert res.compared == ["states.parquet: 32 rows, 26 columns",
+    assert res.compared == ["states.parquet: 32 rows, 27 columns",
                             "cameras/uav1_belly.mp4: the same bytes",
                             "cameras/uav1_belly.gt.csv: the same bytes"]
     assert _log(tmp_path / "again") == _log(operated["run"])

@@ -39,7 +39,8 @@ def test_run_writes_every_output(mixed_scenario: Path, tmp_path: Path) -> None:
     out = res.out_dir
     t = read_states(out)
     assert set(REQUIRED) <= set(t.column_names)
-    assert tuple(t.column_names) == STATE_COLUMNS + ("contact_force_n",)  # fixed-wings' own
+    # then the fixed-wings' own
+    assert tuple(t.column_names) == STATE_COLUMNS + ("contact_force_n", "fuel_kg")
     logged_ticks = sorted(set(t["tick"].to_pylist()))
     assert logged_ticks == list(range(0, 721, 12))  # 10 Hz of 120 Hz, 6 s, incl. tick 0
     assert t.num_rows == len(logged_ticks) * 7

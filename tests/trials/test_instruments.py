@@ -213,9 +213,6 @@ def test_sagat_probes_are_read() -> None:
      r"questions\[0\]: missing required key 'from'"),
     ("sagat:\n  - {at_s: 5, questions: [{kind: choice, which: lowest, of: alt_agl_m, "
      "from: [0, 0]}]}\n", r"questions\[0\]\.from: only a distance_m question has a point"),
-    ("sagat:\n  - {at_s: 5, questions: [{kind: choice, which: lowest, of: fuel_kg}]}\n",
-     r"s\.yaml:2: sagat\[0\]\.questions\[0\]\.of: fuel_kg: the runs record no fuel "
-     r"\(states\.parquet has no fuel column\), so the answer could not be scored"),
     ("sagat:\n  - {at_s: 5, questions: [{kind: last_target, sector: [[0, 0], [1, 0], [0, 1]]}]}\n",
      r"questions\[0\]\.sector: not a key of a last_target question \(its keys: tolerance_m\)"),
     ("sagat:\n  - {at_s: 5, questions: [{id: wh\u00e9re, kind: last_target}]}\n",

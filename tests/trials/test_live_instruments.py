@@ -43,6 +43,7 @@ sagat:
       - {{id: north, kind: count, sector: [[0, -100], [1000, -100], [1000, 30], [0, 30]]}}
       - {{id: far, kind: choice, which: highest, of: distance_m, from: [0, 0]}}
       - {{id: low, kind: choice, which: lowest, of: alt_agl_m}}
+      - {{id: fuel, kind: choice, which: lowest, of: fuel_kg}}
 """
 #: the participant's TLX: ratings, and in each pair the scale earlier in PREFER
 RATINGS = {"mental": 70, "physical": 10, "temporal": 85, "performance": 40, "effort": 60,
@@ -74,7 +75,7 @@ def _answer_tlx(page: Any, picture: Path) -> None:
 def test_a_freeze_asks_the_probe_on_a_blank_page_and_scores_it_against_the_run(
         tmp_path: Path, chromium: str) -> None:
     """At 2.8 s the run is paused (the map's clock stops), the page covers
-    the feeds and the map and asks the probe's four questions; the answers
+    the feeds and the map and asks the probe's five questions; the answers
     are stored and scored against the aircraft at the freeze's tick as the
     same scenario's run without the console logs them, and the truck where
     the scenario puts it (seen in uav1's feed before the freeze). The run
@@ -103,7 +104,7 @@ def test_a_freeze_asks_the_probe_on_a_blank_page_and_scores_it_against_the_run(
             status, now = server.request("GET", f"/api/sessions/{sid}/live/freeze")
             assert status == 200 and now["freeze"]["time_s"] == FREEZE_S, now
             assert [q["id"] for q in now["freeze"]["questions"]] == ["where", "north", "far",
-                                                                    "low"]
+                                                                    "low", "fuel"]
             assert "truth" not in str(now)  # the page is never told the answers
             # the experimenter sees why the run stands still
             status, v = server.request("GET", f"/api/sessions/{sid}/live")
@@ -141,6 +142,8 @@ def test_a_freeze_asks_the_probe_on_a_blank_page_and_scores_it_against_the_run(
             page.click("[data-question='far'] button.choice:text-is('uav2')")
             page.wait_for_selector("[data-question='low']")
             page.click("[data-question='low'] button.choice:text-is('uav1')")
+            page.wait_for_selector("[data-question='fuel']")
+            page.click("[data-question='fuel'] button.choice:text-is('uav2')")
             page.wait_for_function("window.liveInstruments.posted.some((p) => "
                                    "p.body.instrument === 'sagat' && p.status === 201)")
             page.wait_for_function("document.body.dataset.freeze === undefined")
@@ -167,7 +170,7 @@ def test_a_freeze_asks_the_probe_on_a_blank_page_and_scores_it_against_the_run(
     _same_states(folder, tmp_path / "alone")  # paused or not, the same states
     # the scores, from the run without the console: its aircraft at the freeze's tick
     t = pq.read_table(tmp_path / "alone" / "states.parquet").to_pydict()
-    at = {t["vehicle"][i]: {k: t[k][i] for k in ("north_m", "east_m", "alt_agl_m")}
+    at = {t["vehicle"][i]: {k: t[k][i] for k in ("north_m", "east_m", "alt_agl_m", "fuel_kg")}
           for i in range(len(t["tick"])) if t["tick"][i] == freeze_tick}
     assert sorted(at) == ["uav1", "uav2"]
     count = sum(0 < a["north_m"] < 1000 and -100 < a["east_m"] < 30 for a in at.values())
@@ -191,7 +194,14 @@ def test_a_freeze_asks_the_probe_on_a_blank_page_and_scores_it_against_the_run(
     d = math.hypot(answer["where"]["north_m"], answer["where"]["east_m"])
     assert scores["where"] == {"correct": d <= 50, "error": pytest.approx(d, abs=1e-9),
                                "truth": {"target": "truck1", "north_m": 0.0, "east_m": 0.0}}
-    assert row["correct"] == sum(s["correct"] for s in scores.values()) and row["questions"] == 4
+    # fuel: the fuel on board at the freeze as the run logged it (each tank's, burnt)
+    fuel = {k: a["fuel_kg"] for k, a in at.items()}
+    assert all(0.0 < f < t["fuel_kg"][0] + 1e-9 for f in fuel.values()), fuel
+    assert scores["fuel"]["truth"] == sorted(k for k, f in fuel.items()
+                                             if f == min(fuel.values()))
+    assert scores["fuel"]["correct"] == ("uav2" in scores["fuel"]["truth"])
+    assert scores["fuel"]["error"] == pytest.approx(fuel["uav2"] - min(fuel.values()), abs=1e-12)
+    assert row["correct"] == sum(s["correct"] for s in scores.values()) and row["questions"] == 5
     # the TLX: raw = the mean of the six; weights = each scale's wins among the 15 pairs
     weights = {k: 5 - PREFER.index(k) for k in RATINGS}
     assert tlx["answer"]["weights"] == weights and tlx["answer"]["ratings"] == RATINGS
@@ -221,12 +231,33 @@ def test_a_live_sessions_sagat_answer_needs_its_trial_frozen_for_the_probe(
             200, {"instrument": None})
         body = {"instrument": "sagat", "trial_index": 0, "probe": 0,
                 "answers": {"where": {"north_m": 0, "east_m": 0}, "north": 1, "far": "uav1",
-                            "low": "uav2"}}
+                            "low": "uav2", "fuel": "uav1"}}
         status, out = server.request("POST", f"/api/sessions/{sid}/instruments", body)
         assert status == 409
         assert re.fullmatch(r"probe 0: trial 0 of this session has not been frozen for it",
                             out["error"]), out
         assert server.store.instrument_answers(sid) == []
+
+
+def test_a_fuel_question_is_asked_only_of_aircraft_that_record_fuel(tmp_path: Path) -> None:
+    """JSBSim fixed-wings log the fuel on board (``fuel_kg``); a condition
+    with an aircraft whose class records none (here a batched fixed-wing,
+    whose mass is constant) cannot have a fuel question scored: refused when
+    the study is read, naming the condition and the aircraft."""
+    from cosim.errors import ConfigError
+    from cosim.trials.study import load_study
+
+    st = load_study(live_study(tmp_path, STUDY))
+    assert [q.of for q in st.sagat[0].questions][-1] == "fuel_kg" and st.live[0].no_fuel == ()
+    pair = tmp_path / "pair.yaml"
+    pair.write_text(pair.read_text().replace("  - id: uav2\n    model: uav700",
+                                             "  - id: uav2\n    class: fixed_wing_batched\n"
+                                             "    model: uav700"))
+    (tmp_path / "study.yaml").write_text(STUDY)
+    with pytest.raises(ConfigError, match=r"study\.yaml:\d+: sagat\[0\]\.questions\[4\]\.of: "
+                                          r"fuel_kg: aircraft of these conditions record no fuel "
+                                          r".*could not be scored: two: uav2$"):
+        load_study(tmp_path / "study.yaml")
 
 
 def test_the_example_study_with_the_instruments_reads() -> None:

@@ -21,7 +21,7 @@ import numpy as np
 
 from cosim.core.geo import LocalFrame
 from cosim.core.state import StateField, VehicleSpec
-from cosim.core.units import KT_TO_MPS, LBF_TO_N
+from cosim.core.units import KT_TO_MPS, LB_TO_KG, LBF_TO_N
 from cosim.guidance.commands import Command
 from cosim.guidance.safety import Limits, floor_problems, radius_problems
 from cosim.vehicles.base import Guidance, SwarmLimits, VehicleClass
@@ -44,8 +44,11 @@ class FixedWing(VehicleClass):
     contact_is_impact = True
     #: the ground's push on skids or wheels (N; 0 in the air): a landing's
     #: load, in the log
+    #: and the fuel on board (kg; every tank's), for the operator's questions
     state_columns: tuple[StateField, ...] = (
-        StateField("contact_force_n", "forces/fbz-gear-lbs", -LBF_TO_N),)
+        StateField("contact_force_n", "forces/fbz-gear-lbs", -LBF_TO_N),
+        StateField("fuel_kg", "propulsion/total-fuel-lbs", LB_TO_KG))
+    logs_fuel = True
     flag_events = {"stalled": ("stall", "onset", "recovery"),
                    "stall_protection_active": ("stall_protection", "active", "inactive")}
     mavlink = ARDUPLANE

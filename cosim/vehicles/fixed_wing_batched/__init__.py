@@ -82,6 +82,8 @@ class FixedWingBatched(FixedWing):
     #: that flat frame; guidance reads it rather than converting lat/lon)
     state_columns = (*FIXED_WING.state_columns, StateField("frame_north_m", None),
                      StateField("frame_east_m", None))
+    #: a constant mass: its fuel_kg column is NaN
+    logs_fuel = False
     trims = False
 
     def resolve_model(self, model: str | None, aircraft_path: tuple[str, ...]) -> ModelChoice:

@@ -100,6 +100,7 @@ class PointMassModel:
         self.dt = dt_s
         cols = list(columns)
         self.c_contact = cols.index("contact_force_n")
+        self.c_fuel = cols.index("fuel_kg")  # not modelled: NaN (unknown)
         self.c_north, self.c_east = cols.index("frame_north_m"), cols.index("frame_east_m")
         ch = list(channels)
         self.idx = {c: ch.index(c) for c in INPUTS if c in ch}
@@ -224,6 +225,7 @@ class PointMassModel:
 
     def write_states(self, out: np.ndarray) -> None:
         out[:] = 0.0
+        out[:, self.c_fuel] = np.nan
         # down of the point at height h over (n, e): the flat-earth value less
         # the Earth's curvature drop (latitude and longitude within 5 mm of
         # the exact LocalFrame.place over 50 km; the height reported is h)
