@@ -190,12 +190,14 @@ vehicles:
 def test_the_swarm_flies_it_as_it_flies_jsbsim(tmp_path) -> None:
     """The bundled rendezvous (eight uav700s on a 4 km circle, converge within
     300 m): as batched point masses it converges too, in a time within 15% of
-    the JSBSim aircraft's."""
+    the JSBSim aircraft's. Both converge at about 60 s (58 and 60): 75 s flown
+    holds a batched swarm 15% slower than the JSBSim one, and one slower still
+    fails either way (no convergence in the run is an error)."""
     from cosim.scenario import load_scenario
 
     repo = Path(__file__).resolve().parent.parent.parent
     src = (repo / "scenarios/swarm/rendezvous.yaml").read_text().replace(
-        "duration_s: 150", "duration_s: 90")
+        "duration_s: 150", "duration_s: 75")
     times = {}
     for tier, text in (("jsbsim", src), ("batched", src.replace(
             "    model: uav700\n", "    model: uav700\n    class: fixed_wing_batched\n"))):
