@@ -26,10 +26,13 @@ is taken with that aircraft selected and the menu open at that point:
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import shutil
 import tempfile
 import urllib.request
+from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -80,6 +83,60 @@ def _menu(page: Any, vehicle: str, north_m: float, east_m: float) -> None:
     page.wait_for_selector("#taskmenu button")
 
 
+@dataclass
+class LiveTrial:
+    """A live trial being followed: the study (a copy), the app's address,
+    the session and the participant's page."""
+
+    study: Any
+    url: str
+    session: dict[str, Any]
+    page: Any
+
+    def status(self) -> dict[str, Any]:
+        """The session's live run as the experimenter's page sees it."""
+        with urllib.request.urlopen(f"{self.url}/api/sessions/{self.session['id']}/live") as r:
+            return dict(json.loads(r.read())["live"])
+
+    def stop(self) -> None:
+        _post(f"{self.url}/api/sessions/{self.session['id']}/live/stop", {})
+
+
+@contextlib.contextmanager
+def live_trial(study_file: str, condition: str) -> Iterator[LiveTrial]:
+    """Serve a copy of the study (in a temporary folder, its databases and run
+    folders left behind), open a session's live page in headless Chromium and
+    start the trial of ``condition``; the page, browser, server and store are
+    closed after."""
+    from playwright.sync_api import sync_playwright
+
+    with tempfile.TemporaryDirectory() as tmp:
+        src = Path(study_file).resolve().parent
+        shutil.copytree(src, Path(tmp) / "study", ignore=shutil.ignore_patterns(
+            "*.sqlite*", "*-live"))
+        study = load_study(Path(tmp) / "study" / Path(study_file).name)
+        store = Store(Path(tmp) / "demo.sqlite")
+        try:
+            with served_in_thread(make_app(study, store), lifespan="auto",
+                                  stop_timeout_s=30) as url:
+                s = _post(f"{url}/api/sessions", {"participant": "demo", **PROFILE})
+                trial = next(t["index"] for t in s["trials"] if t["condition"] == condition)
+                with sync_playwright() as pw:
+                    browser = pw.chromium.launch(executable_path=CHROMIUM)
+                    try:
+                        page = browser.new_page(viewport={"width": WIDTH_PX,
+                                                          "height": HEIGHT_PX})
+                        page.goto(f"{url}/live?session={s['id']}")
+                        page.wait_for_function("document.body.dataset.phase === 'waiting'")
+                        _post(f"{url}/api/sessions/{s['id']}/live/start",
+                              {"trial_index": trial})
+                        yield LiveTrial(study, url, s, page)
+                    finally:
+                        browser.close()
+        finally:
+            store.close()
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     ap.add_argument("study")
@@ -94,48 +151,25 @@ def main() -> None:
     ap.add_argument("--menu", metavar="VEHICLE:NORTH_M:EAST_M",
                     help="take the picture with the map's menu open here")
     a = ap.parse_args()
-    from playwright.sync_api import sync_playwright
-
-    with tempfile.TemporaryDirectory() as tmp:
-        src = Path(a.study).resolve().parent
-        shutil.copytree(src, Path(tmp) / "study", ignore=shutil.ignore_patterns(
-            "*.sqlite*", "*-live"))
-        study = load_study(Path(tmp) / "study" / Path(a.study).name)
-        store = Store(Path(tmp) / "demo.sqlite")
-        try:
-            with served_in_thread(make_app(study, store), lifespan="auto",
-                                  stop_timeout_s=30) as url:
-                s = _post(f"{url}/api/sessions", {"participant": "demo", **PROFILE})
-                trial = next(t["index"] for t in s["trials"] if t["condition"] == a.condition)
-                with sync_playwright() as pw:
-                    browser = pw.chromium.launch(executable_path=CHROMIUM)
-                    page = browser.new_page(viewport={"width": WIDTH_PX, "height": HEIGHT_PX})
-                    page.goto(f"{url}/live?session={s['id']}")
-                    page.wait_for_function("document.body.dataset.phase === 'waiting'")
-                    _post(f"{url}/api/sessions/{s['id']}/live/start", {"trial_index": trial})
-                    page.wait_for_function("document.body.dataset.phase === 'live'",
-                                           timeout=60_000)
-                    for k, task in enumerate(a.task):
-                        vehicle, action, north_m, east_m = task.split(":")
-                        _clock_at(page, 2.0 + k)
-                        _menu(page, vehicle, float(north_m), float(east_m))
-                        page.click(f"#taskmenu button[data-action='{action}']")
-                    _clock_at(page, a.at_s)
-                    if a.menu:
-                        vehicle, north_m, east_m = a.menu.split(":")
-                        _menu(page, vehicle, float(north_m), float(east_m))
-                    page.screenshot(path=a.out)
-                    if a.until_end:
-                        page.wait_for_function("document.body.dataset.phase === 'ended'",
-                                               timeout=3_600_000)
-                    browser.close()
-                if a.until_end:
-                    with urllib.request.urlopen(f"{url}/api/sessions/{s['id']}/live") as r:
-                        print(json.dumps(json.loads(r.read())["live"], indent=1))
-                else:
-                    _post(f"{url}/api/sessions/{s['id']}/live/stop", {})
-        finally:
-            store.close()
+    with live_trial(a.study, a.condition) as lt:
+        page = lt.page
+        page.wait_for_function("document.body.dataset.phase === 'live'", timeout=60_000)
+        for k, task in enumerate(a.task):
+            vehicle, action, north_m, east_m = task.split(":")
+            _clock_at(page, 2.0 + k)
+            _menu(page, vehicle, float(north_m), float(east_m))
+            page.click(f"#taskmenu button[data-action='{action}']")
+        _clock_at(page, a.at_s)
+        if a.menu:
+            vehicle, north_m, east_m = a.menu.split(":")
+            _menu(page, vehicle, float(north_m), float(east_m))
+        page.screenshot(path=a.out)
+        if a.until_end:
+            page.wait_for_function("document.body.dataset.phase === 'ended'",
+                                   timeout=3_600_000)
+            print(json.dumps(lt.status(), indent=1))
+        else:
+            lt.stop()
     print(f"wrote {a.out}")
 
 

@@ -24,18 +24,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import shutil
-import tempfile
 import time
-import urllib.request
 from pathlib import Path
 from typing import Any
 
-from live_console_screenshot import CHROMIUM, HEIGHT_PX, PROFILE, WIDTH_PX, _post
-
-from cosim.trials.server import make_app, served_in_thread
-from cosim.trials.store import Store
-from cosim.trials.study import load_study
+from live_console_screenshot import live_trial
 
 
 def _answer(page: Any, qid: str) -> None:
@@ -63,59 +56,37 @@ def main() -> None:
     ap.add_argument("--until-end", action="store_true",
                     help="answer every probe, follow the trial to its end, print its timing")
     a = ap.parse_args()
-    from playwright.sync_api import sync_playwright
-
-    with tempfile.TemporaryDirectory() as tmp:
-        src = Path(a.study).resolve().parent
-        shutil.copytree(src, Path(tmp) / "study", ignore=shutil.ignore_patterns(
-            "*.sqlite*", "*-live"))
-        study = load_study(Path(tmp) / "study" / Path(a.study).name)
-        ids = [q.id for q in study.sagat[a.probe].questions]
+    with live_trial(a.study, a.condition) as lt:
+        page = lt.page
+        ids = [q.id for q in lt.study.sagat[a.probe].questions]
         shown = a.question or ids[0]
-        store = Store(Path(tmp) / "demo.sqlite")
-        try:
-            with served_in_thread(make_app(study, store), lifespan="auto",
-                                  stop_timeout_s=30) as url:
-                s = _post(f"{url}/api/sessions", {"participant": "demo", **PROFILE})
-                trial = next(t["index"] for t in s["trials"] if t["condition"] == a.condition)
-                with sync_playwright() as pw:
-                    browser = pw.chromium.launch(executable_path=CHROMIUM)
-                    page = browser.new_page(viewport={"width": WIDTH_PX, "height": HEIGHT_PX})
-                    page.goto(f"{url}/live?session={s['id']}")
-                    page.wait_for_function("document.body.dataset.phase === 'waiting'")
-                    _post(f"{url}/api/sessions/{s['id']}/live/start", {"trial_index": trial})
-                    page.wait_for_function(f"document.body.dataset.freeze === '{a.probe}'",
-                                           timeout=600_000)
-                    for qid in ids[:ids.index(shown)]:
-                        page.wait_for_selector(f"[data-question='{qid}']")
-                        _answer(page, qid)
-                    page.wait_for_selector(f"[data-question='{shown}']")
-                    page.screenshot(path=a.out)
-                    if a.until_end:
-                        time.sleep(a.hold_s)
-                        for qid in ids[ids.index(shown):]:
-                            page.wait_for_selector(f"[data-question='{qid}']")
-                            _answer(page, qid)
-                        for probe in study.sagat[a.probe + 1:]:
-                            page.wait_for_function(f"document.body.dataset.freeze === "
-                                                   f"'{probe.index}'", timeout=600_000)
-                            for q in probe.questions:
-                                page.wait_for_selector(f"[data-question='{q.id}']")
-                                _answer(page, q.id)
-                        page.wait_for_function("document.body.dataset.phase === 'ended'",
-                                               timeout=3_600_000)
-                    browser.close()
-                if a.until_end:
-                    with urllib.request.urlopen(f"{url}/api/sessions/{s['id']}/live") as r:
-                        live = json.loads(r.read())["live"]
-                    summary = json.loads((Path(live["out_dir"]) / "summary.json").read_text())
-                    print(json.dumps({"live": live, **{k: summary.get(k) for k in (
-                        "sagat_freezes", "paused_s", "wall_time_s", "real_time_factor",
-                        "realtime")}}, indent=1))
-                else:
-                    _post(f"{url}/api/sessions/{s['id']}/live/stop", {})
-        finally:
-            store.close()
+        page.wait_for_function(f"document.body.dataset.freeze === '{a.probe}'",
+                               timeout=600_000)
+        for qid in ids[:ids.index(shown)]:
+            page.wait_for_selector(f"[data-question='{qid}']")
+            _answer(page, qid)
+        page.wait_for_selector(f"[data-question='{shown}']")
+        page.screenshot(path=a.out)
+        if a.until_end:
+            time.sleep(a.hold_s)
+            for qid in ids[ids.index(shown):]:
+                page.wait_for_selector(f"[data-question='{qid}']")
+                _answer(page, qid)
+            for probe in lt.study.sagat[a.probe + 1:]:
+                page.wait_for_function(f"document.body.dataset.freeze === "
+                                       f"'{probe.index}'", timeout=600_000)
+                for q in probe.questions:
+                    page.wait_for_selector(f"[data-question='{q.id}']")
+                    _answer(page, q.id)
+            page.wait_for_function("document.body.dataset.phase === 'ended'",
+                                   timeout=3_600_000)
+            live = lt.status()
+            summary = json.loads((Path(live["out_dir"]) / "summary.json").read_text())
+            print(json.dumps({"live": live, **{k: summary.get(k) for k in (
+                "sagat_freezes", "paused_s", "wall_time_s", "real_time_factor",
+                "realtime")}}, indent=1))
+        else:
+            lt.stop()
     print(f"wrote {a.out}")
 
 
