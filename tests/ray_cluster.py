@@ -40,11 +40,17 @@ class LocalRayCluster:
                     "RAY_AUTH_TOKEN": secrets.token_hex(16), "RAY_USAGE_STATS_ENABLED": "0"}
         self.procs: list[subprocess.Popen[bytes]] = []
 
+    def _where(self, node: int) -> tuple[list[str], str, int]:
+        """Node ``node``'s command prefix (what runs its commands where it is),
+        address and CPUs: here, on ``NODE_IP``."""
+        return [], NODE_IP, self.cpus
+
     def _ray(self, *args: str) -> subprocess.Popen[bytes]:
         ray = Path(sys.executable).with_name("ray")
+        prefix, ip, cpus = self._where(len(self.procs))
         log = open(self.tmp / f"node{len(self.procs)}.log", "wb")  # noqa: SIM115 - kept
-        p = subprocess.Popen([str(ray), "start", *args, "--node-ip-address", NODE_IP,
-                              "--num-cpus", str(self.cpus), "--object-store-memory",
+        p = subprocess.Popen([*prefix, str(ray), "start", *args, "--node-ip-address", ip,
+                              "--num-cpus", str(cpus), "--object-store-memory",
                               str(80 * 1024 * 1024), "--block"], env=self.env, stdout=log,
                              stderr=subprocess.STDOUT, start_new_session=True)
         self.procs.append(p)
@@ -62,8 +68,8 @@ class LocalRayCluster:
     def live_nodes(self) -> int:
         code = (f"import ray,logging;ray.init(address={self.address!r},"
                 "logging_level=logging.ERROR);print(sum(n['Alive'] for n in ray.nodes()))")
-        r = subprocess.run([sys.executable, "-c", code], env=self.env, capture_output=True,
-                           text=True, timeout=60)
+        r = subprocess.run([*self._where(0)[0], sys.executable, "-c", code], env=self.env,
+                           capture_output=True, text=True, timeout=60)
         return int(r.stdout.strip().splitlines()[-1]) if r.returncode == 0 and r.stdout.strip() \
             else 0
 
