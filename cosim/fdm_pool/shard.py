@@ -233,11 +233,16 @@ class Shard:
         vs = self.vehicles
         if setpoints is not None and self.n_channels:
             mine = setpoints[self._rows]
-            written = np.flatnonzero(~np.isnan(mine).all(axis=1))
-            for j in written.tolist():
-                self.current = vs[j].spec.id
-                vs[j].apply(mine[j].tolist())
-            self.current = None
+            # the values written (not NaN), vehicle by vehicle in channel order:
+            # one numpy pass, not a Python test of every channel of every row
+            js, cs = np.nonzero(mine == mine)
+            j = -1
+            try:
+                for j, c, v in zip(js.tolist(), cs.tolist(), mine[js, cs].tolist()):
+                    vs[j].apply(c, v)
+            except BaseException:
+                self.current = vs[j].spec.id if j >= 0 else None
+                raise
             for name, model, rows in self.batches:
                 self.current = f"(the {name} vehicles)"
                 model.apply(setpoints[rows])

@@ -161,11 +161,13 @@ class Vehicle:
     def _touching(self) -> bool:
         return self._gear.get_double_value() != 0.0 or self._agl.get_double_value() <= 0.0
 
-    def apply(self, values: Sequence[float]) -> None:
-        """Write the non-NaN setpoint channel values into the FDM."""
-        for node, v in zip(self._channels, values):
-            if v == v and node is not None:  # v == v: not NaN
-                node.set_double_value(v)
+    def apply(self, channel: int, value: float) -> None:
+        """Write one setpoint channel's value into the FDM (nothing for a
+        channel its model lacks). The shard finds the values to write (the
+        non-NaN ones) for all its vehicles at once."""
+        node = self._channels[channel]
+        if node is not None:
+            node.set_double_value(value)
 
     def step(self, n: int, check_ground: bool) -> None:
         """Run ``n`` physics substeps. With ``check_ground``, look for ground
