@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import re
 from pathlib import Path
 
@@ -73,6 +74,13 @@ def test_usage_errors_exit_2(tmp_path: Path, capsys) -> None:
                  "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert "--address: the process backend does not take it; backends that do: ray" in err
+    assert not out.exists()
+    assert main(["run", str(REPO / "scenarios" / "quickstart.yaml"), "--backend", "inline",
+                 "--coordinating-driver", "--out", str(out)]) == 2
+    assert ("--coordinating-driver: the inline backend has no driver share to give up; "
+            "backends that do: process") in capsys.readouterr().err
+    assert main(["bench", "--backend", "inline", "--coordinating-driver", "--vehicles", "2"]) == 2
+    assert "--coordinating-driver: the inline backend" in capsys.readouterr().err
     assert not out.exists()
 
 
@@ -193,6 +201,12 @@ def test_bench_reports_ratios_measured_in_the_same_run(tmp_path: Path, capsys) -
     assert r["speedup_vs_serial"] == pytest.approx(sum(per_round) / 2)  # median of two
     assert r["pool_steps_per_s"] == pytest.approx(4 * 60 / min(r["pool_s_all"]))
     assert r["vehicles"] == 4 and r["ticks"] == 60
+    # the hot-step limit: the cores the pool can use, each stepping a hot flight model
+    cores = min(2, len(os.sched_getaffinity(0)))
+    assert r["hot_step_us"] > 0
+    assert r["hot_limit_steps_per_s"] == pytest.approx(cores / (r["hot_step_us"] * 1e-6))
+    assert 0 < r["fraction_of_hot_limit"] < 2
+    assert "of hot" in capsys.readouterr().out
 
 
 @pytest.mark.integration

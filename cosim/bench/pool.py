@@ -7,7 +7,12 @@ For each fleet size N it measures, over the same number of physics ticks:
 - ``ceiling``: W independent processes each stepping N/W FDMs with no
   communication at all: what W cores can do at best;
 - ``pool``: the chosen backend through the full exchange (setpoints, states,
-  lockstep barrier), as ``cosim run`` uses it.
+  lockstep barrier), as ``cosim run`` uses it;
+- ``hot step``: one flight model stepped over and over with nothing in
+  between, so that it stays in the CPU's caches; the cores the pool can use
+  times that rate is the *hot-step limit*, what no exchange design can beat
+  (each aircraft's memory must come back into the caches at its exchange:
+  the distance between the ceiling and this limit is that refill).
 
 The three are measured in interleaved rounds (pool, serial, ceiling, pool,
 ...) because shared machines drift in speed over minutes; ratios are the
@@ -44,6 +49,7 @@ import numpy as np
 
 from cosim.bench.fleet import ORIGIN, bench_specs, check_rates
 from cosim.bench.plot import plot_scaling
+from cosim.core import memory
 from cosim.core import workers as worker_kit
 from cosim.core.state import VehicleSpec
 from cosim.errors import CosimError
@@ -73,6 +79,27 @@ def _serial_loop(shard: Shard, ticks: int, k: int) -> float:
             model.step(k)
             model.write_states(block)
     return time.perf_counter() - t0
+
+
+#: physics steps per measurement of the hot step (a few ms), best of ``_HOT_BLOCKS``
+_HOT_STEPS, _HOT_BLOCKS = 2000, 5
+
+
+def _hot_step_s(shard: Shard) -> float | None:
+    """Seconds per physics step of the shard's first flight model, stepped
+    over and over with nothing in between (the best of a few blocks); None
+    where the shard has none (a batched tier steps its rows together)."""
+    fdm = next((getattr(v, "fdm", None) for v in shard.vehicles), None)
+    if fdm is None:
+        return None
+    run = fdm.run
+    best = math.inf
+    for _ in range(_HOT_BLOCKS):
+        t0 = time.perf_counter()
+        for _ in range(_HOT_STEPS):
+            run()
+        best = min(best, time.perf_counter() - t0)
+    return best / _HOT_STEPS
 
 
 def _ceiling_worker(specs: list[VehicleSpec], dt_s: float, ticks: int, k: int,
@@ -171,10 +198,11 @@ class _Ceiling:
             c.close()
 
 
-def _rss_kib(pid: int | str = "self", field: str = "VmRSS") -> int:
-    """A process's resident memory (KiB) from /proc (0 where there is none)."""
+def _rss_kib(pid: int | str = "self", field: str = "VmRSS", table: str = "status") -> int:
+    """One memory field of a process (KiB) from ``/proc/PID/TABLE``
+    (``status``, or ``smaps_rollup`` for the huge pages); 0 where there is none."""
     try:
-        with open(f"/proc/{pid}/status") as f:
+        with open(f"/proc/{pid}/{table}") as f:
             for line in f:
                 if line.startswith(field + ":"):
                     return int(line.split()[1])
@@ -185,7 +213,8 @@ def _rss_kib(pid: int | str = "self", field: str = "VmRSS") -> int:
 
 def bench_size(n: int, model: str, backend: str, workers: int | None, seconds: float,
                physics_hz: float, control_hz: float, baselines: bool = True,
-               repeat: int = 3, vehicle_class: str | None = None) -> dict[str, Any]:
+               repeat: int = 3, vehicle_class: str | None = None,
+               options: dict[str, Any] | None = None) -> dict[str, Any]:
     """``repeat`` rounds; each round runs one segment of ``seconds`` simulated
     time on the pool, then on the serial loop, then on the ceiling processes,
     so the three are measured side by side under the same machine load.
@@ -201,10 +230,14 @@ def bench_size(n: int, model: str, backend: str, workers: int | None, seconds: f
 
     rss0 = _rss_kib()
     t0 = time.perf_counter()
-    pool = make_pool(specs, dt, (), backend, workers)
+    pool = make_pool(specs, dt, (), backend, workers, **(options or {}))
     res["startup_s"] = time.perf_counter() - t0
     # the pool's memory: what the driver grew by, and its worker processes' peaks
     mem_kib = max(_rss_kib() - rss0, 0) + sum(_rss_kib(p, "VmHWM") for p in pool.pids.values())
+    # how much of it the kernel gave as huge pages (the driver's and the workers')
+    pids: list[int | str] = ["self", *pool.pids.values()]
+    res["huge_pages_mib"] = sum(_rss_kib(p, "AnonHugePages", "smaps_rollup")
+                                for p in pids) / 1024
     res["pool_mib"] = mem_kib / 1024
     res["kib_per_aircraft"] = mem_kib / n
     w = pool.workers
@@ -218,6 +251,7 @@ def bench_size(n: int, model: str, backend: str, workers: int | None, seconds: f
     walls: list[float] = []
     serials: list[float] = []
     ceils: list[float] = []
+    hots: list[float] = []
     over: list[float] = []
     try:
         with pool:
@@ -231,6 +265,9 @@ def bench_size(n: int, model: str, backend: str, workers: int | None, seconds: f
                 walls.append(time.perf_counter() - t0)
                 if shard is not None:
                     serials.append(_serial_loop(shard, ticks, k))
+                    hot = _hot_step_s(shard)
+                    if hot is not None:
+                        hots.append(hot)
                 if ceiling is not None:  # no slower than 10x the pool, or it is stuck
                     ceils.append(ceiling.segment(timeout_s=60.0 + 10 * walls[-1]))
     finally:
@@ -253,6 +290,13 @@ def bench_size(n: int, model: str, backend: str, workers: int | None, seconds: f
         res["ceiling_s_all"] = ceils
         res["ceiling_steps_per_s"] = steps / min(ceils)
         res["fraction_of_ceiling"] = float(np.median([c / p for c, p in zip(ceils, walls)]))
+    if hots:
+        # the cores the pool can keep busy, each stepping a hot flight model
+        cores = min(w, default_workers())
+        res["hot_step_us"] = min(hots) * 1e6
+        res["hot_limit_steps_per_s"] = cores / min(hots)
+        res["fraction_of_hot_limit"] = float(np.median(
+            [steps / p / (cores / h) for h, p in zip(hots, walls)]))
     return res
 
 
@@ -278,7 +322,7 @@ _SPLIT_GROUPS = (("pool:", "stepping"), ("Guidance.", "guidance"), ("Schedule.",
 
 def whole_run(n: int, model: str, vehicle_class: str | None, backend: str,
               workers: int | None, seconds: float, physics_hz: float, control_hz: float,
-              log_hz: float) -> dict[str, Any]:
+              log_hz: float, options: dict[str, Any] | None = None) -> dict[str, Any]:
     """Fly ``n`` aircraft as a whole ``cosim run`` (in a temporary folder);
     its real-time factor, start-up and tick-loop time split (fractions)."""
     import tempfile
@@ -293,7 +337,7 @@ def whole_run(n: int, model: str, vehicle_class: str | None, backend: str,
             n=n, lat=ORIGIN[0], lon=ORIGIN[1], physics_hz=physics_hz, control_hz=control_hz,
             log_hz=min(log_hz, control_hz), seconds=max(seconds, 2.0), cls=cls, model=model))
         res = Run(load_scenario(path), Path(tmp) / "run", backend=backend,
-                  workers=workers).run()
+                  workers=workers, backend_options=options).run()
         if not res.ok:
             raise CosimError(f"cosim bench: the whole run of {n} aircraft failed: {res.error}")
     sm = res.summary
@@ -316,7 +360,10 @@ columns: N aircraft; start s: building and trimming them all; KiB/ac: memory per
   pool's real-time factor (simulated s / wall s); ovh us: per exchange, its wall time minus the
   busiest worker's stepping time (microseconds, median); serial st/s: one process stepping the
   same FDMs back to back, nothing else; x serial: pool / serial; ceil st/s: as many processes as
-  workers stepping their share with no communication at all; of ceil: pool / ceiling"""
+  workers stepping their share with no communication at all; of ceil: pool / ceiling; hot us:
+  one physics step of one flight model kept hot in the caches (microseconds); of hot: pool / the
+  hot-step limit (the cores the pool can use, each stepping hot flight models: what no exchange
+  can beat)"""
 
 
 WHOLE_COLUMNS = """
@@ -329,7 +376,11 @@ def run_bench(vehicles: list[int], model: str = "c172p", backend: str = "process
               control_hz: float = 30.0, baselines: bool = True, repeat: int = 3,
               json_path: str | None = None, vehicle_class: str | None = None,
               plot_path: str | None = None, whole: bool = False,
-              log_hz: float = 10.0, gym: bool = False) -> list[dict[str, Any]]:
+              log_hz: float = 10.0, gym: bool = False,
+              options: dict[str, Any] | None = None) -> list[dict[str, Any]]:
+    """Measure each fleet size (``bench_size``; with ``whole`` also
+    ``whole_run``) and print a row for it; ``options``: the backend's own
+    (``driver_steps=False``: a driver that only coordinates)."""
     check_rates(physics_hz, control_hz)
     if workers is not None and workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
@@ -338,18 +389,25 @@ def run_bench(vehicles: list[int], model: str = "c172p", backend: str = "process
     print(f"cosim bench: model {model} ({tier}), backend {backend}, workers {w}, "
           f"{physics_hz:g} Hz physics, {control_hz:g} Hz exchange, best of {repeat} x "
           f"{seconds:g} s simulated per size", flush=True)
+    mem = _memory_setup()
+    print(f"memory: {mem['allocator']} in the workers; the driver "
+          f"{'with' if mem['driver_huge_pages'] else 'without'} huge pages (transparent huge "
+          f"pages: {mem['thp'] or 'unknown'})"
+          + ("; the driver only coordinates" if (options or {}).get("driver_steps") is False
+             else ""), flush=True)
     hdr = (f"{'N':>6} {'start s':>8} {'KiB/ac':>8} {'pool st/s':>11} {'RTF':>8} {'ovh us':>8} "
-           f"{'serial st/s':>12} {'x serial':>9} {'ceil st/s':>11} {'of ceil':>8}"
+           f"{'serial st/s':>12} {'x serial':>9} {'ceil st/s':>11} {'of ceil':>8} "
+           f"{'hot us':>7} {'of hot':>7}"
            + (f" | {'run RTF':>7} {'step':>5} {'guid':>5} {'log':>5} {'other':>5}"
               if whole else ""))
     print(hdr, flush=True)
     results = []
     for n in vehicles:
         r = bench_size(n, model, backend, workers, seconds, physics_hz, control_hz, baselines,
-                       repeat, vehicle_class)
+                       repeat, vehicle_class, options)
         if whole:
             r.update(whole_run(n, model, vehicle_class, backend, workers, seconds, physics_hz,
-                               control_hz, log_hz))
+                               control_hz, log_hz, options))
         results.append(r)
 
         def f(key: str, fmt: str, r: dict[str, Any] = r) -> str:
@@ -359,7 +417,8 @@ def run_bench(vehicles: list[int], model: str = "c172p", backend: str = "process
               f"{f('pool_steps_per_s', '11.0f')} "
               f"{f('pool_rtf', '8.2f')} {f('overhead_us_per_exchange', '8.0f')} "
               f"{f('serial_steps_per_s', '12.0f')} {f('speedup_vs_serial', '9.2f')} "
-              f"{f('ceiling_steps_per_s', '11.0f')} {f('fraction_of_ceiling', '8.1%')}"
+              f"{f('ceiling_steps_per_s', '11.0f')} {f('fraction_of_ceiling', '8.1%')} "
+              f"{f('hot_step_us', '7.2f')} {f('fraction_of_hot_limit', '7.1%')}"
               + (f" | {r['run_rtf']:>7.2f} " + " ".join(
                   f"{r['run_split'][g]:>5.0%}" for g in ("stepping", "guidance", "logging",
                                                           "other")) if whole else ""),
@@ -371,6 +430,7 @@ def run_bench(vehicles: list[int], model: str = "c172p", backend: str = "process
         doc = {"model": model, "class": tier, "backend": backend, "workers": w,
                "physics_hz": physics_hz, "whole_run": whole, "log_hz": log_hz,
                "control_hz": control_hz, "seconds": seconds, "repeat": repeat,
+               "options": options or {}, "memory": mem,
                "machine": {"python": sys.version.split()[0], "platform": platform.platform(),
                            "cores": default_workers()},
                "results": results, **({"gym_reference": gym_rows} if gym else {})}
@@ -381,6 +441,15 @@ def run_bench(vehicles: list[int], model: str = "c172p", backend: str = "process
                      f"cosim bench, {physics_hz:g} Hz physics, {control_hz:g} Hz exchange")
         print(f"wrote {plot_path}")
     return results
+
+
+def _memory_setup() -> dict[str, Any]:
+    """The workers' allocator, whether the driver has huge pages, the
+    kernel's mode (``cosim.core.memory``)."""
+    alloc = memory.allocator()
+    return {"allocator": alloc.describe(), "huge_pages": alloc.huge_pages,
+            "driver_huge_pages": alloc.huge_pages and memory.driver_has_huge_pages(alloc),
+            "thp": memory.thp_mode()}
 
 
 #: the fleet sizes of the gymnasium reference

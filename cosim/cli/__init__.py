@@ -36,6 +36,7 @@ from cosim.cli.common import (
     Parser,
     UsageError,
 )
+from cosim.core import memory
 from cosim.core.section import CliCommand, scenario_sections
 from cosim.errors import ConfigError, CosimError
 
@@ -97,6 +98,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if a.cmd is None:
         parser.print_help()
         return EXIT_USAGE
+    if argv is None and cmds[a.cmd].flies_aircraft:
+        memory.reexec_driver()  # once, with the physics allocator's settings
     setup_logging(a.verbose, a.quiet)
     try:
         return cmds[a.cmd].run(a)

@@ -7,7 +7,14 @@ import argparse
 import os
 from pathlib import Path
 
-from cosim.cli.common import EXIT_OK, backend_names, positive_float, positive_int_list
+from cosim.cli.common import (
+    EXIT_OK,
+    add_coordinating_driver,
+    backend_names,
+    driver_options,
+    positive_float,
+    positive_int_list,
+)
 from cosim.core.section import CliCommand
 from cosim.errors import ConfigError
 
@@ -50,6 +57,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="also measure what an RL user would otherwise write: gymnasium's "
                         "AsyncVectorEnv, one aircraft per environment, at 16 and 64 aircraft "
                         "(needs the rl extra)")
+    add_coordinating_driver(p)
     p.add_argument("--quick", action="store_true",
                    help="a look in under a minute: 1, 16 and 128 aircraft, 1 s, one round")
 
@@ -88,13 +96,14 @@ def run(a: argparse.Namespace) -> int:
               seconds=a.seconds, physics_hz=a.physics_hz, control_hz=a.control_hz,
               baselines=not a.no_baselines, repeat=max(1, a.repeat), json_path=a.json,
               vehicle_class=a.vehicle_class, plot_path=a.plot, whole=a.whole_run,
-              log_hz=a.log_hz, gym=a.gym)
+              log_hz=a.log_hz, gym=a.gym, options=driver_options(a.backend,
+                                                                    a.coordinating_driver))
     return EXIT_OK
 
 
 COMMAND = CliCommand(
     "bench",
     "measure pool throughput against the serial loop",
-    add_arguments, run, rank=120,
+    add_arguments, run, rank=120, flies_aircraft=True,
     epilog="One row per fleet size; what each column means is printed under the table (and in "
            "benchmarks/README.md).")

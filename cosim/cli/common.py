@@ -4,7 +4,7 @@ errors as exit 2, argument types, loading a scenario, the backend names."""
 from __future__ import annotations
 
 import argparse
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from cosim.scenario import Scenario
@@ -18,6 +18,7 @@ from cosim.core.args import (  # noqa: F401 - the commands import them from here
     positive_float,
     positive_int_list,
 )
+from cosim.errors import ConfigError
 
 
 class UsageError(Exception):
@@ -33,6 +34,28 @@ def load_scenario(path: str) -> Scenario:
     from cosim.scenario import load_scenario as load  # imported here: a fast --help
 
     return load(path)
+
+
+def add_coordinating_driver(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--coordinating-driver", action="store_true",
+                   help="the driver steps no aircraft and only coordinates the workers "
+                        "(default: with two workers or more it steps one worker's share "
+                        "itself)")
+
+
+def driver_options(backend: str, coordinating: bool) -> dict[str, Any]:
+    """The backend option ``--coordinating-driver`` stands for
+    (``driver_steps=False``), refused with the backends that take it when
+    ``backend`` does not."""
+    if not coordinating:
+        return {}
+    from cosim.fdm_pool import backends, get_backend
+
+    if "driver_steps" not in get_backend(backend).options:
+        takers = [b.name for b in backends().values() if "driver_steps" in b.options]
+        raise ConfigError(f"--coordinating-driver: the {backend} backend has no driver share "
+                          f"to give up; backends that do: {', '.join(takers) or 'none'}")
+    return {"driver_steps": False}
 
 
 def backend_names() -> tuple[list[str], str, str]:

@@ -49,4 +49,4 @@ COMMAND = CliCommand(
     "replay",
     "run a run folder's scenario again with its logged operator commands and compare the "
     "states and videos with the original's (exit 0 identical, 1 different)",
-    add_arguments, run, rank=62)
+    add_arguments, run, rank=62, flies_aircraft=True)

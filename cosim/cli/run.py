@@ -15,7 +15,9 @@ from cosim.cli.common import (
     EXIT_INTERRUPTED,
     EXIT_OK,
     EXIT_USAGE,
+    add_coordinating_driver,
     backend_names,
+    driver_options,
     load_scenario,
     positive_float,
 )
@@ -51,6 +53,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--connect-timeout-s", type=positive_float, metavar="S",
                    help="how long joining the cluster may take before the run fails, for a "
                         "backend that joins one (ray: default 30)")
+    add_coordinating_driver(p)
     p.add_argument("--realtime", nargs="?", const=1.0, type=positive_float, metavar="FACTOR",
                    help="pace to the wall clock (FACTOR x real time, default 1)")
     p.add_argument("--duration-s", type=positive_float, metavar="S",
@@ -100,6 +103,7 @@ def run(a: argparse.Namespace) -> int:
     backend_options = {k: v for k, v in (("address", a.address), ("strict", a.strict or None),
                                          ("connect_timeout_s", a.connect_timeout_s))
                        if v is not None}
+    backend_options.update(driver_options(a.backend, a.coordinating_driver))
     run = prepare_run(
         scn, a.out, duration_s=a.duration_s, overwrite=a.overwrite, mavlink_url=a.mavlink,
         signing_key_file=a.mavlink_signing_key_file, signing_key_env=a.mavlink_signing_key_env,
@@ -167,4 +171,4 @@ def _outputs(out: Path) -> str:
 COMMAND = CliCommand(
     "run",
     "run a scenario",
-    add_arguments, run, rank=10)
+    add_arguments, run, rank=10, flies_aircraft=True)

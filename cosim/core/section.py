@@ -115,7 +115,9 @@ class CliCommand:
     or an ``OSError`` 1). Its module imports what the command needs inside
     ``run``, so ``cosim --help`` stays quick. ``rank`` places it in ``cosim
     --help`` (ascending; the CLI's own run from 10 to 120 in steps of 10, a
-    command without one comes last)."""
+    command without one comes last). ``flies_aircraft``: it steps flight
+    models in its own process, so ``cosim`` starts it with the physics
+    allocator's settings (``cosim.core.memory.reexec_driver``)."""
 
     name: str
     help: str
@@ -123,6 +125,7 @@ class CliCommand:
     run: Callable[[argparse.Namespace], int]
     epilog: str = ""
     rank: int = 1000
+    flies_aircraft: bool = False
 
 
 class Section:

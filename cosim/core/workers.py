@@ -30,13 +30,11 @@ import signal
 import sys
 import time
 import traceback
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from multiprocessing.connection import wait as _wait
 from multiprocessing.process import BaseProcess
 from typing import Any
-
-from cosim.errors import CosimError
 
 #: the driver's to act on, never a shielded child's
 STOP_SIGNALS = frozenset({signal.SIGINT, signal.SIGTERM})
@@ -93,34 +91,14 @@ def context() -> Any:
     return mp.get_context("spawn")
 
 
-#: shared libraries tried, in order, as the physics workers' allocator
-ALLOCATORS = ("/usr/lib/x86_64-linux-gnu/libjemalloc.so.2", "/usr/lib64/libjemalloc.so.2",
-              "/usr/lib/libjemalloc.so.2", "/usr/lib/x86_64-linux-gnu/libmimalloc.so.2",
-              "/usr/lib/x86_64-linux-gnu/libmimalloc.so")
-
-
-def allocator() -> str | None:
-    """The allocator to preload into physics workers: ``COSIM_ALLOCATOR``
-    ('system': none; a path: that library), else the first of ``ALLOCATORS``
-    present (None: none is)."""
-    want = os.environ.get("COSIM_ALLOCATOR", "auto")
-    if want == "system":
-        return None
-    if want != "auto":
-        if not os.path.isfile(want):
-            raise CosimError(f"COSIM_ALLOCATOR={want}: no such file (give 'system', "
-                             f"'auto' or the path of an allocator library)")
-        return want
-    return next((p for p in ALLOCATORS if os.path.isfile(p)), None)
-
-
 def start(target: Callable[..., Any], args: tuple[Any, ...], name: str, *,
           shielded: bool = True, inherit_logging: bool = True,
-          daemon: bool = True, preload: str | None = None) -> BaseProcess:
+          daemon: bool = True, env: Mapping[str, str] | None = None) -> BaseProcess:
     """Start ``target(*args)`` in a spawned child named ``name`` (see the
     module docstring). ``daemon``: ended with the driver (a daemonic child
-    cannot start children of its own). ``preload``: a shared library the
-    child's dynamic linker loads first (an allocator, ``allocator``)."""
+    cannot start children of its own). ``env``: variables set in the child's
+    environment only (an allocator to preload and its settings,
+    ``cosim.core.memory.Allocator.child_env``)."""
     levels, fmt, datefmt = _log_setup() if inherit_logging else (None, None, None)
     setup = _Setup(os.getpid(), shielded, levels, fmt, datefmt)
     p = context().Process(target=_child_main, name=name, daemon=daemon,
@@ -128,17 +106,17 @@ def start(target: Callable[..., Any], args: tuple[Any, ...], name: str, *,
     # blocked until the child ignores them; in the driver, a stop signal
     # arriving meanwhile is handled right after
     old = signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS) if shielded else None
-    env_before = os.environ.get("LD_PRELOAD")
-    if preload:  # the spawned child's environment is ours at start()
-        os.environ["LD_PRELOAD"] = " ".join(x for x in (preload, env_before) if x)
+    # the spawned child's environment is ours at start()
+    before = {k: os.environ.get(k) for k in (env or {})}
+    os.environ.update(env or {})
     try:
         p.start()
     finally:
-        if preload:
-            if env_before is None:
-                os.environ.pop("LD_PRELOAD", None)
+        for k, v in before.items():
+            if v is None:
+                os.environ.pop(k, None)
             else:
-                os.environ["LD_PRELOAD"] = env_before
+                os.environ[k] = v
         if old is not None:
             signal.pthread_sigmask(signal.SIG_SETMASK, old)
     return p

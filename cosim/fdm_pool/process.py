@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from cosim.core import memory
 from cosim.core import workers as worker_kit
 from cosim.core.state import StateField, VehicleSpec
 from cosim.errors import BuildError, WorkerDied, WorkerError, WorkerTimeout
@@ -213,8 +214,9 @@ class ProcessPool(Pool):
         # or half closed: close it first (atexit runs the last registered first;
         # multiprocessing registered its handler when the shared arrays were made)
         atexit.register(self.close)
-        #: the allocator preloaded into the workers (``cosim.workers.allocator``)
-        self.allocator = worker_kit.allocator()
+        #: the workers' allocator and pages (``cosim.core.memory``)
+        self.allocator = memory.allocator()
+        child_env = self.allocator.child_env(os.environ)
         try:
             for i in range(first_child, w):
                 a, b = self.bounds[i]
@@ -223,7 +225,7 @@ class ProcessPool(Pool):
                     _worker_main, (i, self.specs[a:b], a, b, self.dt_s, self.channels,
                                    self._raw, self.n, w, s, layout_names, watch,
                                    watch_shape),
-                    name=f"cosim-worker-{i}", preload=self.allocator)
+                    name=f"cosim-worker-{i}", env=child_env)
                 self._errs[i] = r
                 s.close()
             self._build(start_timeout_s if start_timeout_s is not None
@@ -324,6 +326,8 @@ class ProcessPool(Pool):
                 self._own.write_states(self.states[a:b])
             except BuildError as e:
                 failures += e.failures
+            else:
+                self._own_pages()
         deadline = time.monotonic() + timeout_s
         for i, proc in self._procs.items():
             while ctrl[i, _DONE] != 0:
@@ -343,6 +347,15 @@ class ProcessPool(Pool):
         if failures:
             order = {v: k for k, v in enumerate(self.ids)}
             raise BuildError(sorted(failures, key=lambda f: order.get(f[0], 0)), self.n)
+
+    def _own_pages(self) -> None:
+        """Huge pages for the driver's own flight models when it started
+        without its allocator's setting (``cosim.run()`` from a script)."""
+        if self.allocator.huge_pages and not memory.driver_has_huge_pages(self.allocator):
+            t0 = time.perf_counter()
+            done = memory.advise_heap()
+            log.debug("driver: %.0f MiB of heap gathered into huge pages in %.2f s",
+                      done / 2**20, time.perf_counter() - t0)
 
     def _remote(self, i: int) -> BaseException:
         """What child ``i`` reported: the vehicles it could not build

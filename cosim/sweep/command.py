@@ -62,4 +62,4 @@ def run(a: argparse.Namespace) -> int:
 COMMAND = CliCommand(
     "sweep",
     "run a scenario once per combination of its sweep: values, in parallel",
-    add_arguments, run, rank=70)
+    add_arguments, run, rank=70, flies_aircraft=True)

@@ -95,6 +95,26 @@ def test_states_match_inline_bit_for_bit_at_every_exchange(specs, backend: str) 
             assert not bad, f"{backend}, workers={workers}, exchange {step}: {bad}"
 
 
+@pytest.mark.parametrize("pages", ["hugepages", "nohugepages"])
+def test_states_match_inline_with_and_without_huge_pages(specs, backend: str, pages: str,
+                                                         monkeypatch) -> None:
+    """The allocator's page size changes where the flight models' memory
+    lies, never what they compute: bit-identical to ``inline`` either way
+    (the workers start with the setting; this driver, started without it,
+    gathers its own share into huge pages after building it)."""
+    if backend == "inline":
+        pytest.skip("inline runs in this process, which started with its own allocator")
+    monkeypatch.setenv("COSIM_ALLOCATOR", f"auto,{pages}")
+    vs = specs(7)
+    with make_pool(vs, DT, CH, "inline") as ref:
+        expected = [ref.states.copy()] + _drive(ref)
+    with make_pool(vs, DT, CH, backend, 2) as pool:
+        got = [pool.states.copy()] + _drive(pool)
+    for step, (e, g) in enumerate(zip(expected, got)):
+        bad = _mismatches(e, g, pool.ids)
+        assert not bad, f"{backend}, {pages}, exchange {step}: {bad}"
+
+
 def test_impact_and_divergence_freeze_that_vehicle_only(specs, backend: str) -> None:
     vs = specs(3)
     vs[0] = dataclasses.replace(vs[0], alt_msl_m=40.0, initial_props=(

@@ -330,3 +330,18 @@ def test_a_pool_left_open_does_not_hang_the_interpreter_exit(tmp_path) -> None:
     proc, pids = _run_driver(tmp_path, "pass  # exit with the pool still open", 30)
     assert proc.returncode == 0, proc.stderr
     assert len(pids) == 2 and not [p for p in pids if os.path.exists(f"/proc/{p}")]
+
+
+def test_a_driver_that_only_coordinates_gives_the_same_states() -> None:
+    """driver_steps=False: every shard in a worker process (two here), the
+    driver steps none; the states are inline's, bit for bit."""
+    from cosim.bench.fleet import bench_specs
+
+    specs = bench_specs(5)
+    with InlinePool(specs, 1 / 120) as ref:
+        want = [ref.step(4).copy() for _ in range(15)]
+    with ProcessPool(specs, 1 / 120, workers=2, driver_steps=False) as pool:
+        assert sorted(pool.pids) == [0, 1] and len(pool.busy_s()) == 2
+        got = [pool.step(4).copy() for _ in range(15)]
+    for w, g in zip(want, got):
+        np.testing.assert_array_equal(w, g)
