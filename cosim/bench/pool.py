@@ -37,6 +37,7 @@ from __future__ import annotations
 import json
 import logging
 import math
+import os
 import platform
 import sys
 import time
@@ -131,13 +132,15 @@ class _Ceiling:
     def __init__(self, specs: list[VehicleSpec], dt_s: float, ticks: int, k: int,
                  workers: int, build_timeout_s: float | None = None) -> None:
         ctx = worker_kit.context()
+        env = memory.allocator().child_env(os.environ)
         self.procs: list[Any] = []
         self.conns: list[Connection] = []
         try:
             for a, b in shard_bounds(len(specs), workers):
                 mine, theirs = ctx.Pipe()
+                # with the pool's workers' allocator and pages: the same memory
                 p = worker_kit.start(_ceiling_worker, (specs[a:b], dt_s, ticks, k, theirs),
-                                  name=f"cosim-ceiling-{len(self.procs)}")
+                                     name=f"cosim-ceiling-{len(self.procs)}", env=env)
                 theirs.close()
                 self.procs.append(p)
                 self.conns.append(mine)
