@@ -11,12 +11,10 @@ adds (``VehicleClass.state_columns``) are read from their properties.
 from __future__ import annotations
 
 import math
-import warnings
 from collections.abc import Sequence
 from typing import Any
 
 import jsbsim
-import numpy as np
 
 from cosim.core.state import STATE_FIELDS, StateField, VehicleSpec, VehicleStatus
 from cosim.core.units import FT_TO_M, KT_TO_MPS
@@ -34,17 +32,21 @@ def contact_radius_m(fdm: jsbsim.FGFDMExec) -> float:
 
     Whatever the attitude, no contact point is lower than this below the CG,
     so a vehicle whose CG is higher than this above the ground is not
-    touching it. Read after ``run_ic()`` (the CG is computed there).
+    touching it. Read after ``run_ic()`` (the CG is computed there). Unit
+    ``i``'s point is read from its ``x-position`` (y, z) properties, under
+    ``gear/unit[i]`` (a BOGEY) or ``contact/unit[i]`` (a STRUCTURE): the
+    doubles ``FGLGear.get_location()`` returns, without the numpy matrix it
+    builds per unit (a quarter of the cost).
     """
-    gr = fdm.get_ground_reactions()
+    pm = fdm.get_property_manager()
     cg = (fdm["inertia/cg-x-in"], fdm["inertia/cg-y-in"], fdm["inertia/cg-z-in"])
     r_in = 0.0
-    # every contact unit (gear/unit[i]/... properties exist only for BOGEY units)
-    for i in range(gr.get_num_gear_units()):
-        with warnings.catch_warnings():  # JSBSim returns a numpy.matrix
-            warnings.simplefilter("ignore", PendingDeprecationWarning)
-            loc = np.asarray(gr.get_gear_unit(i).get_location(), dtype=np.float64).reshape(3)
-        r_in = max(r_in, math.dist(loc.tolist(), cg))  # structural frame, inches
+    for i in range(fdm.get_ground_reactions().get_num_gear_units()):
+        unit = f"gear/unit[{i}]"
+        if not pm.hasNode(f"{unit}/x-position"):
+            unit = f"contact/unit[{i}]"
+        at = [fdm[f"{unit}/{axis}-position"] for axis in "xyz"]
+        r_in = max(r_in, math.dist(at, cg))  # structural frame, inches
     return r_in * _IN_TO_M
 
 
