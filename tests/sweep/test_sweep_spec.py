@@ -39,7 +39,7 @@ Write = Callable[..., Path]
 
 def test_first_values_by_default_with_a_log_line(write_scenario: Write, caplog) -> None:
     p = write_scenario(BASE)
-    with caplog.at_level(logging.INFO, logger="cosim.sweep"):
+    with caplog.at_level(logging.INFO, logger="cosim.scenario"):
         scn = load_scenario(p, check_properties=False)
     assert "uses the first value of each swept name (speed_kt=50, alt_agl_m=30, " \
            "target=truck, vfov_deg=40)" in caplog.text
