@@ -34,7 +34,6 @@ from pathlib import Path
 from typing import Any
 
 import pyarrow as pa
-import pyarrow.parquet as pq
 
 from cosim.errors import ConfigError
 from cosim.logs.runfolder import (
@@ -45,7 +44,7 @@ from cosim.logs.runfolder import (
     state_files,
     stored_schema,
 )
-from cosim.logs.writers import replacing, write_json_atomic
+from cosim.logs.writers import replacing, write_json_atomic, write_part
 from cosim.scenario.yaml_lines import open_bounded
 
 log = logging.getLogger(__name__)
@@ -96,7 +95,7 @@ def _recover_states(run: RunFolder, rec: Recovery) -> None:
                 raise ConfigError(f"{journal}: not the columns of the run's other states "
                                   f"files: {e}") from None
             with replacing(part, "wb", tmp=states / f".{part.name}.tmp") as f:
-                pq.write_table(table.combine_chunks(), f, compression="zstd")
+                write_part(table.combine_chunks(), f)
             rec.actions.append(f"wrote {part.name} from {journal.name} ({table.num_rows} rows, "
                                f"{len(batches)} ticks)")
         if not complete:

@@ -421,6 +421,34 @@ def test_state_log_journal_keeps_every_complete_tick_of_a_crashed_run(tmp_path: 
     del log
 
 
+def test_parts_keep_dictionaries_off_the_columns_that_change_every_tick(tmp_path: Path
+                                                                        ) -> None:
+    """Written by the log and by ``cosim recover``, a part stores the columns
+    that differ in every row (positions, attitudes, speeds) without a
+    dictionary (it would overflow: wasted work and bytes) and the others
+    (tick, vehicle, command, flags) with one; the values read back the same."""
+    import pyarrow.parquet as pq
+
+    from cosim.logs.recover import recover_run
+
+    ticks = [0, 12, 24, 36]
+    ref = _log_ticks(tmp_path / "ref", ticks)
+    ref.close()
+    run = tmp_path / "run"
+    log = _log_ticks(run / "states.parquet", ticks, flush_rows=6)  # part 0, then a journal
+    recover_run(run)  # the rest of a "killed" run: the journal becomes part 1
+    parts = sorted((run / "states.parquet").glob("part-*.parquet"))
+    assert [p.name for p in parts] == ["part-000000.parquet", "part-000001.parquet"]
+    for part in parts:
+        meta = pq.ParquetFile(part).metadata.row_group(0)
+        dictionary = {meta.column(i).path_in_schema: meta.column(i).has_dictionary_page
+                      for i in range(meta.num_columns)}
+        assert not any(dictionary[c] for c in ("lat_deg", "north_m", "yaw_deg", "vd_mps")), part
+        assert all(dictionary[c] for c in ("tick", "vehicle", "command", "status")), part
+    assert read_states(run).to_pylist() == read_states(tmp_path / "ref").to_pylist()
+    del log
+
+
 def test_a_part_in_place_makes_its_leftover_journal_redundant(tmp_path: Path) -> None:
     folder = tmp_path / "states.parquet"
     log = _log_ticks(folder, [0, 12])
