@@ -213,3 +213,29 @@ def test_live_console_bench_reports_one_small_trial(tmp_path: Path,
     # the page's earlier variants still apply to static/live.js as it is
     now = bench.page_script("now")
     assert all(bench.page_script(v) != now for v in bench.PAGE_VARIANTS if v != "now")
+
+
+def test_startup_cost_splits_a_pools_start(tmp_path: Path) -> None:
+    """Its parts fit together: the worker's start-up and build make the
+    start, the driver builds within it, JSBSim's calls within a Vehicle's
+    build, and the floor is half the aircraft times JSBSim's cost."""
+    import json
+
+    out = tmp_path / "startup.json"
+    proc = subprocess.run([sys.executable, str(REPO / "benchmarks/startup_cost.py"),
+                           "--vehicles", "4", "--phases", "2", "--rounds", "1",
+                           "--json", str(out)], cwd=REPO, capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert "4 uav700, 2 workers; medians of 1 rounds" in proc.stdout
+    (row,) = next(iter(json.loads(out.read_text())["runs"].values()))
+    assert 0 < row["worker_build_s"] < row["start_s"]
+    assert row["worker_startup_s"] == pytest.approx(row["start_s"] - row["worker_build_s"])
+    assert 0 < row["driver_build_s"] < row["start_s"]
+    assert row["jsbsim_ms"] == pytest.approx(
+        row["ctor_ms"] + row["load_ms"] + row["ic_ms"] + row["trim_ms"])
+    assert row["floor_s"] == pytest.approx(2 * row["jsbsim_ms"] / 1e3)
+    bad = subprocess.run([sys.executable, str(REPO / "benchmarks/startup_cost.py"),
+                          "--tree", str(tmp_path)], cwd=REPO, capture_output=True, text=True,
+                         timeout=60)
+    assert bad.returncode == 2 and "not a cosim source tree" in bad.stderr
