@@ -23,6 +23,10 @@ segments a NIC's TCP offloads hand the kernel, so the relay handles a few
 packets a Ray call, not hundreds).
 
     python -m tests.ray_netns relay NS_A NS_B DEV_A DEV_B DELAY_MS   # the relay
+
+The relay runs at the lowest real-time priority (a link does not wait for a
+core; on a loaded machine it would), and SIGUSR2 / SIGUSR1 turn its delay
+off and on again (``set_delay``, as ``tc qdisc change`` does for netem).
 """
 
 from __future__ import annotations
@@ -187,12 +191,29 @@ class NetnsPair:
             raise RuntimeError(f"the round trip from {self.ns[0]} to {self.ns[1]}: {r.stderr}")
         return float(r.stdout.strip())
 
+    def describe(self) -> dict[str, object]:
+        """What ``set_delay`` needs, as JSON (for a driver in another process)."""
+        return {"ns": self.ns, "dev": self.dev, "link": self.link, "delay_ms": self.delay_ms,
+                "relay_pid": None if self._relay is None else self._relay.pid}
+
     def stop(self) -> None:
         if self._relay is not None:  # its TUN devices go with it
             self._relay.kill()
             self._relay.wait(10)
         for ns in self.ns:
             _remove(ns)
+
+
+def set_delay(link: dict[str, object], on: bool) -> None:
+    """The link ``NetnsPair.describe`` describes delays by its ``delay_ms``
+    (``on``) or not at all, from now on."""
+    pid = link["relay_pid"]
+    if isinstance(pid, int):
+        os.kill(pid, signal.SIGUSR1 if on else signal.SIGUSR2)
+        return
+    ms = float(link["delay_ms"]) if on else 0.0  # type: ignore[arg-type]
+    for ns, dev in zip(link["ns"], link["dev"]):  # type: ignore[call-overload]
+        _run("tc", "-n", ns, "qdisc", "change", "dev", dev, "root", "netem", "delay", f"{ms:g}ms")
 
 
 class NetnsRayCluster(LocalRayCluster):
@@ -237,10 +258,16 @@ def relay(ns_a: str, ns_b: str, dev_a: str, dev_b: str, delay_ms: float) -> None
     after it came (one thread, a deadline heap per the whole link)."""
     fds = (_tun(ns_a, dev_a), _tun(ns_b, dev_b))
     other = {fds[0]: fds[1], fds[1]: fds[0]}
-    delay_s = delay_ms / 1e3
+    delay_s = [delay_ms / 1e3]
+    signal.signal(signal.SIGUSR1, lambda *_: delay_s.__setitem__(0, delay_ms / 1e3))
+    signal.signal(signal.SIGUSR2, lambda *_: delay_s.__setitem__(0, 0.0))
     due: list[tuple[float, int, int, bytes]] = []  # (when, order, to fd, packet)
     order = itertools.count()
     ctypes.CDLL(None).prctl(_PR_SET_TIMERSLACK, 1)  # woken on time, not 50 us late
+    try:  # a link is not a process that waits for a core: first when a packet is due
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
+    except OSError:
+        pass
     print("ready", flush=True)
     while True:
         # woken a little early, then spinning to the packet's time: a wake-up
@@ -256,7 +283,7 @@ def relay(ns_a: str, ns_b: str, dev_a: str, dev_b: str, delay_ms: float) -> None
                     packet = os.read(fd, _TUN_MTU + 64)
                 except BlockingIOError:
                     break
-                heapq.heappush(due, (now + delay_s, next(order), other[fd], packet))
+                heapq.heappush(due, (now + delay_s[0], next(order), other[fd], packet))
         now = time.perf_counter()
         while due and due[0][0] <= now:
             _, _, fd, packet = heapq.heappop(due)

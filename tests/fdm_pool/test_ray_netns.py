@@ -8,6 +8,7 @@ with iproute2."""
 from __future__ import annotations
 
 import importlib.util
+import json
 import re
 import subprocess
 import sys
@@ -68,6 +69,26 @@ def test_the_conformance_suite_passes_across_the_link(netns_ray: NetnsRayCluster
     tail = (r.stdout + r.stderr)[-6000:]
     assert r.returncode == 0, tail
     assert re.search(rf"\b{len(CASES)} passed\b", r.stdout), tail
+
+
+def test_the_efficiency_benchmark_runs_across_the_link(netns_ray: NetnsRayCluster,
+                                                       tmp_path: Path) -> None:
+    # the driver's half of ``ray_efficiency.py --netns`` on the module's cluster
+    pair, out = netns_ray.pair, tmp_path / "r.json"
+    argv = [sys.executable, "benchmarks/ray_efficiency.py", "--netns", "0.2", "--vehicles", "8",
+            "--control-hz", "30", "--seconds", "0.2", "--rounds", "2", "--workers", "2",
+            "--json", str(out)]
+    r = subprocess.run(pair.command(0, *argv), cwd=REPO, capture_output=True, text=True,
+                       env={**netns_ray.driver_env(), "COSIM_BENCH_NETNS_LINK": json.dumps(
+                           {**pair.describe(), "summary": "test"})},
+                       timeout=300)
+    assert r.returncode == 0, (r.stdout + r.stderr)[-4000:]
+    (row,) = json.loads(out.read_text())
+    assert row["vehicles"] == 8 and row["workers"] == 2 and "ray_agent" not in row
+    assert row["agent_ip"] == pair.ips[1]  # every vehicle across the link
+    for name in ("ray", "ray_no_delay"):  # the same pool, the link's delay on and off
+        assert row[name]["steps_per_s"] > 0 and len(row[name]["ratios"]) == 2
+    assert row["ray_call_ms"] > 0 and row["ray_call_ms_no_delay"] > 0
 
 
 def _namespaces() -> str:
