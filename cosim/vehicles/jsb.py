@@ -3,19 +3,18 @@ console, building an FDM for a named model.
 
 It owns JSBSim's process-wide logger (``jsbsim.set_logger``), which every
 process that builds FDMs must install (``quiet_jsbsim``), and the aircraft
-catalog. It does not step, trim or schedule anything.
+catalog. It does not step, trim or schedule anything. What only the
+catalog and the autopilot wrapper need (yaml, difflib, hashlib, shutil,
+tempfile) is imported where it is used: a physics worker, which reaches
+JSBSim through this module, starts without them.
 """
 
 from __future__ import annotations
 
 import contextlib
-import difflib
-import hashlib
 import logging
 import os
 import re
-import shutil
-import tempfile
 import threading
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -24,7 +23,6 @@ from pathlib import Path
 from typing import Any
 
 import jsbsim
-import yaml
 
 from cosim.core.cache import cache_folder
 from cosim.errors import JSBSimError, ModelNotFound
@@ -140,6 +138,8 @@ class ModelInfo:
 
 
 def _load_profile(name: str, aircraft_dir: Path) -> dict[str, Any]:
+    import yaml
+
     for p in (aircraft_dir / name / "cosim.yaml", PROFILES_DIR / f"{name}.yaml"):
         if p.is_file():
             data = yaml.safe_load(p.read_text()) or {}
@@ -201,6 +201,8 @@ def find_model(name: str, extra: tuple[str, ...] = ()) -> ModelInfo:
     lower = {n.lower(): n for n in names}
     close = [n for n in names if n.lower() == name.lower()]
     if not close:  # the nearest spellings, best first (ties in name order)
+        import difflib
+
         scored = sorted((-difflib.SequenceMatcher(None, name.lower(), k).ratio(), v)
                         for k, v in lower.items())
         close = [v for score, v in scored[:3] if -score >= 0.75]
@@ -217,6 +219,10 @@ def _wrapper_root(model: ModelInfo) -> Path:
     once per content hash in the cache folder (``cosim.core.cache``:
     ``wrapped/``), atomically, so concurrent workers agree.
     """
+    import hashlib
+    import shutil
+    import tempfile
+
     src = Path(model.aircraft_dir) / model.name
     xml = (src / f"{model.name}.xml").read_text()
     ap = (SYSTEMS_DIR / f"{AUTOPILOT_SYSTEM}.xml").read_text()

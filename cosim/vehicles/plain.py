@@ -5,15 +5,14 @@ The class of a model whose cosim profile names none."""
 
 from __future__ import annotations
 
-from cosim.vehicles.base import VehicleClass
-from cosim.vehicles.fixed_wing.mavlink import ARDUPLANE_NO_AUTOPILOT
+from cosim.vehicles.base import VehicleClass, on_mavlink
 
 
 class PlainJSBSim(VehicleClass):
     name = "jsbsim"
     description = "any JSBSim model, flown by its own systems (set: properties; no commands)"
     model_kind = "jsbsim"
-    mavlink = ARDUPLANE_NO_AUTOPILOT
+    mavlink = on_mavlink("cosim.vehicles.fixed_wing.mavlink:ARDUPLANE_NO_AUTOPILOT")
 
 
 PLAIN = PlainJSBSim()

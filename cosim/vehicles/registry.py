@@ -10,9 +10,10 @@ Worker processes find the same classes (they import the same packages).
 
 from __future__ import annotations
 
+import importlib
 import logging
 from collections.abc import Sequence
-from functools import lru_cache
+from functools import cache, lru_cache
 
 from cosim.core import plugins
 from cosim.core.state import STATE_FIELDS, StateField, VehicleSpec
@@ -47,9 +48,20 @@ def vehicle_classes() -> dict[str, VehicleClass]:
 
 
 def get_class(name: str) -> VehicleClass:
-    """The class called ``name``; ``ConfigError`` listing the others if none is."""
+    """The class called ``name``; ``ConfigError`` listing the others if none is.
+    One of cosim's own is imported alone (an entry point cannot replace it): a
+    physics worker imports only its vehicles' classes."""
+    if name in BUILTIN_CLASSES:
+        return _builtin(name)
     return plugins.pick(plugins.VEHICLES, vehicle_classes(), name,
                         ("vehicle class", "classes"))
+
+
+@cache
+def _builtin(name: str) -> VehicleClass:
+    module, attr = BUILTIN_CLASSES[name].split(":")
+    obj: VehicleClass = getattr(importlib.import_module(module), attr)
+    return obj
 
 
 def state_layout(specs: Sequence[VehicleSpec]) -> tuple[StateField, ...]:

@@ -24,9 +24,8 @@ from cosim.core.state import StateField, VehicleSpec
 from cosim.core.units import KT_TO_MPS, LB_TO_KG, LBF_TO_N
 from cosim.guidance.commands import Command
 from cosim.guidance.safety import Limits, floor_problems, radius_problems
-from cosim.vehicles.base import Guidance, SwarmLimits, VehicleClass
+from cosim.vehicles.base import Guidance, SwarmLimits, VehicleClass, on_mavlink
 from cosim.vehicles.fixed_wing.guidance import AP_CHANNELS, FixedWingGuidance
-from cosim.vehicles.fixed_wing.mavlink import ARDUPLANE
 
 #: how low a fixed-wing may be commanded, above the ground (m); the study's
 #: lowest passes were 30 m above the ground
@@ -51,7 +50,7 @@ class FixedWing(VehicleClass):
     logs_fuel = True
     flag_events = {"stalled": ("stall", "onset", "recovery"),
                    "stall_protection_active": ("stall_protection", "active", "inactive")}
-    mavlink = ARDUPLANE
+    mavlink = on_mavlink("cosim.vehicles.fixed_wing.mavlink:ARDUPLANE")
 
     @property
     def commandable(self) -> bool:

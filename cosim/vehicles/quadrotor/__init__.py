@@ -24,7 +24,7 @@ from cosim.core.geo import LocalFrame
 from cosim.core.state import VehicleSpec
 from cosim.guidance.commands import Command
 from cosim.guidance.safety import Limits
-from cosim.vehicles.base import SwarmLimits, VehicleClass
+from cosim.vehicles.base import SwarmLimits, VehicleClass, on_mavlink
 from cosim.vehicles.quadrotor.guidance import (
     ALT,
     CHANNELS,
@@ -36,7 +36,6 @@ from cosim.vehicles.quadrotor.guidance import (
     YAW,
     QuadGuidance,
 )
-from cosim.vehicles.quadrotor.mavlink import ARDUCOPTER
 
 if TYPE_CHECKING:
     from cosim.world.model import World
@@ -57,7 +56,7 @@ class Quadrotor(VehicleClass):
     contact_is_impact = False
     hovers = True
     trims = False  # its own controller holds it from the first step
-    mavlink = ARDUCOPTER
+    mavlink = on_mavlink("cosim.vehicles.quadrotor.mavlink:ARDUCOPTER")
 
     def with_world(self, spec: VehicleSpec, world: World, sections: Mapping[str, Any],
                    origin: tuple[float, float, float]) -> VehicleSpec:
