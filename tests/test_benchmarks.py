@@ -239,3 +239,18 @@ def test_startup_cost_splits_a_pools_start(tmp_path: Path) -> None:
                           "--tree", str(tmp_path)], cwd=REPO, capture_output=True, text=True,
                          timeout=60)
     assert bad.returncode == 2 and "not a cosim source tree" in bad.stderr
+
+
+def test_whole_run_pool_replays_the_runs_flight_through_the_pool() -> None:
+    """The pool alone is given the run's setpoints and must end in the run's
+    states (exit 1 otherwise); bad sizes are a usage error."""
+    proc = subprocess.run([sys.executable, str(REPO / "benchmarks/whole_run_pool.py"),
+                           "--vehicles", "4", "--rounds", "1"], cwd=REPO, capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "N 4 round 1 (load" in proc.stdout and "N 4: medians run / pool" in proc.stdout
+    bad = subprocess.run([sys.executable, str(REPO / "benchmarks/whole_run_pool.py"),
+                          "--vehicles", "4,x"], cwd=REPO, capture_output=True, text=True,
+                         timeout=60)
+    assert bad.returncode == 2
+    assert "expected fleet sizes such as 1024,2048, got '4,x'" in bad.stderr
