@@ -236,21 +236,27 @@ def _table_netns(a: argparse.Namespace) -> int:
     print(f"{'N':>6} {'Hz':>4} {'process st/s':>13} | {'remote: st/s':>12} {'eff.':>6} "
           f"{'+ms/exch':>8} {'call ms':>7} | {'no delay: st/s':>14} {'eff.':>6} "
           f"{'call ms':>7} | {'start p/r s':>11}", flush=True)
+    delayed = float(link["delay_ms"]) > 0  # else a bare veth pair: nothing to turn off
     for n in a.vehicles:
         for hz in a.control_hz:
             r = measure(n, hz, a.seconds, a.rounds, a.workers, configs=["ray"],
-                        variants={"ray@": ("ray", on), "ray_no_delay": ("ray", off)})
-            off()
-            r["ray_call_ms_no_delay"] = ray_call_ms(n, r["width"], on_ip=r["agent_ip"])
+                        variants={"ray@": ("ray", on), "ray_no_delay": ("ray", off)}
+                        if delayed else None)
             rows.append(r)
-            p, y, z = r["process"], r["ray"], r["ray_no_delay"]
-            print(f"{n:>6} {r['control_hz']:>4.0f} {p['steps_per_s']:>13,.0f} | "
-                  f"{y['steps_per_s']:>12,.0f} {y['efficiency']:>6.1%} "
-                  f"{y['ms_per_exchange_extra']:>8.2f} {r['ray_call_ms']:>7.2f} | "
-                  f"{z['steps_per_s']:>14,.0f} {z['efficiency']:>6.1%} "
-                  f"{r['ray_call_ms_no_delay']:>7.2f} | "
-                  f"{p['startup_s']:.1f}/{y['startup_s']:.1f}", flush=True)
-            for name in ("ray", "ray_no_delay"):
+            p, y = r["process"], r["ray"]
+            line = (f"{n:>6} {r['control_hz']:>4.0f} {p['steps_per_s']:>13,.0f} | "
+                    f"{y['steps_per_s']:>12,.0f} {y['efficiency']:>6.1%} "
+                    f"{y['ms_per_exchange_extra']:>8.2f} {r['ray_call_ms']:>7.2f} | ")
+            if delayed:
+                off()
+                r["ray_call_ms_no_delay"] = ray_call_ms(n, r["width"], on_ip=r["agent_ip"])
+                z = r["ray_no_delay"]
+                line += (f"{z['steps_per_s']:>14,.0f} {z['efficiency']:>6.1%} "
+                         f"{r['ray_call_ms_no_delay']:>7.2f} | ")
+            else:
+                line += f"{'-':>14} {'-':>6} {'-':>7} | "
+            print(f"{line}{p['startup_s']:.1f}/{y['startup_s']:.1f}", flush=True)
+            for name in ("ray", "ray_no_delay")[:1 + delayed]:
                 print(f"    {name} ratios: {' '.join(f'{x:.2f}' for x in r[name]['ratios'])}")
     if a.json:
         Path(a.json).write_text(json.dumps(rows, indent=1))

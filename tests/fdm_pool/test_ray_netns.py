@@ -12,6 +12,7 @@ import json
 import re
 import subprocess
 import sys
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -106,6 +107,11 @@ def test_a_crashed_runs_namespaces_are_removed_first_and_ours_on_stop() -> None:
     subprocess.run(["ip", "netns", "add", stale], check=True, timeout=30)
     inside = subprocess.Popen(["ip", "netns", "exec", stale, "sleep", "60"])
     try:
+        deadline = time.monotonic() + 10.0  # until it is in there
+        while str(inside.pid) not in subprocess.run(
+                ["ip", "netns", "pids", stale], capture_output=True, text=True,
+                timeout=30).stdout.split() and time.monotonic() < deadline:
+            time.sleep(0.02)
         pair = NetnsPair(delay_ms=0.2, relay=True).start()
         try:
             assert stale not in _namespaces()
