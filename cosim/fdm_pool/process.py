@@ -28,6 +28,7 @@ from __future__ import annotations
 import atexit
 import logging
 import os
+import threading
 import time
 from collections.abc import Sequence
 from multiprocessing.connection import Connection
@@ -307,6 +308,7 @@ class ProcessPool(Pool):
         children = list(self._procs)
         failures: list[tuple[str, str]] = []
         own = 0
+        pages: threading.Thread | None = None
 
         def built(k: int) -> None:
             nonlocal own
@@ -327,7 +329,12 @@ class ProcessPool(Pool):
             except BuildError as e:
                 failures += e.failures
             else:
-                self._own_pages()
+                if (self.allocator.huge_pages
+                        and not memory.driver_has_huge_pages(self.allocator)):
+                    # beside the wait for the children (the kernel's work, not Python's)
+                    pages = threading.Thread(target=self._own_pages, name="cosim-pages",
+                                             daemon=True)
+                    pages.start()
         deadline = time.monotonic() + timeout_s
         for i, proc in self._procs.items():
             while ctrl[i, _DONE] != 0:
@@ -344,18 +351,20 @@ class ProcessPool(Pool):
                                         "build and trim its vehicles")
                 progress(own + int(ctrl[children, _BUILT].sum()))
                 time.sleep(0.005)
+        if pages is not None:
+            pages.join()
         if failures:
             order = {v: k for k, v in enumerate(self.ids)}
             raise BuildError(sorted(failures, key=lambda f: order.get(f[0], 0)), self.n)
 
-    def _own_pages(self) -> None:
-        """Huge pages for the driver's own flight models when it started
+    @staticmethod
+    def _own_pages() -> None:
+        """Huge pages for the driver's own flight models, when it started
         without its allocator's setting (``cosim.run()`` from a script)."""
-        if self.allocator.huge_pages and not memory.driver_has_huge_pages(self.allocator):
-            t0 = time.perf_counter()
-            done = memory.advise_heap()
-            log.debug("driver: %.0f MiB of heap gathered into huge pages in %.2f s",
-                      done / 2**20, time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        done = memory.advise_heap()
+        log.debug("driver: %.0f MiB of heap gathered into huge pages in %.2f s",
+                  done / 2**20, time.perf_counter() - t0)
 
     def _remote(self, i: int) -> BaseException:
         """What child ``i`` reported: the vehicles it could not build
