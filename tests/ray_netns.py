@@ -2,7 +2,8 @@
 delaying the packets leaving each end (a LAN's 0.2 ms each way): the ray
 backend's calls to the other node's agent cross a real network stack (two
 kernels' TCP, a link, a queue) instead of the loopback. The tests of
-``tests/fdm_pool/test_ray_netns.py`` and ``benchmarks/ray_netns.py`` use it.
+``tests/fdm_pool/test_ray_netns.py`` and ``benchmarks/ray_efficiency.py
+--netns`` use it.
 
 The driver's node (the head) is in namespace ``a`` with no CPU, so it steps
 no vehicle itself; the other node in namespace ``b`` has the CPUs, so every
