@@ -25,7 +25,7 @@ def main(argv: list[str] | None = None) -> int:
         label = (f"{doc['model']} ({doc.get('class', 'jsbsim')}), {doc['control_hz']:g} Hz "
                  f"exchange, {doc['workers']} workers")
         series[label] = doc["results"]
-    plot_scaling(series, a.out, "cosim bench: pool against the no-communication ceiling, "
+    plot_scaling(series, a.out, "cosim bench: the pool against its limits, "
                                 "120 Hz physics")
     print(f"wrote {a.out}")
     return 0

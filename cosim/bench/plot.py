@@ -52,12 +52,13 @@ def plot_scaling(series: dict[str, list[dict[str, Any]]], path: str | Path,
     ax2.set(xscale="log", xlabel="aircraft", ylabel="pool / limit",
             title="efficiency", ylim=(0, max(1.2, top * 1.1)))
     plain_log_axis(ax2.xaxis, sizes)
-    ax1.legend(fontsize=8)
-    ax2.legend(fontsize=8, loc="lower left")
+    # under the panels, clear of the lines
+    ax1.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.2))
+    ax2.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.2))
     ax1.grid(True, which="both", alpha=0.3)
     ax2.grid(True, which="both", alpha=0.3)
     if title:
         fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    fig.savefig(path, dpi=100, bbox_inches="tight")
     plt.close(fig)
