@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import functools
 import shutil
 from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 
+from cosim.logs.writers import StateLog
 from cosim.sweep.runner import load_point
 from cosim.sweep.spec import read_sweep
 from cosim.sync import Run
@@ -24,8 +26,13 @@ def camera_run(tmp_path_factory: pytest.TempPathFactory) -> Path:
     point = dict(read_sweep(EXP2).points()[0])
     point.update(width_px=64, height_px=48, static=True, speed_kt=200, alt_agl_m=30)
     out = tmp_path_factory.mktemp("camera-run") / "run"
-    res = Run(load_point(EXP2, point), out, backend="inline").run()
+    # one states part whatever the machine's load (a part is written every 5 s
+    # of wall time too, and the tests damage the one part)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr("cosim.sync.runner.StateLog", functools.partial(StateLog, flush_s=3600.0))
+        res = Run(load_point(EXP2, point), out, backend="inline").run()
     assert res.stop_reason == "completed", res.error
+    assert [p.name for p in (out / "states.parquet").iterdir()] == ["part-000000.parquet"]
     return out
 
 
