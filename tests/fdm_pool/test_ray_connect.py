@@ -52,6 +52,7 @@ def run(tmp_path: Path) -> Iterator[Starter]:
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env))
         return procs[-1]
 
+    start.ray_tmp = ray_tmp  # type: ignore[attr-defined]
     yield start
     for p in procs:
         if p.poll() is None:
@@ -151,16 +152,18 @@ def test_the_connect_timeout_is_refused_by_a_backend_that_joins_nothing(
            "ray" in capsys.readouterr().err
 
 
-def _ray_processes() -> set[int]:
-    """Running (not zombie) Ray core processes on this machine."""
+def _ray_processes(ray_tmp: str) -> set[int]:
+    """Running (not zombie) Ray core processes of the Ray whose files are in
+    ``ray_tmp`` (other tests' clusters may run beside this one)."""
     out = set()
     for d in Path("/proc").iterdir():
         try:
-            cmd = (d / "cmdline").read_bytes().split(b"\0")[0]
+            args = (d / "cmdline").read_bytes()
             state = (d / "stat").read_text().rsplit(")", 1)[1].split()[0]
         except (OSError, IndexError, ValueError):
             continue
-        if state != "Z" and cmd.endswith((b"gcs_server", b"raylet")):
+        if (state != "Z" and args.split(b"\0")[0].endswith((b"gcs_server", b"raylet"))
+                and ray_tmp.encode() in args):
             out.add(int(d.name))
     return out
 
@@ -169,12 +172,17 @@ def test_without_an_address_a_private_local_ray_runs_it_and_is_gone_after(
         run: Starter) -> None:
     # its processes die with the thread that started them: that thread must
     # live as long as the run (a joining thread that ended killed them)
-    before = _ray_processes()
     p = run("--duration-s", "1")
+    seen = set()  # its Ray's processes, seen while it runs (the filter finds them)
+    while p.poll() is None and not seen:
+        seen = _ray_processes(run.ray_tmp)  # type: ignore[attr-defined]
+        time.sleep(0.1)
     err = _finish(p, 120.0)
     assert p.returncode == 0, err
     assert "joined a local Ray" in err
+    assert seen, "no Ray process of the run's own was seen while it ran"
     deadline = time.monotonic() + 15.0
-    while (left := _ray_processes() - before) and time.monotonic() < deadline:
+    while (left := _ray_processes(run.ray_tmp)  # type: ignore[attr-defined]
+           ) and time.monotonic() < deadline:
         time.sleep(0.2)
     assert not left, f"Ray processes left running: {sorted(left)}"
