@@ -1,0 +1,2 @@
+"""The rigid-body tier: JSBSim aircraft files compiled to vectorised kernels
+(``cosim.rigid.functions``: the aerodynamic functions and tables)."""
