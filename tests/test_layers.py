@@ -15,7 +15,7 @@ ROOT = Path(__file__).resolve().parent.parent / "cosim"
 LAYERS: list[tuple[str, ...]] = [
     ("errors",),
     ("core",),
-    ("guidance", "world"),
+    ("guidance", "rigid", "world"),
     ("coverage", "mavlink"),
     ("vehicles",),
     ("fdm_pool", "scenario"),
