@@ -93,12 +93,17 @@ def context() -> Any:
 
 def start(target: Callable[..., Any], args: tuple[Any, ...], name: str, *,
           shielded: bool = True, inherit_logging: bool = True,
-          daemon: bool = True, env: Mapping[str, str] | None = None) -> BaseProcess:
+          daemon: bool = True, env: Mapping[str, str] | None = None,
+          on_start: Callable[[BaseProcess], None] | None = None) -> BaseProcess:
     """Start ``target(*args)`` in a spawned child named ``name`` (see the
     module docstring). ``daemon``: ended with the driver (a daemonic child
     cannot start children of its own). ``env``: variables set in the child's
     environment only (an allocator to preload and its settings,
-    ``cosim.core.memory.Allocator.child_env``)."""
+    ``cosim.core.memory.Allocator.child_env``). ``on_start(process)``: called
+    once the child runs, before a stop signal that arrived meanwhile is
+    handled: a caller records the child there, so that a handler raising
+    (Ctrl-C while a pool starts) cannot leave a child it does not know of,
+    which would ignore the interpreter's own SIGTERM at exit and hang it."""
     levels, fmt, datefmt = _log_setup() if inherit_logging else (None, None, None)
     setup = _Setup(os.getpid(), shielded, levels, fmt, datefmt)
     p = context().Process(target=_child_main, name=name, daemon=daemon,
@@ -111,6 +116,8 @@ def start(target: Callable[..., Any], args: tuple[Any, ...], name: str, *,
     os.environ.update(env or {})
     try:
         p.start()
+        if on_start is not None:
+            on_start(p)
     finally:
         for k, v in before.items():
             if v is None:

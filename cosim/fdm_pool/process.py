@@ -26,6 +26,7 @@ log like the driver.
 from __future__ import annotations
 
 import atexit
+import functools
 import logging
 import os
 import threading
@@ -222,12 +223,15 @@ class ProcessPool(Pool):
             for i in range(first_child, w):
                 a, b = self.bounds[i]
                 r, s = ctx.Pipe(duplex=False)
-                self._procs[i] = worker_kit.start(
+                self._errs[i] = r
+                # recorded as it starts: a Ctrl-C handled right after is then
+                # a pool whose close stops it
+                worker_kit.start(
                     _worker_main, (i, self.specs[a:b], a, b, self.dt_s, self.channels,
                                    self._raw, self.n, w, s, layout_names, watch,
                                    watch_shape),
-                    name=f"cosim-worker-{i}", env=child_env)
-                self._errs[i] = r
+                    name=f"cosim-worker-{i}", env=child_env,
+                    on_start=functools.partial(self._procs.__setitem__, i))
                 s.close()
             self._build(start_timeout_s if start_timeout_s is not None
                         else 60.0 + 0.05 * self.n)

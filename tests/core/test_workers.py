@@ -141,3 +141,38 @@ def test_the_allocator_is_chosen_and_preloaded_into_the_child_only(monkeypatch) 
     p.join(10)
     assert os.path.basename(alloc.preload) in maps and env is not None and alloc.preload in env
     assert os.environ.get("LD_PRELOAD") == before
+
+
+def _sleep_a_while() -> None:
+    time.sleep(30)
+
+
+def test_a_child_is_recorded_before_a_stop_signal_that_arrived_while_it_started() -> None:
+    """A SIGTERM that arrives while a child starts is handled as ``start``
+    unblocks it; a handler that raises (the CLI's Ctrl-C during a build) then
+    leaves ``start`` without a return value, and the child would be unknown
+    to its pool, alive at exit, ignoring the interpreter's SIGTERM: the
+    interpreter hung joining it. ``on_start`` records it first."""
+    import pytest
+
+    class Stop(Exception):
+        pass
+
+    def handler(signum: int, frame: object) -> None:
+        raise Stop
+
+    recorded: list = []
+
+    def record(p) -> None:
+        recorded.append(p)
+        os.kill(os.getpid(), signal.SIGTERM)  # pending: blocked until start unblocks it
+
+    old = signal.signal(signal.SIGTERM, handler)
+    try:
+        with pytest.raises(Stop):
+            worker_kit.start(_sleep_a_while, (), "cosim-test-race", on_start=record)
+    finally:
+        signal.signal(signal.SIGTERM, old)
+    assert len(recorded) == 1 and recorded[0].is_alive()
+    worker_kit.stop(recorded, 1.0)  # it ignores SIGTERM: stopped by the kill after the grace
+    assert not recorded[0].is_alive()
