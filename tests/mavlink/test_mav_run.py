@@ -274,18 +274,17 @@ def test_fuzzing_a_live_run_leaves_the_vehicles_flying_and_answering(tmp_path: P
         assert sent_random > 100 and sent_messages > 100
         # still answering and flying. Like any ground station, repeat an
         # unacknowledged command (datagrams sent while the fuzz still fills the
-        # simulation's receive buffer are dropped by the kernel, as on any
-        # lossy link; counted in kernel_dropped)
+        # simulation's receive buffer may be dropped by the kernel, as on any
+        # lossy link, counted in kernel_dropped; or the answer may come after
+        # the backlog, later than a second: a repeat says neither)
         acks, positions = [], []
         deadline = time.monotonic() + 20
         next_try = 0.0
-        attempts = 0
         def answered() -> bool:  # ours: the fuzzer's own requests may be DENIED to 255
             return any(a.result == ML.MAV_RESULT_ACCEPTED for a in acks)
 
         while (not answered() or len(positions) < 10) and time.monotonic() < deadline:
             if not answered() and time.monotonic() >= next_try:
-                attempts += 1
                 gcs.hello()
                 gcs.conn.mav.command_long_send(2, 1, ML.MAV_CMD_REQUEST_MESSAGE, 0, 148, 0, 0,
                                                0, 0, 0, 0)
@@ -309,8 +308,6 @@ def test_fuzzing_a_live_run_leaves_the_vehicles_flying_and_answering(tmp_path: P
     assert c["handler_errors"] == 0, c
     events = [json.loads(x)["event"] for x in (out / "events.jsonl").read_text().splitlines()]
     assert "ground_impact" not in events and "divergence" not in events  # no vehicle lost
-    if attempts > 1:  # a command went unanswered: only because the kernel dropped datagrams
-        assert c["kernel_dropped"] > 0, c
     # ours among them (the fuzzer's random messages may come from system 255 too, and
     # its own REQUEST_MESSAGEs of odd ids are answered to 255 as DENIED)
     assert any(a.result == ML.MAV_RESULT_ACCEPTED for a in acks), (
