@@ -326,12 +326,18 @@ class Geodetic(NamedTuple):
     cos_lat: np.ndarray
 
 
+def _radius_latitude(x: np.ndarray, y: np.ndarray, z: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """FGLocation's radius and geocentric latitude."""
+    xy2 = x * x + y * y
+    return np.sqrt(xy2 + z * z), np.arctan2(z, np.sqrt(xy2))
+
+
 def geocentric(x_ft: np.ndarray, y_ft: np.ndarray, z_ft: np.ndarray
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Radius (ft), geocentric latitude and longitude (rad) of ECEF positions."""
     x, y, z = (np.asarray(v, dtype=np.float64) for v in (x_ft, y_ft, z_ft))
-    radius = np.sqrt(x * x + y * y + z * z)
-    return radius, np.arctan2(z, np.sqrt(x * x + y * y)), np.arctan2(y, x)
+    return (*_radius_latitude(x, y, z), np.arctan2(y, x))
 
 
 def sea_level_radius_ft(lat_gc_rad: np.ndarray) -> np.ndarray:
@@ -342,7 +348,8 @@ def sea_level_radius_ft(lat_gc_rad: np.ndarray) -> np.ndarray:
 
 def altitude_asl_ft(x_ft: np.ndarray, y_ft: np.ndarray, z_ft: np.ndarray) -> np.ndarray:
     """JSBSim's ``position/h-sl-ft``: the radius less the sea-level radius."""
-    radius, lat_gc, _ = geocentric(x_ft, y_ft, z_ft)
+    x, y, z = (np.asarray(v, dtype=np.float64) for v in (x_ft, y_ft, z_ft))
+    radius, lat_gc = _radius_latitude(x, y, z)
     return radius - sea_level_radius_ft(lat_gc)
 
 
@@ -412,7 +419,7 @@ def gravity_ecef(x_ft: np.ndarray, y_ft: np.ndarray, z_ft: np.ndarray
     """The WGS84 gravitation with J2 in ECEF (ft/s^2) at ECEF positions (ft):
     FGInertial::GetGravityJ2."""
     x, y, z = (np.asarray(v, dtype=np.float64) for v in (x_ft, y_ft, z_ft))
-    r, lat_gc, _ = geocentric(x, y, z)
+    r, lat_gc = _radius_latitude(x, y, z)
     s = np.sin(lat_gc)
     s2 = s * s
     adivr = SEMIMAJOR_FT / r

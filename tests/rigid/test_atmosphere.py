@@ -144,6 +144,7 @@ def test_the_atmosphere_in_flight_and_its_viscosity_through_the_reynolds_number(
     nu = props["_atmosphere/kinematic-viscosity-ft2_s"]
     re = r["velocities/vt-fps"] * fdm["metrics/cbarw-ft"] / nu
     np.testing.assert_allclose(re, r["aero/Re"], rtol=RTOL, atol=0)
+    assert not np.allclose(re * (1 + 1e-10), r["aero/Re"], rtol=RTOL, atol=0)
     assert np.all(r["aero/Re"] > 1e5)
 
 
