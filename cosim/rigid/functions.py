@@ -19,8 +19,8 @@ of an aircraft file, in file order, by output name.
 Supported: ``property`` (a leading ``-`` negates), ``value``, ``product``,
 ``sum``, ``difference``, ``quotient``, ``pow``, ``abs``, ``sqrt``, ``exp``,
 ``ln``, ``sin``, ``cos``, ``tan``, ``asin``, ``acos``, ``atan``, ``atan2``,
-``min``, ``max``, ``lt``, ``le``, ``gt``, ``ge``, ``eq``, ``nq``, ``and``,
-``or``, ``not``, ``ifthen``, and ``table`` of one or two dimensions.
+``toradians``, ``todegrees``, ``min``, ``max``, ``lt``, ``le``, ``gt``, ``ge``,
+``eq``, ``nq``, ``and``, ``or``, ``not``, ``ifthen``, and ``table`` of one or two dimensions.
 """
 
 from __future__ import annotations
@@ -92,6 +92,8 @@ def _children(el: ET.Element) -> list[ET.Element]:
 _UNARY: dict[str, Callable[[np.ndarray], np.ndarray]] = {
     "abs": np.abs, "sqrt": np.sqrt, "exp": np.exp, "ln": np.log, "sin": np.sin,
     "cos": np.cos, "tan": np.tan, "asin": np.arcsin, "acos": np.arccos, "atan": np.arctan,
+    # as FGFunction: x*pi/180 and x*180/pi, multiplied first
+    "toradians": lambda x: x * np.pi / 180.0, "todegrees": lambda x: x * 180.0 / np.pi,
 }
 _COMPARE: dict[str, Callable[[np.ndarray, np.ndarray], np.ndarray]] = {
     "lt": np.less, "le": np.less_equal, "gt": np.greater, "ge": np.greater_equal,

@@ -1,0 +1,283 @@
+"""JSBSim's flight-control systems (``<system>``, ``<autopilot>``,
+``<flight_control>``) compiled to one stateless, vectorised plan.
+
+``compile_systems(aircraft_xml, systems_dir)`` reads an aircraft's
+systems (inline, or ``<system file="NAME"/>`` looked up as JSBSim looks it
+up: the aircraft's folder, its ``Systems`` folder, then ``systems_dir``),
+then its ``<autopilot>`` and its ``<flight_control>``, and returns a
+``Systems``: every channel of every system in JSBSim's order (FGFCS runs
+them as one list, systems first, then the autopilot, then the flight
+control), each component computed as JSBSim 1.3's class computes it, over
+arrays of N aircraft.
+
+State lives in the caller's ``props`` dict (JSBSim's property names, float64
+arrays of N); a component's own state (a PID's integrator, an actuator's
+last output, a filter's past values, a channel's frame counter) lives under
+a private key ``_fcs:<component property>:<what>``. ``init(props, n)``
+adds what is missing (JSBSim's values at load: ``<property value=...>``
+declarations, component outputs 0); ``run(props, dt_s)`` runs one physics
+frame. ``run(props, dt_s, suspended=True)`` is JSBSim's ``RunIC`` frame
+(integration suspended: channel frame counters stand still, so every
+channel whose ``execute`` property is on runs).
+
+What FGFCS does before the channels is done too: each engine's throttle,
+mixture, propeller advance and feather position set to its command. The
+default nose-wheel steering angle (``fcs/steer-pos-deg``) belongs to the
+ground reactions and is not computed here. Trimming is not modelled.
+
+Supported, exactly as JSBSim 1.3 computes them: ``<property value=...>``
+declarations; channels with ``execute`` and ``execrate`` (a channel at
+rate R runs every R-th frame its ``execute`` property is non-zero, its
+components stepping R x dt); components ``fcs_function``, ``switch``
+(``default``, ``test`` with ``logic`` AND/OR, nested tests, values and
+properties), ``summer`` (``bias``), ``pure_gain``, ``scheduled_gain``,
+``aerosurface_scale`` (``domain``, ``range``, ``zero_centered``, ``gain``),
+``pid`` (``kp``/``ki``/``kd`` numbers or properties, ``type="standard"``,
+the integrator types ``rect``/``trap``/``ab2``/``ab3``, ``trigger``,
+``pvdot``), ``actuator`` (``lag``, ``rate_limit`` with ``sense``,
+``deadband_width``, ``hysteresis_width``, ``bias``, the fail properties,
+``saturated``), ``kinematic`` (``traverse``/``setting``, ``noscale``),
+``lag_filter``, ``lead_lag_filter``, ``washout_filter``,
+``second_order_filter``, ``integrator`` (Tustin coefficients, ``c1``..``c6``
+numbers, integrator ``trigger``), ``deadband``; ``<input>`` with a leading
+``-``, ``<output>`` (several), ``<clipto>`` (``type="cyclic"`` too).
+Anything else (an element, an attribute, a ``delay``, a coefficient given
+as a property) is a ``CompileError`` naming the file, the line and the
+element; with ``problems=[...]`` every problem is listed and the part
+skipped instead.
+"""
+
+from __future__ import annotations
+
+import logging
+import xml.etree.ElementTree as ET
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from functools import partial
+from pathlib import Path
+
+import numpy as np
+
+from cosim.rigid.fcs_components import (
+    COMPONENTS,
+    Component,
+    Context,
+    Props,
+    attrs,
+    is_number,
+    kids,
+    text,
+)
+from cosim.rigid.functions import CompileError, parse
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class _Channel:
+    name: str
+    rate: int
+    execute: str | None
+    counter: str
+    components: tuple[Component, ...]
+
+
+@dataclass(frozen=True)
+class Systems:
+    """The compiled plan: stateless; ``props`` holds every value."""
+
+    inputs: frozenset[str]
+    outputs: frozenset[str]
+    channels: tuple[_Channel, ...]
+    defaults: dict[str, float] = field(repr=False)
+    engines: int = 0
+
+    def init(self, props: Props, n: int) -> None:
+        """Add JSBSim's values at load for ``n`` aircraft (keys already in
+        ``props`` are kept)."""
+        for k, v in self.defaults.items():
+            if k not in props:
+                props[k] = np.full(n, v, dtype=np.float64)
+
+    def run(self, props: Props, dt_s: float, *, suspended: bool = False) -> None:
+        """One physics frame (``suspended``: JSBSim's RunIC frame)."""
+        for i in range(self.engines):
+            sfx = f"[{i}]" if i else ""
+            for cmd, pos in (("throttle-cmd-norm", "throttle-pos-norm"),
+                             ("mixture-cmd-norm", "mixture-pos-norm"),
+                             ("advance-cmd-norm", "advance-pos-norm")):
+                props[f"fcs/{pos}{sfx}"] = props[f"fcs/{cmd}{sfx}"].copy()
+            props[f"fcs/feather-pos-norm{sfx}"] = (
+                props[f"fcs/feather-cmd-norm{sfx}"] != 0.0).astype(np.float64)
+        for ch in self.channels:
+            _run_channel(ch, props, dt_s, suspended)
+
+
+def _run_channel(ch: _Channel, props: Props, dt_s: float, suspended: bool) -> None:
+    mask: np.ndarray | None = None
+    on: np.ndarray | bool = True
+    if ch.execute is not None:
+        on_arr = props[ch.execute] != 0.0
+        if not on_arr.any():
+            return
+        mask = None if on_arr.all() else on_arr
+        on = on_arr
+    if ch.rate > 1:
+        count = props[ch.counter]
+        if not suspended:
+            count = np.where(on & (count >= ch.rate), 0.0, count) + on
+            props[ch.counter] = count
+        due = (count >= ch.rate) & on
+        if not due.any():
+            return
+        mask = None if due.all() else due
+    dt = dt_s * ch.rate
+    for comp in ch.components:
+        new = comp.step(props, dt)
+        if mask is None:
+            props.update(new)
+        else:
+            for k, v in new.items():
+                props[k] = np.where(mask, v, props[k])
+
+
+# --------------------------------------------------------------- systems
+
+def _problem(ctx: Context, err: CompileError) -> None:
+    """Raise ``err``, or with a problem list, record it and go on."""
+    if ctx.problems is None:
+        raise err
+    ctx.problems.append(err)
+
+
+def _guard(ctx: Context, fn: Callable[[], object]) -> object:
+    """Run ``fn``; with a problem list, record its CompileError and go on."""
+    try:
+        return fn()
+    except CompileError as e:
+        _problem(ctx, e)
+        return None
+
+
+def _declare(c: ET.Element, ctx: Context, declared: dict[str, float]) -> None:
+    attrs(c, ctx, {"value"})
+    t = text(c)
+    if not t or " " in t:
+        raise ctx.fail(c, f"expected a property name, got {t!r}")
+    v = c.get("value", "0")
+    if not is_number(v):
+        raise ctx.fail(c, f"value={v!r}: expected a number")
+    declared.setdefault(t, float(v))  # JSBSim keeps the first definition
+
+
+def _system(el: ET.Element, ctx: Context, declared: dict[str, float],
+            channels: list[_Channel]) -> None:
+    _guard(ctx, partial(attrs, el, ctx, {"name", "file"} if el.tag == "system" else {"name"}))
+    for c in kids(el):
+        if c.tag == "property":
+            _guard(ctx, partial(_declare, c, ctx, declared))
+        elif c.tag == "channel":
+            ch = _guard(ctx, partial(_channel, c, ctx, len(channels)))
+            if isinstance(ch, _Channel):
+                channels.append(ch)
+        else:
+            _problem(ctx, ctx.fail(c, f"is not supported in <{el.tag}> (supported: property, "
+                                      f"channel)"))
+
+
+def _channel(el: ET.Element, ctx: Context, index: int) -> _Channel:
+    attrs(el, ctx, {"name", "execute", "execrate"})
+    rate_s = el.get("execrate", "1")
+    try:
+        rate = max(1, int(float(rate_s)))
+    except ValueError:
+        raise ctx.fail(el, f"execrate={rate_s!r}: expected a whole number") from None
+    if float(rate_s) != int(float(rate_s)):
+        raise ctx.fail(el, f"execrate={rate_s!r}: expected a whole number")
+    comps: list[Component] = []
+    for c in kids(el):
+        make = COMPONENTS.get(c.tag)
+        if make is None:
+            _problem(ctx, ctx.fail(c, f"is not supported (supported components: "
+                                      f"{', '.join(sorted(COMPONENTS))})"))
+            continue
+        comp = _guard(ctx, partial(make, c, ctx))
+        if isinstance(comp, Component):
+            comps.append(comp)
+    return _Channel(el.get("name", f"channel {index}"), rate, el.get("execute") or None,
+                    f"_fcs:channel{index}:frames", tuple(comps))
+
+
+def _find_system(name: str, aircraft_dir: Path, systems_dir: Path) -> Path | None:
+    fname = name if Path(name).suffix else name + ".xml"
+    for folder in (aircraft_dir, aircraft_dir / "Systems", systems_dir):
+        if (folder / fname).is_file():
+            return folder / fname
+    return None
+
+
+def compile_systems(aircraft_xml: Path, systems_dir: Path, *,
+                    problems: list[CompileError] | None = None) -> Systems:
+    """An aircraft's systems, autopilot and flight control as one plan."""
+    aircraft_xml = Path(aircraft_xml)
+    root = parse(aircraft_xml)
+    ctx = Context(str(aircraft_xml), problems)
+    declared: dict[str, float] = {}
+    channels: list[_Channel] = []
+    order = ([e for e in root if e.tag == "system"] + [e for e in root if e.tag == "autopilot"]
+             + [e for e in root if e.tag == "flight_control"])
+    for el in order:
+        f = el.get("file")
+        if f:
+            path = _find_system(f, aircraft_xml.parent, Path(systems_dir))
+            if path is None:
+                _problem(ctx, ctx.fail(el, f"system file {f!r} not found in "
+                                           f"{aircraft_xml.parent}, "
+                                           f"{aircraft_xml.parent / 'Systems'} or {systems_dir}"))
+                continue
+            sub = parse(path)
+            if sub.tag != "system":
+                _problem(ctx, CompileError(f"{path}:{sub.get('_line', '?')}: <{sub.tag}>: "
+                                           f"expected <system>"))
+                continue
+            _system(sub, Context(str(path), problems), declared, channels)
+        else:
+            _system(el, ctx, declared, channels)
+    propulsion = root.find("propulsion")
+    engines = len(propulsion.findall("engine")) if propulsion is not None else 0
+    plan = _assemble(channels, declared, engines)
+    log.debug("%s: %d channels, %d components, %d inputs", aircraft_xml, len(plan.channels),
+              sum(len(c.components) for c in plan.channels), len(plan.inputs))
+    return plan
+
+
+def _assemble(channels: list[_Channel], declared: dict[str, float], engines: int) -> Systems:
+    writes: dict[str, float] = {}
+    reads: set[str] = set()
+    for i in range(engines):
+        sfx = f"[{i}]" if i else ""
+        for cmd, pos in (("throttle-cmd-norm", "throttle-pos-norm"),
+                         ("mixture-cmd-norm", "mixture-pos-norm"),
+                         ("advance-cmd-norm", "advance-pos-norm"),
+                         ("feather-cmd-norm", "feather-pos-norm")):
+            reads.add(f"fcs/{cmd}{sfx}")
+            writes[f"fcs/{pos}{sfx}"] = 0.0
+    defaults: dict[str, float] = dict(declared)
+    for ch in channels:
+        if ch.execute:
+            reads.add(ch.execute)
+        if ch.rate > 1:
+            defaults[ch.counter] = float(ch.rate)
+        for comp in ch.components:
+            reads |= comp.reads
+            for w in comp.writes:
+                writes.setdefault(w, 0.0)
+            for k, v in comp.state.items():
+                defaults[k] = v
+    for k, v in writes.items():
+        defaults.setdefault(k, v)
+    for r in reads:
+        defaults.setdefault(r, 0.0)
+    outputs = frozenset(k for k in writes if not k.startswith("_"))
+    inputs = frozenset(reads - set(writes))
+    return Systems(inputs, outputs, tuple(channels), defaults, engines)
