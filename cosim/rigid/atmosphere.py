@@ -92,7 +92,7 @@ Props = dict[str, np.ndarray]
 # --- JSBSim's unit conversions (FGJSBBase) --------------------------------
 _FT_TO_M = 0.3048
 _KG_TO_SLUG = 0.06852168
-_PA_TO_PSF = 0.0208854342
+_PA_TO_PSF = 0.0208854342  # FGAtmosphere::ConvertToPSF from pascals
 
 # --- the standard atmosphere's constants (FGAtmosphere, FGStandardAtmosphere)
 #: universal gas constant, ft lbf / (R mol)
