@@ -1,0 +1,332 @@
+"""The rigid-body tier's propulsion (``cosim.rigid.propulsion``) against
+JSBSim itself: three uav700s flown by JSBSim through throttle steps,
+climbs and dives, fuel freeze on and off, a reverser angle and a thruster
+moved off the CG; the compiled plan, fed each frame the inputs JSBSim's
+propulsion saw, carries its own state (N1, N2, fuel flow, tanks) for the
+three aircraft at once and must give JSBSim's thrust, spools, fuel,
+forces and moments every frame. A perturbed table is caught; what the
+compiler does not know is refused with file:line."""
+
+from __future__ import annotations
+
+import re
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cosim.rigid.functions import CompileError
+from cosim.rigid.propulsion import Propulsion, PropulsionError, compile_propulsion
+from cosim.vehicles.jsb import JSBSIM_ROOT, find_model, new_fdm
+
+REPO = Path(__file__).resolve().parents[2]
+UAV700 = REPO / "aircraft" / "uav700" / "uav700.xml"
+ENGINES = JSBSIM_ROOT / "engine"
+DT_S = 1 / 120
+
+#: what JSBSim's propulsion reads in a frame, all final once fdm.run() returns
+#: (the atmosphere, auxiliary, FCS and mass balance run before it, nothing
+#: after it changes them); the fuel freeze is write-only in JSBSim: the
+#: uav700's system copies uav700/fuel-freeze into it before propulsion runs
+INPUTS = ("velocities/mach", "atmosphere/density-altitude", "atmosphere/sigma",
+          "atmosphere/T-R", "fcs/throttle-pos-norm", "inertia/cg-x-in", "inertia/cg-y-in",
+          "inertia/cg-z-in")
+SETTINGS = ("propulsion/engine/reverser-angle-rad", "propulsion/engine/x-position",
+            "propulsion/engine/y-position", "propulsion/engine/z-position")
+OUTPUTS = ("propulsion/engine/thrust-lbs", "propulsion/engine/n1", "propulsion/engine/n2",
+           "propulsion/engine/fuel-flow-rate-pps", "propulsion/engine/fuel-used-lbs",
+           "propulsion/engine/tsfc", "propulsion/engine/IdleThrust",
+           "propulsion/engine/MilThrust", "propulsion/tank/contents-lbs",
+           "propulsion/total-fuel-lbs", "forces/fbx-prop-lbs", "forces/fby-prop-lbs",
+           "forces/fbz-prop-lbs", "moments/l-prop-lbsft", "moments/m-prop-lbsft",
+           "moments/n-prop-lbsft")
+#: the same operations in the same order on the same doubles: equal bit for
+#: bit. The rest depend on the thrust tables, whose interpolation
+#: (cosim.rigid.functions) agrees with FGTable's to the last bits only
+#: (up to 2e-16 of the value); the moments' atol is for their zeros
+EXACT = ("propulsion/engine/n1", "propulsion/engine/n2", "propulsion/engine/fuel-flow-rate-pps",
+         "propulsion/engine/fuel-used-lbs", "propulsion/engine/tsfc",
+         "propulsion/tank/contents-lbs", "propulsion/total-fuel-lbs")
+
+#: per aircraft, (second, property, value) commands
+SCHEDULES = [
+    [(0, "fcs/throttle-cmd-norm", 0.0), (4, "fcs/throttle-cmd-norm", 1.0),
+     (5, "uav700/fuel-freeze", 0.0), (6, "fcs/elevator-cmd-norm", -0.3),
+     (9, "fcs/throttle-cmd-norm", 0.3), (11, "fcs/elevator-cmd-norm", 0.2),
+     (14, "fcs/throttle-cmd-norm", 0.8), (16, "uav700/fuel-freeze", 1.0)],
+    [(0, "fcs/throttle-cmd-norm", 1.0), (0, "uav700/fuel-freeze", 0.0),
+     (0, "propulsion/engine/z-position", -6.0), (0, "propulsion/engine/y-position", 4.0),
+     (3, "fcs/throttle-cmd-norm", 0.05), (7, "fcs/elevator-cmd-norm", 0.25),
+     (10, "fcs/throttle-cmd-norm", 0.6), (13, "propulsion/engine/reverser-angle-rad", 0.3),
+     (15, "fcs/throttle-cmd-norm", 1.0)],
+    [(0, "fcs/throttle-cmd-norm", 0.5), (2, "fcs/elevator-cmd-norm", -0.5),
+     (5, "fcs/throttle-cmd-norm", 0.0), (8, "fcs/elevator-cmd-norm", 0.4),
+     (12, "fcs/throttle-cmd-norm", 0.9), (12, "uav700/fuel-freeze", 0.0)],
+]
+
+
+Arrays = dict[str, np.ndarray]
+Flights = tuple[Arrays, Arrays, Arrays]
+
+
+def _flights(seconds: float = 20.0) -> Flights:
+    """Three uav700s flown by JSBSim: the state after set-running, then per
+    frame (rows) and aircraft (columns) the inputs, settings and outputs."""
+    fdms = []
+    for _ in SCHEDULES:
+        fdm = new_fdm(find_model("uav700"), DT_S)
+        fdm["ic/h-sl-ft"] = 3000
+        fdm["ic/vc-kts"] = 100
+        fdm.run_ic()
+        fdm["propulsion/set-running"] = -1
+        fdms.append(fdm)
+    start = {k: np.array([f[k] for f in fdms]) for k in (*INPUTS, *OUTPUTS)}
+    frames = round(seconds / DT_S)
+    rec: dict[str, list[list[float]]] = {k: [] for k in (*INPUTS, "uav700/fuel-freeze",
+                                                           *SETTINGS, *OUTPUTS)}
+    for i in range(frames):
+        for fdm, schedule in zip(fdms, SCHEDULES):
+            for t_s, prop, value in schedule:
+                if round(t_s / DT_S) == i:
+                    fdm[prop] = value
+            fdm.run()
+        for k, rows in rec.items():
+            rows.append([f[k] for f in fdms])
+    got = {k: np.array(v) for k, v in rec.items()}
+    ins = {k: got.pop(k) for k in (*INPUTS, "uav700/fuel-freeze", *SETTINGS)}
+    ins["propulsion/fuel_freeze"] = ins.pop("uav700/fuel-freeze")
+    return start, ins, got
+
+
+@pytest.fixture(scope="module")
+def flights() -> Flights:
+    return _flights()
+
+
+def _replay(plan: Propulsion, start: Arrays, ins: Arrays) -> Arrays:
+    """The plan run on the recorded inputs, its state its own from init on."""
+    n = len(start["velocities/mach"])
+    props = {k: start[k].copy() for k in INPUTS}
+    plan.init(props, n)
+    out: dict[str, list[np.ndarray]] = {k: [] for k in OUTPUTS}
+    for i in range(len(ins["velocities/mach"])):
+        for k, v in ins.items():
+            props[k] = v[i].copy()
+        plan.run(props, DT_S)
+        for k in OUTPUTS:
+            out[k].append(props[k].copy())
+    return {k: np.array(v) for k, v in out.items()}
+
+
+def test_the_uav700_equals_jsbsim_frame_by_frame(flights: Flights) -> None:
+    start, ins, jsb = flights
+    plan = compile_propulsion(UAV700, ENGINES)
+    assert plan.inputs >= {"velocities/mach", "atmosphere/density-altitude",
+                           "fcs/throttle-pos-norm", "inertia/cg-x-in", "propulsion/fuel_freeze"}
+    # set-running: full-throttle spools and the tank's initial contents
+    props = {k: start[k].copy() for k in INPUTS}
+    plan.init(props, 3)
+    for k in ("propulsion/engine/n1", "propulsion/engine/n2", "propulsion/tank/contents-lbs",
+              "propulsion/total-fuel-lbs"):
+        np.testing.assert_array_equal(props[k], start[k], err_msg=k)
+    ours = _replay(plan, start, ins)
+    # the flights moved what is compared: spools both ways, fuel burnt and
+    # frozen, moments from the offset thruster, the reverser's cosine
+    n2 = jsb["propulsion/engine/n2"]
+    assert (np.diff(n2, axis=0) > 0).any() and (np.diff(n2, axis=0) < 0).any()
+    burnt = jsb["propulsion/tank/contents-lbs"][-1] - start["propulsion/tank/contents-lbs"]
+    assert (burnt < -0.01).all()
+    assert np.ptp(jsb["moments/m-prop-lbsft"][:, 1]) > 1.0
+    assert np.ptp(jsb["moments/n-prop-lbsft"][:, 1]) > 1.0
+    assert np.ptp(ins["velocities/mach"]) > 0.05
+    assert np.ptp(ins["atmosphere/density-altitude"]) > 300
+    for k in OUTPUTS:
+        if k in EXACT:
+            np.testing.assert_array_equal(ours[k], jsb[k], err_msg=k)
+        else:
+            np.testing.assert_allclose(ours[k], jsb[k], rtol=1e-12, atol=1e-12, err_msg=k)
+
+
+def test_a_perturbed_table_value_is_caught(flights: Flights, tmp_path: Path) -> None:
+    start, ins, jsb = flights
+    bad_dir = tmp_path / "uav700"
+    shutil.copytree(UAV700.parent, bad_dir)
+    engine = bad_dir / "Engines" / "uav700_turbojet.xml"
+    text = engine.read_text()
+    assert text.count("0.922") == 1
+    engine.write_text(text.replace("0.922", "0.912"))  # MilThrust, mach 0.3, 0 ft: 1 % off
+    ours = _replay(compile_propulsion(bad_dir / "uav700.xml", ENGINES), start, ins)
+    k = "propulsion/engine/thrust-lbs"
+    assert not np.allclose(ours[k], jsb[k], rtol=1e-3)
+
+
+def test_the_thrusters_orientation_and_tanks_of_a_file(tmp_path: Path) -> None:
+    """A thruster pitched, yawed and rolled and two tanks fed by priority,
+    compiled and flown by JSBSim from the same files."""
+    import jsbsim
+
+    work = tmp_path / "uav700"
+    shutil.copytree(UAV700.parent, work)
+    xml = work / "uav700.xml"
+    text = xml.read_text()
+    text = text.replace("<roll> 0 </roll> <pitch> 0 </pitch> <yaw> 0 </yaw>",
+                        "<roll> 3 </roll> <pitch> 4 </pitch> <yaw> -2 </yaw>")
+    text = text.replace("      <feed> 0 </feed>\n", "      <feed> 0 </feed> <feed> 1 </feed>\n")
+    text = text.replace("    </tank>\n", """    </tank>
+    <tank type="FUEL">
+      <location unit="IN"> <x> 30 </x> <y> 2 </y> <z> -1 </z> </location>
+      <capacity unit="LBS"> 0.3 </capacity>
+      <contents unit="LBS"> 0.02 </contents>
+      <priority> 1 </priority>
+    </tank>
+""", 1)
+    text = text.replace("<contents unit=\"KG\"> 8.0 </contents>",
+                        "<contents unit=\"KG\"> 8.0 </contents> <priority> 2 </priority>")
+    xml.write_text(text)
+    engine = work / "Engines" / "uav700_turbojet.xml"
+    text = engine.read_text()
+    for a, b in (("<bypassratio>           0.0", "<bypassratio> 1.5"),
+                 ("<tsfc>                  1.55", "<tsfc> 4.0"),  # above the idle flow
+                 ("<bleed>                 0.0", "<bleed> 0.02")):
+        assert a in text
+        text = text.replace(a, b)
+    engine.write_text(text)
+    fdm = jsbsim.FGFDMExec(str(JSBSIM_ROOT))
+    fdm.set_debug_level(0)
+    assert fdm.load_model_with_paths("uav700", str(tmp_path), str(ENGINES),
+                                     str(REPO / "aircraft" / "systems"))
+    fdm.set_dt(DT_S)
+    fdm["ic/h-sl-ft"] = 2000
+    fdm["ic/vc-kts"] = 110
+    fdm.run_ic()
+    fdm["propulsion/set-running"] = -1
+    fdm["uav700/fuel-freeze"] = 0
+    fdm["fcs/throttle-cmd-norm"] = 0.7
+    plan = compile_propulsion(xml, ENGINES)
+    assert [t.contents_key for t in plan.tanks] == ["propulsion/tank/contents-lbs",
+                                                    "propulsion/tank[1]/contents-lbs"]
+    props = {k: np.array([fdm[k]]) for k in INPUTS}
+    plan.init(props, 1)
+    keys = (*OUTPUTS, "propulsion/tank[1]/contents-lbs")
+    flow = []
+    for i in range(600):  # the small tank empties, then the big one feeds
+        fdm.run()
+        for k in (*INPUTS, "propulsion/engine/reverser-angle-rad"):
+            props[k] = np.array([fdm[k]])
+        props["propulsion/fuel_freeze"] = np.array([fdm["uav700/fuel-freeze"]])
+        plan.run(props, DT_S)
+        for k in keys:
+            assert props[k][0] == pytest.approx(fdm[k], rel=1e-12, abs=1e-12), (i, k)
+        flow.append(fdm["propulsion/engine/fuel-flow-rate-pps"])
+        if i == 240:
+            fdm["fcs/throttle-cmd-norm"] = 0.2
+    flow_pps = np.array(flow)
+    assert fdm["propulsion/tank[1]/contents-lbs"] == 0.0
+    assert flow_pps.max() > 1.1 * flow_pps.min() > 263.0 / 3600  # sought, above idle
+    assert fdm["forces/fbz-prop-lbs"] != 0.0 and fdm["forces/fby-prop-lbs"] != 0.0
+
+
+def test_an_engine_without_fuel_is_refused_at_run_time() -> None:
+    plan = compile_propulsion(UAV700, ENGINES)
+    props = {"velocities/mach": np.full(2, 0.15), "atmosphere/density-altitude": np.zeros(2),
+             "atmosphere/sigma": np.ones(2), "atmosphere/T-R": np.full(2, 518.67),
+             "fcs/throttle-pos-norm": np.ones(2), "inertia/cg-x-in": np.zeros(2),
+             "inertia/cg-y-in": np.zeros(2), "inertia/cg-z-in": np.zeros(2)}
+    plan.init(props, 2)
+    props["propulsion/tank/contents-lbs"][1] = 0.0
+    props["propulsion/fuel_freeze"][:] = 1.0
+    plan.run(props, DT_S)  # frozen: nothing burnt, nothing starved
+    props["propulsion/fuel_freeze"][:] = 0.0
+    with pytest.raises(PropulsionError, match=r"engine 0 \(uav700_turbojet\) of aircraft "
+                                              r"\[1\] has no usable fuel"):
+        plan.run(props, DT_S)
+
+
+def _write(tmp_path: Path, propulsion: str, engine: str | None = None,
+           thruster: str | None = None) -> Path:
+    (tmp_path / "Engines").mkdir(exist_ok=True)
+    if engine is not None:
+        (tmp_path / "Engines" / "eng.xml").write_text(engine)
+    (tmp_path / "Engines" / "thr.xml").write_text(thruster or '<direct name="thr"/>\n')
+    xml = tmp_path / "a.xml"
+    xml.write_text(f"<fdm_config>\n  <propulsion>\n{propulsion}\n  </propulsion>\n"
+                   f"</fdm_config>\n")
+    return xml
+
+
+_ENGINE = """  <engine file="eng">
+    <feed> 0 </feed>
+    <thruster file="thr">
+      <location unit="IN"> <x> 1 </x> <y> 0 </y> <z> 0 </z> </location>
+    </thruster>
+  </engine>
+  <tank type="FUEL">
+    <location unit="IN"> <x> 1 </x> <y> 0 </y> <z> 0 </z> </location>
+    <capacity unit="LBS"> 10 </capacity> <contents unit="LBS"> 5 </contents>
+  </tank>"""
+_TURBINE = """<turbine_engine name="t">
+  <milthrust> 100 </milthrust>
+  {extra}
+  <function name="IdleThrust"> <value> 0.05 </value> </function>
+  <function name="MilThrust"> <value> 1 </value> </function>
+</turbine_engine>
+"""
+
+
+@pytest.mark.parametrize(("extra", "match"), [
+    ("<augmented> 1 </augmented>", r"eng.xml:3: <augmented>: only 0 is supported"),
+    ("<injected> 1 </injected>", r"eng.xml:3: <injected>: only 0 is supported"),
+    ("<function name=\"N2SpoolUp\"> <value> 1 </value> </function>",
+     r"eng.xml:3: <function>: function 'N2SpoolUp' is not supported"),
+    ("<tsfc> <function> <value> 1 </value> </function> </tsfc>",
+     r"eng.xml:3: <tsfc>: expected a number"),
+    ("<afterburner> 1 </afterburner>", r"eng.xml:3: <afterburner>: not supported in a "
+                                       r"turbine_engine"),
+])
+def test_unsupported_turbine_elements_are_refused_with_file_and_line(
+        tmp_path: Path, extra: str, match: str) -> None:
+    xml = _write(tmp_path, _ENGINE, _TURBINE.format(extra=extra))
+    with pytest.raises(CompileError, match=match):
+        compile_propulsion(xml, ENGINES)
+
+
+def test_the_c172ps_piston_engine_and_propeller_are_refused_together() -> None:
+    info = find_model("c172p")
+    xml = Path(info.aircraft_dir) / "c172p" / "c172p.xml"
+    problems: list[CompileError] = []
+    plan = compile_propulsion(xml, ENGINES, problems=problems)
+    text = "\n".join(str(p) for p in problems)
+    assert plan.engines == () and len(plan.tanks) == 2
+    assert len(problems) == 2, text
+    assert "eng_io320.xml:" in text and "<piston_engine>: not supported" in text
+    assert "prop_75in2f.xml:" in text and "<propeller>: thruster not supported" in text
+    with pytest.raises(CompileError, match=r"eng_io320.xml:\d+: <piston_engine>: not "
+                                           r"supported by the rigid-body compiler"):
+        compile_propulsion(xml, ENGINES)
+
+
+def test_every_problem_is_listed_when_asked(tmp_path: Path) -> None:
+    tanks = """  <tank type="OXIDIZER">
+    <location unit="IN"> <x> 1 </x> <y> 0 </y> <z> 0 </z> </location>
+  </tank>
+  <tank type="FUEL">
+    <location unit="FURLONG"> <x> 1 </x> <y> 0 </y> <z> 0 </z> </location>
+    <temperature> 20 </temperature>
+  </tank>
+  <dump-rate> 3 </dump-rate>"""
+    xml = _write(tmp_path, _ENGINE.replace("<feed> 0 </feed>", "<feed> 7 </feed>") + "\n" + tanks,
+                 _TURBINE.format(extra="<injected> 1 </injected> <bogus/>"))
+    problems: list[CompileError] = []
+    compile_propulsion(xml, ENGINES, problems=problems)
+    text = "\n".join(str(p) for p in problems)
+    for expected in (r"a.xml:13: <tank>: type 'OXIDIZER' is not supported",
+                     r"a.xml:18: <temperature>: not supported in a tank",
+                     r"a.xml:20: <dump-rate>: not supported in <propulsion>",
+                     r"a.xml:4: <feed>: tank 7 does not exist \(3 tanks\)",
+                     r"eng.xml:3: <injected>: only 0 is supported",
+                     r"eng.xml:3: <bogus>: not supported in a turbine_engine"):
+        assert any(re.search(expected, str(p)) for p in problems), (
+            expected, text)
+    with pytest.raises(CompileError, match=r"a.xml:\d+: "):
+        compile_propulsion(xml, ENGINES)
