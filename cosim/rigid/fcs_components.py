@@ -35,6 +35,33 @@ _DESCRIBE = {"description", "documentation"}
 _COMMON = {"input", "output", "clipto"}
 
 
+_RADTODEG = 57.295779513082320876798154814105
+_DEGTORAD = 0.017453292519943295769236907684886
+#: FGFCS's surface positions and whether it also ties a magnitude
+_SURFACES = {"elevator": True, "left-aileron": True, "right-aileron": True, "rudder": True,
+             "speedbrake": True, "spoiler": True, "flap": False}
+
+
+def _tied(name: str) -> list[tuple[str, Callable[[np.ndarray], np.ndarray]]]:
+    """What FGFCS sets with a surface position: writing ``fcs/X-pos-rad``
+    sets ``fcs/X-pos-deg`` (and ``fcs/mag-X-pos-rad``), and the other way
+    round; ``-norm`` stands alone."""
+    for surface, mag in _SURFACES.items():
+        rad, deg = f"fcs/{surface}-pos-rad", f"fcs/{surface}-pos-deg"
+        out: list[tuple[str, Callable[[np.ndarray], np.ndarray]]] = []
+        if name == rad:
+            out.append((deg, lambda r: r * _RADTODEG))
+            if mag:
+                out.append((f"fcs/mag-{surface}-pos-rad", np.abs))
+        elif name == deg:
+            out.append((rad, lambda d: d * _DEGTORAD))
+            if mag:
+                out.append((f"fcs/mag-{surface}-pos-rad", lambda d: np.abs(d * _DEGTORAD)))
+        if out:
+            return out
+    return []
+
+
 def normalize(name: str) -> str:
     """A component's own property: ``fcs/`` + its name lower-cased with
     blanks as dashes (JSBSim's mkPropertyName), or the name itself when it
@@ -222,6 +249,7 @@ class _Build:
         """Wrap ``compute`` (which returns the component's Output under
         ``self.name`` and its state) with the clip and the output copies."""
         name, outs, clip = self.name, self.outputs[1:], self.clip
+        tied = [t for o in self.outputs for t in _tied(o)]
 
         def step(p: Props, dt: float) -> dict[str, np.ndarray]:
             new: dict[str, np.ndarray] = compute(p, dt)
@@ -235,9 +263,12 @@ class _Build:
             new[name] = out
             for o in outs:
                 new[o] = out.copy()
+            for key, f in tied:
+                new[key] = f(out)
             return new
 
-        writes = tuple(self.outputs) + tuple(self.state) + extra
+        writes = (tuple(self.outputs) + tuple(k for k, _ in tied) + tuple(self.state)
+                  + extra)
         return Component(name, frozenset(self.reads), writes, dict(self.state), step)
 
 
@@ -392,7 +423,8 @@ def _gain(el: ET.Element, ctx: Context) -> Component:
     def scale(p: Props, dt: float) -> dict[str, Any]:
         u = np.asarray(x(p), dtype=np.float64)
         if centered:
-            out = np.where(u > 0, (u / in_max) * out_max, (u / in_min) * out_min)
+            with np.errstate(divide="ignore", invalid="ignore"):  # the branch not taken
+                out = np.where(u > 0, (u / in_max) * out_max, (u / in_min) * out_min)
             out = np.where(u == 0.0, 0.0, out)
         else:
             out = out_min + ((u - in_min) / (in_max - in_min)) * (out_max - out_min)

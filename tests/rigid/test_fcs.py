@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from cosim.rigid.fcs import Systems, compile_systems
-from cosim.vehicles.jsb import SYSTEMS_DIR, find_model, new_fdm
+from cosim.vehicles.jsb import JSBSIM_ROOT, SYSTEMS_DIR, _wrapper_root, find_model, new_fdm
 
 REPO = Path(__file__).resolve().parents[2]
 UAV700 = REPO / "aircraft" / "uav700" / "uav700.xml"
@@ -133,3 +133,24 @@ def test_a_one_percent_gain_error_is_caught(
     with pytest.raises(AssertionError, match="cosim/ap/roll-pi"):
         np.testing.assert_allclose(got["cosim/ap/roll-pi"], want["cosim/ap/roll-pi"],
                                    rtol=1e-9, err_msg="cosim/ap/roll-pi")
+
+
+def test_the_c172p_flight_control_with_the_cosim_autopilot_equals_jsbsim() -> None:
+    """The c172p as cosim flies it (JSBSim's own files with the autopilot
+    attached): its flaps' kinematic through three settings, the trims and
+    the aileron scaling, under the autopilot."""
+    model = find_model("c172p")
+    root = _wrapper_root(model)  # the files new_fdm gives JSBSim
+    plan = compile_systems(root / "c172p" / "c172p.xml", JSBSIM_ROOT / "systems")
+    assert {"fcs/flap-pos-deg", "fcs/flap-pos-norm", "cosim/ap/roll-pi"} <= plan.outputs
+    schedule = _autopilot_schedule()
+    for t_s, flap, trim in ((1, 0.5, 0.02), (4, 1.0, -0.03), (7, 0.1, 0.0), (7.5, 0.0, 0.01)):
+        schedule.setdefault(_s(t_s), {}).update({"fcs/flap-cmd-norm": flap,
+                                                 "fcs/pitch-trim-cmd-norm": trim})
+    seen, want = _fly("c172p", plan, schedule, _s(10))
+    got = _replay(plan, seen, schedule)
+    for name in sorted(plan.outputs - _WRITE_ONLY):
+        np.testing.assert_allclose(got[name], want[name], rtol=1e-12, atol=1e-12, err_msg=name)
+    # the flaps moved through their detents at each interval's own rate
+    assert set(np.round(want["fcs/flap-pos-deg"][_s(3.9):_s(4)], 9)) == {15.0}
+    assert want["fcs/flap-pos-deg"].max() == 30.0
