@@ -31,8 +31,11 @@ Each frame (``run(props, dt_s)``), in JSBSim's order, for each engine:
 then the total fuel (``propulsion/total-fuel-lbs``).
 
 The state: ``propulsion/engine[i]/n1``, ``n2``, ``fuel-used-lbs`` and
-``fuel-flow-rate-pps``, the fuel flow in pounds an hour (JSBSim's private
-``FuelFlow_pph``: ``_propulsion/engine[i]/fuel-flow-pph``), each tank's
+``fuel-flow-rate-pps``, two of JSBSim's members that have no property: the
+fuel flow in pounds an hour (``FuelFlow_pph``:
+``_propulsion/engine[i]/fuel-flow-pph``) and the N2 fraction of the last
+frame the spool rates use (``N2norm``: ``_propulsion/engine[i]/n2norm``;
+as in JSBSim, writing ``n2`` does not change it until the next frame), each tank's
 ``propulsion/tank[j]/contents-lbs``; and the settings JSBSim lets a user
 write: ``propulsion/engine[i]/reverser-angle-rad`` and the acting location
 ``x-position``, ``y-position``, ``z-position`` (inches). ``init(props, n)``
@@ -214,13 +217,30 @@ _TOTAL = "propulsion/total-fuel-lbs"
 _POSITION = ("x-position", "y-position", "z-position")
 
 
-def _seek(v: np.ndarray, target: np.ndarray, up: np.ndarray | float,
-          down: np.ndarray | float, dt_s: float) -> np.ndarray:
-    """``FGTurbine::Seek``: ``v`` moved towards ``target`` by ``dt x up`` or
-    ``dt x down``, never past it (v - dt*down is v + (-dt)*down exactly)."""
+def _seek(v: np.ndarray, target: np.ndarray, up: float, down: float, dt_s: float,
+          den: np.ndarray | None = None) -> np.ndarray:
+    """``FGTurbine::Seek``: ``v`` moved towards ``target`` by dt x ``up``
+    or dt x ``down`` (each divided by ``den`` first when given), never past
+    it. A rate's sign is exact in every product and quotient, so v - dt x
+    (down / den) is v + dt x (-down / den) to the bit."""
     above = v > target
-    moved = v + np.where(above, np.multiply(-dt_s, down), np.multiply(dt_s, up))
+    if den is None:
+        step = np.where(above, -dt_s * down, dt_s * up)
+    else:
+        step = dt_s * (np.where(above, -down, up) / den)
+    moved = v + step
     return np.where(above, np.maximum(moved, target), np.minimum(moved, target))
+
+
+def _times(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray | None:
+    return None if a is None or b is None else a * b
+
+
+def _minus(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray | None:
+    """a - b, a missing term a zero (0 - b is -b exactly)."""
+    if b is None:
+        return a
+    return -b if a is None else a - b
 
 
 @dataclass(frozen=True)
@@ -244,7 +264,7 @@ class Propulsion:
         for e in self.engines:
             names |= {e.key(k) for k in ("thrust-lbs", "n1", "n2", "fuel-flow-rate-pps",
                                          "fuel-used-lbs", "tsfc", "IdleThrust", "MilThrust")}
-            names.add("_" + e.key("fuel-flow-pph"))
+            names |= {"_" + e.key("fuel-flow-pph"), "_" + e.key("n2norm")}
         return frozenset(names | {t.contents_key for t in self.tanks})
 
     def init(self, props: dict[str, np.ndarray], n: int) -> None:
@@ -260,6 +280,7 @@ class Propulsion:
         for e in self.engines:
             props[e.key("n1")] = np.full(n, e.idle_n1 + 1.0 * e.n1_factor)
             props[e.key("n2")] = np.full(n, e.idle_n2 + 1.0 * e.n2_factor)
+            props["_" + e.key("n2norm")] = (props[e.key("n2")] - e.idle_n2) / e.n2_factor
             for k in ("thrust-lbs", "fuel-flow-rate-pps", "fuel-used-lbs", "tsfc",
                       "IdleThrust", "MilThrust"):
                 props[e.key(k)] = zeros.copy()
@@ -303,7 +324,8 @@ class Propulsion:
             fb, mb = self._engine(e, props, dt_s, cg, frozen)
             for acc, part in ((force, fb), (moment, mb)):
                 for k in range(3):
-                    acc[k] = part[k] if acc[k] is None else acc[k] + part[k]
+                    a, b = acc[k], part[k]
+                    acc[k] = b if a is None else a if b is None else a + b
         for keys, acc in ((_FORCES, force), (_MOMENTS, moment)):
             for k in range(3):
                 got = acc[k]
@@ -312,30 +334,36 @@ class Propulsion:
 
     def _engine(self, e: Turbine, props: dict[str, np.ndarray], dt_s: float,
                 cg: list[np.ndarray], frozen: np.ndarray
-                ) -> tuple[list[np.ndarray], list[np.ndarray]]:
+                ) -> tuple[list[np.ndarray | None], list[np.ndarray | None]]:
         tp = props[e.throttle_key]
-        over = tp - 1.0  # FGTurbine::Calculate: above 1 is augmentation, not compiled
-        tp = np.where(over > 0.0, tp - over, tp)
+        if bool((tp > 1.0).any()):  # FGTurbine::Calculate: above 1 is augmentation
+            over = tp - 1.0
+            tp = np.where(over > 0.0, tp - over, tp)
         idle_fraction = e.idle_thrust.evaluate(props)
         mil_fraction = e.mil_thrust.evaluate(props)
         idle = e.milthrust_lbs * idle_fraction
         mil = (e.milthrust_lbs - idle) * mil_fraction
         n1, n2 = props[e.key("n1")], props[e.key("n2")]
         # FGSpoolUp with the N2norm of the previous frame, the same for N1 and N2
-        m = 1.0 - np.minimum(1.0, (n2 - e.idle_n2) / e.n2_factor + 0.1)
+        norm_key = "_" + e.key("n2norm")
+        m = 1.0 - np.minimum(1.0, props[norm_key] + 0.1)
         den = 1 + 3 * m * m * m + (1 - props["atmosphere/sigma"])
         d2u, d2d, d1u, d1d = e.delays
-        n2 = _seek(n2, e.idle_n2 + tp * e.n2_factor, d2u / den, d2d / den, dt_s)
-        n1 = _seek(n1, e.idle_n1 + tp * e.n1_factor, d1u / den, d1d / den, dt_s)
+        n2 = _seek(n2, e.idle_n2 + tp * e.n2_factor, d2u, d2d, dt_s, den)
+        n1 = _seek(n1, e.idle_n1 + tp * e.n1_factor, d1u, d1d, dt_s, den)
         n2norm = (n2 - e.idle_n2) / e.n2_factor
+        props[norm_key] = n2norm
         thrust = idle + mil * n2norm * n2norm
         rest = 1 - n2norm
         tsfc = e.tsfc * np.sqrt(props["atmosphere/T-R"] / 389.7) * (0.84 + rest * rest)
         pph_key = "_" + e.key("fuel-flow-pph")
         pph = np.maximum(_seek(props[pph_key], thrust * tsfc, 1000.0, 10000.0, dt_s),
                          e.idle_ff_pph)
-        thrust = thrust * e.one_minus_bleed
-        thrust = np.cos(props[e.key("reverser-angle-rad")]) * thrust
+        if e.one_minus_bleed != 1.0:
+            thrust = thrust * e.one_minus_bleed
+        reverser = props[e.key("reverser-angle-rad")]
+        if bool(reverser.any()):  # cos(0) x thrust is thrust
+            thrust = np.cos(reverser) * thrust
         props[e.key("IdleThrust")] = idle_fraction
         props[e.key("MilThrust")] = mil_fraction
         props[e.key("n1")], props[e.key("n2")] = n1, n2
@@ -343,15 +371,19 @@ class Propulsion:
         props[pph_key] = pph
         props[e.key("thrust-lbs")] = thrust
         self._burn(e, props, dt_s, pph, frozen)
-        # FGForce: the body force (a zero of the transform gives a zero, as
-        # JSBSim's sum of thrust x entry and two zero products) and the moment
-        # about the CG, the arm from the structural frame to body axes in feet
-        fb = [thrust * a for a in e.axis]
-        loc = [props[e.key(k)] for k in _POSITION]
-        arm = (_INCH_TO_FT * (cg[0] - loc[0]), _INCH_TO_FT * (loc[1] - cg[1]),
-               _INCH_TO_FT * (cg[2] - loc[2]))
-        mb = [arm[1] * fb[2] - arm[2] * fb[1], arm[2] * fb[0] - arm[0] * fb[2],
-              arm[0] * fb[1] - arm[1] * fb[0]]
+        # FGForce: the body force and the moment about the CG, the arm from
+        # the structural frame to body axes in feet. A zero of the transform
+        # (known when compiled) gives no force (None), as JSBSim's zero
+        # products add nothing, and no term of the moment
+        fb = [None if a == 0.0 else thrust * a for a in e.axis]
+        need = [any(fb[j] is not None for j in range(3) if j != k) for k in range(3)]
+        x, y, z = (props[e.key(k)] for k in _POSITION)
+        arms = [_INCH_TO_FT * (cg[0] - x) if need[0] else None,
+                _INCH_TO_FT * (y - cg[1]) if need[1] else None,
+                _INCH_TO_FT * (cg[2] - z) if need[2] else None]
+        mb = [_minus(_times(arms[1], fb[2]), _times(arms[2], fb[1])),
+              _minus(_times(arms[2], fb[0]), _times(arms[0], fb[2])),
+              _minus(_times(arms[0], fb[1]), _times(arms[1], fb[0]))]
         return fb, mb
 
     def _burn(self, e: Turbine, props: dict[str, np.ndarray], dt_s: float,
