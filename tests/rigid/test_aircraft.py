@@ -1,0 +1,149 @@
+"""The rigid-body tier's whole aircraft (``cosim.rigid.aircraft``) against
+JSBSim flying the same files: from the same trimmed state, through
+elevator, aileron and throttle inputs, the two stay together to a fraction
+of a millimetre; a 2 % change of one aerodynamic coefficient is seen; the
+trim finds JSBSim's; and the compiler refuses what it does not know with
+the file, the line and the element."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cosim.rigid.aircraft import compile_aircraft, position_ecef, problems
+from cosim.rigid.functions import CompileError
+from cosim.vehicles.jsb import find_model, has_property, new_fdm
+
+REPO = Path(__file__).resolve().parents[2]
+UAV700 = REPO / "aircraft" / "uav700" / "uav700.xml"
+SYSTEMS = REPO / "aircraft" / "systems"
+ENGINES = REPO / "aircraft" / "uav700" / "Engines"
+KT = 1.68781
+#: what is compared, and how far apart the two may end (JSBSim's units)
+CHECK = {"position/h-sl-ft": 1e-3, "velocities/vt-fps": 1e-5, "attitude/psi-deg": 1e-5,
+         "attitude/phi-deg": 1e-5, "attitude/theta-deg": 1e-5, "aero/alpha-deg": 1e-5,
+         "propulsion/engine/thrust-lbs": 1e-5, "position/lat-geod-deg": 1e-9,
+         "position/long-gc-deg": 1e-9}
+
+
+def _trimmed_fdm(h_ft: float = 3000, kt: float = 100, psi_deg: float = 30):
+    fdm = new_fdm(find_model("uav700"), 1 / 120)
+    fdm["ic/lat-geod-deg"], fdm["ic/long-gc-deg"] = 47.0, 8.0
+    fdm["ic/h-sl-ft"], fdm["ic/vt-fps"], fdm["ic/psi-true-deg"] = h_ft, kt * KT, psi_deg
+    fdm.run_ic()
+    fdm["propulsion/set-running"] = -1
+    fdm.do_trim(1)
+    return fdm
+
+
+def _rigid_from(fdm, path: Path = UAV700):
+    """A rigid aircraft placed in ``fdm``'s state (its properties copied)."""
+    ac = compile_aircraft(path, SYSTEMS, ENGINES)
+    props = ac.new_props(1)
+    for k in list(props):
+        if not k.startswith("_") and has_property(fdm, k):
+            props[k] = np.full(1, float(fdm[k]))
+    lat, lon = fdm["position/lat-gc-rad"], fdm["position/long-gc-rad"]
+    r = fdm["position/radius-to-vehicle-ft"]
+    loc = tuple(np.array([v]) for v in (r * np.cos(lat) * np.cos(lon),
+                                        r * np.cos(lat) * np.sin(lon), r * np.sin(lat)))
+
+    def a(k: str) -> np.ndarray:
+        return np.array([fdm[k]])
+
+    ac.place(props, loc, a("attitude/phi-rad"), a("attitude/theta-rad"), a("attitude/psi-rad"),
+             (a("velocities/u-fps"), a("velocities/v-fps"), a("velocities/w-fps")),
+             (a("velocities/p-rad_sec"), a("velocities/q-rad_sec"), a("velocities/r-rad_sec")))
+    return ac, props
+
+
+#: (time s, property, value): a pull, a roll into a spiral, full throttle
+INPUTS = [(1.0, "fcs/elevator-cmd-norm", -0.1), (2.0, "fcs/elevator-cmd-norm", 0.0),
+          (2.0, "fcs/aileron-cmd-norm", 0.2), (3.0, "fcs/aileron-cmd-norm", 0.0),
+          (4.0, "fcs/throttle-cmd-norm", 1.0)]
+
+
+def _fly(fdm, ac, props, seconds: float) -> dict[str, float]:
+    """Both through ``INPUTS``; the largest difference of each ``CHECK``."""
+    worst = dict.fromkeys(CHECK, 0.0)
+    todo = list(INPUTS)
+    for i in range(int(seconds * 120)):
+        t = i / 120
+        while todo and todo[0][0] <= t:
+            _, k, v = todo.pop(0)
+            fdm[k] = v
+            props[k] = np.full(1, v)
+        fdm.run()
+        ac.run(props, 1 / 120)
+        for k in CHECK:
+            worst[k] = max(worst[k], abs(float(props[k][0]) - fdm[k]))
+    return worst
+
+
+def test_the_rigid_aircraft_flies_as_jsbsim_does_through_manoeuvres() -> None:
+    fdm = _trimmed_fdm()
+    ac, props = _rigid_from(fdm)
+    start = {k: fdm[k] for k in CHECK}
+    worst = _fly(fdm, ac, props, 20.0)
+    assert all(worst[k] <= tol for k, tol in CHECK.items()), worst
+    # the flight went somewhere: a climbing spiral at full throttle
+    assert fdm["position/h-sl-ft"] - start["position/h-sl-ft"] > 100
+    assert abs(fdm["attitude/phi-deg"]) > 20
+    assert fdm["velocities/vt-fps"] > start["velocities/vt-fps"] + 20
+
+
+def test_a_two_percent_lift_coefficient_is_seen(tmp_path: Path) -> None:
+    text = UAV700.read_text()
+    aircraft = tmp_path / "uav700"
+    aircraft.mkdir()
+    # the wing-body lift at 5 deg (0.58) 2 % higher
+    changed = text.replace("            5   0.58\n", "            5   0.5916\n", 1)
+    assert changed != text
+    (aircraft / "uav700.xml").write_text(changed)
+    shutil.copytree(ENGINES, aircraft / "Engines")
+    fdm = _trimmed_fdm()
+    ac, props = _rigid_from(fdm, aircraft / "uav700.xml")
+    worst = _fly(fdm, ac, props, 10.0)
+    assert worst["position/h-sl-ft"] > 0.5, worst  # half a foot, where equal files give 1e-5
+
+
+@pytest.mark.parametrize(("h_ft", "kt"), [(3000, 100), (500, 60), (10000, 200)])
+def test_the_trim_finds_jsbsims(h_ft: float, kt: float) -> None:
+    fdm = _trimmed_fdm(h_ft, kt, 30)
+    ac = compile_aircraft(UAV700, SYSTEMS, ENGINES)
+    props = ac.new_props(1)
+    loc = position_ecef(np.array([47.0]), np.array([8.0]), np.array([float(h_ft)]))
+    ok = ac.trim_level(props, loc, np.radians([30.0]), np.array([kt * KT]))
+    assert ok.all()
+    assert abs(props["position/h-sl-ft"][0] - h_ft) < 1e-6
+    assert abs(props["aero/alpha-deg"][0] - fdm["aero/alpha-deg"]) < 1e-3
+    # JSBSim also trims the roll of the Earth's rotation: a few hundredths of a degree
+    assert abs(props["attitude/phi-deg"][0] - fdm["attitude/phi-deg"]) < 0.1
+    assert abs(props["fcs/throttle-cmd-norm"][0] - fdm["fcs/throttle-cmd-norm"]) < 1e-4
+    assert abs(props["fcs/pitch-trim-cmd-norm"][0] - fdm["fcs/pitch-trim-cmd-norm"]) < 1e-4
+
+
+def test_unknown_elements_are_refused_with_file_line_and_element(tmp_path: Path) -> None:
+    text = UAV700.read_text()
+    bad = text.replace("<aerodynamics>", "<aerodynamics>\n    <aero_ref_pt_shift_x/>", 1)
+    bad = bad.replace('<axis name="DRAG"', '<axis name="AXIAL"', 1)
+    bad = bad.replace("</fdm_config>", "  <buoyant_forces/>\n</fdm_config>", 1)
+    aircraft = tmp_path / "uav700"
+    aircraft.mkdir()
+    path = aircraft / "uav700.xml"
+    path.write_text(bad)
+    shutil.copytree(ENGINES, aircraft / "Engines")
+    found = [str(e) for e in problems(path, SYSTEMS, ENGINES)]
+    assert any("<buoyant_forces>: not supported" in m for m in found), found
+    assert any("<aero_ref_pt_shift_x>: not supported" in m for m in found), found
+    assert any("axis 'AXIAL' is not supported" in m for m in found), found
+    assert all(m.startswith(f"{path}:") for m in found), found
+    with pytest.raises(CompileError, match=r"uav700\.xml:\d+: <buoyant_forces>"):
+        compile_aircraft(path, SYSTEMS, ENGINES)
+
+
+def test_the_bundled_aircraft_compiles_without_a_problem() -> None:
+    assert problems(UAV700, SYSTEMS, ENGINES) == []
