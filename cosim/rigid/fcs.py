@@ -99,6 +99,14 @@ class Systems:
             if k not in props:
                 props[k] = np.full(n, v, dtype=np.float64)
 
+    def run_ic(self, props: Props, dt_s: float) -> None:
+        """What JSBSim's ``run_ic()`` does to the systems: every channel
+        whose ``execute`` property is on runs twice with integration
+        suspended (measured against JSBSim 1.3.3: a PID integrates twice,
+        a filter initialises, then steps once)."""
+        self.run(props, dt_s, suspended=True)
+        self.run(props, dt_s, suspended=True)
+
     def run(self, props: Props, dt_s: float, *, suspended: bool = False) -> None:
         """One physics frame (``suspended``: JSBSim's RunIC frame)."""
         for i in range(self.engines):

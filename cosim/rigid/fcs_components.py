@@ -595,7 +595,7 @@ def _actuator(el: ET.Element, ctx: Context) -> Component:
 def _filter(el: ET.Element, ctx: Context) -> Component:
     tag = el.tag
     coeffs = {"lag_filter": 1, "washout_filter": 1, "lead_lag_filter": 4,
-              "second_order_filter": 6, "integrator": 0}[tag]
+              "second_order_filter": 6, "integrator": 1}[tag]
     allowed = {f"c{i}" for i in range(1, coeffs + 1)} | ({"trigger"} if tag == "integrator"
                                                         else set())
     b = _Build(el, ctx, allowed)
@@ -615,7 +615,12 @@ def _filter(el: ET.Element, ctx: Context) -> Component:
     k_first, k_in = b.key("initialize"), b.key("input")
     k_i1, k_i2, k_o1, k_o2 = (b.key("input_prev1"), b.key("input_prev2"),
                               b.key("output_prev1"), b.key("output_prev2"))
-    b.state.update({k_first: 1.0, k_in: 0.0, k_i1: 0.0, k_i2: 0.0, k_o1: 0.0, k_o2: 0.0})
+    # a filter's first run sets its past to the input it last held (0 at
+    # load) and outputs that; an integrator's first run is an ordinary step
+    # (both measured against JSBSim 1.3.3)
+    first_run = 0.0 if tag == "integrator" else 1.0
+    b.state.update({k_first: first_run, k_in: 0.0, k_i1: 0.0, k_i2: 0.0, k_o1: 0.0,
+                    k_o2: 0.0})
 
     def coefficients(dt: float) -> tuple[float, ...]:
         if tag == "lag_filter":
@@ -627,7 +632,7 @@ def _filter(el: ET.Element, ctx: Context) -> Component:
         if tag == "lead_lag_filter":
             denom = 2.0 * c[3] + dt * c[4]
             return ((2.0 * c[1] + dt * c[2]) / denom, (dt * c[2] - 2.0 * c[1]) / denom,
-                    (dt * c[4] - 2.0 * c[3]) / denom)
+                    (2.0 * c[3] - dt * c[4]) / denom)
         if tag == "second_order_filter":
             denom = 4.0 * c[4] + 2.0 * c[5] * dt + c[6] * dt * dt
             return ((4.0 * c[1] + 2.0 * c[2] * dt + c[3] * dt * dt) / denom,
@@ -635,7 +640,7 @@ def _filter(el: ET.Element, ctx: Context) -> Component:
                     (4.0 * c[1] - 2.0 * c[2] * dt + c[3] * dt * dt) / denom,
                     (2.0 * c[6] * dt * dt - 8.0 * c[4]) / denom,
                     (4.0 * c[4] - 2.0 * c[5] * dt + c[6] * dt * dt) / denom)
-        return (dt / 2.0,)
+        return (dt * c[1] / 2.0,)
 
     def compute(p: Props, dt: float) -> dict[str, Any]:
         first = p[k_first] != 0.0
@@ -652,11 +657,15 @@ def _filter(el: ET.Element, ctx: Context) -> Component:
             out = u * k[0] - i1 * k[0] + o1 * k[1]
         else:
             if trigger is not None:
-                fire = np.abs(trigger(p)) > 0.000001
-                u = np.where(fire, 0.0, u)
-                i1 = np.where(fire, 0.0, i1)
-                i2 = np.where(fire, 0.0, i2)
-            out = u * k[0] + i1 * k[0] + o1
+                # a negative trigger resets the output to 0 first; one beyond
+                # 1e-6 either way then holds it (the inputs are not added);
+                # the past inputs follow the input all the while (measured
+                # against JSBSim 1.3.3 at 1, 2e-6, 5e-7, -5e-7, -2e-6 and -1)
+                test = trigger(p)
+                o1 = np.where(test < 0.0, 0.0, o1)
+                out = np.where(np.abs(test) > 0.000001, o1, u * k[0] + i1 * k[0] + o1)
+            else:
+                out = u * k[0] + i1 * k[0] + o1
         # the first frame: the output is the input held from before (0 at load)
         held = p[k_in]
         u = np.where(first, held, u)

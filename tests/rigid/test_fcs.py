@@ -14,7 +14,14 @@ import numpy as np
 import pytest
 
 from cosim.rigid.fcs import Systems, compile_systems
-from cosim.vehicles.jsb import JSBSIM_ROOT, SYSTEMS_DIR, _wrapper_root, find_model, new_fdm
+from cosim.vehicles.jsb import (
+    JSBSIM_ROOT,
+    SYSTEMS_DIR,
+    ModelInfo,
+    _wrapper_root,
+    find_model,
+    new_fdm,
+)
 
 REPO = Path(__file__).resolve().parents[2]
 UAV700 = REPO / "aircraft" / "uav700" / "uav700.xml"
@@ -33,11 +40,11 @@ _BEFORE_FCS = ("attitude/", "position/", "atmosphere/", "velocities/p-rad_sec",
                "velocities/v-east-fps", "velocities/v-down-fps")
 
 
-def _fly(model: str, plan: Systems, schedule: dict[int, dict[str, float]], frames: int
-         ) -> tuple[list[dict[str, float]], dict[str, np.ndarray]]:
+def _fly(model: str | ModelInfo, plan: Systems, schedule: dict[int, dict[str, float]],
+         frames: int) -> tuple[list[dict[str, float]], dict[str, np.ndarray]]:
     """JSBSim flying ``model``: per frame the inputs its FCS saw (frame 0
     is run_ic) and every output of ``plan`` after the frame."""
-    fdm = new_fdm(find_model(model), DT_S)
+    fdm = new_fdm(find_model(model) if isinstance(model, str) else model, DT_S)
     fdm["ic/h-sl-ft"] = 3000
     fdm["ic/vc-kts"] = 100
     seen: list[dict[str, float]] = []
@@ -68,7 +75,10 @@ def _replay(plan: Systems, seen: list[dict[str, float]], schedule: dict[int, dic
             props[k] = np.array([v])
         for k, v in (tweak or {}).items():
             props[k] = props[k] * v
-        plan.run(props, DT_S, suspended=f == 0)
+        if f == 0:
+            plan.run_ic(props, DT_S)
+        else:
+            plan.run(props, DT_S)
         for k in plan.outputs:
             got[k].append(float(props[k][0]))
     return {k: np.array(v) for k, v in got.items()}
@@ -154,3 +164,106 @@ def test_the_c172p_flight_control_with_the_cosim_autopilot_equals_jsbsim() -> No
     # the flaps moved through their detents at each interval's own rate
     assert set(np.round(want["fcs/flap-pos-deg"][_s(3.9):_s(4)], 9)) == {15.0}
     assert want["fcs/flap-pos-deg"].max() == 30.0
+
+
+#: every component type and option the compiler knows, driven by zoo/*
+_ZOO = """
+<system name="zoo">
+  <property value="0">zoo/u</property>
+  <property value="0">zoo/v</property>
+  <property value="0">zoo/gate</property>
+  <property value="1.5">zoo/k</property>
+  <property value="1">zoo/run</property>
+  <channel name="filters">
+    <lag_filter name="zoo/lag"><input>zoo/u</input><c1>5</c1></lag_filter>
+    <lead_lag_filter name="zoo/leadlag"><input>-zoo/u</input>
+      <c1>1</c1><c2>2</c2><c3>0.5</c3><c4>3</c4></lead_lag_filter>
+    <washout_filter name="zoo/washout"><input>zoo/u</input><c1>2</c1></washout_filter>
+    <second_order_filter name="zoo/order2"><input>zoo/u</input>
+      <c1>1</c1><c2>2</c2><c3>3</c3><c4>1</c4><c5>0.8</c5><c6>25</c6></second_order_filter>
+    <integrator name="zoo/integ"><input>zoo/u</input><c1>2</c1><trigger>zoo/gate</trigger>
+      <clipto><min>-3</min><max>zoo/k</max></clipto></integrator>
+    <deadband name="zoo/deadband"><input>zoo/u</input><width>0.4</width><gain>2</gain></deadband>
+  </channel>
+  <channel name="pids" execrate="3">
+    <pid name="zoo/pid-rect"><input>zoo/u</input><kp>0.5</kp><ki type="rect">0.3</ki>
+      <kd>0.01</kd><trigger>zoo/gate</trigger></pid>
+    <pid name="zoo/pid-trap"><input>zoo/u</input><kp>zoo/k</kp><ki type="trap">0.3</ki></pid>
+    <pid name="zoo/pid-ab3" type="standard"><input>zoo/u</input><kp>0.5</kp>
+      <ki type="ab3">0.3</ki><kd>0.02</kd><clipto><min>-0.5</min><max>0.5</max></clipto></pid>
+    <pid name="zoo/pid-pvdot"><input>zoo/u</input><ki>0.2</ki><kd>0.1</kd>
+      <pvdot>zoo/v</pvdot></pid>
+  </channel>
+  <channel name="actuators" execute="zoo/run">
+    <actuator name="zoo/act"><input>zoo/u</input><lag>8</lag>
+      <rate_limit sense="incr">2</rate_limit><rate_limit sense="decr">zoo/k</rate_limit>
+      <deadband_width>0.05</deadband_width><hysteresis_width>0.1</hysteresis_width>
+      <bias>0.01</bias><clipto><min>-0.8</min><max>0.7</max></clipto></actuator>
+    <actuator name="zoo/act-stuck"><input>zoo/u</input><rate_limit>1</rate_limit>
+      <clipto><min>-1</min><max>1</max></clipto></actuator>
+    <kinematic name="zoo/kin"><input>zoo/v</input><noscale/><traverse>
+      <setting><position>-1</position><time>0</time></setting>
+      <setting><position>0</position><time>1.5</time></setting>
+      <setting><position>2</position><time>0.5</time></setting></traverse></kinematic>
+  </channel>
+  <channel name="gains">
+    <pure_gain name="Zoo Pure Gain"><input>zoo/u</input><gain>-zoo/k</gain></pure_gain>
+    <scheduled_gain name="zoo/sched"><input>zoo/u</input><gain>2</gain>
+      <table><independentVar>zoo/v</independentVar>
+        <tableData>-1 0.5
+                   0 1
+                   1 3</tableData></table></scheduled_gain>
+    <aerosurface_scale name="zoo/scale"><input>zoo/u</input><zero_centered>0</zero_centered>
+      <domain><min>-2</min><max>1</max></domain><range><min>-10</min><max>30</max></range>
+      <gain>0.5</gain></aerosurface_scale>
+    <summer name="zoo/sum"><input>zoo/u</input><input>-zoo/v</input>
+      <input>fcs/zoo-pure-gain</input><bias>0.25</bias>
+      <clipto type="cyclic"><min>-1</min><max>1</max></clipto></summer>
+    <switch name="zoo/switch">
+      <default value="-zoo/v"/>
+      <test logic="OR" value="zoo/k">zoo/u GT 0.5
+        <test logic="AND">zoo/v LT 0
+          zoo/gate NE 0</test></test>
+      <test value="2">zoo/u LE -0.5</test>
+      <output>zoo/switch-copy</output>
+    </switch>
+  </channel>
+</system>
+"""
+
+
+def test_every_component_type_equals_jsbsim(tmp_path: Path) -> None:
+    """A system with every component and option, added to the uav700 and
+    driven by random walks, gates, a disabled channel, a stuck and a
+    hardover actuator: every output equals JSBSim's in every frame."""
+    folder = tmp_path / "uav700"
+    folder.mkdir()
+    (folder / "Engines").symlink_to(UAV700.parent / "Engines")
+    xml = UAV700.read_text()
+    at = xml.index("<flight_control")
+    (folder / "uav700.xml").write_text(xml[:at] + _ZOO + xml[at:])
+    plan = compile_systems(folder / "uav700.xml", SYSTEMS_DIR)
+    frames = 900
+    rng = np.random.default_rng(3)
+    u = np.clip(np.cumsum(rng.normal(0, 0.08, frames)), -1.2, 1.2)
+    v = np.clip(np.cumsum(rng.normal(0, 0.1, frames)), -1.5, 2.5)
+    schedule: dict[int, dict[str, float]] = {f: {"zoo/u": u[f], "zoo/v": v[f]}
+                                             for f in range(frames)}
+    for first, last, key, value in ((200, 260, "zoo/gate", 1), (400, 410, "zoo/gate", -1),
+                                    (450, 470, "zoo/gate", 5e-7), (480, 490, "zoo/gate", -5e-7),
+                                    (600, 610, "zoo/gate", 2e-6), (620, 630, "zoo/gate", -2e-6),
+                                    (300, frames, "zoo/k", 0.8), (500, 560, "zoo/run", 0),
+                                    (600, 650, "zoo/act-stuck/malfunction/fail_stuck", 1),
+                                    (700, 720, "zoo/act/malfunction/fail_hardover", 1)):
+        schedule[first][key] = value
+        if last < frames:
+            schedule[last][key] = {"zoo/k": 1.5, "zoo/run": 1}.get(key, 0)
+    model = ModelInfo("uav700", str(tmp_path), "user")
+    seen, want = _fly(model, plan, schedule, frames)
+    got = _replay(plan, seen, schedule)
+    zoo = sorted(k for k in plan.outputs if "zoo" in k)
+    assert len(zoo) == 21
+    for name in sorted(plan.outputs - _WRITE_ONLY):
+        np.testing.assert_allclose(got[name], want[name], rtol=1e-12, atol=1e-12, err_msg=name)
+    for name in zoo:  # each moved
+        assert np.ptp(want[name]) > 0.01, name
