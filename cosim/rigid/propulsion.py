@@ -13,37 +13,48 @@ property, one value per aircraft, JSBSim's names and units).
 
 Each frame (``run(props, dt_s)``), in JSBSim's order, for each engine:
 
-- the turbine's running phase (``FGTurbine::Run``): the ``IdleThrust`` and
+- the turbine (``FGTurbine::Calculate``): the ``IdleThrust`` and
   ``MilThrust`` functions of the engine file (``cosim.rigid.functions``),
-  N2 then N1 moved towards their throttle targets by JSBSim's seek at the
-  spool rates it derives from the bypass ratio, the N2 reached and the
-  density ratio (``FGSpoolUp``), thrust idle + (mil - idle) x N2norm^2,
-  the simplified TSFC corrected for temperature and N2, the fuel flow
-  sought towards thrust x TSFC and never below the idle flow, bleed;
+  then its phase. Running (``Run``): N2 then N1 moved towards their
+  throttle targets by JSBSim's seek at the spool rates it derives from the
+  bypass ratio, the last N2 fraction and the density ratio
+  (``FGSpoolUp``), thrust idle + (mil - idle) x N2norm^2, the simplified
+  TSFC corrected for temperature and N2, the fuel flow sought towards
+  thrust x TSFC and never below the idle flow, bleed. Cut off
+  (``propulsion/cutoff_cmd``) or starved it is off (``Off``: no thrust, N1
+  and N2 spooling down to their windmilling speeds from ``aero/qbar-psf``
+  unless ``disable-windmill``); cut off with the starter
+  (``propulsion/starter_cmd``) it spins up to the ignition speeds
+  (``SpinUp``); not cut off above 15 % N2 with the starter or a dynamic
+  pressure above 30 psf it starts (``Start``: to idle at the start rates,
+  then running). The running engine clears the starter, as JSBSim's does;
 - the direct thruster: thrust x cos(reverser angle) along the thruster's
   orientation, and its moment about the CG (the acting location, inches
   in the structural frame, x aft and z up, taken from the CG
   ``inertia/cg-[xyz]-in`` into body axes and feet);
 - the fuel it burns (``FGPropulsion::ConsumeFuel``), unless
   ``propulsion/fuel_freeze`` is set: drained equally from its feed tanks of
-  the best priority holding usable fuel.
+  the best priority holding usable fuel; none there, the engine starves.
 
 then the total fuel (``propulsion/total-fuel-lbs``).
 
 The state: ``propulsion/engine[i]/n1``, ``n2``, ``fuel-used-lbs`` and
-``fuel-flow-rate-pps``, two of JSBSim's members that have no property: the
-fuel flow in pounds an hour (``FuelFlow_pph``:
-``_propulsion/engine[i]/fuel-flow-pph``) and the N2 fraction of the last
-frame the spool rates use (``N2norm``: ``_propulsion/engine[i]/n2norm``;
-as in JSBSim, writing ``n2`` does not change it until the next frame), each tank's
-``propulsion/tank[j]/contents-lbs``; and the settings JSBSim lets a user
-write: ``propulsion/engine[i]/reverser-angle-rad`` and the acting location
-``x-position``, ``y-position``, ``z-position`` (inches). ``init(props, n)``
-starts every engine running as JSBSim's ``propulsion/set-running`` = -1
-leaves it (N1 and N2 at their full-throttle values; the fuel flow at its
-steady value when the flight inputs are already in ``props``, else the idle
-flow) and every tank at its initial contents. Index 0 is written without
-brackets, as JSBSim's property tree names it (``propulsion/engine/n1``).
+``fuel-flow-rate-pps``; JSBSim's members that have no property, under
+private keys ``_propulsion/engine[i]/...``: ``fuel-flow-pph`` (the fuel
+flow in pounds an hour), ``n2norm`` (the N2 fraction of the last running
+frame, which the spool rates use: as in JSBSim, writing ``n2`` does not
+change it), ``phase`` (0 off, 1 running, 2 spinning up, 3 starting),
+``running`` and ``starved``; each tank's ``propulsion/tank[j]/contents-lbs``;
+and what JSBSim lets a user write: ``propulsion/cutoff_cmd``,
+``propulsion/starter_cmd``, ``propulsion/engine[i]/reverser-angle-rad`` and
+the acting location ``x-position``, ``y-position``, ``z-position``
+(inches). ``init(props, n)`` starts every engine running as JSBSim's
+``propulsion/set-running`` = -1 leaves it (N1 and N2 at their full-throttle
+values; the fuel flow at its steady value when the flight inputs are
+already in ``props``, else the idle flow) and every tank at its initial
+contents. Index 0 is written without brackets, as JSBSim's property tree
+names it (``propulsion/engine/n1``). Every phase but running is computed
+only in a frame where some aircraft needs it.
 
 The mass balance adds the tanks: ``Propulsion.tanks`` gives each tank's
 location in inches (``location_in``) and the ``props`` key of its contents
@@ -53,27 +64,27 @@ What it does not know it refuses (``CompileError``, ``FILE:LINE:
 <element>``), never guesses: engines other than ``turbine_engine``
 (``piston_engine``, ``turboprop_engine``, ``rocket_engine``,
 ``electric_engine``, ...), thrusters other than ``direct`` (``propeller``,
-``nozzle``, ``rotor``), augmentation, water injection, the spool-rate and
-TSFC functions, any other element or function, oxidizer tanks and tank
-temperature, drain locations, radius and grain. Engines only run: the
-phases off, spin-up, start, stall and seize are not compiled (cut-off and
-starter commands are not read), and a ``run`` in which an engine's feed
-tanks hold no usable fuel (JSBSim would starve it) raises ``PropulsionError``
-naming the engine and the aircraft (``PropulsionError``). The thruster's orientation is fixed at
-compile time; a tank's priority too.
+``nozzle``, ``rotor``, ``pointing``), augmentation, water injection, the
+spool-rate and TSFC functions, any other element or function, oxidizer
+tanks and tank temperature, drain locations, radius and grain. Not
+compiled, so never entered: the turbine's stall, seize and trim phases
+(``stalled`` and ``seized`` are not read), refuelling, dumping and a tank's
+external flow. The starter of an aircraft with several engines (JSBSim
+keeps one per engine behind the one command) is a ``PropulsionError``
+when used. The thruster's orientation and a tank's priority are fixed at
+compile time.
 """
 
 from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
-from cosim.errors import CosimError
 from cosim.rigid.functions import Compiled, CompileError, compile_function, parse
+from cosim.rigid.propulsion_plan import Propulsion, PropulsionError, Tank, Turbine
+
+__all__ = ["Propulsion", "PropulsionError", "Tank", "Turbine", "compile_propulsion"]
 
 #: JSBSim's conversion factors (``FGJSBBase``, ``FGXMLElement``)
 _M_TO_FT = 3.2808399
@@ -84,7 +95,6 @@ _TO: dict[str, dict[str, float]] = {
     "GAL": {"GAL": 1.0, "L": 0.26417287},
     "LBS/GAL": {"LBS/GAL": 1.0, "KG/L": 8.3454045},
 }
-_INCH_TO_FT = 1.0 / 12.0
 #: ``FGTank::ProcessFuelName``'s densities (lbs/gal)
 _FUEL_DENSITY = {
     "AVGAS": 6.02, "JET-A": 6.74, "JET-A1": 6.74, "JET-B": 6.48, "JP-1": 6.76, "JP-2": 6.38,
@@ -94,8 +104,7 @@ _FUEL_DENSITY = {
 }
 _OTHER_ENGINES = ("piston_engine", "turboprop_engine", "rocket_engine", "electric_engine",
                   "brushless_dc_motor")
-#: turbine numbers read as they are; those that only the phases this plan
-#: does not compile use (starting, windmilling) are accepted and unused
+#: the turbine's numbers (disable-windmill: 0 or 1)
 _TURBINE_NUMBERS = {"milthrust", "maxthrust", "bypassratio", "bleed", "tsfc", "atsfc",
                     "idlen1", "idlen2", "maxn1", "maxn2", "n1spinup", "n2spinup",
                     "n1startrate", "n2startrate", "n1spindown", "n2spindown", "ignitionn1",
@@ -149,280 +158,6 @@ def _triplet(el: ET.Element, source: str, target: str, names: tuple[str, str, st
         out.append(0.0 if item is None else _number(item, source) * f)
     return out[0], out[1], out[2]
 
-
-def _indexed(base: str, i: int) -> str:
-    """JSBSim's property name of index ``i`` as its tree lists it."""
-    head, _, tail = base.partition("/#")
-    return f"{head}{'' if i == 0 else f'[{i}]'}{tail}"
-
-
-@dataclass(frozen=True)
-class Tank:
-    """One fuel tank: where it is and where its contents live in ``props``."""
-
-    index: int
-    location_in: tuple[float, float, float]
-    capacity_lbs: float
-    initial_lbs: float
-    unusable_lbs: float
-    priority: int
-
-    @property
-    def contents_key(self) -> str:
-        return _indexed("propulsion/tank/#/contents-lbs", self.index)
-
-
-@dataclass(frozen=True)
-class Turbine:
-    """One turbine engine and its direct thruster, compiled."""
-
-    index: int
-    name: str
-    milthrust_lbs: float
-    idle_n1: float
-    idle_n2: float
-    n1_factor: float
-    n2_factor: float
-    tsfc: float
-    one_minus_bleed: float
-    idle_ff_pph: float
-    #: FGSpoolUp's delays: N2 up, N2 down, N1 up, N1 down
-    delays: tuple[float, float, float, float]
-    idle_thrust: Compiled
-    mil_thrust: Compiled
-    feeds: tuple[int, ...]
-    location_in: tuple[float, float, float]
-    #: the thruster's first column of FGForce's custom transform
-    axis: tuple[float, float, float]
-
-    def key(self, leaf: str) -> str:
-        return _indexed(f"propulsion/engine/#/{leaf}", self.index)
-
-    @property
-    def throttle_key(self) -> str:
-        return _indexed("fcs/throttle-pos-norm/#", self.index)
-
-
-class PropulsionError(CosimError):
-    """A compiled propulsion plan met a state it does not compile (an
-    engine without fuel, which JSBSim would shut down)."""
-
-
-_CG = ("inertia/cg-x-in", "inertia/cg-y-in", "inertia/cg-z-in")
-_FLIGHT = ("atmosphere/sigma", "atmosphere/T-R")
-_FORCES = ("forces/fbx-prop-lbs", "forces/fby-prop-lbs", "forces/fbz-prop-lbs")
-_MOMENTS = ("moments/l-prop-lbsft", "moments/m-prop-lbsft", "moments/n-prop-lbsft")
-_FREEZE = "propulsion/fuel_freeze"
-_TOTAL = "propulsion/total-fuel-lbs"
-_POSITION = ("x-position", "y-position", "z-position")
-
-
-def _seek(v: np.ndarray, target: np.ndarray, up: float, down: float, dt_s: float,
-          den: np.ndarray | None = None) -> np.ndarray:
-    """``FGTurbine::Seek``: ``v`` moved towards ``target`` by dt x ``up``
-    or dt x ``down`` (each divided by ``den`` first when given), never past
-    it. A rate's sign is exact in every product and quotient, so v - dt x
-    (down / den) is v + dt x (-down / den) to the bit."""
-    above = v > target
-    if den is None:
-        step = np.where(above, -dt_s * down, dt_s * up)
-    else:
-        step = dt_s * (np.where(above, -down, up) / den)
-    moved = v + step
-    return np.where(above, np.maximum(moved, target), np.minimum(moved, target))
-
-
-def _times(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray | None:
-    return None if a is None or b is None else a * b
-
-
-def _minus(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray | None:
-    """a - b, a missing term a zero (0 - b is -b exactly)."""
-    if b is None:
-        return a
-    return -b if a is None else a - b
-
-
-@dataclass(frozen=True)
-class Propulsion:
-    """The compiled ``<propulsion>``: engines and tanks, a stateless plan."""
-
-    source: str
-    engines: tuple[Turbine, ...]
-    tanks: tuple[Tank, ...]
-
-    @property
-    def inputs(self) -> frozenset[str]:
-        names: set[str] = {*_CG, *_FLIGHT, _FREEZE}
-        for e in self.engines:
-            names |= e.idle_thrust.inputs | e.mil_thrust.inputs | {e.throttle_key}
-        return frozenset(names)
-
-    @property
-    def outputs(self) -> frozenset[str]:
-        names: set[str] = {*_FORCES, *_MOMENTS, _TOTAL}
-        for e in self.engines:
-            names |= {e.key(k) for k in ("thrust-lbs", "n1", "n2", "fuel-flow-rate-pps",
-                                         "fuel-used-lbs", "tsfc", "IdleThrust", "MilThrust")}
-            names |= {"_" + e.key("fuel-flow-pph"), "_" + e.key("n2norm")}
-        return frozenset(names | {t.contents_key for t in self.tanks})
-
-    def init(self, props: dict[str, np.ndarray], n: int) -> None:
-        """Every engine running (``propulsion/set-running`` = -1), every
-        tank at its initial contents, the settings at the file's values."""
-        zeros = np.zeros(n)
-        props.setdefault(_FREEZE, zeros.copy())
-        for t in self.tanks:
-            props[t.contents_key] = np.full(n, t.initial_lbs)
-        props[_TOTAL] = self._total(props, n)
-        for k in (*_FORCES, *_MOMENTS):
-            props[k] = zeros.copy()
-        for e in self.engines:
-            props[e.key("n1")] = np.full(n, e.idle_n1 + 1.0 * e.n1_factor)
-            props[e.key("n2")] = np.full(n, e.idle_n2 + 1.0 * e.n2_factor)
-            props["_" + e.key("n2norm")] = (props[e.key("n2")] - e.idle_n2) / e.n2_factor
-            for k in ("thrust-lbs", "fuel-flow-rate-pps", "fuel-used-lbs", "tsfc",
-                      "IdleThrust", "MilThrust"):
-                props[e.key(k)] = zeros.copy()
-            props[e.key("reverser-angle-rad")] = zeros.copy()
-            for k, x in zip(_POSITION, e.location_in):
-                props[e.key(k)] = np.full(n, x)
-            props["_" + e.key("fuel-flow-pph")] = self._steady_flow(e, props, n)
-
-    def _steady_flow(self, e: Turbine, props: dict[str, np.ndarray], n: int) -> np.ndarray:
-        """The fuel flow JSBSim's steady state at full throttle leaves: the
-        target thrust x TSFC at N2norm 1, never below the idle flow."""
-        needed = e.idle_thrust.inputs | e.mil_thrust.inputs | {"atmosphere/T-R"}
-        if not needed <= set(props):
-            return np.full(n, e.idle_ff_pph)
-        n2norm = (e.idle_n2 + 1.0 * e.n2_factor - e.idle_n2) / e.n2_factor
-        idle = e.milthrust_lbs * e.idle_thrust.evaluate(props)
-        mil = (e.milthrust_lbs - idle) * e.mil_thrust.evaluate(props)
-        thrust = idle + mil * n2norm * n2norm
-        tsfc = e.tsfc * np.sqrt(props["atmosphere/T-R"] / 389.7) * (
-            0.84 + (1 - n2norm) * (1 - n2norm))
-        return np.maximum(thrust * tsfc, e.idle_ff_pph)
-
-    def _total(self, props: dict[str, np.ndarray], n: int) -> np.ndarray:
-        if not self.tanks:
-            return np.zeros(n)
-        total = 0.0 + props[self.tanks[0].contents_key]
-        for t in self.tanks[1:]:
-            total = total + props[t.contents_key]
-        return total
-
-    def run(self, props: dict[str, np.ndarray], dt_s: float) -> None:
-        """One physics frame of every aircraft (``dt_s`` > 0)."""
-        if not dt_s > 0:
-            raise ValueError(f"dt_s must be positive, got {dt_s}")
-        n = len(props[_CG[0]])
-        cg = [props[k] for k in _CG]
-        frozen = props[_FREEZE] != 0.0
-        force: list[np.ndarray | None] = [None, None, None]
-        moment: list[np.ndarray | None] = [None, None, None]
-        for e in self.engines:
-            fb, mb = self._engine(e, props, dt_s, cg, frozen)
-            for acc, part in ((force, fb), (moment, mb)):
-                for k in range(3):
-                    a, b = acc[k], part[k]
-                    acc[k] = b if a is None else a if b is None else a + b
-        for keys, acc in ((_FORCES, force), (_MOMENTS, moment)):
-            for k in range(3):
-                got = acc[k]
-                props[keys[k]] = np.zeros(n) if got is None else got
-        props[_TOTAL] = self._total(props, n)
-
-    def _engine(self, e: Turbine, props: dict[str, np.ndarray], dt_s: float,
-                cg: list[np.ndarray], frozen: np.ndarray
-                ) -> tuple[list[np.ndarray | None], list[np.ndarray | None]]:
-        tp = props[e.throttle_key]
-        if bool((tp > 1.0).any()):  # FGTurbine::Calculate: above 1 is augmentation
-            over = tp - 1.0
-            tp = np.where(over > 0.0, tp - over, tp)
-        idle_fraction = e.idle_thrust.evaluate(props)
-        mil_fraction = e.mil_thrust.evaluate(props)
-        idle = e.milthrust_lbs * idle_fraction
-        mil = (e.milthrust_lbs - idle) * mil_fraction
-        n1, n2 = props[e.key("n1")], props[e.key("n2")]
-        # FGSpoolUp with the N2norm of the previous frame, the same for N1 and N2
-        norm_key = "_" + e.key("n2norm")
-        m = 1.0 - np.minimum(1.0, props[norm_key] + 0.1)
-        den = 1 + 3 * m * m * m + (1 - props["atmosphere/sigma"])
-        d2u, d2d, d1u, d1d = e.delays
-        n2 = _seek(n2, e.idle_n2 + tp * e.n2_factor, d2u, d2d, dt_s, den)
-        n1 = _seek(n1, e.idle_n1 + tp * e.n1_factor, d1u, d1d, dt_s, den)
-        n2norm = (n2 - e.idle_n2) / e.n2_factor
-        props[norm_key] = n2norm
-        thrust = idle + mil * n2norm * n2norm
-        rest = 1 - n2norm
-        tsfc = e.tsfc * np.sqrt(props["atmosphere/T-R"] / 389.7) * (0.84 + rest * rest)
-        pph_key = "_" + e.key("fuel-flow-pph")
-        pph = np.maximum(_seek(props[pph_key], thrust * tsfc, 1000.0, 10000.0, dt_s),
-                         e.idle_ff_pph)
-        if e.one_minus_bleed != 1.0:
-            thrust = thrust * e.one_minus_bleed
-        reverser = props[e.key("reverser-angle-rad")]
-        if bool(reverser.any()):  # cos(0) x thrust is thrust
-            thrust = np.cos(reverser) * thrust
-        props[e.key("IdleThrust")] = idle_fraction
-        props[e.key("MilThrust")] = mil_fraction
-        props[e.key("n1")], props[e.key("n2")] = n1, n2
-        props[e.key("tsfc")] = tsfc
-        props[pph_key] = pph
-        props[e.key("thrust-lbs")] = thrust
-        self._burn(e, props, dt_s, pph, frozen)
-        # FGForce: the body force and the moment about the CG, the arm from
-        # the structural frame to body axes in feet. A zero of the transform
-        # (known when compiled) gives no force (None), as JSBSim's zero
-        # products add nothing, and no term of the moment
-        fb = [None if a == 0.0 else thrust * a for a in e.axis]
-        need = [any(fb[j] is not None for j in range(3) if j != k) for k in range(3)]
-        x, y, z = (props[e.key(k)] for k in _POSITION)
-        arms = [_INCH_TO_FT * (cg[0] - x) if need[0] else None,
-                _INCH_TO_FT * (y - cg[1]) if need[1] else None,
-                _INCH_TO_FT * (cg[2] - z) if need[2] else None]
-        mb = [_minus(_times(arms[1], fb[2]), _times(arms[2], fb[1])),
-              _minus(_times(arms[2], fb[0]), _times(arms[0], fb[2])),
-              _minus(_times(arms[0], fb[1]), _times(arms[1], fb[0]))]
-        return fb, mb
-
-    def _burn(self, e: Turbine, props: dict[str, np.ndarray], dt_s: float,
-              pph: np.ndarray, frozen: np.ndarray) -> None:
-        """``FGPropulsion::ConsumeFuel`` for one engine (nothing while frozen)."""
-        if bool(frozen.all()):
-            return
-        feeds = [self.tanks[i] for i in e.feeds]
-        has = [props[t.contents_key] > t.unusable_lbs for t in feeds]
-        best = np.full(len(pph), np.inf)
-        for t, h in zip(feeds, has):
-            if 1 <= t.priority <= len(self.tanks):
-                best = np.where(h, np.minimum(best, t.priority), best)
-        live = ~frozen
-        starved = live & np.isinf(best)
-        if bool(starved.any()):
-            rows = np.flatnonzero(starved)
-            raise PropulsionError(f"{self.source}: engine {e.index} ({e.name}) of aircraft "
-                               f"{rows[:5].tolist()} has no usable fuel in its feed tanks "
-                               f"{list(e.feeds)}: JSBSim would starve it, and the engine-off "
-                               f"phase is not compiled")
-        rate = pph / 3600.0
-        burned = rate * dt_s
-        ff_key, used_key = e.key("fuel-flow-rate-pps"), e.key("fuel-used-lbs")
-        props[ff_key] = np.where(live, rate, props[ff_key])
-        props[used_key] = np.where(live, props[used_key] + burned, props[used_key])
-        feeding = [h & (best == t.priority) for t, h in zip(feeds, has)]
-        if len(feeds) == 1:
-            each = burned
-        else:
-            count = feeding[0].astype(np.float64)
-            for f in feeding[1:]:
-                count = count + f
-            each = burned / count
-        for t, f in zip(feeds, feeding):
-            c = props[t.contents_key]
-            left = c - each
-            drained = np.where(left >= t.unusable_lbs, left, np.minimum(c, t.unusable_lbs))
-            props[t.contents_key] = np.where(f & live, drained, c)
 
 
 def _find(name: str, aircraft_dir: Path, engine_dir: Path, el: ET.Element,
@@ -524,6 +259,11 @@ def _turbine(el: ET.Element, index: int, source: str,
         one_minus_bleed=1.0 - values.get("bleed", 0.0), idle_ff_pph=mil ** 0.2 * 107.0,
         delays=(1.0 * 90.0 / (bpr + 3.0), 3.0 * 90.0 / (bpr + 3.0), 1.0 * 90.0 / (bpr + 3.0),
                 2.4 * 90.0 / (bpr + 3.0)),
+        spindown=(values.get("n1spindown", 2.0), values.get("n2spindown", 2.0)),
+        spinup=(values.get("n1spinup", 1.0), values.get("n2spinup", 3.0)),
+        ignition=(values.get("ignitionn1", 5.21), values.get("ignitionn2", 25.18)),
+        start_rate=(values.get("n1startrate", 1.4), values.get("n2startrate", 2.0)),
+        windmill=values.get("disable-windmill", 0.0) == 0.0,
         idle_thrust=functions["IdleThrust"], mil_thrust=functions["MilThrust"], feeds=feeds,
         location_in=location, axis=(cp * cy, cp * sy, -sp))
 

@@ -31,23 +31,26 @@ DT_S = 1 / 120
 #: uav700's system copies uav700/fuel-freeze into it before propulsion runs
 INPUTS = ("velocities/mach", "atmosphere/density-altitude", "atmosphere/sigma",
           "atmosphere/T-R", "fcs/throttle-pos-norm", "inertia/cg-x-in", "inertia/cg-y-in",
-          "inertia/cg-z-in")
-SETTINGS = ("propulsion/engine/reverser-angle-rad", "propulsion/engine/x-position",
-            "propulsion/engine/y-position", "propulsion/engine/z-position")
+          "inertia/cg-z-in", "aero/qbar-psf")
+#: the plan's state a user writes: the schedule's writes go to props as to JSBSim
+WRITES = ("propulsion/engine/reverser-angle-rad", "propulsion/engine/x-position",
+          "propulsion/engine/y-position", "propulsion/engine/z-position",
+          "propulsion/cutoff_cmd", "propulsion/starter_cmd", "propulsion/tank/contents-lbs")
 OUTPUTS = ("propulsion/engine/thrust-lbs", "propulsion/engine/n1", "propulsion/engine/n2",
            "propulsion/engine/fuel-flow-rate-pps", "propulsion/engine/fuel-used-lbs",
            "propulsion/engine/tsfc", "propulsion/engine/IdleThrust",
            "propulsion/engine/MilThrust", "propulsion/tank/contents-lbs",
            "propulsion/total-fuel-lbs", "forces/fbx-prop-lbs", "forces/fby-prop-lbs",
            "forces/fbz-prop-lbs", "moments/l-prop-lbsft", "moments/m-prop-lbsft",
-           "moments/n-prop-lbsft")
+           "moments/n-prop-lbsft", "propulsion/cutoff_cmd", "propulsion/starter_cmd")
 #: the same operations in the same order on the same doubles: equal bit for
 #: bit. The rest depend on the thrust tables, whose interpolation
 #: (cosim.rigid.functions) agrees with FGTable's to the last bits only
 #: (up to 2e-16 of the value); the moments' atol is for their zeros
 EXACT = ("propulsion/engine/n1", "propulsion/engine/n2", "propulsion/engine/fuel-flow-rate-pps",
          "propulsion/engine/fuel-used-lbs", "propulsion/engine/tsfc",
-         "propulsion/tank/contents-lbs", "propulsion/total-fuel-lbs")
+         "propulsion/tank/contents-lbs", "propulsion/total-fuel-lbs", "propulsion/cutoff_cmd",
+         "propulsion/starter_cmd")
 
 #: per aircraft, (second, property, value) commands
 SCHEDULES = [
@@ -63,6 +66,19 @@ SCHEDULES = [
     [(0, "fcs/throttle-cmd-norm", 0.5), (2, "fcs/elevator-cmd-norm", -0.5),
      (5, "fcs/throttle-cmd-norm", 0.0), (8, "fcs/elevator-cmd-norm", 0.4),
      (12, "fcs/throttle-cmd-norm", 0.9), (12, "uav700/fuel-freeze", 0.0)],
+    # cut off, spun up by the starter, started, run
+    [(0, "fcs/throttle-cmd-norm", 0.4), (0, "uav700/fuel-freeze", 0.0),
+     (1, "propulsion/cutoff_cmd", 1.0),
+     (3, "propulsion/starter_cmd", 1.0), (6, "propulsion/cutoff_cmd", 0.0),
+     (15, "fcs/throttle-cmd-norm", 0.8)],
+    # starved (off, windmilling), refuelled, relit by the airflow
+    [(0, "uav700/fuel-freeze", 0.0), (0, "fcs/throttle-cmd-norm", 0.7),
+     (2, "propulsion/tank/contents-lbs", 0.05), (2.5, "fcs/elevator-cmd-norm", 0.1),
+     (3.3, "propulsion/tank/contents-lbs", 10.0), (6, "fcs/elevator-cmd-norm", 0.0)],
+    # the starter cleared by the running engine; cut off and relit at once
+    [(0, "fcs/throttle-cmd-norm", 0.6), (1, "propulsion/starter_cmd", 1.0),
+     (2, "propulsion/cutoff_cmd", 1.0), (2.5, "propulsion/cutoff_cmd", 0.0),
+     (4, "fcs/throttle-cmd-norm", 1.0)],
 ]
 
 
@@ -71,8 +87,8 @@ Flights = tuple[Arrays, Arrays, Arrays]
 
 
 def _flights(seconds: float = 20.0) -> Flights:
-    """Three uav700s flown by JSBSim: the state after set-running, then per
-    frame (rows) and aircraft (columns) the inputs, settings and outputs."""
+    """The uav700s of SCHEDULES flown by JSBSim: the state after set-running,
+    then per frame (rows) and aircraft (columns) the inputs and outputs."""
     fdms = []
     for _ in SCHEDULES:
         fdm = new_fdm(find_model("uav700"), DT_S)
@@ -84,7 +100,7 @@ def _flights(seconds: float = 20.0) -> Flights:
     start = {k: np.array([f[k] for f in fdms]) for k in (*INPUTS, *OUTPUTS)}
     frames = round(seconds / DT_S)
     rec: dict[str, list[list[float]]] = {k: [] for k in (*INPUTS, "uav700/fuel-freeze",
-                                                           *SETTINGS, *OUTPUTS)}
+                                                           *OUTPUTS)}
     for i in range(frames):
         for fdm, schedule in zip(fdms, SCHEDULES):
             for t_s, prop, value in schedule:
@@ -94,7 +110,7 @@ def _flights(seconds: float = 20.0) -> Flights:
         for k, rows in rec.items():
             rows.append([f[k] for f in fdms])
     got = {k: np.array(v) for k, v in rec.items()}
-    ins = {k: got.pop(k) for k in (*INPUTS, "uav700/fuel-freeze", *SETTINGS)}
+    ins = {k: got.pop(k) for k in (*INPUTS, "uav700/fuel-freeze")}
     ins["propulsion/fuel_freeze"] = ins.pop("uav700/fuel-freeze")
     return start, ins, got
 
@@ -113,6 +129,10 @@ def _replay(plan: Propulsion, start: Arrays, ins: Arrays) -> Arrays:
     for i in range(len(ins["velocities/mach"])):
         for k, v in ins.items():
             props[k] = v[i].copy()
+        for j, schedule in enumerate(SCHEDULES):
+            for t_s, prop, value in schedule:
+                if prop in WRITES and round(t_s / DT_S) == i:
+                    props[prop][j] = value
         plan.run(props, DT_S)
         for k in OUTPUTS:
             out[k].append(props[k].copy())
@@ -126,7 +146,7 @@ def test_the_uav700_equals_jsbsim_frame_by_frame(flights: Flights) -> None:
                            "fcs/throttle-pos-norm", "inertia/cg-x-in", "propulsion/fuel_freeze"}
     # set-running: full-throttle spools and the tank's initial contents
     props = {k: start[k].copy() for k in INPUTS}
-    plan.init(props, 3)
+    plan.init(props, len(SCHEDULES))
     for k in ("propulsion/engine/n1", "propulsion/engine/n2", "propulsion/tank/contents-lbs",
               "propulsion/total-fuel-lbs"):
         np.testing.assert_array_equal(props[k], start[k], err_msg=k)
@@ -136,7 +156,12 @@ def test_the_uav700_equals_jsbsim_frame_by_frame(flights: Flights) -> None:
     n2 = jsb["propulsion/engine/n2"]
     assert (np.diff(n2, axis=0) > 0).any() and (np.diff(n2, axis=0) < 0).any()
     burnt = jsb["propulsion/tank/contents-lbs"][-1] - start["propulsion/tank/contents-lbs"]
-    assert (burnt < -0.01).all()
+    assert (burnt[:3] < -0.01).all()
+    # the phases: off, spun up below idle and relit, starved and relit
+    thrust = jsb["propulsion/engine/thrust-lbs"]
+    assert (thrust[:, 3:] == 0).any(axis=0).all() and (thrust[-1, 3:] > 5).all()
+    starter = jsb["propulsion/starter_cmd"][:, 3]
+    assert n2[:, 3].min() < 30 and starter.max() == 1 and starter[-1] == 0
     assert np.ptp(jsb["moments/m-prop-lbsft"][:, 1]) > 1.0
     assert np.ptp(jsb["moments/n-prop-lbsft"][:, 1]) > 1.0
     assert np.ptp(ins["velocities/mach"]) > 0.05
@@ -227,22 +252,6 @@ def test_the_thrusters_orientation_and_tanks_of_a_file(tmp_path: Path) -> None:
     assert fdm["forces/fbz-prop-lbs"] != 0.0 and fdm["forces/fby-prop-lbs"] != 0.0
 
 
-def test_an_engine_without_fuel_is_refused_at_run_time() -> None:
-    plan = compile_propulsion(UAV700, ENGINES)
-    props = {"velocities/mach": np.full(2, 0.15), "atmosphere/density-altitude": np.zeros(2),
-             "atmosphere/sigma": np.ones(2), "atmosphere/T-R": np.full(2, 518.67),
-             "fcs/throttle-pos-norm": np.ones(2), "inertia/cg-x-in": np.zeros(2),
-             "inertia/cg-y-in": np.zeros(2), "inertia/cg-z-in": np.zeros(2)}
-    plan.init(props, 2)
-    props["propulsion/tank/contents-lbs"][1] = 0.0
-    props["propulsion/fuel_freeze"][:] = 1.0
-    plan.run(props, DT_S)  # frozen: nothing burnt, nothing starved
-    props["propulsion/fuel_freeze"][:] = 0.0
-    with pytest.raises(PropulsionError, match=r"engine 0 \(uav700_turbojet\) of aircraft "
-                                              r"\[1\] has no usable fuel"):
-        plan.run(props, DT_S)
-
-
 def _write(tmp_path: Path, propulsion: str, engine: str | None = None,
            thruster: str | None = None) -> Path:
     (tmp_path / "Engines").mkdir(exist_ok=True)
@@ -330,3 +339,23 @@ def test_every_problem_is_listed_when_asked(tmp_path: Path) -> None:
             expected, text)
     with pytest.raises(CompileError, match=r"a.xml:\d+: "):
         compile_propulsion(xml, ENGINES)
+
+
+def test_the_starter_of_several_engines_is_refused_when_used(tmp_path: Path) -> None:
+    two = _ENGINE.replace("  <tank", _ENGINE.split("  <tank")[0] + "  <tank", 1)
+    plan = compile_propulsion(_write(tmp_path, two, _TURBINE.format(extra="")), ENGINES)
+    assert len(plan.engines) == 2
+    props = {"velocities/mach": np.full(2, 0.15), "atmosphere/density-altitude": np.zeros(2),
+             "atmosphere/sigma": np.ones(2), "atmosphere/T-R": np.full(2, 518.67),
+             "aero/qbar-psf": np.full(2, 20.0), "fcs/throttle-pos-norm": np.ones(2),
+             "fcs/throttle-pos-norm[1]": np.ones(2), "inertia/cg-x-in": np.zeros(2),
+             "inertia/cg-y-in": np.zeros(2), "inertia/cg-z-in": np.zeros(2)}
+    plan.init(props, 2)
+    props["propulsion/cutoff_cmd"][1] = 1.0  # cut-off is one command for all: flown
+    plan.run(props, DT_S)
+    assert props["propulsion/engine[1]/thrust-lbs"][1] == 0.0
+    assert props["propulsion/engine[1]/thrust-lbs"][0] > 0.0
+    props["propulsion/starter_cmd"][1] = 1.0
+    with pytest.raises(PropulsionError, match=r"a.xml: the starter of an aircraft with 2 "
+                                              r"engines is not compiled"):
+        plan.run(props, DT_S)

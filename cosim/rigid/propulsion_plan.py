@@ -1,0 +1,371 @@
+"""The plan ``cosim.rigid.propulsion`` compiles: the turbine engines, their
+direct thrusters and the fuel tanks of every aircraft stepped together
+(``Propulsion.init``, ``run``, ``inputs``, ``outputs``), their state in the
+caller's ``props``. What it computes, and in which order, is said in
+``cosim.rigid.propulsion``; this module holds no XML."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from cosim.errors import CosimError
+from cosim.rigid.functions import Compiled
+
+_INCH_TO_FT = 1.0 / 12.0
+
+
+def _indexed(base: str, i: int) -> str:
+    """JSBSim's property name of index ``i`` as its tree lists it."""
+    head, _, tail = base.partition("/#")
+    return f"{head}{'' if i == 0 else f'[{i}]'}{tail}"
+
+
+@dataclass(frozen=True)
+class Tank:
+    """One fuel tank: where it is and where its contents live in ``props``."""
+
+    index: int
+    location_in: tuple[float, float, float]
+    capacity_lbs: float
+    initial_lbs: float
+    unusable_lbs: float
+    priority: int
+
+    @property
+    def contents_key(self) -> str:
+        return _indexed("propulsion/tank/#/contents-lbs", self.index)
+
+
+@dataclass(frozen=True)
+class Turbine:
+    """One turbine engine and its direct thruster, compiled."""
+
+    index: int
+    name: str
+    milthrust_lbs: float
+    idle_n1: float
+    idle_n2: float
+    n1_factor: float
+    n2_factor: float
+    tsfc: float
+    one_minus_bleed: float
+    idle_ff_pph: float
+    #: FGSpoolUp's delays: N2 up, N2 down, N1 up, N1 down
+    delays: tuple[float, float, float, float]
+    #: the phases off, spin-up and start: N1's and N2's spin-down divisors,
+    #: spin-up rates, ignition and start rates, and whether the engine windmills
+    spindown: tuple[float, float]
+    spinup: tuple[float, float]
+    ignition: tuple[float, float]
+    start_rate: tuple[float, float]
+    windmill: bool
+    idle_thrust: Compiled
+    mil_thrust: Compiled
+    feeds: tuple[int, ...]
+    location_in: tuple[float, float, float]
+    #: the thruster's first column of FGForce's custom transform
+    axis: tuple[float, float, float]
+
+    def key(self, leaf: str) -> str:
+        return _indexed(f"propulsion/engine/#/{leaf}", self.index)
+
+    @property
+    def throttle_key(self) -> str:
+        return _indexed("fcs/throttle-pos-norm/#", self.index)
+
+
+class PropulsionError(CosimError):
+    """A compiled propulsion plan met a state it does not compile (an
+    engine without fuel, which JSBSim would shut down)."""
+
+
+_CG = ("inertia/cg-x-in", "inertia/cg-y-in", "inertia/cg-z-in")
+_FLIGHT = ("atmosphere/sigma", "atmosphere/T-R")
+_FORCES = ("forces/fbx-prop-lbs", "forces/fby-prop-lbs", "forces/fbz-prop-lbs")
+_MOMENTS = ("moments/l-prop-lbsft", "moments/m-prop-lbsft", "moments/n-prop-lbsft")
+_FREEZE = "propulsion/fuel_freeze"
+_TOTAL = "propulsion/total-fuel-lbs"
+_POSITION = ("x-position", "y-position", "z-position")
+_CUTOFF, _STARTER = "propulsion/cutoff_cmd", "propulsion/starter_cmd"
+#: FGTurbine's phases (as floats: they live in props)
+_OFF, _RUN, _SPINUP, _START = 0.0, 1.0, 2.0, 3.0
+
+
+def _seek(v: np.ndarray, target: np.ndarray | float, up: np.ndarray | float,
+          down: np.ndarray | float, dt_s: float, den: np.ndarray | None = None) -> np.ndarray:
+    """``FGTurbine::Seek``: ``v`` moved towards ``target`` by dt x ``up``
+    or dt x ``down`` (each divided by ``den`` first when given), never past
+    it. A rate's sign is exact in every product and quotient, so v - dt x
+    (down / den) is v + dt x (-down / den) to the bit."""
+    above = v > target
+    if den is None:
+        step = np.where(above, -dt_s * down, dt_s * up)
+    else:
+        step = dt_s * (np.where(above, -down, up) / den)
+    moved = v + step
+    return np.where(above, np.maximum(moved, target), np.minimum(moved, target))
+
+
+def _times(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray | None:
+    return None if a is None or b is None else a * b
+
+
+def _minus(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray | None:
+    """a - b, a missing term a zero (0 - b is -b exactly)."""
+    if b is None:
+        return a
+    return -b if a is None else a - b
+
+
+@dataclass(frozen=True)
+class Propulsion:
+    """The compiled ``<propulsion>``: engines and tanks, a stateless plan."""
+
+    source: str
+    engines: tuple[Turbine, ...]
+    tanks: tuple[Tank, ...]
+
+    @property
+    def inputs(self) -> frozenset[str]:
+        names: set[str] = {*_CG, *_FLIGHT, _FREEZE, "aero/qbar-psf"}
+        for e in self.engines:
+            names |= e.idle_thrust.inputs | e.mil_thrust.inputs | {e.throttle_key}
+        return frozenset(names)
+
+    @property
+    def outputs(self) -> frozenset[str]:
+        names: set[str] = {*_FORCES, *_MOMENTS, _TOTAL}
+        for e in self.engines:
+            names |= {e.key(k) for k in ("thrust-lbs", "n1", "n2", "fuel-flow-rate-pps",
+                                         "fuel-used-lbs", "tsfc", "IdleThrust", "MilThrust")}
+            names |= {"_" + e.key(k) for k in ("fuel-flow-pph", "n2norm", "phase", "running",
+                                               "starved")}
+        return frozenset(names | {t.contents_key for t in self.tanks})
+
+    def init(self, props: dict[str, np.ndarray], n: int) -> None:
+        """Every engine running (``propulsion/set-running`` = -1), every
+        tank at its initial contents, the settings at the file's values."""
+        zeros = np.zeros(n)
+        for k in (_FREEZE, _CUTOFF, _STARTER):
+            props.setdefault(k, zeros.copy())
+        for t in self.tanks:
+            props[t.contents_key] = np.full(n, t.initial_lbs)
+        props[_TOTAL] = self._total(props, n)
+        for k in (*_FORCES, *_MOMENTS):
+            props[k] = zeros.copy()
+        for e in self.engines:
+            props[e.key("n1")] = np.full(n, e.idle_n1 + 1.0 * e.n1_factor)
+            props[e.key("n2")] = np.full(n, e.idle_n2 + 1.0 * e.n2_factor)
+            props["_" + e.key("n2norm")] = (props[e.key("n2")] - e.idle_n2) / e.n2_factor
+            props["_" + e.key("phase")] = np.full(n, _RUN)
+            props["_" + e.key("running")] = np.ones(n)
+            props["_" + e.key("starved")] = zeros.copy()
+            for k in ("thrust-lbs", "fuel-flow-rate-pps", "fuel-used-lbs", "tsfc",
+                      "IdleThrust", "MilThrust"):
+                props[e.key(k)] = zeros.copy()
+            props[e.key("reverser-angle-rad")] = zeros.copy()
+            for k, x in zip(_POSITION, e.location_in):
+                props[e.key(k)] = np.full(n, x)
+            props["_" + e.key("fuel-flow-pph")] = self._steady_flow(e, props, n)
+
+    def _steady_flow(self, e: Turbine, props: dict[str, np.ndarray], n: int) -> np.ndarray:
+        """The fuel flow JSBSim's steady state at full throttle leaves: the
+        target thrust x TSFC at N2norm 1, never below the idle flow."""
+        needed = e.idle_thrust.inputs | e.mil_thrust.inputs | {"atmosphere/T-R"}
+        if not needed <= set(props):
+            return np.full(n, e.idle_ff_pph)
+        n2norm = (e.idle_n2 + 1.0 * e.n2_factor - e.idle_n2) / e.n2_factor
+        idle = e.milthrust_lbs * e.idle_thrust.evaluate(props)
+        mil = (e.milthrust_lbs - idle) * e.mil_thrust.evaluate(props)
+        thrust = idle + mil * n2norm * n2norm
+        tsfc = e.tsfc * np.sqrt(props["atmosphere/T-R"] / 389.7) * (
+            0.84 + (1 - n2norm) * (1 - n2norm))
+        return np.maximum(thrust * tsfc, e.idle_ff_pph)
+
+    def _total(self, props: dict[str, np.ndarray], n: int) -> np.ndarray:
+        if not self.tanks:
+            return np.zeros(n)
+        total = 0.0 + props[self.tanks[0].contents_key]
+        for t in self.tanks[1:]:
+            total = total + props[t.contents_key]
+        return total
+
+    def run(self, props: dict[str, np.ndarray], dt_s: float) -> None:
+        """One physics frame of every aircraft (``dt_s`` > 0)."""
+        if not dt_s > 0:
+            raise ValueError(f"dt_s must be positive, got {dt_s}")
+        n = len(props[_CG[0]])
+        cg = [props[k] for k in _CG]
+        frozen = props[_FREEZE] != 0.0
+        force: list[np.ndarray | None] = [None, None, None]
+        moment: list[np.ndarray | None] = [None, None, None]
+        for e in self.engines:
+            fb, mb = self._engine(e, props, dt_s, cg, frozen)
+            for acc, part in ((force, fb), (moment, mb)):
+                for k in range(3):
+                    a, b = acc[k], part[k]
+                    acc[k] = b if a is None else a if b is None else a + b
+        for keys, acc in ((_FORCES, force), (_MOMENTS, moment)):
+            for k in range(3):
+                got = acc[k]
+                props[keys[k]] = np.zeros(n) if got is None else got
+        props[_TOTAL] = self._total(props, n)
+
+    def _engine(self, e: Turbine, props: dict[str, np.ndarray], dt_s: float,
+                cg: list[np.ndarray], frozen: np.ndarray
+                ) -> tuple[list[np.ndarray | None], list[np.ndarray | None]]:
+        tp = props[e.throttle_key]
+        if bool((tp > 1.0).any()):  # FGTurbine::Calculate: above 1 is augmentation
+            over = tp - 1.0
+            tp = np.where(over > 0.0, tp - over, tp)
+        idle_fraction = e.idle_thrust.evaluate(props)
+        mil_fraction = e.mil_thrust.evaluate(props)
+        props[e.key("IdleThrust")] = idle_fraction
+        props[e.key("MilThrust")] = mil_fraction
+        idle = e.milthrust_lbs * idle_fraction
+        mil = (e.milthrust_lbs - idle) * mil_fraction
+        n1, n2 = props[e.key("n1")], props[e.key("n2")]
+        # FGSpoolUp with the N2norm of the previous frame, the same for N1 and N2
+        norm_key, pph_key = "_" + e.key("n2norm"), "_" + e.key("fuel-flow-pph")
+        m = 1.0 - np.minimum(1.0, props[norm_key] + 0.1)
+        den = 1 + 3 * m * m * m + (1 - props["atmosphere/sigma"])
+        d2u, d2d, d1u, d1d = e.delays
+        run_n2 = _seek(n2, e.idle_n2 + tp * e.n2_factor, d2u, d2d, dt_s, den)
+        run_n1 = _seek(n1, e.idle_n1 + tp * e.n1_factor, d1u, d1d, dt_s, den)
+        n2norm = (run_n2 - e.idle_n2) / e.n2_factor
+        thrust = idle + mil * n2norm * n2norm
+        rest = 1 - n2norm
+        tsfc = e.tsfc * np.sqrt(props["atmosphere/T-R"] / 389.7) * (0.84 + rest * rest)
+        pph = np.maximum(_seek(props[pph_key], thrust * tsfc, 1000.0, 10000.0, dt_s),
+                         e.idle_ff_pph)
+        if e.one_minus_bleed != 1.0:
+            thrust = thrust * e.one_minus_bleed
+        phase_key, cutoff, starter = "_" + e.key("phase"), props[_CUTOFF], props[_STARTER]
+        if bool(cutoff.any()) or bool(starter.any()) or bool((props[phase_key] != _RUN).any()):
+            ran = self._phases(e, props, dt_s)
+            run_n1, run_n2, pph = (np.where(ran, a, b) for a, b in (
+                (run_n1, props[e.key("n1")]), (run_n2, props[e.key("n2")]),
+                (pph, props[pph_key])))
+            n2norm = np.where(ran, n2norm, props[norm_key])
+            tsfc = np.where(ran, tsfc, props[e.key("tsfc")])
+            thrust = np.where(ran, thrust, 0.0)
+        reverser = props[e.key("reverser-angle-rad")]
+        if bool(reverser.any()):  # cos(0) x thrust is thrust
+            thrust = np.cos(reverser) * thrust
+        props[e.key("n1")], props[e.key("n2")], props[norm_key] = run_n1, run_n2, n2norm
+        props[e.key("tsfc")] = tsfc
+        props[pph_key] = pph
+        props[e.key("thrust-lbs")] = thrust
+        self._burn(e, props, dt_s, pph, frozen)
+        # FGForce: the body force and the moment about the CG, the arm from
+        # the structural frame to body axes in feet. A zero of the transform
+        # (known when compiled) gives no force (None), as JSBSim's zero
+        # products add nothing, and no term of the moment
+        fb = [None if a == 0.0 else thrust * a for a in e.axis]
+        need = [any(fb[j] is not None for j in range(3) if j != k) for k in range(3)]
+        x, y, z = (props[e.key(k)] for k in _POSITION)
+        arms = [_INCH_TO_FT * (cg[0] - x) if need[0] else None,
+                _INCH_TO_FT * (y - cg[1]) if need[1] else None,
+                _INCH_TO_FT * (cg[2] - z) if need[2] else None]
+        mb = [_minus(_times(arms[1], fb[2]), _times(arms[2], fb[1])),
+              _minus(_times(arms[2], fb[0]), _times(arms[0], fb[2])),
+              _minus(_times(arms[0], fb[1]), _times(arms[1], fb[0]))]
+        return fb, mb
+
+    def _phases(self, e: Turbine, props: dict[str, np.ndarray], dt_s: float) -> np.ndarray:
+        """The turbine's phases other than running (``FGTurbine::Calculate``,
+        ``Off``, ``SpinUp``, ``Start``) for every aircraft: leaves N1, N2 and
+        the fuel flow of the rows not running in ``props`` and returns the
+        rows that ran (whose values the caller keeps from ``run_*``)."""
+        if len(self.engines) > 1 and bool(props[_STARTER].any()):
+            raise PropulsionError(f"{self.source}: the starter of an aircraft with "
+                                  f"{len(self.engines)} engines is not compiled (JSBSim keeps "
+                                  f"one per engine behind propulsion/starter_cmd)")
+        phase_key, running_key = "_" + e.key("phase"), "_" + e.key("running")
+        phase, running = props[phase_key], props[running_key] != 0.0
+        starved = props["_" + e.key("starved")] != 0.0
+        cutoff, starter = props[_CUTOFF] != 0.0, props[_STARTER] != 0.0
+        qbar = props["aero/qbar-psf"]
+        n1, n2 = props[e.key("n1")], props[e.key("n2")]
+        pph_key = "_" + e.key("fuel-flow-pph")
+        # the transitions, in JSBSim's order
+        phase = np.where(~running & cutoff & starter & (phase == _OFF), _SPINUP, phase)
+        phase = np.where((starter | (qbar > 30.0)) & ~running & ~cutoff & (n2 > 15.0),
+                         _START, phase)
+        phase = np.where((cutoff & (phase != _SPINUP)) | starved, _OFF, phase)
+        off, spin, start = phase == _OFF, phase == _SPINUP, phase == _START
+        ran = phase == _RUN
+        # Off: spooling down to the windmilling speed, the fuel flow to none
+        (i1, i2), (s1, s2) = e.ignition, e.spindown
+        if e.windmill:
+            off_n1 = _seek(n1, qbar / 10.0, n1 / 2.0 + 0.1, n1 / s1, dt_s)
+            off_n2 = _seek(n2, qbar / 15.0, n2 / 2.0 + 0.1, n2 / s2, dt_s)
+        else:
+            off_n1 = _seek(n1, 0.0, n1 / 2.0, n1 / s1, dt_s)
+            off_n2 = _seek(n2, 0.0, n2 / 2.0, n2 / s2, dt_s)
+        off_pph = _seek(props[pph_key], 0.0, 1000.0, 10000.0, dt_s)
+        # SpinUp: the starter turns it to the ignition speeds, no fuel
+        spin_n2 = _seek(n2, i2, e.spinup[1], n2 / 2.0, dt_s)
+        spin_n1 = _seek(n1, i1, e.spinup[0], n1 / 2.0, dt_s)
+        # Start: lit above 15 % N2 with fuel, to idle; at idle it runs
+        lit = start & (n2 > 15.0) & ~starved
+        cranking = lit & (n2 < e.idle_n2)
+        start_n2 = _seek(n2, e.idle_n2, e.start_rate[1], n2 / 2.0, dt_s)
+        start_n1 = _seek(n1, e.idle_n1, e.start_rate[0], n1 / 2.0, dt_s)
+        start_pph = e.idle_ff_pph * start_n2 / e.idle_n2
+        props[e.key("n1")] = np.where(off, off_n1, np.where(spin, spin_n1, np.where(
+            cranking, start_n1, n1)))
+        props[e.key("n2")] = np.where(off, off_n2, np.where(spin, spin_n2, np.where(
+            cranking, start_n2, n2)))
+        props[pph_key] = np.where(off, off_pph, np.where(spin, 0.0, np.where(
+            cranking, start_pph, props[pph_key])))
+        # the phase and flags the frame leaves
+        to_run = start & lit & ~cranking
+        aborted = cranking & ~starter & (qbar < 30.0)
+        phase = np.where((ran & cutoff) | (spin & ~starter) | (start & ~lit) | aborted, _OFF,
+                         np.where(to_run, _RUN, phase))
+        props[phase_key] = phase
+        props[running_key] = (ran | to_run | (running & ~off & ~spin)).astype(np.float64)
+        props[_STARTER] = np.where(ran | to_run | (start & ~lit), 0.0, props[_STARTER])
+        return ran
+
+    def _burn(self, e: Turbine, props: dict[str, np.ndarray], dt_s: float,
+              pph: np.ndarray, frozen: np.ndarray) -> None:
+        """``FGPropulsion::ConsumeFuel`` for one engine (nothing while frozen):
+        an engine whose feed tanks hold no usable fuel starves (the next
+        frame turns it off) and burns nothing."""
+        if bool(frozen.all()):
+            return
+        feeds = [self.tanks[i] for i in e.feeds]
+        has = [props[t.contents_key] > t.unusable_lbs for t in feeds]
+        best = np.full(len(pph), np.inf)
+        for t, h in zip(feeds, has):
+            if 1 <= t.priority <= len(self.tanks):
+                best = np.where(h, np.minimum(best, t.priority), best)
+        starved_key = "_" + e.key("starved")
+        starved = np.isinf(best)
+        props[starved_key] = np.where(frozen, props[starved_key], starved)
+        live = ~frozen & ~starved
+        if bool(starved.any()):  # JSBSim's next frame begins with the engine off
+            phase_key = "_" + e.key("phase")
+            props[phase_key] = np.where(live | frozen, props[phase_key], _OFF)
+        rate = pph / 3600.0
+        burned = rate * dt_s
+        ff_key, used_key = e.key("fuel-flow-rate-pps"), e.key("fuel-used-lbs")
+        props[ff_key] = np.where(live, rate, props[ff_key])
+        props[used_key] = np.where(live, props[used_key] + burned, props[used_key])
+        feeding = [h & (best == t.priority) for t, h in zip(feeds, has)]
+        if len(feeds) == 1:
+            each = burned
+        else:
+            count = feeding[0].astype(np.float64)
+            for f in feeding[1:]:
+                count = count + f
+            each = burned / count
+        for t, f in zip(feeds, feeding):
+            c = props[t.contents_key]
+            left = c - each
+            drained = np.where(left >= t.unusable_lbs, left, np.minimum(c, t.unusable_lbs))
+            props[t.contents_key] = np.where(f & live, drained, c)
