@@ -53,7 +53,7 @@ EXACT = ("propulsion/engine/n1", "propulsion/engine/n2", "propulsion/engine/fuel
          "propulsion/starter_cmd")
 
 #: per aircraft, (second, property, value) commands
-SCHEDULES = [
+SCHEDULES: list[list[tuple[float, str, float]]] = [
     [(0, "fcs/throttle-cmd-norm", 0.0), (4, "fcs/throttle-cmd-norm", 1.0),
      (5, "uav700/fuel-freeze", 0.0), (6, "fcs/elevator-cmd-norm", -0.3),
      (9, "fcs/throttle-cmd-norm", 0.3), (11, "fcs/elevator-cmd-norm", 0.2),
