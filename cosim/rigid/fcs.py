@@ -16,14 +16,25 @@ last output, a filter's past values, a channel's frame counter) lives under
 a private key ``_fcs:<component property>:<what>``. ``init(props, n)``
 adds what is missing (JSBSim's values at load: ``<property value=...>``
 declarations, component outputs 0); ``run(props, dt_s)`` runs one physics
-frame. ``run(props, dt_s, suspended=True)`` is JSBSim's ``RunIC`` frame
-(integration suspended: channel frame counters stand still, so every
-channel whose ``execute`` property is on runs).
+frame. ``run_ic(props, dt_s)`` does what ``fdm.run_ic()`` does to the
+systems: every channel whose ``execute`` property is on runs twice with
+integration suspended (channel frame counters stand still); a channel at
+``execrate`` R then runs on the R-th frame after it.
 
-What FGFCS does before the channels is done too: each engine's throttle,
-mixture, propeller advance and feather position set to its command. The
-default nose-wheel steering angle (``fcs/steer-pos-deg``) belongs to the
-ground reactions and is not computed here. Trimming is not modelled.
+What FGFCS does besides the channels is done too: first each engine's
+throttle, mixture, propeller advance and feather position set to its
+command; and a component writing a surface position in radians
+(``fcs/elevator-pos-rad``...) also sets it in degrees and its magnitude
+(``fcs/mag-elevator-pos-rad``), and the other way round, as FGFCS's tied
+properties do. The default nose-wheel steering angle
+(``fcs/steer-pos-deg``) belongs to the ground reactions and is not
+computed here. Trimming is not modelled.
+
+Measured against JSBSim 1.3.3 where its behaviour is not what its older
+sources say: a filter's first run (at ``run_ic``) sets its past to the
+input it held (0 at load) and outputs that, an integrator's does not; an
+integrator's trigger resets its output to 0 when negative and holds it
+beyond 1e-6, while its past input keeps following the input.
 
 Supported, exactly as JSBSim 1.3 computes them: ``<property value=...>``
 declarations; channels with ``execute`` and ``execrate`` (a channel at
@@ -39,7 +50,7 @@ the integrator types ``rect``/``trap``/``ab2``/``ab3``, ``trigger``,
 ``saturated``), ``kinematic`` (``traverse``/``setting``, ``noscale``),
 ``lag_filter``, ``lead_lag_filter``, ``washout_filter``,
 ``second_order_filter``, ``integrator`` (Tustin coefficients, ``c1``..``c6``
-numbers, integrator ``trigger``), ``deadband``; ``<input>`` with a leading
+numbers; the integrator ``c1/s`` with its ``trigger``), ``deadband``; ``<input>`` with a leading
 ``-``, ``<output>`` (several), ``<clipto>`` (``type="cyclic"`` too).
 Anything else (an element, an attribute, a ``delay``, a coefficient given
 as a property) is a ``CompileError`` naming the file, the line and the
@@ -117,28 +128,39 @@ class Systems:
                 props[f"fcs/{pos}{sfx}"] = props[f"fcs/{cmd}{sfx}"].copy()
             props[f"fcs/feather-pos-norm{sfx}"] = (
                 props[f"fcs/feather-cmd-norm{sfx}"] != 0.0).astype(np.float64)
-        for ch in self.channels:
-            _run_channel(ch, props, dt_s, suspended)
+        # IEEE arithmetic without warnings, as JSBSim computes (a quotient
+        # by zero is infinite, 0/0 NaN)
+        with np.errstate(all="ignore"):
+            for ch in self.channels:
+                _run_channel(ch, props, dt_s, suspended)
 
 
 def _run_channel(ch: _Channel, props: Props, dt_s: float, suspended: bool) -> None:
     mask: np.ndarray | None = None
-    on: np.ndarray | bool = True
+    on: np.ndarray | None = None
     if ch.execute is not None:
-        on_arr = props[ch.execute] != 0.0
-        if not on_arr.any():
+        on = props[ch.execute] != 0.0
+        n_on = np.count_nonzero(on)
+        if n_on == 0:
             return
-        mask = None if on_arr.all() else on_arr
-        on = on_arr
+        if n_on == on.size:
+            on = None
+        mask = on
     if ch.rate > 1:
         count = props[ch.counter]
         if not suspended:
-            count = np.where(on & (count >= ch.rate), 0.0, count) + on
+            if on is None:  # counts 1, 2 .. rate, 1 ..
+                count = np.remainder(count, ch.rate) + 1.0
+            else:  # only where the channel is on
+                count = np.where(on & (count >= ch.rate), 0.0, count) + on
             props[ch.counter] = count
-        due = (count >= ch.rate) & on
-        if not due.any():
+        due = count >= ch.rate
+        if on is not None:
+            due &= on
+        n_due = np.count_nonzero(due)
+        if n_due == 0:
             return
-        mask = None if due.all() else due
+        mask = None if n_due == due.size else due
     dt = dt_s * ch.rate
     for comp in ch.components:
         new = comp.step(props, dt)

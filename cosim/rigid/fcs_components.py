@@ -242,7 +242,8 @@ class _Build:
                 return np.where(rng != 0.0, y, np.clip(x, vmin, vmax))
             self.clip = cyc
         else:
-            self.clip = lambda x, p: np.clip(x, lo(p), hi(p))
+            # Constrain(min, x, max); two ufuncs cost less than np.clip
+            self.clip = lambda x, p: np.minimum(np.maximum(x, lo(p)), hi(p))
 
     def done(self, compute: Compute,
              extra: tuple[str, ...] = ()) -> Component:
@@ -250,21 +251,29 @@ class _Build:
         ``self.name`` and its state) with the clip and the output copies."""
         name, outs, clip = self.name, self.outputs[1:], self.clip
         tied = [t for o in self.outputs for t in _tied(o)]
+        reads = tuple(self.reads)
 
         def step(p: Props, dt: float) -> dict[str, np.ndarray]:
             new: dict[str, np.ndarray] = compute(p, dt)
             out = new[name]
             if clip is not None:
                 out = clip(out, p)
-            out = np.asarray(out, dtype=np.float64)
             ref = p[name]
-            if out.shape != ref.shape:
-                out = np.broadcast_to(out, ref.shape).copy()
+            if not (isinstance(out, np.ndarray) and out.shape == ref.shape
+                    and out.dtype == np.float64):
+                out = np.broadcast_to(np.asarray(out, dtype=np.float64), ref.shape).copy()
             new[name] = out
             for o in outs:
                 new[o] = out.copy()
             for key, f in tied:
                 new[key] = f(out)
+            # no array may serve two keys: a step may hand back an input
+            # (a function of one property) or one array as output and state
+            taken = {id(p[r]) for r in reads if r in p}
+            for k, v in new.items():
+                if id(v) in taken:
+                    new[k] = v = v.copy()
+                taken.add(id(v))
             return new
 
         writes = (tuple(self.outputs) + tuple(k for k, _ in tied) + tuple(self.state)
@@ -374,11 +383,15 @@ def _summer(el: ET.Element, ctx: Context) -> Component:
     bias = _number(be, ctx) if be is not None else 0.0
     ins, name = b.inputs, b.name
 
+    # JSBSim starts from 0.0 and adds the bias even when 0: both only turn
+    # a -0.0 into 0.0, which compares equal, so they are left out
+    first, rest = ins[0], ins[1:]
+
     def compute(p: Props, dt: float) -> dict[str, Any]:
-        out = 0.0 + ins[0](p)
-        for s in ins[1:]:
+        out = first(p)
+        for s in rest:
             out = out + s(p)
-        return {name: out + bias}
+        return {name: out + bias if bias else out}
     return b.done(compute)
 
 
@@ -420,15 +433,24 @@ def _gain(el: ET.Element, ctx: Context) -> Component:
     zc = _one(el, "zero_centered", ctx)
     centered = not (zc is not None and text(zc) in ("0", "false"))
 
+    zero_end = in_min == 0.0 or in_max == 0.0
+    scaled = ge is not None
+
     def scale(p: Props, dt: float) -> dict[str, Any]:
         u = np.asarray(x(p), dtype=np.float64)
-        if centered:
-            with np.errstate(divide="ignore", invalid="ignore"):  # the branch not taken
-                out = np.where(u > 0, (u / in_max) * out_max, (u / in_min) * out_min)
+        if centered and not zero_end:
+            # both sides computed, in place; an input of 0 gives a signed
+            # zero where JSBSim gives 0.0 (equal in every comparison)
+            # dividing by 1 or -1 is exact, so skipped (the usual domain)
+            hi = u * out_max if in_max == 1.0 else (u / in_max) * out_max
+            lo = u * -out_min if in_min == -1.0 else (u / in_min) * out_min
+            out = np.where(u > 0, hi, lo)
+        elif centered:  # a domain ending at 0: 0/0 where JSBSim gives 0.0
+            out = np.where(u > 0, (u / in_max) * out_max, (u / in_min) * out_min)
             out = np.where(u == 0.0, 0.0, out)
         else:
             out = out_min + ((u - in_min) / (in_max - in_min)) * (out_max - out_min)
-        return {name: out * gain(p)}
+        return {name: out * gain(p) if scaled else out}
     return b.done(scale)
 
 
@@ -582,7 +604,7 @@ def _actuator(el: ET.Element, ctx: Context) -> Component:
         new[k_init] = np.ones_like(u)
         if clip is not None:
             vmin, vmax = clip[0](p), clip[1](p)
-            out = np.clip(out, vmin, vmax)
+            out = np.minimum(np.maximum(out, vmin), vmax)
             s = ((out >= vmax) & (vmax != 0)) | ((out <= vmin) & (vmin != 0))
             new[sat] = s.astype(np.float64)
         new[name] = out
@@ -612,15 +634,14 @@ def _filter(el: ET.Element, ctx: Context) -> Component:
     tr = _one(el, "trigger", ctx)
     trigger = _prop(text(tr), b.reads) if tr is not None else None
     x, name = b.inputs[0], b.name
-    k_first, k_in = b.key("initialize"), b.key("input")
+    k_first = b.key("initialize")
     k_i1, k_i2, k_o1, k_o2 = (b.key("input_prev1"), b.key("input_prev2"),
                               b.key("output_prev1"), b.key("output_prev2"))
     # a filter's first run sets its past to the input it last held (0 at
     # load) and outputs that; an integrator's first run is an ordinary step
     # (both measured against JSBSim 1.3.3)
     first_run = 0.0 if tag == "integrator" else 1.0
-    b.state.update({k_first: first_run, k_in: 0.0, k_i1: 0.0, k_i2: 0.0, k_o1: 0.0,
-                    k_o2: 0.0})
+    b.state.update({k_first: first_run, k_i1: 0.0, k_i2: 0.0, k_o1: 0.0, k_o2: 0.0})
 
     def coefficients(dt: float) -> tuple[float, ...]:
         if tag == "lag_filter":
@@ -667,12 +688,12 @@ def _filter(el: ET.Element, ctx: Context) -> Component:
             else:
                 out = u * k[0] + i1 * k[0] + o1
         # the first frame: the output is the input held from before (0 at load)
-        held = p[k_in]
+        held = p[k_i1]  # JSBSim's Input member: the last input
         u = np.where(first, held, u)
         out = np.where(first, held, out)
         i1 = np.where(first, held, i1)
         o1 = np.where(first, held, o1)
-        return {name: out, k_o2: o1, k_o1: out, k_i2: i1, k_i1: u, k_in: u,
+        return {name: out, k_o2: o1, k_o1: out, k_i2: i1, k_i1: u,
                 k_first: np.zeros_like(u)}
     return b.done(compute)
 

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cosim.rigid.fcs import Systems, compile_systems
+from cosim.rigid.fcs import CompileError, Systems, compile_systems
 from cosim.vehicles.jsb import (
     JSBSIM_ROOT,
     SYSTEMS_DIR,
@@ -267,3 +267,95 @@ def test_every_component_type_equals_jsbsim(tmp_path: Path) -> None:
         np.testing.assert_allclose(got[name], want[name], rtol=1e-12, atol=1e-12, err_msg=name)
     for name in zoo:  # each moved
         assert np.ptp(want[name]) > 0.01, name
+
+
+def _aircraft(tmp_path: Path, body: str) -> Path:
+    xml = tmp_path / "plane.xml"
+    xml.write_text(f'<?xml version="1.0"?>\n<fdm_config name="plane">\n{body}\n</fdm_config>\n')
+    return xml
+
+
+@pytest.mark.parametrize(("body", "match"), [
+    ('<flight_control name="f">\n<channel name="c">\n<sensor name="s"><input>a/b</input>'
+     '</sensor>\n</channel>\n</flight_control>',
+     r"plane\.xml:5: <sensor>: is not supported \(supported components: .*actuator"),
+    ('<flight_control name="f">\n<channel name="c">\n<summer name="s"><input>a/b</input>\n'
+     '<delay>2</delay></summer>\n</channel>\n</flight_control>',
+     r"plane\.xml:6: <delay>: is not supported in <summer> \(supported: .*bias"),
+    ('<system name="s">\n<channel name="c" execrate="2.5">\n</channel>\n</system>',
+     r"plane\.xml:4: <channel>: execrate='2\.5': expected a whole number"),
+    ('<system name="s">\n<channel name="c">\n<lag_filter name="f"><input>a/b</input>\n'
+     '<c1>a/tau</c1></lag_filter>\n</channel>\n</system>',
+     r"plane\.xml:6: <c1>: a coefficient given as a property \('a/tau'\) is not supported"),
+    ('<system name="s">\n<channel name="c">\n<switch name="w">\n<test value="1">\n'
+     'a/b EQ 1\na/c GTT 2\n</test>\n</switch>\n</channel>\n</system>',
+     r"plane\.xml:8: <test>: condition 'a/c GTT 2': expected 'PROPERTY OP VALUE'"),
+    ('<system name="s">\n<channel name="c">\n<actuator name="a" kind="fast">'
+     '<input>a/b</input></actuator>\n</channel>\n</system>',
+     r"plane\.xml:5: <actuator>: attribute kind='fast' is not supported"),
+    ('<system file="nowhere"/>',
+     r"plane\.xml:3: <system>: system file 'nowhere' not found in .*, .*Systems or "),
+])
+def test_what_it_does_not_know_is_refused_with_the_file_and_line(
+        tmp_path: Path, body: str, match: str) -> None:
+    with pytest.raises(CompileError, match=match):
+        compile_systems(_aircraft(tmp_path, body), tmp_path)
+
+
+def test_with_a_problem_list_every_problem_is_listed_and_the_rest_compiled(
+        tmp_path: Path) -> None:
+    body = ('<system name="s">\n<property value="2">a/k</property>\n<channel name="c">\n'
+            '<sensor name="s1"><input>a/b</input></sensor>\n'
+            '<pure_gain name="g"><input>a/b</input><gain>a/k</gain></pure_gain>\n'
+            '<pid name="p"><input>a/b</input><kp>1</kp><noise>1</noise></pid>\n'
+            '</channel>\n<function name="x"><value>1</value></function>\n</system>')
+    problems: list[CompileError] = []
+    plan = compile_systems(_aircraft(tmp_path, body), tmp_path, problems=problems)
+    assert [str(p).split(": ", 2)[:2] for p in problems] == [
+        [f"{tmp_path / 'plane.xml'}:6", "<sensor>"], [f"{tmp_path / 'plane.xml'}:8", "<noise>"],
+        [f"{tmp_path / 'plane.xml'}:10", "<function>"]]
+    props = {"a/b": np.array([1.0, -3.0])}
+    plan.init(props, 2)
+    plan.run(props, DT_S)
+    np.testing.assert_array_equal(props["fcs/g"], [2.0, -6.0])
+    assert "fcs/p" not in plan.outputs
+
+
+def test_a_system_file_is_found_as_jsbsim_finds_it(tmp_path: Path) -> None:
+    """The aircraft's folder, then its Systems folder, then the systems
+    folder given; the first found wins."""
+    def system(folder: Path, value: float) -> None:
+        folder.mkdir(exist_ok=True)
+        (folder / "extra.xml").write_text(
+            f'<system name="e"><property value="{value}">a/k</property></system>')
+    xml = _aircraft(tmp_path, '<system file="extra"/>')
+    system(tmp_path / "shared", 3.0)
+    props: dict[str, np.ndarray] = {}
+    compile_systems(xml, tmp_path / "shared").init(props, 1)
+    assert props["a/k"][0] == 3.0
+    system(tmp_path / "Systems", 2.0)
+    props = {}
+    compile_systems(xml, tmp_path / "shared").init(props, 1)
+    assert props["a/k"][0] == 2.0
+    system(tmp_path, 1.0)
+    props = {}
+    compile_systems(xml, tmp_path / "shared").init(props, 1)
+    assert props["a/k"][0] == 1.0
+
+
+def test_no_array_serves_two_properties(
+        uav700_flight: tuple[Systems, list[dict[str, float]], dict[str, np.ndarray]]) -> None:
+    """The shared contract: an array belongs to one key (the uav700's
+    fuel-freeze command is a function of one property, its value that
+    property's array; a PID keeps its input as state)."""
+    plan, seen, _ = uav700_flight
+    props: dict[str, np.ndarray] = {}
+    plan.init(props, 3)
+    plan.run_ic(props, DT_S)
+    props["cosim/ap/engage"][:] = 1
+    for _ in range(8):
+        plan.run(props, DT_S)
+    owners: dict[int, list[str]] = {}
+    for k, v in props.items():
+        owners.setdefault(id(v), []).append(k)
+    assert [ks for ks in owners.values() if len(ks) > 1] == []
