@@ -27,7 +27,11 @@ Each frame (``run(props, dt_s)``), in JSBSim's order, for each engine:
   (``propulsion/starter_cmd``) it spins up to the ignition speeds
   (``SpinUp``); not cut off above 15 % N2 with the starter or a dynamic
   pressure above 30 psf it starts (``Start``: to idle at the start rates,
-  then running). The running engine clears the starter, as JSBSim's does;
+  then running). The running engine clears the starter, as JSBSim's does.
+  A frame without time (``dt_s`` 0, JSBSim's suspended integration) is
+  its trim (``Trim``: the thrust of the throttle's N2 at once, nothing
+  moves); the next frame with time runs a running engine from the
+  throttle's N1 and N2 and leaves any other off and cut off;
 - the direct thruster: thrust x cos(reverser angle) along the thruster's
   orientation, and its moment about the CG (the acting location, inches
   in the structural frame, x aft and z up, taken from the CG
@@ -43,7 +47,7 @@ The state: ``propulsion/engine[i]/n1``, ``n2``, ``fuel-used-lbs`` and
 private keys ``_propulsion/engine[i]/...``: ``fuel-flow-pph`` (the fuel
 flow in pounds an hour), ``n2norm`` (the N2 fraction of the last running
 frame, which the spool rates use: as in JSBSim, writing ``n2`` does not
-change it), ``phase`` (0 off, 1 running, 2 spinning up, 3 starting),
+change it), ``phase`` (0 off, 1 running, 2 spinning up, 3 starting, 4 trimming),
 ``running`` and ``starved``; each tank's ``propulsion/tank[j]/contents-lbs``;
 and what JSBSim lets a user write: ``propulsion/cutoff_cmd``,
 ``propulsion/starter_cmd``, ``propulsion/engine[i]/reverser-angle-rad`` and
@@ -67,12 +71,12 @@ What it does not know it refuses (``CompileError``, ``FILE:LINE:
 ``nozzle``, ``rotor``, ``pointing``), augmentation, water injection, the
 spool-rate and TSFC functions, any other element or function, oxidizer
 tanks and tank temperature, drain locations, radius and grain. Not
-compiled, so never entered: the turbine's stall, seize and trim phases
+compiled, so never entered: the turbine's stall and seize phases
 (``stalled`` and ``seized`` are not read), refuelling, dumping and a tank's
-external flow. The starter of an aircraft with several engines (JSBSim
-keeps one per engine behind the one command) is a ``PropulsionError``
-when used. The thruster's orientation and a tank's priority are fixed at
-compile time.
+external flow. On an aircraft with several engines the starter, and an
+engine leaving a trim cut off, are a ``PropulsionError`` (JSBSim keeps a
+starter and a cut-off per engine behind the one command each). The
+thruster's orientation and a tank's priority are fixed at compile time.
 """
 
 from __future__ import annotations

@@ -90,7 +90,7 @@ _TOTAL = "propulsion/total-fuel-lbs"
 _POSITION = ("x-position", "y-position", "z-position")
 _CUTOFF, _STARTER = "propulsion/cutoff_cmd", "propulsion/starter_cmd"
 #: FGTurbine's phases (as floats: they live in props)
-_OFF, _RUN, _SPINUP, _START = 0.0, 1.0, 2.0, 3.0
+_OFF, _RUN, _SPINUP, _START, _TRIM = 0.0, 1.0, 2.0, 3.0, 4.0
 
 
 def _seek(v: np.ndarray, target: np.ndarray | float, up: np.ndarray | float,
@@ -193,9 +193,10 @@ class Propulsion:
         return total
 
     def run(self, props: dict[str, np.ndarray], dt_s: float) -> None:
-        """One physics frame of every aircraft (``dt_s`` > 0)."""
-        if not dt_s > 0:
-            raise ValueError(f"dt_s must be positive, got {dt_s}")
+        """One physics frame of every aircraft (``dt_s`` 0: a frame of
+        suspended integration, JSBSim's trim phase)."""
+        if not dt_s >= 0:
+            raise ValueError(f"dt_s must be 0 or more, got {dt_s}")
         n = len(props[_CG[0]])
         cg = [props[k] for k in _CG]
         frozen = props[_FREEZE] != 0.0
@@ -226,37 +227,15 @@ class Propulsion:
         props[e.key("MilThrust")] = mil_fraction
         idle = e.milthrust_lbs * idle_fraction
         mil = (e.milthrust_lbs - idle) * mil_fraction
-        n1, n2 = props[e.key("n1")], props[e.key("n2")]
-        # FGSpoolUp with the N2norm of the previous frame, the same for N1 and N2
-        norm_key, pph_key = "_" + e.key("n2norm"), "_" + e.key("fuel-flow-pph")
-        m = 1.0 - np.minimum(1.0, props[norm_key] + 0.1)
-        den = 1 + 3 * m * m * m + (1 - props["atmosphere/sigma"])
-        d2u, d2d, d1u, d1d = e.delays
-        run_n2 = _seek(n2, e.idle_n2 + tp * e.n2_factor, d2u, d2d, dt_s, den)
-        run_n1 = _seek(n1, e.idle_n1 + tp * e.n1_factor, d1u, d1d, dt_s, den)
-        n2norm = (run_n2 - e.idle_n2) / e.n2_factor
-        thrust = idle + mil * n2norm * n2norm
-        rest = 1 - n2norm
-        tsfc = e.tsfc * np.sqrt(props["atmosphere/T-R"] / 389.7) * (0.84 + rest * rest)
-        pph = np.maximum(_seek(props[pph_key], thrust * tsfc, 1000.0, 10000.0, dt_s),
-                         e.idle_ff_pph)
-        if e.one_minus_bleed != 1.0:
-            thrust = thrust * e.one_minus_bleed
-        phase_key, cutoff, starter = "_" + e.key("phase"), props[_CUTOFF], props[_STARTER]
-        if bool(cutoff.any()) or bool(starter.any()) or bool((props[phase_key] != _RUN).any()):
-            ran = self._phases(e, props, dt_s)
-            run_n1, run_n2, pph = (np.where(ran, a, b) for a, b in (
-                (run_n1, props[e.key("n1")]), (run_n2, props[e.key("n2")]),
-                (pph, props[pph_key])))
-            n2norm = np.where(ran, n2norm, props[norm_key])
-            tsfc = np.where(ran, tsfc, props[e.key("tsfc")])
-            thrust = np.where(ran, thrust, 0.0)
+        pph_key = "_" + e.key("fuel-flow-pph")
+        if dt_s == 0.0:
+            thrust = self._trim(e, props, tp, idle, mil)
+            pph = props[pph_key]
+        else:
+            thrust, pph = self._calculate(e, props, dt_s, tp, idle, mil)
         reverser = props[e.key("reverser-angle-rad")]
         if bool(reverser.any()):  # cos(0) x thrust is thrust
             thrust = np.cos(reverser) * thrust
-        props[e.key("n1")], props[e.key("n2")], props[norm_key] = run_n1, run_n2, n2norm
-        props[e.key("tsfc")] = tsfc
-        props[pph_key] = pph
         props[e.key("thrust-lbs")] = thrust
         self._burn(e, props, dt_s, pph, frozen)
         # FGForce: the body force and the moment about the CG, the arm from
@@ -273,6 +252,85 @@ class Propulsion:
               _minus(_times(arms[2], fb[0]), _times(arms[0], fb[2])),
               _minus(_times(arms[0], fb[1]), _times(arms[1], fb[0]))]
         return fb, mb
+
+    def _calculate(self, e: Turbine, props: dict[str, np.ndarray], dt_s: float,
+                   tp: np.ndarray, idle: np.ndarray, mil: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray]:
+        """A frame of ``FGTurbine::Calculate`` (dt > 0): leaves N1, N2, the
+        N2 fraction, TSFC and fuel flow in props, returns the thrust (before
+        the thruster) and the fuel flow."""
+        phase_key, cutoff, starter = "_" + e.key("phase"), props[_CUTOFF], props[_STARTER]
+        slow = bool(cutoff.any()) or bool(starter.any()) or bool(
+            (props[phase_key] != _RUN).any())
+        if slow:
+            self._leave_trim(e, props, tp)
+        norm_key, pph_key = "_" + e.key("n2norm"), "_" + e.key("fuel-flow-pph")
+        n1, n2 = props[e.key("n1")], props[e.key("n2")]
+        # FGSpoolUp with the N2norm of the previous frame, the same for N1 and N2
+        m = 1.0 - np.minimum(1.0, props[norm_key] + 0.1)
+        den = 1 + 3 * m * m * m + (1 - props["atmosphere/sigma"])
+        d2u, d2d, d1u, d1d = e.delays
+        run_n2 = _seek(n2, e.idle_n2 + tp * e.n2_factor, d2u, d2d, dt_s, den)
+        run_n1 = _seek(n1, e.idle_n1 + tp * e.n1_factor, d1u, d1d, dt_s, den)
+        n2norm = (run_n2 - e.idle_n2) / e.n2_factor
+        thrust = idle + mil * n2norm * n2norm
+        rest = 1 - n2norm
+        tsfc = e.tsfc * np.sqrt(props["atmosphere/T-R"] / 389.7) * (0.84 + rest * rest)
+        pph = np.maximum(_seek(props[pph_key], thrust * tsfc, 1000.0, 10000.0, dt_s),
+                         e.idle_ff_pph)
+        if e.one_minus_bleed != 1.0:
+            thrust = thrust * e.one_minus_bleed
+        if slow:
+            ran = self._phases(e, props, dt_s)
+            run_n1, run_n2, pph = (np.where(ran, a, b) for a, b in (
+                (run_n1, props[e.key("n1")]), (run_n2, props[e.key("n2")]),
+                (pph, props[pph_key])))
+            n2norm = np.where(ran, n2norm, props[norm_key])
+            tsfc = np.where(ran, tsfc, props[e.key("tsfc")])
+            thrust = np.where(ran, thrust, 0.0)
+        props[e.key("n1")], props[e.key("n2")], props[norm_key] = run_n1, run_n2, n2norm
+        props[e.key("tsfc")] = tsfc
+        props[pph_key] = pph
+        return thrust, pph
+
+    def _trim(self, e: Turbine, props: dict[str, np.ndarray], tp: np.ndarray,
+              idle: np.ndarray, mil: np.ndarray) -> np.ndarray:
+        """A frame without time (``FGTurbine::Trim``): the thrust of the
+        throttle's N2 at once, N1, N2 and the fuel flow left as they are; a
+        starved engine is off."""
+        n2 = e.idle_n2 + tp * e.n2_factor
+        n2norm = (n2 - e.idle_n2) / e.n2_factor
+        thrust = (idle + mil * n2norm * n2norm) * e.one_minus_bleed
+        starved = props["_" + e.key("starved")] != 0.0
+        props["_" + e.key("phase")] = np.where(starved, _OFF, _TRIM)
+        if bool(starved.any()):
+            running_key = "_" + e.key("running")
+            props[running_key] = np.where(starved, 0.0, props[running_key])
+            thrust = np.where(starved, 0.0, thrust)
+        return thrust
+
+    def _leave_trim(self, e: Turbine, props: dict[str, np.ndarray], tp: np.ndarray) -> None:
+        """The first frame with time after a trim: a running engine that is
+        not starved runs from the throttle's N1 and N2, no longer cut off;
+        any other is off and cut off (JSBSim's Calculate)."""
+        phase_key = "_" + e.key("phase")
+        phase = props[phase_key]
+        trim = phase == _TRIM
+        if not bool(trim.any()):
+            return
+        go = trim & (props["_" + e.key("running")] != 0.0) & (
+            props["_" + e.key("starved")] == 0.0)
+        if len(self.engines) > 1 and bool((trim & ~go).any() or (trim & (
+                props[_CUTOFF] != 0.0)).any()):
+            raise PropulsionError(f"{self.source}: an engine of an aircraft with "
+                                  f"{len(self.engines)} engines leaving a trim cut off or "
+                                  f"cutting off is not compiled (JSBSim keeps a cut-off per "
+                                  f"engine behind the one command)")
+        for n_key, idle_n, factor in (("n2", e.idle_n2, e.n2_factor),
+                                      ("n1", e.idle_n1, e.n1_factor)):
+            props[e.key(n_key)] = np.where(go, idle_n + tp * factor, props[e.key(n_key)])
+        props[phase_key] = np.where(go, _RUN, np.where(trim, _OFF, phase))
+        props[_CUTOFF] = np.where(go, 0.0, np.where(trim, 1.0, props[_CUTOFF]))
 
     def _phases(self, e: Turbine, props: dict[str, np.ndarray], dt_s: float) -> np.ndarray:
         """The turbine's phases other than running (``FGTurbine::Calculate``,
