@@ -79,6 +79,9 @@ SCHEDULES: list[list[tuple[float, str, float]]] = [
     [(0, "fcs/throttle-cmd-norm", 0.6), (1, "propulsion/starter_cmd", 1.0),
      (2, "propulsion/cutoff_cmd", 1.0), (2.5, "propulsion/cutoff_cmd", 0.0),
      (4, "fcs/throttle-cmd-norm", 1.0)],
+    # cut off in a zoom until it nearly stops, windmilled up again in a dive
+    [(0.5, "propulsion/cutoff_cmd", 1.0), (1, "fcs/elevator-cmd-norm", -0.2),
+     (9, "fcs/elevator-cmd-norm", 0.3)],
 ]
 
 #: frames of suspended integration (dt 0: JSBSim's trim phase), for all
@@ -165,7 +168,8 @@ def test_the_uav700_equals_jsbsim_frame_by_frame(flights: Flights) -> None:
     assert (burnt[:3] < -0.01).all()
     # the phases: off, spun up below idle and relit, starved and relit
     thrust = jsb["propulsion/engine/thrust-lbs"]
-    assert (thrust[:, 3:] == 0).any(axis=0).all() and (thrust[-1, 3:] > 5).all()
+    assert (thrust[:, 3:6] == 0).any(axis=0).all() and (thrust[-1, 3:6] > 5).all()
+    assert (np.diff(n2[:, 6]) > 0).sum() > 600 and thrust[-1, 6] == 0  # windmilled up
     starter = jsb["propulsion/starter_cmd"][:, 3]
     assert n2[:, 3].min() < 30 and starter.max() == 1 and starter[-1] == 0
     # the trims: thrust at the throttle's N2 at once; a starting engine
