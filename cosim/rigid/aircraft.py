@@ -82,6 +82,7 @@ class RigidAircraft:
         for k, v in self.metrics.constants().items():
             props[k] = np.full(n, v)
         props["position/terrain-elevation-asl-ft"] = np.zeros(n)
+        props["forces/fbz-gear-lbs"] = np.zeros(n)  # no gear forces: the tier stops at contact
         self.atmosphere.init(props, n)
         self.systems.init(props, n)
         self.propulsion.init(props, n)
@@ -193,8 +194,7 @@ class RigidAircraft:
         self.systems.run(props, dt_s, suspended=suspended)
         self.mass.run(props)
         body.auxiliary(props)
-        if dt_s > 0.0 or "forces/fbx-prop-lbs" not in props:
-            self.propulsion.run(props, dt_s or 1e-12)
+        self.propulsion.run(props, dt_s)
         m = self.metrics
         self.aero.run(props, m.rp_in, m.sw_sqft, m.bw_ft, m.cbar_ft, m.iw_rad)
         force = (props["forces/fbx-aero-lbs"] + props["forces/fbx-prop-lbs"],
@@ -274,7 +274,10 @@ def problems(aircraft_xml: Path, systems_dir: Path, engine_dir: Path) -> list[Co
         compile_aircraft(aircraft_xml, systems_dir, engine_dir, problems=found)
     except CompileError as e:
         found.append(e)
-    return found
+    unique: dict[str, CompileError] = {}
+    for e in found:  # an engine file used twice says its refusals once
+        unique.setdefault(str(e), e)
+    return list(unique.values())
 
 
 def position_ecef(lat_geod_deg: np.ndarray, lon_deg: np.ndarray, h_sl_ft: np.ndarray

@@ -57,7 +57,7 @@ def _refuse(problems: list[CompileError] | None, err: CompileError) -> None:
 def _unknown(el: ET.Element, allowed: set[str], source: str,
              problems: list[CompileError] | None) -> None:
     for c in el:
-        if c.tag not in allowed and c.tag != "description":
+        if c.tag not in allowed and c.tag not in ("description", "documentation"):
             _refuse(problems, CompileError(
                 f"{_where(c, source)}: not supported in <{el.tag}> (supported: "
                 f"{', '.join(sorted(allowed))})"))

@@ -70,6 +70,7 @@ _R = ("_eom/rx", "_eom/ry", "_eom/rz")
 _V = ("_eom/vx", "_eom/vy", "_eom/vz")
 _V1 = ("_eom/v1x", "_eom/v1y", "_eom/v1z")  # the inertial velocity a frame ago
 _V2 = ("_eom/v2x", "_eom/v2y", "_eom/v2z")  # two frames ago
+_ECEF = ("_eom/ex", "_eom/ey", "_eom/ez")  # the Earth-fixed position (ft)
 _A1 = ("_eom/a1x", "_eom/a1y", "_eom/a1z")  # the inertial acceleration a frame ago
 _WD = ("accelerations/pidot-rad_sec2", "accelerations/qidot-rad_sec2",
        "accelerations/ridot-rad_sec2")
@@ -206,7 +207,7 @@ def _update(props: Props, q: Quat, w_i: Vec, r_i: Vec, v_i: Vec, epa: np.ndarray
     props["position/long-gc-deg"] = lon * _RADTODEG
     props["position/h-sl-ft"] = h
     props["position/h-agl-ft"] = g.alt_ft - props["position/terrain-elevation-asl-ft"]
-    props["_eom/ecef"] = np.stack(loc)
+    _put(props, _ECEF, loc)
     for i, k in enumerate(("t11", "t12", "t13", "t21", "t22", "t23", "t31", "t32", "t33")):
         props["_eom/tl2b_" + k] = tl2b[i]
         props["_eom/ti2b_" + k] = ti2b[i]
@@ -239,7 +240,7 @@ def accelerations(props: Props, force: Vec, moment: Vec) -> None:
     pqr = _get(props, _PQR)
     uvw = _get(props, _UVW)
     r_i = _get(props, _R)
-    g = geo.gravity_ecef(*props["_eom/ecef"])
+    g = geo.gravity_ecef(*_get(props, _ECEF))
     accel = scale(1.0 / m, force)
     uvwdot = sub(accel, cross(add(pqr, scale(2.0, om_b)), uvw))  # type: ignore[arg-type]
     uvwdot = sub(uvwdot, mv(ti2b, cross(om, cross(om, r_i))))  # type: ignore[arg-type]

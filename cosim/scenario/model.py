@@ -125,7 +125,7 @@ class Scenario:
         for v in self.vehicles:
             cls = get_class(v.vehicle_class)
             d: dict[str, Any] = {"id": v.id, "class": v.vehicle_class}
-            if cls.model_kind == "jsbsim":
+            if v.model:
                 d["model"] = v.model
             d["init"] = {"lat_deg": v.lat_deg, "lon_deg": v.lon_deg, "alt_msl_m": v.alt_msl_m,
                          "heading_deg": v.heading_deg, "airspeed_mps": v.airspeed_mps}

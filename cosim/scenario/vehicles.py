@@ -81,8 +81,8 @@ def parse_vehicles(ctx: Problems, d: Any, origin: Origin, apath: tuple[str, ...]
                         f"the scenario would have {planned} or more vehicles; at most "
                         f"{lim.MAX_ALL_VEHICLES} of every kind")
                 count = None
-        trim = r.boolean("trim", True) if jsbsim and (vclass is None or vclass.trims) \
-            else False
+        trim = r.boolean("trim", True) if vclass is None or (
+            vclass.trims and "trim" in vclass.vehicle_keys) else False
         props = prop_values(ctx, r.d["set"], vp + ("set",)) if r.has("set") else []
         params = vclass.parse_vehicle(r, vp) if vclass else {}
         fixed_seed = r.integer("random_seed", None, lo=0, hi=lim.MAX_VEHICLE_SEED)

@@ -31,6 +31,7 @@ BUILTIN_CLASSES: dict[str, str] = {
     "ground": "cosim.vehicles.ground:GROUND",
     "quadrotor": "cosim.vehicles.quadrotor:QUADROTOR",
     "fixed_wing_batched": "cosim.vehicles.fixed_wing_batched:FIXED_WING_BATCHED",
+    "fixed_wing_rigid": "cosim.vehicles.fixed_wing_rigid:FIXED_WING_RIGID",
 }
 
 
