@@ -37,8 +37,10 @@ Each frame (``run(props, dt_s)``), in JSBSim's order, for each engine:
   in the structural frame, x aft and z up, taken from the CG
   ``inertia/cg-[xyz]-in`` into body axes and feet);
 - the fuel it burns (``FGPropulsion::ConsumeFuel``), unless
-  ``propulsion/fuel_freeze`` is set: drained equally from its feed tanks of
-  the best priority holding usable fuel; none there, the engine starves.
+  ``propulsion/fuel_freeze`` is set or the frame is part of a trim
+  (``run(..., trimming=True)``, as JSBSim's trim status): drained equally
+  from its feed tanks of the best priority holding usable fuel; none there,
+  the engine starves.
 
 then the total fuel (``propulsion/total-fuel-lbs``).
 

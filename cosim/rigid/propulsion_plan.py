@@ -192,14 +192,15 @@ class Propulsion:
             total = total + props[t.contents_key]
         return total
 
-    def run(self, props: dict[str, np.ndarray], dt_s: float) -> None:
+    def run(self, props: dict[str, np.ndarray], dt_s: float, *, trimming: bool = False) -> None:
         """One physics frame of every aircraft (``dt_s`` 0: a frame of
-        suspended integration, JSBSim's trim phase)."""
+        suspended integration, JSBSim's trim phase; ``trimming``: while
+        JSBSim's trim status is set, no fuel is consumed, as if frozen)."""
         if not dt_s >= 0:
             raise ValueError(f"dt_s must be 0 or more, got {dt_s}")
         n = len(props[_CG[0]])
         cg = [props[k] for k in _CG]
-        frozen = props[_FREEZE] != 0.0
+        frozen = np.ones(n, dtype=bool) if trimming else props[_FREEZE] != 0.0
         force: list[np.ndarray | None] = [None, None, None]
         moment: list[np.ndarray | None] = [None, None, None]
         for e in self.engines:

@@ -86,6 +86,8 @@ SCHEDULES: list[list[tuple[float, str, float]]] = [
 
 #: frames of suspended integration (dt 0: JSBSim's trim phase), for all
 SUSPENDED = {*range(264, 267), *range(960, 963), *range(1704, 1707)}
+#: frames with JSBSim's trim status set: no fuel consumed
+TRIMMING = set(range(1300, 1330))
 
 Arrays = dict[str, np.ndarray]
 Flights = tuple[Arrays, Arrays, Arrays]
@@ -115,6 +117,7 @@ def _flights(seconds: float = 20.0) -> Flights:
                 fdm.suspend_integration()
             elif i - 1 in SUSPENDED and i not in SUSPENDED:
                 fdm.resume_integration()
+            fdm.set_trim_status(i in TRIMMING)
             fdm.run()
         for k, rows in rec.items():
             rows.append([f[k] for f in fdms])
@@ -142,7 +145,7 @@ def _replay(plan: Propulsion, start: Arrays, ins: Arrays) -> Arrays:
             for t_s, prop, value in schedule:
                 if prop in WRITES and round(t_s / DT_S) == i:
                     props[prop][j] = value
-        plan.run(props, 0.0 if i in SUSPENDED else DT_S)
+        plan.run(props, 0.0 if i in SUSPENDED else DT_S, trimming=i in TRIMMING)
         for k in OUTPUTS:
             out[k].append(props[k].copy())
     return {k: np.array(v) for k, v in out.items()}
@@ -170,6 +173,8 @@ def test_the_uav700_equals_jsbsim_frame_by_frame(flights: Flights) -> None:
     thrust = jsb["propulsion/engine/thrust-lbs"]
     assert (thrust[:, 3:6] == 0).any(axis=0).all() and (thrust[-1, 3:6] > 5).all()
     assert (np.diff(n2[:, 6]) > 0).sum() > 600 and thrust[-1, 6] == 0  # windmilled up
+    fuel = jsb["propulsion/tank/contents-lbs"][:, 1]
+    assert fuel[1329] == fuel[1299] > fuel[1330]  # no fuel burnt while trimming
     starter = jsb["propulsion/starter_cmd"][:, 3]
     assert n2[:, 3].min() < 30 and starter.max() == 1 and starter[-1] == 0
     # the trims: thrust at the throttle's N2 at once; a starting engine
