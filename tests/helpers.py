@@ -100,3 +100,27 @@ def finished_run(text: str, folder: Path) -> Path:
                        backend="inline")
     assert res.stop_reason == "completed", res.error
     return folder / "run"
+
+
+def run_by_vehicle(text: str, folder: Path, backend: str = "inline", workers: int | None = None,
+                   check_properties: bool = False
+                   ) -> tuple[dict[str, dict[str, Any]], list[dict[str, Any]]]:
+    """Scenario ``text`` run to its end in ``folder/run``: each vehicle's
+    logged columns (arrays) by name, and the run's events."""
+    import json
+
+    import numpy as np
+
+    from cosim.logs import read_states
+    from cosim.scenario import parse_scenario
+    from cosim.sync import run_scenario
+
+    scn = parse_scenario(text, str(folder / "s.yaml"), check_properties=check_properties)
+    res = run_scenario(scn, folder / "run", backend=backend, workers=workers)
+    assert res.stop_reason == "completed", res.error
+    t = read_states(folder / "run")
+    who = np.array(t["vehicle"].to_pylist())
+    cols = {v: {k: np.asarray(t[k].to_pylist())[who == v] for k in t.column_names
+                if k not in ("vehicle", "command")} for v in sorted(set(who))}
+    lines = (folder / "run" / "events.jsonl").read_text().splitlines()
+    return cols, [json.loads(x) for x in lines]

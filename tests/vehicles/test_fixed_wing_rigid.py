@@ -16,10 +16,9 @@ import pytest
 
 from cosim.core.state import VehicleStatus
 from cosim.errors import ConfigError
-from cosim.logs import read_states
 from cosim.scenario import parse_scenario
-from cosim.sync import run_scenario
 from cosim.vehicles.registry import get_class
+from tests.helpers import run_by_vehicle
 
 HEAD = """\
 schema_version: 1
@@ -30,15 +29,7 @@ rates: {physics_hz: 120, control_hz: 30, log_hz: 10}
 
 def _run(tmp: Path, body: str, backend: str = "inline", workers: int | None = None
          ) -> tuple[dict[str, dict[str, np.ndarray]], list[dict]]:
-    scn = parse_scenario(HEAD + body, str(tmp / "s.yaml"), check_properties=True)
-    res = run_scenario(scn, tmp / "run", backend=backend, workers=workers)
-    assert res.stop_reason == "completed", res.error
-    t = read_states(tmp / "run")
-    who = np.array(t["vehicle"].to_pylist())
-    cols = {v: {k: np.asarray(t[k].to_pylist())[who == v] for k in t.column_names
-                if k not in ("vehicle", "command")} for v in sorted(set(who))}
-    events = [json.loads(x) for x in (tmp / "run" / "events.jsonl").read_text().splitlines()]
-    return cols, events
+    return run_by_vehicle(HEAD + body, tmp, backend, workers, check_properties=True)
 
 
 def test_the_class_is_registered_and_refuses_a_model_it_cannot_fly(tmp_path: Path) -> None:
