@@ -77,11 +77,15 @@ from cosim.rigid.fcs_components import (
     attrs,
     is_number,
     kids,
+    model_function,
     text,
 )
 from cosim.rigid.functions import CompileError, parse
 
 log = logging.getLogger(__name__)
+
+#: the elements FGFCS loads (a file's root may be any of them)
+_KINDS = ("system", "autopilot", "flight_control")
 
 
 @dataclass(frozen=True)
@@ -102,6 +106,9 @@ class Systems:
     channels: tuple[_Channel, ...]
     defaults: dict[str, float] = field(repr=False)
     engines: int = 0
+    #: the systems' own <function>s, before and after the channels
+    pre: _Channel | None = None
+    post: _Channel | None = None
 
     def init(self, props: Props, n: int) -> None:
         """Add JSBSim's values at load for ``n`` aircraft (keys already in
@@ -120,6 +127,8 @@ class Systems:
 
     def run(self, props: Props, dt_s: float, *, suspended: bool = False) -> None:
         """One physics frame (``suspended``: JSBSim's RunIC frame)."""
+        if self.pre is not None:
+            _run_channel(self.pre, props, dt_s, suspended)
         for i in range(self.engines):
             sfx = f"[{i}]" if i else ""
             for cmd, pos in (("throttle-cmd-norm", "throttle-pos-norm"),
@@ -133,6 +142,8 @@ class Systems:
         with np.errstate(all="ignore"):
             for ch in self.channels:
                 _run_channel(ch, props, dt_s, suspended)
+        if self.post is not None:
+            _run_channel(self.post, props, dt_s, suspended)
 
 
 def _run_channel(ch: _Channel, props: Props, dt_s: float, suspended: bool) -> None:
@@ -201,8 +212,10 @@ def _declare(c: ET.Element, ctx: Context, declared: dict[str, float]) -> None:
 
 
 def _system(el: ET.Element, ctx: Context, declared: dict[str, float],
-            channels: list[_Channel]) -> None:
-    _guard(ctx, partial(attrs, el, ctx, {"name", "file"} if el.tag == "system" else {"name"}))
+            channels: list[_Channel], functions: tuple[list[Component], list[Component]]
+            ) -> None:
+    xml_ns = {a for a in el.attrib if a.startswith(("xmlns", "xsi:"))}  # schema notes
+    _guard(ctx, partial(attrs, el, ctx, {"name", "file"} | xml_ns))
     for c in kids(el):
         if c.tag == "property":
             _guard(ctx, partial(_declare, c, ctx, declared))
@@ -210,9 +223,13 @@ def _system(el: ET.Element, ctx: Context, declared: dict[str, float],
             ch = _guard(ctx, partial(_channel, c, ctx, len(channels)))
             if isinstance(ch, _Channel):
                 channels.append(ch)
+        elif c.tag == "function":
+            got = _guard(ctx, partial(model_function, c, ctx))
+            if isinstance(got, tuple):
+                functions[got[0]].append(got[1])
         else:
             _problem(ctx, ctx.fail(c, f"is not supported in <{el.tag}> (supported: property, "
-                                      f"channel)"))
+                                      f"function, channel)"))
 
 
 def _channel(el: ET.Element, ctx: Context, index: int) -> _Channel:
@@ -238,9 +255,16 @@ def _channel(el: ET.Element, ctx: Context, index: int) -> _Channel:
                     f"_fcs:channel{index}:frames", tuple(comps))
 
 
-def _find_system(name: str, aircraft_dir: Path, systems_dir: Path) -> Path | None:
+def _find_system(kind: str, name: str, aircraft_dir: Path, systems_dir: Path
+                 ) -> Path | None:
+    """A system's file: in the aircraft's folder, then (a <system> only)
+    its Systems folder, then the systems folder; ``.xml`` added when the
+    name has no suffix."""
     fname = name if Path(name).suffix else name + ".xml"
-    for folder in (aircraft_dir, aircraft_dir / "Systems", systems_dir):
+    folders = [aircraft_dir]
+    if kind == "system":
+        folders += [aircraft_dir / "Systems", systems_dir]
+    for folder in folders:
         if (folder / fname).is_file():
             return folder / fname
     return None
@@ -254,34 +278,35 @@ def compile_systems(aircraft_xml: Path, systems_dir: Path, *,
     ctx = Context(str(aircraft_xml), problems)
     declared: dict[str, float] = {}
     channels: list[_Channel] = []
-    order = ([e for e in root if e.tag == "system"] + [e for e in root if e.tag == "autopilot"]
-             + [e for e in root if e.tag == "flight_control"])
+    functions: tuple[list[Component], list[Component]] = ([], [])
+    order = [e for kind in _KINDS for e in root if e.tag == kind]
     for el in order:
         f = el.get("file")
         if f:
-            path = _find_system(f, aircraft_xml.parent, Path(systems_dir))
+            path = _find_system(el.tag, f, aircraft_xml.parent, Path(systems_dir))
             if path is None:
-                _problem(ctx, ctx.fail(el, f"system file {f!r} not found in "
-                                           f"{aircraft_xml.parent}, "
-                                           f"{aircraft_xml.parent / 'Systems'} or {systems_dir}"))
+                where = (f"{aircraft_xml.parent}, {aircraft_xml.parent / 'Systems'} or "
+                         f"{systems_dir}" if el.tag == "system" else str(aircraft_xml.parent))
+                _problem(ctx, ctx.fail(el, f"file {f!r} not found in {where}"))
                 continue
             sub = parse(path)
-            if sub.tag != "system":
+            if sub.tag not in _KINDS:
                 _problem(ctx, CompileError(f"{path}:{sub.get('_line', '?')}: <{sub.tag}>: "
-                                           f"expected <system>"))
+                                           f"expected one of <{'>, <'.join(_KINDS)}>"))
                 continue
-            _system(sub, Context(str(path), problems), declared, channels)
+            _system(sub, Context(str(path), problems), declared, channels, functions)
         else:
-            _system(el, ctx, declared, channels)
+            _system(el, ctx, declared, channels, functions)
     propulsion = root.find("propulsion")
     engines = len(propulsion.findall("engine")) if propulsion is not None else 0
-    plan = _assemble(channels, declared, engines)
+    plan = _assemble(channels, declared, engines, functions)
     log.debug("%s: %d channels, %d components, %d inputs", aircraft_xml, len(plan.channels),
               sum(len(c.components) for c in plan.channels), len(plan.inputs))
     return plan
 
 
-def _assemble(channels: list[_Channel], declared: dict[str, float], engines: int) -> Systems:
+def _assemble(channels: list[_Channel], declared: dict[str, float], engines: int,
+              functions: tuple[list[Component], list[Component]]) -> Systems:
     writes: dict[str, float] = {}
     reads: set[str] = set()
     for i in range(engines):
@@ -293,7 +318,9 @@ def _assemble(channels: list[_Channel], declared: dict[str, float], engines: int
             reads.add(f"fcs/{cmd}{sfx}")
             writes[f"fcs/{pos}{sfx}"] = 0.0
     defaults: dict[str, float] = dict(declared)
-    for ch in channels:
+    pre, post = (_Channel(f"{when} functions", 1, None, "", tuple(fs)) if fs else None
+                 for when, fs in zip(("pre", "post"), functions))
+    for ch in channels + [c for c in (pre, post) if c is not None]:
         if ch.execute:
             reads.add(ch.execute)
         if ch.rate > 1:
@@ -310,4 +337,4 @@ def _assemble(channels: list[_Channel], declared: dict[str, float], engines: int
         defaults.setdefault(r, 0.0)
     outputs = frozenset(k for k in writes if not k.startswith("_"))
     inputs = frozenset(reads - set(writes))
-    return Systems(inputs, outputs, tuple(channels), defaults, engines)
+    return Systems(inputs, outputs, tuple(channels), defaults, engines, pre, post)

@@ -304,6 +304,25 @@ def _leaf(a: Source, op: Callable[[Any, Any], np.ndarray], b: Source) -> Test:
     return lambda p: op(a(p), b(p))
 
 
+def model_function(el: ET.Element, ctx: Context) -> tuple[bool, Component]:
+    """A ``<function>`` of a system (FGModelFunctions): whether it runs
+    after the channels (``type="post"``), and it as a component setting
+    the property it names."""
+    attrs(el, ctx, {"name", "type"})
+    name = el.get("name", "")
+    if "/" not in name:
+        raise ctx.fail(el, f"name={name!r}: expected the path of the property it sets")
+    kind = el.get("type", "pre")
+    if kind not in ("pre", "post"):
+        raise ctx.fail(el, f"type={kind!r}: expected pre or post")
+    line = el.get("_line", "?")
+    wrapper = ET.Element("fcs_function", {"name": name, "_line": line})
+    fn = ET.SubElement(wrapper, "function", {"_line": line})
+    fn.text = el.text
+    fn.extend(list(el))
+    return kind == "post", _fcs_function(wrapper, ctx)
+
+
 def _condition_lines(text: str | None, line0: int, el: ET.Element, ctx: Context,
                      reads: set[str]) -> list[Test]:
     """The ``PROPERTY OP VALUE`` lines of a test's text."""

@@ -174,6 +174,10 @@ _ZOO = """
   <property value="0">zoo/gate</property>
   <property value="1.5">zoo/k</property>
   <property value="1">zoo/run</property>
+  <function name="zoo/pre"><product><property>fcs/zoo-pure-gain</property><value>2</value>
+    </product></function>
+  <function name="zoo/post" type="post"><sum><property>zoo/sum</property>
+    <property>zoo/pre</property></sum></function>
   <channel name="filters">
     <lag_filter name="zoo/lag"><input>zoo/u</input><c1>5</c1></lag_filter>
     <lead_lag_filter name="zoo/leadlag"><input>-zoo/u</input>
@@ -235,7 +239,8 @@ _ZOO = """
 def test_every_component_type_equals_jsbsim(tmp_path: Path) -> None:
     """A system with every component and option, added to the uav700 and
     driven by random walks, gates, a disabled channel, a stuck and a
-    hardover actuator: every output equals JSBSim's in every frame."""
+    hardover actuator, with functions before and after the channels: every
+    output equals JSBSim's in every frame."""
     folder = tmp_path / "uav700"
     folder.mkdir()
     (folder / "Engines").symlink_to(UAV700.parent / "Engines")
@@ -262,7 +267,7 @@ def test_every_component_type_equals_jsbsim(tmp_path: Path) -> None:
     seen, want = _fly(model, plan, schedule, frames)
     got = _replay(plan, seen, schedule)
     zoo = sorted(k for k in plan.outputs if "zoo" in k)
-    assert len(zoo) == 21
+    assert len(zoo) == 23
     for name in sorted(plan.outputs - _WRITE_ONLY):
         np.testing.assert_allclose(got[name], want[name], rtol=1e-12, atol=1e-12, err_msg=name)
     for name in zoo:  # each moved
@@ -294,7 +299,9 @@ def _aircraft(tmp_path: Path, body: str) -> Path:
      '<input>a/b</input></actuator>\n</channel>\n</system>',
      r"plane\.xml:5: <actuator>: attribute kind='fast' is not supported"),
     ('<system file="nowhere"/>',
-     r"plane\.xml:3: <system>: system file 'nowhere' not found in .*, .*Systems or "),
+     r"plane\.xml:3: <system>: file 'nowhere' not found in .*, .*Systems or "),
+    ('<flight_control file="nowhere"/>',
+     r"plane\.xml:3: <flight_control>: file 'nowhere' not found in [^,]*$"),
 ])
 def test_what_it_does_not_know_is_refused_with_the_file_and_line(
         tmp_path: Path, body: str, match: str) -> None:
