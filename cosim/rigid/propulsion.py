@@ -72,7 +72,9 @@ What it does not know it refuses (``CompileError``, ``FILE:LINE:
 ``electric_engine``, ...), thrusters other than ``direct`` (``propeller``,
 ``nozzle``, ``rotor``, ``pointing``), augmentation, water injection, the
 spool-rate and TSFC functions, any other element or function, oxidizer
-tanks and tank temperature, drain locations, radius and grain. Not
+tanks and tank temperature, drain locations, radius and grain (an
+engine's own ``location`` and ``orient`` are ignored, as JSBSim ignores
+them: the thruster's count). Not
 compiled, so never entered: the turbine's stall and seize phases
 (``stalled`` and ``seized`` are not read), refuelling, dumping and a tank's
 external flow. On an aircraft with several engines the starter, and an
@@ -96,7 +98,7 @@ __all__ = ["Propulsion", "PropulsionError", "Tank", "Turbine", "compile_propulsi
 _M_TO_FT = 3.2808399
 _TO: dict[str, dict[str, float]] = {
     "IN": {"IN": 1.0, "FT": 12.0, "M": _M_TO_FT * 12.0},
-    "LBS": {"LBS": 1.0, "KG": 1.0 / 0.45359237},
+    "LBS": {"LBS": 1.0, "KG": 1.0 / 0.45359237, "N": 0.22482},
     "RAD": {"RAD": 1.0, "DEG": 1.0 / (180.0 / math.pi)},
     "GAL": {"GAL": 1.0, "L": 0.26417287},
     "LBS/GAL": {"LBS/GAL": 1.0, "KG/L": 8.3454045},
@@ -237,7 +239,7 @@ def _turbine(el: ET.Element, index: int, source: str,
                     raise CompileError(f"{_where(c, source)}: only 0 is supported "
                                        f"(augmentation and water injection are not compiled)")
             elif c.tag in _TURBINE_NUMBERS:
-                unit = "LBS" if c.tag in ("milthrust", "maxthrust") and c.get("unit") else ""
+                unit = "LBS" if c.tag in ("milthrust", "maxthrust") else ""
                 values[c.tag] = _number(c, source, unit)
             else:
                 raise CompileError(f"{_where(c, source)}: not supported in a turbine_engine "

@@ -378,3 +378,14 @@ def test_the_starter_of_several_engines_is_refused_when_used(tmp_path: Path) -> 
     with pytest.raises(PropulsionError, match=r"a.xml: the starter of an aircraft with 2 "
                                               r"engines is not compiled"):
         plan.run(props, DT_S)
+
+
+def test_units_are_converted_with_jsbsims_factors_or_refused(tmp_path: Path) -> None:
+    turbine = _TURBINE.replace("<milthrust> 100 </milthrust>",
+                               "<milthrust unit=\"N\"> 400 </milthrust>")
+    plan = compile_propulsion(_write(tmp_path, _ENGINE, turbine.format(extra="")), ENGINES)
+    assert plan.engines[0].milthrust_lbs == 400 * 0.22482
+    turbine = turbine.replace("unit=\"N\"", "unit=\"KGF\"")
+    with pytest.raises(CompileError, match=r"eng.xml:2: <milthrust>: unit 'KGF' is not "
+                                           r"supported here \(supported: KG, LBS, N\)"):
+        compile_propulsion(_write(tmp_path, _ENGINE, turbine.format(extra="")), ENGINES)
