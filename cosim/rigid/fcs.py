@@ -70,7 +70,7 @@ from pathlib import Path
 import numpy as np
 
 from cosim.rigid.fcs_components import (
-    COMPONENTS,
+    STATELESS,
     Component,
     Context,
     Props,
@@ -80,9 +80,13 @@ from cosim.rigid.fcs_components import (
     model_function,
     text,
 )
+from cosim.rigid.fcs_dynamics import DYNAMIC
 from cosim.rigid.functions import CompileError, parse
 
 log = logging.getLogger(__name__)
+
+#: every component the compiler knows, by element
+COMPONENTS = {**STATELESS, **DYNAMIC}
 
 #: the elements FGFCS loads (a file's root may be any of them)
 _KINDS = ("system", "autopilot", "flight_control")
