@@ -63,7 +63,7 @@ from __future__ import annotations
 import logging
 import xml.etree.ElementTree as ET
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
 
@@ -131,8 +131,9 @@ class Systems:
 
     def run(self, props: Props, dt_s: float, *, suspended: bool = False) -> None:
         """One physics frame (``suspended``: JSBSim's RunIC frame)."""
+        gates: dict[str, _Gate] = {}
         if self.pre is not None:
-            _run_channel(self.pre, props, dt_s, suspended)
+            _run_channel(self.pre, props, dt_s, suspended, gates)
         for i in range(self.engines):
             sfx = f"[{i}]" if i else ""
             for cmd, pos in (("throttle-cmd-norm", "throttle-pos-norm"),
@@ -145,19 +146,43 @@ class Systems:
         # by zero is infinite, 0/0 NaN)
         with np.errstate(all="ignore"):
             for ch in self.channels:
-                _run_channel(ch, props, dt_s, suspended)
+                _run_channel(ch, props, dt_s, suspended, gates)
         if self.post is not None:
-            _run_channel(self.post, props, dt_s, suspended)
+            _run_channel(self.post, props, dt_s, suspended, gates)
 
 
-def _run_channel(ch: _Channel, props: Props, dt_s: float, suspended: bool) -> None:
+#: a channel's gate this frame: skip it, or run it on these rows (None: all)
+_Gate = tuple[bool, "np.ndarray | None"]
+
+
+def _run_channel(ch: _Channel, props: Props, dt_s: float, suspended: bool,
+                 gates: dict[str, _Gate]) -> None:
+    gate = gates.get(ch.counter)
+    if gate is None:
+        gate = gates[ch.counter] = _gate(ch, props, suspended)
+    skip, mask = gate
+    if skip:
+        return
+    dt = dt_s * ch.rate
+    for comp in ch.components:
+        new = comp.step(props, dt)
+        if mask is None:
+            props.update(new)
+        else:
+            for k, v in new.items():
+                props[k] = np.where(mask, v, props[k])
+
+
+def _gate(ch: _Channel, props: Props, suspended: bool) -> _Gate:
+    """FGFCSChannel::Execute's test: whether the channel runs this frame,
+    and for which rows; its frame counter advanced."""
     mask: np.ndarray | None = None
     on: np.ndarray | None = None
     if ch.execute is not None:
         on = props[ch.execute] != 0.0
         n_on = np.count_nonzero(on)
         if n_on == 0:
-            return
+            return True, None
         if n_on == on.size:
             on = None
         mask = on
@@ -174,16 +199,9 @@ def _run_channel(ch: _Channel, props: Props, dt_s: float, suspended: bool) -> No
             due &= on
         n_due = np.count_nonzero(due)
         if n_due == 0:
-            return
+            return True, None
         mask = None if n_due == due.size else due
-    dt = dt_s * ch.rate
-    for comp in ch.components:
-        new = comp.step(props, dt)
-        if mask is None:
-            props.update(new)
-        else:
-            for k, v in new.items():
-                props[k] = np.where(mask, v, props[k])
+    return False, mask
 
 
 # --------------------------------------------------------------- systems
@@ -322,8 +340,14 @@ def _assemble(channels: list[_Channel], declared: dict[str, float], engines: int
             reads.add(f"fcs/{cmd}{sfx}")
             writes[f"fcs/{pos}{sfx}"] = 0.0
     defaults: dict[str, float] = dict(declared)
-    pre, post = (_Channel(f"{when} functions", 1, None, "", tuple(fs)) if fs else None
-                 for when, fs in zip(("pre", "post"), functions))
+    pre, post = (_Channel(f"{when} functions", 1, None, f"_fcs:{when}", tuple(fs))
+                 if fs else None for when, fs in zip(("pre", "post"), functions))
+    # channels with the same execute property (written by no component) and
+    # the same rate count the same frames: one counter, one test a frame
+    written = {w for ch in channels for comp in ch.components for w in comp.writes}
+    channels = [ch if ch.execute in written else
+                replace(ch, counter=f"_fcs:frames:{ch.execute or ''}:{ch.rate}")
+                for ch in channels]
     for ch in channels + [c for c in (pre, post) if c is not None]:
         if ch.execute:
             reads.add(ch.execute)

@@ -246,10 +246,11 @@ class Build:
             # Constrain(min, x, max); two ufuncs cost less than np.clip
             self.clip = lambda x, p: np.minimum(np.maximum(x, lo(p)), hi(p))
 
-    def done(self, compute: Compute,
-             extra: tuple[str, ...] = ()) -> Component:
+    def done(self, compute: Compute, extra: tuple[str, ...] = (), *,
+             fresh: bool = False) -> Component:
         """Wrap ``compute`` (which returns the component's Output under
-        ``self.name`` and its state) with the clip and the output copies."""
+        ``self.name`` and its state) with the clip and the output copies
+        (``fresh``: ``compute`` returns only arrays it made, each once)."""
         name, outs, clip = self.name, self.outputs[1:], self.clip
         tied = [t for o in self.outputs for t in _tied(o)]
         reads = tuple(self.reads)
@@ -268,6 +269,8 @@ class Build:
                 new[o] = out.copy()
             for key, f in tied:
                 new[key] = f(out)
+            if fresh:
+                return new
             # no array may serve two keys: a step may hand back an input
             # (a function of one property) or one array as output and state
             taken = {id(p[r]) for r in reads if r in p}
@@ -393,7 +396,7 @@ def _switch(el: ET.Element, ctx: Context) -> Component:
         for cond, val in tests:
             out = np.where(cond(p), val(p), out)
         return {name: out}
-    return b.done(compute)
+    return b.done(compute, fresh=bool(tests))
 
 
 def _summer(el: ET.Element, ctx: Context) -> Component:
@@ -412,7 +415,7 @@ def _summer(el: ET.Element, ctx: Context) -> Component:
         for s in rest:
             out = out + s(p)
         return {name: out + bias if bias else out}
-    return b.done(compute)
+    return b.done(compute, fresh=bool(rest or bias))
 
 
 def _gain(el: ET.Element, ctx: Context) -> Component:
@@ -425,7 +428,7 @@ def _gain(el: ET.Element, ctx: Context) -> Component:
     gain = param_el(ge, ctx, b.reads) if ge is not None else (lambda p: 1.0)
     x, name = b.inputs[0], b.name
     if tag == "pure_gain":
-        return b.done(lambda p, dt: {name: gain(p) * x(p)})
+        return b.done(lambda p, dt: {name: gain(p) * x(p)}, fresh=True)
     if tag == "scheduled_gain":
         te = one(el, "table", ctx, need=True)
         assert te is not None
@@ -434,7 +437,7 @@ def _gain(el: ET.Element, ctx: Context) -> Component:
         f = compile_function(fn, ctx.source)
         b.reads |= f.inputs
         table = f.kernel
-        return b.done(lambda p, dt: {name: gain(p) * table(p) * x(p)})
+        return b.done(lambda p, dt: {name: gain(p) * table(p) * x(p)}, fresh=True)
 
     def pair(tag2: str, lo: float, hi: float, need: bool) -> tuple[float, float]:
         e = one(el, tag2, ctx, need=need)
@@ -471,7 +474,7 @@ def _gain(el: ET.Element, ctx: Context) -> Component:
         else:
             out = out_min + ((u - in_min) / (in_max - in_min)) * (out_max - out_min)
         return {name: out * gain(p) if scaled else out}
-    return b.done(scale)
+    return b.done(scale, fresh=True)
 
 
 def _deadband(el: ET.Element, ctx: Context) -> Component:
@@ -489,7 +492,7 @@ def _deadband(el: ET.Element, ctx: Context) -> Component:
         half = 0.5 * np.asarray(width(p))
         out = np.where(u < -half, (u + half) * gain, np.where(u > half, (u - half) * gain, 0.0))
         return {name: out}
-    return b.done(compute)
+    return b.done(compute, fresh=True)
 
 
 #: the components without state
