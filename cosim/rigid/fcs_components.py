@@ -190,8 +190,9 @@ class Build:
             t = text(i)
             if not t or " " in t:
                 raise ctx.fail(i, f"expected a property, got {t!r}")
-            self.inputs.append(param(t, self.reads) if is_number(t)
-                               else prop(t, self.reads))
+            if is_number(t):  # FGPropertyValue takes a property only
+                raise ctx.fail(i, f"expected a property, got the number {t!r}")
+            self.inputs.append(prop(t, self.reads))
         self.outputs = [self.name]
         for o in el.findall("output"):
             attrs(o, ctx, set())
@@ -300,6 +301,7 @@ _OPS: dict[str, Callable[[np.ndarray, np.ndarray], np.ndarray]] = {
     "EQ": np.equal, "NE": np.not_equal, "GT": np.greater, "GE": np.greater_equal,
     "LT": np.less, "LE": np.less_equal, "==": np.equal, "!=": np.not_equal,
     ">": np.greater, ">=": np.greater_equal, "<": np.less, "<=": np.less_equal}
+_OPS.update({k.lower(): v for k, v in _OPS.items() if k.isalpha()})  # FGCondition's list
 
 Test = Callable[[Props], np.ndarray]
 
@@ -335,11 +337,11 @@ def _condition_lines(text: str | None, line0: int, el: ET.Element, ctx: Context,
         words = line.split()
         if not words:
             continue
-        if len(words) != 3 or words[1].upper() not in _OPS or is_number(words[0]):
+        if len(words) != 3 or words[1] not in _OPS or is_number(words[0]):
             raise CompileError(f"{ctx.source}:{line0 + i}: <{el.tag}>: condition "
                                f"{line.strip()!r}: expected 'PROPERTY OP VALUE' with OP one "
-                               f"of EQ NE GT GE LT LE == != > >= < <=")
-        out.append(_leaf(prop(words[0], reads), _OPS[words[1].upper()],
+                               f"of EQ NE GT GE LT LE (or in lower case) == != > >= < <=")
+        out.append(_leaf(prop(words[0], reads), _OPS[words[1]],
                          param(words[2], reads)))
     return out
 

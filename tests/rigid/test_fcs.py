@@ -231,6 +231,10 @@ _ZOO = """
       <test value="2">zoo/u LE -0.5</test>
       <output>zoo/switch-copy</output>
     </switch>
+    <switch name="zoo/run2"><default value="0"/><test value="1">zoo/u gt -0.3</test></switch>
+  </channel>
+  <channel name="switched by a component" execute="zoo/run2" execrate="2">
+    <lag_filter name="zoo/lag2"><input>zoo/v</input><c1>3</c1></lag_filter>
   </channel>
 </system>
 """
@@ -267,7 +271,7 @@ def test_every_component_type_equals_jsbsim(tmp_path: Path) -> None:
     seen, want = _fly(model, plan, schedule, frames)
     got = _replay(plan, seen, schedule)
     zoo = sorted(k for k in plan.outputs if "zoo" in k)
-    assert len(zoo) == 23
+    assert len(zoo) == 25
     for name in sorted(plan.outputs - _WRITE_ONLY):
         np.testing.assert_allclose(got[name], want[name], rtol=1e-12, atol=1e-12, err_msg=name)
     for name in zoo:  # each moved
@@ -298,6 +302,12 @@ def _aircraft(tmp_path: Path, body: str) -> Path:
     ('<system name="s">\n<channel name="c">\n<actuator name="a" kind="fast">'
      '<input>a/b</input></actuator>\n</channel>\n</system>',
      r"plane\.xml:5: <actuator>: attribute kind='fast' is not supported"),
+    ('<system name="s">\n<channel name="c">\n<summer name="s">\n<input>1.5</input></summer>\n'
+     '</channel>\n</system>',
+     r"plane\.xml:6: <input>: expected a property, got the number '1\.5'"),
+    ('<system name="s">\n<channel name="c">\n<switch name="w">\n<test value="1">a/b Gt 1\n'
+     '</test>\n</switch>\n</channel>\n</system>',
+     r"plane\.xml:6: <test>: condition 'a/b Gt 1': expected 'PROPERTY OP VALUE'"),
     ('<system file="nowhere"/>',
      r"plane\.xml:3: <system>: file 'nowhere' not found in .*, .*Systems or "),
     ('<flight_control file="nowhere"/>',
