@@ -3,12 +3,15 @@
 
 ``compile_systems(aircraft_xml, systems_dir)`` reads an aircraft's
 systems (inline, or ``<system file="NAME"/>`` looked up as JSBSim looks it
-up: the aircraft's folder, its ``Systems`` folder, then ``systems_dir``),
-then its ``<autopilot>`` and its ``<flight_control>``, and returns a
-``Systems``: every channel of every system in JSBSim's order (FGFCS runs
-them as one list, systems first, then the autopilot, then the flight
-control), each component computed as JSBSim 1.3's class computes it, over
-arrays of N aircraft.
+up: the aircraft's folder, its ``Systems`` folder, then ``systems_dir``;
+an ``<autopilot file=...>`` or ``<flight_control file=...>`` in the
+aircraft's folder only), then its ``<autopilot>`` and its
+``<flight_control>``, and returns a ``Systems``: every channel of every
+system in JSBSim's order (FGFCS runs them as one list, systems first, then
+the autopilot, then the flight control), each component computed as
+JSBSim 1.3's class computes it, over arrays of N aircraft. A system's own
+``<function name=...>`` sets its property before the channels
+(``type="post"``: after them).
 
 State lives in the caller's ``props`` dict (JSBSim's property names, float64
 arrays of N); a component's own state (a PID's integrator, an actuator's
@@ -50,12 +53,17 @@ the integrator types ``rect``/``trap``/``ab2``/``ab3``, ``trigger``,
 ``saturated``), ``kinematic`` (``traverse``/``setting``, ``noscale``),
 ``lag_filter``, ``lead_lag_filter``, ``washout_filter``,
 ``second_order_filter``, ``integrator`` (Tustin coefficients, ``c1``..``c6``
-numbers; the integrator ``c1/s`` with its ``trigger``), ``deadband``; ``<input>`` with a leading
-``-``, ``<output>`` (several), ``<clipto>`` (``type="cyclic"`` too).
-Anything else (an element, an attribute, a ``delay``, a coefficient given
-as a property) is a ``CompileError`` naming the file, the line and the
-element; with ``problems=[...]`` every problem is listed and the part
-skipped instead.
+numbers; the integrator ``c1/s`` with its ``trigger``), ``deadband``;
+``<input>`` a property with a leading ``-`` or not, ``<output>``
+(several), ``<clipto>`` (``type="cyclic"`` too). Anything else is a
+``CompileError`` naming the file, the line and the element: among them
+the sensors (``sensor``, ``accelerometer``, ``gyro``, ``magnetometer``),
+``waypoint_*``, ``angle``, ``distributor``, a ``<delay>``, a component
+without a name, a filter coefficient or actuator lag given as a
+property, an unknown attribute (``login="AND"``, which JSBSim reads as
+AND). With ``problems=[...]`` every problem is listed and the part
+skipped instead. A PID's ``initial-integrator-value`` property is not
+modelled.
 """
 
 from __future__ import annotations
