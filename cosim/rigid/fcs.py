@@ -138,7 +138,11 @@ class Systems:
         self.run(props, dt_s, suspended=True)
 
     def run(self, props: Props, dt_s: float, *, suspended: bool = False) -> None:
-        """One physics frame (``suspended``: JSBSim's RunIC frame)."""
+        """One physics frame (``suspended``: a frame of JSBSim's RunIC, the
+        channel frame counters standing still). ``dt_s`` is the physics step
+        in either case: JSBSim's components keep the step they were built
+        with, so a RunIC frame at 0 would freeze rate limits, filters and
+        kinematics and make a PID's derivative infinite."""
         gates: dict[str, _Gate] = {}
         if self.pre is not None:
             _run_channel(self.pre, props, dt_s, suspended, gates)
