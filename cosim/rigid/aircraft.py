@@ -74,6 +74,8 @@ class RigidAircraft:
     atmosphere: Atmosphere
     #: the contact points (structural frame, in)
     contacts: tuple[tuple[float, float, float], ...]
+    #: every property some part reads (an output nobody reads may be skipped)
+    reads: frozenset[str] = frozenset()
 
     def new_props(self, n: int) -> Props:
         """Fresh state for ``n`` aircraft: every constant and default, no
@@ -93,17 +95,20 @@ class RigidAircraft:
     def place(self, props: Props, loc_ecef_ft: tuple[np.ndarray, np.ndarray, np.ndarray],
               phi: np.ndarray, theta: np.ndarray, psi: np.ndarray,
               uvw: tuple[np.ndarray, np.ndarray, np.ndarray],
-              pqr: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> None:
+              pqr: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+              dt_s: float = 1 / 120) -> None:
         """The initial conditions, then one frame with the integration held
-        (FGFDMExec::RunIC), then the past derivatives set to the present."""
+        (FGFDMExec::RunIC: the flight controls run twice at the physics
+        step ``dt_s``, the rest once with none), then the past derivatives
+        set to the present."""
         z = np.zeros(len(phi))
         body.initial_state(props, loc_ecef_ft, phi, theta, psi, uvw, pqr or (z, z, z))
-        self._models(props, 0.0, suspended=True)
+        self._models(props, 0.0, ic_dt_s=dt_s)
         body.initialize_derivatives(props)
 
     def trim_level(self, props: Props, loc_ecef_ft: tuple[np.ndarray, np.ndarray, np.ndarray],
                    psi: np.ndarray, vt_fps: np.ndarray, *, iterations: int = 30,
-                   tolerance: float = 1e-7) -> np.ndarray:
+                   tolerance: float = 1e-7, dt_s: float = 1 / 120) -> np.ndarray:
         """Trim every aircraft for straight and level flight at true airspeed
         ``vt_fps`` and heading ``psi`` (rad): the angle of attack (= pitch),
         the throttle (``fcs/throttle-cmd-norm``, the engine at its steady
@@ -128,7 +133,7 @@ class RigidAircraft:
                 for k in ("accelerations/udot-ft_sec2", "accelerations/vdot-ft_sec2",
                           "accelerations/wdot-ft_sec2"):
                     props[k] = z  # trimmed, they are zero (the angle-of-attack rate reads them)
-                self.place(props, loc_ecef_ft, z, a, psi, uvw)
+                self.place(props, loc_ecef_ft, z, a, psi, uvw, dt_s=dt_s)
                 if settle:
                     self.steady_engines(props)
             return np.stack([props["accelerations/udot-ft_sec2"],
@@ -177,7 +182,7 @@ class RigidAircraft:
         still = 0
         for _ in range(most):
             before = [props[k].copy() for k in keys]
-            self.propulsion.run(props, dt_s)
+            self.propulsion.run(props, dt_s, trimming=True)
             same = all(np.all(np.abs(props[k] - b) <= 1e-10 * np.abs(b) + 1e-12)
                        for k, b in zip(keys, before, strict=True))
             still = still + 1 if same else 0
@@ -189,11 +194,14 @@ class RigidAircraft:
         body.propagate(props, dt_s)
         self._models(props, dt_s)
 
-    def _models(self, props: Props, dt_s: float, suspended: bool = False) -> None:
+    def _models(self, props: Props, dt_s: float, ic_dt_s: float | None = None) -> None:
         self.atmosphere.run(props, dt_s)
-        self.systems.run(props, dt_s, suspended=suspended)
+        if ic_dt_s is None:
+            self.systems.run(props, dt_s)
+        else:
+            self.systems.run_ic(props, ic_dt_s)
         self.mass.run(props)
-        body.auxiliary(props)
+        body.auxiliary(props, self.reads)
         self.propulsion.run(props, dt_s)
         m = self.metrics
         self.aero.run(props, m.rp_in, m.sw_sqft, m.bw_ft, m.cbar_ft, m.iw_rad)
@@ -263,8 +271,9 @@ def compile_aircraft(aircraft_xml: Path, systems_dir: Path, engine_dir: Path, *,
     systems = compile_systems(path, Path(systems_dir), problems=problems)
     prop = compile_propulsion(path, Path(engine_dir), problems=problems)
     mass = mass.with_tanks([Tank(t.location_in, t.contents_key) for t in prop.tanks])
+    reads = systems.inputs | aero.inputs | prop.inputs
     return RigidAircraft(root.get("name", path.stem), source, metrics, mass, aero, systems,
-                         prop, Atmosphere(), _contacts(root, source, problems))
+                         prop, Atmosphere(), _contacts(root, source, problems), reads)
 
 
 def problems(aircraft_xml: Path, systems_dir: Path, engine_dir: Path) -> list[CompileError]:
@@ -272,8 +281,8 @@ def problems(aircraft_xml: Path, systems_dir: Path, engine_dir: Path) -> list[Co
     found: list[CompileError] = []
     try:
         compile_aircraft(aircraft_xml, systems_dir, engine_dir, problems=found)
-    except CompileError as e:
-        found.append(e)
+    except CompileError as err:
+        found.append(err)
     unique: dict[str, CompileError] = {}
     for e in found:  # an engine file used twice says its refusals once
         unique.setdefault(str(e), e)

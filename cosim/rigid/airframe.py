@@ -167,8 +167,12 @@ class MassBalance:
 
     def run(self, props: Props) -> None:
         """FGMassBalance::Run for every aircraft: weight, mass, CG, J, J^-1
-        (the inverse's six terms under ``_mb/jinv*``)."""
+        (the inverse's six terms under ``_mb/jinv*``). Nothing is recomputed
+        while every tank holds what it held at the last computation (frozen
+        fuel, or an engine off): the sums would give the same doubles."""
         n = len(props["_n"])
+        if self._unchanged(props, n):
+            return
         w = np.full(n, self.empty_lbs)
         mx = np.full(n, self.empty_lbs * self.base_cg_in[0])
         my = np.full(n, self.empty_lbs * self.base_cg_in[1])
@@ -221,6 +225,17 @@ class MassBalance:
         props["_mb/jinv22"] = (izz * ixx - ixz * ixz) * denom
         props["_mb/jinv23"] = (ixy * ixz + iyz * ixx) * denom
         props["_mb/jinv33"] = (ixx * iyy - ixy * ixy) * denom
+
+
+    def _unchanged(self, props: Props, n: int) -> bool:
+        held = [props[t.contents_key] for t in self.tanks]
+        last = props.get("_mb/contents")
+        same = (last is not None and last.shape == (len(held), n)
+                and "_mb/jinv33" in props and len(props["_mb/jinv33"]) == n
+                and all(np.array_equal(h, last[k]) for k, h in enumerate(held)))
+        if not same:
+            props["_mb/contents"] = np.array(held).reshape(len(held), n)
+        return same
 
 
 def _add_pointmass(j: list[list[np.ndarray]], m: np.ndarray | float, loc: XYZ,

@@ -86,6 +86,7 @@ from typing import NamedTuple
 import numpy as np
 
 from cosim.errors import ConfigError
+from cosim.rigid import kernels
 
 Props = dict[str, np.ndarray]
 
@@ -303,11 +304,11 @@ class Atmosphere:
 
 
 # --- the Earth (FGInertial, FGLocation) -------------------------------------
-SEMIMAJOR_FT = 20925646.32546
-SEMIMINOR_FT = 20855486.5951
-GM_FT3_S2 = 14.0764417572e15
-J2 = 1.08262982e-03
-OMEGA_EARTH_RAD_S = 0.00007292115
+SEMIMAJOR_FT = kernels.SEMIMAJOR_FT
+SEMIMINOR_FT = kernels.SEMIMINOR_FT
+GM_FT3_S2 = kernels.GM_FT3_S2
+J2 = kernels.J2
+OMEGA_EARTH_RAD_S = kernels.OMEGA_EARTH_RAD_S
 # FGLocation::SetEllipse
 _EC = SEMIMINOR_FT / SEMIMAJOR_FT
 _EC2 = _EC * _EC
@@ -346,40 +347,24 @@ def sea_level_radius_ft(lat_gc_rad: np.ndarray) -> np.ndarray:
     return SEMIMAJOR_FT * _EC / np.sqrt(1.0 - _E2 * c * c)
 
 
+def _f64(*arrays: np.ndarray) -> list[np.ndarray]:
+    return [np.ascontiguousarray(np.atleast_1d(np.asarray(v, dtype=np.float64)))
+            for v in arrays]
+
+
 def altitude_asl_ft(x_ft: np.ndarray, y_ft: np.ndarray, z_ft: np.ndarray) -> np.ndarray:
-    """JSBSim's ``position/h-sl-ft``: the radius less the sea-level radius."""
-    x, y, z = (np.asarray(v, dtype=np.float64) for v in (x_ft, y_ft, z_ft))
-    radius, lat_gc = _radius_latitude(x, y, z)
-    return radius - sea_level_radius_ft(lat_gc)
+    """JSBSim's ``position/h-sl-ft``: the radius less the sea-level radius
+    (``kernels.altitude_asl``)."""
+    return kernels.altitude_asl_arrays(*_f64(x_ft, y_ft, z_ft))
 
 
 def ecef_to_geodetic(x_ft: np.ndarray, y_ft: np.ndarray, z_ft: np.ndarray) -> Geodetic:
     """Geodetic latitude, longitude and height above the ellipsoid of ECEF
-    positions (ft), by FGLocation's one Fukushima-Halley iteration."""
-    x, y, z = (np.asarray(v, dtype=np.float64) for v in (x_ft, y_ft, z_ft))
-    rxy = np.sqrt(x * x + y * y)
-    sign = np.where(z >= 0.0, 1.0, -1.0)
-    s0 = np.abs(z)
-    zc = _EC * s0
-    c0 = _EC * rxy
-    c02 = c0 * c0
-    s02 = s0 * s0
-    a02 = c02 + s02
-    a0 = np.sqrt(a02)
-    a03 = a02 * a0
-    s1 = zc * a03 + _C * s02 * s0
-    c1 = rxy * a03 - _C * c02 * c0
-    cs0c0 = _C * c0 * s0
-    b0 = 1.5 * cs0c0 * ((rxy * s0 - zc * c0) * a0 - cs0c0)
-    s1 = s1 * a03 - b0 * s0
-    cc = _EC * (c1 * a03 - b0 * c0)
-    s12 = s1 * s1
-    cc2 = cc * cc
-    norm = np.sqrt(s12 + cc2)
-    alt = (rxy * cc + s0 * s1 - SEMIMAJOR_FT * np.sqrt(_EC2 * s12 + cc2)) / norm
-    with np.errstate(divide="ignore"):  # at a pole cc is 0: atan(inf), as in C
-        lat = sign * np.arctan(s1 / cc)
-    return Geodetic(lat, np.arctan2(y, x), alt, sign * s1 / norm, cc / norm)
+    positions (ft), by FGLocation's one Fukushima-Halley iteration
+    (``kernels.geodetic``)."""
+    x, y, z = _f64(x_ft, y_ft, z_ft)
+    tan_lat, sin_lat, cos_lat, alt, _ = kernels.geodetic_arrays(x, y, z)
+    return Geodetic(np.arctan(tan_lat), np.arctan2(y, x), alt, sin_lat, cos_lat)
 
 
 def geodetic_to_ecef(lon_rad: np.ndarray, lat_rad: np.ndarray, alt_ft: np.ndarray
@@ -400,30 +385,14 @@ def tec2l(x_ft: np.ndarray, y_ft: np.ndarray, z_ft: np.ndarray,
     column ``j`` for every aircraft, so ``np.einsum("ijn,jn->in", m, v)``
     turns ECEF vectors ``v`` (3, n) into NED ones. ``geodetic``: the
     positions' ``ecef_to_geodetic`` when already computed."""
-    x, y, z = (np.asarray(v, dtype=np.float64) for v in (x_ft, y_ft, z_ft))
+    x, y, z = _f64(x_ft, y_ft, z_ft)
     g = ecef_to_geodetic(x, y, z) if geodetic is None else geodetic
-    rxy = np.sqrt(x * x + y * y)
-    pole = rxy == 0.0
-    safe = np.where(pole, 1.0, rxy)
-    sin_lon = np.where(pole, 0.0, y / safe)
-    cos_lon = np.where(pole, 1.0, x / safe)
-    sl, cl = g.sin_lat, g.cos_lat
-    zero = np.zeros_like(sl)
-    return np.array([[-cos_lon * sl, -sin_lon * sl, cl],
-                     [-sin_lon, cos_lon, zero],
-                     [-cos_lon * cl, -sin_lon * cl, -sl]])
+    return kernels.tec2l_arrays(x, y, np.sqrt(x * x + y * y), *_f64(g.sin_lat, g.cos_lat))
 
 
 def gravity_ecef(x_ft: np.ndarray, y_ft: np.ndarray, z_ft: np.ndarray
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The WGS84 gravitation with J2 in ECEF (ft/s^2) at ECEF positions (ft):
-    FGInertial::GetGravityJ2."""
-    x, y, z = (np.asarray(v, dtype=np.float64) for v in (x_ft, y_ft, z_ft))
-    r, lat_gc = _radius_latitude(x, y, z)
-    s = np.sin(lat_gc)
-    s2 = s * s
-    adivr = SEMIMAJOR_FT / r
-    pre = 1.5 * J2 * adivr * adivr
-    g_r2 = -GM_FT3_S2 / (r * r)
-    xy = 1.0 + pre * (1.0 - 5.0 * s2)
-    return g_r2 * (xy * x / r), g_r2 * (xy * y / r), g_r2 * ((1.0 + pre * (3.0 - 5.0 * s2)) * z / r)
+    FGInertial::GetGravityJ2 (``kernels.gravity``)."""
+    g = kernels.gravity_arrays(*_f64(x_ft, y_ft, z_ft))
+    return g[0], g[1], g[2]

@@ -34,6 +34,7 @@ from xml.parsers import expat
 import numpy as np
 
 from cosim.errors import ConfigError
+from cosim.rigid import kernels
 
 Values = Mapping[str, np.ndarray]
 Kernel = Callable[[Values], np.ndarray]
@@ -252,6 +253,8 @@ def _table(el: ET.Element, source: str, inputs: set[str]) -> Kernel:
 
         def k1(v: Values) -> np.ndarray:
             key = np.asarray(v[rname], dtype=np.float64)
+            if key.ndim == 1:
+                return kernels.table1(bp, val, key)
             r, f = _factor(key, bp)
             return f * (val[r] - val[r - 1]) + val[r - 1]
         return k1
@@ -268,8 +271,12 @@ def _table(el: ET.Element, source: str, inputs: set[str]) -> Kernel:
     rname, cname = look["row"], look["column"]
 
     def k2(v: Values) -> np.ndarray:
-        r, rf = _factor(np.asarray(v[rname], dtype=np.float64), rbp)
-        c, cf = _factor(np.asarray(v[cname], dtype=np.float64), cols)
+        rkey = np.asarray(v[rname], dtype=np.float64)
+        ckey = np.asarray(v[cname], dtype=np.float64)
+        if rkey.ndim == 1 and rkey.shape == ckey.shape:
+            return kernels.table2(rbp, cols, data, rkey, ckey)
+        r, rf = _factor(rkey, rbp)
+        c, cf = _factor(ckey, cols)
         col1 = rf * (data[r, c - 1] - data[r - 1, c - 1]) + data[r - 1, c - 1]
         col2 = rf * (data[r, c] - data[r - 1, c]) + data[r - 1, c]
         return col1 + cf * (col2 - col1)

@@ -95,6 +95,24 @@ def test_the_rigid_aircraft_flies_as_jsbsim_does_through_manoeuvres() -> None:
     assert fdm["velocities/vt-fps"] > start["velocities/vt-fps"] + 20
 
 
+def test_burning_fuel_lightens_it_as_jsbsim_does() -> None:
+    """With the fuel no longer frozen the weight, centre of gravity and
+    inertia follow the tank (the mass balance recomputes only when a tank's
+    contents change)."""
+    fdm = _trimmed_fdm()
+    ac, props = _rigid_from(fdm)
+    for target in (fdm, props):
+        target["uav700/fuel-freeze"] = 0.0 if target is fdm else np.zeros(1)
+    start = fdm["inertia/weight-lbs"]
+    for _ in range(6 * 120):
+        fdm.run()
+        ac.run(props, 1 / 120)
+    assert fdm["inertia/weight-lbs"] < start - 0.05  # it burnt fuel
+    for k in ("inertia/weight-lbs", "inertia/ixx-slugs_ft2", "inertia/cg-x-in",
+              "position/h-sl-ft", "velocities/vt-fps"):
+        assert abs(props[k][0] - fdm[k]) < 1e-6 * max(1.0, abs(fdm[k])), k
+
+
 def test_a_two_percent_lift_coefficient_is_seen(tmp_path: Path) -> None:
     text = UAV700.read_text()
     aircraft = tmp_path / "uav700"

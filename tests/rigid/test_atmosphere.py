@@ -204,14 +204,26 @@ def test_the_earth_equals_jsbsims_from_pole_to_pole(earth) -> None:
 
 
 def test_a_perturbed_earth_is_caught(earth, monkeypatch) -> None:
+    """The Earth's formulas are numba kernels, which take their constants
+    when compiled: the perturbed constants are given to their Python forms
+    (``py_func``, which read the module's constants when called)."""
+    from cosim.rigid import kernels
+
     x, y, z = earth["position/ecef-x-ft"], earth["position/ecef-y-ft"], earth["position/ecef-z-ft"]
-    monkeypatch.setattr(atm, "J2", atm.J2 * (1 + 1e-6))
-    gx, gy, gz = gravity_ecef(x, y, z)
-    assert not np.allclose(np.sqrt(gx * gx + gy * gy + gz * gz),
-                           earth["accelerations/gravity-ft_sec2"], rtol=RTOL, atol=0)
-    monkeypatch.setattr(atm, "SEMIMAJOR_FT", atm.SEMIMAJOR_FT + 0.01)
-    assert not np.allclose(altitude_asl_ft(x, y, z), earth["position/h-sl-ft"],
-                           rtol=RTOL, atol=1e-9)
+
+    def each(f, *cols):
+        return np.array([f(*v) for v in zip(*cols, strict=True)])
+
+    g = each(kernels.gravity.py_func, x, y, z)
+    np.testing.assert_allclose(np.sqrt((g * g).sum(axis=1)),
+                               earth["accelerations/gravity-ft_sec2"], rtol=RTOL, atol=0)
+    monkeypatch.setattr(kernels, "J2", kernels.J2 * (1 + 1e-6))
+    g = each(kernels.gravity.py_func, x, y, z)
+    assert not np.allclose(np.sqrt((g * g).sum(axis=1)), earth["accelerations/gravity-ft_sec2"],
+                           rtol=RTOL, atol=0)
+    monkeypatch.setattr(kernels, "SEMIMAJOR_FT", kernels.SEMIMAJOR_FT + 0.01)
+    assert not np.allclose(each(kernels.altitude_asl.py_func, x, y, z),
+                           earth["position/h-sl-ft"], rtol=RTOL, atol=1e-9)
 
 
 def test_geodetic_and_ecef_round_trip() -> None:

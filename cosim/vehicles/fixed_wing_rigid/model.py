@@ -96,7 +96,7 @@ class RigidBatch:
         psi = np.radians(np.array([s.heading_deg for s in specs]))
         vt = np.array([s.airspeed_mps * _FPS for s in specs])
         if all(s.trim for s in specs):
-            ok = ac.trim_level(props, loc, psi, vt)
+            ok = ac.trim_level(props, loc, psi, vt, dt_s=self.dt)
             if not ok.all():
                 bad = [specs[i] for i in np.flatnonzero(~ok)]
                 raise ConfigError(
@@ -108,7 +108,7 @@ class RigidBatch:
                       "outside the model's range")
         else:
             z = np.zeros(m)
-            ac.place(props, loc, z, z, psi, (vt, z, z))
+            ac.place(props, loc, z, z, psi, (vt, z, z), dt_s=self.dt)
         for i, s in enumerate(specs):
             for name, value in s.initial_props:
                 if name in props:
