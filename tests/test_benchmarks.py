@@ -254,3 +254,39 @@ def test_whole_run_pool_replays_the_runs_flight_through_the_pool() -> None:
                          timeout=60)
     assert bad.returncode == 2
     assert "expected fleet sizes such as 1024,2048, got '4,x'" in bad.stderr
+
+
+def test_rigid_fidelity_flies_the_tiers_beside_jsbsim(tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """Five seconds of the 100 kt level turn: the rigid tier within the bar
+    everywhere (a drift of half a metre, knot or degree fails it), the point
+    mass, which turns later than JSBSim, outside it on heading and bank; the
+    trims at every point, the rigid's within 0.1 deg; bad names exit 2."""
+    import json
+    import re
+
+    import rigid_fidelity
+
+    out = tmp_path / "f.json"
+    assert rigid_fidelity.main(["--manoeuvres", "turn_100kt", "--duration", "5",
+                                "--json", str(out)]) == 0
+    got = json.loads(out.read_text())
+    assert "| level turns at 100 kt (45 deg bank) | rigid |" in capsys.readouterr().out
+    (turn,) = got["manoeuvres"].values()
+    rigid, pm = turn["rigid"], turn["point_mass"]
+    assert rigid["same_length"] and rigid["seconds"] == pytest.approx(5.0, abs=0.05)
+    for q in ("alt_m", "airspeed_kt", "heading_deg", "bank_deg"):
+        assert rigid[q]["within"] and rigid[q]["max_diff"] < rigid[q]["bar_there"], q
+    assert rigid["within_bar"]
+    assert rigid["bank_deg"]["value_range"][1] > 40  # it banked to the limit
+    assert not pm["within_bar"] and not pm["heading_deg"]["within"]
+    assert [(r["airspeed_kt"], r["alt_msl_m"]) for r in got["trim"]] == list(
+        rigid_fidelity.TRIM_POINTS)
+    for row in got["trim"]:
+        assert row["rigid"]["within_bar"], row
+        assert abs(row["rigid"]["diff"]["alpha_deg"]) < 1e-3
+        assert abs(row["rigid"]["diff"]["throttle"]) < 1e-4
+    with pytest.raises(SystemExit) as ei:
+        rigid_fidelity.main(["--manoeuvres", "loop", "--tiers", "rigid"])
+    assert ei.value.code == 2
+    assert re.search(r"unknown manoeuvre or tier \['loop'\]", capsys.readouterr().err)
