@@ -1,0 +1,119 @@
+"""The rigid-body tier's speed against the JSBSim tier's, in the same run and
+one process each (what a core does): ``N`` uav700 at 120 Hz with the cosim
+autopilot engaged (heading, altitude and speed holds, a new heading every
+10 s so the loops work), aircraft-steps a second, best of ``--rounds``
+blocks of ``--frames`` frames. The JSBSim tier is timed on fewer aircraft
+(its cost grows linearly: ``--jsbsim`` of them, each stepped in turn as a
+worker steps its share), the rigid tier at each size of ``--vehicles``
+(one vectorised frame for all).
+
+    python benchmarks/rigid_speed.py --vehicles 1000,4000,10000,20000 --json out.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+AP = {"cosim/ap/engage": 1.0, "cosim/ap/heading-hold": 1.0, "cosim/ap/alt-hold": 1.0,
+      "cosim/ap/alt-cmd-ft": 3300.0, "cosim/ap/speed-hold": 1.0,
+      "cosim/ap/speed-cmd-kt": 110.0}
+
+
+def rigid(n: int, frames: int, rounds: int) -> float:
+    """Aircraft-steps a second of ``n`` rigid uav700s in one process."""
+    from cosim.rigid.aircraft import compile_aircraft, position_ecef
+
+    ac = compile_aircraft(REPO / "aircraft" / "uav700" / "uav700.xml",
+                          REPO / "aircraft" / "systems", REPO / "aircraft" / "uav700" / "Engines")
+    props = ac.new_props(n)
+    loc = position_ecef(47.0 + np.arange(n) * 1e-3, np.full(n, 8.0), np.full(n, 3000.0))
+    props["cosim/ap/qbar-ref-psf"] = np.full(n, 34.0)
+    if not ac.trim_level(props, loc, np.zeros(n), np.full(n, 100 * 1.68781)).all():
+        raise SystemExit("the rigid tier did not trim")
+    for k, v in AP.items():
+        props[k] = np.full(n, v)
+    best = float("inf")
+    t_sim = 0.0
+    for r in range(rounds + 1):
+        props["cosim/ap/heading-cmd-deg"] = np.full(n, 90.0 * (r % 4))
+        t = time.perf_counter()
+        for _ in range(frames):
+            ac.run(props, 1 / 120)
+        if r:  # the first block warms up (numba's cache, the loops settling)
+            best = min(best, time.perf_counter() - t)
+        t_sim += frames / 120
+    if not np.all(props["cosim/ap/engage"] == 1.0) or np.isnan(props["position/h-sl-ft"]).any():
+        raise SystemExit("the rigid tier's autopilot did not stay engaged")
+    return n * frames / best
+
+
+def jsbsim(n: int, frames: int, rounds: int) -> float:
+    """Aircraft-steps a second of ``n`` JSBSim uav700s stepped in turn."""
+    from cosim.vehicles.jsb import find_model, new_fdm
+
+    fdms = []
+    for i in range(n):
+        fdm = new_fdm(find_model("uav700"), 1 / 120)
+        fdm["ic/lat-geod-deg"], fdm["ic/long-gc-deg"] = 47.0 + i * 1e-3, 8.0
+        fdm["ic/h-sl-ft"], fdm["ic/vt-fps"] = 3000.0, 100 * 1.68781
+        fdm.run_ic()
+        fdm["propulsion/set-running"] = -1
+        fdm.do_trim(1)
+        for k, v in AP.items():
+            fdm[k] = v
+        fdms.append(fdm)
+    best = float("inf")
+    for r in range(rounds + 1):
+        for fdm in fdms:
+            fdm["cosim/ap/heading-cmd-deg"] = 90.0 * (r % 4)
+        t = time.perf_counter()
+        for fdm in fdms:
+            run = fdm.run
+            for _ in range(frames):
+                run()
+        if r:
+            best = min(best, time.perf_counter() - t)
+    return n * frames / best
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--vehicles", default="1000,4000,10000,20000",
+                    help="rigid-tier sizes, comma-separated (default %(default)s)")
+    ap.add_argument("--jsbsim", type=int, default=64,
+                    help="JSBSim aircraft timed (default %(default)s)")
+    ap.add_argument("--frames", type=int, default=60, help="frames a block (default 60)")
+    ap.add_argument("--rounds", type=int, default=5, help="timed blocks (default 5)")
+    ap.add_argument("--json", type=Path, help="write the figures here")
+    a = ap.parse_args(argv)
+    sizes = [int(x) for x in a.vehicles.split(",") if x]
+    if not sizes or min(sizes) < 1 or a.jsbsim < 1 or a.frames < 1 or a.rounds < 1:
+        ap.error("--vehicles, --jsbsim, --frames and --rounds take positive numbers")
+    ref = jsbsim(a.jsbsim, a.frames, a.rounds)
+    print(f"JSBSim tier : {a.jsbsim:6d} aircraft  {ref:12,.0f} aircraft-steps/s a core")
+    rows = []
+    for n in sizes:
+        v = rigid(n, a.frames, a.rounds)
+        rows.append({"vehicles": n, "steps_per_s": v, "x_jsbsim": v / ref})
+        print(f"rigid tier  : {n:6d} aircraft  {v:12,.0f} aircraft-steps/s a core  "
+              f"{v / ref:5.1f} x JSBSim  {v / 120:8,.0f} aircraft in real time a core")
+        sys.stdout.flush()
+    if a.json:
+        a.json.write_text(json.dumps({
+            "benchmark": "rigid_speed", "date": time.strftime("%Y-%m-%d"),
+            "machine": platform.machine(), "python": platform.python_version(),
+            "physics_hz": 120, "autopilot": "engaged", "jsbsim_vehicles": a.jsbsim,
+            "jsbsim_steps_per_s": ref, "rigid": rows}, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
