@@ -1,0 +1,33 @@
+"""``benchmarks/rigid_speed.py`` runs end to end on a small fleet: both tiers
+timed, the figures written, the rigid tier's autopilot engaged throughout
+(the script refuses to report otherwise)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def test_the_speed_benchmark_reports_both_tiers(tmp_path: Path) -> None:
+    out = tmp_path / "speed.json"
+    res = subprocess.run([sys.executable, str(REPO / "benchmarks" / "rigid_speed.py"),
+                          "--vehicles", "20,40", "--jsbsim", "2", "--frames", "6",
+                          "--rounds", "1", "--json", str(out)],
+                         capture_output=True, text=True, timeout=300, check=False)
+    assert res.returncode == 0, res.stderr
+    doc = json.loads(out.read_text())
+    assert doc["autopilot"] == "engaged" and doc["jsbsim_steps_per_s"] > 0
+    assert [r["vehicles"] for r in doc["rigid"]] == [20, 40]
+    assert all(r["steps_per_s"] > 0 and r["x_jsbsim"] > 0 for r in doc["rigid"])
+    assert "x JSBSim" in res.stdout
+
+
+def test_bad_arguments_are_a_usage_error() -> None:
+    res = subprocess.run([sys.executable, str(REPO / "benchmarks" / "rigid_speed.py"),
+                          "--vehicles", "0"], capture_output=True, text=True, timeout=60,
+                         check=False)
+    assert res.returncode == 2 and "positive numbers" in res.stderr
