@@ -20,7 +20,8 @@ Supported: ``property`` (a leading ``-`` negates), ``value``, ``product``,
 ``sum``, ``difference``, ``quotient``, ``pow``, ``abs``, ``sqrt``, ``exp``,
 ``ln``, ``sin``, ``cos``, ``tan``, ``asin``, ``acos``, ``atan``, ``atan2``,
 ``toradians``, ``todegrees``, ``min``, ``max``, ``lt``, ``le``, ``gt``, ``ge``,
-``eq``, ``nq``, ``and``, ``or``, ``not``, ``ifthen``, and ``table`` of one or two dimensions.
+``eq``, ``nq``, ``and``, ``or``, ``not``, ``ifthen``, ``table`` of one,
+two or three dimensions, and the short forms ``p`` and ``v``.
 """
 
 from __future__ import annotations
@@ -122,7 +123,7 @@ def _op(el: ET.Element, source: str, inputs: set[str]) -> Kernel:
     kids = _children(el)
     where = _where(el, source)
     extra = sorted(a for a in el.attrib if a != "_line")
-    if tag == "property":
+    if tag in ("property", "p"):  # <p> is JSBSim's short form
         name = (el.text or "").strip()
         if not name or extra:
             raise CompileError(f"{where}: expected a property name and no attributes")
@@ -132,7 +133,7 @@ def _op(el: ET.Element, source: str, inputs: set[str]) -> Kernel:
         if sign < 0:
             return lambda v: -np.asarray(v[name], dtype=np.float64)
         return lambda v: np.asarray(v[name], dtype=np.float64)
-    if tag == "value":
+    if tag in ("value", "v"):
         try:
             x = float((el.text or "").strip())
         except ValueError:
@@ -237,9 +238,13 @@ def _table(el: ET.Element, source: str, inputs: set[str]) -> Kernel:
         raise CompileError(f"{_where(unknown[0], source)}: not supported in a table")
     datas = el.findall("tableData")
     look = _lookup(el, source, inputs)
+    if set(look) == {"row", "column", "table"} and len(datas) >= 2:
+        return _table3(datas, look, where, source)
     if len(datas) != 1 or set(look) - {"row", "column"} or "row" not in look:
-        raise CompileError(f"{where}: only tables of one or two dimensions (one <tableData>, "
-                           f"a row and optionally a column lookup) are supported")
+        raise CompileError(f"{where}: only tables of one, two or three dimensions (one "
+                           f"<tableData> and a row and optionally a column lookup; or a row, "
+                           f"a column and a table lookup with a <tableData breakPoint=...> "
+                           f"for each breakpoint) are supported")
     rows = _numbers(datas[0], source)
     if "column" not in look:
         if len(rows) < 2 or any(len(r) != 2 for r in rows):
@@ -258,16 +263,7 @@ def _table(el: ET.Element, source: str, inputs: set[str]) -> Kernel:
             r, f = _factor(key, bp)
             return f * (val[r] - val[r - 1]) + val[r - 1]
         return k1
-    cols = np.array(rows[0])
-    body = rows[1:]
-    if len(cols) < 2 or len(body) < 2 or any(len(r) != len(cols) + 1 for r in body):
-        raise CompileError(f"{_where(datas[0], source)}: a table of two dimensions needs a "
-                           f"line of column breakpoints, then rows of a breakpoint and one "
-                           f"value a column")
-    rbp = np.array([r[0] for r in body])
-    data = np.array([r[1:] for r in body])
-    if np.any(np.diff(rbp) <= 0) or np.any(np.diff(cols) <= 0):
-        raise CompileError(f"{_where(datas[0], source)}: breakpoints must increase")
+    rbp, cols, data = _grid(rows, datas[0], source)
     rname, cname = look["row"], look["column"]
 
     def k2(v: Values) -> np.ndarray:
@@ -281,6 +277,64 @@ def _table(el: ET.Element, source: str, inputs: set[str]) -> Kernel:
         col2 = rf * (data[r, c] - data[r - 1, c]) + data[r - 1, c]
         return col1 + cf * (col2 - col1)
     return k2
+
+
+def _grid(rows: list[list[float]], el: ET.Element, source: str
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A two-dimensional <tableData>: row breakpoints, column breakpoints, values."""
+    cols = np.array(rows[0])
+    body = rows[1:]
+    if len(cols) < 2 or len(body) < 2 or any(len(r) != len(cols) + 1 for r in body):
+        raise CompileError(f"{_where(el, source)}: a table of two dimensions needs a "
+                           f"line of column breakpoints, then rows of a breakpoint and one "
+                           f"value a column")
+    rbp = np.array([r[0] for r in body])
+    data = np.array([r[1:] for r in body])
+    if np.any(np.diff(rbp) <= 0) or np.any(np.diff(cols) <= 0):
+        raise CompileError(f"{_where(el, source)}: breakpoints must increase")
+    return rbp, cols, data
+
+
+def _table3(datas: list[ET.Element], look: dict[str, str], where: str, source: str) -> Kernel:
+    """FGTable of three dimensions: one two-dimensional table per breakpoint
+    of the table lookup, interpolated linearly between the two around the
+    key; at or beyond the ends, the end table's value."""
+    tbp, grids = [], []
+    for d in datas:
+        bp = d.get("breakPoint")
+        extra = sorted(k for k in d.attrib if k not in ("_line", "breakPoint"))
+        if bp is None or extra:
+            raise CompileError(f"{_where(d, source)}: each <tableData> of a table of three "
+                               f"dimensions needs a breakPoint attribute and no other")
+        try:
+            tbp.append(float(bp))
+        except ValueError:
+            raise CompileError(f"{_where(d, source)}: breakPoint {bp!r} is not a number") from None
+        grids.append(_grid(_numbers(d, source), d, source))
+    tb = np.array(tbp)
+    if np.any(np.diff(tb) <= 0):
+        raise CompileError(f"{where}: breakPoints must increase")
+    rname, cname, tname = look["row"], look["column"], look["table"]
+
+    def sub(v: Values, i: int) -> np.ndarray:
+        rbp, cbp, data = grids[i]
+        rkey = np.atleast_1d(np.asarray(v[rname], dtype=np.float64))
+        ckey = np.broadcast_to(np.asarray(v[cname], dtype=np.float64), rkey.shape)
+        return kernels.table2(rbp, cbp, data, np.ascontiguousarray(rkey),
+                              np.ascontiguousarray(ckey))
+
+    def k3(v: Values) -> np.ndarray:
+        key = np.atleast_1d(np.asarray(v[tname], dtype=np.float64))
+        r, f = _factor(key, tb)
+        out = np.empty(np.broadcast(key, np.asarray(v[rname])).shape)
+        for i in np.unique(r).tolist():  # the pairs of tables some aircraft are between
+            m = r == i
+            lo, hi = sub(v, i - 1), sub(v, i)
+            val = f * (hi - lo) + lo
+            val = np.where(key <= tb[0], lo, np.where(key >= tb[-1], hi, val))
+            out[m] = np.broadcast_to(val, out.shape)[m]
+        return out
+    return k3
 
 
 def compile_function(el: ET.Element, source: str) -> Compiled:

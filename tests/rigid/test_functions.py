@@ -19,7 +19,7 @@ REPO = Path(__file__).resolve().parents[2]
 UAV700 = REPO / "aircraft" / "uav700" / "uav700.xml"
 
 
-def _flight(functions: dict, steps: int = 600, model: str = "uav700"
+def _flight(functions: dict, steps: int = 600, model: str = "uav700", flaps: bool = False
             ) -> tuple[dict[str, np.ndarray], dict]:
     """The model flown by JSBSim through elevator, aileron and rudder
     doublets: each input property and each function's value, per frame."""
@@ -37,6 +37,8 @@ def _flight(functions: dict, steps: int = 600, model: str = "uav700"
             for c in ("fcs/elevator-cmd-norm", "fcs/aileron-cmd-norm", "fcs/rudder-cmd-norm"):
                 fdm[c] = float(rng.uniform(-1, 1))
             fdm["fcs/throttle-cmd-norm"] = float(rng.uniform(0, 1))
+            if flaps:  # through and between the flap table's breakpoints
+                fdm["fcs/flap-cmd-norm"] = float(rng.uniform(0, 1))
         fdm.run()
         for n in names:
             inputs[n].append(fdm[n])
@@ -57,6 +59,20 @@ def test_every_function_of_a_model_equals_jsbsims_own_value_in_flight(model: str
     for name, f in functions.items():
         got = f.evaluate(inputs)
         np.testing.assert_allclose(got, outputs[name], rtol=1e-12, atol=1e-9, err_msg=name)
+
+
+def test_three_dimensional_tables_equal_jsbsims_in_flight() -> None:
+    """JSBSim's c172x: its lift and moment tables of alpha, beta and flap
+    angle, flown with the flaps moving through and between breakpoints."""
+    info = find_model("c172x")
+    functions = read_functions(Path(info.aircraft_dir) / "c172x" / "c172x.xml")
+    text = (Path(info.aircraft_dir) / "c172x" / "c172x.xml").read_text()
+    assert 'lookup="table"' in text
+    inputs, outputs = _flight(functions, steps=900, model="c172x", flaps=True)
+    assert np.ptp(inputs["fcs/flap-pos-deg"]) > 10  # across the 10 deg breakpoint
+    for name, f in functions.items():
+        np.testing.assert_allclose(f.evaluate(inputs), outputs[name], rtol=1e-12, atol=1e-9,
+                                   err_msg=name)
 
 
 def test_a_perturbed_coefficient_is_caught() -> None:
