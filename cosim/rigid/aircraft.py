@@ -92,6 +92,11 @@ class RigidAircraft:
         self.mass.run(props)
         return props
 
+    def property_names(self) -> list[str]:
+        """The public properties of this model's state (what a scenario may
+        write: JSBSim's names), sorted."""
+        return sorted(k for k in self.new_props(1) if not k.startswith("_"))
+
     def place(self, props: Props, loc_ecef_ft: tuple[np.ndarray, np.ndarray, np.ndarray],
               phi: np.ndarray, theta: np.ndarray, psi: np.ndarray,
               uvw: tuple[np.ndarray, np.ndarray, np.ndarray],

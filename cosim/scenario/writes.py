@@ -64,14 +64,18 @@ def check_property_names(ctx: Problems, vehicles: list[tuple[VehicleSpec, P]],
 
     def check(where: P, specs: list[VehicleSpec], props: list[tuple[str, float]],
               report: Callable[[P, str], None]) -> None:
-        kinds = {c: get_class(c).model_kind for c in {s.vehicle_class for s in specs}}
-        batched = [s for s in specs if kinds[s.vehicle_class] != "jsbsim"]
-        specs = [s for s in specs if kinds[s.vehicle_class] == "jsbsim"]
-        for name, _ in props:  # a batched class's inputs are its channels
-            for bad in sorted({s.vehicle_class for s in batched
-                               if name not in get_class(s.vehicle_class).channels}):
-                report(where + (name,), f"{name!r} is not an input of class {bad} (its "
-                                        f"inputs: {', '.join(get_class(bad).channels) or 'none'})")
+        known = {id(s): get_class(s.vehicle_class).writable_properties(s) for s in specs}
+        own = [s for s in specs if known[id(s)] is not None]
+        specs = [s for s in specs if known[id(s)] is None]  # JSBSim models: ask JSBSim
+        for name, _ in props:  # a class that knows its inputs
+            for cls, model in sorted({(s.vehicle_class, s.model) for s in own
+                                      if name not in (known[id(s)] or ())}):
+                names = sorted(get_class(cls).writable_properties(
+                    next(s for s in own if s.vehicle_class == cls and s.model == model)) or ())
+                shown = ", ".join(names[:12]) + (f" and {len(names) - 12} more"
+                                                 if len(names) > 12 else "")
+                report(where + (name,), f"{name!r} is not an input of class {cls} (model "
+                                        f"{model}; its inputs: {shown or 'none'})")
         for name, value in props:
             if any(get_class(s.vehicle_class).write_problems(name, value, s) for s in specs):
                 continue  # refused already (``check_writes``)

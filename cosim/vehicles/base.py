@@ -207,6 +207,12 @@ class VehicleClass:
     #: setpoint channels its guidance writes (JSBSim properties for JSBSim kinds)
     channels: tuple[str, ...] = ()
 
+    def writable_properties(self, spec: VehicleSpec) -> frozenset[str] | None:
+        """The properties a scenario's ``set:`` may write on ``spec``'s
+        vehicle, when the class knows them (a batched class: its channels);
+        None: they are its JSBSim model's, looked up in JSBSim."""
+        return None if self.model_kind == "jsbsim" else frozenset(self.channels)
+
     @property
     def commandable(self) -> bool:
         """Whether it takes commands (the schedule's ``command:``, MAVLink, the swarm)."""

@@ -121,3 +121,22 @@ schedule:
     assert any(e.get("vehicle") == "glide" and "impact" in json.dumps(e) for e in events)
     # the others flew on
     assert cols["jsb"]["status"][-1] == VehicleStatus.ACTIVE
+
+
+def test_set_writes_any_property_of_the_compiled_model_and_refuses_a_misspelling(
+        tmp_path: Path) -> None:
+    body = """duration_s: 4
+vehicles:
+  - {id: burn, class: fixed_wing_rigid, model: uav700, set: {uav700/fuel-freeze: 0},
+     init: {north_m: 0, east_m: 0, alt_agl_m: 300, airspeed_kt: 100}}
+  - {id: keep, class: fixed_wing_rigid, model: uav700,
+     init: {north_m: 0, east_m: 300, alt_agl_m: 300, airspeed_kt: 100}}
+"""
+    cols, _ = _run(tmp_path / "ok", body)
+    assert cols["burn"]["fuel_kg"][-1] < cols["burn"]["fuel_kg"][0]  # the written one burns
+    assert cols["keep"]["fuel_kg"][-1] == cols["keep"]["fuel_kg"][0]
+    bad = body.replace("uav700/fuel-freeze", "uav700/fuel-freez")
+    with pytest.raises(ConfigError) as ei:
+        parse_scenario(HEAD + bad, str(tmp_path / "s.yaml"), check_properties=True)
+    said = "\n".join(ei.value.problems)
+    assert "'uav700/fuel-freez' is not an input of class fixed_wing_rigid (model uav700" in said

@@ -90,6 +90,14 @@ class FixedWingRigid(FixedWing):
                                            "engine_dir": str(engines),
                                            "properties": tuple(props)})
 
+    def writable_properties(self, spec: VehicleSpec) -> frozenset[str] | None:
+        """Every property of the compiled model (not the private state)."""
+        from cosim.vehicles.fixed_wing_rigid.model import compiled
+
+        xml, systems, engines = model_files(spec.aircraft_dir, spec.model, spec.model_source)
+        names = compiled(str(xml), str(systems), str(engines)).property_names()
+        return frozenset(names) | frozenset(self.channels)
+
     def make_batch(self, specs: Sequence[VehicleSpec], dt_s: float, channels: Sequence[str],
                    columns: Sequence[str]) -> RigidBatch:
         return RigidBatch(specs, dt_s, channels, columns)
