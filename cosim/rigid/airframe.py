@@ -29,6 +29,8 @@ a ``CompileError`` naming the file, the line and the element.
 
 from __future__ import annotations
 
+import functools
+import logging
 import math
 import xml.etree.ElementTree as ET
 from collections.abc import Callable, Sequence
@@ -37,9 +39,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cosim.errors import ConfigError
+from cosim.rigid.body import block
 from cosim.rigid.functions import Compiled, CompileError, compile_function
+from cosim.rigid.fused import Fused, fuse
 from cosim.rigid.units import INCHTOFT, LB_TO_SLUG, triplet_in, value_in
 
+log = logging.getLogger(__name__)
 Props = dict[str, np.ndarray]
 XYZ = tuple[float, float, float]
 
@@ -328,6 +333,36 @@ class Aerodynamics:
                  *(c for a in self.moments for c in a)]
         return frozenset(set().union(*(c.inputs for c in every)) - made)
 
+    @functools.cached_property
+    def _fused(self) -> Fused | None:
+        """The functions and axis terms as one numba loop (``cosim.rigid.fused``),
+        built at the first frame of a process; None: numpy's kernels."""
+        every = [*self.variables, *(c for a in self.forces for c in a),
+                 *(c for a in self.moments for c in a)]
+        groups, k = [], len(self.variables)
+        for terms in (*self.forces, *self.moments):
+            groups.append(list(range(k, k + len(terms))))
+            k += len(terms)
+        try:
+            return fuse(every, "aerodynamics", name="aero", sums=groups)
+        except CompileError as e:  # a function the fuser does not know: numpy's
+            log.info("aerodynamics not fused (%s): numpy's kernels", e)
+            return None
+
+    def _terms(self, props: Props) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        """Every function, then each axis's sum (force axes, moment axes)."""
+        fz = self._fused
+        if fz is None:
+            return _numpy_terms(self, props)
+        n = len(props["_n"])
+        out = fz.run(props, block(props, "_aero/terms", fz.names, n) if fz.names and
+                     fz.names[0] else None)
+        for k, name in enumerate(fz.names):
+            if name:
+                props[name] = out[k]
+        s = len(fz.names) - 6  # the six axes' sums, left to right from zero
+        return [out[s], out[s + 1], out[s + 2]], [out[s + 3], out[s + 4], out[s + 5]]
+
     def init(self, props: Props, n: int) -> None:
         props["aero/stall-hyst-norm"] = np.zeros(n)
         props["aero/bi2vel"] = np.zeros(n)
@@ -356,9 +391,7 @@ class Aerodynamics:
             h = props["aero/stall-hyst-norm"]
             props["aero/stall-hyst-norm"] = np.where(
                 alpha > self.hyst_max_rad, 1.0, np.where(alpha < self.hyst_min_rad, 0.0, h))
-        for v in self.variables:
-            props[v.name] = v.kernel(props)
-        native = [_sum_terms(terms, props) for terms in self.forces]
+        native, mom = self._terms(props)
         if self.wind_axes:
             fd, fs, fl = -native[0], native[1], -native[2]  # drag and lift oppose
             beta = props["aero/beta-rad"]
@@ -374,13 +407,19 @@ class Aerodynamics:
         props["forces/fbz-aero-lbs"] = fz
         rx, ry, rz = structural_to_body(rp_in, props["inertia/cg-x-in"],
                                         props["inertia/cg-y-in"], props["inertia/cg-z-in"])
-        mom = [_sum_terms(terms, props) for terms in self.moments]
         # M = r x F about the centre of gravity, plus the axes' moments
         props["moments/l-aero-lbsft"] = (ry * fz - rz * fy) + mom[0]
         props["moments/m-aero-lbsft"] = (rz * fx - rx * fz) + mom[1]
         props["moments/n-aero-lbsft"] = (rx * fy - ry * fx) + mom[2]
         for f in self.post:
             props[f.name] = f.kernel(props)
+
+
+def _numpy_terms(aero: Aerodynamics, props: Props) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    for v in aero.variables:
+        props[v.name] = v.kernel(props)
+    return ([_sum_terms(terms, props) for terms in aero.forces],
+            [_sum_terms(terms, props) for terms in aero.moments])
 
 
 def _sum_terms(terms: tuple[Compiled, ...], props: Props) -> np.ndarray:

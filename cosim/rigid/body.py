@@ -99,7 +99,7 @@ def _store(props: Props, keys: tuple[str, ...], block: np.ndarray) -> None:
         props[key] = block[j]
 
 
-def _block(props: Props, name: str, keys: tuple[str, ...], n: int) -> np.ndarray:
+def block(props: Props, name: str, keys: tuple[str, ...], n: int) -> np.ndarray:
     """Where a kernel writes ``keys`` this frame: of two blocks kept in
     ``props`` (so a frame allocates nothing), the one the properties do not
     show now (they show last frame's until ``_store``)."""
@@ -209,8 +209,8 @@ def propagate(props: Props, dt: float) -> None:
     epa = props["_eom/epa"] + OMEGA_EARTH * dt
     ce, se = np.cos(epa), np.sin(epa)
     n = len(epa)
-    new = _block(props, "_eom/state", kern.STATE, n)
-    der = _block(props, "_eom/derived", kern.DERIVED, n)
+    new = block(props, "_eom/state", kern.STATE, n)
+    der = block(props, "_eom/derived", kern.DERIVED, n)
     kern.propagate(dt, _state(props, n), _rows(props, _QD), _rows(props, _WD),
                    _rows(props, _AI), ce, se, props["position/terrain-elevation-asl-ft"],
                    new, der)
@@ -251,7 +251,7 @@ def accelerations(props: Props, force: Vec, moment: Vec) -> None:
     """FGAccelerations::Run in the air (no ground friction): the body's
     angular and linear accelerations from the total force (lbs) and moment
     (lbs ft) about the centre of gravity (``kernels.accelerations``)."""
-    out = _block(props, "_eom/accelerations", kern.ACCELERATIONS, len(props["_n"]))
+    out = block(props, "_eom/accelerations", kern.ACCELERATIONS, len(props["_n"]))
     kern.accelerations(props["inertia/mass-slugs"], _rows(props, _INERTIA),
                           _rows(props, _JINV), _rows(props, _W), _rows(props, _TI2B),
                           _rows(props, _TEC2B), props["_eom/ce"], props["_eom/se"],
@@ -269,7 +269,7 @@ def auxiliary(props: Props, wanted: frozenset[str] = frozenset()) -> None:
     a third of the rest's)."""
     phi, theta = props["attitude/phi-rad"], props["attitude/theta-rad"]
     u, v, w = _get(props, _UVW)
-    out = _block(props, "_eom/auxiliary", kern.AUXILIARY, len(phi))
+    out = block(props, "_eom/auxiliary", kern.AUXILIARY, len(phi))
     kern.auxiliary(_rows(props, _PQR), np.cos(phi), np.sin(phi), np.cos(theta),
                          np.sin(theta), _rows(props, _UVW), np.arctan2(w, u),
                          np.arctan2(v, np.sqrt(u * u + w * w)), _rows(props, _UVWDOT),

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import xml.etree.ElementTree as ET
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from xml.parsers import expat
 
@@ -55,6 +55,8 @@ class Compiled:
     name: str
     inputs: frozenset[str]
     kernel: Kernel
+    #: the operation it was compiled from (for ``cosim.rigid.fused``)
+    element: ET.Element | None = field(default=None, compare=False, repr=False)
 
     def evaluate(self, values: Values) -> np.ndarray:
         """The function's value for every aircraft (``values``: each input's
@@ -351,7 +353,7 @@ def compile_function(el: ET.Element, source: str) -> Compiled:
         raise CompileError(f"{where}: expected one operation, has {len(kids)}")
     inputs: set[str] = set()
     kernel = _op(kids[0], source, inputs)
-    return Compiled(el.get("name", ""), frozenset(inputs), kernel)
+    return Compiled(el.get("name", ""), frozenset(inputs), kernel, kids[0])
 
 
 def read_functions(path: Path, *, skip_post: bool = True) -> dict[str, Compiled]:
