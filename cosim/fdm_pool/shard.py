@@ -22,8 +22,11 @@ unchanged and saves most of its cost.
 Watched rows (``watch``: a camera's aircraft, gathered every ``every``
 ticks inside an exchange) are stepped ``every`` substeps at a time with
 their state row recorded after each run, which gives the same states as
-stepping them in one go. Batched classes integrate a whole exchange at
-once, so their vehicles cannot be watched.
+stepping them in one go. A batched class's vehicles can be watched when its
+model has ``step_watched`` (``cosim.vehicles.base.BatchedModel``): the shard
+then steps that batch ``every`` substeps at a time, writing the watched rows
+between, and only while some of its rows are watched; a model without it
+integrates a whole exchange at once, so its vehicles cannot be watched.
 
 A layout that ends with the ``cosim.vehicles.resume`` columns (a pool whose
 vehicles may have to be rebuilt elsewhere: the ray backend's agents) also
@@ -54,6 +57,8 @@ from cosim.vehicles.resume import FIELDS as RESUME_FIELDS
 from cosim.vehicles.resume import Reader
 from cosim.vehicles.resume import columns as resume_columns
 
+#: ``BatchedModel.step_watched``: (nsub, every, rows of the batch, out)
+WatchedStep = Callable[[int, int, np.ndarray, np.ndarray], None]
 _SCALES = np.array([f.scale for f in STATE_FIELDS if f.prop is not None])
 _AGL, _VD = STATE_INDEX["alt_agl_m"], STATE_INDEX["vd_mps"]
 _MARGIN_MPS, _MARGIN_M = 50.0, 2.0
@@ -80,6 +85,9 @@ class Shard:
         self._watch_rows = np.zeros(0, dtype=np.intp)
         self._watch_every = 0
         self._bad: list[tuple[int, int]] = []  # (watched position, first non-finite chunk)
+        #: batch index -> (its model's ``step_watched``, its watched rows counted in
+        #: the batch, their positions in the watch)
+        self._watch_batch: dict[int, tuple[WatchedStep, np.ndarray, np.ndarray]] = {}
         self._extra_of: dict[int, int] = {}  # JSBSim vehicle index -> its first extra column
         #: the first of the ``cosim.vehicles.resume`` columns, when the layout has them
         self._resume_at: int | None = None
@@ -147,15 +155,27 @@ class Shard:
 
     def _set_watch(self, specs: Sequence[VehicleSpec], rows: Sequence[int], every: int) -> None:
         index = {int(r): i for i, r in enumerate(self._rows.tolist())}
+        in_batch = {int(r): (b, k) for b, (_, _, brows) in enumerate(self.batches)
+                    for k, r in enumerate(brows.tolist())}
+        watched: dict[int, tuple[list[int], list[int]]] = {}
         for j, r in enumerate(rows):
-            if r not in index:
+            if r in index:
+                self._watch_of[index[r]] = j
+                continue
+            b, k = in_batch[r]
+            if getattr(self.batches[b][1], "step_watched", None) is None:
                 spec = specs[r]
                 raise ConfigError(
                     f"vehicle {spec.id!r} (class {spec.vehicle_class}) is stepped with its "
                     f"class's other vehicles a whole exchange at a time: its states exist "
                     f"only at exchanges, so nothing (a camera) can be watched on it more "
                     f"often; use a rate that falls on exchanges")
-            self._watch_of[index[r]] = j
+            watched.setdefault(b, ([], []))
+            watched[b][0].append(k)
+            watched[b][1].append(j)
+        self._watch_batch = {b: (self.batches[b][1].step_watched,  # type: ignore[attr-defined]
+                                 np.asarray(ks, dtype=np.intp), np.asarray(js, dtype=np.intp))
+                             for b, (ks, js) in watched.items()}
         self._watch_rows = np.asarray(rows, dtype=np.intp)
         self._watch_every = int(every)
         self._extra_of = dict(self._extra)
@@ -272,9 +292,17 @@ class Shard:
         except BaseException:
             self.current = vs[i].spec.id if i >= 0 else None
             raise
-        for name, model, _ in self.batches:
+        for b, (name, model, _) in enumerate(self.batches):
             self.current = f"(the {name} vehicles)"
-            model.step(nsub)
+            part = self._watch_batch.get(b) if watching else None
+            if part is None:  # the hot path: the whole exchange in one call
+                model.step(nsub)
+            else:
+                assert watched is not None
+                step_watched, ks, where = part
+                block = watched[:m, where]  # a copy: the rows' last states in every chunk
+                step_watched(nsub, self._watch_every, ks, block)
+                watched[:m, where] = block
         self.current = None
         self.write_states(out)
         if watching:

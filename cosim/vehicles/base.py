@@ -85,6 +85,16 @@ class BatchedModel(Protocol):
     - ``step(nsub)``: ``nsub`` physics substeps of ``dt_s``, vectorised;
     - ``write_states(out)``: fill an ``(m, layout width)`` block, the status
       column included (``VehicleStatus``); a frozen vehicle keeps its row.
+
+    Optionally (a model whose vehicles a camera may watch between exchanges):
+
+    - ``step_watched(nsub, every, rows, out)``: ``step(nsub)`` ``every``
+      substeps at a time, writing the states of the batch's ``rows`` after
+      each piece ``c`` into ``out[c]`` (``(nsub // every, len(rows), layout
+      width)``, holding those rows' states as they were), bit-identical to
+      ``step(every)`` and ``write_states`` called in turn. The pool calls it
+      instead of ``step`` only in exchanges where some of the batch's rows
+      are watched; without it, watching them is refused.
     """
 
     def apply(self, setpoints: np.ndarray) -> None: ...

@@ -5,6 +5,10 @@ ones and any a package registers in the ``cosim.backends`` entry-point
 group), and for the names in ``COSIM_CONFORMANCE_BACKENDS`` (comma
 separated), which must be registered:
 
+- the cases that concern the flight models (states, statuses, setpoints,
+  watched rows) fly the tiers mixed (``fleet``): JSBSim c172ps between
+  rigid-body uav700s (``fixed_wing_rigid``, a batched class), each tier
+  given the case's every role;
 - bit-identical states against ``inline`` at every exchange, setpoints
   (including extreme ones) and every worker count included;
 - statuses: ground impact and divergence freeze that vehicle only;
@@ -27,10 +31,13 @@ import dataclasses
 import os
 import signal
 import time
+from collections.abc import Callable
 
 import numpy as np
 import pytest
 
+from cosim.bench.fleet import bench_specs
+from cosim.core.state import VehicleSpec
 from cosim.errors import BuildError, CosimError, PoolStateError, WorkerDied
 from cosim.fdm_pool import STATE_FIELDS, STATE_INDEX, VehicleStatus, backends, make_pool
 from cosim.fdm_pool.base import Watch
@@ -49,6 +56,18 @@ def backend(request: pytest.FixtureRequest) -> str:
         pytest.fail(f"backend {request.param!r} is not registered (COSIM_CONFORMANCE_BACKENDS)")
     backend_ready(request, request.param)
     return str(request.param)
+
+
+@pytest.fixture
+def fleet(specs: Callable[..., list[VehicleSpec]]) -> Callable[..., list[VehicleSpec]]:
+    """``fleet(n)``: the c172ps of ``specs`` on the odd rows, rigid-body
+    uav700s (``fixed_wing_rigid``) at the same places on the even rows."""
+
+    def make(n: int) -> list[VehicleSpec]:
+        rigid = bench_specs(n, "uav700", vehicle_class="fixed_wing_rigid")
+        return [r if i % 2 == 0 else s for i, (r, s) in enumerate(zip(rigid, specs(n)))]
+
+    return make
 
 
 def worker_counts(backend: str) -> list[int | None]:
@@ -81,8 +100,8 @@ def _mismatches(a: np.ndarray, b: np.ndarray, ids: list[str]) -> list[str]:
             f"{b[i, j]!r}" for i, j in bad[:10]]
 
 
-def test_states_match_inline_bit_for_bit_at_every_exchange(specs, backend: str) -> None:
-    vs = specs(7)
+def test_states_match_inline_bit_for_bit_at_every_exchange(fleet, backend: str) -> None:
+    vs = fleet(7)
     with make_pool(vs, DT, CH, "inline") as ref:
         expected = [ref.states.copy()] + _drive(ref)
     assert not np.array_equal(expected[0], expected[-1])  # something moved
@@ -96,7 +115,7 @@ def test_states_match_inline_bit_for_bit_at_every_exchange(specs, backend: str) 
 
 
 @pytest.mark.parametrize("pages", ["hugepages", "nohugepages"])
-def test_states_match_inline_with_and_without_huge_pages(specs, backend: str, pages: str,
+def test_states_match_inline_with_and_without_huge_pages(fleet, backend: str, pages: str,
                                                          monkeypatch) -> None:
     """The allocator's page size changes where the flight models' memory
     lies, never what they compute: bit-identical to ``inline`` either way
@@ -106,7 +125,7 @@ def test_states_match_inline_with_and_without_huge_pages(specs, backend: str, pa
         pytest.skip(f"backend {backend!r} has no worker processes: it steps in this process, "
                     f"which started with its own allocator")
     monkeypatch.setenv("COSIM_ALLOCATOR", f"auto,{pages}")
-    vs = specs(7)
+    vs = fleet(7)
     with make_pool(vs, DT, CH, "inline") as ref:
         expected = [ref.states.copy()] + _drive(ref)
     with make_pool(vs, DT, CH, backend, 2) as pool:
@@ -116,34 +135,39 @@ def test_states_match_inline_with_and_without_huge_pages(specs, backend: str, pa
         assert not bad, f"{backend}, {pages}, exchange {step}: {bad}"
 
 
-def test_impact_and_divergence_freeze_that_vehicle_only(specs, backend: str) -> None:
-    vs = specs(3)
-    vs[0] = dataclasses.replace(vs[0], alt_msl_m=40.0, initial_props=(
-        ("fcs/throttle-cmd-norm", 0.0), ("fcs/elevator-cmd-norm", 0.6)))
+def test_impact_and_divergence_freeze_that_vehicle_only(fleet, backend: str) -> None:
+    vs = fleet(6)  # of each tier: one dives, one diverges, one flies on
+    dive, diverge, fly = [0, 1], [2, 3], [4, 5]
+    for j in dive:
+        vs[j] = dataclasses.replace(vs[j], alt_msl_m=40.0, initial_props=(
+            ("fcs/throttle-cmd-norm", 0.0), ("fcs/elevator-cmd-norm", 0.6)))
     st = STATE_INDEX["status"]
-    with make_pool(vs, DT, ("position/h-sl-ft",), backend) as pool:
-        pool.setpoints[2, 0] = 1e308
+    # each diverges one of the tiers: JSBSim's altitude, the rigid body's mass
+    with make_pool(vs, DT, ("position/h-sl-ft", "propulsion/tank/contents-lbs"),
+                   backend) as pool:
+        pool.setpoints[diverge] = -np.inf
         pool.step(4)
-        assert pool.states[2, st] == VehicleStatus.DIVERGED
-        assert np.isfinite(pool.states[2]).all()  # frozen at its last finite state
+        assert (pool.states[diverge, st] == VehicleStatus.DIVERGED).all()
+        assert np.isfinite(pool.states[diverge]).all()  # frozen at its last finite state
         for _ in range(200):
             pool.step(4)
-            if pool.states[0, st]:
+            if pool.states[dive, st].all():
                 break
-        assert pool.states[0, st] == VehicleStatus.GROUND_IMPACT
-        frozen, moving = pool.states[0].copy(), pool.states[1].copy()
+        assert (pool.states[dive, st] == VehicleStatus.GROUND_IMPACT).all()
+        frozen, moving = pool.states[dive + diverge].copy(), pool.states[fly].copy()
         for _ in range(5):
             pool.step(4)
-        assert np.array_equal(pool.states[0], frozen)
-        assert not np.array_equal(pool.states[1], moving)
-        assert pool.states[1, st] == VehicleStatus.ACTIVE
+        assert np.array_equal(pool.states[dive + diverge], frozen)
+        for i, row in zip(fly, moving):
+            assert not np.array_equal(pool.states[i], row), pool.ids[i]
+            assert pool.states[i, st] == VehicleStatus.ACTIVE, pool.ids[i]
 
 
-def test_setpoints_reset_to_nan_and_nan_leaves_the_model_alone(specs, backend: str) -> None:
-    vs = specs(2)
+def test_setpoints_reset_to_nan_and_nan_leaves_the_model_alone(fleet, backend: str) -> None:
+    vs = fleet(2)
     with make_pool(vs, DT, CH, "inline") as ref, make_pool(vs, DT, CH, backend) as pool:
         for p in (ref, pool):
-            p.setpoints[1, 0] = 0.123
+            p.setpoints[:, 0] = 0.123  # every tier
             p.step(4)
             assert np.isnan(p.setpoints).all()
         for _ in range(10):  # NaN everywhere: nothing written
@@ -229,14 +253,16 @@ def test_a_killed_worker_is_workerdied_within_seconds(specs, backend: str) -> No
         pool.close()
 
 
-def test_watched_rows_match_inline_stepped_at_the_watch_rate(specs, backend: str) -> None:
+def test_watched_rows_match_inline_stepped_at_the_watch_rate(fleet, backend: str) -> None:
     if "watch" not in backends()[backend].options:
         pytest.skip(f"backend {backend!r} takes no watch")
-    vs = specs(7)
-    # b0004 dives into the ground: an impact inside an exchange, watched
-    vs[4] = dataclasses.replace(vs[4], alt_msl_m=40.0, initial_props=(
-        ("fcs/throttle-cmd-norm", 0.0), ("fcs/elevator-cmd-norm", 0.6)))
-    watch = Watch((1, 4, 6), every=2, max_nsub=6)
+    vs = fleet(7)
+    # b0003 and b0004 (one of each tier) dive into the ground: an impact
+    # inside an exchange, watched
+    for j in (3, 4):
+        vs[j] = dataclasses.replace(vs[j], alt_msl_m=40.0, initial_props=(
+            ("fcs/throttle-cmd-norm", 0.0), ("fcs/elevator-cmd-norm", 0.6)))
+    watch = Watch((1, 3, 4, 6), every=2, max_nsub=6)
     rows = list(watch.rows)
 
     def drive(pool, nsub: int, steps: int) -> list[np.ndarray]:
@@ -257,7 +283,7 @@ def test_watched_rows_match_inline_stepped_at_the_watch_rate(specs, backend: str
     with make_pool(vs, DT, CH, "inline") as ref:
         coarse = drive(ref, 6, 60)  # what the watched pool must give as its states
     st = STATE_INDEX["status"]
-    assert fine[-1][4, st] == VehicleStatus.GROUND_IMPACT  # the dive ended inside
+    assert (fine[-1][[3, 4], st] == VehicleStatus.GROUND_IMPACT).all()  # the dives ended
     for workers in worker_counts(backend):
         with make_pool(vs, DT, CH, backend, workers, watch=watch) as pool:
             for e in range(60):

@@ -5,8 +5,15 @@ at a time for all of them.
 
 Aircraft of different models in one worker are kept in one group per
 model. An aircraft that stops (a ground impact, a landing, a state that is
-no longer finite) is taken out of its group's arrays and its last row is
-kept: the others fly on without it.
+no longer finite) is taken out of its group's arrays: the others fly on
+without it. A ground impact or a landing keeps the row of the frame it
+touched; a diverged aircraft keeps the row it had (the last one written, as
+the JSBSim tier keeps a diverged vehicle's last state), only its status
+changes.
+
+``step_watched`` steps the batch a few frames at a time and writes some
+rows between (a camera's aircraft faster than the exchanges): the frames
+are the same whatever the pieces, so the states are too.
 
 The ground is the JSBSim tier's rule without the gear's forces: when a
 contact point of the aircraft file (or its centre of gravity) reaches the
@@ -68,8 +75,10 @@ class RigidBatch:
         self.channels = list(channels)
         self.n = len(specs)
         self.status = np.full(self.n, float(VehicleStatus.ACTIVE))
-        #: rows that stopped: their last state row
+        #: rows that touched the ground: their row at that frame
         self.frozen: dict[int, np.ndarray] = {}
+        #: rows that diverged: they keep the row they had
+        self.diverged: list[int] = []
         self.width = len(cols)
         self.landed = np.zeros(self.n, dtype=bool)
         self.airborne = np.ones(self.n, dtype=bool)
@@ -158,9 +167,11 @@ class RigidBatch:
         for i in np.flatnonzero(stop).tolist():
             r = int(rows[i])
             row = block[i].copy()
-            if bad[i]:
-                row[_S["status"]] = self.status[r] = float(VehicleStatus.DIVERGED)
-            elif gentle[i]:
+            if bad[i]:  # its last finite row is the one written before
+                self.status[r] = float(VehicleStatus.DIVERGED)
+                self.diverged.append(r)
+                continue
+            if gentle[i]:
                 self.landed[r] = True  # at rest where it touched
                 for c in ("vn_mps", "ve_mps", "vd_mps", "airspeed_mps", "alpha_deg"):
                     row[_S[c]] = 0.0
@@ -174,13 +185,15 @@ class RigidBatch:
         g.rows = rows[keep]
         g.props = {k: v[..., keep] for k, v in p.items()}  # the aircraft are the last axis
 
-    def _write(self, g: _Group, block: np.ndarray) -> None:
+    def _write(self, g: _Group, block: np.ndarray, at: np.ndarray | None = None) -> None:
+        """The group's rows (``at``: those positions in its arrays only)."""
         p = g.props
+        pick = slice(None) if at is None else at
         for j, prop, scale in _READ:
-            block[:, j] = p[prop] * scale if prop in p else np.nan
-        block[:, _S["status"]] = self.status[g.rows]
+            block[:, j] = p[prop][pick] * scale if prop in p else np.nan
+        block[:, _S["status"]] = self.status[g.rows[pick]]
         block[:, self.c_contact] = 0.0
-        block[:, self.c_fuel] = (p["propulsion/total-fuel-lbs"] * LB_TO_KG
+        block[:, self.c_fuel] = (p["propulsion/total-fuel-lbs"][pick] * LB_TO_KG
                                  if "propulsion/total-fuel-lbs" in p else np.nan)
 
     def write_states(self, out: np.ndarray) -> None:
@@ -189,5 +202,35 @@ class RigidBatch:
                 block = np.empty((len(g.rows), out.shape[1]))
                 self._write(g, block)
                 out[g.rows] = block
+        self._write_stopped(out)
+
+    def _write_stopped(self, out: np.ndarray, where: dict[int, int] | None = None) -> None:
+        """The stopped rows into ``out`` (``where``: batch row -> row of
+        ``out``, those only; by default every row): a diverged one's status
+        only, it keeps its row."""
         for r, row in self.frozen.items():
-            out[r] = row
+            i = r if where is None else where.get(r)
+            if i is not None:
+                out[i] = row
+        for r in self.diverged:
+            i = r if where is None else where.get(r)
+            if i is not None:
+                out[i, _S["status"]] = float(VehicleStatus.DIVERGED)
+
+    def step_watched(self, nsub: int, every: int, rows: np.ndarray, out: np.ndarray) -> None:
+        """``step(nsub)``, ``every`` frames at a time, with the states of the
+        batch's ``rows`` after each piece ``c`` in ``out[c]`` (``out``: at
+        least ``nsub // every`` blocks of ``(len(rows), width)`` holding those
+        rows' last states: a diverged row keeps its own)."""
+        for c in range(nsub // every):
+            self.step(every)
+            for g in self.groups:
+                if not len(g.rows):
+                    continue
+                at = np.minimum(np.searchsorted(g.rows, rows), len(g.rows) - 1)
+                mine = np.flatnonzero(g.rows[at] == rows)  # rows flying in this group
+                if len(mine):
+                    block = np.empty((len(mine), out.shape[2]))
+                    self._write(g, block, at[mine])
+                    out[c, mine] = block
+            self._write_stopped(out[c], {r: i for i, r in enumerate(rows.tolist())})
