@@ -99,8 +99,9 @@ class Shard:
               layout_names: Sequence[str] | None = None,
               watch: tuple[Sequence[int], int] | None = None) -> Shard:
         """Build and trim every vehicle. A JSBSim vehicle that cannot be loaded
-        or trimmed does not stop the others: all such failures are raised
-        together as one ``BuildError``; on any other failure ``current`` names
+        or trimmed does not stop the others: all such failures, with those of
+        the batched classes (their ``BuildError``), are raised together as one
+        ``BuildError`` in vehicle order; on any other failure ``current`` names
         the culprit. ``on_built(k)`` is called after each vehicle with the
         count so far. ``layout_names``: the run's state columns (the pool's
         ``state_layout``; by default these vehicles' own), for the columns
@@ -134,14 +135,20 @@ class Shard:
                 on_built(k)
         for name, brows in batched.items():
             shard.current = None
-            model = get_class(name).make_batch([specs[r] for r in brows], dt_s, channels,
-                                               list(layout_names))
+            try:
+                model = get_class(name).make_batch([specs[r] for r in brows], dt_s, channels,
+                                                   list(layout_names))
+            except BuildError as e:  # reported with the others
+                failures += e.failures
+                continue
             shard.batches.append((name, model, np.asarray(brows, dtype=np.intp)))
             if on_built is not None:
                 on_built(len(specs))
         shard.current = None
         if failures:
-            raise BuildError(failures, len(specs))
+            order = {s.id: k for k, s in enumerate(specs)}
+            raise BuildError(sorted(failures, key=lambda f: order.get(f[0], len(specs))),
+                             len(specs))
         shard._rows = np.asarray(rows, dtype=np.intp)
         if watch is not None:
             shard._set_watch(specs, watch[0], watch[1])

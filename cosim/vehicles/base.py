@@ -210,7 +210,9 @@ class VehicleClass:
                    columns: Sequence[str]) -> BatchedModel:
         """Batched kinds: the model of ``specs``, built in the worker that owns
         them; ``channels`` name the setpoint columns, ``columns`` the state
-        array's (``STATE_FIELDS`` first, then the run's classes' own)."""
+        array's (``STATE_FIELDS`` first, then the run's classes' own). Vehicles
+        it cannot build or trim: a ``BuildError`` naming every one, which the
+        pool reports with the other classes' in one."""
         raise NotImplementedError(f"vehicle class {self.name!r} is not batched")
 
     # -- commands --------------------------------------------------------------

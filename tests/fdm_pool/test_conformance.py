@@ -6,9 +6,9 @@ group), and for the names in ``COSIM_CONFORMANCE_BACKENDS`` (comma
 separated), which must be registered:
 
 - the cases that concern the flight models (states, statuses, setpoints,
-  watched rows) fly the tiers mixed (``fleet``): JSBSim c172ps between
-  rigid-body uav700s (``fixed_wing_rigid``, a batched class), each tier
-  given the case's every role;
+  builds, watched rows) fly the tiers mixed (``fleet``): JSBSim c172ps
+  between rigid-body uav700s (``fixed_wing_rigid``, a batched class), a
+  vehicle of each tier diving, diverging, failing to trim or watched;
 - bit-identical states against ``inline`` at every exchange, setpoints
   (including extreme ones) and every worker count included;
 - statuses: ground impact and divergence freeze that vehicle only;
@@ -220,14 +220,16 @@ def test_a_vehicle_failing_mid_exchange_is_named_with_the_tick(specs, backend: s
         assert "b0003" in str(ei.value) and "tick 4" in str(ei.value), str(ei.value)
 
 
-def test_every_vehicle_that_cannot_be_built_is_reported_at_once(specs, backend: str) -> None:
-    vs = specs(5)
-    for j in (0, 3):
+def test_every_vehicle_that_cannot_be_built_is_reported_at_once(fleet, backend: str) -> None:
+    vs = fleet(5)
+    for j in (0, 3):  # a rigid body and a JSBSim c172p
         vs[j] = dataclasses.replace(vs[j], airspeed_mps=2.0 + j)  # far below any stall
     for workers in worker_counts(backend):
-        with pytest.raises(BuildError) as ei:
+        with pytest.raises(BuildError, match=r"2 of 5 vehicles could not be built") as ei:
             make_pool(vs, DT, (), backend, workers)
         assert ei.value.vehicles == ["b0000", "b0003"], (backend, workers)
+        assert "'b0000' (uav700): the rigid-body tier could not trim at 2.0 m/s" in str(
+            ei.value), str(ei.value)
 
 
 def test_a_killed_worker_is_workerdied_within_seconds(specs, backend: str) -> None:

@@ -33,8 +33,8 @@ from pathlib import Path
 import numpy as np
 
 from cosim.core.state import STATE_FIELDS, STATE_INDEX, VehicleSpec, VehicleStatus
-from cosim.core.units import FT_TO_M, LB_TO_KG, LBF_TO_N
-from cosim.errors import ConfigError
+from cosim.core.units import FT_TO_M, KT_TO_MPS, LB_TO_KG, LBF_TO_N
+from cosim.errors import BuildError, ConfigError
 from cosim.rigid.aircraft import RigidAircraft, compile_aircraft, position_ecef
 from cosim.vehicles.jsbsim_model import LANDING_PROP, LANDING_ROLL_RAD, LANDING_SINK_FPS
 
@@ -86,8 +86,13 @@ class RigidBatch:
         for r, s in enumerate(specs):
             p = s.class_params
             by_model.setdefault((p["xml"], p["systems_dir"], p["engine_dir"]), []).append(r)
+        #: (vehicle id, why) of the aircraft that could not be trimmed
+        self.failures: list[tuple[str, str]] = []
         self.groups = [self._build(compiled(*key), [specs[r] for r in rows], rows)
                        for key, rows in by_model.items()]
+        if self.failures:  # every one, as the JSBSim tier reports its own
+            order = {s.id: r for r, s in enumerate(specs)}
+            raise BuildError(sorted(self.failures, key=lambda f: order[f[0]]), self.n)
 
     def _build(self, ac: RigidAircraft, specs: list[VehicleSpec], rows: list[int]) -> _Group:
         m = len(specs)
@@ -106,15 +111,13 @@ class RigidBatch:
         vt = np.array([s.airspeed_mps * _FPS for s in specs])
         if all(s.trim for s in specs):
             ok = ac.trim_level(props, loc, psi, vt, dt_s=self.dt)
-            if not ok.all():
-                bad = [specs[i] for i in np.flatnonzero(~ok)]
-                raise ConfigError(
-                    "the rigid-body tier could not trim " + "; ".join(
-                        f"vehicle {s.id!r} ({s.model}) at {s.airspeed_mps:.1f} m/s, "
-                        f"{s.alt_msl_m:.1f} m MSL" for s in bad[:5])
-                    + (f" and {len(bad) - 5} more" if len(bad) > 5 else "")
-                    + ": level flight needs an angle of attack, throttle or pitch trim "
-                      "outside the model's range")
+            for s in (specs[i] for i in np.flatnonzero(~ok)):
+                self.failures.append((s.id, (
+                    f"vehicle {s.id!r} ({s.model}): the rigid-body tier could not trim at "
+                    f"{s.airspeed_mps:.1f} m/s TAS ({s.airspeed_mps / KT_TO_MPS:.0f} kt), "
+                    f"{s.alt_msl_m:.1f} m MSL ({s.alt_msl_m - s.terrain_alt_m:.1f} m above "
+                    f"the ground): level flight needs an angle of attack, throttle or pitch "
+                    f"trim outside the model's range")))
         else:
             z = np.zeros(m)
             ac.place(props, loc, z, z, psi, (vt, z, z), dt_s=self.dt)
