@@ -3,7 +3,8 @@
 ``~/.cache/cosim``. Its folders: ``wrapped/`` (aircraft with the cosim
 autopilot attached), ``ground/`` (procedural ground tiles; ``COSIM_GROUND_CACHE
 =off`` keeps none), ``signing/`` (MAVLink signing timestamps: replay
-protection, not a cache to delete while runs use the key). Deleting the rest
+protection, not a cache to delete while runs use the key), ``fused/`` (the
+rigid-body tier's generated numba loops). Deleting the rest
 only costs the time to make it again."""
 
 from __future__ import annotations

@@ -10,9 +10,9 @@ The operations are the numpy kernels' (``cosim.rigid.functions``), in the
 same order on the same doubles: left folds, a quotient by zero infinite,
 comparisons 1 or 0, tables by ``cosim.rigid.kernels``' segment search. The
 generated source is written to a cache folder named for its content, so
-numba compiles it once a machine, not once a process
-(``$COSIM_CACHE`` or ``~/.cache/cosim``; where that cannot be written the
-loop is compiled in memory, each process).
+numba compiles it once a machine, not once a process (``fused/`` in
+cosim's cache folder, ``cosim.core.cache``; where that cannot be written
+the loop is compiled in memory, each process).
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from cosim.core.cache import cache_folder
 from cosim.rigid.functions import Compiled, CompileError, _children, _grid, _numbers
 
 log = logging.getLogger(__name__)
@@ -203,10 +204,12 @@ def fuse(functions: Sequence[Compiled], source: str, *, name: str = "fused",
 
 
 def _cache_dir() -> Path | None:
-    root = Path(os.environ.get("COSIM_CACHE") or Path.home() / ".cache" / "cosim") / "fused"
+    """``fused/`` in cosim's cache folder (``cosim.core.cache``), or None
+    where it cannot be written."""
+    root = cache_folder("fused")
     try:
         root.mkdir(parents=True, exist_ok=True)
-        probe = root / ".write-test"
+        probe = root / f".write-test-{os.getpid()}"
         probe.write_text("")
         probe.unlink()
     except OSError:

@@ -59,7 +59,7 @@ def _numpy_chain(functions, values):
 
 
 def test_every_operation_fused_equals_numpy(tmp_path: Path, monkeypatch) -> None:
-    monkeypatch.setenv("COSIM_CACHE", str(tmp_path / "cache"))
+    monkeypatch.setenv("COSIM_CACHE_DIR", str(tmp_path / "cache"))
     el = ET.fromstring(ALL_OPS.replace("-1 0.5 0 1.0 2 -3.0", "\n -1 0.5\n 0 1.0\n 2 -3.0\n"))
     f = compile_function(el, "t.xml")
     rng = np.random.default_rng(3)
@@ -98,7 +98,7 @@ def test_an_aircrafts_aerodynamics_fused_equal_numpy(model: str) -> None:
 def test_without_a_writable_cache_it_compiles_in_memory(tmp_path: Path, monkeypatch) -> None:
     blocker = tmp_path / "not-a-folder"
     blocker.write_text("")
-    monkeypatch.setenv("COSIM_CACHE", str(blocker))
+    monkeypatch.setenv("COSIM_CACHE_DIR", str(blocker))
     f = compile_function(ET.fromstring(
         "<function name='x'><product><p>a</p><v>3</v></product></function>"), "t.xml")
     fz = fuse([f], "t.xml", name="test_memory")
