@@ -19,7 +19,10 @@ last output, a filter's past values, a channel's frame counter) lives under
 a private key ``_fcs:<component property>:<what>``. ``init(props, n)``
 adds what is missing (JSBSim's values at load: ``<property value=...>``
 declarations, component outputs 0); ``run(props, dt_s)`` runs one physics
-frame. ``run_ic(props, dt_s)`` does what ``fdm.run_ic()`` does to the
+frame: as a few numba loops (``cosim.rigid.fcs_fused``, the same doubles)
+where every component can be fused, else on the numpy steps here
+(``Systems.fused`` is None; ``compile_systems(..., fuse=False)`` asks
+for them). ``run_ic(props, dt_s)`` does what ``fdm.run_ic()`` does to the
 systems: every channel whose ``execute`` property is on runs twice with
 integration suspended (channel frame counters stand still); a channel at
 ``execrate`` R then runs on the R-th frame after it.
@@ -89,6 +92,7 @@ from cosim.rigid.fcs_components import (
     text,
 )
 from cosim.rigid.fcs_dynamics import DYNAMIC
+from cosim.rigid.fcs_fused import FusedSystems, fuse_systems
 from cosim.rigid.functions import CompileError, parse
 
 log = logging.getLogger(__name__)
@@ -121,6 +125,9 @@ class Systems:
     #: the systems' own <function>s, before and after the channels
     pre: _Channel | None = None
     post: _Channel | None = None
+    #: the same frame as numba loops (``cosim.rigid.fcs_fused``), or None:
+    #: the numpy steps
+    fused: FusedSystems | None = field(default=None, repr=False, compare=False)
 
     def init(self, props: Props, n: int) -> None:
         """Add JSBSim's values at load for ``n`` aircraft (keys already in
@@ -143,6 +150,9 @@ class Systems:
         in either case: JSBSim's components keep the step they were built
         with, so a RunIC frame at 0 would freeze rate limits, filters and
         kinematics and make a PID's derivative infinite."""
+        if self.fused is not None:
+            self.fused.run(props, dt_s, suspended)
+            return
         gates: dict[str, _Gate] = {}
         if self.pre is not None:
             _run_channel(self.pre, props, dt_s, suspended, gates)
@@ -305,8 +315,10 @@ def _find_system(kind: str, name: str, aircraft_dir: Path, systems_dir: Path
 
 
 def compile_systems(aircraft_xml: Path, systems_dir: Path, *,
-                    problems: list[CompileError] | None = None) -> Systems:
-    """An aircraft's systems, autopilot and flight control as one plan."""
+                    problems: list[CompileError] | None = None,
+                    fuse: bool = True) -> Systems:
+    """An aircraft's systems, autopilot and flight control as one plan
+    (``fuse``: run as numba loops where every component can be fused)."""
     aircraft_xml = Path(aircraft_xml)
     root = parse(aircraft_xml)
     ctx = Context(str(aircraft_xml), problems)
@@ -334,6 +346,12 @@ def compile_systems(aircraft_xml: Path, systems_dir: Path, *,
     propulsion = root.find("propulsion")
     engines = len(propulsion.findall("engine")) if propulsion is not None else 0
     plan = _assemble(channels, declared, engines, functions)
+    if fuse and plan.channels:
+        try:
+            plan = replace(plan, fused=fuse_systems(plan.pre, plan.channels, plan.post,
+                                                     plan.engines))
+        except CompileError as e:
+            log.info("%s: the systems run on numpy's steps: %s", aircraft_xml, e)
     log.debug("%s: %d channels, %d components, %d inputs", aircraft_xml, len(plan.channels),
               sum(len(c.components) for c in plan.channels), len(plan.inputs))
     return plan

@@ -83,6 +83,10 @@ class Component:
     writes: tuple[str, ...]   # its own property first, then <output>s, then extras
     state: dict[str, float]   # private keys and their values at load
     step: Step
+    #: the element it was compiled from and its file (``cosim.rigid.fcs_fused``
+    #: writes its code from them)
+    element: ET.Element | None = None
+    source: str = ""
 
 
 # ------------------------------------------------------------------ parsing
@@ -283,7 +287,8 @@ class Build:
 
         writes = (tuple(self.outputs) + tuple(k for k, _ in tied) + tuple(self.state)
                   + extra)
-        return Component(name, frozenset(self.reads), writes, dict(self.state), step)
+        return Component(name, frozenset(self.reads), writes, dict(self.state), step,
+                         self.el, self.ctx.source)
 
 
 def _fcs_function(el: ET.Element, ctx: Context) -> Component:

@@ -22,6 +22,7 @@ import importlib.util
 import logging
 import os
 import sys
+import types
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -81,6 +82,9 @@ def _t2(rbp, cbp, data, rkey, ckey):
 class _Gen:
     """Source for one loop: inputs by property, locals by function."""
 
+    #: <min> and <max> of two values
+    MINMAX = {"min": "min({}, {})", "max": "max({}, {})"}
+
     def __init__(self) -> None:
         self.inputs: dict[str, str] = {}  # property -> local name
         self.made: dict[str, str] = {}  # function's property -> local name
@@ -112,8 +116,7 @@ class _Gen:
         if tag == "table":
             return self.table(el, source)
         parts = [self.expr(c, source) for c in kids]
-        fold = {**{k: f"({{}} {op} {{}})" for k, op in _FOLD.items()},
-                "min": "min({}, {})", "max": "max({}, {})",
+        fold = {**{k: f"({{}} {op} {{}})" for k, op in _FOLD.items()}, **self.MINMAX,
                 "and": "(1.0 if ({} != 0.0) and ({} != 0.0) else 0.0)",
                 "or": "(1.0 if ({} != 0.0) or ({} != 0.0) else 0.0)"}.get(tag)
         if fold is not None:  # JSBSim's left fold of an n-ary operation
@@ -123,12 +126,8 @@ class _Gen:
             return acc
         if tag == "quotient":
             return f"_q({parts[0]}, {parts[1]})"
-        if tag == "pow":
-            return f"({parts[0]} ** {parts[1]})"
-        if tag == "atan2":
-            return f"math.atan2({parts[0]}, {parts[1]})"
-        if tag in _UNARY:
-            return _UNARY[tag].format(parts[0])
+        if tag in ("pow", "atan2") or tag in _UNARY:
+            return self.call(tag, parts)
         if tag in _COMPARE:
             return f"(1.0 if {parts[0]} {_COMPARE[tag]} {parts[1]} else 0.0)"
         if tag == "not":
@@ -136,6 +135,15 @@ class _Gen:
         if tag == "ifthen":
             return f"({parts[1]} if {parts[0]} != 0.0 else {parts[2]})"
         raise CompileError(f"{source}:{el.get('_line', '?')}: <{tag}>: cannot be fused")
+
+    def call(self, tag: str, parts: list[str]) -> str:
+        """A function of the math library (a subclass may compute it
+        elsewhere: ``cosim.rigid.fcs_fused`` calls numpy's)."""
+        if tag == "pow":
+            return f"({parts[0]} ** {parts[1]})"
+        if tag == "atan2":
+            return f"math.atan2({parts[0]}, {parts[1]})"
+        return _UNARY[tag].format(parts[0])
 
     def table(self, el: ET.Element, source: str) -> str:
         look = {iv.get("lookup", "row"): (iv.text or "").strip()
@@ -198,7 +206,7 @@ def fuse(functions: Sequence[Compiled], source: str, *, name: str = "fused",
     loads = [f"        {v} = a_{v}[i]" for _, v in ins]
     src = (_HEADER + f"\n@jit\ndef kernel({args}):\n    for i in range(n):\n"
            + "\n".join(loads + body) + "\n")
-    module = _load(src, name)
+    module = load(src, name)
     return Fused((*(f.name for f in functions), *("" for _ in sums)),
                  tuple(p for p, _ in ins), module.kernel, tuple(a for _, a in gen.tables))
 
@@ -217,7 +225,7 @@ def _cache_dir() -> Path | None:
     return root
 
 
-def _load(src: str, name: str) -> Any:
+def load(src: str, name: str) -> Any:
     """The generated module, from a file named for its content (numba's cache
     then serves every process) or, where no cache folder can be written,
     compiled in memory."""
@@ -228,7 +236,7 @@ def _load(src: str, name: str) -> Any:
         log.info("no writable cache folder: the fused %s kernel is compiled in memory", name)
         namespace: dict[str, Any] = {"__name__": mod_name}
         exec(compile(src.replace("cache=True", "cache=False"), mod_name, "exec"), namespace)
-        return type("M", (), {"kernel": staticmethod(namespace["kernel"])})
+        return types.SimpleNamespace(**namespace)
     path = root / f"{mod_name}.py"
     if not path.exists() or path.read_text() != src:
         tmp = path.with_suffix(f".{os.getpid()}.tmp")

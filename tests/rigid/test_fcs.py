@@ -8,6 +8,7 @@ against its difference equation; refusals with file:line."""
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -114,13 +115,22 @@ def _autopilot_schedule() -> dict[int, dict[str, float]]:
 @pytest.fixture(scope="module")
 def uav700_flight() -> tuple[Systems, list[dict[str, float]], dict[str, np.ndarray]]:
     plan = compile_systems(UAV700, SYSTEMS_DIR)
+    assert plan.fused is not None  # the uav700's systems run as numba loops
     seen, outs = _fly("uav700", plan, _autopilot_schedule(), _s(20))
     return plan, seen, outs
 
 
+def _path(plan: Systems, path: str) -> Systems:
+    """The plan as its numba loops (``fused``) or its numpy steps."""
+    return plan if path == "fused" else dataclasses.replace(plan, fused=None)
+
+
+@pytest.mark.parametrize("path", ["fused", "numpy"])
 def test_the_uav700_autopilot_and_flight_control_equal_jsbsim_frame_by_frame(
-        uav700_flight: tuple[Systems, list[dict[str, float]], dict[str, np.ndarray]]) -> None:
+        uav700_flight: tuple[Systems, list[dict[str, float]], dict[str, np.ndarray]],
+        path: str) -> None:
     plan, seen, want = uav700_flight
+    plan = _path(plan, path)
     assert {"fcs/elevator-pos-rad", "fcs/left-aileron-pos-rad", "fcs/throttle-pos-norm",
             "cosim/ap/roll-pi", "cosim/ap/speed-pi", "cosim/ap/stall-protection-active",
             "propulsion/fuel_freeze"} <= plan.outputs
@@ -136,9 +146,12 @@ def test_the_uav700_autopilot_and_flight_control_equal_jsbsim_frame_by_frame(
     assert want["cosim/ap/stall-protection-active"].max() == 1.0
 
 
+@pytest.mark.parametrize("path", ["fused", "numpy"])
 def test_a_one_percent_gain_error_is_caught(
-        uav700_flight: tuple[Systems, list[dict[str, float]], dict[str, np.ndarray]]) -> None:
+        uav700_flight: tuple[Systems, list[dict[str, float]], dict[str, np.ndarray]],
+        path: str) -> None:
     plan, seen, want = uav700_flight
+    plan = _path(plan, path)
     got = _replay(plan, seen, _autopilot_schedule(), tweak={"cosim/ap/gain/roll-ki": 1.01})
     with pytest.raises(AssertionError, match="cosim/ap/roll-pi"):
         np.testing.assert_allclose(got["cosim/ap/roll-pi"], want["cosim/ap/roll-pi"],
@@ -360,12 +373,15 @@ def test_a_system_file_is_found_as_jsbsim_finds_it(tmp_path: Path) -> None:
     assert props["a/k"][0] == 1.0
 
 
+@pytest.mark.parametrize("path", ["fused", "numpy"])
 def test_no_array_serves_two_properties(
-        uav700_flight: tuple[Systems, list[dict[str, float]], dict[str, np.ndarray]]) -> None:
+        uav700_flight: tuple[Systems, list[dict[str, float]], dict[str, np.ndarray]],
+        path: str) -> None:
     """The shared contract: an array belongs to one key (the uav700's
     fuel-freeze command is a function of one property, its value that
     property's array; a PID keeps its input as state)."""
     plan, seen, _ = uav700_flight
+    plan = _path(plan, path)
     props: dict[str, np.ndarray] = {}
     plan.init(props, 3)
     plan.run_ic(props, DT_S)
@@ -420,12 +436,15 @@ def test_each_filter_is_its_transfer_function_discretised_by_tustin(
     assert np.abs(np.array(got).T - off).max() > 1e-11 * scale
 
 
+@pytest.mark.parametrize("path", ["fused", "numpy"])
 def test_each_aircraft_runs_its_own_channels_whatever_the_others_do(
-        uav700_flight: tuple[Systems, list[dict[str, float]], dict[str, np.ndarray]]) -> None:
+        uav700_flight: tuple[Systems, list[dict[str, float]], dict[str, np.ndarray]],
+        path: str) -> None:
     """Three aircraft on the recorded flight, the autopilot engaged on
     different frames (so channels run for some rows only and their frame
     counters drift apart): each row equals the plan run on it alone."""
     plan, seen, _ = uav700_flight
+    plan = _path(plan, path)
     frames = 1600
     engage = np.ones((3, frames))
     engage[:, 0] = 0.0
