@@ -90,6 +90,9 @@ _NUMPY: dict[str, Callable[..., Any]] = {
 #: an argument of a numpy call between loops: a scratch row, a property
 #: as the plan holds it, or a row of the frame's new block
 _Arg = tuple[str, Any]
+#: numpy's call after a loop: the function, its arguments, the scratch row
+#: of its result, the gate it is inside (not called when no row is due)
+_After = tuple[Callable[..., Any], tuple[_Arg, ...], int, "int | None"]
 
 
 class _Channel(Protocol):
@@ -111,7 +114,7 @@ class _Channel(Protocol):
 class _Segment:
     lines: list[str]
     arrays: list[str]            # props keys passed as arrays, in order
-    after: tuple[Callable[..., Any], tuple[_Arg, ...], int] | None = None
+    after: _After | None = None
 
 
 class _SysGen(_Gen):
@@ -198,11 +201,11 @@ class _SysGen(_Gen):
                     args.append(("S", s))
             r = self.scratch
             self.scratch += 1
-            self.cut((_NUMPY[el.tag], tuple(args), r))
+            self.cut((_NUMPY[el.tag], tuple(args), r, self.gate))
             return f"S[{r}, i]"  # a row every later loop reads
         return super().expr(el, source)
 
-    def cut(self, after: tuple[Callable[..., Any], tuple[_Arg, ...], int] | None) -> None:
+    def cut(self, after: _After | None) -> None:
         """End this loop (then numpy's call ``after``) and open the next in
         the same gate, with what the component had loaded loaded again
         (an expression being written may read it)."""
@@ -566,8 +569,12 @@ class FusedSystems:
             for kernel, arrays, after in self.segments:
                 kernel(n, dt_s, suspended, whole, gates, scratch,
                        *[props[k] for k in arrays], *self.tables)
-                if after is not None:
-                    fn, args, r = after
+                if after is None:
+                    continue
+                fn, args, r, gate = after
+                # a channel due on no row (3 frames in 4 at execrate 4) needs
+                # no value: the numpy plan skips it whole
+                if gate is None or gates[gate].any():
                     fn(*[scratch[a] if w == "S" else props[a] for w, a in args],
                        out=scratch[r])
 
