@@ -553,14 +553,20 @@ class FusedSystems:
     gates: int
     scratch: int
     tables: tuple[np.ndarray, ...]
+    reads: tuple[str, ...]      # what the loops read and do not write
 
     def run(self, props: Props, dt_s: float, suspended: bool) -> None:
         """One frame, each key the plan writes written in place (an array
-        that cannot be, read-only or not float64, replaced by a copy first)."""
+        that cannot be, read-only or not float64, replaced by a copy first;
+        one it only reads and is not float64 read through a float64 copy,
+        so numba compiles the loops for float64 arrays only)."""
         for k in self.written:
             a = props[k]
             if not (a.flags.writeable and a.dtype == np.float64):
                 props[k] = np.array(a, dtype=np.float64)
+        other = [k for k in self.reads if props[k].dtype != np.float64]
+        if other:
+            props = {**props, **{k: props[k].astype(np.float64) for k in other}}
         n = len(props[self.written[0]])
         gates = np.empty((max(self.gates, 1), n))
         scratch = np.empty((max(self.scratch, 1), n))
@@ -628,5 +634,6 @@ def fuse_systems(pre: _Channel | None, chans: Sequence[_Channel], post: _Channel
     return FusedSystems(tuple((getattr(module, f"seg{s}"), tuple(seg.arrays), seg.after)
                               for s, seg in enumerate(segs)),
                         tuple(g.written), tuple(g.flags), len(g.gates), g.scratch,
-                        tuple(a for _, a in g.tables))
+                        tuple(a for _, a in g.tables),
+                        tuple(sorted({k for seg in segs for k in seg.arrays} - set(g.written))))
 

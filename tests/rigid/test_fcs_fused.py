@@ -154,20 +154,29 @@ def test_a_one_ulp_difference_is_caught(uav700: Systems) -> None:
         _same(got[30], want[30], 30)
 
 
-def test_written_arrays_are_replaced_where_they_cannot_be_written(uav700: Systems) -> None:
+def test_arrays_of_other_kinds_are_read_and_written_through_float64_copies(
+        uav700: Systems) -> None:
     """A read-only or integer array under a key the plan writes is replaced
-    by a float64 copy, not written through (nor refused by numba)."""
+    by a float64 copy, not written through (nor refused by numba); an
+    integer array it only reads is read through a float64 copy and kept
+    (numba compiles its loops for float64 arrays only)."""
     props: dict[str, np.ndarray] = {}
     uav700.init(props, N)
     frozen = np.broadcast_to(np.float64(0.3), (N,))
     props["fcs/throttle-cmd-norm"] = frozen
     props["fcs/elevator-cmd-norm"] = np.zeros(N, dtype=np.int64)
+    engage = props["cosim/ap/engage"] = np.ones(N, dtype=np.int64)
+    props["cosim/ap/heading-hold"] = np.ones(N, dtype=np.int32)
     want = {k: v.copy() for k, v in props.items()}
-    _numpy(uav700).run(want, DT_S)
-    uav700.run(props, DT_S)
-    _same(props, want, 1)
+    for f in range(1, 9):
+        _numpy(uav700).run(want, DT_S)
+        uav700.run(props, DT_S)
+        _same(props, want, f)
     assert props["fcs/throttle-pos-norm"][0] == 0.3 and frozen[0] == 0.3
     assert props["fcs/elevator-cmd-norm"].dtype == np.float64
+    assert props["cosim/ap/engage"] is engage
+    assert uav700.fused is not None
+    assert all(len(k.signatures) == 1 for k, _, _ in uav700.fused.segments)
 
 
 def _fusable(zoo: str) -> str:
