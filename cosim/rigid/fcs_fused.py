@@ -32,15 +32,15 @@ not of the dict; an array that cannot be written (read-only, not float64)
 is replaced by a float64 copy first.
 
 Fused: ``fcs_function``, ``switch``, ``summer``, ``pure_gain``,
-``scheduled_gain``, ``aerosurface_scale``, ``deadband``, ``pid`` and
-``actuator`` with every option the numpy plan supports, ``<clipto>``
-(not ``type="cyclic"``), the surface positions FGFCS ties. Not fused:
-the filters and the ``integrator``, ``kinematic`` (so the c172p's flaps
-keep its whole plan on numpy's steps), a cyclic clip, a channel whose
-``execute`` property a component writes, a transcendental function of
-constants only; a plan with any of them runs on its numpy steps, whole
-(``fuse_systems`` raises ``CompileError`` saying which and where, and
-``compile_systems`` logs it and keeps the numpy plan).
+``scheduled_gain``, ``aerosurface_scale``, ``deadband``, ``pid``,
+``actuator`` and ``kinematic`` with every option the numpy plan supports,
+``<clipto>`` (not ``type="cyclic"``), the surface positions FGFCS ties:
+the uav700's and the c172p's systems. Not fused: the filters and the
+``integrator``, a cyclic clip, a channel whose ``execute`` property a
+component writes, a transcendental function of constants only; a plan
+with any of them runs on its numpy steps, whole (``fuse_systems`` raises
+``CompileError`` saying which and where, and ``compile_systems`` logs it
+and keeps the numpy plan).
 """
 
 from __future__ import annotations
@@ -63,6 +63,7 @@ from cosim.rigid.fcs_components import (
     one,
     text,
 )
+from cosim.rigid.fcs_dynamics import _EPS
 from cosim.rigid.functions import CompileError, _children
 from cosim.rigid.fused import _HEADER, _Gen, load
 
@@ -79,6 +80,16 @@ def _mx(a, b):
 @jit
 def _mn(a, b):
     return a if (a <= b or a != a) else b
+
+
+@jit
+def _ss(a, v, right):
+    # numpy's searchsorted of v in the sorted a (NaN after every number)
+    k = 0
+    for e in a:
+        if (e <= v if right else e < v) or v != v:
+            k += 1
+    return k
 
 '''
 
@@ -536,9 +547,54 @@ def _actuator(g: _SysGen, comp: Component, el: ET.Element, src: str) -> None:
     _finish(g, comp, out, state, None)
 
 
+def _kinematic(g: _SysGen, comp: Component, el: ET.Element, src: str) -> None:
+    """FGKinemat: the input moved towards at each interval's own rate, the
+    numpy step's loop over intervals per aircraft (a row's loop ends where
+    the numpy step leaves that row unchanged)."""
+    tv = el.find("traverse")
+    assert tv is not None
+    pos = [float(text(st.find("position"))) for st in tv.findall("setting")]  # type: ignore[arg-type]
+    times = [float(text(st.find("time"))) for st in tv.findall("setting")]  # type: ignore[arg-type]
+    det, tt = g.const(np.array(pos)), g.const(np.array(times))
+    inner = g.const(np.array(pos[1:]))
+    last, first = repr(pos[-1]), repr(pos[0])
+    outs = [text(e) for e in el.findall("output")]
+    current = g.var(next((o for o in outs if o != comp.name), comp.name))
+    u = g.temp(_input(g, el))
+    if el.find("noscale") is None:
+        u = g.temp(f"{u} * {last}")
+    u = g.temp(f"_mn(_mx({u}, {first}), {last})")
+    out, left = g.temp(current), g.temp("dt")
+    k = g.temps
+    g.temps += 1
+    ind, t, rate, into, need = (f"{w}{k}" for w in ("ind", "tt", "rate", "into", "need"))
+    g.line(f"for _ in range({len(pos) + 1}):")
+    g.line(f"    if not ({left} > 0.0 and not (abs({u} - {out}) <= {float(_EPS)!r} * "
+           f"_mx(abs({u}), abs({out})))):")
+    g.line("        break")
+    g.line(f"    {ind} = min((_ss({inner}, {out}, False) if {u} < {out} else "
+           f"_ss({inner}, {out}, True)) + 1, {len(pos) - 1})")
+    g.line(f"    {t} = {tt}[{ind}]")
+    g.line(f"    if {t} <= 0.0:")
+    g.line(f"        {out} = {u}")
+    g.line(f"        {left} = 0.0")
+    g.line("    else:")
+    g.line(f"        {rate} = ({det}[{ind}] - {det}[{ind} - 1]) / {t}")
+    g.line(f"        {into} = _mn(_mx({u}, {det}[{ind} - 1]), {det}[{ind}])")
+    g.line(f"        {need} = abs(({into} - {out}) / {rate})")
+    g.line(f"        if {left} < {need}:")
+    g.line(f"            {out} = {out} + {left} * {rate} if {out} < {u} else "
+           f"{out} - {left} * {rate}")
+    g.line(f"            {left} = {left} - {left}")
+    g.line("        else:")
+    g.line(f"            {out} = {into}")
+    g.line(f"            {left} = {left} - {need}")
+    _finish(g, comp, out, {}, _clip(g, el, src))
+
+
 _EMIT = {"fcs_function": _fcs_function, "switch": _switch, "summer": _summer,
          "pure_gain": _gain, "scheduled_gain": _gain, "aerosurface_scale": _gain,
-         "deadband": _deadband, "pid": _pid, "actuator": _actuator}
+         "deadband": _deadband, "pid": _pid, "actuator": _actuator, "kinematic": _kinematic}
 
 
 # --------------------------------------------------------------------- plan

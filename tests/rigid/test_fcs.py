@@ -158,13 +158,16 @@ def test_a_one_percent_gain_error_is_caught(
                                    rtol=1e-9, err_msg="cosim/ap/roll-pi")
 
 
-def test_the_c172p_flight_control_with_the_cosim_autopilot_equals_jsbsim() -> None:
+@pytest.mark.parametrize("path", ["fused", "numpy"])
+def test_the_c172p_flight_control_with_the_cosim_autopilot_equals_jsbsim(path: str) -> None:
     """The c172p as cosim flies it (JSBSim's own files with the autopilot
     attached): its flaps' kinematic through three settings, the trims and
     the aileron scaling, under the autopilot."""
     model = find_model("c172p")
     root = _wrapper_root(model)  # the files new_fdm gives JSBSim
     plan = compile_systems(root / "c172p" / "c172p.xml", JSBSIM_ROOT / "systems")
+    assert plan.fused is not None
+    plan = _path(plan, path)
     assert {"fcs/flap-pos-deg", "fcs/flap-pos-norm", "cosim/ap/roll-pi"} <= plan.outputs
     schedule = _autopilot_schedule()
     for t_s, flap, trim in ((1, 0.5, 0.02), (4, 1.0, -0.03), (7, 0.1, 0.0), (7.5, 0.0, 0.01)):

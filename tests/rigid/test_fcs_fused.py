@@ -181,11 +181,11 @@ def test_arrays_of_other_kinds_are_read_and_written_through_float64_copies(
 
 def _fusable(zoo: str) -> str:
     """test_fcs.py's zoo of every component, without what the loops do not
-    know (the filters, the kinematic, the cyclic clip, the channel a
-    component switches), with transcendental functions (the loops cut for
-    numpy's), a domain ending at 0 and a surface position in degrees."""
+    know (the filters, the cyclic clip, the channel a component switches),
+    with transcendental functions (the loops cut for numpy's), a domain
+    ending at 0 and a surface position in degrees."""
     for tag in ("lag_filter", "lead_lag_filter", "washout_filter", "second_order_filter",
-                "integrator", "kinematic"):
+                "integrator"):
         zoo = re.sub(rf"<{tag} .*?</{tag}>", "", zoo, flags=re.S)
     zoo = zoo.replace(' type="cyclic"', "")
     zoo = re.sub(r'<channel name="switched by a component".*?</channel>', "", zoo, flags=re.S)
@@ -245,7 +245,7 @@ def test_every_component_the_loops_know_gives_the_numpy_plans_doubles(tmp_path: 
         for k in hist:
             hist[k].append(b[k].copy())
     zoo = sorted(k for k in plan.outputs if "zoo" in k)
-    assert len(zoo) == 21
+    assert len(zoo) == 22
     for k in zoo:  # each moved
         assert np.ptp(hist[k]) > 0.01, k
 
