@@ -257,9 +257,12 @@ def _contacts(root: ET.Element, source: str,
 
 
 def compile_aircraft(aircraft_xml: Path, systems_dir: Path, engine_dir: Path, *,
-                     problems: list[CompileError] | None = None) -> RigidAircraft:
+                     problems: list[CompileError] | None = None,
+                     fuse: bool = True) -> RigidAircraft:
     """Compile an aircraft file (and the files it names); with ``problems``
-    a list, every refusal is appended and compiling goes on where it can."""
+    a list, every refusal is appended and compiling goes on where it can.
+    ``fuse``: the systems as generated numba loops where they can be (off for
+    a check that only lists refusals)."""
     path = Path(aircraft_xml)
     source = str(path)
     root = parse(path)
@@ -273,7 +276,7 @@ def compile_aircraft(aircraft_xml: Path, systems_dir: Path, engine_dir: Path, *,
     metrics = read_metrics(root, source, problems)
     mass = read_mass_balance(root, source, problems)
     aero = read_aerodynamics(root, source, problems)
-    systems = compile_systems(path, Path(systems_dir), problems=problems)
+    systems = compile_systems(path, Path(systems_dir), problems=problems, fuse=fuse)
     prop = compile_propulsion(path, Path(engine_dir), problems=problems)
     mass = mass.with_tanks([Tank(t.location_in, t.contents_key) for t in prop.tanks])
     reads = systems.inputs | aero.inputs | prop.inputs
@@ -285,7 +288,7 @@ def problems(aircraft_xml: Path, systems_dir: Path, engine_dir: Path) -> list[Co
     """Every element of an aircraft (and its files) the compiler refuses."""
     found: list[CompileError] = []
     try:
-        compile_aircraft(aircraft_xml, systems_dir, engine_dir, problems=found)
+        compile_aircraft(aircraft_xml, systems_dir, engine_dir, problems=found, fuse=False)
     except CompileError as err:
         found.append(err)
     unique: dict[str, CompileError] = {}

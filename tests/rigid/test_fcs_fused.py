@@ -168,6 +168,9 @@ def test_arrays_of_other_kinds_are_read_and_written_through_float64_copies(
     engage = props["cosim/ap/engage"] = np.ones(N, dtype=np.int64)
     props["cosim/ap/heading-hold"] = np.ones(N, dtype=np.int32)
     want = {k: v.copy() for k, v in props.items()}
+    assert uav700.fused is not None
+    # other tests in this process may have compiled other array layouts already
+    before = [max(len(k.signatures), 1) for k, _, _ in uav700.fused.segments]
     for f in range(1, 9):
         _numpy(uav700).run(want, DT_S)
         uav700.run(props, DT_S)
@@ -175,8 +178,8 @@ def test_arrays_of_other_kinds_are_read_and_written_through_float64_copies(
     assert props["fcs/throttle-pos-norm"][0] == 0.3 and frozen[0] == 0.3
     assert props["fcs/elevator-cmd-norm"].dtype == np.float64
     assert props["cosim/ap/engage"] is engage
-    assert uav700.fused is not None
-    assert all(len(k.signatures) == 1 for k, _, _ in uav700.fused.segments)
+    # no loop compiled again for the integer arrays
+    assert [len(k.signatures) for k, _, _ in uav700.fused.segments] == before
 
 
 def _fusable(zoo: str) -> str:
