@@ -40,17 +40,13 @@ import numpy as np
 
 from cosim.errors import ConfigError
 from cosim.rigid.body import block
-from cosim.rigid.functions import Compiled, CompileError, compile_function
+from cosim.rigid.functions import Compiled, CompileError, _where, compile_function
 from cosim.rigid.fused import Fused, fuse
 from cosim.rigid.units import INCHTOFT, LB_TO_SLUG, triplet_in, value_in
 
 log = logging.getLogger(__name__)
 Props = dict[str, np.ndarray]
 XYZ = tuple[float, float, float]
-
-
-def _where(el: ET.Element, source: str) -> str:
-    return f"{source}:{el.get('_line', '?')}: <{el.tag}>"
 
 
 def _refuse(problems: list[CompileError] | None, err: CompileError) -> None:

@@ -89,20 +89,12 @@ import math
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from cosim.rigid.functions import Compiled, CompileError, compile_function, parse
+from cosim.rigid.functions import Compiled, CompileError, _where, compile_function, parse
 from cosim.rigid.propulsion_plan import Propulsion, PropulsionError, Tank, Turbine
+from cosim.rigid.units import factor, number
 
 __all__ = ["Propulsion", "PropulsionError", "Tank", "Turbine", "compile_propulsion"]
 
-#: JSBSim's conversion factors (``FGJSBBase``, ``FGXMLElement``)
-_M_TO_FT = 3.2808399
-_TO: dict[str, dict[str, float]] = {
-    "IN": {"IN": 1.0, "FT": 12.0, "M": _M_TO_FT * 12.0},
-    "LBS": {"LBS": 1.0, "KG": 1.0 / 0.45359237, "N": 0.22482},
-    "RAD": {"RAD": 1.0, "DEG": 1.0 / (180.0 / math.pi)},
-    "GAL": {"GAL": 1.0, "L": 0.26417287},
-    "LBS/GAL": {"LBS/GAL": 1.0, "KG/L": 8.3454045},
-}
 #: ``FGTank::ProcessFuelName``'s densities (lbs/gal)
 _FUEL_DENSITY = {
     "AVGAS": 6.02, "JET-A": 6.74, "JET-A1": 6.74, "JET-B": 6.48, "JP-1": 6.76, "JP-2": 6.38,
@@ -123,33 +115,17 @@ _TANK_ELEMENTS = {"location", "capacity", "contents", "unusable-volume", "priori
                   "density", "type"}
 
 
-def _where(el: ET.Element, source: str) -> str:
-    return f"{source}:{el.get('_line', '?')}: <{el.tag}>"
-
-
 def _kids(el: ET.Element) -> list[ET.Element]:
     return [c for c in el if c.tag != "description"]
 
 
 def _number(el: ET.Element, source: str, target: str = "") -> float:
-    try:
-        x = float((el.text or "").strip())
-    except ValueError:
-        raise CompileError(f"{_where(el, source)}: expected a number, got "
-                           f"{(el.text or '').strip()!r}") from None
-    return x * _factor(el, source, target)
+    """An element's number, in ``target`` units (none: as written)."""
+    return number(el, source) * _factor(el, source, target)
 
 
 def _factor(el: ET.Element, source: str, target: str) -> float:
-    unit = el.get("unit", "")
-    if not unit or not target:
-        return 1.0
-    f = _TO.get(target, {}).get(unit)
-    if f is None:
-        known = ", ".join(sorted(_TO.get(target, {})))
-        raise CompileError(f"{_where(el, source)}: unit {unit!r} is not supported here "
-                           f"(supported: {known})")
-    return f
+    return factor(el.get("unit", ""), target, el, source) if target else 1.0
 
 
 def _triplet(el: ET.Element, source: str, target: str, names: tuple[str, str, str]

@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 import xml.etree.ElementTree as ET
 
-from cosim.errors import ConfigError
+from cosim.rigid.functions import CompileError, _where
 
 M_TO_FT = 3.2808399
 KG_TO_LBS = 1.0 / 0.45359237
@@ -39,13 +39,8 @@ _FACTORS: dict[tuple[str, str], float] = {
     ("N", "LBS"): 0.22482, ("LBS", "N"): 1.0 / 0.22482,
     ("KTS", "FT/SEC"): 1.6878098571, ("FT/SEC", "KTS"): 1.0 / 1.6878098571,
     ("M/S", "FT/S"): M_TO_FT, ("M/SEC", "FT/SEC"): M_TO_FT,
+    ("L", "GAL"): 0.26417287, ("KG/L", "LBS/GAL"): 8.3454045,
 }
-_SAME = {"M", "FT", "IN", "CM", "M2", "FT2", "IN2", "LBS", "KG", "SLUG", "SLUG*FT2", "KG*M2",
-         "RAD", "DEG", "N/M", "LBS/FT", "N/M/SEC", "LBS/FT/SEC", "N", "KTS", "FT/SEC"}
-
-
-def _where(el: ET.Element, source: str) -> str:
-    return f"{source}:{el.get('_line', '?')}: <{el.tag}>"
 
 
 def factor(supplied: str, target: str, el: ET.Element, source: str) -> float:
@@ -55,19 +50,19 @@ def factor(supplied: str, target: str, el: ET.Element, source: str) -> float:
         return 1.0
     f = _FACTORS.get((supplied, target))
     if f is None:
-        known = "known" if supplied in _SAME else "unknown"
-        raise ConfigError(f"{_where(el, source)}: unit {supplied!r} ({known}) cannot be "
-                          f"converted to {target}")
+        known = ", ".join(sorted({target, *(a for a, b in _FACTORS if b == target)}))
+        raise CompileError(f"{_where(el, source)}: unit {supplied!r} is not supported here "
+                           f"(supported: {known})")
     return f
 
 
 def number(el: ET.Element, source: str) -> float:
-    """An element's single number, or a ConfigError naming where."""
+    """An element's single number, or a CompileError naming where."""
     try:
         return float((el.text or "").strip())
     except ValueError:
-        raise ConfigError(f"{_where(el, source)}: expected a number, got "
-                          f"{(el.text or '').strip()!r}") from None
+        raise CompileError(f"{_where(el, source)}: expected a number, got "
+                           f"{(el.text or '').strip()!r}") from None
 
 
 def value_in(parent: ET.Element, tag: str, target: str, source: str,
@@ -77,7 +72,7 @@ def value_in(parent: ET.Element, tag: str, target: str, source: str,
     el = parent.find(tag)
     if el is None:
         if default is None:
-            raise ConfigError(f"{_where(parent, source)}: needs <{tag}>")
+            raise CompileError(f"{_where(parent, source)}: needs <{tag}>")
         return default
     return number(el, source) * factor(el.get("unit", ""), target, el, source)
 
