@@ -140,3 +140,20 @@ vehicles:
         parse_scenario(HEAD + bad, str(tmp_path / "s.yaml"), check_properties=True)
     said = "\n".join(ei.value.problems)
     assert "'uav700/fuel-freez' is not an input of class fixed_wing_rigid (model uav700" in said
+
+
+def test_trim_false_on_one_aircraft_leaves_the_others_of_its_model_trimmed(
+        tmp_path: Path) -> None:
+    """Aircraft of one model in one worker start as each asks: the trimmed
+    one with its trim's throttle and pitch, the other untrimmed."""
+    body = """duration_s: 1
+vehicles:
+  - {id: trimmed, class: fixed_wing_rigid, model: uav700,
+     init: {north_m: 0, east_m: 0, alt_agl_m: 300, heading_deg: 0, airspeed_kt: 100}}
+  - {id: raw, class: fixed_wing_rigid, model: uav700, trim: false,
+     init: {north_m: 0, east_m: 300, alt_agl_m: 300, heading_deg: 0, airspeed_kt: 100}}
+"""
+    cols, _ = _run(tmp_path, body)
+    assert 0.2 < cols["trimmed"]["throttle"][0] < 0.6
+    assert cols["trimmed"]["pitch_deg"][0] > 0.1
+    assert cols["raw"]["throttle"][0] == 0.0 and abs(cols["raw"]["pitch_deg"][0]) < 1e-9

@@ -80,15 +80,15 @@ class RigidBatch:
         #: rows that diverged: they keep the row they had
         self.diverged: list[int] = []
         self.width = len(cols)
-        self.landed = np.zeros(self.n, dtype=bool)
-        self.airborne = np.ones(self.n, dtype=bool)
-        by_model: dict[tuple[str, str, str], list[int]] = {}
+        #: a group a model and a start (trimmed or not: a group starts together)
+        by_model: dict[tuple[str, str, str, bool], list[int]] = {}
         for r, s in enumerate(specs):
             p = s.class_params
-            by_model.setdefault((p["xml"], p["systems_dir"], p["engine_dir"]), []).append(r)
+            by_model.setdefault((p["xml"], p["systems_dir"], p["engine_dir"], s.trim),
+                                []).append(r)
         #: (vehicle id, why) of the aircraft that could not be trimmed
         self.failures: list[tuple[str, str]] = []
-        self.groups = [self._build(compiled(*key), [specs[r] for r in rows], rows)
+        self.groups = [self._build(compiled(*key[:3]), [specs[r] for r in rows], rows)
                        for key, rows in by_model.items()]
         if self.failures:  # every one, as the JSBSim tier reports its own
             order = {s.id: r for r, s in enumerate(specs)}
@@ -109,7 +109,7 @@ class RigidBatch:
                             np.array([s.alt_msl_m * _FPS for s in specs]))
         psi = np.radians(np.array([s.heading_deg for s in specs]))
         vt = np.array([s.airspeed_mps * _FPS for s in specs])
-        if all(s.trim for s in specs):
+        if specs[0].trim:  # the group's every aircraft, as grouped
             ok = ac.trim_level(props, loc, psi, vt, dt_s=self.dt)
             for s in (specs[i] for i in np.flatnonzero(~ok)):
                 self.failures.append((s.id, (
@@ -174,8 +174,7 @@ class RigidBatch:
                 self.status[r] = float(VehicleStatus.DIVERGED)
                 self.diverged.append(r)
                 continue
-            if gentle[i]:
-                self.landed[r] = True  # at rest where it touched
+            if gentle[i]:  # a landing: at rest where it touched
                 for c in ("vn_mps", "ve_mps", "vd_mps", "airspeed_mps", "alpha_deg"):
                     row[_S[c]] = 0.0
                 row[_S["roll_deg"]] = 0.0
