@@ -22,6 +22,7 @@ it is saved, restored or cut to some rows as one unit.
 
 from __future__ import annotations
 
+import functools
 import logging
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping
@@ -55,7 +56,6 @@ Props = dict[str, np.ndarray]
 #: (``fileheader`` only describes; ``ground_reactions`` gives contact points)
 _SECTIONS = {"fileheader", "metrics", "mass_balance", "ground_reactions", "propulsion",
              "system", "flight_control", "aerodynamics", "autopilot"}
-_IGNORED = {"fileheader"}
 #: the trim's residuals' scales (ft/s^2, ft/s^2, rad/s^2) for its step control
 _TRIM_SCALE = np.array([1.0, 1.0, 0.1])
 
@@ -92,10 +92,12 @@ class RigidAircraft:
         self.mass.run(props)
         return props
 
-    def property_names(self) -> list[str]:
+    @functools.cached_property
+    def property_names(self) -> frozenset[str]:
         """The public properties of this model's state (what a scenario may
-        write: JSBSim's names), sorted."""
-        return sorted(k for k in self.new_props(1) if not k.startswith("_"))
+        write: JSBSim's names); made once a plan, as a scenario's check asks
+        for every vehicle a ``set:`` names."""
+        return frozenset(k for k in self.new_props(1) if not k.startswith("_"))
 
     def place(self, props: Props, loc_ecef_ft: tuple[np.ndarray, np.ndarray, np.ndarray],
               phi: np.ndarray, theta: np.ndarray, psi: np.ndarray,

@@ -76,7 +76,6 @@ _UVWDOT = ("accelerations/udot-ft_sec2", "accelerations/vdot-ft_sec2",
 _UVW = ("velocities/u-fps", "velocities/v-fps", "velocities/w-fps")
 _PQR = ("velocities/p-rad_sec", "velocities/q-rad_sec", "velocities/r-rad_sec")
 _NED = ("velocities/v-north-fps", "velocities/v-east-fps", "velocities/v-down-fps")
-_EULER = ("attitude/phi-rad", "attitude/theta-rad", "attitude/psi-rad")
 
 
 def _get(props: Props, keys: tuple[str, ...]) -> tuple[np.ndarray, ...]:
@@ -136,11 +135,11 @@ def _state(props: Props, n: int) -> np.ndarray:
     """The integrated state's rows as one block: the block they are rows of
     when they all are (no copy), else a copy."""
     for name in ("_eom/state0", "_eom/state1"):
-        block = props.get(name)
-        if block is not None and block.shape == (len(kern.STATE), n):
-            start, step = _at(block), block.strides[0]
+        kept = props.get(name)
+        if kept is not None and kept.shape == (len(kern.STATE), n):
+            start, step = _at(kept), kept.strides[0]
             if all(_at(props[key]) == start + j * step for j, key in enumerate(kern.STATE)):
-                return block  # the rows are this block's, in order
+                return kept  # the rows are this block's, in order
     return _rows(props, kern.STATE)
 
 
@@ -168,7 +167,7 @@ def initial_state(props: Props, loc: Vec, phi: np.ndarray, theta: np.ndarray,
     Earth (ft/s) and the body rates relative to the Earth (rad/s); the Earth
     position angle 0."""
     n = len(phi)
-    for key in (*kern.ACCELERATIONS, "_eom/bax", "_eom/bay", "_eom/baz"):
+    for key in kern.ACCELERATIONS:  # the body's acceleration by forces among them
         props.setdefault(key, np.zeros(n))  # FGAccelerations::InitModel
     epa = np.zeros(n)
     ti2ec = _ti2ec(epa)
@@ -253,11 +252,10 @@ def accelerations(props: Props, force: Vec, moment: Vec) -> None:
     (lbs ft) about the centre of gravity (``kernels.accelerations``)."""
     out = block(props, "_eom/accelerations", kern.ACCELERATIONS, len(props["_n"]))
     kern.accelerations(props["inertia/mass-slugs"], _rows(props, _INERTIA),
-                          _rows(props, _JINV), _rows(props, _W), _rows(props, _TI2B),
-                          _rows(props, _TEC2B), props["_eom/ce"], props["_eom/se"],
-                          _rows(props, _PQR),
-                          _rows(props, _UVW), _rows(props, _R), _rows(props, _ECEF),
-                          np.array(force), np.array(moment), out)
+                       _rows(props, _JINV), _rows(props, _W), _rows(props, _TI2B),
+                       _rows(props, _TEC2B), props["_eom/ce"], props["_eom/se"],
+                       _rows(props, _PQR), _rows(props, _UVW), _rows(props, _R),
+                       _rows(props, _ECEF), np.array(force), np.array(moment), out)
     _store(props, kern.ACCELERATIONS, out)
 
 
@@ -271,11 +269,11 @@ def auxiliary(props: Props, wanted: frozenset[str] = frozenset()) -> None:
     u, v, w = _get(props, _UVW)
     out = block(props, "_eom/auxiliary", kern.AUXILIARY, len(phi))
     kern.auxiliary(_rows(props, _PQR), np.cos(phi), np.sin(phi), np.cos(theta),
-                         np.sin(theta), _rows(props, _UVW), np.arctan2(w, u),
-                         np.arctan2(v, np.sqrt(u * u + w * w)), _rows(props, _UVWDOT),
-                         props["atmosphere/rho-slugs_ft3"], props["atmosphere/a-fps"],
-                         _rows(props, _NED), props["atmosphere/rho-sl-slugs_ft3"],
-                         _rows(props, _BA), geo.G0_FT_S2, KTSTOFPS, out)
+                   np.sin(theta), _rows(props, _UVW), np.arctan2(w, u),
+                   np.arctan2(v, np.sqrt(u * u + w * w)), _rows(props, _UVWDOT),
+                   props["atmosphere/rho-slugs_ft3"], props["atmosphere/a-fps"],
+                   _rows(props, _NED), props["atmosphere/rho-sl-slugs_ft3"],
+                   _rows(props, _BA), geo.G0_FT_S2, KTSTOFPS, out)
     _store(props, kern.AUXILIARY, out)
     # no wind, no turbulence: the air-relative rates and velocities are the body's
     for a, b in zip(("velocities/p-aero-rad_sec", "velocities/q-aero-rad_sec",

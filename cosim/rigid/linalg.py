@@ -52,12 +52,6 @@ def add(a: Vec, b: Vec) -> Vec:
     return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
 
 
-def sub(a: Vec, b: Vec) -> Vec:
-    return (a[0] - b[0], a[1] - b[1], a[2] - b[2])
-
-
-def scale(s: Arr | float, a: Vec) -> Vec:
-    return (s * a[0], s * a[1], s * a[2])
 
 
 def quat_from_euler(phi: Arr, tht: Arr, psi: Arr) -> Quat:
@@ -117,22 +111,3 @@ def quat_mul(a: Quat, b: Quat) -> Quat:
             a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
             a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
             a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0])
-
-
-def quat_dot(q: Quat, w: Vec) -> Quat:
-    """The quaternion's time derivative for body rates ``w`` (FGQuaternion::GetQDot)."""
-    return (-0.5 * (q[1] * w[0] + q[2] * w[1] + q[3] * w[2]),
-            0.5 * (q[0] * w[0] - q[3] * w[1] + q[2] * w[2]),
-            0.5 * (q[3] * w[0] + q[0] * w[1] - q[1] * w[2]),
-            0.5 * (-q[2] * w[0] + q[1] * w[1] + q[0] * w[2]))
-
-
-def euler(t: Mat) -> Vec:
-    """Roll, pitch and yaw (rad, yaw in [0, 2 pi)) of a transformation
-    matrix (FGMatrix33::GetEuler, without its gimbal-lock branch: at exactly
-    +-90 deg of pitch roll is computed from the same formula)."""
-    theta = np.arcsin(np.clip(-t[2], -1.0, 1.0))
-    phi = np.arctan2(t[5], t[8])
-    psi = np.arctan2(t[1], t[0])
-    psi = np.where(psi < 0.0, psi + 2.0 * np.pi, psi)
-    return (phi, theta, psi)

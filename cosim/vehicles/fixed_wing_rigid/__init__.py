@@ -95,8 +95,8 @@ class FixedWingRigid(FixedWing):
         from cosim.vehicles.fixed_wing_rigid.model import compiled
 
         xml, systems, engines = model_files(spec.aircraft_dir, spec.model, spec.model_source)
-        names = compiled(str(xml), str(systems), str(engines)).property_names()
-        return frozenset(names) | frozenset(self.channels)
+        return compiled(str(xml), str(systems), str(engines)).property_names \
+            | frozenset(self.channels)
 
     def make_batch(self, specs: Sequence[VehicleSpec], dt_s: float, channels: Sequence[str],
                    columns: Sequence[str]) -> RigidBatch:
