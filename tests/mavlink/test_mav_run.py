@@ -39,10 +39,11 @@ def _dist_m(lat1: float, lon1: float, lat2: float, lon2: float) -> float:
 
 
 def _start_sim(tmp_path: Path, duration_s: int, realtime: str, gcs_port: int,
-               *extra: str) -> tuple[subprocess.Popen, Path]:
-    """``cosim run`` of the 3-vehicle scenario with MAVLink sent to ``gcs_port``."""
+               *extra: str, scenario: str = SCENARIO) -> tuple[subprocess.Popen, Path]:
+    """``cosim run`` of the 3-vehicle scenario (or ``scenario``) with MAVLink
+    sent to ``gcs_port``."""
     scn = tmp_path / "mav3.yaml"
-    scn.write_text(SCENARIO.replace("duration_s: 600", f"duration_s: {duration_s}"))
+    scn.write_text(scenario.replace("duration_s: 600", f"duration_s: {duration_s}"))
     out = tmp_path / "out"
     sim = subprocess.Popen(
         [sys.executable, "-m", "cosim", "-q", "run", str(scn), "--out", str(out),
@@ -150,6 +151,74 @@ def test_ground_station_repositions_one_vehicle_and_flies_a_mission_on_another(
     tlogs = sorted(p.name for p in out.glob("*.tlog"))
     assert tlogs == ["uav0.tlog", "uav1.tlog", "uav2.tlog"]
     assert mavutil.mavlink_connection(str(out / "uav2.tlog")).recv_match(type="HEARTBEAT")
+
+
+@pytest.mark.parametrize("vehicle_class", ["fixed_wing", "fixed_wing_rigid"])
+def test_a_lone_plane_of_each_tier_obeys_a_reposition_and_a_speed_change(
+        tmp_path: Path, vehicle_class: str) -> None:
+    """One uav700 of the JSBSim tier or the rigid-body tier: an ArduPlane
+    heartbeat, its start in GLOBAL_POSITION_INT, and a guided reposition 3 km
+    east and 100 m up with a faster airspeed that shows in its flight within
+    a few simulated seconds (the times are the messages' time_boot_ms)."""
+    scenario = SCENARIO.replace("count: 3, model: uav700, formation: {type: line, "
+                                "spacing_m: 1000},",
+                                f"class: {vehicle_class}, model: uav700,")
+    gcs = GroundStation("udpin:127.0.0.1:0")
+    sim, out = _start_sim(tmp_path, 600, "10", gcs.port, scenario=scenario)
+    try:
+        hb = pos0 = None
+        deadline = time.monotonic() + 60  # numba's first compilation on a cold cache
+        while (hb is None or pos0 is None) and time.monotonic() < deadline:
+            for m in gcs.drain(0.5):
+                if m.get_type() == "HEARTBEAT":
+                    hb = m
+                elif m.get_type() == "GLOBAL_POSITION_INT" and pos0 is None:
+                    pos0 = m
+        assert hb is not None and pos0 is not None, "no heartbeat or position"
+        assert (hb.get_srcSystem(), hb.type, hb.autopilot) == (
+            1, ML.MAV_TYPE_FIXED_WING, ML.MAV_AUTOPILOT_ARDUPILOTMEGA)
+        assert _dist_m(pos0.lat * 1e-7, pos0.lon * 1e-7, 37.0, -116.0) < 100.0
+        assert abs(pos0.relative_alt / 1000.0 - 300.0) < 2.0 and pos0.hdg in (0, 35999)
+        gcs.hello()
+        target = (37.0, -116.0 + 3000.0 / (111_000.0 * math.cos(math.radians(37.0))))
+        gcs.conn.mav.command_int_send(
+            1, 1, ML.MAV_FRAME_GLOBAL_INT, ML.MAV_CMD_DO_REPOSITION, 0, 0, -1,
+            ML.MAV_DO_REPOSITION_FLAGS_CHANGE_MODE, 0, 0, round(target[0] * 1e7),
+            round(target[1] * 1e7), 1400.0)
+        gcs.conn.mav.command_long_send(1, 1, ML.MAV_CMD_DO_CHANGE_SPEED, 0, 0, 65.0, -1,
+                                       0, 0, 0, 0)
+        acks: dict[int, int] = {}
+        track: list[tuple[float, float, float]] = []  # (time_boot_s, heading_deg, alt_m)
+        speeds: list[tuple[float, float]] = []  # (time_boot_s, airspeed_mps)
+        t_ms = pos0.time_boot_ms
+        deadline = time.monotonic() + 30
+        while (not track or track[-1][0] - track[0][0] < 10.0) \
+                and time.monotonic() < deadline:
+            for m in gcs.drain(0.5):
+                kind = m.get_type()
+                if kind == "COMMAND_ACK":
+                    acks[m.command] = m.result
+                elif kind == "GLOBAL_POSITION_INT":
+                    t_ms = m.time_boot_ms
+                    if len(acks) == 2:  # from the first position after both answers
+                        track.append((t_ms / 1000.0, m.hdg / 100.0, m.alt / 1000.0))
+                elif kind == "VFR_HUD" and len(acks) == 2:
+                    speeds.append((t_ms / 1000.0, m.airspeed))
+        assert acks == {ML.MAV_CMD_DO_REPOSITION: ML.MAV_RESULT_ACCEPTED,
+                        ML.MAV_CMD_DO_CHANGE_SPEED: ML.MAV_RESULT_ACCEPTED}, acks
+        assert track and track[-1][0] - track[0][0] >= 10.0, "positions stopped coming"
+        (t0, hdg0, alt0), later = track[0], [p for p in track if p[0] <= track[0][0] + 10.0]
+        hdg_deg = max(p[1] if p[1] < 180.0 else p[1] - 360.0 for p in later)
+        assert hdg_deg - (hdg0 if hdg0 < 180.0 else hdg0 - 360.0) > 45.0, later
+        assert max(p[2] for p in later) - alt0 > 30.0, later
+        fast = [v for t, v in speeds if t <= t0 + 10.0]
+        assert fast and max(fast) - fast[0] > 5.0, speeds
+    finally:
+        err = _stop_sim(sim)
+        gcs.close()
+    assert sim.returncode == 130, err
+    events = [json.loads(x)["event"] for x in (out / "events.jsonl").read_text().splitlines()]
+    assert "ground_impact" not in events and "divergence" not in events
 
 
 def test_signed_run_answers_only_a_ground_station_with_the_key(tmp_path: Path,
