@@ -12,6 +12,7 @@ module or itself; ``fast`` when it is in no other tier."""
 from __future__ import annotations
 
 import dataclasses
+import logging
 import os
 import textwrap
 from collections.abc import Callable, Iterator
@@ -75,6 +76,21 @@ def pytest_terminal_summary(terminalreporter: Any) -> None:
                                    "(mark them integration if they always do)", yellow=True)
         for s, n in slow:
             terminalreporter.write_line(f"{s:6.1f} s  {n}")
+
+
+@pytest.fixture(autouse=True)
+def _logging_as_it_was() -> Iterator[None]:
+    """The root logger's handlers and level, and cosim.jsbsim's level, as
+    they were before the test: ``cosim.cli.main`` called in the test's
+    process configures logging for the process (a stream handler on the
+    test's captured stderr, closed once the test ends; the root at INFO),
+    which later tests on the same worker would otherwise inherit."""
+    root, jsbsim = logging.getLogger(), logging.getLogger("cosim.jsbsim")
+    handlers, root_level, jsbsim_level = root.handlers[:], root.level, jsbsim.level
+    yield
+    root.handlers[:] = handlers
+    root.setLevel(root_level)
+    jsbsim.setLevel(jsbsim_level)
 
 
 @pytest.fixture(autouse=True, scope="session")

@@ -54,13 +54,19 @@ def pytest_collection_finish(session):
 '''
 
 
-def _collect(folder: Path, *args: str) -> subprocess.CompletedProcess[str]:
-    """``pytest --collect-only`` of ``folder``'s tests with this conftest as a plugin."""
-    return subprocess.run([sys.executable, "-m", "pytest", "-p", "tests.conftest", "-p", "dump",
-                           "--collect-only", "-q", "-p", "no:cacheprovider", "--rootdir",
-                           str(folder), "-c", str(folder / "pytest.ini"), *args, str(folder)],
+def _pytest(folder: Path, *args: str, **env: str) -> subprocess.CompletedProcess[str]:
+    """``pytest`` of ``folder``'s tests with this conftest as a plugin."""
+    return subprocess.run([sys.executable, "-m", "pytest", "-p", "tests.conftest",
+                           "-p", "no:cacheprovider", "--rootdir", str(folder),
+                           "-c", str(folder / "pytest.ini"), *args, str(folder)],
                           cwd=REPO, capture_output=True, text=True, timeout=120,
-                          env={**os.environ, "PYTHONPATH": f"{folder}{os.pathsep}{REPO}"})
+                          env={**os.environ, **env,
+                               "PYTHONPATH": f"{folder}{os.pathsep}{REPO}"})
+
+
+def _collect(folder: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    """``pytest --collect-only`` of ``folder``'s tests, printing their tiers."""
+    return _pytest(folder, "-p", "dump", "--collect-only", "-q", *args)
 
 
 def test_every_test_lands_in_one_tier(tmp_path: Path) -> None:
@@ -92,3 +98,35 @@ def test_two_tiers_on_one_test_are_a_usage_error(tmp_path: Path) -> None:
     assert r.returncode == 4, r.stdout + r.stderr
     assert "test_suite.py::test_both is marked integration and slow: a test is in one tier" in (
         r.stdout + r.stderr)
+
+
+#: a test calling the CLI in its process, then one looking at the logging it left
+CLI_THEN_LOGGING = '''
+import logging
+
+from cosim.cli import main
+
+
+def test_a_cli_call(tmp_path):
+    assert main(["-v", "validate", str(tmp_path / "missing.yaml")]) == 2
+
+
+def test_logging_is_as_before():
+    root = logging.getLogger()
+    assert root.level == logging.WARNING, logging.getLevelName(root.level)
+    assert not [h for h in root.handlers if type(h) is logging.StreamHandler], root.handlers
+    assert logging.getLogger("cosim.jsbsim").level == logging.NOTSET
+'''
+
+
+def test_a_cli_call_in_a_test_leaves_no_logging_to_the_next(tmp_path: Path) -> None:
+    """``cosim.cli.main`` in a test's process sets the root logger to INFO
+    with a handler on the test's captured stderr; the next test on that
+    worker starts with logging as it was (it had inherited both: its log
+    lines went to a closed file, and a test read records it had not asked
+    for)."""
+    (tmp_path / "pytest.ini").write_text("[pytest]\n")
+    (tmp_path / "test_order.py").write_text(CLI_THEN_LOGGING)
+    r = _pytest(tmp_path, "-p", "no:randomly", "-q")
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "2 passed" in r.stdout, r.stdout
