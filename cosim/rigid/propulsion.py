@@ -58,7 +58,10 @@ the acting location ``x-position``, ``y-position``, ``z-position``
 ``propulsion/set-running`` = -1 leaves it (N1 and N2 at their full-throttle
 values; the fuel flow at its steady value when the flight inputs are
 already in ``props``, else the idle flow) and every tank at its initial
-contents. Index 0 is written without brackets, as JSBSim's property tree
+contents; ``set_running(props)`` is that command written after the initial
+conditions' frame, as an untrimmed start writes it (JSBSim's engine then
+runs from full speed, its steady state at full throttle, which the next
+frames spool down to the throttle's). Index 0 is written without brackets, as JSBSim's property tree
 names it (``propulsion/engine/n1``). Every phase but running is computed
 only in a frame where some aircraft needs it.
 

@@ -1,8 +1,8 @@
 """The plan ``cosim.rigid.propulsion`` compiles: the turbine engines, their
 direct thrusters and the fuel tanks of every aircraft stepped together
-(``Propulsion.init``, ``run``, ``inputs``, ``outputs``), their state in the
-caller's ``props``. What it computes, and in which order, is said in
-``cosim.rigid.propulsion``; this module holds no XML."""
+(``Propulsion.init``, ``set_running``, ``run``, ``inputs``, ``outputs``),
+their state in the caller's ``props``. What it computes, and in which
+order, is said in ``cosim.rigid.propulsion``; this module holds no XML."""
 
 from __future__ import annotations
 
@@ -108,6 +108,15 @@ def _seek(v: np.ndarray, target: np.ndarray | float, up: np.ndarray | float,
     return np.where(above, np.maximum(moved, target), np.minimum(moved, target))
 
 
+def _position(tp: np.ndarray) -> np.ndarray:
+    """The throttle position an engine runs at (``FGTurbine::Calculate``:
+    above 1 is augmentation, taken off)."""
+    if bool((tp > 1.0).any()):
+        over = tp - 1.0
+        tp = np.where(over > 0.0, tp - over, tp)
+    return tp
+
+
 def _times(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray | None:
     return None if a is None or b is None else a * b
 
@@ -170,6 +179,56 @@ class Propulsion:
                 props[e.key(k)] = np.full(n, x)
             props["_" + e.key("fuel-flow-pph")] = self._steady_flow(e, props, n)
 
+    def set_running(self, props: dict[str, np.ndarray]) -> None:
+        """``propulsion/set-running`` = -1 written after the initial
+        conditions' frame (``place``), as JSBSim 1.3 does it: for every engine
+        ``FGTurbine::InitRunning`` (no longer cut off; running unless starved;
+        N1 and N2 at the last frame's throttle; its frame without time moves
+        nothing; the phase left running), then ``FGPropulsion::GetSteadyState``:
+        the engine stepped at 0.5 s with the throttle at 1 and no fuel burned
+        until its thrust has moved by less than 1e-4 lbf 121 steps running
+        (at most 6,000 steps). A running engine so ends at its full-throttle
+        N1, N2 and fuel flow, from which the next frame spools it down to the
+        throttle's; a starved one winds down, off. The thrust is left at its
+        steady value; the accelerations stay those of the initial conditions'
+        frame (JSBSim runs no other model; it also sums the steady thrust into
+        ``forces/fbx-prop-lbs``, which the next frame writes before reading)."""
+        n = len(props[_CG[0]])
+        props[_CUTOFF] = np.zeros(n)
+        full = np.ones(n)
+        current = np.zeros(n)  # JSBSim's, kept from one engine to the next
+        for e in self.engines:
+            starved = props["_" + e.key("starved")] != 0.0
+            tp = _position(props[e.throttle_key])
+            props[e.key("n2")] = e.idle_n2 + tp * e.n2_factor
+            props[e.key("n1")] = e.idle_n1 + tp * e.n1_factor
+            props["_" + e.key("running")] = np.where(starved, 0.0, 1.0)
+            props["_" + e.key("phase")] = np.where(starved, _OFF, _RUN)
+            idle_fraction = e.idle_thrust.evaluate(props)
+            mil_fraction = e.mil_thrust.evaluate(props)
+            idle = e.milthrust_lbs * idle_fraction
+            mil = (e.milthrust_lbs - idle) * mil_fraction
+            keys = [e.key(k) for k in ("n1", "n2", "tsfc")] + [
+                "_" + e.key(k) for k in ("n2norm", "fuel-flow-pph", "phase", "running")] + [
+                _STARTER]
+            count = np.zeros(n, dtype=np.int64)
+            done = np.zeros(n, dtype=bool)
+            for _ in range(6000):
+                if bool(done.all()):
+                    break
+                before = [props[k].copy() for k in keys]
+                thrust = self._calculate(e, props, 0.5, full, idle, mil)[0]
+                reverser = props[e.key("reverser-angle-rad")]
+                if bool(reverser.any()):
+                    thrust = np.cos(reverser) * thrust
+                for k, b in zip(keys, before, strict=True):  # a steady aircraft stopped
+                    props[k] = np.where(done, b, props[k])
+                last, current = current, np.where(done, current, thrust)
+                count = np.where(done, count, np.where(np.abs(last - current) < 1e-4,
+                                                       count + 1, 0))
+                done = done | (count > 120)
+            props[e.key("thrust-lbs")] = current
+
     def _steady_flow(self, e: Turbine, props: dict[str, np.ndarray], n: int) -> np.ndarray:
         """The fuel flow JSBSim's steady state at full throttle leaves: the
         target thrust x TSFC at N2norm 1, never below the idle flow."""
@@ -218,10 +277,7 @@ class Propulsion:
     def _engine(self, e: Turbine, props: dict[str, np.ndarray], dt_s: float,
                 cg: list[np.ndarray], frozen: np.ndarray
                 ) -> tuple[list[np.ndarray | None], list[np.ndarray | None]]:
-        tp = props[e.throttle_key]
-        if bool((tp > 1.0).any()):  # FGTurbine::Calculate: above 1 is augmentation
-            over = tp - 1.0
-            tp = np.where(over > 0.0, tp - over, tp)
+        tp = _position(props[e.throttle_key])
         idle_fraction = e.idle_thrust.evaluate(props)
         mil_fraction = e.mil_thrust.evaluate(props)
         props[e.key("IdleThrust")] = idle_fraction

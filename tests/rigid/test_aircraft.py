@@ -48,8 +48,8 @@ def _rigid_from(fdm, path: Path = UAV700):
             props[k] = np.full(1, float(fdm[k]))
     lat, lon = fdm["position/lat-gc-rad"], fdm["position/long-gc-rad"]
     r = fdm["position/radius-to-vehicle-ft"]
-    loc = tuple(np.array([v]) for v in (r * np.cos(lat) * np.cos(lon),
-                                        r * np.cos(lat) * np.sin(lon), r * np.sin(lat)))
+    loc = (np.array([r * np.cos(lat) * np.cos(lon)]), np.array([r * np.cos(lat) * np.sin(lon)]),
+           np.array([r * np.sin(lat)]))
 
     def a(k: str) -> np.ndarray:
         return np.array([fdm[k]])
@@ -126,6 +126,49 @@ def test_a_two_percent_lift_coefficient_is_seen(tmp_path: Path) -> None:
     ac, props = _rigid_from(fdm, aircraft / "uav700.xml")
     worst = _fly(fdm, ac, props, 10.0)
     assert worst["position/h-sl-ft"] > 0.5, worst  # half a foot, where equal files give 1e-5
+
+
+def test_set_running_after_the_initial_conditions_leaves_jsbsims_engine() -> None:
+    """Untrimmed starts: the initial conditions, then propulsion/set-running.
+    JSBSim leaves the engine at its full-throttle N1, N2 and thrust, running,
+    and its first frames spool it down to the closed throttle; so does the
+    rigid aircraft (its engine had started from the throttle's N2). An
+    aircraft with empty tanks and its fuel not frozen is starved there:
+    JSBSim winds its engine down, off, and so does the rigid one."""
+    ac = compile_aircraft(UAV700, SYSTEMS, ENGINES)
+    props = ac.new_props(2)
+    props["uav700/fuel-freeze"] = np.array([1.0, 0.0])
+    props["propulsion/tank/contents-lbs"] = np.array([props["propulsion/tank/contents-lbs"][0],
+                                                      0.0])
+    fdms = []
+    for i in range(2):
+        fdm = new_fdm(find_model("uav700"), 1 / 120)
+        fdm["ic/lat-geod-deg"], fdm["ic/long-gc-deg"] = 47.0, 8.0
+        fdm["ic/h-sl-ft"], fdm["ic/vt-fps"], fdm["ic/psi-true-deg"] = 3000, 100 * KT, 0
+        if i == 1:
+            fdm["uav700/fuel-freeze"], fdm["propulsion/tank/contents-lbs"] = 0.0, 0.0
+        fdm.run_ic()
+        fdm["propulsion/set-running"] = -1
+        fdms.append(fdm)
+    z = np.zeros(2)
+    loc = position_ecef(np.full(2, 47.0), np.full(2, 8.0), np.full(2, 3000.0))
+    ac.place(props, loc, z, z, z, (np.full(2, 100 * KT), z, z))
+    ac.propulsion.set_running(props)
+    keys = ("propulsion/engine/n1", "propulsion/engine/n2", "propulsion/engine/thrust-lbs")
+    for i, fdm in enumerate(fdms):
+        for k in keys:
+            assert props[k][i] == pytest.approx(fdm[k], rel=1e-12, abs=1e-12), (i, k)
+    assert props["propulsion/engine/n2"][0] == 100.0 and props["propulsion/engine/n2"][1] < 5
+    for _ in range(60):
+        ac.run(props, 1 / 120)
+        for fdm in fdms:
+            fdm.run()
+    for k in keys:
+        assert props[k][0] == pytest.approx(fdms[0][k], rel=1e-6), k
+    assert 50 < props["propulsion/engine/n2"][0] < 70  # half-way down to idle (33 %)
+    assert props["propulsion/engine/thrust-lbs"][1] == fdms[1]["propulsion/engine/thrust-lbs"]
+    assert props["propulsion/engine/n2"][1] == pytest.approx(fdms[1]["propulsion/engine/n2"],
+                                                             abs=1e-3)
 
 
 @pytest.mark.parametrize(("h_ft", "kt"), [(3000, 100), (500, 60), (10000, 200)])

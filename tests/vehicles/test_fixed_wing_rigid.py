@@ -157,3 +157,20 @@ vehicles:
     assert 0.2 < cols["trimmed"]["throttle"][0] < 0.6
     assert cols["trimmed"]["pitch_deg"][0] > 0.1
     assert cols["raw"]["throttle"][0] == 0.0 and abs(cols["raw"]["pitch_deg"][0]) < 1e-9
+
+
+def test_an_untrimmed_start_keeps_with_jsbsims_untrimmed_start(tmp_path: Path) -> None:
+    """Both tiers start ``trim: false`` from the same state: JSBSim's engine
+    leaves ``propulsion/set-running`` at its full-throttle speed and spools
+    down to the throttle's, and the rigid body's does too, so their
+    airspeeds agree to 0.05 kt over the first 5 s (they parted by knots when
+    the rigid engine started at the throttle's speed)."""
+    start = SIDE_BY_SIDE.split("schedule:")[0]  # its two aircraft, no commands
+    body = start.replace("duration_s: 60", "duration_s: 5").replace(
+        "model: uav700,", "model: uav700, trim: false,")
+    assert body.count("trim: false") == 2
+    cols, _ = _run(tmp_path, body)
+    jsb, rig = cols["jsb"], cols["rig"]
+    assert len(jsb["airspeed_mps"]) >= 50 and (jsb["throttle"] == 0.0).all()
+    gap_kt = np.abs(rig["airspeed_mps"] - jsb["airspeed_mps"]).max() / 0.514444
+    assert gap_kt < 0.05, f"the untrimmed starts part by {gap_kt:.3f} kt"

@@ -118,9 +118,10 @@ class RigidBatch:
                     f"{s.alt_msl_m:.1f} m MSL ({s.alt_msl_m - s.terrain_alt_m:.1f} m above "
                     f"the ground): level flight needs an angle of attack, throttle or pitch "
                     f"trim outside the model's range")))
-        else:
+        else:  # the JSBSim tier's untrimmed start: run_ic, then propulsion/set-running
             z = np.zeros(m)
             ac.place(props, loc, z, z, psi, (vt, z, z), dt_s=self.dt)
+            ac.propulsion.set_running(props)
         for i, s in enumerate(specs):
             for name, value in s.initial_props:
                 if name in props:
