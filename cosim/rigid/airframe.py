@@ -351,8 +351,8 @@ class Aerodynamics:
         if fz is None:
             return _numpy_terms(self, props)
         n = len(props["_n"])
-        out = fz.run(props, block(props, "_aero/terms", fz.names, n) if fz.names and
-                     fz.names[0] else None)
+        out = fz.run(props, block(props, "_aero/terms", fz.names, n, reuse=True)
+                     if fz.names and fz.names[0] else None)
         for k, name in enumerate(fz.names):
             if name:
                 props[name] = out[k]

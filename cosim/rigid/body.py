@@ -47,7 +47,6 @@ from cosim.rigid.linalg import (
     quat_from_euler,
     quat_from_matrix,
     quat_mul,
-    quat_t,
     transpose,
 )
 from cosim.rigid.units import KTSTOFPS
@@ -98,10 +97,20 @@ def _store(props: Props, keys: tuple[str, ...], block: np.ndarray) -> None:
         props[key] = block[j]
 
 
-def block(props: Props, name: str, keys: tuple[str, ...], n: int) -> np.ndarray:
+def block(props: Props, name: str, keys: tuple[str, ...], n: int, *,
+          reuse: bool = False) -> np.ndarray:
     """Where a kernel writes ``keys`` this frame: of two blocks kept in
     ``props`` (so a frame allocates nothing), the one the properties do not
-    show now (they show last frame's until ``_store``)."""
+    show now (they show last frame's until ``_store``). ``reuse``: one block,
+    written over in place, for a kernel that reads none of its rows or reads
+    an aircraft's before writing that aircraft's (the frame touches half the
+    memory; nothing keeps these rows across frames: the flight controls keep
+    copies)."""
+    if reuse:
+        a = props.get(name + "0")
+        if a is None or a.shape != (len(keys), n):
+            a = props[name + "0"] = _aligned((len(keys), n), 1)
+        return a
     a, b = props.get(name + "0"), props.get(name + "1")
     if a is None or b is None or a.shape != (len(keys), n):
         a, b = _aligned((len(keys), n), 1), _aligned((len(keys), n), 2)
@@ -176,7 +185,7 @@ def initial_state(props: Props, loc: Vec, phi: np.ndarray, theta: np.ndarray,
     ti2l = mm(_tec2l(loc), ti2ec)
     q_local = quat_from_euler(phi, theta, psi)
     q = quat_mul(quat_from_matrix(ti2l), q_local)
-    ti2b = quat_t(q)
+    ti2b = tuple(kern.ti2b_arrays(np.array(q)))
     w_i = add(pqr, mv(ti2b, _omega(n)))
     v_i = add(mtv(ti2b, uvw), cross(_omega(n), r_i))
     props["_eom/epa"] = epa
@@ -209,7 +218,7 @@ def propagate(props: Props, dt: float) -> None:
     ce, se = np.cos(epa), np.sin(epa)
     n = len(epa)
     new = block(props, "_eom/state", kern.STATE, n)
-    der = block(props, "_eom/derived", kern.DERIVED, n)
+    der = block(props, "_eom/derived", kern.DERIVED, n, reuse=True)
     kern.propagate(dt, _state(props, n), _rows(props, _QD), _rows(props, _WD),
                    _rows(props, _AI), ce, se, props["position/terrain-elevation-asl-ft"],
                    new, der)
@@ -242,18 +251,16 @@ def _angles(props: Props) -> None:
 _INERTIA = ("inertia/ixx-slugs_ft2", "inertia/iyy-slugs_ft2", "inertia/izz-slugs_ft2",
             "inertia/ixy-slugs_ft2", "inertia/ixz-slugs_ft2", "inertia/iyz-slugs_ft2")
 _JINV = tuple("_mb/jinv" + s for s in ("11", "12", "13", "22", "23", "33"))
-_TI2B = tuple(f"_eom/ti2b_t{r}{c}" for r in "123" for c in "123")
-_TEC2B = tuple(f"_eom/tec2b_t{r}{c}" for r in "123" for c in "123")
 
 
 def accelerations(props: Props, force: Vec, moment: Vec) -> None:
     """FGAccelerations::Run in the air (no ground friction): the body's
     angular and linear accelerations from the total force (lbs) and moment
     (lbs ft) about the centre of gravity (``kernels.accelerations``)."""
-    out = block(props, "_eom/accelerations", kern.ACCELERATIONS, len(props["_n"]))
+    out = block(props, "_eom/accelerations", kern.ACCELERATIONS, len(props["_n"]), reuse=True)
     kern.accelerations(props["inertia/mass-slugs"], _rows(props, _INERTIA),
-                       _rows(props, _JINV), _rows(props, _W), _rows(props, _TI2B),
-                       _rows(props, _TEC2B), props["_eom/ce"], props["_eom/se"],
+                       _rows(props, _JINV), _rows(props, _W), _rows(props, _Q),
+                       props["_eom/ce"], props["_eom/se"],
                        _rows(props, _PQR), _rows(props, _UVW), _rows(props, _R),
                        _rows(props, _ECEF), np.array(force), np.array(moment), out)
     _store(props, kern.ACCELERATIONS, out)
@@ -267,9 +274,8 @@ def auxiliary(props: Props, wanted: frozenset[str] = frozenset()) -> None:
     a third of the rest's)."""
     phi, theta = props["attitude/phi-rad"], props["attitude/theta-rad"]
     u, v, w = _get(props, _UVW)
-    out = block(props, "_eom/auxiliary", kern.AUXILIARY, len(phi))
-    kern.auxiliary(_rows(props, _PQR), np.cos(phi), np.sin(phi), np.cos(theta),
-                   np.sin(theta), _rows(props, _UVW), np.arctan2(w, u),
+    out = block(props, "_eom/auxiliary", kern.AUXILIARY, len(phi), reuse=True)
+    kern.auxiliary(_rows(props, _PQR), phi, theta, _rows(props, _UVW), np.arctan2(w, u),
                    np.arctan2(v, np.sqrt(u * u + w * w)), _rows(props, _UVWDOT),
                    props["atmosphere/rho-slugs_ft3"], props["atmosphere/a-fps"],
                    _rows(props, _NED), props["atmosphere/rho-sl-slugs_ft3"],

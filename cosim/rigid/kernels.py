@@ -150,8 +150,33 @@ DERIVED = ("velocities/u-fps", "velocities/v-fps", "velocities/w-fps",
            "velocities/v-north-fps", "velocities/v-east-fps", "velocities/v-down-fps",
            "velocities/h-dot-fps", "_eom/tanlat", "position/h-sl-ft", "position/h-agl-ft",
            "_eom/qd0", "_eom/qd1", "_eom/qd2", "_eom/qd3", "_eom/ex", "_eom/ey", "_eom/ez",
-           *(f"_eom/{m}_t{r}{c}" for m in ("tl2b", "ti2b", "tec2b")
-             for r in "123" for c in "123"))
+           *(f"_eom/tl2b_t{r}{c}" for r in "123" for c in "123"))
+
+
+@jit
+def ti2b(q0: float, q1: float, q2: float, q3: float
+         ) -> tuple[float, float, float, float, float, float, float, float, float]:
+    """The body's matrix from the inertial frame (row-major) of the attitude
+    quaternion, normalised first (FGQuaternion::GetT)."""
+    rn = 1.0 / math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+    a0, a1, a2, a3 = rn * q0, rn * q1, rn * q2, rn * q3
+    a00, a11, a22, a33 = a0 * a0, a1 * a1, a2 * a2, a3 * a3
+    a01, a02, a03 = a0 * a1, a0 * a2, a0 * a3
+    a12, a13, a23 = a1 * a2, a1 * a3, a2 * a3
+    return (a00 + a11 - a22 - a33, 2.0 * (a12 + a03), 2.0 * (a13 - a02),
+            2.0 * (a12 - a03), a00 - a11 + a22 - a33, 2.0 * (a23 + a01),
+            2.0 * (a13 + a02), 2.0 * (a23 - a01), a00 - a11 - a22 + a33)
+
+
+@jit
+def ti2b_arrays(q: np.ndarray) -> np.ndarray:
+    """``ti2b`` for a (4, n) block of quaternions: its nine rows."""
+    out = np.empty((9, q.shape[1]))
+    for i in range(q.shape[1]):
+        b = ti2b(q[0, i], q[1, i], q[2, i], q[3, i])
+        for k in range(9):
+            out[k, i] = b[k]
+    return out
 
 
 @jit
@@ -169,15 +194,7 @@ def _derive(out: np.ndarray, i: int, q0: float, q1: float, q2: float, q3: float,
     il = (e[0] * ce - e[1] * se, e[0] * se + e[1] * ce, e[2],
           e[3] * ce - e[4] * se, e[3] * se + e[4] * ce, e[5],
           e[6] * ce - e[7] * se, e[6] * se + e[7] * ce, e[8])
-    # Ti2b = the quaternion's matrix (normalised first)
-    rn = 1.0 / math.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
-    a0, a1, a2, a3 = rn * q0, rn * q1, rn * q2, rn * q3
-    a00, a11, a22, a33 = a0 * a0, a1 * a1, a2 * a2, a3 * a3
-    a01, a02, a03 = a0 * a1, a0 * a2, a0 * a3
-    a12, a13, a23 = a1 * a2, a1 * a3, a2 * a3
-    b = (a00 + a11 - a22 - a33, 2.0 * (a12 + a03), 2.0 * (a13 - a02),
-         2.0 * (a12 - a03), a00 - a11 + a22 - a33, 2.0 * (a23 + a01),
-         2.0 * (a13 + a02), 2.0 * (a23 - a01), a00 - a11 - a22 + a33)
+    b = ti2b(q0, q1, q2, q3)
     # Tl2b = Ti2b Ti2l^T
     t = (b[0] * il[0] + b[1] * il[1] + b[2] * il[2], b[0] * il[3] + b[1] * il[4] + b[2] * il[5],
          b[0] * il[6] + b[1] * il[7] + b[2] * il[8],
@@ -185,10 +202,6 @@ def _derive(out: np.ndarray, i: int, q0: float, q1: float, q2: float, q3: float,
          b[3] * il[6] + b[4] * il[7] + b[5] * il[8],
          b[6] * il[0] + b[7] * il[1] + b[8] * il[2], b[6] * il[3] + b[7] * il[4] + b[8] * il[5],
          b[6] * il[6] + b[7] * il[7] + b[8] * il[8])
-    # Tec2b = Ti2b Tec2i (Tec2i = Ti2ec^T = [[ce, -se, 0], [se, ce, 0], [0, 0, 1]])
-    eb = (b[0] * ce + b[1] * se, -b[0] * se + b[1] * ce, b[2],
-          b[3] * ce + b[4] * se, -b[3] * se + b[4] * ce, b[5],
-          b[6] * ce + b[7] * se, -b[6] * se + b[7] * ce, b[8])
     om = OMEGA_EARTH_RAD_S
     # uvw = Ti2b (v_i - w_e x r_i), w_e x r = (-om ry, om rx, 0); pqr = w_i - Ti2b w_e
     dx, dy, dz = vx + om * ry, vy - om * rx, vz
@@ -212,8 +225,6 @@ def _derive(out: np.ndarray, i: int, q0: float, q1: float, q2: float, q3: float,
     out[17, i], out[18, i], out[19, i] = lx, ly, lz
     for k in range(9):
         out[20 + k, i] = t[k]
-        out[29 + k, i] = b[k]
-        out[38 + k, i] = eb[k]
 
 
 @jit
@@ -283,14 +294,16 @@ ACCELERATIONS = ("accelerations/pidot-rad_sec2", "accelerations/qidot-rad_sec2",
 
 @jit
 def accelerations(mass: np.ndarray, inertia: np.ndarray, jinv: np.ndarray, wi: np.ndarray,
-                  ti2b: np.ndarray, tec2b: np.ndarray, ce: np.ndarray, se: np.ndarray,
-                  pqr: np.ndarray,
+                  q: np.ndarray, ce: np.ndarray, se: np.ndarray, pqr: np.ndarray,
                   uvw: np.ndarray, ri: np.ndarray, ecef: np.ndarray, force: np.ndarray,
                   moment: np.ndarray, out: np.ndarray) -> None:
     """FGAccelerations::Run in the air for every aircraft (rows
     ``ACCELERATIONS``). ``inertia``: rows Ixx, Iyy, Izz, Ixy, Ixz, Iyz (the
     products as JSBSim's properties give them); ``jinv``: rows 11, 12, 13,
-    22, 23, 33 of the inverse; matrices as nine rows, row-major."""
+    22, 23, 33 of the inverse; ``q``: the attitude quaternion's rows (the
+    body's matrices are made from it and the Earth's angle ``ce``, ``se``
+    again here, the same arithmetic as ``_derive``'s, rather than kept as
+    eighteen rows a frame writes and reads back)."""
     n = len(mass)
     om = OMEGA_EARTH_RAD_S
     for i in range(n):
@@ -309,8 +322,7 @@ def accelerations(mass: np.ndarray, inertia: np.ndarray, jinv: np.ndarray, wi: n
         d0 = k11 * m0 + k12 * m1 + k13 * m2
         d1 = k12 * m0 + k22 * m1 + k23 * m2
         d2 = k13 * m0 + k23 * m1 + k33 * m2
-        b = (ti2b[0, i], ti2b[1, i], ti2b[2, i], ti2b[3, i], ti2b[4, i], ti2b[5, i],
-             ti2b[6, i], ti2b[7, i], ti2b[8, i])
+        b = ti2b(q[0, i], q[1, i], q[2, i], q[3, i])
         # the Earth's rate in the body: Ti2b (0, 0, om)
         ob0 = b[0] * 0.0 + b[1] * 0.0 + b[2] * om
         ob1 = b[3] * 0.0 + b[4] * 0.0 + b[5] * om
@@ -336,8 +348,11 @@ def accelerations(mass: np.ndarray, inertia: np.ndarray, jinv: np.ndarray, wi: n
         ud -= b[0] * i0 + b[1] * i1 + b[2] * i2
         vd -= b[3] * i0 + b[4] * i1 + b[5] * i2
         wd -= b[6] * i0 + b[7] * i1 + b[8] * i2
-        e = (tec2b[0, i], tec2b[1, i], tec2b[2, i], tec2b[3, i], tec2b[4, i], tec2b[5, i],
-             tec2b[6, i], tec2b[7, i], tec2b[8, i])
+        # Tec2b = Ti2b Tec2i (Tec2i = Ti2ec^T = [[ce, -se, 0], [se, ce, 0], [0, 0, 1]])
+        c, sn = ce[i], se[i]
+        e = (b[0] * c + b[1] * sn, -b[0] * sn + b[1] * c, b[2],
+             b[3] * c + b[4] * sn, -b[3] * sn + b[4] * c, b[5],
+             b[6] * c + b[7] * sn, -b[6] * sn + b[7] * c, b[8])
         ud += e[0] * gx + e[1] * gy + e[2] * gz
         vd += e[3] * gx + e[4] * gy + e[5] * gz
         wd += e[6] * gx + e[7] * gy + e[8] * gz
@@ -408,24 +423,28 @@ AUXILIARY = ("velocities/thetadot-rad_sec", "velocities/psidot-rad_sec",
 
 
 @jit
-def auxiliary(pqr: np.ndarray, cphi: np.ndarray, sphi: np.ndarray, ctht: np.ndarray,
-              stht: np.ndarray, uvw: np.ndarray, alpha_uw: np.ndarray, beta_v: np.ndarray,
+def auxiliary(pqr: np.ndarray, phi: np.ndarray, theta: np.ndarray, uvw: np.ndarray,
+              alpha_uw: np.ndarray, beta_v: np.ndarray,
               uvwdot: np.ndarray, rho: np.ndarray, a_snd: np.ndarray, ned: np.ndarray,
               rho_sl: np.ndarray, body_accel: np.ndarray, g0: float, ktstofps: float,
               out: np.ndarray) -> None:
     """FGAuxiliary::Run without wind for every aircraft (rows ``AUXILIARY``):
     it reads the previous frame's accelerations, as JSBSim does. The
-    trigonometry comes in: the roll's and pitch's cosines and sines, and
-    ``atan2(w, u)`` and ``atan2(v, sqrt(u^2 + w^2))`` (used where JSBSim
-    computes them: a true airspeed above 0.001 ft/s, and ``u^2 + w^2`` at
-    least 1e-6 for the angle of attack)."""
-    n = len(cphi)
+    roll's and pitch's cosines and sines are libm's here (numpy 2 computes
+    float64 sines and cosines with libm too: the same doubles);
+    ``atan2(w, u)`` and ``atan2(v, sqrt(u^2 + w^2))`` come in from numpy's
+    vectorised atan2, which rounds differently from libm's (used where
+    JSBSim computes them: a true airspeed above 0.001 ft/s, and ``u^2 +
+    w^2`` at least 1e-6 for the angle of attack)."""
+    n = len(phi)
     for i in range(n):
         p, q, r = pqr[0, i], pqr[1, i], pqr[2, i]
-        out[0, i] = q * cphi[i] - r * sphi[i]
-        if ctht[i] != 0.0:
-            psidot = (q * sphi[i] + r * cphi[i]) / ctht[i]
-            out[1, i], out[2, i] = psidot, p + psidot * stht[i]
+        cphi, sphi = math.cos(phi[i]), math.sin(phi[i])
+        ctht, stht = math.cos(theta[i]), math.sin(theta[i])
+        out[0, i] = q * cphi - r * sphi
+        if ctht != 0.0:
+            psidot = (q * sphi + r * cphi) / ctht
+            out[1, i], out[2, i] = psidot, p + psidot * stht
         else:
             out[1, i], out[2, i] = 0.0, 0.0
         u, v, w = uvw[0, i], uvw[1, i], uvw[2, i]

@@ -64,19 +64,6 @@ def quat_from_euler(phi: Arr, tht: Arr, psi: Arr) -> Quat:
             cpct * ss - spst * cs)
 
 
-def quat_t(q: Quat) -> Mat:
-    """The transformation matrix of a quaternion, normalised first
-    (FGQuaternion::GetT)."""
-    rnorm = 1.0 / np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    q0, q1, q2, q3 = rnorm * q[0], rnorm * q[1], rnorm * q[2], rnorm * q[3]
-    q0q0, q1q1, q2q2, q3q3 = q0 * q0, q1 * q1, q2 * q2, q3 * q3
-    q0q1, q0q2, q0q3 = q0 * q1, q0 * q2, q0 * q3
-    q1q2, q1q3, q2q3 = q1 * q2, q1 * q3, q2 * q3
-    return (q0q0 + q1q1 - q2q2 - q3q3, 2.0 * (q1q2 + q0q3), 2.0 * (q1q3 - q0q2),
-            2.0 * (q1q2 - q0q3), q0q0 - q1q1 + q2q2 - q3q3, 2.0 * (q2q3 + q0q1),
-            2.0 * (q1q3 + q0q2), 2.0 * (q2q3 - q0q1), q0q0 - q1q1 - q2q2 + q3q3)
-
-
 def quat_from_matrix(m: Mat) -> Quat:
     """The quaternion of a transformation matrix (FGMatrix33::GetQuaternion:
     the largest of the four squared components picks the formula)."""

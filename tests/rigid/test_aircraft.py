@@ -208,3 +208,50 @@ def test_unknown_elements_are_refused_with_file_line_and_element(tmp_path: Path)
 
 def test_the_bundled_aircraft_compiles_without_a_problem() -> None:
     assert problems(UAV700, SYSTEMS, ENGINES) == []
+
+
+
+@pytest.mark.parametrize("fuse", [True, False], ids=["fused-systems", "numpy-systems"])
+def test_blocks_written_over_in_place_fly_as_two_blocks_in_turn_do(
+        fuse: bool, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The derived state, auxiliary values, accelerations and aerodynamic
+    terms are written over in place each frame (one block each, half the
+    memory): a part keeping one of their rows from a frame before (a
+    filter's past input kept by reference, say) would read this frame's
+    values instead. With the autopilot engaged through a heading change,
+    every property ends as it does with two blocks used in turn."""
+    from cosim.rigid import airframe, body
+
+    def fly() -> dict[str, np.ndarray]:
+        ac = compile_aircraft(UAV700, SYSTEMS, ENGINES, fuse=fuse)
+        n = 3
+        props = ac.new_props(n)
+        loc = position_ecef(np.full(n, 47.0), np.full(n, 8.0), np.full(n, 3000.0))
+        props["cosim/ap/qbar-ref-psf"] = np.full(n, 34.0)
+        assert ac.trim_level(props, loc, np.zeros(n), np.full(n, 100 * KT)).all()
+        for k, v in {"cosim/ap/engage": 1.0, "cosim/ap/heading-hold": 1.0,
+                     "cosim/ap/heading-cmd-deg": 90.0, "cosim/ap/alt-hold": 1.0,
+                     "cosim/ap/alt-cmd-ft": 3300.0, "cosim/ap/speed-hold": 1.0,
+                     "cosim/ap/speed-cmd-kt": 110.0}.items():
+            props[k] = np.full(n, v)
+        for _ in range(240):
+            ac.run(props, 1 / 120)
+        return props
+
+    reused = fly()
+    assert "_eom/derived1" not in reused and "_eom/auxiliary1" not in reused
+    real = body.block
+
+    def two(props: dict[str, np.ndarray], name: str, keys: tuple[str, ...], n: int, *,
+            reuse: bool = False) -> np.ndarray:
+        return real(props, name, keys, n)
+
+    monkeypatch.setattr(body, "block", two)
+    monkeypatch.setattr(airframe, "block", two)
+    alternating = fly()
+    assert "_eom/derived1" in alternating and "_aero/terms1" in alternating
+    public = [k for k in alternating if not k.startswith("_")]
+    assert len(public) > 250
+    assert alternating["attitude/psi-deg"][0] > 2.0  # it turned toward 90 deg
+    for k in public:
+        np.testing.assert_array_equal(reused[k], alternating[k], err_msg=k)
