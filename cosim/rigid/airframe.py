@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cosim.errors import ConfigError
+from cosim.rigid import kernels
 from cosim.rigid.body import block
 from cosim.rigid.functions import Compiled, CompileError, _where, compile_function
 from cosim.rigid.fused import Fused, fuse
@@ -389,18 +390,16 @@ class Aerodynamics:
                 alpha > self.hyst_max_rad, 1.0, np.where(alpha < self.hyst_min_rad, 0.0, h))
         native, mom = self._terms(props)
         if self.wind_axes:
-            fd, fs, fl = -native[0], native[1], -native[2]  # drag and lift oppose
-            beta = props["aero/beta-rad"]
-            ca, sa, cb, sb = np.cos(alpha), np.sin(alpha), np.cos(beta), np.sin(beta)
-            fx = ca * cb * fd - ca * sb * fs - sa * fl
-            fy = sb * fd + cb * fs
-            fz = sa * cb * fd - sa * sb * fs + ca * fl
-            props["forces/fwx-aero-lbs"], props["forces/fwy-aero-lbs"] = fd, fs
-            props["forces/fwz-aero-lbs"] = fl
+            out = block(props, "_aero/wind", kernels.WIND_FORCES, len(alpha), reuse=True)
+            kernels.wind_forces(native[0], native[1], native[2], alpha,
+                                props["aero/beta-rad"], out)
+            for j, key in enumerate(kernels.WIND_FORCES):
+                props[key] = out[j]
+            fx, fy, fz = out[3], out[4], out[5]
         else:
             fx, fy, fz = native
-        props["forces/fbx-aero-lbs"], props["forces/fby-aero-lbs"] = fx, fy
-        props["forces/fbz-aero-lbs"] = fz
+            props["forces/fbx-aero-lbs"], props["forces/fby-aero-lbs"] = fx, fy
+            props["forces/fbz-aero-lbs"] = fz
         rx, ry, rz = structural_to_body(rp_in, props["inertia/cg-x-in"],
                                         props["inertia/cg-y-in"], props["inertia/cg-z-in"])
         # M = r x F about the centre of gravity, plus the axes' moments

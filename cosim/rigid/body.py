@@ -196,7 +196,6 @@ def initial_state(props: Props, loc: Vec, phi: np.ndarray, theta: np.ndarray,
     for key in (*_V1, *_V2, *_A1):
         props.setdefault(key, np.zeros(n))
     ce, se = np.cos(epa), np.sin(epa)
-    props["_eom/ce"], props["_eom/se"] = ce, se
     der = np.empty((len(kern.DERIVED), n))
     kern.derive(np.array(q), np.array(w_i), np.array(r_i), np.array(v_i), ce, se,
                 props["position/terrain-elevation-asl-ft"], der)
@@ -215,14 +214,13 @@ def propagate(props: Props, dt: float) -> None:
     """FGPropagate::Run: integrate one frame, then derive the Earth-relative
     state (``kernels.propagate``)."""
     epa = props["_eom/epa"] + OMEGA_EARTH * dt
-    ce, se = np.cos(epa), np.sin(epa)
     n = len(epa)
     new = block(props, "_eom/state", kern.STATE, n)
     der = block(props, "_eom/derived", kern.DERIVED, n, reuse=True)
     kern.propagate(dt, _state(props, n), _rows(props, _QD), _rows(props, _WD),
-                   _rows(props, _AI), ce, se, props["position/terrain-elevation-asl-ft"],
+                   _rows(props, _AI), epa, props["position/terrain-elevation-asl-ft"],
                    new, der)
-    props["_eom/epa"], props["_eom/ce"], props["_eom/se"] = epa, ce, se
+    props["_eom/epa"] = epa
     _store(props, kern.STATE, new)
     _store(props, kern.DERIVED, der)
     _angles(props)

@@ -14,15 +14,17 @@ plan's, computed once a frame for the channels that share a counter) an
 The source goes through ``cosim.rigid.fused`` (its expression writer for
 the functions, its on-disk cache).
 
-The loop is cut where a function calls a transcendental function (sin,
-cos, tan, their inverses, atan2, exp, ln, pow): numpy's vectorised
-functions (SVML on AVX-512) and the math library a loop would call differ
-in the last bit, so the loop ends, numpy computes that function on the
-column of arguments (or on the property's own array, as the numpy plan
-does), and the next loop goes on from there, inside the same gate (gates
-are kept in a scratch row). The uav700's systems: seven loops and six numpy
-calls a frame. ``<min>``, ``<max>`` and a ``<clipto>`` are numpy's
-``minimum`` and ``maximum`` (a NaN wins).
+The loop is cut where a function calls a transcendental function (tan,
+the inverse functions, atan2, exp, ln, pow): numpy's vectorised functions
+(SVML on AVX-512) and the math library a loop would call differ in the
+last bit, so the loop ends, numpy computes that function on the column of
+arguments (or on the property's own array, as the numpy plan does), and
+the next loop goes on from there, inside the same gate (gates are kept in
+a scratch row). Sine and cosine stay in the loop: numpy 2 computes float64
+ones with the math library too (a test holds numba's to numpy's). The
+uav700's systems: four loops and three numpy calls a frame. ``<min>``,
+``<max>`` and a ``<clipto>`` are numpy's ``minimum`` and ``maximum`` (a NaN
+wins).
 
 State stays in ``props`` under the same keys as the numpy plan's, so the
 two paths are interchangeable frame by frame. The loops write the arrays
@@ -93,10 +95,11 @@ def _ss(a, v, right):
 
 '''
 
-#: what numpy computes between the loops, by element
+#: what numpy computes between the loops, by element (sine and cosine are
+#: not among them: numpy 2 computes float64 ones with libm, as a loop does)
 _NUMPY: dict[str, Callable[..., Any]] = {
-    "sin": np.sin, "cos": np.cos, "tan": np.tan, "asin": np.arcsin, "acos": np.arccos,
-    "atan": np.arctan, "exp": np.exp, "ln": np.log, "atan2": np.arctan2, "pow": np.power}
+    "tan": np.tan, "asin": np.arcsin, "acos": np.arccos, "atan": np.arctan, "exp": np.exp,
+    "ln": np.log, "atan2": np.arctan2, "pow": np.power}
 
 #: an argument of a numpy call between loops: a scratch row, a property
 #: as the plan holds it, or a row of the frame's new block

@@ -150,7 +150,7 @@ DERIVED = ("velocities/u-fps", "velocities/v-fps", "velocities/w-fps",
            "velocities/v-north-fps", "velocities/v-east-fps", "velocities/v-down-fps",
            "velocities/h-dot-fps", "_eom/tanlat", "position/h-sl-ft", "position/h-agl-ft",
            "_eom/qd0", "_eom/qd1", "_eom/qd2", "_eom/qd3", "_eom/ex", "_eom/ey", "_eom/ez",
-           *(f"_eom/tl2b_t{r}{c}" for r in "123" for c in "123"))
+           *(f"_eom/tl2b_t{r}{c}" for r in "123" for c in "123"), "_eom/ce", "_eom/se")
 
 
 @jit
@@ -225,6 +225,7 @@ def _derive(out: np.ndarray, i: int, q0: float, q1: float, q2: float, q3: float,
     out[17, i], out[18, i], out[19, i] = lx, ly, lz
     for k in range(9):
         out[20 + k, i] = t[k]
+    out[29, i], out[30, i] = ce, se
 
 
 @jit
@@ -248,13 +249,13 @@ STATE = ("_eom/q0", "_eom/q1", "_eom/q2", "_eom/q3", "_eom/pi", "_eom/qi", "_eom
 
 @jit
 def propagate(dt: float, st: np.ndarray, qd: np.ndarray, wd: np.ndarray, ai: np.ndarray,
-              ce: np.ndarray, se: np.ndarray, terrain: np.ndarray, new: np.ndarray,
-              der: np.ndarray) -> None:
+              epa: np.ndarray, terrain: np.ndarray, new: np.ndarray, der: np.ndarray) -> None:
     """One frame of FGPropagate::Run: the attitude and the inertial rates an
     Euler step, the position an Adams-Bashforth-3 step of the inertial
     velocity (before its own update), the velocity an Adams-Bashforth-2 step
     of the inertial acceleration; then ``_derive`` at the Earth's new angle
-    (``ce``, ``se``). ``st``: the rows ``STATE``; the new ``STATE`` into
+    ``epa`` (its cosine and sine libm's, as numpy 2's). ``st``: the rows
+    ``STATE``; the new ``STATE`` into
     ``new`` and ``DERIVED`` into ``der`` (neither may share memory with an
     input)."""
     n = st.shape[1]
@@ -279,7 +280,8 @@ def propagate(dt: float, st: np.ndarray, qd: np.ndarray, wd: np.ndarray, ai: np.
         new[0, i], new[1, i], new[2, i], new[3, i] = q0, q1, q2, q3
         new[4, i], new[5, i], new[6, i] = w0, w1, w2
         _derive(der, i, q0, q1, q2, q3, w0, w1, w2, new[7, i], new[8, i], new[9, i],
-                new[10, i], new[11, i], new[12, i], ce[i], se[i], terrain[i])
+                new[10, i], new[11, i], new[12, i], math.cos(epa[i]), math.sin(epa[i]),
+                terrain[i])
 
 
 #: the rows ``accelerations`` returns
@@ -478,6 +480,29 @@ def auxiliary(pqr: np.ndarray, phi: np.ndarray, theta: np.ndarray, uvw: np.ndarr
         out[21, i] = body_accel[0, i] / g0
         out[22, i] = body_accel[1, i] / g0
         out[23, i] = -body_accel[2, i] / g0
+
+
+#: the rows ``wind_forces`` writes
+WIND_FORCES = ("forces/fwx-aero-lbs", "forces/fwy-aero-lbs", "forces/fwz-aero-lbs",
+               "forces/fbx-aero-lbs", "forces/fby-aero-lbs", "forces/fbz-aero-lbs")
+
+
+@jit
+def wind_forces(drag: np.ndarray, side: np.ndarray, lift: np.ndarray, alpha: np.ndarray,
+                beta: np.ndarray, out: np.ndarray) -> None:
+    """FGAerodynamics' wind-axes forces (the sums of the DRAG, SIDE and LIFT
+    axes: drag and lift act against their axes) and their body-axes forces
+    through the angle of attack and the sideslip (FGAuxiliary::GetTw2b),
+    rows ``WIND_FORCES``; the angles' cosines and sines are libm's (numpy
+    2's float64 ones are the same doubles)."""
+    for i in range(len(alpha)):
+        fd, fs, fl = -drag[i], side[i], -lift[i]
+        ca, sa = math.cos(alpha[i]), math.sin(alpha[i])
+        cb, sb = math.cos(beta[i]), math.sin(beta[i])
+        out[0, i], out[1, i], out[2, i] = fd, fs, fl
+        out[3, i] = ca * cb * fd - ca * sb * fs - sa * fl
+        out[4, i] = sb * fd + cb * fs
+        out[5, i] = sa * cb * fd - sa * sb * fs + ca * fl
 
 
 # ----------------------------------------------------------- the tables --
