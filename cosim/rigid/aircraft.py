@@ -56,6 +56,11 @@ Props = dict[str, np.ndarray]
 #: (``fileheader`` only describes; ``ground_reactions`` gives contact points)
 _SECTIONS = {"fileheader", "metrics", "mass_balance", "ground_reactions", "propulsion",
              "system", "flight_control", "aerodynamics", "autopilot"}
+#: the atmosphere's outputs the body's auxiliary values read (the others,
+#: pressure and density altitudes, viscosities and ratios, only when a part
+#: reads them)
+_AIR_BODY = frozenset({"atmosphere/T-R", "atmosphere/P-psf", "atmosphere/rho-slugs_ft3",
+                       "atmosphere/a-fps"})
 #: the trim's residuals' scales (ft/s^2, ft/s^2, rad/s^2) for its step control
 _TRIM_SCALE = np.array([1.0, 1.0, 0.1])
 
@@ -282,8 +287,10 @@ def compile_aircraft(aircraft_xml: Path, systems_dir: Path, engine_dir: Path, *,
     prop = compile_propulsion(path, Path(engine_dir), problems=problems)
     mass = mass.with_tanks([Tank(t.location_in, t.contents_key) for t in prop.tanks])
     reads = systems.inputs | aero.inputs | prop.inputs
+    # the atmosphere's outputs the body reads, and those some part reads
+    air = Atmosphere(_AIR_BODY | (reads & frozenset(geo.FRAME_OUTPUTS)))
     return RigidAircraft(root.get("name", path.stem), source, metrics, mass, aero, systems,
-                         prop, Atmosphere(), _contacts(root, source, problems), reads)
+                         prop, air, _contacts(root, source, problems), reads)
 
 
 def problems(aircraft_xml: Path, systems_dir: Path, engine_dir: Path) -> list[CompileError]:

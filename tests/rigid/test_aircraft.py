@@ -128,6 +128,35 @@ def test_a_two_percent_lift_coefficient_is_seen(tmp_path: Path) -> None:
     assert worst["position/h-sl-ft"] > 0.5, worst  # half a foot, where equal files give 1e-5
 
 
+
+def test_the_atmosphere_computes_what_some_part_reads(tmp_path: Path) -> None:
+    """The atmosphere's outputs nobody reads are not computed each frame
+    (the uav700 reads the density altitude, in its engine's tables, not the
+    pressure altitude); a system that reads the pressure altitude gets
+    JSBSim's value."""
+    from cosim.rigid.atmosphere import standard_atmosphere
+
+    plain = compile_aircraft(UAV700, SYSTEMS, ENGINES)
+    assert "atmosphere/density-altitude" in plain.atmosphere.wanted
+    assert "atmosphere/pressure-altitude" not in plain.atmosphere.wanted
+    probe = ('<system name="probe"><channel name="c"><fcs_function name="probe/pa">'
+             '<function><property>atmosphere/pressure-altitude</property></function>'
+             '</fcs_function></channel></system>\n</fdm_config>')
+    text = UAV700.read_text()
+    aircraft = tmp_path / "uav700"
+    aircraft.mkdir()
+    (aircraft / "uav700.xml").write_text(text.replace("</fdm_config>", probe, 1))
+    shutil.copytree(ENGINES, aircraft / "Engines")
+    ac = compile_aircraft(aircraft / "uav700.xml", SYSTEMS, ENGINES)
+    assert "atmosphere/pressure-altitude" in ac.atmosphere.wanted
+    props = ac.new_props(2)
+    loc = position_ecef(np.full(2, 47.0), np.full(2, 8.0), np.array([3000.0, 12000.0]))
+    assert ac.trim_level(props, loc, np.zeros(2), np.full(2, 100 * KT)).all()
+    ac.run(props, 1 / 120)
+    want = standard_atmosphere(props["position/h-sl-ft"])["atmosphere/pressure-altitude"]
+    np.testing.assert_array_equal(props["atmosphere/pressure-altitude"], want)
+    assert want[1] > want[0] + 8000.0
+
 def test_set_running_after_the_initial_conditions_leaves_jsbsims_engine() -> None:
     """Untrimmed starts: the initial conditions, then propulsion/set-running.
     JSBSim leaves the engine at its full-throttle N1, N2 and thrust, running,
