@@ -389,23 +389,14 @@ class Aerodynamics:
             props["aero/stall-hyst-norm"] = np.where(
                 alpha > self.hyst_max_rad, 1.0, np.where(alpha < self.hyst_min_rad, 0.0, h))
         native, mom = self._terms(props)
-        if self.wind_axes:
-            out = block(props, "_aero/wind", kernels.WIND_FORCES, len(alpha), reuse=True)
-            kernels.wind_forces(native[0], native[1], native[2], alpha,
-                                props["aero/beta-rad"], out)
-            for j, key in enumerate(kernels.WIND_FORCES):
-                props[key] = out[j]
-            fx, fy, fz = out[3], out[4], out[5]
-        else:
-            fx, fy, fz = native
-            props["forces/fbx-aero-lbs"], props["forces/fby-aero-lbs"] = fx, fy
-            props["forces/fbz-aero-lbs"] = fz
-        rx, ry, rz = structural_to_body(rp_in, props["inertia/cg-x-in"],
-                                        props["inertia/cg-y-in"], props["inertia/cg-z-in"])
-        # M = r x F about the centre of gravity, plus the axes' moments
-        props["moments/l-aero-lbsft"] = (ry * fz - rz * fy) + mom[0]
-        props["moments/m-aero-lbsft"] = (rz * fx - rx * fz) + mom[1]
-        props["moments/n-aero-lbsft"] = (rx * fy - ry * fx) + mom[2]
+        keys = kernels.AERO_FORCES if self.wind_axes else kernels.AERO_FORCES[:6]
+        out = block(props, "_aero/forces", keys, len(alpha), reuse=True)
+        kernels.aero_forces(native[0], native[1], native[2], alpha, props["aero/beta-rad"],
+                            mom[0], mom[1], mom[2], props["inertia/cg-x-in"],
+                            props["inertia/cg-y-in"], props["inertia/cg-z-in"], rp_in[0],
+                            rp_in[1], rp_in[2], INCHTOFT, self.wind_axes, out)
+        for j, key in enumerate(keys):
+            props[key] = out[j]
         for f in self.post:
             props[f.name] = f.kernel(props)
 

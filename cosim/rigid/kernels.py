@@ -482,27 +482,44 @@ def auxiliary(pqr: np.ndarray, phi: np.ndarray, theta: np.ndarray, uvw: np.ndarr
         out[23, i] = -body_accel[2, i] / g0
 
 
-#: the rows ``wind_forces`` writes
-WIND_FORCES = ("forces/fwx-aero-lbs", "forces/fwy-aero-lbs", "forces/fwz-aero-lbs",
-               "forces/fbx-aero-lbs", "forces/fby-aero-lbs", "forces/fbz-aero-lbs")
+#: the rows ``aero_forces`` writes (the last three with wind axes only)
+AERO_FORCES = ("forces/fbx-aero-lbs", "forces/fby-aero-lbs", "forces/fbz-aero-lbs",
+               "moments/l-aero-lbsft", "moments/m-aero-lbsft", "moments/n-aero-lbsft",
+               "forces/fwx-aero-lbs", "forces/fwy-aero-lbs", "forces/fwz-aero-lbs")
 
 
 @jit
-def wind_forces(drag: np.ndarray, side: np.ndarray, lift: np.ndarray, alpha: np.ndarray,
-                beta: np.ndarray, out: np.ndarray) -> None:
-    """FGAerodynamics' wind-axes forces (the sums of the DRAG, SIDE and LIFT
-    axes: drag and lift act against their axes) and their body-axes forces
-    through the angle of attack and the sideslip (FGAuxiliary::GetTw2b),
-    rows ``WIND_FORCES``; the angles' cosines and sines are libm's (numpy
-    2's float64 ones are the same doubles)."""
+def aero_forces(f0: np.ndarray, f1: np.ndarray, f2: np.ndarray, alpha: np.ndarray,
+                beta: np.ndarray, m0: np.ndarray, m1: np.ndarray, m2: np.ndarray,
+                cgx: np.ndarray, cgy: np.ndarray, cgz: np.ndarray, rpx: float, rpy: float,
+                rpz: float, inch_to_ft: float, wind: bool, out: np.ndarray) -> None:
+    """FGAerodynamics' forces and moments from the axes' sums (rows
+    ``AERO_FORCES``). ``wind``: ``f0, f1, f2`` are the DRAG, SIDE and LIFT
+    sums (drag and lift act against their axes), turned into body axes
+    through the angle of attack and the sideslip (FGAuxiliary::GetTw2b; the
+    angles' cosines and sines libm's, as numpy 2's); else they are the X, Y
+    and Z sums. The moment about the centre of gravity is that of the body
+    force at the reference point (structural frame, in: ``rp``; JSBSim's
+    ``inch_to_ft``) plus the axes' moments ``m0, m1, m2``."""
     for i in range(len(alpha)):
-        fd, fs, fl = -drag[i], side[i], -lift[i]
-        ca, sa = math.cos(alpha[i]), math.sin(alpha[i])
-        cb, sb = math.cos(beta[i]), math.sin(beta[i])
-        out[0, i], out[1, i], out[2, i] = fd, fs, fl
-        out[3, i] = ca * cb * fd - ca * sb * fs - sa * fl
-        out[4, i] = sb * fd + cb * fs
-        out[5, i] = sa * cb * fd - sa * sb * fs + ca * fl
+        if wind:
+            fd, fs, fl = -f0[i], f1[i], -f2[i]
+            ca, sa = math.cos(alpha[i]), math.sin(alpha[i])
+            cb, sb = math.cos(beta[i]), math.sin(beta[i])
+            out[6, i], out[7, i], out[8, i] = fd, fs, fl
+            fx = ca * cb * fd - ca * sb * fs - sa * fl
+            fy = sb * fd + cb * fs
+            fz = sa * cb * fd - sa * sb * fs + ca * fl
+        else:
+            fx, fy, fz = f0[i], f1[i], f2[i]
+        out[0, i], out[1, i], out[2, i] = fx, fy, fz
+        # FGMassBalance::StructuralToBody: x aft and z up to x forward and z down, ft
+        rx = inch_to_ft * (cgx[i] - rpx)
+        ry = inch_to_ft * (rpy - cgy[i])
+        rz = inch_to_ft * (cgz[i] - rpz)
+        out[3, i] = (ry * fz - rz * fy) + m0[i]
+        out[4, i] = (rz * fx - rx * fz) + m1[i]
+        out[5, i] = (rx * fy - ry * fx) + m2[i]
 
 
 # ----------------------------------------------------------- the tables --
