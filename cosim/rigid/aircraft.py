@@ -217,15 +217,7 @@ class RigidAircraft:
         self.propulsion.run(props, dt_s)
         m = self.metrics
         self.aero.run(props, m.rp_in, m.sw_sqft, m.bw_ft, m.cbar_ft, m.iw_rad)
-        force = (props["forces/fbx-aero-lbs"] + props["forces/fbx-prop-lbs"],
-                 props["forces/fby-aero-lbs"] + props["forces/fby-prop-lbs"],
-                 props["forces/fbz-aero-lbs"] + props["forces/fbz-prop-lbs"])
-        moment = (props["moments/l-aero-lbsft"] + props["moments/l-prop-lbsft"],
-                  props["moments/m-aero-lbsft"] + props["moments/m-prop-lbsft"],
-                  props["moments/n-aero-lbsft"] + props["moments/n-prop-lbsft"])
-        props["forces/fbx-total-lbs"], props["forces/fby-total-lbs"], \
-            props["forces/fbz-total-lbs"] = force
-        body.accelerations(props, force, moment)
+        body.accelerations(props)
 
     def touching(self, props: Props) -> np.ndarray:
         """Whether each aircraft touches the ground: a contact point at or

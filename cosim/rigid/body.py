@@ -249,18 +249,22 @@ def _angles(props: Props) -> None:
 _INERTIA = ("inertia/ixx-slugs_ft2", "inertia/iyy-slugs_ft2", "inertia/izz-slugs_ft2",
             "inertia/ixy-slugs_ft2", "inertia/ixz-slugs_ft2", "inertia/iyz-slugs_ft2")
 _JINV = tuple("_mb/jinv" + s for s in ("11", "12", "13", "22", "23", "33"))
+#: the forces (lbs) and moments (lbs ft) summed into the total
+_LOADS = tuple(f"forces/fb{a}-{s}-lbs" for s in ("aero", "prop") for a in "xyz") + tuple(
+    f"moments/{a}-{s}-lbsft" for s in ("aero", "prop") for a in "lmn")
 
 
-def accelerations(props: Props, force: Vec, moment: Vec) -> None:
+def accelerations(props: Props) -> None:
     """FGAccelerations::Run in the air (no ground friction): the body's
     angular and linear accelerations from the total force (lbs) and moment
-    (lbs ft) about the centre of gravity (``kernels.accelerations``)."""
+    (lbs ft) about the centre of gravity, the aerodynamics' and the
+    propulsion's (``kernels.accelerations``; it writes the total force)."""
     out = block(props, "_eom/accelerations", kern.ACCELERATIONS, len(props["_n"]), reuse=True)
-    kern.accelerations(props["inertia/mass-slugs"], _rows(props, _INERTIA),
-                       _rows(props, _JINV), _rows(props, _W), _rows(props, _Q),
-                       props["_eom/ce"], props["_eom/se"],
-                       _rows(props, _PQR), _rows(props, _UVW), _rows(props, _R),
-                       _rows(props, _ECEF), np.array(force), np.array(moment), out)
+    args = (props["inertia/mass-slugs"], _rows(props, _INERTIA), _rows(props, _JINV),
+            _rows(props, _W), _rows(props, _Q), props["_eom/ce"], props["_eom/se"],
+            _rows(props, _PQR), _rows(props, _UVW), _rows(props, _R), _rows(props, _ECEF),
+            *(props[k] for k in _LOADS), out)
+    kern.accelerations(*args)
     _store(props, kern.ACCELERATIONS, out)
 
 

@@ -291,18 +291,23 @@ ACCELERATIONS = ("accelerations/pidot-rad_sec2", "accelerations/qidot-rad_sec2",
                  "accelerations/udot-ft_sec2", "accelerations/vdot-ft_sec2",
                  "accelerations/wdot-ft_sec2", "accelerations/uidot-ft_sec2",
                  "accelerations/vidot-ft_sec2", "accelerations/widot-ft_sec2",
-                 "_eom/bax", "_eom/bay", "_eom/baz", "accelerations/gravity-ft_sec2")
+                 "_eom/bax", "_eom/bay", "_eom/baz", "accelerations/gravity-ft_sec2",
+                 "forces/fbx-total-lbs", "forces/fby-total-lbs", "forces/fbz-total-lbs")
 
 
 @jit
 def accelerations(mass: np.ndarray, inertia: np.ndarray, jinv: np.ndarray, wi: np.ndarray,
                   q: np.ndarray, ce: np.ndarray, se: np.ndarray, pqr: np.ndarray,
-                  uvw: np.ndarray, ri: np.ndarray, ecef: np.ndarray, force: np.ndarray,
-                  moment: np.ndarray, out: np.ndarray) -> None:
+                  uvw: np.ndarray, ri: np.ndarray, ecef: np.ndarray, fax: np.ndarray,
+                  fay: np.ndarray, faz: np.ndarray, fpx: np.ndarray, fpy: np.ndarray,
+                  fpz: np.ndarray, mal: np.ndarray, mam: np.ndarray, man: np.ndarray,
+                  mpl: np.ndarray, mpm: np.ndarray, mpn: np.ndarray, out: np.ndarray) -> None:
     """FGAccelerations::Run in the air for every aircraft (rows
     ``ACCELERATIONS``). ``inertia``: rows Ixx, Iyy, Izz, Ixy, Ixz, Iyz (the
     products as JSBSim's properties give them); ``jinv``: rows 11, 12, 13,
-    22, 23, 33 of the inverse; ``q``: the attitude quaternion's rows (the
+    22, 23, 33 of the inverse; the total force (lbs) and moment (lbs ft) are
+    the aerodynamics' (``fa``, ``ma``) plus the propulsion's (``fp``,
+    ``mp``), the force kept in the last three rows; ``q``: the attitude quaternion's rows (the
     body's matrices are made from it and the Earth's angle ``ce``, ``se``
     again here, the same arithmetic as ``_derive``'s, rather than kept as
     eighteen rows a frame writes and reads back)."""
@@ -318,9 +323,11 @@ def accelerations(mass: np.ndarray, inertia: np.ndarray, jinv: np.ndarray, wi: n
         jw0 = j[0] * w0 + j[1] * w1 + j[2] * w2
         jw1 = j[3] * w0 + j[4] * w1 + j[5] * w2
         jw2 = j[6] * w0 + j[7] * w1 + j[8] * w2
-        m0 = moment[0, i] - (w1 * jw2 - w2 * jw1)
-        m1 = moment[1, i] - (w2 * jw0 - w0 * jw2)
-        m2 = moment[2, i] - (w0 * jw1 - w1 * jw0)
+        fx, fy, fz = fax[i] + fpx[i], fay[i] + fpy[i], faz[i] + fpz[i]
+        out[16, i], out[17, i], out[18, i] = fx, fy, fz
+        m0 = (mal[i] + mpl[i]) - (w1 * jw2 - w2 * jw1)
+        m1 = (mam[i] + mpm[i]) - (w2 * jw0 - w0 * jw2)
+        m2 = (man[i] + mpn[i]) - (w0 * jw1 - w1 * jw0)
         d0 = k11 * m0 + k12 * m1 + k13 * m2
         d1 = k12 * m0 + k22 * m1 + k23 * m2
         d2 = k13 * m0 + k23 * m1 + k33 * m2
@@ -335,7 +342,7 @@ def accelerations(mass: np.ndarray, inertia: np.ndarray, jinv: np.ndarray, wi: n
         out[5, i] = d2 + (w0 * ob1 - w1 * ob0)
         gx, gy, gz = gravity(ecef[0, i], ecef[1, i], ecef[2, i])
         inv_m = 1.0 / mass[i]
-        ax, ay, az = inv_m * force[0, i], inv_m * force[1, i], inv_m * force[2, i]
+        ax, ay, az = inv_m * fx, inv_m * fy, inv_m * fz
         c0, c1, c2 = pqr[0, i] + 2.0 * ob0, pqr[1, i] + 2.0 * ob1, pqr[2, i] + 2.0 * ob2
         u, v, w = uvw[0, i], uvw[1, i], uvw[2, i]
         ud = ax - (c1 * w - c2 * v)
