@@ -63,6 +63,25 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
                 "ray" if on_cluster else item.nodeid.split("::")[0]))
 
 
+@pytest.hookimpl(tryfirst=True)  # before pytest-xdist sends the worker's ids to its scheduler
+def pytest_collection_finish(session: pytest.Session) -> None:
+    """Each test's group at the end of its id, where ``--dist loadgroup``
+    reads it. pytest-xdist 3.8 writes it to ``item._nodeid``, which pytest 9
+    no longer reads: each test was then sent on its own, a file's module
+    fixtures (a live server, a browser session) and the session's Ray
+    cluster made once on each worker."""
+    if not getattr(session.config.option, "loadgroup", False):  # set on xdist's workers
+        return
+    for item in session.items:
+        nodeid = item.nodeid
+        if nodeid.rfind("@") > nodeid.rfind("]") or not hasattr(item, "_id"):
+            continue  # grouped already (pytest 8)
+        names = sorted({str(m.args[0] if m.args else m.kwargs.get("name", "default"))
+                        for m in item.iter_markers("xdist_group")})
+        if names:
+            item._id = type(item._id).parse(f"{nodeid}@{'_'.join(names)}")
+
+
 def pytest_terminal_summary(terminalreporter: Any) -> None:
     """Name the fast tests that were not fast (set-up, call and tear-down)."""
     took: dict[str, float] = {}

@@ -10,6 +10,8 @@ import sys
 import textwrap
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parent.parent
 
 SUITE = '''
@@ -98,6 +100,47 @@ def test_two_tiers_on_one_test_are_a_usage_error(tmp_path: Path) -> None:
     assert r.returncode == 4, r.stdout + r.stderr
     assert "test_suite.py::test_both is marked integration and slow: a test is in one tier" in (
         r.stdout + r.stderr)
+
+
+#: a test file whose module fixture notes each time it is made
+GROUPED = '''
+import os
+
+import pytest
+
+
+@pytest.fixture(scope="module")
+def made():
+    with open(os.environ["SETUPS"], "a") as f:
+        f.write(__name__ + "\\n")
+
+
+@pytest.mark.parametrize("i", range(6))
+def test_one_of_six(made, i):
+    pass
+'''
+
+
+@pytest.mark.integration  # two pytest-xdist workers, each importing cosim
+def test_a_files_tests_run_on_one_worker_and_make_its_module_fixture_once(
+        tmp_path: Path) -> None:
+    """``-n 2 --dist loadgroup`` sends each file's tests to one worker (on
+    pytest 9 each test had gone on its own, round the workers, and a
+    module fixture was made on each)."""
+    (tmp_path / "pytest.ini").write_text("[pytest]\n")
+    for name in ("test_one.py", "test_two.py"):
+        (tmp_path / name).write_text(GROUPED)
+    setups = tmp_path / "setups.txt"
+    r = _pytest(tmp_path, "-n", "2", "--dist", "loadgroup", "-v", SETUPS=str(setups))
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert sorted(setups.read_text().split()) == ["test_one", "test_two"], r.stdout
+    workers: dict[str, set[str]] = {}
+    for line in r.stdout.splitlines():
+        if " PASSED " in line:  # "[gw0] [  8%] PASSED .../test_one.py::test_one_of_six[0]@..."
+            name = Path(line.split()[-1].split("::")[0]).name
+            workers.setdefault(name, set()).add(line.split()[0])
+    assert {f: len(w) for f, w in workers.items()} == {"test_one.py": 1, "test_two.py": 1}, \
+        r.stdout
 
 
 #: a test calling the CLI in its process, then one looking at the logging it left
