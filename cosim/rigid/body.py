@@ -143,12 +143,11 @@ def _aligned(shape: tuple[int, int], k: int) -> np.ndarray:
 def _state(props: Props, n: int) -> np.ndarray:
     """The integrated state's rows as one block: the block they are rows of
     when they all are (no copy), else a copy."""
-    for name in ("_eom/state0", "_eom/state1"):
-        kept = props.get(name)
-        if kept is not None and kept.shape == (len(kern.STATE), n):
-            start, step = _at(kept), kept.strides[0]
-            if all(_at(props[key]) == start + j * step for j, key in enumerate(kern.STATE)):
-                return kept  # the rows are this block's, in order
+    kept = props.get("_eom/state0")
+    if kept is not None and kept.shape == (len(kern.STATE), n):
+        start, step = _at(kept), kept.strides[0]
+        if all(_at(props[key]) == start + j * step for j, key in enumerate(kern.STATE)):
+            return kept  # the rows are this block's, in order
     return _rows(props, kern.STATE)
 
 
@@ -215,7 +214,7 @@ def propagate(props: Props, dt: float) -> None:
     state (``kernels.propagate``)."""
     epa = props["_eom/epa"] + OMEGA_EARTH * dt
     n = len(epa)
-    new = block(props, "_eom/state", kern.STATE, n)
+    new = block(props, "_eom/state", kern.STATE, n, reuse=True)  # the state's own, mostly
     der = block(props, "_eom/derived", kern.DERIVED, n, reuse=True)
     kern.propagate(dt, _state(props, n), _rows(props, _QD), _rows(props, _WD),
                    _rows(props, _AI), epa, props["position/terrain-elevation-asl-ft"],

@@ -255,9 +255,9 @@ def propagate(dt: float, st: np.ndarray, qd: np.ndarray, wd: np.ndarray, ai: np.
     velocity (before its own update), the velocity an Adams-Bashforth-2 step
     of the inertial acceleration; then ``_derive`` at the Earth's new angle
     ``epa`` (its cosine and sine libm's, as numpy 2's). ``st``: the rows
-    ``STATE``; the new ``STATE`` into
-    ``new`` and ``DERIVED`` into ``der`` (neither may share memory with an
-    input)."""
+    ``STATE``; the new ``STATE`` into ``new``, which may be ``st`` itself
+    (an aircraft's state is read before it is written), and ``DERIVED``
+    into ``der`` (which may share no memory with an input)."""
     n = st.shape[1]
     c = (1 / 12.0) * dt
     for i in range(n):
