@@ -116,10 +116,18 @@ def _logging_as_it_was() -> Iterator[None]:
 def _ground_cache(tmp_path_factory: pytest.TempPathFactory) -> None:
     """Tests keep cosim's cache folder (ground tiles, wrapped aircraft, MAVLink
     signing state) in a temporary folder, never the user's ~/.cache/cosim
-    (subprocesses inherit the variable)."""
-    import os
-
-    os.environ.setdefault("COSIM_CACHE_DIR", str(tmp_path_factory.mktemp("cosim-cache")))
+    (subprocesses inherit the variable). Its ``fused/`` (the rigid tier's
+    generated numba loops) is one folder for all of a session's pytest-xdist
+    workers, in the session's temporary folder: a loop one worker compiled
+    (seconds) the others load (files named for their content, written whole)."""
+    if os.environ.get("COSIM_CACHE_DIR"):
+        return
+    root = tmp_path_factory.mktemp("cosim-cache")
+    if os.environ.get("PYTEST_XDIST_WORKER"):  # the workers' folders share a parent
+        shared = tmp_path_factory.getbasetemp().parent / "cosim-fused"
+        shared.mkdir(exist_ok=True)
+        (root / "fused").symlink_to(shared, target_is_directory=True)
+    os.environ["COSIM_CACHE_DIR"] = str(root)
 
 
 @pytest.fixture

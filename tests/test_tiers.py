@@ -57,13 +57,16 @@ def pytest_collection_finish(session):
 
 
 def _pytest(folder: Path, *args: str, **env: str) -> subprocess.CompletedProcess[str]:
-    """``pytest`` of ``folder``'s tests with this conftest as a plugin."""
+    """``pytest`` of ``folder``'s tests with this conftest as a plugin, its
+    temporary folder ``folder/base`` (its cosim cache folder there, not this
+    session's)."""
+    outer = {k: v for k, v in os.environ.items() if k != "COSIM_CACHE_DIR"}
     return subprocess.run([sys.executable, "-m", "pytest", "-p", "tests.conftest",
                            "-p", "no:cacheprovider", "--rootdir", str(folder),
-                           "-c", str(folder / "pytest.ini"), *args, str(folder)],
+                           "-c", str(folder / "pytest.ini"), "--basetemp", str(folder / "base"),
+                           *args, str(folder)],
                           cwd=REPO, capture_output=True, text=True, timeout=120,
-                          env={**os.environ, **env,
-                               "PYTHONPATH": f"{folder}{os.pathsep}{REPO}"})
+                          env={**outer, **env, "PYTHONPATH": f"{folder}{os.pathsep}{REPO}"})
 
 
 def _collect(folder: Path, *args: str) -> subprocess.CompletedProcess[str]:
@@ -173,3 +176,31 @@ def test_a_cli_call_in_a_test_leaves_no_logging_to_the_next(tmp_path: Path) -> N
     r = _pytest(tmp_path, "-p", "no:randomly", "-q")
     assert r.returncode == 0, r.stdout + r.stderr
     assert "2 passed" in r.stdout, r.stdout
+
+
+#: a test file noting its worker's cache folder and where its fused/ leads
+CACHE = '''
+import os
+from pathlib import Path
+
+
+def test_cache():
+    root = Path(os.environ["COSIM_CACHE_DIR"])
+    with open(os.environ["SETUPS"], "a") as f:
+        f.write(f"{root} {(root / 'fused').resolve()}\\n")
+'''
+
+
+@pytest.mark.integration  # two pytest-xdist workers, each importing cosim
+def test_the_workers_of_a_session_share_one_folder_of_fused_loops(tmp_path: Path) -> None:
+    """Each worker has its own cache folder, in the session's temporary
+    folder, but one ``fused/`` for all: a loop is compiled once a session."""
+    (tmp_path / "pytest.ini").write_text("[pytest]\n")
+    for name in ("test_one.py", "test_two.py"):
+        (tmp_path / name).write_text(CACHE)
+    setups = tmp_path / "setups.txt"
+    r = _pytest(tmp_path, "-n", "2", "--dist", "loadgroup", SETUPS=str(setups))
+    assert r.returncode == 0, r.stdout + r.stderr
+    rows = [line.split() for line in setups.read_text().splitlines()]
+    assert len(rows) == 2 and rows[0][0] != rows[1][0], rows  # a folder per worker
+    assert {fused for _, fused in rows} == {str((tmp_path / "base" / "cosim-fused").resolve())}
