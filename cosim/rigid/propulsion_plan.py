@@ -2,12 +2,25 @@
 direct thrusters and the fuel tanks of every aircraft stepped together
 (``Propulsion.init``, ``set_running``, ``run``, ``inputs``, ``outputs``),
 their state in the caller's ``props``. What it computes, and in which
-order, is said in ``cosim.rigid.propulsion``; this module holds no XML."""
+order, is said in ``cosim.rigid.propulsion``; this module holds no XML.
+
+A frame's common case, time passing (``dt_s`` > 0) outside a trim with
+every engine of every aircraft running, none cut off or starting, each
+engine fed by one tank, runs as one numba loop an engine (``_turbine``:
+the turbine, its thruster, the fuel it burns and its share of the forces
+and moments, one aircraft at a time); any other frame runs the numpy steps
+below for every aircraft. Both compute the same doubles, operation for
+operation (numpy's ``maximum`` and ``minimum`` as numpy has them, NaN and
+signed zeros included; the thrust tables are evaluated before the loop),
+and leave the same keys, so a frame may take either."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from functools import cached_property
 
+import numba
 import numpy as np
 
 from cosim.errors import CosimError
@@ -126,6 +139,141 @@ def _minus(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray | None:
     if b is None:
         return a
     return -b if a is None else a - b
+
+
+# ------------------------------------------- the running frame as a loop --
+
+_jit = numba.njit(cache=True, error_model="numpy", nogil=True)
+
+
+@_jit
+def _maximum(a: float, b: float) -> float:
+    """``np.maximum``: NaN if either is, ``b`` when they are equal (+0, -0)."""
+    return a if a > b or a != a else b
+
+
+@_jit
+def _minimum(a: float, b: float) -> float:
+    """``np.minimum``: NaN if either is, ``b`` when they are equal."""
+    return a if a < b or a != a else b
+
+
+@_jit
+def _seek_one(v: float, target: float, up: float, down: float, dt_s: float, den: float
+              ) -> float:
+    """``_seek`` of one value with a divisor: v + dt x (-down / den) or
+    dt x (up / den), never past the target."""
+    if v > target:
+        return _maximum(v + dt_s * (-down / den), target)
+    return _minimum(v + dt_s * (up / den), target)
+
+
+@_jit
+def _moment(first: bool, second: bool, a: float, b: float) -> float:
+    """``_minus(a, b)`` of two products, each there when its force is."""
+    if first and second:
+        return a - b
+    return a if first else -b
+
+
+@_jit
+def _sum(have: bool, there: bool, before: float, term: float) -> float:
+    """``run``'s sum over the engines: the term added to those of the
+    engines before it (``have``), the first one kept, 0 where no engine
+    gives one (scalars: an array passed to a call costs its reference
+    count every aircraft)."""
+    if there:
+        return before + term if have else term
+    return before if have else 0.0
+
+
+#: the rows of ``_turbine``'s constants
+(_C_MIL, _C_IDLE_N1, _C_IDLE_N2, _C_N1_FACTOR, _C_N2_FACTOR, _C_TSFC, _C_BLEED, _C_IDLE_FF,
+ _C_D2U, _C_D2D, _C_D1U, _C_D1D, _C_UNUSABLE, _C_FEEDS, _C_AX, _C_AY, _C_AZ) = range(17)
+
+
+@_jit
+def _turbine(dt_s: float, c: np.ndarray, have: np.ndarray, ins: tuple, outs: tuple,
+             acc: tuple) -> None:
+    """One running engine of every aircraft, what ``Propulsion._engine``
+    computes with the slow phases, the trim and the multi-tank feeds left
+    out: ``_calculate``, the reverser, ``_burn`` with one feed tank and
+    the thruster's force and moment, added to ``acc`` (forces then moments)
+    where ``have`` says an engine before this one gave a term (else its
+    term, else 0). ``ins``: throttle, idle and mil fractions, N1, N2,
+    N2norm, fuel flow (pph), sigma, T-R, reverser angle, fuel freeze,
+    starved, phase, fuel flow (pps), fuel used, the feed tank's contents,
+    the CG and the acting location; ``outs``: N1, N2, N2norm, TSFC, fuel
+    flow (pph), thrust, starved, phase, fuel flow (pps), fuel used, contents."""
+    (throttle, idle_fraction, mil_fraction, n1, n2, norm, pph, sigma, t_r, reverser, freeze,
+     starved, phase, ff, used, contents, cg_x, cg_y, cg_z, x, y, z) = ins
+    (n1_out, n2_out, norm_out, tsfc_out, pph_out, thrust_out, starved_out, phase_out, ff_out,
+     used_out, contents_out) = outs
+    milthrust, idle_n1, idle_n2 = c[_C_MIL], c[_C_IDLE_N1], c[_C_IDLE_N2]
+    n1_factor, n2_factor, bleed = c[_C_N1_FACTOR], c[_C_N2_FACTOR], c[_C_BLEED]
+    unusable, fed = c[_C_UNUSABLE], c[_C_FEEDS] != 0.0
+    d2u, d2d, d1u, d1d = c[_C_D2U], c[_C_D2D], c[_C_D1U], c[_C_D1D]
+    force_x, force_y, force_z, moment_l, moment_m, moment_n = acc
+    h_fx, h_fy, h_fz, h_l, h_m, h_n = have[0], have[1], have[2], have[3], have[4], have[5]
+    ax, ay, az = c[_C_AX], c[_C_AY], c[_C_AZ]
+    px, py, pz = ax != 0.0, ay != 0.0, az != 0.0
+    pph_up, pph_down = dt_s * 1000.0, -dt_s * 10000.0
+    for i in range(len(throttle)):
+        # _position, then _calculate's running engine
+        tp = throttle[i]
+        over = tp - 1.0
+        if over > 0.0:
+            tp = tp - over
+        idle = milthrust * idle_fraction[i]
+        mil = (milthrust - idle) * mil_fraction[i]
+        m = 1.0 - _minimum(1.0, norm[i] + 0.1)
+        den = 1.0 + 3.0 * m * m * m + (1.0 - sigma[i])
+        run_n2 = _seek_one(n2[i], idle_n2 + tp * n2_factor, d2u, d2d, dt_s, den)
+        run_n1 = _seek_one(n1[i], idle_n1 + tp * n1_factor, d1u, d1d, dt_s, den)
+        n2norm = (run_n2 - idle_n2) / n2_factor
+        thrust = idle + mil * n2norm * n2norm
+        rest = 1.0 - n2norm
+        tsfc = c[_C_TSFC] * math.sqrt(t_r[i] / 389.7) * (0.84 + rest * rest)
+        want = thrust * tsfc  # _seek without a divisor
+        flow = pph[i]
+        if flow > want:
+            flow = _maximum(flow + pph_down, want)
+        else:
+            flow = _minimum(flow + pph_up, want)
+        flow = _maximum(flow, c[_C_IDLE_FF])
+        if bleed != 1.0:
+            thrust = thrust * bleed
+        if reverser[i] != 0.0:  # cos(0) x thrust is thrust
+            thrust = math.cos(reverser[i]) * thrust
+        n1_out[i], n2_out[i], norm_out[i], tsfc_out[i] = run_n1, run_n2, n2norm, tsfc
+        pph_out[i], thrust_out[i] = flow, thrust
+        # _burn with one feed tank (its priority usable: fed)
+        frozen = freeze[i] != 0.0
+        fuel = contents[i]
+        has = fuel > unusable
+        starving = not (has and fed)
+        starved_out[i] = starved[i] if frozen else (1.0 if starving else 0.0)
+        live = not frozen and not starving
+        phase_out[i] = phase[i] if live or frozen else _OFF
+        rate = flow / 3600.0
+        burned = rate * dt_s
+        ff_out[i] = rate if live else ff[i]
+        used_out[i] = used[i] + burned if live else used[i]
+        if live:  # feeding: it has fuel and the best priority
+            left = fuel - burned
+            fuel = left if left >= unusable else _minimum(fuel, unusable)
+        contents_out[i] = fuel
+        # FGForce, as _engine: a zero of the transform gives no term
+        fx, fy, fz = thrust * ax, thrust * ay, thrust * az
+        arm_x = _INCH_TO_FT * (cg_x[i] - x[i])
+        arm_y = _INCH_TO_FT * (y[i] - cg_y[i])
+        arm_z = _INCH_TO_FT * (cg_z[i] - z[i])
+        force_x[i] = _sum(h_fx, px, force_x[i], fx)
+        force_y[i] = _sum(h_fy, py, force_y[i], fy)
+        force_z[i] = _sum(h_fz, pz, force_z[i], fz)
+        moment_l[i] = _sum(h_l, py or pz, moment_l[i], _moment(pz, py, arm_y * fz, arm_z * fy))
+        moment_m[i] = _sum(h_m, px or pz, moment_m[i], _moment(px, pz, arm_z * fx, arm_x * fz))
+        moment_n[i] = _sum(h_n, px or py, moment_n[i], _moment(py, px, arm_x * fy, arm_y * fx))
 
 
 @dataclass(frozen=True)
@@ -251,13 +399,20 @@ class Propulsion:
             total = total + props[t.contents_key]
         return total
 
-    def run(self, props: dict[str, np.ndarray], dt_s: float, *, trimming: bool = False) -> None:
+    def run(self, props: dict[str, np.ndarray], dt_s: float, *, trimming: bool = False,
+            loop: bool = True) -> None:
         """One physics frame of every aircraft (``dt_s`` 0: a frame of
         suspended integration, JSBSim's trim phase; ``trimming``: while
-        JSBSim's trim status is set, no fuel is consumed, as if frozen)."""
+        JSBSim's trim status is set, no fuel is consumed, as if frozen).
+        The common case runs as one loop an engine, unless ``loop`` is
+        false: the numpy steps, the same doubles."""
         if not dt_s >= 0:
             raise ValueError(f"dt_s must be 0 or more, got {dt_s}")
         n = len(props[_CG[0]])
+        if loop and dt_s > 0.0 and not trimming and self._running(props):
+            self._run_loop(props, dt_s, n)
+            props[_TOTAL] = self._total(props, n)
+            return
         cg = [props[k] for k in _CG]
         frozen = np.ones(n, dtype=bool) if trimming else props[_FREEZE] != 0.0
         force: list[np.ndarray | None] = [None, None, None]
@@ -273,6 +428,60 @@ class Propulsion:
                 got = acc[k]
                 props[keys[k]] = np.zeros(n) if got is None else got
         props[_TOTAL] = self._total(props, n)
+
+    @cached_property
+    def _loop_plan(self) -> tuple[tuple[np.ndarray, np.ndarray, tuple[str, ...],
+                                        tuple[str, ...]], ...] | None:
+        """Per engine, ``_turbine``'s constants, which of the sums an engine
+        before it gave a term (``have``), and the keys it reads and writes;
+        None when an engine is not fed by exactly one tank (or there is no
+        engine): the numpy steps always."""
+        if not self.engines or any(len(e.feeds) != 1 for e in self.engines):
+            return None
+        plan = []
+        have = np.zeros(6, dtype=np.bool_)
+        for e in self.engines:
+            tank = self.tanks[e.feeds[0]]
+            c = np.array([e.milthrust_lbs, e.idle_n1, e.idle_n2, e.n1_factor, e.n2_factor,
+                          e.tsfc, e.one_minus_bleed, e.idle_ff_pph, *e.delays,
+                          tank.unusable_lbs, float(1 <= tank.priority <= len(self.tanks)),
+                          *e.axis])
+            ins = (e.key("n1"), e.key("n2"), "_" + e.key("n2norm"), "_" + e.key("fuel-flow-pph"),
+                   *_FLIGHT, e.key("reverser-angle-rad"), _FREEZE, "_" + e.key("starved"),
+                   "_" + e.key("phase"), e.key("fuel-flow-rate-pps"), e.key("fuel-used-lbs"),
+                   tank.contents_key, *_CG, *(e.key(k) for k in _POSITION))
+            outs = (e.key("n1"), e.key("n2"), "_" + e.key("n2norm"), e.key("tsfc"),
+                    "_" + e.key("fuel-flow-pph"), e.key("thrust-lbs"), "_" + e.key("starved"),
+                    "_" + e.key("phase"), e.key("fuel-flow-rate-pps"), e.key("fuel-used-lbs"),
+                    tank.contents_key)
+            plan.append((c, have.copy(), ins, outs))
+            x, y, z = (a != 0.0 for a in e.axis)
+            have |= np.array([x, y, z, y or z, x or z, x or y])
+        return tuple(plan)
+
+    def _running(self, props: dict[str, np.ndarray]) -> bool:
+        """Whether the frame is the loop's: every engine running (the
+        phase), none cut off or starting, each fed by one tank."""
+        return self._loop_plan is not None and not bool(props[_CUTOFF].any()) and not bool(
+            props[_STARTER].any()) and all(bool((props["_" + e.key("phase")] == _RUN).all())
+                                           for e in self.engines)
+
+    def _run_loop(self, props: dict[str, np.ndarray], dt_s: float, n: int) -> None:
+        """``run``'s common case: ``_turbine`` for each engine in turn (a
+        tank two engines share drained by the first before the second reads
+        it), new arrays for what it writes."""
+        assert self._loop_plan is not None
+        acc = tuple(np.empty(n) for _ in range(6))
+        for e, (c, have, ins, outs) in zip(self.engines, self._loop_plan, strict=True):
+            idle_fraction = e.idle_thrust.evaluate(props)
+            mil_fraction = e.mil_thrust.evaluate(props)
+            props[e.key("IdleThrust")] = idle_fraction
+            props[e.key("MilThrust")] = mil_fraction
+            arrays = tuple(np.empty(n) for _ in outs)
+            _turbine(dt_s, c, have, (props[e.throttle_key], idle_fraction, mil_fraction,
+                                     *(props[k] for k in ins)), arrays, acc)
+            props.update(zip(outs, arrays))
+        props.update(zip((*_FORCES, *_MOMENTS), acc))
 
     def _engine(self, e: Turbine, props: dict[str, np.ndarray], dt_s: float,
                 cg: list[np.ndarray], frozen: np.ndarray

@@ -5,13 +5,16 @@ moved off the CG; the compiled plan, fed each frame the inputs JSBSim's
 propulsion saw, carries its own state (N1, N2, fuel flow, tanks) for the
 three aircraft at once and must give JSBSim's thrust, spools, fuel,
 forces and moments every frame. A perturbed table is caught; what the
-compiler does not know is refused with file:line."""
+compiler does not know is refused with file:line. The running frame's
+loop and the numpy steps, flown side by side through the same frames,
+leave every property bit for bit the same."""
 
 from __future__ import annotations
 
 import re
 import shutil
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -203,6 +206,123 @@ def test_a_perturbed_table_value_is_caught(flights: Flights, tmp_path: Path) -> 
     ours = _replay(compile_propulsion(bad_dir / "uav700.xml", ENGINES), start, ins)
     k = "propulsion/engine/thrust-lbs"
     assert not np.allclose(ours[k], jsb[k], rtol=1e-3)
+
+
+def _loop_and_numpy(plan: Propulsion, start: Arrays, ins: Arrays, columns: list[int],
+                    writes: dict[int, list[tuple[int, str, float]]],
+                    monkeypatch: pytest.MonkeyPatch) -> tuple[list[bool], Arrays]:
+    """The recorded flights' ``columns`` run twice side by side, by the
+    running frame's loop where it applies and by the numpy steps always
+    (``writes``: per frame, (column, property, value) written into both):
+    every property equal, bit for bit, after every frame. Returns, per
+    frame, whether the loop ran, and the last frame's properties."""
+    from cosim.rigid import propulsion_plan
+
+    calls: list[int] = []
+    loop = propulsion_plan._turbine
+
+    def counted(*args: Any) -> None:
+        calls.append(1)
+        loop(*args)
+
+    monkeypatch.setattr(propulsion_plan, "_turbine", counted)
+    both = [{k: start[k][columns].copy() for k in ins if k in start} for _ in range(2)]
+    for props in both:
+        plan.init(props, len(columns))
+    ran = []
+    for i in range(len(ins["velocities/mach"])):
+        before = len(calls)
+        for props, use_loop in zip(both, (True, False)):
+            for k, v in ins.items():
+                props[k] = v[i][columns].copy()
+            for j, prop, value in writes.get(i, []):
+                props[prop][j] = value
+            plan.run(props, 0.0 if i in SUSPENDED else DT_S, trimming=i in TRIMMING,
+                     loop=use_loop)
+        ran.append(len(calls) > before)
+        fast, slow = both
+        assert fast.keys() == slow.keys()
+        for k, v in slow.items():  # bit for bit; numpy says where they part
+            if fast[k].dtype != v.dtype or fast[k].tobytes() != v.tobytes():
+                np.testing.assert_array_equal(fast[k], v, err_msg=f"frame {i}: {k}")
+                pytest.fail(f"frame {i}: {k}: {fast[k]!r} and {v!r} equal, not bit for bit")
+    owners: dict[int, list[str]] = {}
+    for k, v in both[0].items():
+        owners.setdefault(id(v), []).append(k)
+    assert [ks for ks in owners.values() if len(ks) > 1] == []
+    return ran, both[0]
+
+
+def test_the_running_frames_loop_gives_the_numpy_steps_doubles(
+        flights: Flights, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The uav700s that stay running (one frozen for 5 s, one with its
+    thruster off the CG and a reverser angle), one starved and refuelled,
+    and one cut off for five frames: the loop runs the frames where every
+    engine runs, the numpy steps the others (dt 0, trimming, an engine
+    cut off, off or starting), and the two give the same doubles."""
+    start, ins, _ = flights
+    columns = [0, 1, 2, 4]
+    writes: dict[int, list[tuple[int, str, float]]] = {}
+    for j, column in enumerate(columns):
+        for t_s, prop, value in SCHEDULES[column]:
+            if prop in WRITES:
+                writes.setdefault(round(t_s / DT_S), []).append((j, prop, value))
+    writes.setdefault(100, []).append((2, "propulsion/cutoff_cmd", 1.0))
+    writes.setdefault(105, []).append((2, "propulsion/cutoff_cmd", 0.0))
+    plan = compile_propulsion(UAV700, ENGINES)
+    ran, _ = _loop_and_numpy(plan, start, ins, columns, writes, monkeypatch)
+    # the loop ran, left for the cut-off, the starvation, the trims, came back
+    assert ran[99] and not any(ran[100:106]) and ran[120]
+    assert not ran[264] and ran[300] and not any(ran[1300:1330]) and ran[-1]
+    assert 0.5 * len(ran) < sum(ran) < len(ran) - 60
+
+
+def test_the_loop_sums_two_engines_turned_off_the_axes_as_numpy(
+        flights: Flights, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two engines, pitched, yawed and rolled, with bleed, feeding from one
+    tank (the second reads what the first left) until it runs dry: each
+    force and moment the sum of both engines' terms, in the loop as in the
+    numpy steps."""
+    work = tmp_path / "uav700"
+    shutil.copytree(UAV700.parent, work)
+    xml = work / "uav700.xml"
+    text = xml.read_text()
+    engine = text[text.index("    <engine"):text.index("    <tank")]
+    text = text.replace(engine, engine.replace(
+        "<roll> 0 </roll> <pitch> 0 </pitch> <yaw> 0 </yaw>",
+        "<roll> 3 </roll> <pitch> 4 </pitch> <yaw> -2 </yaw>") + engine.replace(
+        "<roll> 0 </roll> <pitch> 0 </pitch> <yaw> 0 </yaw>",
+        "<roll> 0 </roll> <pitch> -5 </pitch> <yaw> 0 </yaw>").replace(
+        "<y> 0.0 </y>", "<y> 1.2 </y>"))
+    text = text.replace("<contents unit=\"KG\"> 8.0 </contents>",
+                        "<contents unit=\"KG\"> 0.3 </contents>")
+    xml.write_text(text)
+    turbine = work / "Engines" / "uav700_turbojet.xml"
+    turbine.write_text(turbine.read_text().replace("<bleed>                 0.0",
+                                                   "<bleed> 0.02"))
+    plan = compile_propulsion(xml, ENGINES)
+    assert len(plan.engines) == 2 and plan.engines[0].axis[2] != 0.0
+    start, ins, _ = flights
+    ins = {k: v[:720] for k, v in ins.items()}  # the tank runs dry at frame 543
+    ins["fcs/throttle-pos-norm[1]"] = 0.5 * ins["fcs/throttle-pos-norm"]
+    start = dict(start, **{"fcs/throttle-pos-norm[1]": start["fcs/throttle-pos-norm"]})
+    ran, props = _loop_and_numpy(plan, start, ins, [0, 1, 2], {}, monkeypatch)
+    assert ran[1] and ran[500] and not any(ran[600:])  # starved: the numpy steps
+    assert (props["_propulsion/engine[1]/starved"] == 1.0).any()
+
+
+def test_the_loops_maximum_and_minimum_are_numpys() -> None:
+    """NaN from either side, and of two equal values (+0 and -0) the
+    second, as numpy's own loops give them, short arrays and long."""
+    from cosim.rigid.propulsion_plan import _maximum, _minimum
+
+    special = [np.nan, -0.0, 0.0, 1.0, -1.0, np.inf, -np.inf]
+    pairs = [(a, b) for a in special for b in special]
+    a, b = (np.array(v * 40) for v in zip(*pairs, strict=True))
+    for loop, ufunc in ((_maximum, np.maximum), (_minimum, np.minimum)):
+        ours = np.array([loop(x, y) for x, y in zip(a, b, strict=True)])
+        assert ours.tobytes() == ufunc(a, b).tobytes(), ufunc
+        assert ours[:3].tobytes() == ufunc(a[:3], b[:3]).tobytes(), ufunc
 
 
 def test_the_thrusters_orientation_and_tanks_of_a_file(tmp_path: Path) -> None:
