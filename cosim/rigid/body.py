@@ -259,11 +259,10 @@ def accelerations(props: Props) -> None:
     (lbs ft) about the centre of gravity, the aerodynamics' and the
     propulsion's (``kernels.accelerations``; it writes the total force)."""
     out = block(props, "_eom/accelerations", kern.ACCELERATIONS, len(props["_n"]), reuse=True)
-    args = (props["inertia/mass-slugs"], _rows(props, _INERTIA), _rows(props, _JINV),
-            _rows(props, _W), _rows(props, _Q), props["_eom/ce"], props["_eom/se"],
-            _rows(props, _PQR), _rows(props, _UVW), _rows(props, _R), _rows(props, _ECEF),
-            *(props[k] for k in _LOADS), out)
-    kern.accelerations(*args)
+    kern.accelerations(props["inertia/mass-slugs"], _get(props, _INERTIA), _get(props, _JINV),
+                       _get(props, _W), _get(props, _Q), props["_eom/ce"], props["_eom/se"],
+                       _get(props, _PQR), _get(props, _UVW), _get(props, _R),
+                       _get(props, _ECEF), _get(props, _LOADS), out)
     _store(props, kern.ACCELERATIONS, out)
 
 
@@ -276,11 +275,11 @@ def auxiliary(props: Props, wanted: frozenset[str] = frozenset()) -> None:
     phi, theta = props["attitude/phi-rad"], props["attitude/theta-rad"]
     u, v, w = _get(props, _UVW)
     out = block(props, "_eom/auxiliary", kern.AUXILIARY, len(phi), reuse=True)
-    kern.auxiliary(_rows(props, _PQR), phi, theta, _rows(props, _UVW), np.arctan2(w, u),
-                   np.arctan2(v, np.sqrt(u * u + w * w)), _rows(props, _UVWDOT),
+    kern.auxiliary(_get(props, _PQR), phi, theta, _get(props, _UVW), np.arctan2(w, u),
+                   np.arctan2(v, np.sqrt(u * u + w * w)), _get(props, _UVWDOT),
                    props["atmosphere/rho-slugs_ft3"], props["atmosphere/a-fps"],
-                   _rows(props, _NED), props["atmosphere/rho-sl-slugs_ft3"],
-                   _rows(props, _BA), geo.G0_FT_S2, KTSTOFPS, out)
+                   _get(props, _NED), props["atmosphere/rho-sl-slugs_ft3"],
+                   _get(props, _BA), geo.G0_FT_S2, KTSTOFPS, out)
     _store(props, kern.AUXILIARY, out)
     # no wind, no turbulence: the air-relative rates and velocities are the body's
     for a, b in zip(("velocities/p-aero-rad_sec", "velocities/q-aero-rad_sec",

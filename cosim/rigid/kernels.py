@@ -36,6 +36,9 @@ _RADTODEG = 57.295779513082320876798154814105
 _TWO_PI = 2.0 * math.pi
 
 jit = numba.njit(cache=True, error_model="numpy", nogil=True)
+#: some properties' arrays, one a row, as a tuple (a kernel reads them where
+#: they are: no copy into a block)
+Rows = tuple[np.ndarray, ...]
 
 
 # ------------------------------------------------------------ the Earth --
@@ -296,42 +299,41 @@ ACCELERATIONS = ("accelerations/pidot-rad_sec2", "accelerations/qidot-rad_sec2",
 
 
 @jit
-def accelerations(mass: np.ndarray, inertia: np.ndarray, jinv: np.ndarray, wi: np.ndarray,
-                  q: np.ndarray, ce: np.ndarray, se: np.ndarray, pqr: np.ndarray,
-                  uvw: np.ndarray, ri: np.ndarray, ecef: np.ndarray, fax: np.ndarray,
-                  fay: np.ndarray, faz: np.ndarray, fpx: np.ndarray, fpy: np.ndarray,
-                  fpz: np.ndarray, mal: np.ndarray, mam: np.ndarray, man: np.ndarray,
-                  mpl: np.ndarray, mpm: np.ndarray, mpn: np.ndarray, out: np.ndarray) -> None:
+def accelerations(mass: np.ndarray, inertia: Rows, jinv: Rows, wi: Rows, q: Rows,
+                  ce: np.ndarray, se: np.ndarray, pqr: Rows, uvw: Rows, ri: Rows,
+                  ecef: Rows, loads: Rows, out: np.ndarray) -> None:
     """FGAccelerations::Run in the air for every aircraft (rows
     ``ACCELERATIONS``). ``inertia``: rows Ixx, Iyy, Izz, Ixy, Ixz, Iyz (the
     products as JSBSim's properties give them); ``jinv``: rows 11, 12, 13,
     22, 23, 33 of the inverse; the total force (lbs) and moment (lbs ft) are
-    the aerodynamics' (``fa``, ``ma``) plus the propulsion's (``fp``,
-    ``mp``), the force kept in the last three rows; ``q``: the attitude quaternion's rows (the
-    body's matrices are made from it and the Earth's angle ``ce``, ``se``
-    again here, the same arithmetic as ``_derive``'s, rather than kept as
-    eighteen rows a frame writes and reads back)."""
+    the aerodynamics' plus the propulsion's (``loads``: their forces x, y,
+    z, then their moments l, m, n), the force kept in the last three rows; ``q``: the attitude
+    quaternion's rows (the body's matrices are made from it and the Earth's
+    angle ``ce``, ``se`` again here, the same arithmetic as ``_derive``'s,
+    rather than kept as eighteen rows a frame writes and reads back)."""
     n = len(mass)
     om = OMEGA_EARTH_RAD_S
     for i in range(n):
-        ixx, iyy, izz = inertia[0, i], inertia[1, i], inertia[2, i]
-        ixy, ixz, iyz = inertia[3, i], inertia[4, i], inertia[5, i]
+        ixx, iyy, izz = inertia[0][i], inertia[1][i], inertia[2][i]
+        ixy, ixz, iyz = inertia[3][i], inertia[4][i], inertia[5][i]
         j = (ixx, -ixy, -ixz, -ixy, iyy, -iyz, -ixz, -iyz, izz)
-        k11, k12, k13 = jinv[0, i], jinv[1, i], jinv[2, i]
-        k22, k23, k33 = jinv[3, i], jinv[4, i], jinv[5, i]
-        w0, w1, w2 = wi[0, i], wi[1, i], wi[2, i]
+        k11, k12, k13 = jinv[0][i], jinv[1][i], jinv[2][i]
+        k22, k23, k33 = jinv[3][i], jinv[4][i], jinv[5][i]
+        w0, w1, w2 = wi[0][i], wi[1][i], wi[2][i]
         jw0 = j[0] * w0 + j[1] * w1 + j[2] * w2
         jw1 = j[3] * w0 + j[4] * w1 + j[5] * w2
         jw2 = j[6] * w0 + j[7] * w1 + j[8] * w2
-        fx, fy, fz = fax[i] + fpx[i], fay[i] + fpy[i], faz[i] + fpz[i]
+        fx = loads[0][i] + loads[3][i]
+        fy = loads[1][i] + loads[4][i]
+        fz = loads[2][i] + loads[5][i]
         out[16, i], out[17, i], out[18, i] = fx, fy, fz
-        m0 = (mal[i] + mpl[i]) - (w1 * jw2 - w2 * jw1)
-        m1 = (mam[i] + mpm[i]) - (w2 * jw0 - w0 * jw2)
-        m2 = (man[i] + mpn[i]) - (w0 * jw1 - w1 * jw0)
+        m0 = (loads[6][i] + loads[9][i]) - (w1 * jw2 - w2 * jw1)
+        m1 = (loads[7][i] + loads[10][i]) - (w2 * jw0 - w0 * jw2)
+        m2 = (loads[8][i] + loads[11][i]) - (w0 * jw1 - w1 * jw0)
         d0 = k11 * m0 + k12 * m1 + k13 * m2
         d1 = k12 * m0 + k22 * m1 + k23 * m2
         d2 = k13 * m0 + k23 * m1 + k33 * m2
-        b = ti2b(q[0, i], q[1, i], q[2, i], q[3, i])
+        b = ti2b(q[0][i], q[1][i], q[2][i], q[3][i])
         # the Earth's rate in the body: Ti2b (0, 0, om)
         ob0 = b[0] * 0.0 + b[1] * 0.0 + b[2] * om
         ob1 = b[3] * 0.0 + b[4] * 0.0 + b[5] * om
@@ -340,16 +342,16 @@ def accelerations(mass: np.ndarray, inertia: np.ndarray, jinv: np.ndarray, wi: n
         out[3, i] = d0 + (w1 * ob2 - w2 * ob1)
         out[4, i] = d1 + (w2 * ob0 - w0 * ob2)
         out[5, i] = d2 + (w0 * ob1 - w1 * ob0)
-        gx, gy, gz = gravity(ecef[0, i], ecef[1, i], ecef[2, i])
+        gx, gy, gz = gravity(ecef[0][i], ecef[1][i], ecef[2][i])
         inv_m = 1.0 / mass[i]
         ax, ay, az = inv_m * fx, inv_m * fy, inv_m * fz
-        c0, c1, c2 = pqr[0, i] + 2.0 * ob0, pqr[1, i] + 2.0 * ob1, pqr[2, i] + 2.0 * ob2
-        u, v, w = uvw[0, i], uvw[1, i], uvw[2, i]
+        c0, c1, c2 = pqr[0][i] + 2.0 * ob0, pqr[1][i] + 2.0 * ob1, pqr[2][i] + 2.0 * ob2
+        u, v, w = uvw[0][i], uvw[1][i], uvw[2][i]
         ud = ax - (c1 * w - c2 * v)
         vd = ay - (c2 * u - c0 * w)
         wd = az - (c0 * v - c1 * u)
         # centripetal: w_e x (w_e x r_i) = (-om^2 rx, -om^2 ry, 0)
-        rx, ry, rz = ri[0, i], ri[1, i], ri[2, i]
+        rx, ry, rz = ri[0][i], ri[1][i], ri[2][i]
         cx, cy, cz = 0.0 * rz - om * ry, om * rx - 0.0 * rz, 0.0 * ry - 0.0 * rx
         i0 = 0.0 * cz - om * cy
         i1 = om * cx - 0.0 * cz
@@ -432,11 +434,10 @@ AUXILIARY = ("velocities/thetadot-rad_sec", "velocities/psidot-rad_sec",
 
 
 @jit
-def auxiliary(pqr: np.ndarray, phi: np.ndarray, theta: np.ndarray, uvw: np.ndarray,
-              alpha_uw: np.ndarray, beta_v: np.ndarray,
-              uvwdot: np.ndarray, rho: np.ndarray, a_snd: np.ndarray, ned: np.ndarray,
-              rho_sl: np.ndarray, body_accel: np.ndarray, g0: float, ktstofps: float,
-              out: np.ndarray) -> None:
+def auxiliary(pqr: Rows, phi: np.ndarray, theta: np.ndarray, uvw: Rows,
+              alpha_uw: np.ndarray, beta_v: np.ndarray, uvwdot: Rows, rho: np.ndarray,
+              a_snd: np.ndarray, ned: Rows, rho_sl: np.ndarray, body_accel: Rows, g0: float,
+              ktstofps: float, out: np.ndarray) -> None:
     """FGAuxiliary::Run without wind for every aircraft (rows ``AUXILIARY``):
     it reads the previous frame's accelerations, as JSBSim does. The
     roll's and pitch's cosines and sines are libm's here (numpy 2 computes
@@ -447,7 +448,7 @@ def auxiliary(pqr: np.ndarray, phi: np.ndarray, theta: np.ndarray, uvw: np.ndarr
     w^2`` at least 1e-6 for the angle of attack)."""
     n = len(phi)
     for i in range(n):
-        p, q, r = pqr[0, i], pqr[1, i], pqr[2, i]
+        p, q, r = pqr[0][i], pqr[1][i], pqr[2][i]
         cphi, sphi = math.cos(phi[i]), math.sin(phi[i])
         ctht, stht = math.cos(theta[i]), math.sin(theta[i])
         out[0, i] = q * cphi - r * sphi
@@ -456,8 +457,8 @@ def auxiliary(pqr: np.ndarray, phi: np.ndarray, theta: np.ndarray, uvw: np.ndarr
             out[1, i], out[2, i] = psidot, p + psidot * stht
         else:
             out[1, i], out[2, i] = 0.0, 0.0
-        u, v, w = uvw[0, i], uvw[1, i], uvw[2, i]
-        ud, vd, wd = uvwdot[0, i], uvwdot[1, i], uvwdot[2, i]
+        u, v, w = uvw[0][i], uvw[1][i], uvw[2][i]
+        ud, vd, wd = uvwdot[0][i], uvwdot[1][i], uvwdot[2][i]
         u2, v2, w2 = u * u, v * v, w * w
         muw = u2 + w2
         vt2 = muw + v2
@@ -480,13 +481,13 @@ def auxiliary(pqr: np.ndarray, phi: np.ndarray, theta: np.ndarray, uvw: np.ndarr
         out[14, i] = 0.5 * rho[i] * muw
         out[15, i] = 0.5 * rho[i] * (u2 + v2)
         out[16, i], out[17, i] = vt / a_snd[i], u / a_snd[i]
-        vn, ve = ned[0, i], ned[1, i]
+        vn, ve = ned[0][i], ned[1][i]
         out[18, i] = math.sqrt(vn * vn + ve * ve)
         ve_ = math.sqrt(2.0 * qbar / rho_sl[i])
         out[19, i], out[20, i] = ve_, ve_ / ktstofps
-        out[21, i] = body_accel[0, i] / g0
-        out[22, i] = body_accel[1, i] / g0
-        out[23, i] = -body_accel[2, i] / g0
+        out[21, i] = body_accel[0][i] / g0
+        out[22, i] = body_accel[1][i] / g0
+        out[23, i] = -body_accel[2][i] / g0
 
 
 #: the rows ``aero_forces`` writes (the last three with wind axes only)
