@@ -105,14 +105,17 @@ def block(props: Props, name: str, keys: tuple[str, ...], n: int, *,
     written over in place, for a kernel that reads none of its rows or reads
     an aircraft's before writing that aircraft's (the frame touches half the
     memory; nothing keeps these rows across frames: the flight controls keep
-    copies)."""
+    copies). A kept block that is not C-contiguous (an aircraft's rows cut
+    out of it with a mask leave it so) is replaced: the kernels' rows stay
+    contiguous, and numba compiles no second version for strided ones."""
     if reuse:
         a = props.get(name + "0")
-        if a is None or a.shape != (len(keys), n):
+        if a is None or a.shape != (len(keys), n) or not a.flags.c_contiguous:
             a = props[name + "0"] = _aligned((len(keys), n), 1)
         return a
     a, b = props.get(name + "0"), props.get(name + "1")
-    if a is None or b is None or a.shape != (len(keys), n):
+    if a is None or b is None or a.shape != (len(keys), n) or not (
+            a.flags.c_contiguous and b.flags.c_contiguous):
         a, b = _aligned((len(keys), n), 1), _aligned((len(keys), n), 2)
         props[name + "0"], props[name + "1"] = a, b
     first = props.get(keys[0])

@@ -530,6 +530,21 @@ def aero_forces(f0: np.ndarray, f1: np.ndarray, f2: np.ndarray, alpha: np.ndarra
         out[5, i] = (rx * fy - ry * fx) + m2[i]
 
 
+@jit
+def any_low_or_not_finite(agl: np.ndarray, reach: float, a: np.ndarray, b: np.ndarray,
+                          c: np.ndarray, d: np.ndarray, e: np.ndarray, f: np.ndarray) -> bool:
+    """Whether some aircraft is below ``reach`` above the terrain or has a
+    value of ``a`` .. ``f`` that is not finite (one pass; the frame's usual
+    answer is no)."""
+    for i in range(len(agl)):
+        if not agl[i] >= reach:  # below, or NaN
+            return True
+        if not (math.isfinite(a[i]) and math.isfinite(b[i]) and math.isfinite(c[i])
+                and math.isfinite(d[i]) and math.isfinite(e[i]) and math.isfinite(f[i])):
+            return True
+    return False
+
+
 # ----------------------------------------------------------- the tables --
 
 @jit

@@ -322,3 +322,38 @@ def test_the_aerodynamic_force_kernel_is_the_formula_to_the_bit(wind: bool) -> N
     want = [fx, fy, fz, (ry * fz - rz * fy) + m[0], (rz * fx - rx * fz) + m[1],
             (rx * fy - ry * fx) + m[2]]
     np.testing.assert_array_equal(out[:6], want)
+
+
+def test_cutting_aircraft_out_leaves_the_others_flying_the_same_doubles() -> None:
+    """The class takes a stopped aircraft out of its group's arrays with a
+    mask (``v[..., keep]``: numpy leaves a cut block strided, not
+    C-contiguous): the next frame's blocks are contiguous again, and the
+    aircraft left fly the same doubles as the same aircraft never cut."""
+    ac = compile_aircraft(UAV700, SYSTEMS, ENGINES)
+    n = 4
+
+    def start() -> dict[str, np.ndarray]:
+        props = ac.new_props(n)
+        loc = position_ecef(np.full(n, 47.0), np.full(n, 8.0), np.full(n, 3000.0))
+        props["cosim/ap/qbar-ref-psf"] = np.full(n, 34.0)
+        assert ac.trim_level(props, loc, np.radians([0.0, 30.0, 60.0, 90.0]),
+                             np.full(n, 100 * KT)).all()
+        props["fcs/elevator-cmd-norm"] = np.array([0.0, -0.05, 0.02, 0.0])
+        return props
+
+    whole, cut = start(), start()
+    for _ in range(30):
+        ac.run(whole, 1 / 120)
+        ac.run(cut, 1 / 120)
+    keep = np.array([True, False, True, True])
+    cut = {k: v[..., keep] for k, v in cut.items()}
+    assert not cut["_eom/derived0"].flags.c_contiguous  # what numpy gives
+    for _ in range(60):
+        ac.run(whole, 1 / 120)
+        ac.run(cut, 1 / 120)
+    for name in ("_eom/state0", "_eom/derived0", "_eom/auxiliary0", "_eom/accelerations0",
+                 "_aero/terms0", "_aero/forces0"):
+        assert cut[name].flags.c_contiguous, name
+    for k, v in whole.items():
+        if not k.startswith("_"):
+            np.testing.assert_array_equal(cut[k], v[..., keep], err_msg=k)

@@ -36,6 +36,7 @@ from cosim.core.state import STATE_FIELDS, STATE_INDEX, VehicleSpec, VehicleStat
 from cosim.core.units import FT_TO_M, KT_TO_MPS, LB_TO_KG, LBF_TO_N
 from cosim.errors import BuildError, ConfigError
 from cosim.rigid.aircraft import RigidAircraft, compile_aircraft, position_ecef
+from cosim.rigid.kernels import any_low_or_not_finite
 from cosim.vehicles.jsbsim_model import LANDING_PROP, LANDING_ROLL_RAD, LANDING_SINK_FPS
 
 _S = STATE_INDEX
@@ -152,6 +153,9 @@ class RigidBatch:
 
     def _ground_and_health(self, g: _Group) -> None:
         p = g.props
+        if not any_low_or_not_finite(p["position/h-agl-ft"], _REACH_FT,
+                                     *(p[k] for k in _FINITE)):
+            return  # every aircraft high and finite: one pass
         low = p["position/h-agl-ft"] < _REACH_FT
         bad = np.zeros(len(g.rows), dtype=bool)
         for k in _FINITE:
