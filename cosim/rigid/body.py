@@ -105,21 +105,26 @@ def block(props: Props, name: str, keys: tuple[str, ...], n: int, *,
     written over in place, for a kernel that reads none of its rows or reads
     an aircraft's before writing that aircraft's (the frame touches half the
     memory; nothing keeps these rows across frames: the flight controls keep
-    copies). A kept block that is not C-contiguous (an aircraft's rows cut
-    out of it with a mask leave it so) is replaced: the kernels' rows stay
-    contiguous, and numba compiles no second version for strided ones."""
+    copies). A kept block whose rows are not contiguous (an aircraft's rows
+    cut out of it with a mask leave it so) is replaced: the kernels' rows
+    stay contiguous."""
     if reuse:
         a = props.get(name + "0")
-        if a is None or a.shape != (len(keys), n) or not a.flags.c_contiguous:
+        if a is None or a.shape != (len(keys), n) or not _rows_contiguous(a):
             a = props[name + "0"] = _aligned((len(keys), n), 1)
         return a
     a, b = props.get(name + "0"), props.get(name + "1")
     if a is None or b is None or a.shape != (len(keys), n) or not (
-            a.flags.c_contiguous and b.flags.c_contiguous):
+            _rows_contiguous(a) and _rows_contiguous(b)):
         a, b = _aligned((len(keys), n), 1), _aligned((len(keys), n), 2)
         props[name + "0"], props[name + "1"] = a, b
     first = props.get(keys[0])
     return b if first is not None and _at(first) == _at(a) else a
+
+
+def _rows_contiguous(block: np.ndarray) -> bool:
+    """Whether each row of a block is contiguous, the rows in order."""
+    return block.strides[1] == block.itemsize and block.strides[0] >= block.shape[1] * 8
 
 
 def _at(arr: np.ndarray) -> int:
@@ -132,15 +137,21 @@ _SKEW = 0
 
 def _aligned(shape: tuple[int, int], k: int) -> np.ndarray:
     """An empty block whose start is skewed by a different number of cache
-    lines for each block made: two blocks read and written together at the
-    same offsets from 4 KiB-aligned starts stall the processor's store
-    forwarding ("4K aliasing", measured: the propagation kernel 1.6 times
-    slower)."""
+    lines for each block made, and whose rows are a cache line longer than
+    the aircraft when a row would be a whole number of 4 KiB pages (a
+    multiple of 512 aircraft): a kernel that writes one row and then reads
+    another at the same offsets from 4 KiB-aligned starts stalls the
+    processor's store forwarding ("4K aliasing", measured: the propagation
+    kernel 1.6 times slower; a whole frame at 8,192 aircraft 1.5 times
+    slower than at 8,000 or 8,200). The rows stay contiguous; the block is
+    not C-contiguous then."""
     global _SKEW
     _SKEW = (_SKEW + 1) % 29
-    pad = 8 * (_SKEW + k)  # doubles: whole cache lines
-    flat = np.empty(shape[0] * shape[1] + pad)
-    return flat[pad:].reshape(shape)
+    skew = 8 * (_SKEW + k)  # doubles: whole cache lines
+    rows, n = shape
+    stride = n + 8 if (n * 8) % 4096 == 0 else n
+    flat = np.empty(rows * stride + skew)
+    return flat[skew:].reshape(rows, stride)[:, :n]
 
 
 def _state(props: Props, n: int) -> np.ndarray:

@@ -353,7 +353,35 @@ def test_cutting_aircraft_out_leaves_the_others_flying_the_same_doubles() -> Non
         ac.run(cut, 1 / 120)
     for name in ("_eom/state0", "_eom/derived0", "_eom/auxiliary0", "_eom/accelerations0",
                  "_aero/terms0", "_aero/forces0"):
-        assert cut[name].flags.c_contiguous, name
+        assert cut[name].strides[1] == 8 and cut[name].flags.c_contiguous, name
     for k, v in whole.items():
         if not k.startswith("_"):
             np.testing.assert_array_equal(cut[k], v[..., keep], err_msg=k)
+
+
+
+def test_a_multiple_of_512_aircraft_pads_the_blocks_rows_and_flies_the_same_doubles() -> None:
+    """At a multiple of 512 aircraft a row of doubles is a whole number of
+    4 KiB pages, and a kernel writing one row and reading another at the
+    same offset stalls (4K aliasing): such blocks get rows a cache line
+    longer, still contiguous, and the aircraft fly the same doubles as a
+    batch that needs no padding (the same aircraft and one more)."""
+    ac = compile_aircraft(UAV700, SYSTEMS, ENGINES)
+
+    def fly(n: int) -> dict[str, np.ndarray]:
+        props = ac.new_props(n)
+        loc = position_ecef(47.0 + np.arange(n) * 1e-4, np.full(n, 8.0), np.full(n, 3000.0))
+        props["cosim/ap/qbar-ref-psf"] = np.full(n, 34.0)
+        assert ac.trim_level(props, loc, np.linspace(0.0, 6.0, 513)[:n],
+                             np.full(n, 100 * KT)).all()
+        for _ in range(30):
+            ac.run(props, 1 / 120)
+        return props
+
+    padded, plain = fly(512), fly(513)
+    for name in ("_eom/state0", "_eom/derived0", "_eom/auxiliary0", "_aero/terms0"):
+        assert padded[name].strides == (8 * 520, 8), name
+        assert plain[name].strides == (8 * 513, 8), name
+    for k, v in padded.items():
+        if not k.startswith("_"):
+            np.testing.assert_array_equal(v, plain[k][:512], err_msg=k)
