@@ -8,6 +8,12 @@ worker steps its share), the rigid tier at each size of ``--vehicles``
 (one vectorised frame for all).
 
     python benchmarks/rigid_speed.py --vehicles 1000,4000,10000,20000 --json out.json
+
+``--pool N,N,...`` also flies N rigid uav700s through the process pool (one
+worker a core, 30 Hz exchange) with the autopilot engaged through its
+setpoint channels (heading, altitude and speed holds; a new heading every
+10 s), and reports the real-time factor: how many fly in real time on the
+machine's cores with everything an exchange costs.
 """
 
 from __future__ import annotations
@@ -84,6 +90,39 @@ def jsbsim(n: int, frames: int, rounds: int) -> float:
     return n * frames / best
 
 
+def pool(n: int, seconds: float, rounds: int) -> dict[str, float]:
+    """``n`` rigid uav700s through the process pool, the autopilot engaged
+    through the setpoint channels: the best round's real-time factor."""
+    from cosim.bench.fleet import bench_specs
+    from cosim.core.state import STATE_INDEX
+    from cosim.fdm_pool import make_pool
+
+    channels = tuple(AP) + ("cosim/ap/heading-cmd-deg",)
+    heading = len(AP)
+    specs = bench_specs(n, "uav700", vehicle_class="fixed_wing_rigid")
+    k = 4  # 120 Hz physics, 30 Hz exchange
+    ticks = max(k, round(seconds * 120 / k) * k)
+    best = float("inf")
+    t0 = time.perf_counter()
+    with make_pool(specs, 1 / 120, channels, "process") as p:
+        start_s = time.perf_counter() - t0
+        for j, v in enumerate(AP.values()):
+            p.setpoints[:, j] = v
+        p.setpoints[:, heading] = 90.0
+        p.step(k)  # the setpoints in, a warm-up exchange
+        for r in range(rounds):
+            p.setpoints[:, heading] = 90.0 * (r % 4)
+            t = time.perf_counter()
+            for _ in range(ticks // k):
+                p.step(k)
+            best = min(best, time.perf_counter() - t)
+        if not np.all(p.states[:, STATE_INDEX["ap_engaged"]] == 1.0):
+            raise SystemExit("the pool's autopilots did not stay engaged")
+        workers = p.workers
+    return {"vehicles": n, "workers": workers, "startup_s": start_s,
+            "rtf": ticks / 120 / best, "steps_per_s": n * ticks / best}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--vehicles", default="1000,4000,10000,20000",
@@ -92,11 +131,22 @@ def main(argv: list[str] | None = None) -> int:
                     help="JSBSim aircraft timed (default %(default)s)")
     ap.add_argument("--frames", type=int, default=60, help="frames a block (default 60)")
     ap.add_argument("--rounds", type=int, default=5, help="timed blocks (default 5)")
+    ap.add_argument("--pool", default="",
+                    help="also these sizes through the process pool, autopilot engaged, "
+                         "comma-separated (e.g. 8192,16384)")
+    ap.add_argument("--pool-seconds", type=float, default=2.0,
+                    help="simulated seconds a pool round (default %(default)s)")
     ap.add_argument("--json", type=Path, help="write the figures here")
     a = ap.parse_args(argv)
-    sizes = [int(x) for x in a.vehicles.split(",") if x]
-    if not sizes or min(sizes) < 1 or a.jsbsim < 1 or a.frames < 1 or a.rounds < 1:
-        ap.error("--vehicles, --jsbsim, --frames and --rounds take positive numbers")
+    try:
+        sizes = [int(x) for x in a.vehicles.split(",") if x]
+        pools = [int(x) for x in a.pool.split(",") if x]
+    except ValueError:
+        ap.error("--vehicles and --pool take comma-separated whole numbers")
+    if not sizes or min(sizes + pools) < 1 or a.jsbsim < 1 or a.frames < 1 or a.rounds < 1 \
+            or not a.pool_seconds > 0:
+        ap.error("--vehicles, --pool, --jsbsim, --frames, --rounds and --pool-seconds take "
+                 "positive numbers")
     ref = jsbsim(a.jsbsim, a.frames, a.rounds)
     print(f"JSBSim tier : {a.jsbsim:6d} aircraft  {ref:12,.0f} aircraft-steps/s a core")
     rows = []
@@ -106,12 +156,20 @@ def main(argv: list[str] | None = None) -> int:
         print(f"rigid tier  : {n:6d} aircraft  {v:12,.0f} aircraft-steps/s a core  "
               f"{v / ref:5.1f} x JSBSim  {v / 120:8,.0f} aircraft in real time a core")
         sys.stdout.flush()
+    pooled = []
+    for n in pools:
+        row = pool(n, a.pool_seconds, a.rounds)
+        pooled.append(row)
+        print(f"rigid pool  : {n:6d} aircraft  {row['steps_per_s']:12,.0f} aircraft-steps/s on "
+              f"{row['workers']} workers  RTF {row['rtf']:5.2f}  (started in "
+              f"{row['startup_s']:.1f} s)")
+        sys.stdout.flush()
     if a.json:
         a.json.write_text(json.dumps({
             "benchmark": "rigid_speed", "date": time.strftime("%Y-%m-%d"),
             "machine": platform.machine(), "python": platform.python_version(),
             "physics_hz": 120, "autopilot": "engaged", "jsbsim_vehicles": a.jsbsim,
-            "jsbsim_steps_per_s": ref, "rigid": rows}, indent=1) + "\n")
+            "jsbsim_steps_per_s": ref, "rigid": rows, "pool": pooled}, indent=1) + "\n")
     return 0
 
 

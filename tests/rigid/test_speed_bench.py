@@ -1,6 +1,7 @@
 """``benchmarks/rigid_speed.py`` runs end to end on a small fleet: both tiers
-timed, the figures written, the rigid tier's autopilot engaged throughout
-(the script refuses to report otherwise)."""
+timed, and a pool of rigid aircraft, the figures written, the rigid
+tier's autopilot engaged throughout (the script refuses to report
+otherwise)."""
 
 from __future__ import annotations
 
@@ -16,7 +17,8 @@ def test_the_speed_benchmark_reports_both_tiers(tmp_path: Path) -> None:
     out = tmp_path / "speed.json"
     res = subprocess.run([sys.executable, str(REPO / "benchmarks" / "rigid_speed.py"),
                           "--vehicles", "20,40", "--jsbsim", "2", "--frames", "6",
-                          "--rounds", "1", "--json", str(out)],
+                          "--rounds", "1", "--pool", "8", "--pool-seconds", "0.1",
+                          "--json", str(out)],
                          capture_output=True, text=True, timeout=300, check=False)
     assert res.returncode == 0, res.stderr
     doc = json.loads(out.read_text())
@@ -24,6 +26,9 @@ def test_the_speed_benchmark_reports_both_tiers(tmp_path: Path) -> None:
     assert [r["vehicles"] for r in doc["rigid"]] == [20, 40]
     assert all(r["steps_per_s"] > 0 and r["x_jsbsim"] > 0 for r in doc["rigid"])
     assert "x JSBSim" in res.stdout
+    # through the pool, every autopilot engaged (the script checks the states)
+    assert [(r["vehicles"], r["rtf"] > 0) for r in doc["pool"]] == [(8, True)]
+    assert "RTF" in res.stdout
 
 
 def test_bad_arguments_are_a_usage_error() -> None:
@@ -31,3 +36,7 @@ def test_bad_arguments_are_a_usage_error() -> None:
                           "--vehicles", "0"], capture_output=True, text=True, timeout=60,
                          check=False)
     assert res.returncode == 2 and "positive numbers" in res.stderr
+    res = subprocess.run([sys.executable, str(REPO / "benchmarks" / "rigid_speed.py"),
+                          "--pool", "8,x"], capture_output=True, text=True, timeout=60,
+                         check=False)
+    assert res.returncode == 2 and "whole numbers" in res.stderr
