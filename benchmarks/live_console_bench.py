@@ -325,6 +325,9 @@ def measures(condition: str, cond: Any, status: dict[str, Any], summary: dict[st
         "lost_percent": _ratio(100.0 * (dropped + received - drawn), published),
         "latency_ms_p50": page.get("latency_ms_p50"), "latency_ms_p95": page.get("latency_ms_p95"),
         "latency_ms_max": page.get("latency_ms_max"),
+        # the page knows the server's clock to within half this (its quickest
+        # round trip), so a latency shorter than that can come out negative
+        "clock_rtt_ms": page.get("clock_rtt_ms"),
         "counter_mismatches": page.get("counter_mismatches"),
         "jpeg_ms_per_frame": _ratio(1000.0 * tap.get("jpeg_encode_s", 0.0), published),
         "jpeg_cores": _ratio(tap.get("jpeg_encode_s", 0.0), summary.get("wall_time_s"), 3),

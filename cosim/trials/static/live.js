@@ -124,7 +124,9 @@
       drawn.set(k, { frame: d.frame, time_ms: now });
       drawnCount += 1;
       if (latencies.length < MAX_LATENCIES) {
-        latencies.push(performance.timeOrigin + now + offsetMs - d.made_ms);
+        // the clock now, not the animation frame's time (`now`: when this
+        // display frame began, which can precede the frame's arrival)
+        latencies.push(performance.timeOrigin + performance.now() + offsetMs - d.made_ms);
       }
       window.live.drawn.push([k, d.frame, now, d.counter]);
       if (window.live.drawn.length > 10000) window.live.drawn.splice(0, 5000);
