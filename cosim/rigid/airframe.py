@@ -352,8 +352,8 @@ class Aerodynamics:
         if fz is None:
             return _numpy_terms(self, props)
         n = len(props["_n"])
-        out = fz.run(props, block(props, "_aero/terms", fz.names, n, reuse=True)
-                     if fz.names and fz.names[0] else None)
+        out = fz.run(props, block(props, "_aero/terms", fz.names, n) if fz.names and
+                     fz.names[0] else None)
         for k, name in enumerate(fz.names):
             if name:
                 props[name] = out[k]
@@ -390,7 +390,7 @@ class Aerodynamics:
                 alpha > self.hyst_max_rad, 1.0, np.where(alpha < self.hyst_min_rad, 0.0, h))
         native, mom = self._terms(props)
         keys = kernels.AERO_FORCES if self.wind_axes else kernels.AERO_FORCES[:6]
-        out = block(props, "_aero/forces", keys, len(alpha), reuse=True)
+        out = block(props, "_aero/forces", keys, len(alpha))
         kernels.aero_forces(native[0], native[1], native[2], alpha, props["aero/beta-rad"],
                             mom[0], mom[1], mom[2], props["inertia/cg-x-in"],
                             props["inertia/cg-y-in"], props["inertia/cg-z-in"], rp_in[0],

@@ -97,29 +97,18 @@ def _store(props: Props, keys: tuple[str, ...], block: np.ndarray) -> None:
         props[key] = block[j]
 
 
-def block(props: Props, name: str, keys: tuple[str, ...], n: int, *,
-          reuse: bool = False) -> np.ndarray:
-    """Where a kernel writes ``keys`` this frame: of two blocks kept in
-    ``props`` (so a frame allocates nothing), the one the properties do not
-    show now (they show last frame's until ``_store``). ``reuse``: one block,
-    written over in place, for a kernel that reads none of its rows or reads
-    an aircraft's before writing that aircraft's (the frame touches half the
-    memory; nothing keeps these rows across frames: the flight controls keep
-    copies). A kept block whose rows are not contiguous (an aircraft's rows
-    cut out of it with a mask leave it so) is replaced: the kernels' rows
-    stay contiguous."""
-    if reuse:
-        a = props.get(name + "0")
-        if a is None or a.shape != (len(keys), n) or not _rows_contiguous(a):
-            a = props[name + "0"] = _aligned((len(keys), n), 1)
-        return a
-    a, b = props.get(name + "0"), props.get(name + "1")
-    if a is None or b is None or a.shape != (len(keys), n) or not (
-            _rows_contiguous(a) and _rows_contiguous(b)):
-        a, b = _aligned((len(keys), n), 1), _aligned((len(keys), n), 2)
-        props[name + "0"], props[name + "1"] = a, b
-    first = props.get(keys[0])
-    return b if first is not None and _at(first) == _at(a) else a
+def block(props: Props, name: str, keys: tuple[str, ...], n: int) -> np.ndarray:
+    """Where a kernel writes ``keys`` this frame: one block kept in
+    ``props`` (so a frame allocates nothing) and written over in place, for
+    a kernel that reads none of its rows or reads an aircraft's before
+    writing that aircraft's (nothing keeps these rows across frames: the
+    flight controls keep copies). A kept block whose rows are not contiguous
+    (an aircraft's rows cut out of it with a mask leave it so) is replaced:
+    the kernels' rows stay contiguous."""
+    a = props.get(name + "0")
+    if a is None or a.shape != (len(keys), n) or not _rows_contiguous(a):
+        a = props[name + "0"] = _aligned((len(keys), n))
+    return a
 
 
 def _rows_contiguous(block: np.ndarray) -> bool:
@@ -135,7 +124,7 @@ def _at(arr: np.ndarray) -> int:
 _SKEW = 0
 
 
-def _aligned(shape: tuple[int, int], k: int) -> np.ndarray:
+def _aligned(shape: tuple[int, int]) -> np.ndarray:
     """An empty block whose start is skewed by a different number of cache
     lines for each block made, and whose rows are a cache line longer than
     the aircraft when a row would be a whole number of 4 KiB pages (a
@@ -147,7 +136,7 @@ def _aligned(shape: tuple[int, int], k: int) -> np.ndarray:
     not C-contiguous then."""
     global _SKEW
     _SKEW = (_SKEW + 1) % 29
-    skew = 8 * (_SKEW + k)  # doubles: whole cache lines
+    skew = 8 * (_SKEW + 1)  # doubles: whole cache lines
     rows, n = shape
     stride = n + 8 if (n * 8) % 4096 == 0 else n
     flat = np.empty(rows * stride + skew)
@@ -228,8 +217,8 @@ def propagate(props: Props, dt: float) -> None:
     state (``kernels.propagate``)."""
     epa = props["_eom/epa"] + OMEGA_EARTH * dt
     n = len(epa)
-    new = block(props, "_eom/state", kern.STATE, n, reuse=True)  # the state's own, mostly
-    der = block(props, "_eom/derived", kern.DERIVED, n, reuse=True)
+    new = block(props, "_eom/state", kern.STATE, n)  # the state's own rows, mostly
+    der = block(props, "_eom/derived", kern.DERIVED, n)
     kern.propagate(dt, _state(props, n), _rows(props, _QD), _rows(props, _WD),
                    _rows(props, _AI), epa, props["position/terrain-elevation-asl-ft"],
                    new, der)
@@ -272,7 +261,7 @@ def accelerations(props: Props) -> None:
     angular and linear accelerations from the total force (lbs) and moment
     (lbs ft) about the centre of gravity, the aerodynamics' and the
     propulsion's (``kernels.accelerations``; it writes the total force)."""
-    out = block(props, "_eom/accelerations", kern.ACCELERATIONS, len(props["_n"]), reuse=True)
+    out = block(props, "_eom/accelerations", kern.ACCELERATIONS, len(props["_n"]))
     kern.accelerations(props["inertia/mass-slugs"], _get(props, _INERTIA), _get(props, _JINV),
                        _get(props, _W), _get(props, _Q), props["_eom/ce"], props["_eom/se"],
                        _get(props, _PQR), _get(props, _UVW), _get(props, _R),
@@ -288,7 +277,7 @@ def auxiliary(props: Props, wanted: frozenset[str] = frozenset()) -> None:
     a third of the rest's)."""
     phi, theta = props["attitude/phi-rad"], props["attitude/theta-rad"]
     u, v, w = _get(props, _UVW)
-    out = block(props, "_eom/auxiliary", kern.AUXILIARY, len(phi), reuse=True)
+    out = block(props, "_eom/auxiliary", kern.AUXILIARY, len(phi))
     kern.auxiliary(_get(props, _PQR), phi, theta, _get(props, _UVW), np.arctan2(w, u),
                    np.arctan2(v, np.sqrt(u * u + w * w)), _get(props, _UVWDOT),
                    props["atmosphere/rho-slugs_ft3"], props["atmosphere/a-fps"],

@@ -52,8 +52,6 @@ def add(a: Vec, b: Vec) -> Vec:
     return (a[0] + b[0], a[1] + b[1], a[2] + b[2])
 
 
-
-
 def quat_from_euler(phi: Arr, tht: Arr, psi: Arr) -> Quat:
     """The quaternion of Euler angles (rad), FGQuaternion(phi, tht, psi)."""
     sp, cp = np.sin(0.5 * phi), np.cos(0.5 * phi)
