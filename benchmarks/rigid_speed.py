@@ -11,8 +11,9 @@ worker steps its share), the rigid tier at each size of ``--vehicles``
 
 ``--pool N,N,...`` also flies N rigid uav700s through the process pool (one
 worker a core, 30 Hz exchange) with the autopilot engaged through its
-setpoint channels (heading, altitude and speed holds; a new heading every
-10 s), and reports the real-time factor: how many fly in real time on the
+setpoint channels (heading, altitude and speed holds; a new heading each
+timed round of ``--pool-seconds``), and reports the best round's real-time
+factor: how many fly in real time on the
 machine's cores with everything an exchange costs.
 """
 
