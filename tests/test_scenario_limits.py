@@ -118,9 +118,9 @@ def test_an_alias_bomb_is_counted_not_expanded() -> None:
     bomb = ["a0: &a0 [x, x, x, x, x, x, x, x, x, x]"]
     for i in range(1, 10):
         bomb.append(f"a{i}: &a{i} [" + ", ".join([f"*a{i - 1}"] * 10) + "]")
-    t0 = time.monotonic()
+    t0 = time.process_time()  # the work, not the shared machine's load
     refused(scenario(extra="\n".join(bomb) + "\n"), "values once aliases are expanded")
-    assert time.monotonic() - t0 < 1.0
+    assert time.process_time() - t0 < 1.0
     refused(scenario(extra="".join(f"k{i}: &k{i} 1\n" for i in range(101))
                      + "l: [" + ", ".join(f"*k{i}" for i in range(101)) + "]\n"),
             f"more than {limits.MAX_ALIASES} aliases")
@@ -141,9 +141,9 @@ def test_an_alias_bomb_is_counted_not_expanded() -> None:
 def test_a_placeholder_beyond_the_limits_is_refused_in_well_under_a_second(
         expr: str, fragment: str) -> None:
     text = scenario(vehicles=VEHICLE.replace("heading_deg: 0", f"heading_deg: ${{{expr}}}"))
-    t0 = time.monotonic()
+    t0 = time.process_time()  # the work, not the shared machine's load
     refused(text, fragment, line=7)
-    assert time.monotonic() - t0 < 0.5
+    assert time.process_time() - t0 < 0.5
 
 
 def test_placeholders_within_the_limits_still_work() -> None:
@@ -274,9 +274,9 @@ def test_vehicle_count_is_bounded_with_the_memory_it_would_take() -> None:
     for count in (1_000_000_000, 100_000):
         v = VEHICLE.replace("model: c172p,", f"model: c172p, count: {count}, "
                                              f"formation: {{type: grid, spacing_m: 50}},")
-        t0 = time.monotonic()
+        t0 = time.process_time()  # the work, not the shared machine's load
         refused(scenario(vehicles=v), f"must be <= {limits.MAX_VEHICLES}", line=7)
-        assert time.monotonic() - t0 < 1.0
+        assert time.process_time() - t0 < 1.0
     two = (VEHICLE.replace("model: c172p,", "model: c172p, count: 6000, formation: "
                                             "{type: grid, spacing_m: 50},")
            + VEHICLE.replace("id: a,", "id: b,").replace(

@@ -65,46 +65,53 @@ def _read_response(s: socket.socket) -> bytes:
 
 def test_slow_clients_are_disconnected_and_others_served_meanwhile(study_file: Path) -> None:
     """Clients that send half a request head, one byte of a 100-byte body or
-    nothing at all are disconnected when the request deadline passes (1 s
-    here), an idle kept-alive connection when its time is up (1 s); one
-    address's connections beyond 32 are closed as they open; a normal client
-    is served at once while the others hang on."""
+    nothing at all are disconnected when the request deadline passes (2 s
+    here, from each one's connection), an idle kept-alive connection when its
+    time is up (2 s); one address's connections beyond 32 are closed as they
+    open; a normal client is served while the others hang on. Every time is
+    measured from the socket's own opening, so a slow machine setting up the
+    80 connections does not move the bounds."""
     import selectors
 
-    timeout_s, margin_s = 1.0, 1.0
+    timeout_s, margin_s = 2.0, 1.5
     sends = {"half a head": b"GET /api/study HTTP/1.1\r\nHost: 127.0.0.1\r\nX-Slow: a",
              "a byte of the body": b"POST /api/sessions HTTP/1.1\r\nHost: 127.0.0.1\r\n"
                                    b"Content-Type: application/json\r\n"
                                    b"Content-Length: 100\r\n\r\n{",
              "nothing": b""}
-    with live_server(study_file, request_timeout_s=timeout_s, keep_alive_s=1) as server:
+    with live_server(study_file, request_timeout_s=timeout_s, keep_alive_s=2) as server:
         addr = (server.host, int(server.port))
-        t0 = time.monotonic()
-        slow: dict[socket.socket, str] = {}
+        slow: dict[socket.socket, tuple[str, float]] = {}  # name, opened at
         for _ in range(10):  # 30 from 127.0.0.3
             for name, data in sends.items():
+                opened = time.monotonic()
                 s = socket.create_connection(addr, source_address=("127.0.0.3", 0))
                 s.sendall(data)
-                slow[s] = name
+                slow[s] = (name, opened)
         for k in range(40):  # 40 from 127.0.0.4: 32 are let in
+            opened = time.monotonic()
             s = socket.create_connection(addr, source_address=("127.0.0.4", 0))
             s.sendall(sends["half a head"])
-            slow[s] = "from one address, in" if k < 32 else "from one address, over 32"
+            slow[s] = ("from one address, in" if k < 32 else "from one address, over 32",
+                       opened)
         idle = socket.create_connection(addr)
         idle.sendall(b"GET /api/study HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
         assert _read_response(idle).startswith(b"HTTP/1.1 200")
-        idle_since = time.monotonic()
-        slow[idle] = "kept alive, idle"
-        start = time.monotonic()
+        slow[idle] = ("kept alive, idle", time.monotonic())
         status, _ = server.request("GET", "/api/study")
-        assert status == 200 and time.monotonic() - start < 0.5
-        assert time.monotonic() - t0 < timeout_s / 2  # (all but 8 were still connected)
+        served = time.monotonic()
+        assert status == 200
+        # served while every slow client let in was still within its deadline
+        # (a server blocked by them would answer only after dropping them)
+        first_deadline = min(opened for name, opened in slow.values()
+                             if name != "from one address, over 32") + timeout_s
+        assert served < first_deadline, (served, first_deadline)
         closed: dict[str, list[float]] = {}
         sel = selectors.DefaultSelector()
         for s in slow:
             sel.register(s, selectors.EVENT_READ)
         try:
-            while len(sel.get_map()) and time.monotonic() - t0 < timeout_s + 5:
+            while len(sel.get_map()) and time.monotonic() - served < timeout_s + 5:
                 for key, _ in sel.select(timeout=0.1):
                     s = key.fileobj
                     assert isinstance(s, socket.socket)
@@ -113,8 +120,8 @@ def test_slow_clients_are_disconnected_and_others_served_meanwhile(study_file: P
                     except ConnectionResetError:
                         got = b""
                     if got == b"":  # disconnected by the server
-                        origin = idle_since if s is idle else t0
-                        closed.setdefault(slow[s], []).append(time.monotonic() - origin)
+                        name, opened = slow[s]
+                        closed.setdefault(name, []).append(time.monotonic() - opened)
                         sel.unregister(s)
         finally:
             sel.close()
