@@ -186,11 +186,12 @@ class RigidAircraft:
 
     def steady_engines(self, props: Props, dt_s: float = 0.1, most: int = 600) -> None:
         """Run the engines alone until they settle at their throttle (as
-        JSBSim's trim takes the propulsion's steady state): until no thrust
-        or spool speed moves by more than 1e-10 of itself in two steps running
-        (the thrust of a step is that of the speed the step began with)."""
+        JSBSim's trim takes the propulsion's steady state): until no thrust,
+        spool or propeller speed or manifold pressure moves by more than
+        1e-10 of itself in two steps running (the thrust of a step is that of
+        the speed the step began with)."""
         keys = sorted(k for k in self.propulsion.outputs
-                      if k.endswith(("thrust-lbs", "/n1", "/n2")))
+                      if k.endswith(("thrust-lbs", "/n1", "/n2", "propeller-rpm", "map-pa")))
         still = 0
         for _ in range(most):
             before = [props[k].copy() for k in keys]

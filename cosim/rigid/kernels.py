@@ -422,6 +422,25 @@ def vcas_arrays(mach: np.ndarray, pres: np.ndarray, sl_pres: float, sl_a: float)
     return out
 
 
+@jit
+def pitot_total_arrays(mach: np.ndarray, pres: np.ndarray) -> np.ndarray:
+    """``_pitot_total`` for every aircraft (an engine's intake pressure)."""
+    out = np.empty(len(mach))
+    for i in range(len(mach)):
+        out[i] = _pitot_total(mach[i], pres[i])
+    return out
+
+
+@jit
+def atan2_arrays(y: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """libm's ``atan2`` for every aircraft (numpy's rounds differently in
+    about one case in a hundred)."""
+    out = np.empty(len(y))
+    for i in range(len(y)):
+        out[i] = math.atan2(y[i], x[i])
+    return out
+
+
 #: the rows ``auxiliary`` returns
 AUXILIARY = ("velocities/thetadot-rad_sec", "velocities/psidot-rad_sec",
              "velocities/phidot-rad_sec", "velocities/vt-fps", "velocities/vtrue-kts",

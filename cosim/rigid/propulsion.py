@@ -1,7 +1,8 @@
 """An aircraft's ``<propulsion>`` compiled to one vectorised plan: the
-turbine engines with their ``direct`` thrusters, and the fuel tanks, of
-every aircraft of a worker stepped together, as JSBSim 1.3's
-``FGPropulsion``, ``FGTurbine``, ``FGThruster``, ``FGForce`` and ``FGTank``
+turbine engines with their ``direct`` thrusters, the piston engines with
+their fixed-pitch propellers, and the fuel tanks, of every aircraft of a
+worker stepped together, as JSBSim 1.3's ``FGPropulsion``, ``FGTurbine``,
+``FGPiston``, ``FGPropeller``, ``FGThruster``, ``FGForce`` and ``FGTank``
 compute them.
 
 ``compile_propulsion(aircraft_xml, engine_dir)`` reads the aircraft file's
@@ -36,6 +37,31 @@ Each frame (``run(props, dt_s)``), in JSBSim's order, for each engine:
   orientation, and its moment about the CG (the acting location, inches
   in the structural frame, x aft and z up, taken from the CG
   ``inertia/cg-[xyz]-in`` into body axes and feet);
+- the piston engine (``FGPiston::Calculate``, unboosted), at the engine
+  speed the propeller left: running while the magnetos are on, fuel flowed
+  last frame and the speed is above 80 % of idle (started again above it
+  when windmilling); the manifold pressure lagging (``man-press-lag``)
+  towards the ram pressure (the pitot total pressure of the Mach number)
+  times the engine's share of the engine, airbox and throttle impedances;
+  the air flow of the swept volume at the volumetric efficiency the
+  manifold-to-ambient pressure ratio reduces; the fuel flow of the
+  mixture's equivalence ratio (none when starved); the indicated power of
+  the fuel flow over the ISFC times the mixture efficiency table (the spark
+  fail drop with a magneto off) less the static friction, or the starter's
+  power while cranking (``propulsion/starter_cmd``), plus the pumping and
+  friction mean effective pressures' power; below 0.125 hp it stops. The
+  exhaust gas, cylinder head and oil temperatures and the oil pressure
+  feed nothing else and are not computed;
+- the fixed-pitch propeller (``FGPropeller::Calculate``): the air velocity
+  at the propeller (the body's plus the rotation's at its location), the
+  advance ratio, the helical tip Mach number, the power and thrust
+  coefficients of their tables (times ``CP_MACH``/``CT_MACH`` when given),
+  the power it absorbs and the thrust, the induced velocity of momentum
+  theory, the P-factor's shift of the acting location (y by the angle of
+  the local flow times w, z times v), the reaction torque, the speed
+  moved by the excess torque over the propeller's inertia, and the moments:
+  the torque, the gyroscopic moment of the inertial body rates and the
+  thrust's at the acting location;
 - the fuel it burns (``FGPropulsion::ConsumeFuel``), unless
   ``propulsion/fuel_freeze`` is set or the frame is part of a trim
   (``run(..., trimming=True)``, as JSBSim's trim status): drained equally
@@ -69,11 +95,28 @@ The mass balance adds the tanks: ``Propulsion.tanks`` gives each tank's
 location in inches (``location_in``) and the ``props`` key of its contents
 in pounds (``contents_key``).
 
+A piston's state: ``propulsion/engine[i]/map-pa`` (the manifold pressure),
+``engine-rpm``, ``propeller-rpm``, ``fuel-flow-rate-pps``, ``power-hp``,
+the propeller's ``advance-ratio``, ``thrust-coefficient``,
+``helical-tip-Mach``, ``prop-induced-velocity_fps``,
+``propeller-power-ftlbps``, ``propeller-torque-ftlb``, the acting location
+``x-position``..., and privately ``running``, ``magnetos`` (3: both; no
+command writes them) and ``starved``. ``init`` leaves it as
+``FGPiston::InitRunning`` does (twice the idle speed, running, the mixture
+command at 1); ``set_running`` then iterates ``GetSteadyState`` at full
+throttle and a mixture of 1.3 x the pressure ratio at 0.5 s steps, as
+JSBSim does, to the same doubles.
+
 What it does not know it refuses (``CompileError``, ``FILE:LINE:
-<element>``), never guesses: engines other than ``turbine_engine``
-(``piston_engine``, ``turboprop_engine``, ``rocket_engine``,
-``electric_engine``, ...), thrusters other than ``direct`` (``propeller``,
-``nozzle``, ``rotor``, ``pointing``), augmentation, water injection, the
+<element>``), never guesses: engines other than ``turbine_engine`` and
+``piston_engine`` (``turboprop_engine``, ``rocket_engine``,
+``electric_engine``, ...), thrusters other than ``direct`` and a
+fixed-pitch ``propeller`` (``nozzle``, ``rotor``, ``pointing``; a
+variable-pitch or constant-speed propeller, one turned off the body's x
+axis), a piston's supercharger (``numboostspeeds`` and the boost
+elements), its functions and units JSBSim converts but the compiler does
+not know; a turbine driving a propeller or a piston a direct thruster;
+augmentation, water injection, the
 spool-rate and TSFC functions, any other element or function, oxidizer
 tanks and tank temperature, drain locations, radius and grain (an
 engine's own ``location`` and ``orient`` are ignored, as JSBSim ignores
@@ -92,11 +135,29 @@ import math
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from cosim.rigid.functions import Compiled, CompileError, _where, compile_function, parse
+from cosim.rigid.functions import (
+    Compiled,
+    CompileError,
+    _numbers,
+    _where,
+    compile_function,
+    parse,
+)
+from cosim.rigid.piston_plan import (
+    FTTOM,
+    IN3TOM3,
+    INHGTOPA,
+    MIXTURE_TABLE,
+    STANDARD_PRESSURE,
+    Piston,
+    Propeller,
+    Table,
+)
 from cosim.rigid.propulsion_plan import Propulsion, PropulsionError, Tank, Turbine
 from cosim.rigid.units import factor, number
 
-__all__ = ["Propulsion", "PropulsionError", "Tank", "Turbine", "compile_propulsion"]
+__all__ = ["Piston", "Propeller", "Propulsion", "PropulsionError", "Tank", "Turbine",
+           "compile_propulsion"]
 
 #: ``FGTank::ProcessFuelName``'s densities (lbs/gal)
 _FUEL_DENSITY = {
@@ -105,7 +166,7 @@ _FUEL_DENSITY = {
     "JP-8+100": 6.66, "RP-1": 6.73, "T-1": 6.88, "ETHANOL": 6.58, "HYDRAZINE": 8.61,
     "F-34": 6.66, "F-35": 6.74, "F-40": 6.48, "F-44": 6.81, "AVTAG": 6.48, "AVCAT": 6.81,
 }
-_OTHER_ENGINES = ("piston_engine", "turboprop_engine", "rocket_engine", "electric_engine",
+_OTHER_ENGINES = ("turboprop_engine", "rocket_engine", "electric_engine",
                   "brushless_dc_motor")
 #: the turbine's numbers (disable-windmill: 0 or 1)
 _TURBINE_NUMBERS = {"milthrust", "maxthrust", "bypassratio", "bleed", "tsfc", "atsfc",
@@ -255,19 +316,185 @@ def _turbine(el: ET.Element, index: int, source: str,
         location_in=location, axis=(cp * cy, cp * sy, -sp))
 
 
+#: the piston's numbers: (JSBSim's unit, default); a None default is
+#: computed (JSBSim's constructor). Read but feeding only what is not
+#: computed (the cylinder head, exhaust gas and oil temperatures): _PISTON_UNUSED
+_PISTON_NUMBERS: dict[str, tuple[str, float | None]] = {
+    "minmp": ("INHG", 6.5), "maxmp": ("INHG", 28.5), "man-press-lag": ("", 1.0),
+    "displacement": ("IN3", 360.0), "maxhp": ("HP", 200.0), "static-friction": ("HP", 1.5),
+    "sparkfaildrop": ("", None), "cycles": ("", 4.0), "idlerpm": ("", 600.0),
+    "maxrpm": ("", 2800.0), "maxthrottle": ("", 1.0), "minthrottle": ("", 0.0),
+    "bsfc": ("LBS/HP*HR", None), "volumetric-efficiency": ("", 0.85),
+    "compression-ratio": ("", 8.5), "stroke": ("IN", 4.375),
+    "air-intake-impedance-factor": ("", None), "ram-air-factor": ("", 1.0),
+    "starter-rpm": ("", None), "starter-torque": ("", None), "dynamic-fmep": ("PA", 18400.0),
+    "static-fmep": ("PA", 46500.0), "peak-piston-speed": ("", 100.0)}
+_PISTON_UNUSED = {"bore", "cylinders", "cylinder-head-mass", "cooling-factor",
+                  "oil-pressure-relief-valve-psi", "design-oil-temp-degK",
+                  "oil-pressure-rpm-max", "oil-viscosity-index"}
+_PROPELLER_NUMBERS = {"ixx": "SLUG*FT2", "diameter": "FT", "numblades": "", "gearratio": "",
+                      "minpitch": "", "maxpitch": "", "ct_factor": "", "cp_factor": ""}
+_PROPELLER_TABLES = ("C_THRUST", "C_POWER", "CT_MACH", "CP_MACH")
+
+
+def _table1(el: ET.Element, source: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """An engine file's table of one dimension (``type="internal"``: no lookup)."""
+    extra = [c for c in _kids(el) if c.tag != "tableData"]
+    if extra or len(el.findall("tableData")) != 1:
+        raise CompileError(f"{_where(extra[0] if extra else el, source)}: only a table of "
+                           f"one dimension (one <tableData>) is supported here")
+    data = el.find("tableData")
+    assert data is not None
+    rows = _numbers(data, source)
+    if len(rows) < 2 or any(len(r) != 2 for r in rows):
+        raise CompileError(f"{_where(data, source)}: a table of one dimension needs two or "
+                           f"more rows of two numbers")
+    if any(b[0] <= a[0] for a, b in zip(rows, rows[1:])):
+        raise CompileError(f"{_where(data, source)}: breakpoints must increase")
+    return tuple(r[0] for r in rows), tuple(r[1] for r in rows)
+
+
+def _piston(el: ET.Element, index: int, source: str, propeller: Propeller,
+            feeds: tuple[int, ...], problems: list[CompileError] | None) -> Piston:
+    """``FGPiston``'s constructor: the numbers read, the defaults and the
+    derived constants (impedances, ISFC) as JSBSim computes them."""
+    values: dict[str, float] = {}
+    mixture: Table = MIXTURE_TABLE
+    for c in _kids(el):
+        try:
+            if c.tag in _PISTON_NUMBERS:
+                values[c.tag] = _number(c, source, _PISTON_NUMBERS[c.tag][0])
+            elif c.tag in _PISTON_UNUSED:
+                _number(c, source)
+            elif c.tag == "table" and c.get("name") == "MIXTURE":
+                mixture = _table1(c, source)
+            elif c.tag == "table" and c.get("name") == "COMBUSTION":
+                _table1(c, source)  # the exhaust gas temperature's only
+            else:
+                raise CompileError(f"{_where(c, source)}: not supported in a piston_engine "
+                                   f"(supported: {', '.join(sorted(_PISTON_NUMBERS))}, "
+                                   f"{', '.join(sorted(_PISTON_UNUSED))}, tables MIXTURE and "
+                                   f"COMBUSTION; no supercharger, no functions)")
+        except CompileError as err:
+            if problems is None:
+                raise
+            problems.append(err)
+
+    def get(name: str) -> float:
+        v = values.get(name, _PISTON_NUMBERS[name][1])
+        assert v is not None
+        return v
+
+    min_mp, max_mp, max_rpm, idle_rpm = get("minmp"), get("maxmp"), get("maxrpm"), get("idlerpm")
+    stroke, ve, cycles, peak = get("stroke"), get("volumetric-efficiency"), get("cycles"), \
+        get("peak-piston-speed")
+    displacement, max_hp, friction = get("displacement"), get("maxhp"), get("static-friction")
+    fmep_dynamic, fmep_static = get("dynamic-fmep"), get("static-fmep")
+    displacement_m3 = displacement * IN3TOM3
+    rated_mps = (max_rpm * stroke) / 360
+    isfc = values.get("bsfc", -1.0)
+    if isfc < 0:
+        pmep = (29.92 - max_mp) * INHGTOPA * ve
+        fmep = fmep_dynamic * rated_mps * FTTOM + fmep_static
+        hp_loss = ((pmep + fmep) * displacement_m3 * max_rpm) / (cycles * 22371)
+        isfc = (1.1 * displacement * max_rpm * ve * (max_mp / 29.92)) / (
+            9411 * (max_hp + hp_loss - friction))
+    max_mp = min(max_mp, 29.9) if max_mp > 29.9 else max_mp
+    min_map, max_map = min_mp * INHGTOPA, max_mp * INHGTOPA
+    z_airbox = values.get("air-intake-impedance-factor", -999.0)
+    if z_airbox < 0.0:
+        ze = peak / rated_mps
+        z_airbox = (STANDARD_PRESSURE * ze / max_map) - ze
+    z_throttle = (peak / ((idle_rpm * stroke) / 360)) * (STANDARD_PRESSURE / min_map - 1) - z_airbox
+    drop = values.get("sparkfaildrop")
+    return Piston(
+        index=index, name=el.get("name", ""), min_throttle=get("minthrottle"),
+        max_throttle=get("maxthrottle"), idle_rpm=idle_rpm, max_rpm=max_rpm, stroke_in=stroke,
+        cycles=cycles, displacement_m3=displacement_m3, isfc=isfc, volumetric_efficiency=ve,
+        compression_ratio=get("compression-ratio"), peak_piston_speed_fps=peak,
+        z_airbox=z_airbox, z_throttle=z_throttle, man_press_lag_s=get("man-press-lag"),
+        ram_air_factor=get("ram-air-factor"), fmep_dynamic_pa=fmep_dynamic,
+        fmep_static_pa=fmep_static, static_friction_hp=friction,
+        spark_fail_drop=1.0 if drop is None else min(max(0.0, 1 - drop), 1.0),
+        starter_rpm=values.get("starter-rpm", 2 * idle_rpm) if values.get(
+            "starter-rpm", -1.0) >= 0.0 else 2 * idle_rpm,
+        starter_torque=values.get("starter-torque", max_hp * 0.4) if values.get(
+            "starter-torque", -1.0) >= 0 else max_hp * 0.4,
+        mixture=mixture, feeds=feeds, propeller=propeller)
+
+
+def _propeller(th: ET.Element, root: ET.Element, path: str, source: str) -> Propeller:
+    """``FGPropeller``'s constructor for a fixed-pitch propeller along the
+    body's x axis (``th``: the aircraft file's <thruster>; ``root``: the
+    propeller file's <propeller>)."""
+    values: dict[str, float] = {}
+    tables: dict[str, tuple[tuple[float, ...], tuple[float, ...]]] = {}
+    extra = sorted(a for a in root.attrib if a not in ("_line", "name", "version"))
+    if extra:
+        raise CompileError(f"{_where(root, path)}: attribute {extra[0]!r} is not supported")
+    for c in _kids(root):
+        if c.tag in _PROPELLER_NUMBERS:
+            values[c.tag] = _number(c, path, _PROPELLER_NUMBERS[c.tag])
+        elif c.tag == "table" and c.get("name") in _PROPELLER_TABLES:
+            tables[c.get("name", "")] = _table1(c, path)
+        else:
+            raise CompileError(f"{_where(c, path)}: not supported in a propeller (supported: "
+                               f"{', '.join(sorted(_PROPELLER_NUMBERS))}, tables "
+                               f"{', '.join(_PROPELLER_TABLES)} of one dimension: a fixed-pitch "
+                               f"propeller)")
+    if values.get("minpitch", 0.0) != values.get("maxpitch", 0.0):
+        raise CompileError(f"{_where(root, path)}: a variable-pitch propeller (minpitch "
+                           f"{values.get('minpitch', 0.0)} != maxpitch "
+                           f"{values.get('maxpitch', 0.0)}) is not compiled (fixed pitch only)")
+    missing = [t for t in ("C_THRUST", "C_POWER") if t not in tables]
+    if missing:
+        raise CompileError(f"{_where(root, path)}: needs the table {missing[0]}")
+    for c in _kids(th):
+        if c.tag not in ("location", "orient", "sense", "p_factor"):
+            raise CompileError(f"{_where(c, source)}: not supported in a propeller thruster "
+                               f"(supported: location, orient, sense, p_factor)")
+    loc, orient = th.find("location"), th.find("orient")
+    if loc is None:
+        raise CompileError(f"{_where(th, source)}: needs a <location>")
+    if orient is not None and any(_triplet(orient, source, "RAD", ("roll", "pitch", "yaw"))):
+        raise CompileError(f"{_where(orient, source)}: a propeller turned off the body's x "
+                           f"axis is not compiled (roll, pitch and yaw must be 0)")
+    sense_el, pf_el = th.find("sense"), th.find("p_factor")
+    sense = 1.0 if sense_el is None else (1.0 if _number(sense_el, source) >= 0.0 else -1.0)
+    p_factor = 0.0 if pf_el is None else _number(pf_el, source)
+    if p_factor < 0:
+        assert pf_el is not None
+        raise CompileError(f"{_where(pf_el, source)}: the P-factor must be 0 or more")
+    version = root.get("version")
+    try:
+        newer = version is not None and float(version) > 1.0
+    except ValueError:
+        raise CompileError(f"{_where(root, path)}: version {version!r} is not a number") from None
+    return Propeller(
+        diameter_ft=max(values.get("diameter", 0.0), 0.001),
+        ixx_slugft2=max(values.get("ixx", 0.0), 1e-06),
+        gear_ratio=max(values.get("gearratio", 1.0), 0.001), ct=tables["C_THRUST"],
+        cp=tables["C_POWER"], ct_mach=tables.get("CT_MACH"), cp_mach=tables.get("CP_MACH"),
+        ct_factor=values.get("ct_factor", 1.0), cp_factor=values.get("cp_factor", 1.0),
+        sense=sense, sense_multiplier=-1.0 if newer else 1.0, p_factor=p_factor,
+        location_in=_triplet(loc, source, "IN", ("x", "y", "z")))
+
+
 def _thruster(engine: ET.Element, aircraft_dir: Path, engine_dir: Path, source: str
-              ) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
-    """The thruster's location (inches) and orientation (radians): a
-    ``direct`` thruster only."""
+              ) -> tuple[tuple[float, float, float], tuple[float, float, float]] | Propeller:
+    """A ``direct`` thruster's location (inches) and orientation (radians),
+    or a fixed-pitch ``propeller``."""
     th = engine.find("thruster")
     if th is None:
         raise CompileError(f"{_where(engine, source)}: needs a <thruster>")
     if th.get("file"):
         path = _find(th.get("file", ""), aircraft_dir, engine_dir, th, source)
         root = parse(path)
+        if root.tag == "propeller":
+            return _propeller(th, root, str(path), source)
         if root.tag != "direct":
             raise CompileError(f"{_where(root, str(path))}: thruster not supported by the "
-                               f"rigid-body compiler (supported: direct)")
+                               f"rigid-body compiler (supported: direct, propeller)")
         extra = _kids(root)
         if extra:
             raise CompileError(f"{_where(extra[0], str(path))}: not supported in a direct "
@@ -295,15 +522,15 @@ def _engine_body(el: ET.Element, aircraft_dir: Path, engine_dir: Path, source: s
     body = parse(path)
     if body.tag in _OTHER_ENGINES:
         raise CompileError(f"{_where(body, str(path))}: not supported by the rigid-body "
-                           f"compiler (supported: turbine_engine)")
-    if body.tag != "turbine_engine":
+                           f"compiler (supported: turbine_engine, piston_engine)")
+    if body.tag not in ("turbine_engine", "piston_engine"):
         raise CompileError(f"{_where(body, str(path))}: not an engine (supported: "
-                           f"turbine_engine)")
+                           f"turbine_engine, piston_engine)")
     return body, str(path)
 
 
 def _engine(el: ET.Element, index: int, aircraft_dir: Path, engine_dir: Path, source: str,
-            n_tanks: int, problems: list[CompileError] | None) -> Turbine | None:
+            n_tanks: int, problems: list[CompileError] | None) -> Turbine | Piston | None:
     """One ``<engine>`` compiled (None when ``problems`` got its refusals)."""
     found: list[CompileError] = []
 
@@ -335,16 +562,28 @@ def _engine(el: ET.Element, index: int, aircraft_dir: Path, engine_dir: Path, so
         thruster = _thruster(el, aircraft_dir, engine_dir, source)
     except CompileError as err:
         note(err)
-    turbine = None
+    engine: Turbine | Piston | None = None
     if body is not None and thruster is not None:
         try:
-            turbine = _turbine(body[0], index, body[1], thruster, tuple(feeds),
-                               None if problems is None else found)
+            pair = (body[0].tag, isinstance(thruster, Propeller))
+            if pair == ("turbine_engine", False):
+                assert not isinstance(thruster, Propeller)
+                engine = _turbine(body[0], index, body[1], thruster, tuple(feeds),
+                                  None if problems is None else found)
+            elif pair == ("piston_engine", True):
+                assert isinstance(thruster, Propeller)
+                engine = _piston(body[0], index, body[1], thruster, tuple(feeds),
+                                 None if problems is None else found)
+            else:
+                raise CompileError(f"{_where(el, source)}: a {body[0].tag} with a "
+                                   f"{'propeller' if pair[1] else 'direct thruster'} is not "
+                                   f"compiled (a turbine_engine drives a direct thruster, a "
+                                   f"piston_engine a propeller)")
         except CompileError as err:
             note(err)
     if problems is not None:
         problems.extend(found)
-    return None if found else turbine
+    return None if found else engine
 
 
 def compile_propulsion(aircraft_xml: Path, engine_dir: Path, *,
@@ -369,14 +608,14 @@ def compile_propulsion(aircraft_xml: Path, engine_dir: Path, *,
             tanks.append(_tank(el, i, source))
         except CompileError as err:
             found.append(err)
-    engines: list[Turbine] = []
+    engines: list[Turbine | Piston] = []
     for i, el in enumerate(prop.findall("engine")):
         if found and problems is None:
             break
-        turbine = _engine(el, i, aircraft_xml.parent, Path(engine_dir), source,
-                          len(tank_els), found if problems is not None else None)
-        if turbine is not None:
-            engines.append(turbine)
+        engine = _engine(el, i, aircraft_xml.parent, Path(engine_dir), source,
+                         len(tank_els), found if problems is not None else None)
+        if engine is not None:
+            engines.append(engine)
     if problems is None:
         if found:
             raise found[0]

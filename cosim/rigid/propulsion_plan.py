@@ -25,6 +25,7 @@ import numpy as np
 
 from cosim.errors import CosimError
 from cosim.rigid.functions import Compiled
+from cosim.rigid.piston_plan import Piston
 
 _INCH_TO_FT = 1.0 / 12.0
 
@@ -281,20 +282,30 @@ class Propulsion:
     """The compiled ``<propulsion>``: engines and tanks, a stateless plan."""
 
     source: str
-    engines: tuple[Turbine, ...]
+    engines: tuple[Turbine | Piston, ...]
     tanks: tuple[Tank, ...]
+
+    @property
+    def turbines(self) -> tuple[Turbine, ...]:
+        return tuple(e for e in self.engines if isinstance(e, Turbine))
 
     @property
     def inputs(self) -> frozenset[str]:
         names: set[str] = {*_CG, *_FLIGHT, _FREEZE, "aero/qbar-psf"}
         for e in self.engines:
-            names |= e.idle_thrust.inputs | e.mil_thrust.inputs | {e.throttle_key}
+            if isinstance(e, Piston):
+                names |= e.inputs
+            else:
+                names |= e.idle_thrust.inputs | e.mil_thrust.inputs | {e.throttle_key}
         return frozenset(names)
 
     @property
     def outputs(self) -> frozenset[str]:
         names: set[str] = {*_FORCES, *_MOMENTS, _TOTAL}
         for e in self.engines:
+            if isinstance(e, Piston):
+                names |= set(e.state)
+                continue
             names |= {e.key(k) for k in ("thrust-lbs", "n1", "n2", "fuel-flow-rate-pps",
                                          "fuel-used-lbs", "tsfc", "IdleThrust", "MilThrust")}
             names |= {"_" + e.key(k) for k in ("fuel-flow-pph", "n2norm", "phase", "running",
@@ -312,7 +323,10 @@ class Propulsion:
         props[_TOTAL] = self._total(props, n)
         for k in (*_FORCES, *_MOMENTS):
             props[k] = zeros.copy()
-        for e in self.engines:
+        for p in self.engines:
+            if isinstance(p, Piston):
+                p.init(props, n)
+        for e in self.turbines:
             props[e.key("n1")] = np.full(n, e.idle_n1 + 1.0 * e.n1_factor)
             props[e.key("n2")] = np.full(n, e.idle_n2 + 1.0 * e.n2_factor)
             props["_" + e.key("n2norm")] = (props[e.key("n2")] - e.idle_n2) / e.n2_factor
@@ -346,6 +360,12 @@ class Propulsion:
         full = np.ones(n)
         current = np.zeros(n)  # JSBSim's, kept from one engine to the next
         for e in self.engines:
+            if isinstance(e, Piston):
+                sfx = "" if e.index == 0 else f"[{e.index}]"
+                for c in ("cmd", "pos"):  # FGPropulsion::InitRunning's mixture
+                    props[f"fcs/mixture-{c}-norm{sfx}"] = np.ones(n)
+                current = e.steady(props, props[_STARTER], current)
+                continue
             starved = props["_" + e.key("starved")] != 0.0
             tp = _position(props[e.throttle_key])
             props[e.key("n2")] = e.idle_n2 + tp * e.n2_factor
@@ -418,7 +438,8 @@ class Propulsion:
         force: list[np.ndarray | None] = [None, None, None]
         moment: list[np.ndarray | None] = [None, None, None]
         for e in self.engines:
-            fb, mb = self._engine(e, props, dt_s, cg, frozen)
+            fb, mb = (self._engine(e, props, dt_s, cg, frozen) if isinstance(e, Turbine)
+                      else self._piston(e, props, dt_s, frozen))
             for acc, part in ((force, fb), (moment, mb)):
                 for k in range(3):
                     a, b = acc[k], part[k]
@@ -436,11 +457,12 @@ class Propulsion:
         before it gave a term (``have``), and the keys it reads and writes;
         None when an engine is not fed by exactly one tank (or there is no
         engine): the numpy steps always."""
-        if not self.engines or any(len(e.feeds) != 1 for e in self.engines):
+        if not self.engines or any(len(e.feeds) != 1 or isinstance(e, Piston)
+                                   for e in self.engines):
             return None
         plan = []
         have = np.zeros(6, dtype=np.bool_)
-        for e in self.engines:
+        for e in self.turbines:
             tank = self.tanks[e.feeds[0]]
             c = np.array([e.milthrust_lbs, e.idle_n1, e.idle_n2, e.n1_factor, e.n2_factor,
                           e.tsfc, e.one_minus_bleed, e.idle_ff_pph, *e.delays,
@@ -464,7 +486,7 @@ class Propulsion:
         phase), none cut off or starting, each fed by one tank."""
         return self._loop_plan is not None and not bool(props[_CUTOFF].any()) and not bool(
             props[_STARTER].any()) and all(bool((props["_" + e.key("phase")] == _RUN).all())
-                                           for e in self.engines)
+                                           for e in self.turbines)
 
     def _run_loop(self, props: dict[str, np.ndarray], dt_s: float, n: int) -> None:
         """``run``'s common case: ``_turbine`` for each engine in turn (a
@@ -472,7 +494,7 @@ class Propulsion:
         it), new arrays for what it writes."""
         assert self._loop_plan is not None
         acc = tuple(np.empty(n) for _ in range(6))
-        for e, (c, have, ins, outs) in zip(self.engines, self._loop_plan, strict=True):
+        for e, (c, have, ins, outs) in zip(self.turbines, self._loop_plan, strict=True):
             idle_fraction = e.idle_thrust.evaluate(props)
             mil_fraction = e.mil_thrust.evaluate(props)
             props[e.key("IdleThrust")] = idle_fraction
@@ -503,7 +525,7 @@ class Propulsion:
         if bool(reverser.any()):  # cos(0) x thrust is thrust
             thrust = np.cos(reverser) * thrust
         props[e.key("thrust-lbs")] = thrust
-        self._burn(e, props, dt_s, pph, frozen)
+        self._burn(e, props, dt_s, pph / 3600.0, frozen)
         # FGForce: the body force and the moment about the CG, the arm from
         # the structural frame to body axes in feet. A zero of the transform
         # (known when compiled) gives no force (None), as JSBSim's zero
@@ -517,6 +539,17 @@ class Propulsion:
         mb = [_minus(_times(arms[1], fb[2]), _times(arms[2], fb[1])),
               _minus(_times(arms[2], fb[0]), _times(arms[0], fb[2])),
               _minus(_times(arms[0], fb[1]), _times(arms[1], fb[0]))]
+        return fb, mb
+
+    def _piston(self, e: Piston, props: dict[str, np.ndarray], dt_s: float,
+                frozen: np.ndarray
+                ) -> tuple[list[np.ndarray | None], list[np.ndarray | None]]:
+        """A piston engine and its propeller (``FGPiston::Calculate``), then
+        the fuel it burns; its body forces and moments."""
+        fb, mb = e.thrust(props, dt_s, e.power(props, dt_s, props[_STARTER]))
+        rate = props[e.key("fuel-flow-rate-pps")]
+        self._burn(e, props, dt_s, rate, frozen)
+        props[e.key("fuel-flow-rate-pps")] = rate  # the engine's, burnt or not
         return fb, mb
 
     def _calculate(self, e: Turbine, props: dict[str, np.ndarray], dt_s: float,
@@ -655,16 +688,17 @@ class Propulsion:
         props[_STARTER] = np.where(ran | to_run | (start & ~lit), 0.0, props[_STARTER])
         return ran
 
-    def _burn(self, e: Turbine, props: dict[str, np.ndarray], dt_s: float,
-              pph: np.ndarray, frozen: np.ndarray) -> None:
-        """``FGPropulsion::ConsumeFuel`` for one engine (nothing while frozen):
-        an engine whose feed tanks hold no usable fuel starves (the next
-        frame turns it off) and burns nothing."""
+    def _burn(self, e: Turbine | Piston, props: dict[str, np.ndarray], dt_s: float,
+              rate: np.ndarray, frozen: np.ndarray) -> None:
+        """``FGPropulsion::ConsumeFuel`` for one engine at ``rate`` pounds a
+        second (nothing while frozen): an engine whose feed tanks hold no
+        usable fuel starves (a turbine's next frame turns it off, a piston's
+        gets no fuel) and burns nothing."""
         if bool(frozen.all()):
             return
         feeds = [self.tanks[i] for i in e.feeds]
         has = [props[t.contents_key] > t.unusable_lbs for t in feeds]
-        best = np.full(len(pph), np.inf)
+        best = np.full(len(rate), np.inf)
         for t, h in zip(feeds, has):
             if 1 <= t.priority <= len(self.tanks):
                 best = np.where(h, np.minimum(best, t.priority), best)
@@ -672,10 +706,9 @@ class Propulsion:
         starved = np.isinf(best)
         props[starved_key] = np.where(frozen, props[starved_key], starved)
         live = ~frozen & ~starved
-        if bool(starved.any()):  # JSBSim's next frame begins with the engine off
+        if isinstance(e, Turbine) and bool(starved.any()):  # the next frame begins off
             phase_key = "_" + e.key("phase")
             props[phase_key] = np.where(live | frozen, props[phase_key], _OFF)
-        rate = pph / 3600.0
         burned = rate * dt_s
         ff_key, used_key = e.key("fuel-flow-rate-pps"), e.key("fuel-used-lbs")
         props[ff_key] = np.where(live, rate, props[ff_key])
@@ -687,7 +720,8 @@ class Propulsion:
             count = feeding[0].astype(np.float64)
             for f in feeding[1:]:
                 count = count + f
-            each = burned / count
+            with np.errstate(divide="ignore", invalid="ignore"):  # none fed: not drained
+                each = burned / count
         for t, f in zip(feeds, feeding):
             c = props[t.contents_key]
             left = c - each

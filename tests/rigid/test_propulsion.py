@@ -301,7 +301,7 @@ def test_the_loop_sums_two_engines_turned_off_the_axes_as_numpy(
     turbine.write_text(turbine.read_text().replace("<bleed>                 0.0",
                                                    "<bleed> 0.02"))
     plan = compile_propulsion(xml, ENGINES)
-    assert len(plan.engines) == 2 and plan.engines[0].axis[2] != 0.0
+    assert len(plan.turbines) == 2 and plan.turbines[0].axis[2] != 0.0
     start, ins, _ = flights
     ins = {k: v[:720] for k, v in ins.items()}  # the tank runs dry at frame 543
     ins["fcs/throttle-pos-norm[1]"] = 0.5 * ins["fcs/throttle-pos-norm"]
@@ -439,19 +439,14 @@ def test_unsupported_turbine_elements_are_refused_with_file_and_line(
         compile_propulsion(xml, ENGINES)
 
 
-def test_the_c172ps_piston_engine_and_propeller_are_refused_together() -> None:
+def test_the_c172ps_piston_engine_and_propeller_compile() -> None:
+    """They were refused; tests/rigid/test_piston.py flies them against JSBSim."""
     info = find_model("c172p")
     xml = Path(info.aircraft_dir) / "c172p" / "c172p.xml"
     problems: list[CompileError] = []
     plan = compile_propulsion(xml, ENGINES, problems=problems)
-    text = "\n".join(str(p) for p in problems)
-    assert plan.engines == () and len(plan.tanks) == 2
-    assert len(problems) == 2, text
-    assert "eng_io320.xml:" in text and "<piston_engine>: not supported" in text
-    assert "prop_75in2f.xml:" in text and "<propeller>: thruster not supported" in text
-    with pytest.raises(CompileError, match=r"eng_io320.xml:\d+: <piston_engine>: not "
-                                           r"supported by the rigid-body compiler"):
-        compile_propulsion(xml, ENGINES)
+    assert problems == [] and len(plan.engines) == 1 and len(plan.tanks) == 2
+    assert plan.turbines == () and plan.engines[0].feeds == (0, 1)
 
 
 def test_every_problem_is_listed_when_asked(tmp_path: Path) -> None:
@@ -504,7 +499,7 @@ def test_units_are_converted_with_jsbsims_factors_or_refused(tmp_path: Path) -> 
     turbine = _TURBINE.replace("<milthrust> 100 </milthrust>",
                                "<milthrust unit=\"N\"> 400 </milthrust>")
     plan = compile_propulsion(_write(tmp_path, _ENGINE, turbine.format(extra="")), ENGINES)
-    assert plan.engines[0].milthrust_lbs == 400 * 0.22482
+    assert plan.turbines[0].milthrust_lbs == 400 * 0.22482
     turbine = turbine.replace("unit=\"N\"", "unit=\"KGF\"")
     with pytest.raises(CompileError, match=r"eng.xml:2: <milthrust>: unit 'KGF' is not "
                                            r"supported here \(supported: KG, LBS, N\)"):
