@@ -50,6 +50,9 @@ from cosim.rigid.propulsion import Propulsion, compile_propulsion
 from cosim.rigid.units import triplet_in
 
 logger = logging.getLogger(__name__)
+#: FGAuxiliary's heights over the wingspan, computed when a part reads one
+_OVER_SPAN = frozenset({"aero/h_b-cg-ft", "aero/h_b-mac-ft"})
+_INCH_TO_FT = 1.0 / 12.0
 Props = dict[str, np.ndarray]
 
 #: sections the compiler reads; anything else at the top level is refused
@@ -215,10 +218,27 @@ class RigidAircraft:
             self.systems.run_ic(props, ic_dt_s)
         self.mass.run(props)
         body.auxiliary(props, self.reads)
+        if self.reads & _OVER_SPAN:
+            self._over_span(props)
         self.propulsion.run(props, dt_s)
         m = self.metrics
         self.aero.run(props, m.rp_in, m.sw_sqft, m.bw_ft, m.cbar_ft, m.iw_rad)
         body.accelerations(props)
+
+    def _over_span(self, props: Props) -> None:
+        """FGAuxiliary's heights above the ground over the wingspan (the
+        ground effect's lookup): of the CG, and of the aerodynamic reference
+        point (its arm from the CG in body axes, the exact inch, turned to
+        the local vertical)."""
+        agl, span_ft = props["position/h-agl-ft"], self.metrics.bw_ft
+        rp = self.metrics.rp_in
+        arm = (_INCH_TO_FT * (props["inertia/cg-x-in"] - rp[0]),
+               _INCH_TO_FT * (rp[1] - props["inertia/cg-y-in"]),
+               _INCH_TO_FT * (props["inertia/cg-z-in"] - rp[2]))
+        t = [props["_eom/tl2b_t" + k] for k in ("13", "23", "33")]  # body -> down
+        down = t[0] * arm[0] + t[1] * arm[1] + t[2] * arm[2]
+        props["aero/h_b-cg-ft"] = agl / span_ft
+        props["aero/h_b-mac-ft"] = (agl - down) / span_ft
 
     def touching(self, props: Props) -> np.ndarray:
         """Whether each aircraft touches the ground: a contact point at or

@@ -15,7 +15,7 @@ import pytest
 
 from cosim.rigid.aircraft import compile_aircraft, position_ecef, problems
 from cosim.rigid.functions import CompileError
-from cosim.vehicles.jsb import find_model, has_property, new_fdm
+from cosim.vehicles.jsb import JSBSIM_ROOT, _wrapper_root, find_model, has_property, new_fdm
 
 REPO = Path(__file__).resolve().parents[2]
 UAV700 = REPO / "aircraft" / "uav700" / "uav700.xml"
@@ -29,8 +29,9 @@ CHECK = {"position/h-sl-ft": 1e-3, "velocities/vt-fps": 1e-5, "attitude/psi-deg"
          "position/long-gc-deg": 1e-9}
 
 
-def _trimmed_fdm(h_ft: float = 3000, kt: float = 100, psi_deg: float = 30):
-    fdm = new_fdm(find_model("uav700"), 1 / 120)
+def _trimmed_fdm(h_ft: float = 3000, kt: float = 100, psi_deg: float = 30,
+                 model: str = "uav700"):
+    fdm = new_fdm(find_model(model), 1 / 120)
     fdm["ic/lat-geod-deg"], fdm["ic/long-gc-deg"] = 47.0, 8.0
     fdm["ic/h-sl-ft"], fdm["ic/vt-fps"], fdm["ic/psi-true-deg"] = h_ft, kt * KT, psi_deg
     fdm.run_ic()
@@ -39,9 +40,9 @@ def _trimmed_fdm(h_ft: float = 3000, kt: float = 100, psi_deg: float = 30):
     return fdm
 
 
-def _rigid_from(fdm, path: Path = UAV700):
+def _rigid_from(fdm, path: Path = UAV700, systems: Path = SYSTEMS, engines: Path = ENGINES):
     """A rigid aircraft placed in ``fdm``'s state (its properties copied)."""
-    ac = compile_aircraft(path, SYSTEMS, ENGINES)
+    ac = compile_aircraft(path, systems, engines)
     props = ac.new_props(1)
     for k in list(props):
         if not k.startswith("_") and has_property(fdm, k):
@@ -93,6 +94,24 @@ def test_the_rigid_aircraft_flies_as_jsbsim_does_through_manoeuvres() -> None:
     assert fdm["position/h-sl-ft"] - start["position/h-sl-ft"] > 100
     assert abs(fdm["attitude/phi-deg"]) > 20
     assert fdm["velocities/vt-fps"] > start["velocities/vt-fps"] + 20
+
+
+def test_the_rigid_c172p_flies_as_jsbsim_does() -> None:
+    """The c172p as cosim gives it JSBSim (the autopilot attached, off): its
+    piston engine and propeller, and the ground effect's height of the
+    reference point over the span, which the rigid tier did not compute."""
+    fdm = _trimmed_fdm(2000, 90, model="c172p")
+    xml = _wrapper_root(find_model("c172p")) / "c172p" / "c172p.xml"
+    ac, props = _rigid_from(fdm, xml, JSBSIM_ROOT / "systems", JSBSIM_ROOT / "engine")
+    start = {k: fdm[k] for k in CHECK}
+    worst = _fly(fdm, ac, props, 12.0)
+    tolerance = {**CHECK, "propulsion/engine/thrust-lbs": 1e-4}
+    assert all(worst[k] <= tol for k, tol in tolerance.items()), worst
+    assert props["aero/h_b-mac-ft"][0] == pytest.approx(fdm["aero/h_b-mac-ft"], rel=1e-9)
+    assert props["propulsion/engine/propeller-rpm"][0] == pytest.approx(
+        fdm["propulsion/engine/propeller-rpm"], rel=1e-9)
+    assert fdm["position/h-sl-ft"] - start["position/h-sl-ft"] > 50
+    assert fdm["propulsion/engine/propeller-rpm"] > 2400 and abs(fdm["attitude/phi-deg"]) > 10
 
 
 def test_burning_fuel_lightens_it_as_jsbsim_does() -> None:

@@ -36,12 +36,34 @@ def test_the_class_is_registered_and_refuses_a_model_it_cannot_fly(tmp_path: Pat
     assert get_class("fixed_wing_rigid").model_kind == "batched"
     body = """duration_s: 5
 vehicles:
-  - {id: c, class: fixed_wing_rigid, model: c172p,
+  - {id: c, class: fixed_wing_rigid, model: c182,
      init: {north_m: 0, east_m: 0, alt_agl_m: 300, airspeed_kt: 90}}
 """
     with pytest.raises(ConfigError) as ei:
         parse_scenario(HEAD + body, str(tmp_path / "s.yaml"), check_properties=False)
-    assert "include the cosim autopilot" in "\n".join(ei.value.problems)
+    assert "needs a fixed-wing model; c182 is not one" in "\n".join(ei.value.problems)
+
+
+def test_the_c172p_flies_with_the_autopilot_attached_as_the_jsbsim_tier_gives_it(
+        tmp_path: Path) -> None:
+    """Its profile attaches the cosim autopilot to JSBSim's own files (it
+    was refused: its files lack the autopilot, its engine a piston): the
+    rigid tier compiles the files the JSBSim tier flies, trims it level and
+    flies it under the same commands, its piston engine's speed following
+    the throttle."""
+    body = """duration_s: 6
+vehicles:
+  - {id: c, class: fixed_wing_rigid, model: c172p,
+     init: {north_m: 0, east_m: 0, alt_agl_m: 300, heading_deg: 0, airspeed_kt: 90}}
+schedule:
+  - {at_s: 1, vehicles: c, command: {airspeed_kt: 105}}
+"""
+    by, _ = _run(tmp_path, body)
+    c = by["c"]
+    assert c["status"][-1] == VehicleStatus.ACTIVE
+    assert abs(c["alt_agl_m"][0] - 300) < 0.01
+    assert abs(c["pitch_deg"][0] - c["alpha_deg"][0]) < 1e-6  # level
+    assert c["airspeed_mps"][-1] > c["airspeed_mps"][0] + 1 and c["throttle"].max() > 0.9
 
 
 SIDE_BY_SIDE = """duration_s: 60

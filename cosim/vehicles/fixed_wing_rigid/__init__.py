@@ -36,13 +36,22 @@ if TYPE_CHECKING:
     from cosim.world.model import World
 
 
-def model_files(choice_dir: str, model: str, source: str = "cosim") -> tuple[Path, Path, Path]:
+def model_files(choice_dir: str, model: str, source: str = "cosim", *, attach: bool = False
+                ) -> tuple[Path, Path, Path]:
     """A model's aircraft file, the systems folder and the engines folder
-    the rigid tier compiles it with (those cosim gives JSBSim)."""
-    from cosim.vehicles.jsb import JSBSIM_ROOT, SYSTEMS_DIR
+    the rigid tier compiles it with (those cosim gives JSBSim: with
+    ``attach``, a profile's ``autopilot: attach``, the model's files with the
+    cosim autopilot attached)."""
+    from cosim.vehicles.jsb import JSBSIM_ROOT, SYSTEMS_DIR, ModelInfo, _wrapper_root
 
     systems = JSBSIM_ROOT / "systems" if source == "jsbsim" else SYSTEMS_DIR
+    if attach:
+        choice_dir = str(_wrapper_root(ModelInfo(model, choice_dir, source)))
     return Path(choice_dir) / model / f"{model}.xml", systems, JSBSIM_ROOT / "engine"
+
+
+def _attached(profile: Mapping[str, Any] | None) -> bool:
+    return (profile or {}).get("autopilot") == "attach"
 
 
 class FixedWingRigid(FixedWing):
@@ -63,11 +72,12 @@ class FixedWingRigid(FixedWing):
         if prof.get("class") != "fixed_wing":
             raise ConfigError(f"the fixed_wing_rigid class needs a fixed-wing model; "
                               f"{choice.name} is not one")
-        if prof.get("autopilot") != "native":
-            raise ConfigError(f"the fixed_wing_rigid class needs a model whose own files "
-                              f"include the cosim autopilot (profile autopilot: native); "
+        if prof.get("autopilot") not in ("native", "attach"):
+            raise ConfigError(f"the fixed_wing_rigid class needs a model flown by the cosim "
+                              f"autopilot (profile autopilot: native or attach); "
                               f"{choice.name}'s profile says {prof.get('autopilot')!r}")
-        found = problems(*model_files(choice.aircraft_dir, choice.name, choice.source))
+        found = problems(*model_files(choice.aircraft_dir, choice.name, choice.source,
+                                      attach=_attached(prof)))
         if found:
             more = f" (and {len(found) - 8} more)" if len(found) > 8 else ""
             raise ConfigError(f"the fixed_wing_rigid class cannot compile {choice.name}: "
@@ -77,7 +87,8 @@ class FixedWingRigid(FixedWing):
 
     def with_world(self, spec: VehicleSpec, world: World, sections: Mapping[str, Any],
                    origin: tuple[float, float, float]) -> VehicleSpec:
-        xml, systems, engines = model_files(spec.aircraft_dir, spec.model, spec.model_source)
+        xml, systems, engines = model_files(spec.aircraft_dir, spec.model, spec.model_source,
+                                            attach=_attached(spec.profile))
         prof = spec.profile or {}
         props: list[tuple[str, float]] = []
         if "clmax" in prof:
@@ -94,7 +105,8 @@ class FixedWingRigid(FixedWing):
         """Every property of the compiled model (not the private state)."""
         from cosim.vehicles.fixed_wing_rigid.model import compiled
 
-        xml, systems, engines = model_files(spec.aircraft_dir, spec.model, spec.model_source)
+        xml, systems, engines = model_files(spec.aircraft_dir, spec.model, spec.model_source,
+                                            attach=_attached(spec.profile))
         return compiled(str(xml), str(systems), str(engines)).property_names \
             | frozenset(self.channels)
 
