@@ -1,6 +1,9 @@
 """How closely the rigid-body tier (class ``fixed_wing_rigid``) and the
 point-mass tier (``fixed_wing_batched``) follow JSBSim's uav700 through the
 flight-test manoeuvres, and how their level trims compare with JSBSim's.
+``--model c172p``: the same for the c172p (its piston engine and propeller
+compiled), through manoeuvres of the same kinds written here for a c172p's
+speeds (60-110 kt) and trims at 60-110 kt.
 
 Each manoeuvre is a vehicle of a scenario of ``scenarios/flight_test/``
 (level turns at 100, 150 and 200 kt, the full-throttle acceleration, the
@@ -31,6 +34,7 @@ shown, not barred). Prints markdown tables; ``--json FILE`` writes the
 figures.
 
     python benchmarks/rigid_fidelity.py
+    python benchmarks/rigid_fidelity.py --model c172p --tiers rigid
     python benchmarks/rigid_fidelity.py --manoeuvres turn_100kt --duration 5 \\
         --tiers rigid --no-trim
 """
@@ -65,26 +69,45 @@ ORIGIN = {"lat_deg": 37.0, "lon_deg": -116.0, "ground_alt_m": 1000}
 RATES = {"physics_hz": 120, "control_hz": 30, "log_hz": 30}
 
 
-def _level_300m(vid: str, *later: tuple[float, dict[str, float]]) -> dict[str, Any]:
-    """A scenario in the flight tests' style: one uav700 level at 300 m above
-    the ground, 100 kt, heading north, then the commands ``later``."""
-    level = {"heading_deg": 0, "alt_agl_m": 300, "airspeed_kt": 100}
+def _level_300m(vid: str, *later: tuple[float, dict[str, Any]], model: str = "uav700",
+                kt: float = 100) -> dict[str, Any]:
+    """A scenario in the flight tests' style: one ``model`` level at 300 m
+    above the ground, ``kt``, heading north, then the commands ``later``."""
+    level = {"heading_deg": 0, "alt_agl_m": 300, "airspeed_kt": kt}
     return {"schema_version": 1, "name": vid, "origin": ORIGIN, "rates": RATES,
             "duration_s": 60,
-            "vehicles": [{"id": vid, "model": "uav700", "init": level}],
+            "vehicles": [{"id": vid, "model": model, "init": level}],
             "schedule": [{"at_s": t, "vehicles": vid, "command": c}
                          for t, c in ((0.0, level), *later)]}
 
 
-#: the manoeuvres the flight tests lack
+def _c172p(vid: str, kt: float, *later: tuple[float, dict[str, Any]]) -> dict[str, Any]:
+    return _level_300m(vid, *later, model="c172p", kt=kt)
+
+
+#: the manoeuvres the flight tests lack, and the c172p's (at its speeds:
+#: the turns at the 45 deg bank limit, about 12 deg/s at 90 kt, given a new
+#: heading about 100 deg further round every 8 s as the flight tests do)
 WRITTEN_HERE = {
     "climb": _level_300m("climb", (5.0, {"alt_agl_m": 600})),
     "speed_steps": _level_300m("steps", (5.0, {"airspeed_kt": 140}),
                                (30.0, {"airspeed_kt": 110})),
+    "c172p_turn": _c172p("turn", 90, (0.0, {"heading_deg": 100}),
+                         *((8.0 * i, {"heading_deg": (100 + 100 * i) % 360})
+                           for i in range(1, 8))),
+    "c172p_climb": _c172p("climb", 80, (5.0, {"alt_agl_m": 450})),
+    "c172p_steps": _c172p("steps", 90, (5.0, {"airspeed_kt": 110}),
+                          (30.0, {"airspeed_kt": 70})),
+    "c172p_slow": _c172p("slow", 65, (5.0, {"heading_deg": 30})),
+    "c172p_acceleration": _c172p("fast", 70, (2.0, {"airspeed_kt": 140})),
+    "c172p_goto": _c172p("goto", 90, (0.0, {"goto": {"north_m": 3000, "east_m": 2000,
+                                                     "alt_agl_m": 350, "airspeed_kt": 100,
+                                                     "loiter_radius_m": 600}})),
 }
 
 #: level trims at (kt, m above sea level); the ground at sea level
 TRIM_POINTS = ((60, 150), (100, 914.4), (150, 1500), (200, 3048))
+C172P_TRIM_POINTS = ((60, 150), (80, 914.4), (100, 1500), (110, 2500))
 
 
 @dataclass(frozen=True)
@@ -109,6 +132,17 @@ MANOEUVRES = [
     Manoeuvre("goto_loiter", "goto 5 km, loiter", "goto_loiter.yaml", "uav"),
     Manoeuvre("waypoints", "3 km square of waypoints at 150 kt", "waypoints.yaml", "uav"),
 ]
+C172P_MANOEUVRES = [
+    Manoeuvre("turn_90kt", "level turns at 90 kt (45 deg bank)", "c172p_turn", "turn"),
+    Manoeuvre("climb", "climb 300 -> 450 m at 80 kt", "c172p_climb", "climb"),
+    Manoeuvre("speed_steps", "speed steps 90 -> 110 -> 70 kt", "c172p_steps", "steps"),
+    Manoeuvre("slow", "65 kt, a 30 deg heading change", "c172p_slow", "slow"),
+    Manoeuvre("acceleration", "full-throttle acceleration from 70 kt", "c172p_acceleration",
+              "fast"),
+    Manoeuvre("goto_loiter", "goto 3.6 km at 100 kt, loiter", "c172p_goto", "goto"),
+]
+#: model -> its manoeuvres and trim points
+MODELS = {"uav700": (MANOEUVRES, TRIM_POINTS), "c172p": (C172P_MANOEUVRES, C172P_TRIM_POINTS)}
 
 
 def _as_tier(scenario: dict[str, Any], vehicle_class: str | None, duration_s: float,
@@ -177,10 +211,10 @@ def compare(ref: dict[str, np.ndarray], got: dict[str, np.ndarray]) -> dict[str,
     return out
 
 
-def fly(names: list[str], tiers: list[str], duration_s: float, tmp: Path
-        ) -> dict[str, dict[str, Any]]:
-    """Each manoeuvre of ``names`` flown by JSBSim and by ``tiers``."""
-    chosen = [m for m in MANOEUVRES if m.name in names]
+def fly(names: list[str], tiers: list[str], duration_s: float, tmp: Path,
+        model: str = "uav700") -> dict[str, dict[str, Any]]:
+    """Each manoeuvre of ``names`` (``model``'s) flown by JSBSim and by ``tiers``."""
+    chosen = [m for m in MODELS[model][0] if m.name in names]
     runs: dict[tuple[str, str], dict[str, dict[str, np.ndarray]]] = {}
     for m in chosen:
         doc = WRITTEN_HERE.get(m.scenario) or yaml.safe_load(
@@ -197,20 +231,21 @@ def fly(names: list[str], tiers: list[str], duration_s: float, tmp: Path
                                           for tier in tiers}} for m in chosen}
 
 
-def trims(tiers: list[str], tmp: Path) -> list[dict[str, Any]]:
-    """Each tier's level trim at ``TRIM_POINTS`` (the first logged row)."""
+def trims(tiers: list[str], tmp: Path, model: str = "uav700") -> list[dict[str, Any]]:
+    """Each tier's level trim at ``model``'s trim points (the first logged row)."""
+    points = MODELS[model][1]
     doc = {"schema_version": 1, "origin": {**ORIGIN, "ground_alt_m": 0}, "rates": RATES,
-           "vehicles": [{"id": f"p{i}", "model": "uav700",
+           "vehicles": [{"id": f"p{i}", "model": model,
                          "init": {"north_m": 2000 * i, "east_m": 0, "alt_msl_m": h,
                                   "heading_deg": 0, "airspeed_kt": kt}}
-                        for i, (kt, h) in enumerate(TRIM_POINTS)]}
+                        for i, (kt, h) in enumerate(points)]}
     got = {}
     for tier in ["jsbsim", *tiers]:
         folder = tmp / f"trim-{tier}"
         folder.mkdir()
         got[tier] = _run(_as_tier(doc, TIERS[tier], 0.1), folder)
     rows = []
-    for i, (kt, h) in enumerate(TRIM_POINTS):
+    for i, (kt, h) in enumerate(points):
         row: dict[str, Any] = {"airspeed_kt": kt, "alt_msl_m": h}
         for tier in ["jsbsim", *tiers]:
             c = got[tier][f"p{i}"]
@@ -260,35 +295,43 @@ def table(flights: dict[str, dict[str, Any]], trim_rows: list[dict[str, Any]],
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--manoeuvres", default=",".join(m.name for m in MANOEUVRES),
-                    help="comma-separated, of: %(default)s")
-    ap.add_argument("--tiers", default="rigid,point_mass",
-                    help="compared with JSBSim, comma-separated: rigid, point_mass")
+    ap.add_argument("--model", default="uav700", choices=sorted(MODELS),
+                    help="the aircraft flown (uav700)")
+    ap.add_argument("--manoeuvres",
+                    help="comma-separated, of the model's (all): uav700: "
+                         + ",".join(m.name for m in MANOEUVRES) + "; c172p: "
+                         + ",".join(m.name for m in C172P_MANOEUVRES))
+    ap.add_argument("--tiers",
+                    help="compared with JSBSim, comma-separated: rigid, point_mass (both for "
+                         "the uav700; the c172p's profile gives no point mass: rigid)")
     ap.add_argument("--duration", type=float, default=60.0, help="seconds flown (60)")
     ap.add_argument("--no-trim", action="store_true", help="skip the trim table")
     ap.add_argument("--json", type=Path, help="write the figures here")
     a = ap.parse_args(argv)
     from cosim.errors import CosimError
 
-    names = [x for x in a.manoeuvres.split(",") if x]
-    tiers = [x for x in a.tiers.split(",") if x]
-    bad = [x for x in names if x not in {m.name for m in MANOEUVRES}] + [
+    known = MODELS[a.model][0]
+    names = [x for x in (a.manoeuvres or ",".join(m.name for m in known)).split(",") if x]
+    tiers = [x for x in (a.tiers or ("rigid,point_mass" if a.model == "uav700" else "rigid")
+                         ).split(",") if x]
+    bad = [x for x in names if x not in {m.name for m in known}] + [
         x for x in tiers if x not in TIERS or x == "jsbsim"]
     if bad:
-        ap.error(f"unknown manoeuvre or tier {bad}: manoeuvres are "
-                 f"{', '.join(m.name for m in MANOEUVRES)}; tiers rigid, point_mass")
+        ap.error(f"unknown manoeuvre or tier {bad}: the {a.model}'s manoeuvres are "
+                 f"{', '.join(m.name for m in known)}; tiers rigid, point_mass")
     if not 0 < a.duration <= 600:
         ap.error(f"--duration {a.duration:g}: expected seconds in (0, 600]")
     with tempfile.TemporaryDirectory() as tmp:
         try:
-            flights = fly(names, tiers, a.duration, Path(tmp))
-            trim_rows = [] if a.no_trim else trims(tiers, Path(tmp))
+            flights = fly(names, tiers, a.duration, Path(tmp), a.model)
+            trim_rows = [] if a.no_trim else trims(tiers, Path(tmp), a.model)
         except (RuntimeError, CosimError) as e:
             print(e, file=sys.stderr)
             return 1
     print(table(flights, trim_rows, tiers))
     if a.json:
-        a.json.write_text(json.dumps({"duration_s": a.duration, "manoeuvres": flights,
+        a.json.write_text(json.dumps({"model": a.model, "duration_s": a.duration,
+                                      "manoeuvres": flights,
                                       "trim": trim_rows}, indent=1) + "\n")
     return 0
 

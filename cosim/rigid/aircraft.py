@@ -46,6 +46,7 @@ from cosim.rigid.airframe import (
 from cosim.rigid.atmosphere import Atmosphere
 from cosim.rigid.fcs import Systems, compile_systems
 from cosim.rigid.functions import CompileError, parse
+from cosim.rigid.piston_plan import Piston
 from cosim.rigid.propulsion import Propulsion, compile_propulsion
 from cosim.rigid.units import triplet_in
 
@@ -64,8 +65,10 @@ _SECTIONS = {"fileheader", "metrics", "mass_balance", "ground_reactions", "propu
 #: reads them)
 _AIR_BODY = frozenset({"atmosphere/T-R", "atmosphere/P-psf", "atmosphere/rho-slugs_ft3",
                        "atmosphere/a-fps"})
-#: the trim's residuals' scales (ft/s^2, ft/s^2, rad/s^2) for its step control
+#: the trim's residuals' scales (ft/s^2, ft/s^2, rad/s^2) for its step control;
+#: with the lateral trim, then (rad/s^2, rad/s^2, ft/s^2)
 _TRIM_SCALE = np.array([1.0, 1.0, 0.1])
+_LATERAL_SCALE = np.array([1.0, 1.0, 0.1, 0.1, 0.1, 1.0])
 
 
 @dataclass(frozen=True)
@@ -131,44 +134,62 @@ class RigidAircraft:
         forward, vertical and pitch accelerations, by Newton's method with a
         finite-difference Jacobian, wings level and no sideslip (JSBSim's
         full trim also balances the small roll and yaw moments of the
-        Earth's rotation: within a few hundredths of a degree). Returns
-        whether each aircraft converged; the state is placed at the result."""
+        Earth's rotation: within a few hundredths of a degree). An aircraft
+        with a propeller, whose torque and P-factor roll and yaw it in level
+        flight, is trimmed as JSBSim's full trim does it: the aileron
+        (``fcs/aileron-cmd-norm``), the rudder (``fcs/rudder-cmd-norm``) and
+        the bank also, zeroing the roll, yaw and sideways accelerations, the
+        pitch then that of level flight at the bank. Returns whether each
+        aircraft converged; the state is placed at the result."""
         n = len(psi)
-        x = np.zeros((n, 3))
+        lateral = any(isinstance(e, Piston) for e in self.propulsion.engines)
+        size = 6 if lateral else 3
+        scale = _LATERAL_SCALE if lateral else _TRIM_SCALE
+        x = np.zeros((n, size))
         x[:, 1] = 0.5
-        lo, hi = np.array([-0.3, 0.0, -1.0]), np.array([0.5, 1.0, 1.0])
+        lo = np.array([-0.3, 0.0, -1.0, -1.0, -1.0, -0.5][:size])
+        hi = np.array([0.5, 1.0, 1.0, 1.0, 1.0, 0.5][:size])
 
         def residual(xv: np.ndarray) -> np.ndarray:
             a = xv[:, 0]
             props["fcs/throttle-cmd-norm"] = xv[:, 1].copy()
             props["fcs/pitch-trim-cmd-norm"] = xv[:, 2].copy()
             z = np.zeros(n)
+            phi, theta = z, a
+            if lateral:
+                props["fcs/aileron-cmd-norm"] = xv[:, 3].copy()
+                props["fcs/rudder-cmd-norm"] = xv[:, 4].copy()
+                phi = xv[:, 5]
+                theta = np.arctan(np.cos(phi) * np.tan(a))  # level: no climb at the bank
             uvw = (vt_fps * np.cos(a), z, vt_fps * np.sin(a))
             for settle in (True, False):
                 for k in ("accelerations/udot-ft_sec2", "accelerations/vdot-ft_sec2",
                           "accelerations/wdot-ft_sec2"):
                     props[k] = z  # trimmed, they are zero (the angle-of-attack rate reads them)
-                self.place(props, loc_ecef_ft, z, a, psi, uvw, dt_s=dt_s)
+                self.place(props, loc_ecef_ft, phi, theta, psi, uvw, dt_s=dt_s)
                 if settle:
                     self.steady_engines(props)
-            return np.stack([props["accelerations/udot-ft_sec2"],
-                             props["accelerations/wdot-ft_sec2"],
-                             props["accelerations/qdot-rad_sec2"]], axis=1)
+            keys = ["accelerations/udot-ft_sec2", "accelerations/wdot-ft_sec2",
+                    "accelerations/qdot-rad_sec2"]
+            if lateral:
+                keys += ["accelerations/pdot-rad_sec2", "accelerations/rdot-rad_sec2",
+                         "accelerations/vdot-ft_sec2"]
+            return np.stack([props[k] for k in keys], axis=1)
 
-        h = np.array([1e-6, 1e-6, 1e-6])
+        h = np.full(size, 1e-6)
         r = residual(x)
-        norm = np.linalg.norm(r / _TRIM_SCALE, axis=1)
+        norm = np.linalg.norm(r / scale, axis=1)
         for _ in range(iterations):
             ok = np.all(np.abs(r) < tolerance, axis=1)
             if ok.all():
                 break
-            jac = np.empty((n, 3, 3))
-            for k in range(3):
+            jac = np.empty((n, size, size))
+            for k in range(size):
                 xp = x.copy()
                 xp[:, k] += h[k]
                 jac[:, :, k] = (residual(xp) - r) / h[k]
             singular = ~np.isfinite(jac).all(axis=(1, 2)) | (np.abs(np.linalg.det(jac)) < 1e-300)
-            jac[singular] = np.eye(3)
+            jac[singular] = np.eye(size)
             step = np.linalg.solve(jac, -r[:, :, None])[:, :, 0]
             step[ok | singular] = 0.0
             # backtracking: halve the step of an aircraft until its residual falls
@@ -176,7 +197,7 @@ class RigidAircraft:
             for _ in range(8):
                 xn = np.clip(x + frac[:, None] * step, lo, hi)
                 rn = residual(xn)
-                nn = np.linalg.norm(rn / _TRIM_SCALE, axis=1)
+                nn = np.linalg.norm(rn / scale, axis=1)
                 better = (nn < norm) | ok
                 if better.all():
                     break

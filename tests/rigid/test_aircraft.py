@@ -235,6 +235,25 @@ def test_the_trim_finds_jsbsims(h_ft: float, kt: float) -> None:
     assert abs(props["fcs/pitch-trim-cmd-norm"][0] - fdm["fcs/pitch-trim-cmd-norm"]) < 1e-4
 
 
+def test_the_c172ps_trim_balances_the_propellers_roll_and_yaw_as_jsbsims() -> None:
+    """The propeller's torque and P-factor roll and yaw the c172p in level
+    flight: JSBSim's full trim holds them with aileron, rudder and a little
+    bank, and so does the rigid trim (it trimmed wings level, no aileron or
+    rudder, before: the autopilot's heading then drifted 1.8 deg from
+    JSBSim's in a climb)."""
+    fdm = _trimmed_fdm(4300, 70, 30, model="c172p")
+    xml = _wrapper_root(find_model("c172p")) / "c172p" / "c172p.xml"
+    ac = compile_aircraft(xml, JSBSIM_ROOT / "systems", JSBSIM_ROOT / "engine")
+    props = ac.new_props(1)
+    loc = position_ecef(np.array([47.0]), np.array([8.0]), np.array([4300.0]))
+    assert ac.trim_level(props, loc, np.radians([30.0]), np.array([70 * KT])).all()
+    assert abs(fdm["fcs/rudder-cmd-norm"]) > 0.01 and abs(fdm["fcs/aileron-cmd-norm"]) > 0.03
+    for k, tol in (("fcs/aileron-cmd-norm", 1e-3), ("fcs/rudder-cmd-norm", 1e-3),
+                   ("attitude/phi-deg", 1e-3), ("aero/alpha-deg", 1e-3), ("aero/beta-deg", 1e-3),
+                   ("fcs/throttle-cmd-norm", 1e-4), ("fcs/pitch-trim-cmd-norm", 1e-4)):
+        assert abs(props[k][0] - fdm[k]) < tol, (k, props[k][0], fdm[k])
+
+
 def test_unknown_elements_are_refused_with_file_line_and_element(tmp_path: Path) -> None:
     text = UAV700.read_text()
     bad = text.replace("<aerodynamics>", "<aerodynamics>\n    <aero_ref_pt_shift_x/>", 1)
