@@ -1,9 +1,10 @@
 """The rigid-body tier's piston engine and fixed-pitch propeller
 (``cosim.rigid.piston_plan``, compiled by ``cosim.rigid.propulsion``)
-against JSBSim 1.3 itself: four c172ps flown by JSBSim at three heights
+against JSBSim 1.3 itself: five c172ps flown by JSBSim at three heights
 and speeds through throttle and mixture steps, pitch, roll and yaw inputs
-(the P-factor), and tanks emptied and refilled (the engine starves, stops
-and windmills back to life); the compiled plan, fed each frame the inputs
+(the P-factor), tanks emptied and refilled (the engine starves, stops and
+windmills back to life) and the mixture cut (it stops; the starter cranks
+it back); the compiled plan, fed each frame the inputs
 JSBSim's propulsion saw, carries its own state (manifold pressure, running,
 propeller speed, acting location, tanks) from its own steady state on and
 must give JSBSim's doubles every frame. A 2 % change of the propeller's
@@ -30,7 +31,7 @@ DT_S = 1 / 120
 E = "propulsion/engine/"
 
 #: per aircraft, the initial height (ft) and calibrated airspeed (kt)
-STARTS = [(3000, 100), (8000, 70), (1000, 110), (5000, 90)]
+STARTS = [(3000, 100), (8000, 70), (1000, 110), (5000, 90), (5000, 70)]
 #: per aircraft, (second, property, value) commands
 SCHEDULES: list[list[tuple[float, str, float]]] = [
     [(0, "fcs/throttle-cmd-norm", 0.6), (3, "fcs/throttle-cmd-norm", 1.0),
@@ -47,6 +48,10 @@ SCHEDULES: list[list[tuple[float, str, float]]] = [
     [(0, "fcs/throttle-cmd-norm", 0.8), (2, "propulsion/tank/contents-lbs", 0.0),
      (2, "propulsion/tank[1]/contents-lbs", 0.0), (3, "fcs/elevator-cmd-norm", 0.1),
      (9, "propulsion/tank/contents-lbs", 20.0), (12, "fcs/elevator-cmd-norm", -0.1)],
+    # the mixture cut: it stops; the starter cranks it back to life
+    [(0, "fcs/throttle-cmd-norm", 0.5), (1, "fcs/mixture-cmd-norm", 0.0),
+     (6, "fcs/mixture-cmd-norm", 1.0), (6, "propulsion/starter_cmd", 1.0),
+     (10, "propulsion/starter_cmd", 0.0)],
 ]
 #: what the propulsion reads in a frame, final once fdm.run() returns
 INPUTS = ("atmosphere/P-psf", "atmosphere/delta", "velocities/mach", "atmosphere/T-R",
@@ -59,7 +64,8 @@ INPUTS = ("atmosphere/P-psf", "atmosphere/delta", "velocities/mach", "atmosphere
 #: the body's inertial rates, under the rigid tier's names
 RATES = {"velocities/pi-rad_sec": "_eom/pi", "velocities/qi-rad_sec": "_eom/qi",
          "velocities/ri-rad_sec": "_eom/ri"}
-WRITES = ("propulsion/tank/contents-lbs", "propulsion/tank[1]/contents-lbs")
+WRITES = ("propulsion/tank/contents-lbs", "propulsion/tank[1]/contents-lbs",
+          "propulsion/starter_cmd")
 OUTPUTS = (*(E + k for k in (
     "power-hp", "map-pa", "map-inhg", "fuel-flow-rate-pps", "fuel-used-lbs", "engine-rpm",
     "propeller-rpm", "thrust-lbs", "advance-ratio", "thrust-coefficient", "helical-tip-Mach",
@@ -68,7 +74,7 @@ OUTPUTS = (*(E + k for k in (
     "propulsion/tank/contents-lbs", "propulsion/tank[1]/contents-lbs",
     "propulsion/total-fuel-lbs", "forces/fbx-prop-lbs", "forces/fby-prop-lbs",
     "forces/fbz-prop-lbs", "moments/l-prop-lbsft", "moments/m-prop-lbsft",
-    "moments/n-prop-lbsft")
+    "moments/n-prop-lbsft", "propulsion/starter_cmd")
 
 Arrays = dict[str, np.ndarray]
 Flights = tuple[Arrays, Arrays, Arrays]
@@ -142,7 +148,8 @@ def test_the_c172p_engine_and_propeller_equal_jsbsim_bit_for_bit(flights: Flight
     steady, ours = _replay(plan, start, ins)
     # the flights moved what is compared: the throttle and mixture both
     # ways, the propeller sped up and slowed, the acting location moved by
-    # the P-factor, fuel burnt, and one engine starved to a stop and relit
+    # the P-factor, fuel burnt, one engine starved to a stop and relit, one
+    # stopped by its mixture and cranked by the starter
     rpm, power = jsb[E + "propeller-rpm"], jsb[E + "power-hp"]
     assert (np.diff(rpm, axis=0) > 1).any() and (np.diff(rpm, axis=0) < -1).any()
     assert np.ptp(jsb[E + "map-inhg"]) > 10 and np.ptp(ins["fcs/mixture-pos-norm"]) > 0.7
@@ -153,6 +160,9 @@ def test_the_c172p_engine_and_propeller_equal_jsbsim_bit_for_bit(flights: Flight
     stopped = jsb[E + "set-running"][:, 3]
     assert stopped[0] == 1 and stopped.min() == 0 and stopped[-1] == 1
     assert power[:, 3].min() < 0 < power[-1, 3]
+    cranked = jsb[E + "set-running"][:, 4]
+    assert cranked[719] == 0 and cranked[-1] == 1 and rpm[719, 4] < 550 < rpm[-1, 4]
+    assert power[720, 4] > 0  # the starter's, before the engine runs
     assert np.ptp(ins["velocities/mach"]) > 0.05 and np.ptp(ins["atmosphere/P-psf"]) > 300
     # set-running's steady state at full throttle (the engine's; the forces
     # are the next frame's), then every frame: the same operations on the
@@ -247,3 +257,14 @@ def test_a_small_piston_file_compiles_with_jsbsims_defaults(tmp_path: Path) -> N
     assert isinstance(e, Piston)
     assert (e.idle_rpm, e.max_rpm, e.stroke_in, e.starter_torque) == (600, 2800, 4.375, 72)
     assert 0.3 < e.isfc < 0.6 and e.propeller.diameter_ft == pytest.approx(70 / 12)
+
+
+def test_a_turbine_turning_a_propeller_is_refused(tmp_path: Path) -> None:
+    xml = _write(tmp_path, "", "")
+    (tmp_path / "Engines" / "eng.xml").write_text(
+        '<turbine_engine name="t">\n  <milthrust> 100 </milthrust>\n'
+        '  <function name="IdleThrust"> <value> 0.05 </value> </function>\n'
+        '  <function name="MilThrust"> <value> 1 </value> </function>\n</turbine_engine>\n')
+    with pytest.raises(CompileError, match=r"a.xml:3: <engine>: a turbine_engine with a "
+                                           r"propeller is not compiled"):
+        compile_propulsion(xml, ENGINES)
