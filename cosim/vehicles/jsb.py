@@ -210,7 +210,7 @@ def find_model(name: str, extra: tuple[str, ...] = ()) -> ModelInfo:
     raise ModelNotFound(f"unknown aircraft model {name!r}{hint}; available: {', '.join(names)}")
 
 
-def _wrapper_root(model: ModelInfo) -> Path:
+def wrapper_root(model: ModelInfo) -> Path:
     """An aircraft folder holding ``model`` with the cosim autopilot attached.
 
     The model's own files are symlinked, its XML is copied with one
@@ -274,7 +274,7 @@ def new_fdm(model: ModelInfo, dt_s: float) -> jsbsim.FGFDMExec:
         if model.source == "jsbsim" and not attach:
             ok = fdm.load_model(model.name)
         else:
-            aircraft = _wrapper_root(model) if attach else Path(model.aircraft_dir)
+            aircraft = wrapper_root(model) if attach else Path(model.aircraft_dir)
             systems = JSBSIM_ROOT / "systems" if model.source == "jsbsim" else SYSTEMS_DIR
             ok = fdm.load_model_with_paths(model.name, str(aircraft),
                                            str(JSBSIM_ROOT / "engine"), str(systems))

@@ -15,7 +15,7 @@ import pytest
 
 from cosim.rigid.aircraft import compile_aircraft, position_ecef, problems
 from cosim.rigid.functions import CompileError
-from cosim.vehicles.jsb import JSBSIM_ROOT, _wrapper_root, find_model, has_property, new_fdm
+from cosim.vehicles.jsb import JSBSIM_ROOT, find_model, has_property, new_fdm, wrapper_root
 
 REPO = Path(__file__).resolve().parents[2]
 UAV700 = REPO / "aircraft" / "uav700" / "uav700.xml"
@@ -101,7 +101,7 @@ def test_the_rigid_c172p_flies_as_jsbsim_does() -> None:
     piston engine and propeller, and the ground effect's height of the
     reference point over the span, which the rigid tier did not compute."""
     fdm = _trimmed_fdm(2000, 90, model="c172p")
-    xml = _wrapper_root(find_model("c172p")) / "c172p" / "c172p.xml"
+    xml = wrapper_root(find_model("c172p")) / "c172p" / "c172p.xml"
     ac, props = _rigid_from(fdm, xml, JSBSIM_ROOT / "systems", JSBSIM_ROOT / "engine")
     start = {k: fdm[k] for k in CHECK}
     worst = _fly(fdm, ac, props, 12.0)
@@ -242,7 +242,7 @@ def test_the_c172ps_trim_balances_the_propellers_roll_and_yaw_as_jsbsims() -> No
     rudder, before: the autopilot's heading then drifted 1.8 deg from
     JSBSim's in a climb)."""
     fdm = _trimmed_fdm(4300, 70, 30, model="c172p")
-    xml = _wrapper_root(find_model("c172p")) / "c172p" / "c172p.xml"
+    xml = wrapper_root(find_model("c172p")) / "c172p" / "c172p.xml"
     ac = compile_aircraft(xml, JSBSIM_ROOT / "systems", JSBSIM_ROOT / "engine")
     props = ac.new_props(1)
     loc = position_ecef(np.array([47.0]), np.array([8.0]), np.array([4300.0]))

@@ -19,9 +19,9 @@ from cosim.vehicles.jsb import (
     JSBSIM_ROOT,
     SYSTEMS_DIR,
     ModelInfo,
-    _wrapper_root,
     find_model,
     new_fdm,
+    wrapper_root,
 )
 
 REPO = Path(__file__).resolve().parents[2]
@@ -164,7 +164,7 @@ def test_the_c172p_flight_control_with_the_cosim_autopilot_equals_jsbsim(path: s
     attached): its flaps' kinematic through three settings, the trims and
     the aileron scaling, under the autopilot."""
     model = find_model("c172p")
-    root = _wrapper_root(model)  # the files new_fdm gives JSBSim
+    root = wrapper_root(model)  # the files new_fdm gives JSBSim
     plan = compile_systems(root / "c172p" / "c172p.xml", JSBSIM_ROOT / "systems")
     assert plan.fused is not None
     plan = _path(plan, path)

@@ -42,11 +42,11 @@ def model_files(choice_dir: str, model: str, source: str = "cosim", *, attach: b
     the rigid tier compiles it with (those cosim gives JSBSim: with
     ``attach``, a profile's ``autopilot: attach``, the model's files with the
     cosim autopilot attached)."""
-    from cosim.vehicles.jsb import JSBSIM_ROOT, SYSTEMS_DIR, ModelInfo, _wrapper_root
+    from cosim.vehicles.jsb import JSBSIM_ROOT, SYSTEMS_DIR, ModelInfo, wrapper_root
 
     systems = JSBSIM_ROOT / "systems" if source == "jsbsim" else SYSTEMS_DIR
     if attach:
-        choice_dir = str(_wrapper_root(ModelInfo(model, choice_dir, source)))
+        choice_dir = str(wrapper_root(ModelInfo(model, choice_dir, source)))
     return Path(choice_dir) / model / f"{model}.xml", systems, JSBSIM_ROOT / "engine"
 
 
