@@ -1,5 +1,6 @@
 """The rigid-body tier's speed against the JSBSim tier's, in the same run and
-one process each (what a core does): ``N`` uav700 at 120 Hz with the cosim
+one process each (what a core does): ``N`` uav700 (or ``--model``'s aircraft,
+e.g. the c172p) at 120 Hz with the cosim
 autopilot engaged (heading, altitude and speed holds, a new heading every
 10 s so the loops work), aircraft-steps a second, best of ``--rounds``
 blocks of ``--frames`` frames. The JSBSim tier is timed on fewer aircraft
@@ -9,7 +10,7 @@ worker steps its share), the rigid tier at each size of ``--vehicles``
 
     python benchmarks/rigid_speed.py --vehicles 1000,4000,10000,20000 --json out.json
 
-``--pool N,N,...`` also flies N rigid uav700s through the process pool (one
+``--pool N,N,...`` also flies N rigid aircraft through the process pool (one
 worker a core, 30 Hz exchange) with the autopilot engaged through its
 setpoint channels (heading, altitude and speed holds; a new heading each
 timed round of ``--pool-seconds``), and reports the best round's real-time
@@ -34,12 +35,15 @@ AP = {"cosim/ap/engage": 1.0, "cosim/ap/heading-hold": 1.0, "cosim/ap/alt-hold":
       "cosim/ap/speed-cmd-kt": 110.0}
 
 
-def rigid(n: int, frames: int, rounds: int) -> float:
-    """Aircraft-steps a second of ``n`` rigid uav700s in one process."""
+def rigid(n: int, frames: int, rounds: int, model: str = "uav700") -> float:
+    """Aircraft-steps a second of ``n`` rigid ``model`` aircraft in one process."""
     from cosim.rigid.aircraft import compile_aircraft, position_ecef
+    from cosim.vehicles.fixed_wing_rigid import model_files
+    from cosim.vehicles.jsb import find_model
 
-    ac = compile_aircraft(REPO / "aircraft" / "uav700" / "uav700.xml",
-                          REPO / "aircraft" / "systems", REPO / "aircraft" / "uav700" / "Engines")
+    m = find_model(model)
+    attach = (m.profile or {}).get("autopilot") == "attach"
+    ac = compile_aircraft(*model_files(m.aircraft_dir, m.name, m.source, attach=attach))
     props = ac.new_props(n)
     loc = position_ecef(47.0 + np.arange(n) * 1e-3, np.full(n, 8.0), np.full(n, 3000.0))
     props["cosim/ap/qbar-ref-psf"] = np.full(n, 34.0)
@@ -62,13 +66,13 @@ def rigid(n: int, frames: int, rounds: int) -> float:
     return n * frames / best
 
 
-def jsbsim(n: int, frames: int, rounds: int) -> float:
-    """Aircraft-steps a second of ``n`` JSBSim uav700s stepped in turn."""
+def jsbsim(n: int, frames: int, rounds: int, model: str = "uav700") -> float:
+    """Aircraft-steps a second of ``n`` JSBSim ``model`` aircraft stepped in turn."""
     from cosim.vehicles.jsb import find_model, new_fdm
 
     fdms = []
     for i in range(n):
-        fdm = new_fdm(find_model("uav700"), 1 / 120)
+        fdm = new_fdm(find_model(model), 1 / 120)
         fdm["ic/lat-geod-deg"], fdm["ic/long-gc-deg"] = 47.0 + i * 1e-3, 8.0
         fdm["ic/h-sl-ft"], fdm["ic/vt-fps"] = 3000.0, 100 * 1.68781
         fdm.run_ic()
@@ -91,16 +95,16 @@ def jsbsim(n: int, frames: int, rounds: int) -> float:
     return n * frames / best
 
 
-def pool(n: int, seconds: float, rounds: int) -> dict[str, float]:
-    """``n`` rigid uav700s through the process pool, the autopilot engaged
-    through the setpoint channels: the best round's real-time factor."""
+def pool(n: int, seconds: float, rounds: int, model: str = "uav700") -> dict[str, float]:
+    """``n`` rigid ``model`` aircraft through the process pool, the autopilot
+    engaged through the setpoint channels: the best round's real-time factor."""
     from cosim.bench.fleet import bench_specs
     from cosim.core.state import STATE_INDEX
     from cosim.fdm_pool import make_pool
 
     channels = tuple(AP) + ("cosim/ap/heading-cmd-deg",)
     heading = len(AP)
-    specs = bench_specs(n, "uav700", vehicle_class="fixed_wing_rigid")
+    specs = bench_specs(n, model, vehicle_class="fixed_wing_rigid")
     k = 4  # 120 Hz physics, 30 Hz exchange
     ticks = max(k, round(seconds * 120 / k) * k)
     best = float("inf")
@@ -126,6 +130,8 @@ def pool(n: int, seconds: float, rounds: int) -> dict[str, float]:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--model", default="uav700",
+                    help="the aircraft, one the rigid tier compiles (default %(default)s)")
     ap.add_argument("--vehicles", default="1000,4000,10000,20000",
                     help="rigid-tier sizes, comma-separated (default %(default)s)")
     ap.add_argument("--jsbsim", type=int, default=64,
@@ -148,18 +154,26 @@ def main(argv: list[str] | None = None) -> int:
             or not a.pool_seconds > 0:
         ap.error("--vehicles, --pool, --jsbsim, --frames, --rounds and --pool-seconds take "
                  "positive numbers")
-    ref = jsbsim(a.jsbsim, a.frames, a.rounds)
+    from cosim.errors import CosimError
+    from cosim.vehicles.jsb import find_model
+
+    try:
+        find_model(a.model)
+    except CosimError as e:
+        ap.error(f"--model: {e}")
+    print(f"model {a.model}, 120 Hz, the autopilot engaged")
+    ref = jsbsim(a.jsbsim, a.frames, a.rounds, a.model)
     print(f"JSBSim tier : {a.jsbsim:6d} aircraft  {ref:12,.0f} aircraft-steps/s a core")
     rows = []
     for n in sizes:
-        v = rigid(n, a.frames, a.rounds)
+        v = rigid(n, a.frames, a.rounds, a.model)
         rows.append({"vehicles": n, "steps_per_s": v, "x_jsbsim": v / ref})
         print(f"rigid tier  : {n:6d} aircraft  {v:12,.0f} aircraft-steps/s a core  "
               f"{v / ref:5.1f} x JSBSim  {v / 120:8,.0f} aircraft in real time a core")
         sys.stdout.flush()
     pooled = []
     for n in pools:
-        row = pool(n, a.pool_seconds, a.rounds)
+        row = pool(n, a.pool_seconds, a.rounds, a.model)
         pooled.append(row)
         print(f"rigid pool  : {n:6d} aircraft  {row['steps_per_s']:12,.0f} aircraft-steps/s on "
               f"{row['workers']} workers  RTF {row['rtf']:5.2f}  (started in "
@@ -167,7 +181,7 @@ def main(argv: list[str] | None = None) -> int:
         sys.stdout.flush()
     if a.json:
         a.json.write_text(json.dumps({
-            "benchmark": "rigid_speed", "date": time.strftime("%Y-%m-%d"),
+            "benchmark": "rigid_speed", "model": a.model, "date": time.strftime("%Y-%m-%d"),
             "machine": platform.machine(), "python": platform.python_version(),
             "physics_hz": 120, "autopilot": "engaged", "jsbsim_vehicles": a.jsbsim,
             "jsbsim_steps_per_s": ref, "rigid": rows, "pool": pooled}, indent=1) + "\n")

@@ -10,6 +10,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 REPO = Path(__file__).resolve().parents[2]
 
 
@@ -29,6 +31,25 @@ def test_the_speed_benchmark_reports_both_tiers(tmp_path: Path) -> None:
     # through the pool, every autopilot engaged (the script checks the states)
     assert [(r["vehicles"], r["rtf"] > 0) for r in doc["pool"]] == [(8, True)]
     assert "RTF" in res.stdout
+
+
+@pytest.mark.integration  # two tiers of the c172p timed: about 6 s
+def test_the_speed_benchmark_takes_another_model(tmp_path: Path) -> None:
+    """``--model c172p``: its piston engine and propeller, both tiers, the
+    rigid autopilot engaged; an unknown model is a usage error."""
+    out = tmp_path / "speed.json"
+    res = subprocess.run([sys.executable, str(REPO / "benchmarks" / "rigid_speed.py"),
+                          "--model", "c172p", "--vehicles", "20", "--jsbsim", "2",
+                          "--frames", "6", "--rounds", "1", "--json", str(out)],
+                         capture_output=True, text=True, timeout=300, check=False)
+    assert res.returncode == 0, res.stderr
+    doc = json.loads(out.read_text())
+    assert doc["model"] == "c172p" and doc["rigid"][0]["steps_per_s"] > 0
+    assert "model c172p" in res.stdout
+    res = subprocess.run([sys.executable, str(REPO / "benchmarks" / "rigid_speed.py"),
+                          "--model", "c17"], capture_output=True, text=True, timeout=60,
+                         check=False)
+    assert res.returncode == 2 and "--model: unknown aircraft model 'c17'" in res.stderr
 
 
 def test_bad_arguments_are_a_usage_error() -> None:
