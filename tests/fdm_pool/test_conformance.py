@@ -7,8 +7,9 @@ separated), which must be registered:
 
 - the cases that concern the flight models (states, statuses, setpoints,
   builds, watched rows) fly the tiers mixed (``fleet``): JSBSim c172ps
-  between rigid-body uav700s (``fixed_wing_rigid``, a batched class), a
-  vehicle of each tier diving, diverging, failing to trim or watched;
+  between rigid-body uav700s and c172ps (``fixed_wing_rigid``, a batched
+  class), a vehicle of each tier diving, diverging, failing to trim or
+  watched;
 - bit-identical states against ``inline`` at every exchange, setpoints
   (including extreme ones) and every worker count included;
 - statuses: ground impact and divergence freeze that vehicle only;
@@ -61,11 +62,15 @@ def backend(request: pytest.FixtureRequest) -> str:
 @pytest.fixture
 def fleet(specs: Callable[..., list[VehicleSpec]]) -> Callable[..., list[VehicleSpec]]:
     """``fleet(n)``: the c172ps of ``specs`` on the odd rows, rigid-body
-    uav700s (``fixed_wing_rigid``) at the same places on the even rows."""
+    aircraft (``fixed_wing_rigid``) at the same places on the even rows:
+    uav700s (a turbine) on rows 0, 4, 8, ..., c172ps (a piston engine and
+    propeller) on rows 2, 6, ..."""
 
     def make(n: int) -> list[VehicleSpec]:
         rigid = bench_specs(n, "uav700", vehicle_class="fixed_wing_rigid")
-        return [r if i % 2 == 0 else s for i, (r, s) in enumerate(zip(rigid, specs(n)))]
+        piston = bench_specs(n, "c172p", vehicle_class="fixed_wing_rigid")
+        return [(r if i % 4 == 0 else p) if i % 2 == 0 else s
+                for i, (r, p, s) in enumerate(zip(rigid, piston, specs(n)))]
 
     return make
 
