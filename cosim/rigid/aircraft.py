@@ -135,10 +135,12 @@ class RigidAircraft:
         full trim also balances the small roll and yaw moments of the
         Earth's rotation: within a few hundredths of a degree). An aircraft
         with a propeller, whose torque and P-factor roll and yaw it in level
-        flight, is trimmed as JSBSim's full trim does it: the aileron
-        (``fcs/aileron-cmd-norm``), the rudder (``fcs/rudder-cmd-norm``) and
-        the bank also, zeroing the roll, yaw and sideways accelerations, the
-        pitch then that of level flight at the bank. Returns whether each
+        flight (``Propulsion.lateral_trim``: an engine's thruster that
+        rolls and yaws the airframe), is trimmed as JSBSim's full trim does
+        it: the aileron (``fcs/aileron-cmd-norm``), the rudder
+        (``fcs/rudder-cmd-norm``) and the bank also, zeroing the roll, yaw
+        and sideways accelerations, the pitch then that of level flight at
+        the bank. Returns whether each
         aircraft converged; the state is placed at the result."""
         n = len(psi)
         lateral = self.propulsion.lateral_trim

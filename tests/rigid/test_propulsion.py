@@ -159,6 +159,7 @@ def test_the_uav700_equals_jsbsim_frame_by_frame(flights: Flights) -> None:
     plan = compile_propulsion(UAV700, ENGINES)
     assert plan.inputs >= {"velocities/mach", "atmosphere/density-altitude",
                            "fcs/throttle-pos-norm", "inertia/cg-x-in", "propulsion/fuel_freeze"}
+    assert not plan.lateral_trim  # a direct thruster: no torque to trim out
     # set-running: full-throttle spools and the tank's initial contents
     props = {k: start[k].copy() for k in INPUTS}
     plan.init(props, len(SCHEDULES))
