@@ -46,7 +46,6 @@ from cosim.rigid.airframe import (
 from cosim.rigid.atmosphere import Atmosphere
 from cosim.rigid.fcs import Systems, compile_systems
 from cosim.rigid.functions import CompileError, parse
-from cosim.rigid.piston_plan import Piston
 from cosim.rigid.propulsion import Propulsion, compile_propulsion
 from cosim.rigid.units import triplet_in
 
@@ -136,13 +135,15 @@ class RigidAircraft:
         full trim also balances the small roll and yaw moments of the
         Earth's rotation: within a few hundredths of a degree). An aircraft
         with a propeller, whose torque and P-factor roll and yaw it in level
-        flight, is trimmed as JSBSim's full trim does it: the aileron
-        (``fcs/aileron-cmd-norm``), the rudder (``fcs/rudder-cmd-norm``) and
-        the bank also, zeroing the roll, yaw and sideways accelerations, the
-        pitch then that of level flight at the bank. Returns whether each
+        flight (``Propulsion.lateral_trim``: an engine's thruster that
+        rolls and yaws the airframe), is trimmed as JSBSim's full trim does
+        it: the aileron (``fcs/aileron-cmd-norm``), the rudder
+        (``fcs/rudder-cmd-norm``) and the bank also, zeroing the roll, yaw
+        and sideways accelerations, the pitch then that of level flight at
+        the bank. Returns whether each
         aircraft converged; the state is placed at the result."""
         n = len(psi)
-        lateral = any(isinstance(e, Piston) for e in self.propulsion.engines)
+        lateral = self.propulsion.lateral_trim
         size = 6 if lateral else 3
         scale = _LATERAL_SCALE if lateral else _TRIM_SCALE
         x = np.zeros((n, size))

@@ -2,7 +2,8 @@
 plan: JSBSim 1.3's ``FGPiston::Calculate`` and ``FGPropeller::Calculate``
 for every aircraft at once, in numpy, their state in the caller's ``props``
 (what they compute, refuse and leave out is said in ``cosim.rigid.propulsion``).
-This module holds no XML; the fuel they burn is ``Propulsion``'s."""
+This module holds no XML; the fuel they burn is ``Propulsion``'s (the
+``Engine`` protocol of ``cosim.rigid.propulsion_base``)."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cosim.rigid import kernels
+from cosim.rigid.propulsion_base import STARTER, Tank, Terms
 
 #: FGJSBBase's and FGPiston's constants, as JSBSim holds them
 PSFTOPA = 47.88
@@ -120,6 +122,16 @@ class Piston:
                           *(f"velocities/{a}-aero-rad_sec" for a in "pqr")})
 
     @property
+    def rolls_and_yaws(self) -> bool:
+        """A propeller's reaction torque and P-factor roll and yaw the
+        airframe in level flight."""
+        return True
+
+    @property
+    def outputs(self) -> frozenset[str]:
+        return frozenset(self.state)
+
+    @property
     def state(self) -> tuple[str, ...]:
         """The keys of the engine's state: what a frame writes, then its
         private flags (running, magnetos, starved)."""
@@ -144,9 +156,35 @@ class Piston:
         props["_" + k("running")] = np.ones(n)
         props["_" + k("magnetos")] = np.full(n, 3.0)
         props["_" + k("starved")] = np.zeros(n)
+        self._full_mixture(props, n)
+
+    def _full_mixture(self, props: dict[str, np.ndarray], n: int) -> None:
+        """``FGPropulsion::InitRunning``'s mixture: command and position at 1."""
         sfx = "" if self.index == 0 else f"[{self.index}]"
         for c in ("cmd", "pos"):
             props[f"fcs/mixture-{c}-norm{sfx}"] = np.ones(n)
+
+    def set_running(self, props: dict[str, np.ndarray], current: np.ndarray, source: str,
+                    engines: int) -> np.ndarray:
+        """``propulsion/set-running`` = -1 for this engine: the mixture at 1,
+        then its steady state (``steady``); returns its thrust."""
+        self._full_mixture(props, len(current))
+        return self.steady(props, props[STARTER], current)
+
+    def frame(self, props: dict[str, np.ndarray], dt_s: float, cg: list[np.ndarray],
+              source: str, engines: int) -> tuple[np.ndarray, Terms, Terms]:
+        """A frame of the engine and its propeller (``FGPiston::Calculate``):
+        the fuel flow it burns (pounds a second), its body forces and
+        moments."""
+        fb, mb = self.thrust(props, dt_s, self.power(props, dt_s, props[STARTER]))
+        return props[self.key("fuel-flow-rate-pps")], fb, mb
+
+    def starve(self, props: dict[str, np.ndarray], fed: np.ndarray) -> None:
+        """Starved, its next frame gets no fuel (``_starved``): nothing else."""
+
+    def loop(self, tank: Tank, tanks: int) -> None:
+        """No loop: every frame runs the numpy steps."""
+        return None
 
     def steady(self, props: dict[str, np.ndarray], starter: np.ndarray,
                current: np.ndarray) -> np.ndarray:

@@ -11,6 +11,11 @@ JSBSim finds them: ``<aircraft dir>/Engines``, ``engines``, ``Engine``,
 ``engine``, then ``engine_dir``) and returns a ``Propulsion``: a stateless
 plan whose state lives in the caller's ``props`` (one float64 array per
 property, one value per aircraft, JSBSim's names and units).
+This module compiles the tanks, the turbine and its direct thruster; the
+piston engine and its propeller are compiled by ``cosim.rigid.piston``,
+with the XML readers both share (``cosim.rigid.propulsion_xml``). The plan
+they give is ``cosim.rigid.propulsion_plan``'s ``Propulsion`` (engines and
+tanks together), its engines ``turbine_plan``'s and ``piston_plan``'s.
 
 Each frame (``run(props, dt_s)``), in JSBSim's order, for each engine:
 
@@ -135,26 +140,13 @@ import math
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from cosim.rigid.functions import (
-    Compiled,
-    CompileError,
-    _numbers,
-    _where,
-    compile_function,
-    parse,
-)
-from cosim.rigid.piston_plan import (
-    FTTOM,
-    IN3TOM3,
-    INHGTOPA,
-    MIXTURE_TABLE,
-    STANDARD_PRESSURE,
-    Piston,
-    Propeller,
-    Table,
-)
-from cosim.rigid.propulsion_plan import Propulsion, PropulsionError, Tank, Turbine
-from cosim.rigid.units import factor, number
+from cosim.rigid.functions import Compiled, CompileError, _where, compile_function, parse
+from cosim.rigid.piston import compile_piston, compile_propeller
+from cosim.rigid.piston_plan import Piston, Propeller
+from cosim.rigid.propulsion_base import PropulsionError, Tank
+from cosim.rigid.propulsion_plan import Propulsion
+from cosim.rigid.propulsion_xml import children, find_file, number_in, triplet
+from cosim.rigid.turbine_plan import Turbine
 
 __all__ = ["Piston", "Propeller", "Propulsion", "PropulsionError", "Tank", "Turbine",
            "compile_propulsion"]
@@ -179,47 +171,6 @@ _TANK_ELEMENTS = {"location", "capacity", "contents", "unusable-volume", "priori
                   "density", "type"}
 
 
-def _kids(el: ET.Element) -> list[ET.Element]:
-    return [c for c in el if c.tag != "description"]
-
-
-def _number(el: ET.Element, source: str, target: str = "") -> float:
-    """An element's number, in ``target`` units (none: as written)."""
-    return number(el, source) * _factor(el, source, target)
-
-
-def _factor(el: ET.Element, source: str, target: str) -> float:
-    return factor(el.get("unit", ""), target, el, source) if target else 1.0
-
-
-def _triplet(el: ET.Element, source: str, target: str, names: tuple[str, str, str]
-             ) -> tuple[float, float, float]:
-    """``FindElementTripletConvertTo``: three children in the parent's unit."""
-    extra = [c for c in _kids(el) if c.tag not in names]
-    if extra:
-        raise CompileError(f"{_where(extra[0], source)}: not supported in <{el.tag}> "
-                           f"(expected {', '.join(names)})")
-    f = _factor(el, source, target)
-    out = []
-    for name in names:
-        item = el.find(name)
-        out.append(0.0 if item is None else _number(item, source) * f)
-    return out[0], out[1], out[2]
-
-
-
-def _find(name: str, aircraft_dir: Path, engine_dir: Path, el: ET.Element,
-          source: str) -> Path:
-    """``FGPropulsion::FindFullPathName`` for an engine or thruster file."""
-    file = name if name.endswith(".xml") else name + ".xml"
-    dirs = [aircraft_dir / d for d in ("Engines", "engines", "Engine", "engine")]
-    for d in [*dirs, engine_dir]:
-        if (d / file).is_file():
-            return d / file
-    raise CompileError(f"{_where(el, source)}: file {file!r} not found in "
-                       f"{', '.join(str(d) for d in dirs)} or {engine_dir}")
-
-
 def _tank(el: ET.Element, index: int, source: str) -> Tank:
     where = _where(el, source)
     if el.get("type") != "FUEL":
@@ -228,7 +179,7 @@ def _tank(el: ET.Element, index: int, source: str) -> Tank:
     extra = sorted(a for a in el.attrib if a not in ("_line", "type", "name"))
     if extra:
         raise CompileError(f"{where}: attribute {extra[0]!r} is not supported")
-    for c in _kids(el):
+    for c in children(el):
         if c.tag not in _TANK_ELEMENTS:
             raise CompileError(f"{_where(c, source)}: not supported in a tank (supported: "
                                f"{', '.join(sorted(_TANK_ELEMENTS))})")
@@ -236,14 +187,14 @@ def _tank(el: ET.Element, index: int, source: str) -> Tank:
     if loc is None:
         raise CompileError(f"{where}: needs a <location>")
     cap_el, con_el = el.find("capacity"), el.find("contents")
-    capacity = 0.00001 if cap_el is None else _number(cap_el, source, "LBS")
-    contents = 0.0 if con_el is None else _number(con_el, source, "LBS")
+    capacity = 0.00001 if cap_el is None else number_in(cap_el, source, "LBS")
+    contents = 0.0 if con_el is None else number_in(con_el, source, "LBS")
     if capacity == 0:
         capacity, contents = 0.00001, 0.0
     density = 6.6
     d_el, t_el = el.find("density"), el.find("type")
     if d_el is not None:
-        density = _number(d_el, source, "LBS/GAL")
+        density = number_in(d_el, source, "LBS/GAL")
     if t_el is not None:
         fuel = (t_el.text or "").strip()
         if fuel not in _FUEL_DENSITY:
@@ -251,13 +202,13 @@ def _tank(el: ET.Element, index: int, source: str) -> Tank:
                                f"{', '.join(sorted(_FUEL_DENSITY))})")
         density = _FUEL_DENSITY[fuel]
     u_el = el.find("unusable-volume")
-    unusable = 0.0 if u_el is None else _number(u_el, source, "GAL") * density
+    unusable = 0.0 if u_el is None else number_in(u_el, source, "GAL") * density
     p_el = el.find("priority")
-    priority = 1 if p_el is None else int(_number(p_el, source))
+    priority = 1 if p_el is None else int(number_in(p_el, source))
     if capacity <= unusable or contents > capacity:
         raise CompileError(f"{where}: contents {contents} lbs, capacity {capacity} lbs and "
                            f"unusable fuel {unusable} lbs are inconsistent")
-    return Tank(index, _triplet(loc, source, "IN", ("x", "y", "z")), capacity, contents,
+    return Tank(index, triplet(loc, source, "IN", ("x", "y", "z")), capacity, contents,
                 unusable, priority)
 
 
@@ -266,7 +217,7 @@ def _turbine(el: ET.Element, index: int, source: str,
              feeds: tuple[int, ...], problems: list[CompileError] | None) -> Turbine:
     values: dict[str, float] = {}
     functions: dict[str, Compiled] = {}
-    for c in _kids(el):
+    for c in children(el):
         try:
             if c.tag == "function":
                 name = c.get("name", "")
@@ -275,12 +226,12 @@ def _turbine(el: ET.Element, index: int, source: str,
                                        f"supported (supported: IdleThrust, MilThrust)")
                 functions[name] = compile_function(c, source)
             elif c.tag in _TURBINE_OFF:
-                if _number(c, source) != 0:
+                if number_in(c, source) != 0:
                     raise CompileError(f"{_where(c, source)}: only 0 is supported "
                                        f"(augmentation and water injection are not compiled)")
             elif c.tag in _TURBINE_NUMBERS:
                 unit = "LBS" if c.tag in ("milthrust", "maxthrust") else ""
-                values[c.tag] = _number(c, source, unit)
+                values[c.tag] = number_in(c, source, unit)
             else:
                 raise CompileError(f"{_where(c, source)}: not supported in a turbine_engine "
                                    f"(supported: {', '.join(sorted(_TURBINE_NUMBERS))}, "
@@ -316,169 +267,6 @@ def _turbine(el: ET.Element, index: int, source: str,
         location_in=location, axis=(cp * cy, cp * sy, -sp))
 
 
-#: the piston's numbers: (JSBSim's unit, default); a None default is
-#: computed (JSBSim's constructor). Read but feeding only what is not
-#: computed (the cylinder head, exhaust gas and oil temperatures): _PISTON_UNUSED
-_PISTON_NUMBERS: dict[str, tuple[str, float | None]] = {
-    "minmp": ("INHG", 6.5), "maxmp": ("INHG", 28.5), "man-press-lag": ("", 1.0),
-    "displacement": ("IN3", 360.0), "maxhp": ("HP", 200.0), "static-friction": ("HP", 1.5),
-    "sparkfaildrop": ("", None), "cycles": ("", 4.0), "idlerpm": ("", 600.0),
-    "maxrpm": ("", 2800.0), "maxthrottle": ("", 1.0), "minthrottle": ("", 0.0),
-    "bsfc": ("LBS/HP*HR", None), "volumetric-efficiency": ("", 0.85),
-    "compression-ratio": ("", 8.5), "stroke": ("IN", 4.375),
-    "air-intake-impedance-factor": ("", None), "ram-air-factor": ("", 1.0),
-    "starter-rpm": ("", None), "starter-torque": ("", None), "dynamic-fmep": ("PA", 18400.0),
-    "static-fmep": ("PA", 46500.0), "peak-piston-speed": ("", 100.0)}
-_PISTON_UNUSED = {"bore", "cylinders", "cylinder-head-mass", "cooling-factor",
-                  "oil-pressure-relief-valve-psi", "design-oil-temp-degK",
-                  "oil-pressure-rpm-max", "oil-viscosity-index"}
-_PROPELLER_NUMBERS = {"ixx": "SLUG*FT2", "diameter": "FT", "numblades": "", "gearratio": "",
-                      "minpitch": "", "maxpitch": "", "ct_factor": "", "cp_factor": ""}
-_PROPELLER_TABLES = ("C_THRUST", "C_POWER", "CT_MACH", "CP_MACH")
-
-
-def _table1(el: ET.Element, source: str) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """An engine file's table of one dimension (``type="internal"``: no lookup)."""
-    extra = [c for c in _kids(el) if c.tag != "tableData"]
-    if extra or len(el.findall("tableData")) != 1:
-        raise CompileError(f"{_where(extra[0] if extra else el, source)}: only a table of "
-                           f"one dimension (one <tableData>) is supported here")
-    data = el.find("tableData")
-    assert data is not None
-    rows = _numbers(data, source)
-    if len(rows) < 2 or any(len(r) != 2 for r in rows):
-        raise CompileError(f"{_where(data, source)}: a table of one dimension needs two or "
-                           f"more rows of two numbers")
-    if any(b[0] <= a[0] for a, b in zip(rows, rows[1:])):
-        raise CompileError(f"{_where(data, source)}: breakpoints must increase")
-    return tuple(r[0] for r in rows), tuple(r[1] for r in rows)
-
-
-def _piston(el: ET.Element, index: int, source: str, propeller: Propeller,
-            feeds: tuple[int, ...], problems: list[CompileError] | None) -> Piston:
-    """``FGPiston``'s constructor: the numbers read, the defaults and the
-    derived constants (impedances, ISFC) as JSBSim computes them."""
-    values: dict[str, float] = {}
-    mixture: Table = MIXTURE_TABLE
-    for c in _kids(el):
-        try:
-            if c.tag in _PISTON_NUMBERS:
-                values[c.tag] = _number(c, source, _PISTON_NUMBERS[c.tag][0])
-            elif c.tag in _PISTON_UNUSED:
-                _number(c, source)
-            elif c.tag == "table" and c.get("name") == "MIXTURE":
-                mixture = _table1(c, source)
-            elif c.tag == "table" and c.get("name") == "COMBUSTION":
-                _table1(c, source)  # the exhaust gas temperature's only
-            else:
-                raise CompileError(f"{_where(c, source)}: not supported in a piston_engine "
-                                   f"(supported: {', '.join(sorted(_PISTON_NUMBERS))}, "
-                                   f"{', '.join(sorted(_PISTON_UNUSED))}, tables MIXTURE and "
-                                   f"COMBUSTION; no supercharger, no functions)")
-        except CompileError as err:
-            if problems is None:
-                raise
-            problems.append(err)
-
-    def get(name: str) -> float:
-        v = values.get(name, _PISTON_NUMBERS[name][1])
-        assert v is not None
-        return v
-
-    min_mp, max_mp, max_rpm, idle_rpm = get("minmp"), get("maxmp"), get("maxrpm"), get("idlerpm")
-    stroke, ve, cycles, peak = get("stroke"), get("volumetric-efficiency"), get("cycles"), \
-        get("peak-piston-speed")
-    displacement, max_hp, friction = get("displacement"), get("maxhp"), get("static-friction")
-    fmep_dynamic, fmep_static = get("dynamic-fmep"), get("static-fmep")
-    displacement_m3 = displacement * IN3TOM3
-    rated_mps = (max_rpm * stroke) / 360
-    isfc = values.get("bsfc", -1.0)
-    if isfc < 0:
-        pmep = (29.92 - max_mp) * INHGTOPA * ve
-        fmep = fmep_dynamic * rated_mps * FTTOM + fmep_static
-        hp_loss = ((pmep + fmep) * displacement_m3 * max_rpm) / (cycles * 22371)
-        isfc = (1.1 * displacement * max_rpm * ve * (max_mp / 29.92)) / (
-            9411 * (max_hp + hp_loss - friction))
-    max_mp = min(max_mp, 29.9) if max_mp > 29.9 else max_mp
-    min_map, max_map = min_mp * INHGTOPA, max_mp * INHGTOPA
-    z_airbox = values.get("air-intake-impedance-factor", -999.0)
-    if z_airbox < 0.0:
-        ze = peak / rated_mps
-        z_airbox = (STANDARD_PRESSURE * ze / max_map) - ze
-    z_throttle = (peak / ((idle_rpm * stroke) / 360)) * (STANDARD_PRESSURE / min_map - 1) - z_airbox
-    drop = values.get("sparkfaildrop")
-    return Piston(
-        index=index, name=el.get("name", ""), min_throttle=get("minthrottle"),
-        max_throttle=get("maxthrottle"), idle_rpm=idle_rpm, max_rpm=max_rpm, stroke_in=stroke,
-        cycles=cycles, displacement_m3=displacement_m3, isfc=isfc, volumetric_efficiency=ve,
-        compression_ratio=get("compression-ratio"), peak_piston_speed_fps=peak,
-        z_airbox=z_airbox, z_throttle=z_throttle, man_press_lag_s=get("man-press-lag"),
-        ram_air_factor=get("ram-air-factor"), fmep_dynamic_pa=fmep_dynamic,
-        fmep_static_pa=fmep_static, static_friction_hp=friction,
-        spark_fail_drop=1.0 if drop is None else min(max(0.0, 1 - drop), 1.0),
-        starter_rpm=values.get("starter-rpm", 2 * idle_rpm) if values.get(
-            "starter-rpm", -1.0) >= 0.0 else 2 * idle_rpm,
-        starter_torque=values.get("starter-torque", max_hp * 0.4) if values.get(
-            "starter-torque", -1.0) >= 0 else max_hp * 0.4,
-        mixture=mixture, feeds=feeds, propeller=propeller)
-
-
-def _propeller(th: ET.Element, root: ET.Element, path: str, source: str) -> Propeller:
-    """``FGPropeller``'s constructor for a fixed-pitch propeller along the
-    body's x axis (``th``: the aircraft file's <thruster>; ``root``: the
-    propeller file's <propeller>)."""
-    values: dict[str, float] = {}
-    tables: dict[str, tuple[tuple[float, ...], tuple[float, ...]]] = {}
-    extra = sorted(a for a in root.attrib if a not in ("_line", "name", "version"))
-    if extra:
-        raise CompileError(f"{_where(root, path)}: attribute {extra[0]!r} is not supported")
-    for c in _kids(root):
-        if c.tag in _PROPELLER_NUMBERS:
-            values[c.tag] = _number(c, path, _PROPELLER_NUMBERS[c.tag])
-        elif c.tag == "table" and c.get("name") in _PROPELLER_TABLES:
-            tables[c.get("name", "")] = _table1(c, path)
-        else:
-            raise CompileError(f"{_where(c, path)}: not supported in a propeller (supported: "
-                               f"{', '.join(sorted(_PROPELLER_NUMBERS))}, tables "
-                               f"{', '.join(_PROPELLER_TABLES)} of one dimension: a fixed-pitch "
-                               f"propeller)")
-    if values.get("minpitch", 0.0) != values.get("maxpitch", 0.0):
-        raise CompileError(f"{_where(root, path)}: a variable-pitch propeller (minpitch "
-                           f"{values.get('minpitch', 0.0)} != maxpitch "
-                           f"{values.get('maxpitch', 0.0)}) is not compiled (fixed pitch only)")
-    missing = [t for t in ("C_THRUST", "C_POWER") if t not in tables]
-    if missing:
-        raise CompileError(f"{_where(root, path)}: needs the table {missing[0]}")
-    for c in _kids(th):
-        if c.tag not in ("location", "orient", "sense", "p_factor"):
-            raise CompileError(f"{_where(c, source)}: not supported in a propeller thruster "
-                               f"(supported: location, orient, sense, p_factor)")
-    loc, orient = th.find("location"), th.find("orient")
-    if loc is None:
-        raise CompileError(f"{_where(th, source)}: needs a <location>")
-    if orient is not None and any(_triplet(orient, source, "RAD", ("roll", "pitch", "yaw"))):
-        raise CompileError(f"{_where(orient, source)}: a propeller turned off the body's x "
-                           f"axis is not compiled (roll, pitch and yaw must be 0)")
-    sense_el, pf_el = th.find("sense"), th.find("p_factor")
-    sense = 1.0 if sense_el is None else (1.0 if _number(sense_el, source) >= 0.0 else -1.0)
-    p_factor = 0.0 if pf_el is None else _number(pf_el, source)
-    if p_factor < 0:
-        assert pf_el is not None
-        raise CompileError(f"{_where(pf_el, source)}: the P-factor must be 0 or more")
-    version = root.get("version")
-    try:
-        newer = version is not None and float(version) > 1.0
-    except ValueError:
-        raise CompileError(f"{_where(root, path)}: version {version!r} is not a number") from None
-    return Propeller(
-        diameter_ft=max(values.get("diameter", 0.0), 0.001),
-        ixx_slugft2=max(values.get("ixx", 0.0), 1e-06),
-        gear_ratio=max(values.get("gearratio", 1.0), 0.001), ct=tables["C_THRUST"],
-        cp=tables["C_POWER"], ct_mach=tables.get("CT_MACH"), cp_mach=tables.get("CP_MACH"),
-        ct_factor=values.get("ct_factor", 1.0), cp_factor=values.get("cp_factor", 1.0),
-        sense=sense, sense_multiplier=-1.0 if newer else 1.0, p_factor=p_factor,
-        location_in=_triplet(loc, source, "IN", ("x", "y", "z")))
-
 
 def _thruster(engine: ET.Element, aircraft_dir: Path, engine_dir: Path, source: str
               ) -> tuple[tuple[float, float, float], tuple[float, float, float]] | Propeller:
@@ -488,29 +276,29 @@ def _thruster(engine: ET.Element, aircraft_dir: Path, engine_dir: Path, source: 
     if th is None:
         raise CompileError(f"{_where(engine, source)}: needs a <thruster>")
     if th.get("file"):
-        path = _find(th.get("file", ""), aircraft_dir, engine_dir, th, source)
+        path = find_file(th.get("file", ""), aircraft_dir, engine_dir, th, source)
         root = parse(path)
         if root.tag == "propeller":
-            return _propeller(th, root, str(path), source)
+            return compile_propeller(th, root, str(path), source)
         if root.tag != "direct":
             raise CompileError(f"{_where(root, str(path))}: thruster not supported by the "
                                f"rigid-body compiler (supported: direct, propeller)")
-        extra = _kids(root)
+        extra = children(root)
         if extra:
             raise CompileError(f"{_where(extra[0], str(path))}: not supported in a direct "
                                f"thruster (it takes no elements)")
     else:
         raise CompileError(f"{_where(th, source)}: needs a file attribute")
-    for c in _kids(th):
+    for c in children(th):
         if c.tag not in ("location", "orient"):
             raise CompileError(f"{_where(c, source)}: not supported in a direct thruster "
                                f"(supported: location, orient)")
     loc, orient = th.find("location"), th.find("orient")
     if loc is None:
         raise CompileError(f"{_where(th, source)}: needs a <location>")
-    angles = (0.0, 0.0, 0.0) if orient is None else _triplet(
+    angles = (0.0, 0.0, 0.0) if orient is None else triplet(
         orient, source, "RAD", ("roll", "pitch", "yaw"))
-    return _triplet(loc, source, "IN", ("x", "y", "z")), angles
+    return triplet(loc, source, "IN", ("x", "y", "z")), angles
 
 
 def _engine_body(el: ET.Element, aircraft_dir: Path, engine_dir: Path, source: str
@@ -518,7 +306,7 @@ def _engine_body(el: ET.Element, aircraft_dir: Path, engine_dir: Path, source: s
     """The ``turbine_engine`` element an ``<engine>`` names, and its file."""
     if not el.get("file"):
         raise CompileError(f"{_where(el, source)}: needs a file attribute")
-    path = _find(el.get("file", ""), aircraft_dir, engine_dir, el, source)
+    path = find_file(el.get("file", ""), aircraft_dir, engine_dir, el, source)
     body = parse(path)
     if body.tag in _OTHER_ENGINES:
         raise CompileError(f"{_where(body, str(path))}: not supported by the rigid-body "
@@ -540,13 +328,13 @@ def _engine(el: ET.Element, index: int, aircraft_dir: Path, engine_dir: Path, so
         found.append(err)
 
     feeds = []
-    for c in _kids(el):
+    for c in children(el):
         if c.tag not in ("feed", "thruster", "location", "orient"):
             note(CompileError(f"{_where(c, source)}: not supported in an <engine> "
                               f"(supported: feed, thruster)"))
     for f in el.findall("feed"):
         try:
-            tank = int(_number(f, source))
+            tank = int(number_in(f, source))
             if not 0 <= tank < n_tanks:
                 raise CompileError(f"{_where(f, source)}: tank {tank} does not exist "
                                    f"({n_tanks} tanks)")
@@ -572,8 +360,8 @@ def _engine(el: ET.Element, index: int, aircraft_dir: Path, engine_dir: Path, so
                                   None if problems is None else found)
             elif pair == ("piston_engine", True):
                 assert isinstance(thruster, Propeller)
-                engine = _piston(body[0], index, body[1], thruster, tuple(feeds),
-                                 None if problems is None else found)
+                engine = compile_piston(body[0], index, body[1], thruster, tuple(feeds),
+                                        None if problems is None else found)
             else:
                 raise CompileError(f"{_where(el, source)}: a {body[0].tag} with a "
                                    f"{'propeller' if pair[1] else 'direct thruster'} is not "
@@ -597,7 +385,7 @@ def compile_propulsion(aircraft_xml: Path, engine_dir: Path, *,
     if prop is None:
         return Propulsion(source, (), ())
     found: list[CompileError] = []
-    for c in _kids(prop):
+    for c in children(prop):
         if c.tag not in ("engine", "tank"):
             found.append(CompileError(f"{_where(c, source)}: not supported in <propulsion> "
                                       f"(supported: engine, tank)"))

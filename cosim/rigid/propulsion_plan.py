@@ -1,280 +1,41 @@
-"""The plan ``cosim.rigid.propulsion`` compiles: the turbine engines, their
-direct thrusters and the fuel tanks of every aircraft stepped together
-(``Propulsion.init``, ``set_running``, ``run``, ``inputs``, ``outputs``),
-their state in the caller's ``props``. What it computes, and in which
-order, is said in ``cosim.rigid.propulsion``; this module holds no XML.
-
-A frame's common case, time passing (``dt_s`` > 0) outside a trim with
-every engine of every aircraft running, none cut off or starting, each
-engine fed by one tank, runs as one numba loop an engine (``_turbine``:
-the turbine, its thruster, the fuel it burns and its share of the forces
-and moments, one aircraft at a time); any other frame runs the numpy steps
-below for every aircraft. Both compute the same doubles, operation for
-operation (numpy's ``maximum`` and ``minimum`` as numpy has them, NaN and
-signed zeros included; the thrust tables are evaluated before the loop),
-and leave the same keys, so a frame may take either."""
+"""The plan ``cosim.rigid.propulsion`` compiles: the engines and the fuel
+tanks of every aircraft stepped together (``Propulsion.init``,
+``set_running``, ``run``, ``inputs``, ``outputs``), their state in the
+caller's ``props``. ``Propulsion`` coordinates them in FGPropulsion's
+order: each engine's frame (its plan answers the ``Engine`` protocol of
+``cosim.rigid.propulsion_base``: the turbine's in ``turbine_plan``, the
+piston's in ``piston_plan``), the fuel it burns from its feed tanks, the
+sums of their forces and moments, the total fuel; a frame every engine of
+which can run as one loop (the turbine's running frame) runs so. What it
+computes is said in ``cosim.rigid.propulsion``; this module holds no XML
+and no engine's arithmetic."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from functools import cached_property
 
-import numba
 import numpy as np
 
-from cosim.errors import CosimError
-from cosim.rigid.functions import Compiled
 from cosim.rigid.piston_plan import Piston
+from cosim.rigid.propulsion_base import (
+    CG,
+    CUTOFF,
+    FLIGHT,
+    FREEZE,
+    STARTER,
+    Engine,
+    EngineLoop,
+    PropulsionError,
+    Tank,
+)
+from cosim.rigid.turbine_plan import Turbine
 
-_INCH_TO_FT = 1.0 / 12.0
+__all__ = ["Piston", "Propulsion", "PropulsionError", "Tank", "Turbine"]
 
-
-def _indexed(base: str, i: int) -> str:
-    """JSBSim's property name of index ``i`` as its tree lists it."""
-    head, _, tail = base.partition("/#")
-    return f"{head}{'' if i == 0 else f'[{i}]'}{tail}"
-
-
-@dataclass(frozen=True)
-class Tank:
-    """One fuel tank: where it is and where its contents live in ``props``."""
-
-    index: int
-    location_in: tuple[float, float, float]
-    capacity_lbs: float
-    initial_lbs: float
-    unusable_lbs: float
-    priority: int
-
-    @property
-    def contents_key(self) -> str:
-        return _indexed("propulsion/tank/#/contents-lbs", self.index)
-
-
-@dataclass(frozen=True)
-class Turbine:
-    """One turbine engine and its direct thruster, compiled."""
-
-    index: int
-    name: str
-    milthrust_lbs: float
-    idle_n1: float
-    idle_n2: float
-    n1_factor: float
-    n2_factor: float
-    tsfc: float
-    one_minus_bleed: float
-    idle_ff_pph: float
-    #: FGSpoolUp's delays: N2 up, N2 down, N1 up, N1 down
-    delays: tuple[float, float, float, float]
-    #: the phases off, spin-up and start: N1's and N2's spin-down divisors,
-    #: spin-up rates, ignition and start rates, and whether the engine windmills
-    spindown: tuple[float, float]
-    spinup: tuple[float, float]
-    ignition: tuple[float, float]
-    start_rate: tuple[float, float]
-    windmill: bool
-    idle_thrust: Compiled
-    mil_thrust: Compiled
-    feeds: tuple[int, ...]
-    location_in: tuple[float, float, float]
-    #: the thruster's first column of FGForce's custom transform
-    axis: tuple[float, float, float]
-
-    def key(self, leaf: str) -> str:
-        return _indexed(f"propulsion/engine/#/{leaf}", self.index)
-
-    @property
-    def throttle_key(self) -> str:
-        return _indexed("fcs/throttle-pos-norm/#", self.index)
-
-
-class PropulsionError(CosimError):
-    """A compiled propulsion plan met a state it does not compile (an
-    engine without fuel, which JSBSim would shut down)."""
-
-
-_CG = ("inertia/cg-x-in", "inertia/cg-y-in", "inertia/cg-z-in")
-_FLIGHT = ("atmosphere/sigma", "atmosphere/T-R")
 _FORCES = ("forces/fbx-prop-lbs", "forces/fby-prop-lbs", "forces/fbz-prop-lbs")
 _MOMENTS = ("moments/l-prop-lbsft", "moments/m-prop-lbsft", "moments/n-prop-lbsft")
-_FREEZE = "propulsion/fuel_freeze"
 _TOTAL = "propulsion/total-fuel-lbs"
-_POSITION = ("x-position", "y-position", "z-position")
-_CUTOFF, _STARTER = "propulsion/cutoff_cmd", "propulsion/starter_cmd"
-#: FGTurbine's phases (as floats: they live in props)
-_OFF, _RUN, _SPINUP, _START, _TRIM = 0.0, 1.0, 2.0, 3.0, 4.0
-
-
-def _seek(v: np.ndarray, target: np.ndarray | float, up: np.ndarray | float,
-          down: np.ndarray | float, dt_s: float, den: np.ndarray | None = None) -> np.ndarray:
-    """``FGTurbine::Seek``: ``v`` moved towards ``target`` by dt x ``up``
-    or dt x ``down`` (each divided by ``den`` first when given), never past
-    it. A rate's sign is exact in every product and quotient, so v - dt x
-    (down / den) is v + dt x (-down / den) to the bit."""
-    above = v > target
-    if den is None:
-        step = np.where(above, -dt_s * down, dt_s * up)
-    else:
-        step = dt_s * (np.where(above, -down, up) / den)
-    moved = v + step
-    return np.where(above, np.maximum(moved, target), np.minimum(moved, target))
-
-
-def _position(tp: np.ndarray) -> np.ndarray:
-    """The throttle position an engine runs at (``FGTurbine::Calculate``:
-    above 1 is augmentation, taken off)."""
-    if bool((tp > 1.0).any()):
-        over = tp - 1.0
-        tp = np.where(over > 0.0, tp - over, tp)
-    return tp
-
-
-def _times(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray | None:
-    return None if a is None or b is None else a * b
-
-
-def _minus(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray | None:
-    """a - b, a missing term a zero (0 - b is -b exactly)."""
-    if b is None:
-        return a
-    return -b if a is None else a - b
-
-
-# ------------------------------------------- the running frame as a loop --
-
-_jit = numba.njit(cache=True, error_model="numpy", nogil=True)
-
-
-@_jit
-def _maximum(a: float, b: float) -> float:
-    """``np.maximum``: NaN if either is, ``b`` when they are equal (+0, -0)."""
-    return a if a > b or a != a else b
-
-
-@_jit
-def _minimum(a: float, b: float) -> float:
-    """``np.minimum``: NaN if either is, ``b`` when they are equal."""
-    return a if a < b or a != a else b
-
-
-@_jit
-def _seek_one(v: float, target: float, up: float, down: float, dt_s: float, den: float
-              ) -> float:
-    """``_seek`` of one value with a divisor: v + dt x (-down / den) or
-    dt x (up / den), never past the target."""
-    if v > target:
-        return _maximum(v + dt_s * (-down / den), target)
-    return _minimum(v + dt_s * (up / den), target)
-
-
-@_jit
-def _moment(first: bool, second: bool, a: float, b: float) -> float:
-    """``_minus(a, b)`` of two products, each there when its force is."""
-    if first and second:
-        return a - b
-    return a if first else -b
-
-
-@_jit
-def _sum(have: bool, there: bool, before: float, term: float) -> float:
-    """``run``'s sum over the engines: the term added to those of the
-    engines before it (``have``), the first one kept, 0 where no engine
-    gives one (scalars: an array passed to a call costs its reference
-    count every aircraft)."""
-    if there:
-        return before + term if have else term
-    return before if have else 0.0
-
-
-#: the rows of ``_turbine``'s constants
-(_C_MIL, _C_IDLE_N1, _C_IDLE_N2, _C_N1_FACTOR, _C_N2_FACTOR, _C_TSFC, _C_BLEED, _C_IDLE_FF,
- _C_D2U, _C_D2D, _C_D1U, _C_D1D, _C_UNUSABLE, _C_FEEDS, _C_AX, _C_AY, _C_AZ) = range(17)
-
-
-@_jit
-def _turbine(dt_s: float, c: np.ndarray, have: np.ndarray, ins: tuple, outs: tuple,
-             acc: tuple) -> None:
-    """One running engine of every aircraft, what ``Propulsion._engine``
-    computes with the slow phases, the trim and the multi-tank feeds left
-    out: ``_calculate``, the reverser, ``_burn`` with one feed tank and
-    the thruster's force and moment, added to ``acc`` (forces then moments)
-    where ``have`` says an engine before this one gave a term (else its
-    term, else 0). ``ins``: throttle, idle and mil fractions, N1, N2,
-    N2norm, fuel flow (pph), sigma, T-R, reverser angle, fuel freeze,
-    starved, phase, fuel flow (pps), fuel used, the feed tank's contents,
-    the CG and the acting location; ``outs``: N1, N2, N2norm, TSFC, fuel
-    flow (pph), thrust, starved, phase, fuel flow (pps), fuel used, contents."""
-    (throttle, idle_fraction, mil_fraction, n1, n2, norm, pph, sigma, t_r, reverser, freeze,
-     starved, phase, ff, used, contents, cg_x, cg_y, cg_z, x, y, z) = ins
-    (n1_out, n2_out, norm_out, tsfc_out, pph_out, thrust_out, starved_out, phase_out, ff_out,
-     used_out, contents_out) = outs
-    milthrust, idle_n1, idle_n2 = c[_C_MIL], c[_C_IDLE_N1], c[_C_IDLE_N2]
-    n1_factor, n2_factor, bleed = c[_C_N1_FACTOR], c[_C_N2_FACTOR], c[_C_BLEED]
-    unusable, fed = c[_C_UNUSABLE], c[_C_FEEDS] != 0.0
-    d2u, d2d, d1u, d1d = c[_C_D2U], c[_C_D2D], c[_C_D1U], c[_C_D1D]
-    force_x, force_y, force_z, moment_l, moment_m, moment_n = acc
-    h_fx, h_fy, h_fz, h_l, h_m, h_n = have[0], have[1], have[2], have[3], have[4], have[5]
-    ax, ay, az = c[_C_AX], c[_C_AY], c[_C_AZ]
-    px, py, pz = ax != 0.0, ay != 0.0, az != 0.0
-    pph_up, pph_down = dt_s * 1000.0, -dt_s * 10000.0
-    for i in range(len(throttle)):
-        # _position, then _calculate's running engine
-        tp = throttle[i]
-        over = tp - 1.0
-        if over > 0.0:
-            tp = tp - over
-        idle = milthrust * idle_fraction[i]
-        mil = (milthrust - idle) * mil_fraction[i]
-        m = 1.0 - _minimum(1.0, norm[i] + 0.1)
-        den = 1.0 + 3.0 * m * m * m + (1.0 - sigma[i])
-        run_n2 = _seek_one(n2[i], idle_n2 + tp * n2_factor, d2u, d2d, dt_s, den)
-        run_n1 = _seek_one(n1[i], idle_n1 + tp * n1_factor, d1u, d1d, dt_s, den)
-        n2norm = (run_n2 - idle_n2) / n2_factor
-        thrust = idle + mil * n2norm * n2norm
-        rest = 1.0 - n2norm
-        tsfc = c[_C_TSFC] * math.sqrt(t_r[i] / 389.7) * (0.84 + rest * rest)
-        want = thrust * tsfc  # _seek without a divisor
-        flow = pph[i]
-        if flow > want:
-            flow = _maximum(flow + pph_down, want)
-        else:
-            flow = _minimum(flow + pph_up, want)
-        flow = _maximum(flow, c[_C_IDLE_FF])
-        if bleed != 1.0:
-            thrust = thrust * bleed
-        if reverser[i] != 0.0:  # cos(0) x thrust is thrust
-            thrust = math.cos(reverser[i]) * thrust
-        n1_out[i], n2_out[i], norm_out[i], tsfc_out[i] = run_n1, run_n2, n2norm, tsfc
-        pph_out[i], thrust_out[i] = flow, thrust
-        # _burn with one feed tank (its priority usable: fed)
-        frozen = freeze[i] != 0.0
-        fuel = contents[i]
-        has = fuel > unusable
-        starving = not (has and fed)
-        starved_out[i] = starved[i] if frozen else (1.0 if starving else 0.0)
-        live = not frozen and not starving
-        phase_out[i] = phase[i] if live or frozen else _OFF
-        rate = flow / 3600.0
-        burned = rate * dt_s
-        ff_out[i] = rate if live else ff[i]
-        used_out[i] = used[i] + burned if live else used[i]
-        if live:  # feeding: it has fuel and the best priority
-            left = fuel - burned
-            fuel = left if left >= unusable else _minimum(fuel, unusable)
-        contents_out[i] = fuel
-        # FGForce, as _engine: a zero of the transform gives no term
-        fx, fy, fz = thrust * ax, thrust * ay, thrust * az
-        arm_x = _INCH_TO_FT * (cg_x[i] - x[i])
-        arm_y = _INCH_TO_FT * (y[i] - cg_y[i])
-        arm_z = _INCH_TO_FT * (cg_z[i] - z[i])
-        force_x[i] = _sum(h_fx, px, force_x[i], fx)
-        force_y[i] = _sum(h_fy, py, force_y[i], fy)
-        force_z[i] = _sum(h_fz, pz, force_z[i], fz)
-        moment_l[i] = _sum(h_l, py or pz, moment_l[i], _moment(pz, py, arm_y * fz, arm_z * fy))
-        moment_m[i] = _sum(h_m, px or pz, moment_m[i], _moment(px, pz, arm_z * fx, arm_x * fz))
-        moment_n[i] = _sum(h_n, px or py, moment_n[i], _moment(py, px, arm_x * fy, arm_y * fx))
 
 
 @dataclass(frozen=True)
@@ -290,126 +51,51 @@ class Propulsion:
         return tuple(e for e in self.engines if isinstance(e, Turbine))
 
     @property
+    def lateral_trim(self) -> bool:
+        """Whether a thruster rolls and yaws the airframe in level flight (a
+        propeller's torque and P-factor), so that a level trim balances it
+        with aileron, rudder and bank."""
+        return any(e.rolls_and_yaws for e in self.engines)
+
+    @property
     def inputs(self) -> frozenset[str]:
-        names: set[str] = {*_CG, *_FLIGHT, _FREEZE, "aero/qbar-psf"}
+        names: set[str] = {*CG, *FLIGHT, FREEZE, "aero/qbar-psf"}
         for e in self.engines:
-            if isinstance(e, Piston):
-                names |= e.inputs
-            else:
-                names |= e.idle_thrust.inputs | e.mil_thrust.inputs | {e.throttle_key}
+            names |= e.inputs
         return frozenset(names)
 
     @property
     def outputs(self) -> frozenset[str]:
         names: set[str] = {*_FORCES, *_MOMENTS, _TOTAL}
         for e in self.engines:
-            if isinstance(e, Piston):
-                names |= set(e.state)
-                continue
-            names |= {e.key(k) for k in ("thrust-lbs", "n1", "n2", "fuel-flow-rate-pps",
-                                         "fuel-used-lbs", "tsfc", "IdleThrust", "MilThrust")}
-            names |= {"_" + e.key(k) for k in ("fuel-flow-pph", "n2norm", "phase", "running",
-                                               "starved")}
+            names |= e.outputs
         return frozenset(names | {t.contents_key for t in self.tanks})
 
     def init(self, props: dict[str, np.ndarray], n: int) -> None:
         """Every engine running (``propulsion/set-running`` = -1), every
         tank at its initial contents, the settings at the file's values."""
         zeros = np.zeros(n)
-        for k in (_FREEZE, _CUTOFF, _STARTER):
+        for k in (FREEZE, CUTOFF, STARTER):
             props.setdefault(k, zeros.copy())
         for t in self.tanks:
             props[t.contents_key] = np.full(n, t.initial_lbs)
         props[_TOTAL] = self._total(props, n)
         for k in (*_FORCES, *_MOMENTS):
             props[k] = zeros.copy()
-        for p in self.engines:
-            if isinstance(p, Piston):
-                p.init(props, n)
-        for e in self.turbines:
-            props[e.key("n1")] = np.full(n, e.idle_n1 + 1.0 * e.n1_factor)
-            props[e.key("n2")] = np.full(n, e.idle_n2 + 1.0 * e.n2_factor)
-            props["_" + e.key("n2norm")] = (props[e.key("n2")] - e.idle_n2) / e.n2_factor
-            props["_" + e.key("phase")] = np.full(n, _RUN)
-            props["_" + e.key("running")] = np.ones(n)
-            props["_" + e.key("starved")] = zeros.copy()
-            for k in ("thrust-lbs", "fuel-flow-rate-pps", "fuel-used-lbs", "tsfc",
-                      "IdleThrust", "MilThrust"):
-                props[e.key(k)] = zeros.copy()
-            props[e.key("reverser-angle-rad")] = zeros.copy()
-            for k, x in zip(_POSITION, e.location_in):
-                props[e.key(k)] = np.full(n, x)
-            props["_" + e.key("fuel-flow-pph")] = self._steady_flow(e, props, n)
+        for e in self.engines:
+            e.init(props, n)
 
     def set_running(self, props: dict[str, np.ndarray]) -> None:
         """``propulsion/set-running`` = -1 written after the initial
-        conditions' frame (``place``), as JSBSim 1.3 does it: for every engine
-        ``FGTurbine::InitRunning`` (no longer cut off; running unless starved;
-        N1 and N2 at the last frame's throttle; its frame without time moves
-        nothing; the phase left running), then ``FGPropulsion::GetSteadyState``:
-        the engine stepped at 0.5 s with the throttle at 1 and no fuel burned
-        until its thrust has moved by less than 1e-4 lbf 121 steps running
-        (at most 6,000 steps). A running engine so ends at its full-throttle
-        N1, N2 and fuel flow, from which the next frame spools it down to the
-        throttle's; a starved one winds down, off. The thrust is left at its
-        steady value; the accelerations stay those of the initial conditions'
-        frame (JSBSim runs no other model; it also sums the steady thrust into
-        ``forces/fbx-prop-lbs``, which the next frame writes before reading)."""
-        n = len(props[_CG[0]])
-        props[_CUTOFF] = np.zeros(n)
-        full = np.ones(n)
+        conditions' frame (``place``), as JSBSim 1.3 does it: no engine cut
+        off, then each engine's ``InitRunning`` and
+        ``FGPropulsion::GetSteadyState`` (``Engine.set_running``), the last
+        engine's thrust carried to the next, as JSBSim compares them."""
+        n = len(props[CG[0]])
+        props[CUTOFF] = np.zeros(n)
         current = np.zeros(n)  # JSBSim's, kept from one engine to the next
         for e in self.engines:
-            if isinstance(e, Piston):
-                sfx = "" if e.index == 0 else f"[{e.index}]"
-                for c in ("cmd", "pos"):  # FGPropulsion::InitRunning's mixture
-                    props[f"fcs/mixture-{c}-norm{sfx}"] = np.ones(n)
-                current = e.steady(props, props[_STARTER], current)
-                continue
-            starved = props["_" + e.key("starved")] != 0.0
-            tp = _position(props[e.throttle_key])
-            props[e.key("n2")] = e.idle_n2 + tp * e.n2_factor
-            props[e.key("n1")] = e.idle_n1 + tp * e.n1_factor
-            props["_" + e.key("running")] = np.where(starved, 0.0, 1.0)
-            props["_" + e.key("phase")] = np.where(starved, _OFF, _RUN)
-            idle_fraction = e.idle_thrust.evaluate(props)
-            mil_fraction = e.mil_thrust.evaluate(props)
-            idle = e.milthrust_lbs * idle_fraction
-            mil = (e.milthrust_lbs - idle) * mil_fraction
-            keys = [e.key(k) for k in ("n1", "n2", "tsfc")] + [
-                "_" + e.key(k) for k in ("n2norm", "fuel-flow-pph", "phase", "running")] + [
-                _STARTER]
-            count = np.zeros(n, dtype=np.int64)
-            done = np.zeros(n, dtype=bool)
-            for _ in range(6000):
-                if bool(done.all()):
-                    break
-                before = [props[k].copy() for k in keys]
-                thrust = self._calculate(e, props, 0.5, full, idle, mil)[0]
-                reverser = props[e.key("reverser-angle-rad")]
-                if bool(reverser.any()):
-                    thrust = np.cos(reverser) * thrust
-                for k, b in zip(keys, before, strict=True):  # a steady aircraft stopped
-                    props[k] = np.where(done, b, props[k])
-                last, current = current, np.where(done, current, thrust)
-                count = np.where(done, count, np.where(np.abs(last - current) < 1e-4,
-                                                       count + 1, 0))
-                done = done | (count > 120)
-            props[e.key("thrust-lbs")] = current
-
-    def _steady_flow(self, e: Turbine, props: dict[str, np.ndarray], n: int) -> np.ndarray:
-        """The fuel flow JSBSim's steady state at full throttle leaves: the
-        target thrust x TSFC at N2norm 1, never below the idle flow."""
-        needed = e.idle_thrust.inputs | e.mil_thrust.inputs | {"atmosphere/T-R"}
-        if not needed <= set(props):
-            return np.full(n, e.idle_ff_pph)
-        n2norm = (e.idle_n2 + 1.0 * e.n2_factor - e.idle_n2) / e.n2_factor
-        idle = e.milthrust_lbs * e.idle_thrust.evaluate(props)
-        mil = (e.milthrust_lbs - idle) * e.mil_thrust.evaluate(props)
-        thrust = idle + mil * n2norm * n2norm
-        tsfc = e.tsfc * np.sqrt(props["atmosphere/T-R"] / 389.7) * (
-            0.84 + (1 - n2norm) * (1 - n2norm))
-        return np.maximum(thrust * tsfc, e.idle_ff_pph)
+            current = e.set_running(props, current, self.source, len(self.engines))
 
     def _total(self, props: dict[str, np.ndarray], n: int) -> np.ndarray:
         if not self.tanks:
@@ -428,18 +114,18 @@ class Propulsion:
         false: the numpy steps, the same doubles."""
         if not dt_s >= 0:
             raise ValueError(f"dt_s must be 0 or more, got {dt_s}")
-        n = len(props[_CG[0]])
+        n = len(props[CG[0]])
         if loop and dt_s > 0.0 and not trimming and self._running(props):
             self._run_loop(props, dt_s, n)
             props[_TOTAL] = self._total(props, n)
             return
-        cg = [props[k] for k in _CG]
-        frozen = np.ones(n, dtype=bool) if trimming else props[_FREEZE] != 0.0
+        cg = [props[k] for k in CG]
+        frozen = np.ones(n, dtype=bool) if trimming else props[FREEZE] != 0.0
         force: list[np.ndarray | None] = [None, None, None]
         moment: list[np.ndarray | None] = [None, None, None]
         for e in self.engines:
-            fb, mb = (self._engine(e, props, dt_s, cg, frozen) if isinstance(e, Turbine)
-                      else self._piston(e, props, dt_s, frozen))
+            rate, fb, mb = e.frame(props, dt_s, cg, self.source, len(self.engines))
+            self._burn(e, props, dt_s, rate, frozen)
             for acc, part in ((force, fb), (moment, mb)):
                 for k in range(3):
                     a, b = acc[k], part[k]
@@ -451,244 +137,39 @@ class Propulsion:
         props[_TOTAL] = self._total(props, n)
 
     @cached_property
-    def _loop_plan(self) -> tuple[tuple[np.ndarray, np.ndarray, tuple[str, ...],
-                                        tuple[str, ...]], ...] | None:
-        """Per engine, ``_turbine``'s constants, which of the sums an engine
-        before it gave a term (``have``), and the keys it reads and writes;
-        None when an engine is not fed by exactly one tank (or there is no
-        engine): the numpy steps always."""
-        if not self.engines or any(len(e.feeds) != 1 or isinstance(e, Piston)
-                                   for e in self.engines):
+    def _loop_plan(self) -> tuple[tuple[EngineLoop, np.ndarray], ...] | None:
+        """Per engine, its running frame's loop and which of the sums an
+        engine before it gave a term (``have``); None when an engine is not
+        fed by exactly one tank, has no loop, or there is no engine: the
+        numpy steps always."""
+        if not self.engines or any(len(e.feeds) != 1 for e in self.engines):
             return None
+        loops = [e.loop(self.tanks[e.feeds[0]], len(self.tanks)) for e in self.engines]
         plan = []
         have = np.zeros(6, dtype=np.bool_)
-        for e in self.turbines:
-            tank = self.tanks[e.feeds[0]]
-            c = np.array([e.milthrust_lbs, e.idle_n1, e.idle_n2, e.n1_factor, e.n2_factor,
-                          e.tsfc, e.one_minus_bleed, e.idle_ff_pph, *e.delays,
-                          tank.unusable_lbs, float(1 <= tank.priority <= len(self.tanks)),
-                          *e.axis])
-            ins = (e.key("n1"), e.key("n2"), "_" + e.key("n2norm"), "_" + e.key("fuel-flow-pph"),
-                   *_FLIGHT, e.key("reverser-angle-rad"), _FREEZE, "_" + e.key("starved"),
-                   "_" + e.key("phase"), e.key("fuel-flow-rate-pps"), e.key("fuel-used-lbs"),
-                   tank.contents_key, *_CG, *(e.key(k) for k in _POSITION))
-            outs = (e.key("n1"), e.key("n2"), "_" + e.key("n2norm"), e.key("tsfc"),
-                    "_" + e.key("fuel-flow-pph"), e.key("thrust-lbs"), "_" + e.key("starved"),
-                    "_" + e.key("phase"), e.key("fuel-flow-rate-pps"), e.key("fuel-used-lbs"),
-                    tank.contents_key)
-            plan.append((c, have.copy(), ins, outs))
-            x, y, z = (a != 0.0 for a in e.axis)
-            have |= np.array([x, y, z, y or z, x or z, x or y])
+        for loop in loops:
+            if loop is None:
+                return None
+            plan.append((loop, have.copy()))
+            have |= loop.terms
         return tuple(plan)
 
     def _running(self, props: dict[str, np.ndarray]) -> bool:
-        """Whether the frame is the loop's: every engine running (the
-        phase), none cut off or starting, each fed by one tank."""
-        return self._loop_plan is not None and not bool(props[_CUTOFF].any()) and not bool(
-            props[_STARTER].any()) and all(bool((props["_" + e.key("phase")] == _RUN).all())
-                                           for e in self.turbines)
+        """Whether the frame is the loop's: every engine's loop ready, none
+        cut off or starting."""
+        return self._loop_plan is not None and not bool(props[CUTOFF].any()) and not bool(
+            props[STARTER].any()) and all(loop.ready(props) for loop, _ in self._loop_plan)
 
     def _run_loop(self, props: dict[str, np.ndarray], dt_s: float, n: int) -> None:
-        """``run``'s common case: ``_turbine`` for each engine in turn (a
-        tank two engines share drained by the first before the second reads
-        it), new arrays for what it writes."""
+        """``run``'s common case: each engine's loop in turn (a tank two
+        engines share drained by the first before the second reads it)."""
         assert self._loop_plan is not None
         acc = tuple(np.empty(n) for _ in range(6))
-        for e, (c, have, ins, outs) in zip(self.turbines, self._loop_plan, strict=True):
-            idle_fraction = e.idle_thrust.evaluate(props)
-            mil_fraction = e.mil_thrust.evaluate(props)
-            props[e.key("IdleThrust")] = idle_fraction
-            props[e.key("MilThrust")] = mil_fraction
-            arrays = tuple(np.empty(n) for _ in outs)
-            _turbine(dt_s, c, have, (props[e.throttle_key], idle_fraction, mil_fraction,
-                                     *(props[k] for k in ins)), arrays, acc)
-            props.update(zip(outs, arrays))
+        for loop, have in self._loop_plan:
+            loop.run(props, dt_s, have, acc)
         props.update(zip((*_FORCES, *_MOMENTS), acc))
 
-    def _engine(self, e: Turbine, props: dict[str, np.ndarray], dt_s: float,
-                cg: list[np.ndarray], frozen: np.ndarray
-                ) -> tuple[list[np.ndarray | None], list[np.ndarray | None]]:
-        tp = _position(props[e.throttle_key])
-        idle_fraction = e.idle_thrust.evaluate(props)
-        mil_fraction = e.mil_thrust.evaluate(props)
-        props[e.key("IdleThrust")] = idle_fraction
-        props[e.key("MilThrust")] = mil_fraction
-        idle = e.milthrust_lbs * idle_fraction
-        mil = (e.milthrust_lbs - idle) * mil_fraction
-        pph_key = "_" + e.key("fuel-flow-pph")
-        if dt_s == 0.0:
-            thrust = self._trim(e, props, tp, idle, mil)
-            pph = props[pph_key]
-        else:
-            thrust, pph = self._calculate(e, props, dt_s, tp, idle, mil)
-        reverser = props[e.key("reverser-angle-rad")]
-        if bool(reverser.any()):  # cos(0) x thrust is thrust
-            thrust = np.cos(reverser) * thrust
-        props[e.key("thrust-lbs")] = thrust
-        self._burn(e, props, dt_s, pph / 3600.0, frozen)
-        # FGForce: the body force and the moment about the CG, the arm from
-        # the structural frame to body axes in feet. A zero of the transform
-        # (known when compiled) gives no force (None), as JSBSim's zero
-        # products add nothing, and no term of the moment
-        fb = [None if a == 0.0 else thrust * a for a in e.axis]
-        need = [any(fb[j] is not None for j in range(3) if j != k) for k in range(3)]
-        x, y, z = (props[e.key(k)] for k in _POSITION)
-        arms = [_INCH_TO_FT * (cg[0] - x) if need[0] else None,
-                _INCH_TO_FT * (y - cg[1]) if need[1] else None,
-                _INCH_TO_FT * (cg[2] - z) if need[2] else None]
-        mb = [_minus(_times(arms[1], fb[2]), _times(arms[2], fb[1])),
-              _minus(_times(arms[2], fb[0]), _times(arms[0], fb[2])),
-              _minus(_times(arms[0], fb[1]), _times(arms[1], fb[0]))]
-        return fb, mb
-
-    def _piston(self, e: Piston, props: dict[str, np.ndarray], dt_s: float,
-                frozen: np.ndarray
-                ) -> tuple[list[np.ndarray | None], list[np.ndarray | None]]:
-        """A piston engine and its propeller (``FGPiston::Calculate``), then
-        the fuel it burns; its body forces and moments."""
-        fb, mb = e.thrust(props, dt_s, e.power(props, dt_s, props[_STARTER]))
-        rate = props[e.key("fuel-flow-rate-pps")]
-        self._burn(e, props, dt_s, rate, frozen)
-        props[e.key("fuel-flow-rate-pps")] = rate  # the engine's, burnt or not
-        return fb, mb
-
-    def _calculate(self, e: Turbine, props: dict[str, np.ndarray], dt_s: float,
-                   tp: np.ndarray, idle: np.ndarray, mil: np.ndarray
-                   ) -> tuple[np.ndarray, np.ndarray]:
-        """A frame of ``FGTurbine::Calculate`` (dt > 0): leaves N1, N2, the
-        N2 fraction, TSFC and fuel flow in props, returns the thrust (before
-        the thruster) and the fuel flow."""
-        phase_key, cutoff, starter = "_" + e.key("phase"), props[_CUTOFF], props[_STARTER]
-        slow = bool(cutoff.any()) or bool(starter.any()) or bool(
-            (props[phase_key] != _RUN).any())
-        if slow:
-            self._leave_trim(e, props, tp)
-        norm_key, pph_key = "_" + e.key("n2norm"), "_" + e.key("fuel-flow-pph")
-        n1, n2 = props[e.key("n1")], props[e.key("n2")]
-        # FGSpoolUp with the N2norm of the previous frame, the same for N1 and N2
-        m = 1.0 - np.minimum(1.0, props[norm_key] + 0.1)
-        den = 1 + 3 * m * m * m + (1 - props["atmosphere/sigma"])
-        d2u, d2d, d1u, d1d = e.delays
-        run_n2 = _seek(n2, e.idle_n2 + tp * e.n2_factor, d2u, d2d, dt_s, den)
-        run_n1 = _seek(n1, e.idle_n1 + tp * e.n1_factor, d1u, d1d, dt_s, den)
-        n2norm = (run_n2 - e.idle_n2) / e.n2_factor
-        thrust = idle + mil * n2norm * n2norm
-        rest = 1 - n2norm
-        tsfc = e.tsfc * np.sqrt(props["atmosphere/T-R"] / 389.7) * (0.84 + rest * rest)
-        pph = np.maximum(_seek(props[pph_key], thrust * tsfc, 1000.0, 10000.0, dt_s),
-                         e.idle_ff_pph)
-        if e.one_minus_bleed != 1.0:
-            thrust = thrust * e.one_minus_bleed
-        if slow:
-            ran = self._phases(e, props, dt_s)
-            run_n1, run_n2, pph = (np.where(ran, a, b) for a, b in (
-                (run_n1, props[e.key("n1")]), (run_n2, props[e.key("n2")]),
-                (pph, props[pph_key])))
-            n2norm = np.where(ran, n2norm, props[norm_key])
-            tsfc = np.where(ran, tsfc, props[e.key("tsfc")])
-            thrust = np.where(ran, thrust, 0.0)
-        props[e.key("n1")], props[e.key("n2")], props[norm_key] = run_n1, run_n2, n2norm
-        props[e.key("tsfc")] = tsfc
-        props[pph_key] = pph
-        return thrust, pph
-
-    def _trim(self, e: Turbine, props: dict[str, np.ndarray], tp: np.ndarray,
-              idle: np.ndarray, mil: np.ndarray) -> np.ndarray:
-        """A frame without time (``FGTurbine::Trim``): the thrust of the
-        throttle's N2 at once, N1, N2 and the fuel flow left as they are; a
-        starved engine is off."""
-        n2 = e.idle_n2 + tp * e.n2_factor
-        n2norm = (n2 - e.idle_n2) / e.n2_factor
-        thrust = (idle + mil * n2norm * n2norm) * e.one_minus_bleed
-        starved = props["_" + e.key("starved")] != 0.0
-        props["_" + e.key("phase")] = np.where(starved, _OFF, _TRIM)
-        if bool(starved.any()):
-            running_key = "_" + e.key("running")
-            props[running_key] = np.where(starved, 0.0, props[running_key])
-            thrust = np.where(starved, 0.0, thrust)
-        return thrust
-
-    def _leave_trim(self, e: Turbine, props: dict[str, np.ndarray], tp: np.ndarray) -> None:
-        """The first frame with time after a trim: a running engine that is
-        not starved runs from the throttle's N1 and N2, no longer cut off;
-        any other is off and cut off (JSBSim's Calculate)."""
-        phase_key = "_" + e.key("phase")
-        phase = props[phase_key]
-        trim = phase == _TRIM
-        if not bool(trim.any()):
-            return
-        go = trim & (props["_" + e.key("running")] != 0.0) & (
-            props["_" + e.key("starved")] == 0.0)
-        if len(self.engines) > 1 and bool((trim & ~go).any() or (trim & (
-                props[_CUTOFF] != 0.0)).any()):
-            raise PropulsionError(f"{self.source}: an engine of an aircraft with "
-                                  f"{len(self.engines)} engines leaving a trim cut off or "
-                                  f"cutting off is not compiled (JSBSim keeps a cut-off per "
-                                  f"engine behind the one command)")
-        for n_key, idle_n, factor in (("n2", e.idle_n2, e.n2_factor),
-                                      ("n1", e.idle_n1, e.n1_factor)):
-            props[e.key(n_key)] = np.where(go, idle_n + tp * factor, props[e.key(n_key)])
-        props[phase_key] = np.where(go, _RUN, np.where(trim, _OFF, phase))
-        props[_CUTOFF] = np.where(go, 0.0, np.where(trim, 1.0, props[_CUTOFF]))
-
-    def _phases(self, e: Turbine, props: dict[str, np.ndarray], dt_s: float) -> np.ndarray:
-        """The turbine's phases other than running (``FGTurbine::Calculate``,
-        ``Off``, ``SpinUp``, ``Start``) for every aircraft: leaves N1, N2 and
-        the fuel flow of the rows not running in ``props`` and returns the
-        rows that ran (whose values the caller keeps from ``run_*``)."""
-        if len(self.engines) > 1 and bool(props[_STARTER].any()):
-            raise PropulsionError(f"{self.source}: the starter of an aircraft with "
-                                  f"{len(self.engines)} engines is not compiled (JSBSim keeps "
-                                  f"one per engine behind propulsion/starter_cmd)")
-        phase_key, running_key = "_" + e.key("phase"), "_" + e.key("running")
-        phase, running = props[phase_key], props[running_key] != 0.0
-        starved = props["_" + e.key("starved")] != 0.0
-        cutoff, starter = props[_CUTOFF] != 0.0, props[_STARTER] != 0.0
-        qbar = props["aero/qbar-psf"]
-        n1, n2 = props[e.key("n1")], props[e.key("n2")]
-        pph_key = "_" + e.key("fuel-flow-pph")
-        # the transitions, in JSBSim's order
-        phase = np.where(~running & cutoff & starter & (phase == _OFF), _SPINUP, phase)
-        phase = np.where((starter | (qbar > 30.0)) & ~running & ~cutoff & (n2 > 15.0),
-                         _START, phase)
-        phase = np.where((cutoff & (phase != _SPINUP)) | starved, _OFF, phase)
-        off, spin, start = phase == _OFF, phase == _SPINUP, phase == _START
-        ran = phase == _RUN
-        # Off: spooling down to the windmilling speed, the fuel flow to none
-        (i1, i2), (s1, s2) = e.ignition, e.spindown
-        if e.windmill:
-            off_n1 = _seek(n1, qbar / 10.0, n1 / 2.0 + 0.1, n1 / s1, dt_s)
-            off_n2 = _seek(n2, qbar / 15.0, n2 / 2.0 + 0.1, n2 / s2, dt_s)
-        else:
-            off_n1 = _seek(n1, 0.0, n1 / 2.0, n1 / s1, dt_s)
-            off_n2 = _seek(n2, 0.0, n2 / 2.0, n2 / s2, dt_s)
-        off_pph = _seek(props[pph_key], 0.0, 1000.0, 10000.0, dt_s)
-        # SpinUp: the starter turns it to the ignition speeds, no fuel
-        spin_n2 = _seek(n2, i2, e.spinup[1], n2 / 2.0, dt_s)
-        spin_n1 = _seek(n1, i1, e.spinup[0], n1 / 2.0, dt_s)
-        # Start: lit above 15 % N2 with fuel, to idle; at idle it runs
-        lit = start & (n2 > 15.0) & ~starved
-        cranking = lit & (n2 < e.idle_n2)
-        start_n2 = _seek(n2, e.idle_n2, e.start_rate[1], n2 / 2.0, dt_s)
-        start_n1 = _seek(n1, e.idle_n1, e.start_rate[0], n1 / 2.0, dt_s)
-        start_pph = e.idle_ff_pph * start_n2 / e.idle_n2
-        props[e.key("n1")] = np.where(off, off_n1, np.where(spin, spin_n1, np.where(
-            cranking, start_n1, n1)))
-        props[e.key("n2")] = np.where(off, off_n2, np.where(spin, spin_n2, np.where(
-            cranking, start_n2, n2)))
-        props[pph_key] = np.where(off, off_pph, np.where(spin, 0.0, np.where(
-            cranking, start_pph, props[pph_key])))
-        # the phase and flags the frame leaves
-        to_run = start & lit & ~cranking
-        aborted = cranking & ~starter & (qbar < 30.0)
-        phase = np.where((ran & cutoff) | (spin & ~starter) | (start & ~lit) | aborted, _OFF,
-                         np.where(to_run, _RUN, phase))
-        props[phase_key] = phase
-        props[running_key] = (ran | to_run | (running & ~off & ~spin)).astype(np.float64)
-        props[_STARTER] = np.where(ran | to_run | (start & ~lit), 0.0, props[_STARTER])
-        return ran
-
-    def _burn(self, e: Turbine | Piston, props: dict[str, np.ndarray], dt_s: float,
+    def _burn(self, e: Engine, props: dict[str, np.ndarray], dt_s: float,
               rate: np.ndarray, frozen: np.ndarray) -> None:
         """``FGPropulsion::ConsumeFuel`` for one engine at ``rate`` pounds a
         second (nothing while frozen): an engine whose feed tanks hold no
@@ -706,9 +187,8 @@ class Propulsion:
         starved = np.isinf(best)
         props[starved_key] = np.where(frozen, props[starved_key], starved)
         live = ~frozen & ~starved
-        if isinstance(e, Turbine) and bool(starved.any()):  # the next frame begins off
-            phase_key = "_" + e.key("phase")
-            props[phase_key] = np.where(live | frozen, props[phase_key], _OFF)
+        if bool(starved.any()):
+            e.starve(props, live | frozen)
         burned = rate * dt_s
         ff_key, used_key = e.key("fuel-flow-rate-pps"), e.key("fuel-used-lbs")
         props[ff_key] = np.where(live, rate, props[ff_key])

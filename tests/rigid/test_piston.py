@@ -144,6 +144,7 @@ def test_the_c172p_engine_and_propeller_equal_jsbsim_bit_for_bit(flights: Flight
     start, ins, jsb = flights
     plan = compile_propulsion(C172P, ENGINES)
     assert [type(e) for e in plan.engines] == [Piston] and len(plan.tanks) == 2
+    assert plan.lateral_trim  # the propeller's torque rolls and yaws the airframe
     assert plan.inputs >= {"fcs/mixture-pos-norm", "atmosphere/P-psf", "velocities/u-aero-fps"}
     steady, ours = _replay(plan, start, ins)
     # the flights moved what is compared: the throttle and mixture both

@@ -159,6 +159,7 @@ def test_the_uav700_equals_jsbsim_frame_by_frame(flights: Flights) -> None:
     plan = compile_propulsion(UAV700, ENGINES)
     assert plan.inputs >= {"velocities/mach", "atmosphere/density-altitude",
                            "fcs/throttle-pos-norm", "inertia/cg-x-in", "propulsion/fuel_freeze"}
+    assert not plan.lateral_trim  # a direct thruster: no torque to trim out
     # set-running: full-throttle spools and the tank's initial contents
     props = {k: start[k].copy() for k in INPUTS}
     plan.init(props, len(SCHEDULES))
@@ -216,16 +217,16 @@ def _loop_and_numpy(plan: Propulsion, start: Arrays, ins: Arrays, columns: list[
     (``writes``: per frame, (column, property, value) written into both):
     every property equal, bit for bit, after every frame. Returns, per
     frame, whether the loop ran, and the last frame's properties."""
-    from cosim.rigid import propulsion_plan
+    from cosim.rigid import turbine_plan
 
     calls: list[int] = []
-    loop = propulsion_plan._turbine
+    loop = turbine_plan._turbine
 
     def counted(*args: Any) -> None:
         calls.append(1)
         loop(*args)
 
-    monkeypatch.setattr(propulsion_plan, "_turbine", counted)
+    monkeypatch.setattr(turbine_plan, "_turbine", counted)
     both = [{k: start[k][columns].copy() for k in ins if k in start} for _ in range(2)]
     for props in both:
         plan.init(props, len(columns))
@@ -314,7 +315,7 @@ def test_the_loop_sums_two_engines_turned_off_the_axes_as_numpy(
 def test_the_loops_maximum_and_minimum_are_numpys() -> None:
     """NaN from either side, and of two equal values (+0 and -0) the
     second, as numpy's own loops give them, short arrays and long."""
-    from cosim.rigid.propulsion_plan import _maximum, _minimum
+    from cosim.rigid.turbine_plan import _maximum, _minimum
 
     special = [np.nan, -0.0, 0.0, 1.0, -1.0, np.inf, -np.inf]
     pairs = [(a, b) for a in special for b in special]
