@@ -96,6 +96,7 @@ def test_the_rigid_aircraft_flies_as_jsbsim_does_through_manoeuvres() -> None:
     assert fdm["velocities/vt-fps"] > start["velocities/vt-fps"] + 20
 
 
+@pytest.mark.integration  # JSBSim and the rigid tier fly 12 s of c172p: 5-8 s
 def test_the_rigid_c172p_flies_as_jsbsim_does() -> None:
     """The c172p as cosim gives it JSBSim (the autopilot attached, off): its
     piston engine and propeller, and the ground effect's height of the
