@@ -47,12 +47,11 @@ from cosim.rigid.atmosphere import Atmosphere
 from cosim.rigid.fcs import Systems, compile_systems
 from cosim.rigid.functions import CompileError, parse
 from cosim.rigid.propulsion import Propulsion, compile_propulsion
-from cosim.rigid.units import triplet_in
+from cosim.rigid.units import IN_TO_FT, triplet_in
 
 logger = logging.getLogger(__name__)
 #: FGAuxiliary's heights over the wingspan, computed when a part reads one
 _OVER_SPAN = frozenset({"aero/h_b-cg-ft", "aero/h_b-mac-ft"})
-_INCH_TO_FT = 1.0 / 12.0
 Props = dict[str, np.ndarray]
 
 #: sections the compiler reads; anything else at the top level is refused
@@ -254,9 +253,9 @@ class RigidAircraft:
         the local vertical)."""
         agl, span_ft = props["position/h-agl-ft"], self.metrics.bw_ft
         rp = self.metrics.rp_in
-        arm = (_INCH_TO_FT * (props["inertia/cg-x-in"] - rp[0]),
-               _INCH_TO_FT * (rp[1] - props["inertia/cg-y-in"]),
-               _INCH_TO_FT * (props["inertia/cg-z-in"] - rp[2]))
+        arm = (IN_TO_FT * (props["inertia/cg-x-in"] - rp[0]),
+               IN_TO_FT * (rp[1] - props["inertia/cg-y-in"]),
+               IN_TO_FT * (props["inertia/cg-z-in"] - rp[2]))
         t = [props["_eom/tl2b_t" + k] for k in ("13", "23", "33")]  # body -> down
         down = t[0] * arm[0] + t[1] * arm[1] + t[2] * arm[2]
         props["aero/h_b-cg-ft"] = agl / span_ft

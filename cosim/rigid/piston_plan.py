@@ -13,7 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from cosim.rigid import kernels
-from cosim.rigid.propulsion_base import STARTER, Tank, Terms
+from cosim.rigid.propulsion_base import CG, POSITION, STARTER, Tank, Terms, indexed
+from cosim.rigid.units import IN_TO_FT
 
 #: FGJSBBase's and FGPiston's constants, as JSBSim holds them
 PSFTOPA = 47.88
@@ -22,7 +23,7 @@ HPTOFTLBSSEC = 550.0
 FTTOM = 0.3048
 #: a cubic inch in cubic metres: FGJSBBase's, from the exact inch (not the
 #: truncated one of the structural frame)
-IN3TOM3 = (1.0 / 12.0) * (1.0 / 12.0) * (1.0 / 12.0) / (1.0 / (FTTOM * FTTOM * FTTOM))
+IN3TOM3 = IN_TO_FT * IN_TO_FT * IN_TO_FT / (1.0 / (FTTOM * FTTOM * FTTOM))
 R_AIR = 287.3
 STANDARD_PRESSURE = 101320.73
 #: FGPiston's default mixture efficiency (fuel/air ratio -> efficiency)
@@ -30,8 +31,6 @@ MIXTURE_TABLE = ((0.05000, 0.05137, 0.05179, 0.05430, 0.05842, 0.06312, 0.06942,
                   0.08845, 0.09270, 0.10120, 0.11455, 0.12158, 0.12435, 0.12500),
                  (0.00000, 0.00862, 0.21552, 0.48276, 0.70690, 0.83621, 0.93103, 1.00000,
                   1.00000, 0.98276, 0.93103, 0.72414, 0.45690, 0.23276, 0.00000))
-#: FGMassBalance::StructuralToBody's inch, exact (as the turbine's thruster)
-_INCH_TO_FT = 1.0 / 12.0
 
 Table = tuple[tuple[float, ...], tuple[float, ...]]
 #: an engine's properties a frame writes (``propulsion/engine[i]/...``) and
@@ -102,16 +101,15 @@ class Piston:
     propeller: Propeller
 
     def key(self, leaf: str) -> str:
-        head = "propulsion/engine" if self.index == 0 else f"propulsion/engine[{self.index}]"
-        return f"{head}/{leaf}"
+        return indexed(f"propulsion/engine/#/{leaf}", self.index)
 
     @property
     def throttle_key(self) -> str:
-        return "fcs/throttle-pos-norm" + ("" if self.index == 0 else f"[{self.index}]")
+        return indexed("fcs/throttle-pos-norm/#", self.index)
 
     @property
     def mixture_key(self) -> str:
-        return "fcs/mixture-pos-norm" + ("" if self.index == 0 else f"[{self.index}]")
+        return indexed("fcs/mixture-pos-norm/#", self.index)
 
     @property
     def inputs(self) -> frozenset[str]:
@@ -146,7 +144,7 @@ class Piston:
         k = self.key
         for x in _PUBLIC:
             props[k(x)] = np.zeros(n)
-        for i, x in enumerate(("x-position", "y-position", "z-position")):
+        for i, x in enumerate(POSITION):
             props[k(x)] = np.full(n, self.propeller.location_in[i])
         p_psf = props.get("atmosphere/P-psf")
         props[k("map-pa")] = np.full(n, 2116.228) * PSFTOPA if p_psf is None else p_psf * PSFTOPA
@@ -160,9 +158,8 @@ class Piston:
 
     def _full_mixture(self, props: dict[str, np.ndarray], n: int) -> None:
         """``FGPropulsion::InitRunning``'s mixture: command and position at 1."""
-        sfx = "" if self.index == 0 else f"[{self.index}]"
         for c in ("cmd", "pos"):
-            props[f"fcs/mixture-{c}-norm{sfx}"] = np.ones(n)
+            props[indexed(f"fcs/mixture-{c}-norm/#", self.index)] = np.ones(n)
 
     def set_running(self, props: dict[str, np.ndarray], current: np.ndarray, source: str,
                     engines: int) -> np.ndarray:
@@ -309,10 +306,10 @@ class Piston:
         the CG (the propeller's reaction torque, its gyroscopic moment and
         the thrust's)."""
         pr, k = self.propeller, self.key
-        cg = [props[c] for c in ("inertia/cg-x-in", "inertia/cg-y-in", "inertia/cg-z-in")]
-        dx, dy, dz = (_INCH_TO_FT * (cg[0] - pr.location_in[0]),
-                      _INCH_TO_FT * (pr.location_in[1] - cg[1]),
-                      _INCH_TO_FT * (cg[2] - pr.location_in[2]))
+        cg = [props[c] for c in CG]
+        dx, dy, dz = (IN_TO_FT * (cg[0] - pr.location_in[0]),
+                      IN_TO_FT * (pr.location_in[1] - cg[1]),
+                      IN_TO_FT * (cg[2] - pr.location_in[2]))
         p, q, r = (props[f"velocities/{a}-aero-rad_sec"] for a in "pqr")
         u = props["velocities/u-aero-fps"] + (q * dz - r * dy)
         v = props["velocities/v-aero-fps"] + (r * dx - p * dz)
@@ -366,9 +363,9 @@ class Piston:
         props[k("propeller-torque-ftlb")] = torque
         props[k("thrust-lbs")] = thrust
         # FGForce: the thrust at the acting location, the moment about the CG
-        ax = _INCH_TO_FT * (cg[0] - props[k("x-position")])
-        ay = _INCH_TO_FT * (props[k("y-position")] - cg[1])
-        az = _INCH_TO_FT * (cg[2] - props[k("z-position")])
+        ax = IN_TO_FT * (cg[0] - props[k("x-position")])
+        ay = IN_TO_FT * (props[k("y-position")] - cg[1])
+        az = IN_TO_FT * (cg[2] - props[k("z-position")])
         pi, qi, ri = (props[f"_eom/{a}i"] for a in "pqr")
         zero = np.zeros_like(thrust)
         moments: list[np.ndarray | None] = [(qi * 0.0 - ri * 0.0 + torque) + (ay * 0.0 - az * 0.0),

@@ -13,8 +13,6 @@ import numpy as np
 
 from cosim.errors import CosimError
 
-#: FGMassBalance::StructuralToBody's inch, exact
-INCH_TO_FT = 1.0 / 12.0
 CG = ("inertia/cg-x-in", "inertia/cg-y-in", "inertia/cg-z-in")
 FLIGHT = ("atmosphere/sigma", "atmosphere/T-R")
 FREEZE = "propulsion/fuel_freeze"

@@ -30,7 +30,6 @@ from cosim.rigid.propulsion_base import (
     CUTOFF,
     FLIGHT,
     FREEZE,
-    INCH_TO_FT,
     POSITION,
     STARTER,
     PropulsionError,
@@ -38,6 +37,7 @@ from cosim.rigid.propulsion_base import (
     Terms,
     indexed,
 )
+from cosim.rigid.units import IN_TO_FT
 
 #: FGTurbine's phases (as floats: they live in props)
 _OFF, _RUN, _SPINUP, _START, _TRIM = 0.0, 1.0, 2.0, 3.0, 4.0
@@ -202,9 +202,9 @@ def _turbine(dt_s: float, c: np.ndarray, have: np.ndarray, ins: tuple, outs: tup
         contents_out[i] = fuel
         # FGForce, as _engine: a zero of the transform gives no term
         fx, fy, fz = thrust * ax, thrust * ay, thrust * az
-        arm_x = INCH_TO_FT * (cg_x[i] - x[i])
-        arm_y = INCH_TO_FT * (y[i] - cg_y[i])
-        arm_z = INCH_TO_FT * (cg_z[i] - z[i])
+        arm_x = IN_TO_FT * (cg_x[i] - x[i])
+        arm_y = IN_TO_FT * (y[i] - cg_y[i])
+        arm_z = IN_TO_FT * (cg_z[i] - z[i])
         force_x[i] = _sum(h_fx, px, force_x[i], fx)
         force_y[i] = _sum(h_fy, py, force_y[i], fy)
         force_z[i] = _sum(h_fz, pz, force_z[i], fz)
@@ -363,9 +363,9 @@ class Turbine:
         fb = [None if a == 0.0 else thrust * a for a in self.axis]
         need = [any(fb[j] is not None for j in range(3) if j != k) for k in range(3)]
         x, y, z = (props[self.key(k)] for k in POSITION)
-        arms = [INCH_TO_FT * (cg[0] - x) if need[0] else None,
-                INCH_TO_FT * (y - cg[1]) if need[1] else None,
-                INCH_TO_FT * (cg[2] - z) if need[2] else None]
+        arms = [IN_TO_FT * (cg[0] - x) if need[0] else None,
+                IN_TO_FT * (y - cg[1]) if need[1] else None,
+                IN_TO_FT * (cg[2] - z) if need[2] else None]
         mb = [_minus(_times(arms[1], fb[2]), _times(arms[2], fb[1])),
               _minus(_times(arms[2], fb[0]), _times(arms[0], fb[2])),
               _minus(_times(arms[0], fb[1]), _times(arms[1], fb[0]))]
