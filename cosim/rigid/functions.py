@@ -211,6 +211,20 @@ def _numbers(el: ET.Element, source: str) -> list[list[float]]:
     return rows
 
 
+def table1_data(data: ET.Element, source: str) -> tuple[np.ndarray, np.ndarray]:
+    """A ``<tableData>`` of one dimension: its breakpoints and values (two
+    or more rows of two numbers, the breakpoints increasing)."""
+    rows = _numbers(data, source)
+    if len(rows) < 2 or any(len(r) != 2 for r in rows):
+        raise CompileError(f"{_where(data, source)}: a table of one dimension needs "
+                           f"two or more rows of two numbers")
+    bp = np.array([r[0] for r in rows])
+    val = np.array([r[1] for r in rows])
+    if np.any(np.diff(bp) <= 0):
+        raise CompileError(f"{_where(data, source)}: breakpoints must increase")
+    return bp, val
+
+
 def _lookup(el: ET.Element, source: str, inputs: set[str]) -> dict[str, str]:
     out = {}
     for iv in el.findall("independentVar"):
@@ -247,15 +261,8 @@ def _table(el: ET.Element, source: str, inputs: set[str]) -> Kernel:
                            f"<tableData> and a row and optionally a column lookup; or a row, "
                            f"a column and a table lookup with a <tableData breakPoint=...> "
                            f"for each breakpoint) are supported")
-    rows = _numbers(datas[0], source)
     if "column" not in look:
-        if len(rows) < 2 or any(len(r) != 2 for r in rows):
-            raise CompileError(f"{_where(datas[0], source)}: a table of one dimension needs "
-                               f"two or more rows of two numbers")
-        bp = np.array([r[0] for r in rows])
-        val = np.array([r[1] for r in rows])
-        if np.any(np.diff(bp) <= 0):
-            raise CompileError(f"{_where(datas[0], source)}: breakpoints must increase")
+        bp, val = table1_data(datas[0], source)
         rname = look["row"]
 
         def k1(v: Values) -> np.ndarray:
@@ -265,7 +272,7 @@ def _table(el: ET.Element, source: str, inputs: set[str]) -> Kernel:
             r, f = _factor(key, bp)
             return f * (val[r] - val[r - 1]) + val[r - 1]
         return k1
-    rbp, cols, data = _grid(rows, datas[0], source)
+    rbp, cols, data = _grid(_numbers(datas[0], source), datas[0], source)
     rname, cname = look["row"], look["column"]
 
     def k2(v: Values) -> np.ndarray:

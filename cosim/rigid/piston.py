@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import xml.etree.ElementTree as ET
 
-from cosim.rigid.functions import CompileError, _numbers, _where
+from cosim.rigid.functions import CompileError, _where, table1_data
 from cosim.rigid.piston_plan import (
     FTTOM,
     IN3TOM3,
@@ -51,13 +51,8 @@ def _table1(el: ET.Element, source: str) -> tuple[tuple[float, ...], tuple[float
                            f"one dimension (one <tableData>) is supported here")
     data = el.find("tableData")
     assert data is not None
-    rows = _numbers(data, source)
-    if len(rows) < 2 or any(len(r) != 2 for r in rows):
-        raise CompileError(f"{_where(data, source)}: a table of one dimension needs two or "
-                           f"more rows of two numbers")
-    if any(b[0] <= a[0] for a, b in zip(rows, rows[1:])):
-        raise CompileError(f"{_where(data, source)}: breakpoints must increase")
-    return tuple(r[0] for r in rows), tuple(r[1] for r in rows)
+    bp, val = table1_data(data, source)
+    return tuple(bp.tolist()), tuple(val.tolist())
 
 
 def compile_piston(el: ET.Element, index: int, source: str, propeller: Propeller,

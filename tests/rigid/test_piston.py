@@ -239,6 +239,8 @@ def _write(tmp_path: Path, piston: str, propeller: str, thruster: str = "") -> P
     ("", "<minpitch> 10 </minpitch> <maxpitch> 30 </maxpitch>", "",
      r"prop.xml:1: <propeller>: a variable-pitch propeller .* is not compiled"),
     ("", "<maxrpm> 2500 </maxrpm>", "", r"prop.xml:3: <maxrpm>: not supported in a propeller"),
+    ("", "<table name=\"CT_MACH\" type=\"internal\"> <tableData> 0.9 1\n 0.8 0.5 </tableData>"
+         " </table>", "", r"prop.xml:3: <tableData>: breakpoints must increase"),
     ("", "", "<orient unit=\"DEG\"> <roll> 0 </roll> <pitch> 2 </pitch> <yaw> 0 </yaw> </orient>",
      r"a.xml:7: <orient>: a propeller turned off the body's x axis is not compiled"),
     ("", "", "<p_factor> -1 </p_factor>", r"a.xml:7: <p_factor>: the P-factor must be 0"),
