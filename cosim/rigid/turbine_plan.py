@@ -308,10 +308,7 @@ class Turbine:
         props[self.key("n1")] = self.idle_n1 + tp * self.n1_factor
         props["_" + self.key("running")] = np.where(starved, 0.0, 1.0)
         props["_" + self.key("phase")] = np.where(starved, _OFF, _RUN)
-        idle_fraction = self.idle_thrust.evaluate(props)
-        mil_fraction = self.mil_thrust.evaluate(props)
-        idle = self.milthrust_lbs * idle_fraction
-        mil = (self.milthrust_lbs - idle) * mil_fraction
+        _, _, idle, mil = self._thrusts(props)
         keys = [self.key(k) for k in ("n1", "n2", "tsfc")] + [
             "_" + self.key(k) for k in ("n2norm", "fuel-flow-pph", "phase", "running")] + [
             STARTER]
@@ -340,12 +337,8 @@ class Turbine:
         thruster: the fuel flow it burns (pounds a second), the body forces
         and the moments about the CG."""
         tp = _position(props[self.throttle_key])
-        idle_fraction = self.idle_thrust.evaluate(props)
-        mil_fraction = self.mil_thrust.evaluate(props)
-        props[self.key("IdleThrust")] = idle_fraction
-        props[self.key("MilThrust")] = mil_fraction
-        idle = self.milthrust_lbs * idle_fraction
-        mil = (self.milthrust_lbs - idle) * mil_fraction
+        props[self.key("IdleThrust")], props[self.key("MilThrust")], idle, mil = \
+            self._thrusts(props)
         pph_key = "_" + self.key("fuel-flow-pph")
         if dt_s == 0.0:
             thrust = self._trim(props, tp, idle, mil)
@@ -379,6 +372,16 @@ class Turbine:
     def loop(self, tank: Tank, tanks: int) -> TurbineLoop:
         """Its running frame as ``_turbine``, fed by ``tank`` alone."""
         return TurbineLoop(self, tank, tanks)
+
+    def _thrusts(self, props: dict[str, np.ndarray]
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The ``IdleThrust`` and ``MilThrust`` functions' fractions, the
+        idle thrust and the military thrust above it (lbs)."""
+        idle_fraction = self.idle_thrust.evaluate(props)
+        mil_fraction = self.mil_thrust.evaluate(props)
+        idle = self.milthrust_lbs * idle_fraction
+        return idle_fraction, mil_fraction, idle, (self.milthrust_lbs - idle) * mil_fraction
+
     def _steady_flow(self, props: dict[str, np.ndarray], n: int) -> np.ndarray:
         """The fuel flow JSBSim's steady state at full throttle leaves: the
         target thrust x TSFC at N2norm 1, never below the idle flow."""
@@ -386,8 +389,7 @@ class Turbine:
         if not needed <= set(props):
             return np.full(n, self.idle_ff_pph)
         n2norm = (self.idle_n2 + 1.0 * self.n2_factor - self.idle_n2) / self.n2_factor
-        idle = self.milthrust_lbs * self.idle_thrust.evaluate(props)
-        mil = (self.milthrust_lbs - idle) * self.mil_thrust.evaluate(props)
+        _, _, idle, mil = self._thrusts(props)
         thrust = idle + mil * n2norm * n2norm
         tsfc = self.tsfc * np.sqrt(props["atmosphere/T-R"] / 389.7) * (
             0.84 + (1 - n2norm) * (1 - n2norm))
