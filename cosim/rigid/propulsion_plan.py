@@ -47,10 +47,6 @@ class Propulsion:
     tanks: tuple[Tank, ...]
 
     @property
-    def turbines(self) -> tuple[Turbine, ...]:
-        return tuple(e for e in self.engines if isinstance(e, Turbine))
-
-    @property
     def lateral_trim(self) -> bool:
         """Whether a thruster rolls and yaws the airframe in level flight (a
         propeller's torque and P-factor), so that a level trim balances it

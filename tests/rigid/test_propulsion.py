@@ -21,6 +21,7 @@ import pytest
 
 from cosim.rigid.functions import CompileError
 from cosim.rigid.propulsion import Propulsion, PropulsionError, compile_propulsion
+from cosim.rigid.turbine_plan import Turbine
 from cosim.vehicles.jsb import JSBSIM_ROOT, find_model, new_fdm
 
 REPO = Path(__file__).resolve().parents[2]
@@ -302,7 +303,8 @@ def test_the_loop_sums_two_engines_turned_off_the_axes_as_numpy(
     turbine.write_text(turbine.read_text().replace("<bleed>                 0.0",
                                                    "<bleed> 0.02"))
     plan = compile_propulsion(xml, ENGINES)
-    assert len(plan.turbines) == 2 and plan.turbines[0].axis[2] != 0.0
+    turbines = [e for e in plan.engines if isinstance(e, Turbine)]
+    assert len(turbines) == len(plan.engines) == 2 and turbines[0].axis[2] != 0.0
     start, ins, _ = flights
     ins = {k: v[:720] for k, v in ins.items()}  # the tank runs dry at frame 543
     ins["fcs/throttle-pos-norm[1]"] = 0.5 * ins["fcs/throttle-pos-norm"]
@@ -447,7 +449,8 @@ def test_the_c172ps_piston_engine_and_propeller_compile() -> None:
     problems: list[CompileError] = []
     plan = compile_propulsion(xml, ENGINES, problems=problems)
     assert problems == [] and len(plan.engines) == 1 and len(plan.tanks) == 2
-    assert plan.turbines == () and plan.engines[0].feeds == (0, 1)
+    assert not any(isinstance(e, Turbine) for e in plan.engines)
+    assert plan.engines[0].feeds == (0, 1)
 
 
 def test_every_problem_is_listed_when_asked(tmp_path: Path) -> None:
@@ -500,7 +503,8 @@ def test_units_are_converted_with_jsbsims_factors_or_refused(tmp_path: Path) -> 
     turbine = _TURBINE.replace("<milthrust> 100 </milthrust>",
                                "<milthrust unit=\"N\"> 400 </milthrust>")
     plan = compile_propulsion(_write(tmp_path, _ENGINE, turbine.format(extra="")), ENGINES)
-    assert plan.turbines[0].milthrust_lbs == 400 * 0.22482
+    engine = plan.engines[0]
+    assert isinstance(engine, Turbine) and engine.milthrust_lbs == 400 * 0.22482
     turbine = turbine.replace("unit=\"N\"", "unit=\"KGF\"")
     with pytest.raises(CompileError, match=r"eng.xml:2: <milthrust>: unit 'KGF' is not "
                                            r"supported here \(supported: KG, LBS, N\)"):
