@@ -42,8 +42,7 @@ def rigid(n: int, frames: int, rounds: int, model: str = "uav700") -> float:
     from cosim.vehicles.jsb import find_model
 
     m = find_model(model)
-    attach = (m.profile or {}).get("autopilot") == "attach"
-    ac = compile_aircraft(*model_files(m.aircraft_dir, m.name, m.source, attach=attach))
+    ac = compile_aircraft(*model_files(m.aircraft_dir, m.name, m.source, m.profile))
     props = ac.new_props(n)
     loc = position_ecef(47.0 + np.arange(n) * 1e-3, np.full(n, 8.0), np.full(n, 3000.0))
     props["cosim/ap/qbar-ref-psf"] = np.full(n, 34.0)

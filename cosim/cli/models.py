@@ -20,9 +20,8 @@ def rigid_problems(m: object) -> list[str]:
     from cosim.rigid.aircraft import problems
     from cosim.vehicles.fixed_wing_rigid import model_files
 
-    prof = getattr(m, "profile", None) or {}
     xml, systems, engines = model_files(m.aircraft_dir, m.name, m.source,  # type: ignore[attr-defined]
-                                        attach=prof.get("autopilot") == "attach")
+                                        getattr(m, "profile", None))
     try:
         return [str(e) for e in problems(xml, systems, engines)]
     except CosimError as e:  # a file it cannot even read

@@ -36,22 +36,18 @@ if TYPE_CHECKING:
     from cosim.world.model import World
 
 
-def model_files(choice_dir: str, model: str, source: str = "cosim", *, attach: bool = False
-                ) -> tuple[Path, Path, Path]:
+def model_files(choice_dir: str, model: str, source: str = "cosim",
+                profile: Mapping[str, Any] | None = None) -> tuple[Path, Path, Path]:
     """A model's aircraft file, the systems folder and the engines folder
-    the rigid tier compiles it with (those cosim gives JSBSim: with
-    ``attach``, a profile's ``autopilot: attach``, the model's files with the
+    the rigid tier compiles it with (those cosim gives JSBSim: for a
+    ``profile`` saying ``autopilot: attach``, the model's files with the
     cosim autopilot attached)."""
     from cosim.vehicles.jsb import JSBSIM_ROOT, SYSTEMS_DIR, ModelInfo, wrapper_root
 
     systems = JSBSIM_ROOT / "systems" if source == "jsbsim" else SYSTEMS_DIR
-    if attach:
+    if (profile or {}).get("autopilot") == "attach":
         choice_dir = str(wrapper_root(ModelInfo(model, choice_dir, source)))
     return Path(choice_dir) / model / f"{model}.xml", systems, JSBSIM_ROOT / "engine"
-
-
-def _attached(profile: Mapping[str, Any] | None) -> bool:
-    return (profile or {}).get("autopilot") == "attach"
 
 
 class FixedWingRigid(FixedWing):
@@ -76,8 +72,7 @@ class FixedWingRigid(FixedWing):
             raise ConfigError(f"the fixed_wing_rigid class needs a model flown by the cosim "
                               f"autopilot (profile autopilot: native or attach); "
                               f"{choice.name}'s profile says {prof.get('autopilot')!r}")
-        found = problems(*model_files(choice.aircraft_dir, choice.name, choice.source,
-                                      attach=_attached(prof)))
+        found = problems(*model_files(choice.aircraft_dir, choice.name, choice.source, prof))
         if found:
             more = f" (and {len(found) - 8} more)" if len(found) > 8 else ""
             raise ConfigError(f"the fixed_wing_rigid class cannot compile {choice.name}: "
@@ -88,7 +83,7 @@ class FixedWingRigid(FixedWing):
     def with_world(self, spec: VehicleSpec, world: World, sections: Mapping[str, Any],
                    origin: tuple[float, float, float]) -> VehicleSpec:
         xml, systems, engines = model_files(spec.aircraft_dir, spec.model, spec.model_source,
-                                            attach=_attached(spec.profile))
+                                            spec.profile)
         prof = spec.profile or {}
         props: list[tuple[str, float]] = []
         if "clmax" in prof:
@@ -106,7 +101,7 @@ class FixedWingRigid(FixedWing):
         from cosim.vehicles.fixed_wing_rigid.model import compiled
 
         xml, systems, engines = model_files(spec.aircraft_dir, spec.model, spec.model_source,
-                                            attach=_attached(spec.profile))
+                                            spec.profile)
         return compiled(str(xml), str(systems), str(engines)).property_names \
             | frozenset(self.channels)
 
