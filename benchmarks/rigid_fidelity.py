@@ -141,8 +141,10 @@ C172P_MANOEUVRES = [
               "fast"),
     Manoeuvre("goto_loiter", "goto 3.6 km at 100 kt, loiter", "c172p_goto", "goto"),
 ]
-#: model -> its manoeuvres and trim points
-MODELS = {"uav700": (MANOEUVRES, TRIM_POINTS), "c172p": (C172P_MANOEUVRES, C172P_TRIM_POINTS)}
+#: model -> its manoeuvres, its trim points and the tiers compared by default
+#: (the c172p's profile gives the point mass no maximum thrust: rigid only)
+MODELS = {"uav700": (MANOEUVRES, TRIM_POINTS, "rigid,point_mass"),
+          "c172p": (C172P_MANOEUVRES, C172P_TRIM_POINTS, "rigid")}
 
 
 def _as_tier(scenario: dict[str, Any], vehicle_class: str | None, duration_s: float,
@@ -312,8 +314,7 @@ def main(argv: list[str] | None = None) -> int:
 
     known = MODELS[a.model][0]
     names = [x for x in (a.manoeuvres or ",".join(m.name for m in known)).split(",") if x]
-    tiers = [x for x in (a.tiers or ("rigid,point_mass" if a.model == "uav700" else "rigid")
-                         ).split(",") if x]
+    tiers = [x for x in (a.tiers or MODELS[a.model][2]).split(",") if x]
     bad = [x for x in names if x not in {m.name for m in known}] + [
         x for x in tiers if x not in TIERS or x == "jsbsim"]
     if bad:
